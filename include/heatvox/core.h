@@ -1,0 +1,71 @@
+/*
+ * heatvox core: status codes, per-thread error messages, logging, version.
+ *
+ * Every fallible public function returns an hv_status (HV_OK = 0). The function
+ * that detects an error records a message with detail (file, line, argument);
+ * hv_last_error() returns it for the calling thread. The library never prints.
+ */
+#ifndef HEATVOX_CORE_H
+#define HEATVOX_CORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define HV_VERSION_MAJOR 0
+#define HV_VERSION_MINOR 1
+#define HV_VERSION_PATCH 0
+#define HV_VERSION_STRING "0.1.0"
+
+typedef enum hv_status {
+    HV_OK = 0,
+    HV_ERR_INVALID_ARG,   /* an argument is out of range or inconsistent */
+    HV_ERR_NOMEM,         /* an allocation failed or would exceed memory */
+    HV_ERR_IO,            /* a file could not be opened, read or written */
+    HV_ERR_PARSE,         /* an input file is malformed */
+    HV_ERR_NUMERIC,       /* NaN or Inf in an input, or a numeric breakdown */
+    HV_ERR_UNSUPPORTED,   /* a feature or backend is not available */
+    HV_ERR_BACKEND,       /* a backend library (OpenCL, FFTW, OpenVDB) failed */
+    HV_ERR_CANCELLED,     /* a progress callback asked to stop */
+    HV_ERR_INTERNAL       /* a bug in heatvox */
+} hv_status;
+
+/* Static name of a status ("invalid argument", ...). Never NULL. */
+const char *hv_status_str(hv_status s);
+
+/* Detailed message of the last error on this thread ("" when none).
+ * The pointer stays valid until the next heatvox call on this thread. */
+const char *hv_last_error(void);
+
+/* Clears this thread's error message. */
+void hv_clear_error(void);
+
+/* Log levels and a process-wide log callback (default: no output). */
+typedef enum hv_log_level { HV_LOG_ERROR = 0, HV_LOG_WARN, HV_LOG_INFO, HV_LOG_DEBUG } hv_log_level;
+typedef void (*hv_log_fn)(hv_log_level level, const char *msg, void *user);
+void hv_set_log(hv_log_fn fn, void *user);
+
+/* Progress callback: fraction in [0,1] and a stage name; return non-zero to cancel
+ * (the running call then returns HV_ERR_CANCELLED). */
+typedef int (*hv_progress_fn)(double fraction, const char *stage, void *user);
+void hv_set_progress(hv_progress_fn fn, void *user);
+
+const char *hv_version(void);
+
+/* Wall-clock seconds from a monotonic clock. */
+double hv_now(void);
+
+/* Peak resident memory of this process in bytes (0 if unknown). */
+size_t hv_peak_rss(void);
+
+/* Number of worker threads the CPU kernels use; 0 restores the default (all cores). */
+void hv_set_threads(int n);
+int hv_get_threads(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

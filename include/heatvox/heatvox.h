@@ -1,0 +1,13 @@
+/* heatvox: heat-method distance fields and extensions on volumetric grids.
+ * The umbrella header; each module has its own header under heatvox/. */
+#ifndef HEATVOX_H
+#define HEATVOX_H
+
+#include "heatvox/core.h"
+#include "heatvox/grid.h"
+#include "heatvox/ops.h"
+#include "heatvox/solve.h"
+#include "heatvox/mesh.h"
+#include "heatvox/io.h"
+
+#endif

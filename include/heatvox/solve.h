@@ -1,0 +1,116 @@
+/*
+ * Linear solves (alpha*I - beta*Laplacian) u = f on a cell-centred grid with
+ * Neumann walls and optional solid cells: the backward-Euler heat step
+ * (alpha = 1, beta = t) and Neumann Poisson (alpha = 0).
+ *
+ * One interface, backends chosen at run time:
+ *   HV_BACKEND_MG      matrix-free geometric multigrid on the CPU (any grid, masks)
+ *   HV_BACKEND_FFTW    exact DCT-II solve (plain boxes only)
+ *   HV_BACKEND_OPENCL  multigrid on an OpenCL device
+ *   HV_BACKEND_AUTO    FFTW for plain boxes, multigrid otherwise
+ *
+ * Lifecycle (PETSc-like): hv_solver_create (plans, hierarchies: expensive, once)
+ * -> hv_solver_solve (repeatable, cheap) -> hv_solver_destroy(&s).
+ * A solver object is not thread-safe; use one per thread.
+ *
+ * Poisson (alpha = 0): the right-hand side is projected onto the range
+ * (mean-free in every connected fluid region) and the mean-free solution is
+ * returned. Not converging is not an error: hv_solve_info says why it stopped.
+ */
+#ifndef HEATVOX_SOLVE_H
+#define HEATVOX_SOLVE_H
+
+#include "grid.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum hv_backend {
+    HV_BACKEND_AUTO = 0,
+    HV_BACKEND_MG,
+    HV_BACKEND_FFTW,
+    HV_BACKEND_OPENCL
+} hv_backend;
+
+typedef enum hv_smoother {
+    HV_SMOOTH_RBGS = 0,    /* red-black Gauss-Seidel (CPU default) */
+    HV_SMOOTH_JACOBI,      /* weighted Jacobi, omega 6/7 (3D) or 4/5 (2D) */
+    HV_SMOOTH_CHEBYSHEV    /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+} hv_smoother;
+
+typedef enum hv_stop_reason {
+    HV_STOP_NONE = 0,
+    HV_STOP_CONVERGED,     /* relative residual <= tol */
+    HV_STOP_MAX_ITER,      /* max_iter reached above tol */
+    HV_STOP_STAGNATED,     /* residual stopped decreasing above tol */
+    HV_STOP_EXACT          /* direct solve (FFTW) */
+} hv_stop_reason;
+
+const char *hv_backend_name(hv_backend b);
+/* Parses "auto", "mg", "fftw", "opencl"; HV_ERR_INVALID_ARG otherwise. */
+hv_status hv_backend_parse(const char *s, hv_backend *out);
+const char *hv_stop_reason_str(hv_stop_reason r);
+
+typedef struct hv_problem {
+    int dim;                /* 2 or 3 */
+    int n[3];               /* n[2] ignored in 2D */
+    double h;               /* voxel size */
+    const uint8_t *solid;   /* NULL or one byte per cell; copied at create */
+    double alpha;           /* >= 0 */
+    double beta;            /* > 0 */
+} hv_problem;
+
+typedef struct hv_solver_opts {
+    hv_backend backend;     /* default AUTO */
+    hv_smoother smoother;   /* default RBGS (mg), CHEBYSHEV (opencl) */
+    double tol;             /* relative residual ||f - A u|| / ||f||, default 1e-6; >= 1e-12 */
+    int max_iter;           /* outer iterations (cycles), default 50 */
+    int pre_smooth;         /* default 2 */
+    int post_smooth;        /* default 2 */
+    int nonzero_guess;      /* 1: u holds an initial guess on entry; default 0 */
+    int fftw_double;        /* FFTW backend: 1 = double transforms, 0 = float; default 1 */
+    const char *wisdom_file;/* FFTW wisdom loaded at create and saved after planning; NULL = none */
+    int fftw_measure;       /* 1: FFTW_MEASURE planning, 0: FFTW_ESTIMATE; default 0 */
+} hv_solver_opts;
+
+#define HV_MAX_HISTORY 64
+
+typedef struct hv_solve_info {
+    hv_backend backend;             /* the backend that ran */
+    hv_stop_reason reason;
+    int iterations;                 /* cycles or CG iterations */
+    double relres;                  /* final relative residual (double precision) */
+    int nhistory;                   /* entries in history (capped at HV_MAX_HISTORY) */
+    double history[HV_MAX_HISTORY]; /* relres after each iteration; history[0] = initial */
+    double seconds;                 /* wall time of this solve */
+} hv_solve_info;
+
+typedef struct hv_solver hv_solver;
+
+void hv_solver_opts_default(hv_solver_opts *o);
+
+/* Builds the solver for problem p (copies p->solid). opts may be NULL (defaults).
+ * AUTO picks FFTW when there is no mask and MG otherwise; an explicit FFTW with a
+ * mask fails with HV_ERR_UNSUPPORTED. The caller owns *out. */
+hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts);
+
+/* Solves A u = f. f and u are arrays of the grid's cell count; values on solid
+ * cells of f are ignored and u is 0 there. info may be NULL.
+ * Fails with HV_ERR_NUMERIC if f holds NaN/Inf. */
+hv_status hv_solver_solve(hv_solver *s, const float *f, float *u, hv_solve_info *info);
+hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_info *info);
+
+/* Solves k right-hand sides that share the operator (same hierarchy / plans). */
+hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
+                               hv_solve_info *info);
+
+hv_backend hv_solver_backend(const hv_solver *s);
+const hv_problem *hv_solver_problem(const hv_solver *s);
+
+void hv_solver_destroy(hv_solver **s);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

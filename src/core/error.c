@@ -1,0 +1,113 @@
+#include "error.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+#include <sys/resource.h>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+static _Thread_local char last_error[1024];
+static hv_log_fn log_fn;
+static void *log_user;
+static hv_progress_fn progress_fn;
+static void *progress_user;
+
+const char *hv_status_str(hv_status s)
+{
+    switch (s) {
+    case HV_OK: return "ok";
+    case HV_ERR_INVALID_ARG: return "invalid argument";
+    case HV_ERR_NOMEM: return "out of memory";
+    case HV_ERR_IO: return "i/o error";
+    case HV_ERR_PARSE: return "malformed input";
+    case HV_ERR_NUMERIC: return "numeric error";
+    case HV_ERR_UNSUPPORTED: return "unsupported";
+    case HV_ERR_BACKEND: return "backend failure";
+    case HV_ERR_CANCELLED: return "cancelled";
+    case HV_ERR_INTERNAL: return "internal error";
+    }
+    return "unknown status";
+}
+
+const char *hv_last_error(void) { return last_error; }
+
+void hv_clear_error(void) { last_error[0] = '\0'; }
+
+hv_status hv_error(hv_status s, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(last_error, sizeof last_error, fmt, ap);
+    va_end(ap);
+    return s;
+}
+
+void hv_set_log(hv_log_fn fn, void *user)
+{
+    log_fn = fn;
+    log_user = user;
+}
+
+void hv_log(hv_log_level level, const char *fmt, ...)
+{
+    if (!log_fn)
+        return;
+    char buf[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    log_fn(level, buf, log_user);
+}
+
+void hv_set_progress(hv_progress_fn fn, void *user)
+{
+    progress_fn = fn;
+    progress_user = user;
+}
+
+hv_status hv_progress(double fraction, const char *stage)
+{
+    if (progress_fn && progress_fn(fraction, stage, progress_user))
+        return hv_error(HV_ERR_CANCELLED, "cancelled during %s", stage);
+    return HV_OK;
+}
+
+const char *hv_version(void) { return HV_VERSION_STRING; }
+
+double hv_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+size_t hv_peak_rss(void)
+{
+    struct rusage ru;
+    if (getrusage(RUSAGE_SELF, &ru) != 0)
+        return 0;
+    return (size_t)ru.ru_maxrss * 1024u;
+}
+
+void hv_set_threads(int n)
+{
+#ifdef _OPENMP
+    omp_set_num_threads(n > 0 ? n : omp_get_num_procs());
+#else
+    (void)n;
+#endif
+}
+
+int hv_get_threads(void)
+{
+#ifdef _OPENMP
+    return omp_get_max_threads();
+#else
+    return 1;
+#endif
+}

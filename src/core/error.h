@@ -1,0 +1,17 @@
+/* Private: recording errors and logging from inside the library. */
+#ifndef HV_CORE_ERROR_H
+#define HV_CORE_ERROR_H
+
+#include "heatvox/core.h"
+
+/* Records a formatted message for this thread and returns s, so that the
+ * function detecting an error can write `return hv_error(HV_ERR_IO, "...")`. */
+hv_status hv_error(hv_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* Sends a message to the log callback, if any. */
+void hv_log(hv_log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* Calls the progress callback; returns HV_ERR_CANCELLED if it asked to stop. */
+hv_status hv_progress(double fraction, const char *stage);
+
+#endif

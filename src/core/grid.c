@@ -1,0 +1,146 @@
+#include "heatvox/grid.h"
+#include "error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+void *hv_malloc(size_t bytes)
+{
+    void *p = NULL;
+    size_t rounded = (bytes + 63u) & ~(size_t)63u;
+    if (rounded < bytes || posix_memalign(&p, 64, rounded ? rounded : 64) != 0)
+        return NULL;
+    return p;
+}
+
+void *hv_calloc(size_t count, size_t size)
+{
+    if (size && count > SIZE_MAX / size)
+        return NULL;
+    void *p = hv_malloc(count * size);
+    if (p)
+        memset(p, 0, count * size);
+    return p;
+}
+
+void hv_free(void *p) { free(p); }
+
+static size_t physical_memory(void)
+{
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0)
+        return SIZE_MAX;
+    return (size_t)pages * (size_t)page;
+}
+
+hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell)
+{
+    if (dim != 2 && dim != 3)
+        return hv_error(HV_ERR_INVALID_ARG, "grid dimension must be 2 or 3, got %d", dim);
+    if (!n)
+        return hv_error(HV_ERR_INVALID_ARG, "grid size is NULL");
+    for (int a = 0; a < dim; a++)
+        if (n[a] <= 0)
+            return hv_error(HV_ERR_INVALID_ARG, "grid size along %c must be positive, got %d",
+                            "xyz"[a], n[a]);
+    if (!(h > 0) || !isfinite(h))
+        return hv_error(HV_ERR_INVALID_ARG, "voxel size must be positive and finite, got %g", h);
+    double cells = (double)n[0] * n[1] * (dim == 3 ? n[2] : 1);
+    double bytes = cells * (double)(bytes_per_cell ? bytes_per_cell : 1);
+    if (bytes >= (double)SIZE_MAX / 2 || bytes > (double)physical_memory())
+        return hv_error(HV_ERR_NOMEM,
+                        "grid %d x %d x %d needs %.3g GB, more than this machine's %.3g GB",
+                        n[0], n[1], dim == 3 ? n[2] : 1, bytes / 1e9, physical_memory() / 1e9);
+    return HV_OK;
+}
+
+hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const double origin[3])
+{
+    if (!out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_create: out is NULL");
+    *out = NULL;
+    hv_status st = hv_check_dims(dim, n, h, sizeof(float));
+    if (st)
+        return st;
+    hv_grid *g = calloc(1, sizeof *g);
+    if (!g)
+        return hv_error(HV_ERR_NOMEM, "hv_grid_create: no memory for the grid header");
+    g->dim = dim;
+    g->n[0] = n[0];
+    g->n[1] = n[1];
+    g->n[2] = dim == 3 ? n[2] : 1;
+    g->h = h;
+    for (int a = 0; a < 3; a++)
+        g->origin[a] = origin ? origin[a] : 0.0;
+    g->v = hv_calloc(hv_grid_count(g), sizeof(float));
+    if (!g->v) {
+        size_t c = hv_grid_count(g);
+        free(g);
+        return hv_error(HV_ERR_NOMEM, "cannot allocate a grid of %zu cells (%.3g GB)", c,
+                        c * 4.0 / 1e9);
+    }
+    *out = g;
+    return HV_OK;
+}
+
+void hv_grid_destroy(hv_grid **g)
+{
+    if (!g || !*g)
+        return;
+    hv_free((*g)->v);
+    hv_free((*g)->solid);
+    free(*g);
+    *g = NULL;
+}
+
+hv_status hv_grid_add_mask(hv_grid *g)
+{
+    if (!g)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_add_mask: grid is NULL");
+    if (g->solid)
+        return HV_OK;
+    g->solid = hv_calloc(hv_grid_count(g), 1);
+    if (!g->solid)
+        return hv_error(HV_ERR_NOMEM, "cannot allocate a mask of %zu cells", hv_grid_count(g));
+    return HV_OK;
+}
+
+size_t hv_grid_count(const hv_grid *g)
+{
+    return (size_t)g->n[0] * (size_t)g->n[1] * (size_t)g->n[2];
+}
+
+void hv_grid_cell_center(const hv_grid *g, int i, int j, int k, double x[3])
+{
+    x[0] = g->origin[0] + (i + 0.5) * g->h;
+    x[1] = g->origin[1] + (j + 0.5) * g->h;
+    x[2] = g->dim == 3 ? g->origin[2] + (k + 0.5) * g->h : g->origin[2];
+}
+
+hv_status hv_check_finite(const float *v, size_t count, const char *what)
+{
+    size_t bad = SIZE_MAX;
+#pragma omp parallel for reduction(min : bad) schedule(static)
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(v[i]) && i < bad)
+            bad = i;
+    if (bad != SIZE_MAX)
+        return hv_error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
+                        (double)v[bad], bad);
+    return HV_OK;
+}
+
+hv_status hv_check_finite_d(const double *v, size_t count, const char *what)
+{
+    size_t bad = SIZE_MAX;
+#pragma omp parallel for reduction(min : bad) schedule(static)
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(v[i]) && i < bad)
+            bad = i;
+    if (bad != SIZE_MAX)
+        return hv_error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
+                        v[bad], bad);
+    return HV_OK;
+}

@@ -1,0 +1,81 @@
+#include "heatvox/io.h"
+#include "core/error.h"
+
+#include <errno.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <string.h>
+#include <unistd.h>
+
+/* A fixed table of pending temporaries, so that a signal handler can unlink them
+ * without allocating or locking. */
+#define HV_TMP_SLOTS 64
+#define HV_TMP_LEN 4096
+static char tmp_names[HV_TMP_SLOTS][HV_TMP_LEN];
+static atomic_int tmp_used[HV_TMP_SLOTS];
+static atomic_uint tmp_counter;
+
+static void tmp_register(const char *name)
+{
+    for (int i = 0; i < HV_TMP_SLOTS; i++) {
+        int expect = 0;
+        if (atomic_compare_exchange_strong(&tmp_used[i], &expect, 2)) {
+            snprintf(tmp_names[i], HV_TMP_LEN, "%s", name);
+            atomic_store(&tmp_used[i], 1);
+            return;
+        }
+    }
+}
+
+static void tmp_unregister(const char *name)
+{
+    for (int i = 0; i < HV_TMP_SLOTS; i++)
+        if (atomic_load(&tmp_used[i]) == 1 && strcmp(tmp_names[i], name) == 0) {
+            atomic_store(&tmp_used[i], 0);
+            return;
+        }
+}
+
+hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
+{
+    if (!target || !*target)
+        return hv_error(HV_ERR_INVALID_ARG, "output path is empty");
+    const char *slash = strrchr(target, '/');
+    int dirlen = slash ? (int)(slash - target + 1) : 0;
+    const char *base = slash ? slash + 1 : target;
+    if (!*base)
+        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' names a directory", target);
+    int n = snprintf(tmp, tmpsize, "%.*s.%s.tmp-%ld-%u", dirlen, target, base, (long)getpid(),
+                     atomic_fetch_add(&tmp_counter, 1u));
+    if (n < 0 || (size_t)n >= tmpsize || n >= HV_TMP_LEN)
+        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
+    tmp_register(tmp);
+    return HV_OK;
+}
+
+hv_status hv_tmp_commit(const char *tmp, const char *target)
+{
+    if (rename(tmp, target) != 0) {
+        int e = errno;
+        unlink(tmp);
+        tmp_unregister(tmp);
+        return hv_error(HV_ERR_IO, "%s: cannot rename the finished output into place: %s", target,
+                        strerror(e));
+    }
+    tmp_unregister(tmp);
+    return HV_OK;
+}
+
+void hv_tmp_discard(const char *tmp)
+{
+    unlink(tmp);
+    tmp_unregister(tmp);
+}
+
+void hv_tmp_cleanup_all(void)
+{
+    for (int i = 0; i < HV_TMP_SLOTS; i++)
+        if (atomic_load(&tmp_used[i]) == 1)
+            unlink(tmp_names[i]);
+}

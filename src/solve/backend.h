@@ -1,0 +1,58 @@
+/*
+ * Private: the interface every solver backend implements. The front end
+ * (solver.c) validates arguments, checks right-hand sides for NaN/Inf, labels
+ * connected fluid regions, projects Poisson right-hand sides onto the range and
+ * converts float arrays; a backend only solves. A distributed backend (MPI with
+ * hypre or PETSc) implements this same table.
+ */
+#ifndef HV_SOLVE_BACKEND_H
+#define HV_SOLVE_BACKEND_H
+
+#include "heatvox/solve.h"
+
+typedef struct hv_setup {
+    hv_problem p;           /* p.solid points at the front end's copy (or NULL) */
+    hv_solver_opts o;       /* defaults filled in */
+    size_t count;           /* cells */
+    int nregion;            /* connected fluid regions (1 without a mask) */
+    const int32_t *region;  /* NULL without a mask; else region id per cell, -1 on solid */
+} hv_setup;
+
+typedef struct hv_backend_ops {
+    const char *name;
+    /* Builds backend state for the setup (which outlives the state). */
+    hv_status (*create)(void **state, const hv_setup *s);
+    /* Solves A u = f in double precision. f is finite, zero on solid cells and,
+     * for alpha == 0, mean-free in every region. u holds the initial guess when
+     * s->o.nonzero_guess is set, else anything. On return u is zero on solid
+     * cells and, for alpha == 0, mean-free per region. Fills info (never NULL)
+     * except backend and seconds. */
+    hv_status (*solve)(void *state, const double *f, double *u, hv_solve_info *info);
+    /* Several right-hand sides at once; NULL means the front end loops. */
+    hv_status (*solve_many)(void *state, int k, const double *const *f, double *const *u,
+                            hv_solve_info *info);
+    void (*destroy)(void *state);
+} hv_backend_ops;
+
+extern const hv_backend_ops hv_backend_mg_ops;
+extern const hv_backend_ops hv_backend_fftw_ops;
+extern const hv_backend_ops hv_backend_opencl_ops;
+
+/* Records relres into info->history (capped) and bumps nhistory. */
+static inline void hv_info_push(hv_solve_info *info, double relres)
+{
+    if (info->nhistory < HV_MAX_HISTORY)
+        info->history[info->nhistory++] = relres;
+    info->relres = relres;
+}
+
+/* Subtracts the per-region mean of u (regions as in s; whole grid without mask). */
+void hv_project_mean(const hv_setup *s, double *u);
+
+/* ||f - A u||_2 in double, with A from the setup; optionally returns r. */
+double hv_residual_norm(const hv_setup *s, const double *f, const double *u, double *r);
+
+/* ||v||_2 over fluid cells. */
+double hv_norm2(const hv_setup *s, const double *v);
+
+#endif

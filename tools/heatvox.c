@@ -1,0 +1,127 @@
+/* heatvox: the command-line driver, a thin layer over libheatvox. */
+#include "cli.h"
+
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+
+int cli_verbose = 0;
+
+struct command {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *summary;
+};
+
+static const struct command commands[] = {
+    {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
+    {"info", cmd_info, "read a mesh and print its defect report"},
+    {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
+};
+
+static void usage(FILE *out)
+{
+    fprintf(out, "usage: heatvox <command> [options]   (heatvox <command> --help)\n\ncommands:\n");
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        fprintf(out, "  %-10s %s\n", commands[i].name, commands[i].summary);
+    fprintf(out, "\nexit codes: 0 success, 1 failure (bad input, I/O, solver), 2 usage error\n");
+}
+
+int cli_fail(const char *cmd, const char *what, hv_status st)
+{
+    const char *detail = hv_last_error();
+    fprintf(stderr, "heatvox %s: %s: %s%s%s\n", cmd, what, hv_status_str(st), *detail ? ": " : "",
+            detail);
+    return HV_EXIT_FAIL;
+}
+
+int cli_usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    fprintf(stderr, "heatvox %s: ", cmd);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "\n(see heatvox %s --help)\n", cmd);
+    return HV_EXIT_USAGE;
+}
+
+int cli_info(const char *fmt, ...)
+{
+    if (cli_verbose < 1)
+        return 0;
+    va_list ap;
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    return 0;
+}
+
+int cli_parse_int(const char *s, int *out)
+{
+    char *end;
+    long v = strtol(s, &end, 10);
+    if (!*s || *end || v < -2147483647L || v > 2147483647L)
+        return -1;
+    *out = (int)v;
+    return 0;
+}
+
+int cli_parse_double(const char *s, double *out)
+{
+    char *end;
+    double v = strtod(s, &end);
+    if (!*s || *end || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static void log_to_stderr(hv_log_level level, const char *msg, void *user)
+{
+    (void)user;
+    if (level == HV_LOG_ERROR || (level == HV_LOG_WARN && cli_verbose >= 0) ||
+        (level == HV_LOG_INFO && cli_verbose >= 1) || cli_verbose >= 2)
+        fprintf(stderr, "heatvox: %s%s\n", level == HV_LOG_WARN ? "warning: " : "", msg);
+}
+
+static void on_signal(int sig)
+{
+    hv_tmp_cleanup_all();
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        usage(stderr);
+        return HV_EXIT_USAGE;
+    }
+    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
+        usage(stdout);
+        return HV_EXIT_OK;
+    }
+    if (!strcmp(argv[1], "--version")) {
+        printf("heatvox %s\n", hv_version());
+        return HV_EXIT_OK;
+    }
+    for (int i = 2; i < argc; i++) {
+        if (!strcmp(argv[i], "-q"))
+            cli_verbose = -1;
+        else if (!strcmp(argv[i], "-v"))
+            cli_verbose = cli_verbose > 0 ? cli_verbose + 1 : 1;
+    }
+    hv_set_log(log_to_stderr, NULL);
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (!strcmp(argv[1], commands[i].name))
+            return commands[i].run(argc - 1, argv + 1);
+    fprintf(stderr, "heatvox: unknown command '%s'\n", argv[1]);
+    usage(stderr);
+    return HV_EXIT_USAGE;
+}
