@@ -101,7 +101,8 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
 hv_status hv_solver_solve(hv_solver *s, const float *f, float *u, hv_solve_info *info);
 hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_info *info);
 
-/* Solves k right-hand sides that share the operator (same hierarchy / plans). */
+/* Solves k right-hand sides that share the operator (same hierarchy / plans).
+ * info is NULL or an array of k entries. */
 hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
                                hv_solve_info *info);
 

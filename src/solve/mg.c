@@ -1,0 +1,994 @@
+/*
+ * Matrix-free geometric multigrid for (alpha I - beta Laplacian) u = f on
+ * cell-centred grids with Neumann walls and solid cells (NOTES §2).
+ *
+ * Float V-cycles (red-black Gauss-Seidel, weighted Jacobi or Chebyshev
+ * smoothing; mean-of-children restriction; cell-centred linear prolongation;
+ * CG on the bottom level) inside a double-precision defect-correction loop, so
+ * tolerances reach 1e-10 although the hierarchy is float. With solid cells the
+ * cycle preconditions CG instead (thin walls can stall plain geometric MG), and
+ * the smoother order is then made symmetric. Poisson starts with full multigrid.
+ */
+#include "mg_level.h"
+#include "backend.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MG_MAX_LEVELS 40
+#define MG_BOTTOM_CELLS 512
+
+typedef struct mg_state {
+    const hv_setup *s;
+    int dim;
+    double alpha;
+    int nlev;
+    mg_level lv[MG_MAX_LEVELS];
+    hv_smoother smoother;
+    int pre, post;
+    int use_pcg;
+    double *rd, *p, *z, *q; /* fine double work */
+} mg_state;
+
+/* ---------- coefficients ---------- */
+
+static size_t face_index(const mg_level *L, int a, int i, int j, int k)
+{
+    size_t m0 = (size_t)L->n[0] + (a == 0), m1 = (size_t)L->n[1] + (a == 1);
+    return (size_t)i + m0 * ((size_t)j + m1 * (size_t)k);
+}
+
+/* Face weight with plain levels, walls and out-of-range indices handled. */
+static float level_w(const mg_level *L, int a, int i, int j, int k)
+{
+    int idx[3] = {i, j, k};
+    for (int b = 0; b < 3; b++)
+        if (idx[b] < 0 || idx[b] > L->n[b] - (b != a))
+            return 0.0f;
+    if (idx[a] == 0 || idx[a] == L->n[a])
+        return 0.0f;
+    return L->plain ? 1.0f : L->w[a][face_index(L, a, i, j, k)];
+}
+
+static float level_a(const mg_level *L, int i, int j, int k)
+{
+    if (i < 0 || j < 0 || k < 0 || i >= L->n[0] || j >= L->n[1] || k >= L->n[2])
+        return 0.0f;
+    return L->plain ? 1.0f : L->a[(size_t)i + L->sy * j + L->sz * k];
+}
+
+static double level_diag(const mg_state *m, const mg_level *L, int i, int j, int k)
+{
+    double d = m->alpha * level_a(L, i, j, k);
+    int idx[3] = {i, j, k};
+    for (int b = 0; b < m->dim; b++) {
+        int lo[3] = {i, j, k}, hi[3] = {i, j, k};
+        hi[b] = idx[b] + 1;
+        (void)lo;
+        d += L->c[b] * (level_w(L, b, i, j, k) + level_w(L, b, hi[0], hi[1], hi[2]));
+    }
+    return d;
+}
+
+static hv_status level_alloc_coeffs(mg_level *L, int dim)
+{
+    L->a = hv_malloc(L->count * sizeof(float));
+    L->dinv = hv_malloc(L->count * sizeof(float));
+    if (!L->a || !L->dinv)
+        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level coefficients");
+    for (int b = 0; b < dim; b++) {
+        size_t nf = (L->count / L->n[b]) * (size_t)(L->n[b] + 1);
+        L->w[b] = hv_calloc(nf, sizeof(float));
+        if (!L->w[b])
+            return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for face weights");
+    }
+    return HV_OK;
+}
+
+static void level_free_coeffs(mg_level *L)
+{
+    hv_free(L->a);
+    hv_free(L->dinv);
+    L->a = L->dinv = NULL;
+    for (int b = 0; b < 3; b++) {
+        hv_free(L->w[b]);
+        L->w[b] = NULL;
+    }
+}
+
+static void level_fill_dinv(const mg_state *m, mg_level *L)
+{
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                double d = level_diag(m, L, i, j, k);
+                L->dinv[(size_t)i + L->sy * j + L->sz * k] = d > 0 ? (float)(1.0 / d) : 0.0f;
+            }
+}
+
+/* Fine level from the solid mask: a = fluid, w = 1 between two fluid cells. */
+static hv_status level_from_mask(const mg_state *m, mg_level *L, const uint8_t *solid)
+{
+    hv_status st = level_alloc_coeffs(L, m->dim);
+    if (st)
+        return st;
+    for (size_t c = 0; c < L->count; c++)
+        L->a[c] = solid[c] ? 0.0f : 1.0f;
+    for (int b = 0; b < m->dim; b++) {
+        size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int k = 0; k < L->n[2] + (b == 2); k++)
+            for (int j = 0; j < L->n[1] + (b == 1); j++)
+                for (int i = 0; i < L->n[0] + (b == 0); i++) {
+                    int idx[3] = {i, j, k};
+                    float w = 0.0f;
+                    if (idx[b] > 0 && idx[b] < L->n[b]) {
+                        size_t hi = (size_t)i + L->sy * j + L->sz * k;
+                        w = (!solid[hi] && !solid[hi - stride]) ? 1.0f : 0.0f;
+                    }
+                    L->w[b][face_index(L, b, i, j, k)] = w;
+                }
+    }
+    level_fill_dinv(m, L);
+    return HV_OK;
+}
+
+/* Coarse coefficients from fine ones (NOTES §2): a = mean of children, face
+ * weight = mean of the fine faces that tile the coarse face. */
+static hv_status level_coarsen(const mg_state *m, const mg_level *F, mg_level *C)
+{
+    hv_status st = level_alloc_coeffs(C, m->dim);
+    if (st)
+        return st;
+    int nchild = 1;
+    for (int b = 0; b < m->dim; b++)
+        nchild *= F->coarsen[b] ? 2 : 1;
+    const int *co = F->coarsen;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int K = 0; K < C->n[2]; K++)
+        for (int J = 0; J < C->n[1]; J++)
+            for (int I = 0; I < C->n[0]; I++) {
+                double sum = 0;
+                for (int dk = 0; dk <= co[2]; dk++)
+                    for (int dj = 0; dj <= co[1]; dj++)
+                        for (int di = 0; di <= co[0]; di++)
+                            sum += level_a(F, co[0] ? 2 * I + di : I, co[1] ? 2 * J + dj : J,
+                                           co[2] ? 2 * K + dk : K);
+                C->a[(size_t)I + C->sy * J + C->sz * K] = (float)(sum / nchild);
+            }
+    for (int b = 0; b < m->dim; b++) {
+        int nface = nchild / (co[b] ? 2 : 1);
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int K = 0; K < C->n[2] + (b == 2); K++)
+            for (int J = 0; J < C->n[1] + (b == 1); J++)
+                for (int I = 0; I < C->n[0] + (b == 0); I++) {
+                    int CI[3] = {I, J, K};
+                    double sum = 0;
+                    int lim[3];
+                    for (int e = 0; e < 3; e++)
+                        lim[e] = (e == b) ? 0 : co[e];
+                    for (int dk = 0; dk <= lim[2]; dk++)
+                        for (int dj = 0; dj <= lim[1]; dj++)
+                            for (int di = 0; di <= lim[0]; di++) {
+                                int d[3] = {di, dj, dk}, f[3];
+                                for (int e = 0; e < 3; e++)
+                                    f[e] = co[e] ? 2 * CI[e] + d[e] : CI[e];
+                                sum += level_w(F, b, f[0], f[1], f[2]);
+                            }
+                    C->w[b][face_index(C, b, I, J, K)] = (float)(sum / nface);
+                }
+    }
+    /* A coarse level whose weights all equal one inside is plain. */
+    int plain = 1;
+    for (size_t c = 0; c < C->count && plain; c++)
+        plain = C->a[c] == 1.0f;
+    for (int b = 0; b < m->dim && plain; b++)
+        for (int K = 0; K < C->n[2] + (b == 2) && plain; K++)
+            for (int J = 0; J < C->n[1] + (b == 1) && plain; J++)
+                for (int I = 0; I < C->n[0] + (b == 0) && plain; I++) {
+                    int CI[3] = {I, J, K};
+                    if (CI[b] > 0 && CI[b] < C->n[b])
+                        plain = C->w[b][face_index(C, b, I, J, K)] == 1.0f;
+                }
+    if (plain) {
+        level_free_coeffs(C);
+        C->plain = 1;
+    } else {
+        level_fill_dinv(m, C);
+    }
+    return HV_OK;
+}
+
+/* ---------- stencil kernels ---------- */
+
+/* Off-diagonal sum  sum_faces c_b w_f u_nb  and diagonal at cell (i,j,k).
+ * The macro body serves float and double vectors. */
+#define MG_STENCIL(L, m, U, i, j, k, c, S, D)                                                     \
+    do {                                                                                           \
+        if ((L)->plain) {                                                                          \
+            double cx_ = (L)->c[0], cy_ = (L)->c[1], cz_ = (L)->c[2];                              \
+            D = (m)->alpha;                                                                        \
+            S = 0;                                                                                 \
+            if (i > 0) { S += cx_ * U[c - 1]; D += cx_; }                                          \
+            if (i < (L)->n[0] - 1) { S += cx_ * U[c + 1]; D += cx_; }                              \
+            if (j > 0) { S += cy_ * U[c - (L)->sy]; D += cy_; }                                    \
+            if (j < (L)->n[1] - 1) { S += cy_ * U[c + (L)->sy]; D += cy_; }                        \
+            if ((m)->dim == 3) {                                                                   \
+                if (k > 0) { S += cz_ * U[c - (L)->sz]; D += cz_; }                                \
+                if (k < (L)->n[2] - 1) { S += cz_ * U[c + (L)->sz]; D += cz_; }                    \
+            }                                                                                      \
+        } else {                                                                                   \
+            const float *wx_ = (L)->w[0], *wy_ = (L)->w[1];                                        \
+            size_t fx_ = face_index(L, 0, i, j, k), fy_ = face_index(L, 1, i, j, k);               \
+            double wl_, wh_;                                                                       \
+            D = (m)->alpha * (L)->a[c];                                                            \
+            S = 0;                                                                                 \
+            wl_ = wx_[fx_]; wh_ = wx_[fx_ + 1];                                                    \
+            if (wl_ != 0) S += (L)->c[0] * wl_ * U[c - 1];                                         \
+            if (wh_ != 0) S += (L)->c[0] * wh_ * U[c + 1];                                         \
+            D += (L)->c[0] * (wl_ + wh_);                                                          \
+            wl_ = wy_[fy_]; wh_ = wy_[fy_ + (size_t)(L)->n[0]];                                    \
+            if (wl_ != 0) S += (L)->c[1] * wl_ * U[c - (L)->sy];                                   \
+            if (wh_ != 0) S += (L)->c[1] * wh_ * U[c + (L)->sy];                                   \
+            D += (L)->c[1] * (wl_ + wh_);                                                          \
+            if ((m)->dim == 3) {                                                                   \
+                size_t fz_ = face_index(L, 2, i, j, k);                                            \
+                wl_ = (L)->w[2][fz_]; wh_ = (L)->w[2][fz_ + (L)->sz];                              \
+                if (wl_ != 0) S += (L)->c[2] * wl_ * U[c - (L)->sz];                               \
+                if (wh_ != 0) S += (L)->c[2] * wh_ * U[c + (L)->sz];                               \
+                D += (L)->c[2] * (wl_ + wh_);                                                      \
+            }                                                                                      \
+        }                                                                                          \
+    } while (0)
+
+/* Plain-level interior row update: the hot loop of the smoother, branch-free. */
+static void rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
+                         int k, int col)
+{
+    const int nx = L->n[0];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const size_t base = L->sy * (size_t)j + L->sz * (size_t)k;
+    float *ur = u + base;
+    const float *fr = f + base;
+    const float wym = j > 0, wyp = j < L->n[1] - 1;
+    const float wzm = (m->dim == 3 && k > 0), wzp = (m->dim == 3 && k < L->n[2] - 1);
+    const float *ym = j > 0 ? ur - L->sy : ur, *yp = j < L->n[1] - 1 ? ur + L->sy : ur;
+    const float *zm = wzm ? ur - L->sz : ur, *zp = wzp ? ur + L->sz : ur;
+    const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+    const float inv_in = 1.0f / (dyz + 2 * cx);
+    int i0 = (j + k + col) & 1;
+    int i = i0;
+    if (i == 0) {
+        float d = dyz + (nx > 1 ? cx : 0);
+        float s = fr[0] + (nx > 1 ? cx * ur[1] : 0) + cy * (wym * ym[0] + wyp * yp[0]) +
+                  cz * (wzm * zm[0] + wzp * zp[0]);
+        ur[0] = d > 0 ? s / d : 0;
+        i = 2;
+    }
+    int last = nx - 1;
+    for (; i < last; i += 2)
+        ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                 cz * (wzm * zm[i] + wzp * zp[i])) *
+                inv_in;
+    if (i == last && last > 0) {
+        float d = dyz + cx;
+        float s = fr[i] + cx * ur[i - 1] + cy * (wym * ym[i] + wyp * yp[i]) +
+                  cz * (wzm * zm[i] + wzp * zp[i]);
+        ur[i] = s / d;
+    }
+}
+
+static void rb_sweep(const mg_state *m, mg_level *L, int col)
+{
+    float *u = L->u;
+    const float *f = L->f;
+    if (L->plain) {
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int k = 0; k < L->n[2]; k++)
+            for (int j = 0; j < L->n[1]; j++)
+                rb_row_plain(m, L, u, f, j, k, col);
+        return;
+    }
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = (j + k + col) & 1; i < L->n[0]; i += 2) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                if (L->dinv[c] == 0) {
+                    u[c] = 0;
+                    continue;
+                }
+                double S, D;
+                MG_STENCIL(L, m, u, i, j, k, c, S, D);
+                (void)D;
+                u[c] = (float)((f[c] + S) * L->dinv[c]);
+            }
+}
+
+/* r = f - A u on a level (float). */
+static void level_residual(const mg_state *m, mg_level *L)
+{
+    const float *u = L->u, *f = L->f;
+    float *r = L->r;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                double S, D;
+                MG_STENCIL(L, m, u, i, j, k, c, S, D);
+                r[c] = (float)(f[c] - (D * u[c] - S));
+            }
+}
+
+/* y = A x in double on a level (fine residuals, bottom CG). */
+static void level_apply_d(const mg_state *m, const mg_level *L, const double *x, double *y)
+{
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                double S, D;
+                MG_STENCIL(L, m, x, i, j, k, c, S, D);
+                y[c] = D * x[c] - S;
+            }
+}
+
+static double level_diag_at(const mg_state *m, const mg_level *L, size_t c, int i, int j, int k)
+{
+    return L->plain ? level_diag(m, L, i, j, k) : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
+}
+
+/* u += omega_k D^-1 r, the Jacobi-type update; with cheb != NULL the Chebyshev
+ * recurrence d = rho*rho_old*d + 2 rho/delta D^-1 r (NOTES §2: Chebyshev on D^-1 A). */
+static void level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr)
+{
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                double dg = level_diag_at(m, L, c, i, j, k);
+                double z = dg > 0 ? L->r[c] / dg : 0.0;
+                double d = cd * L->d[c] + cr * z;
+                L->d[c] = (float)d;
+                L->u[c] += (float)d;
+            }
+}
+
+static void smooth(const mg_state *m, mg_level *L, int steps, int reverse)
+{
+    if (steps <= 0)
+        return;
+    if (m->smoother == HV_SMOOTH_RBGS) {
+        for (int s = 0; s < steps; s++) {
+            rb_sweep(m, L, reverse ? 1 : 0);
+            rb_sweep(m, L, reverse ? 0 : 1);
+        }
+    } else if (m->smoother == HV_SMOOTH_JACOBI) {
+        double omega = m->dim == 3 ? 6.0 / 7.0 : 4.0 / 5.0;
+        for (int s = 0; s < steps; s++) {
+            level_residual(m, L);
+            level_jacobi_update(m, L, 0.0, omega);
+        }
+    } else {
+        /* Chebyshev of degree 2*steps on [lmax/8, lmax]. */
+        double lmax = L->lmax, lmin = lmax / 8;
+        double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin);
+        double sigma = theta / delta, rho_old = 1.0 / sigma;
+        level_residual(m, L);
+        level_jacobi_update(m, L, 0.0, 1.0 / theta);
+        for (int s = 1; s < 2 * steps; s++) {
+            double rho = 1.0 / (2 * sigma - rho_old);
+            level_residual(m, L);
+            level_jacobi_update(m, L, rho * rho_old, 2 * rho / delta);
+            rho_old = rho;
+        }
+    }
+}
+
+/* f_C = mean of the children of r_F (children beyond an odd edge count as 0). */
+static void restrict_residual(const mg_state *m, const mg_level *F, mg_level *C)
+{
+    const int *co = F->coarsen;
+    int nchild = 1;
+    for (int b = 0; b < m->dim; b++)
+        nchild *= co[b] ? 2 : 1;
+    const float scale = 1.0f / (float)nchild;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int K = 0; K < C->n[2]; K++)
+        for (int J = 0; J < C->n[1]; J++)
+            for (int I = 0; I < C->n[0]; I++) {
+                int i0 = co[0] ? 2 * I : I, j0 = co[1] ? 2 * J : J, k0 = co[2] ? 2 * K : K;
+                int i1 = co[0] && i0 + 1 < F->n[0] ? i0 + 1 : i0;
+                int j1 = co[1] && j0 + 1 < F->n[1] ? j0 + 1 : j0;
+                int k1 = co[2] && k0 + 1 < F->n[2] ? k0 + 1 : k0;
+                float s = 0;
+                for (int k = k0; k <= k1; k++)
+                    for (int j = j0; j <= j1; j++)
+                        for (int i = i0; i <= i1; i++)
+                            s += F->r[(size_t)i + F->sy * j + F->sz * k];
+                C->f[(size_t)I + C->sy * J + C->sz * K] = s * scale;
+            }
+}
+
+/* Per-axis prolongation stencil: fine index i takes 3/4 of coarse I = i/2 and
+ * 1/4 of the neighbour on i's side, mirrored (all weight on I) at walls. */
+static inline void prolong_axis(int coarsen, int nc, int i, int *I0, int *I1, float *w1)
+{
+    if (!coarsen) {
+        *I0 = *I1 = i;
+        *w1 = 0.0f;
+        return;
+    }
+    int I = i >> 1, nb = (i & 1) ? I + 1 : I - 1;
+    *I0 = I;
+    if (nb < 0 || nb >= nc) {
+        *I1 = I;
+        *w1 = 0.0f;
+    } else {
+        *I1 = nb;
+        *w1 = 0.25f;
+    }
+}
+
+/* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
+ * levels empty coarse cells are left out and the weights renormalized. */
+static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
+{
+    const int *co = F->coarsen;
+    const float *uc = C->u;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < F->n[2]; k++)
+        for (int j = 0; j < F->n[1]; j++) {
+            int K0, K1, J0, J1;
+            float wk1, wj1;
+            prolong_axis(co[2], C->n[2], k, &K0, &K1, &wk1);
+            prolong_axis(co[1], C->n[1], j, &J0, &J1, &wj1);
+            float wk[2] = {1.0f - wk1, wk1}, wj[2] = {1.0f - wj1, wj1};
+            size_t rows[2][2];
+            rows[0][0] = C->sy * J0 + C->sz * K0;
+            rows[0][1] = C->sy * J1 + C->sz * K0;
+            rows[1][0] = C->sy * J0 + C->sz * K1;
+            rows[1][1] = C->sy * J1 + C->sz * K1;
+            size_t fbase = F->sy * (size_t)j + F->sz * (size_t)k;
+            for (int i = 0; i < F->n[0]; i++) {
+                size_t fc = fbase + i;
+                if (!F->plain && F->a[fc] == 0.0f)
+                    continue;
+                int I0, I1;
+                float wi1;
+                prolong_axis(co[0], C->n[0], i, &I0, &I1, &wi1);
+                float wi[2] = {1.0f - wi1, wi1};
+                int Is[2] = {I0, I1};
+                float s = 0, ws = 0;
+                for (int a = 0; a < 2; a++)
+                    for (int b = 0; b < 2; b++)
+                        for (int e = 0; e < 2; e++) {
+                            float w = wk[a] * wj[b] * wi[e];
+                            if (w == 0.0f)
+                                continue;
+                            size_t cc = rows[a][b] + Is[e];
+                            if (!C->plain && C->a[cc] == 0.0f)
+                                continue;
+                            s += w * uc[cc];
+                            ws += w;
+                        }
+                if (ws > 0)
+                    F->u[fc] += C->plain ? s : s / ws;
+            }
+        }
+}
+
+/* ---------- bottom solve ---------- */
+
+static void bottom_project(const mg_level *L, double *v)
+{
+    if (L->nregion <= 0)
+        return;
+    double sum[64] = {0}, cnt[64] = {0};
+    double *S = L->nregion <= 64 ? sum : calloc((size_t)L->nregion * 2, sizeof(double));
+    double *N = L->nregion <= 64 ? cnt : S + L->nregion;
+    if (!S)
+        return;
+    for (size_t c = 0; c < L->count; c++)
+        if (L->region[c] >= 0) {
+            S[L->region[c]] += v[c];
+            N[L->region[c]] += 1;
+        }
+    for (size_t c = 0; c < L->count; c++)
+        if (L->region[c] >= 0)
+            v[c] -= S[L->region[c]] / N[L->region[c]];
+    if (S != sum)
+        free(S);
+}
+
+static double dot_d(const double *a, const double *b, size_t n)
+{
+    double s = 0;
+    for (size_t i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+/* CG to 1e-12 relative on the (small) bottom level, in double. */
+static void bottom_solve(const mg_state *m, mg_level *L)
+{
+    size_t n = L->count;
+    double *x = L->bx, *b = L->bb, *r = L->br, *p = L->bp, *q = L->bq;
+    for (size_t c = 0; c < n; c++) {
+        x[c] = 0;
+        b[c] = L->f[c];
+    }
+    if (m->alpha == 0)
+        bottom_project(L, b);
+    double bn = sqrt(dot_d(b, b, n));
+    if (bn > 0) {
+        memcpy(r, b, n * sizeof *r);
+        memcpy(p, r, n * sizeof *p);
+        double rr = dot_d(r, r, n);
+        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
+            level_apply_d(m, L, p, q);
+            double pq = dot_d(p, q, n);
+            if (!(pq > 0))
+                break;
+            double al = rr / pq;
+            for (size_t c = 0; c < n; c++) {
+                x[c] += al * p[c];
+                r[c] -= al * q[c];
+            }
+            double rr2 = dot_d(r, r, n);
+            double be = rr2 / rr;
+            rr = rr2;
+            for (size_t c = 0; c < n; c++)
+                p[c] = r[c] + be * p[c];
+        }
+        if (m->alpha == 0)
+            bottom_project(L, x);
+    }
+    for (size_t c = 0; c < n; c++)
+        L->u[c] = (float)x[c];
+}
+
+/* Connected regions of a level: cells with a > 0 joined through faces w > 0. */
+static hv_status level_regions(const mg_state *m, mg_level *L)
+{
+    L->region = malloc(L->count * sizeof(int32_t));
+    size_t *stack = malloc(L->count * sizeof(size_t));
+    if (!L->region || !stack) {
+        free(stack);
+        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory labelling regions");
+    }
+    for (size_t c = 0; c < L->count; c++)
+        L->region[c] = -1;
+    int nr = 0;
+    for (size_t seed = 0; seed < L->count; seed++) {
+        int si = (int)(seed % L->n[0]), sj = (int)((seed / L->sy) % L->n[1]), sk = (int)(seed / L->sz);
+        if (L->region[seed] >= 0 || level_a(L, si, sj, sk) == 0.0f)
+            continue;
+        size_t top = 0;
+        stack[top++] = seed;
+        L->region[seed] = nr;
+        while (top) {
+            size_t c = stack[--top];
+            int idx[3] = {(int)(c % L->n[0]), (int)((c / L->sy) % L->n[1]), (int)(c / L->sz)};
+            for (int b = 0; b < m->dim; b++)
+                for (int sgn = 0; sgn < 2; sgn++) {
+                    int f[3] = {idx[0], idx[1], idx[2]};
+                    f[b] += sgn; /* face index: lo face = idx, hi face = idx + 1 */
+                    if (level_w(L, b, f[0], f[1], f[2]) == 0.0f)
+                        continue;
+                    size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
+                    size_t nb = sgn ? c + stride : c - stride;
+                    if (L->region[nb] < 0) {
+                        L->region[nb] = nr;
+                        stack[top++] = nb;
+                    }
+                }
+        }
+        nr++;
+    }
+    free(stack);
+    L->nregion = nr;
+    return HV_OK;
+}
+
+/* ---------- cycles ---------- */
+
+static void zero_f(float *v, size_t n)
+{
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < n; i++)
+        v[i] = 0.0f;
+}
+
+/* One V-cycle on level l for A u_l = f_l; u_l holds the initial guess when
+ * `guess`, else starts from zero. `sym` reverses the post-smoothing order. */
+static void vcycle(const mg_state *m, int l, int guess, int sym)
+{
+    mg_level *L = (mg_level *)&m->lv[l];
+    if (l == m->nlev - 1) {
+        bottom_solve(m, L);
+        return;
+    }
+    if (!guess)
+        zero_f(L->u, L->count);
+    if (m->smoother != HV_SMOOTH_RBGS)
+        zero_f(L->d, L->count);
+    smooth(m, L, m->pre, 0);
+    level_residual(m, L);
+    restrict_residual(m, L, (mg_level *)&m->lv[l + 1]);
+    vcycle(m, l + 1, 0, sym);
+    prolong_add(m, L, &m->lv[l + 1]);
+    if (m->smoother != HV_SMOOTH_RBGS)
+        zero_f(L->d, L->count);
+    smooth(m, L, m->post, sym);
+}
+
+/* Full multigrid: restrict f down, solve the bottom, then interpolate and
+ * V-cycle on each finer level (for Poisson, NOTES §2). */
+static void fmg(const mg_state *m)
+{
+    for (int l = 0; l + 1 < m->nlev; l++) {
+        mg_level *F = (mg_level *)&m->lv[l];
+        memcpy(F->r, F->f, F->count * sizeof(float));
+        restrict_residual(m, F, (mg_level *)&m->lv[l + 1]);
+    }
+    bottom_solve(m, (mg_level *)&m->lv[m->nlev - 1]);
+    for (int l = m->nlev - 2; l >= 0; l--) {
+        mg_level *L = (mg_level *)&m->lv[l];
+        zero_f(L->u, L->count);
+        prolong_add(m, L, &m->lv[l + 1]);
+        vcycle(m, l, 1, 0);
+    }
+}
+
+/* ---------- backend entry points ---------- */
+
+static void mg_destroy(void *state)
+{
+    mg_state *m = state;
+    if (!m)
+        return;
+    for (int l = 0; l < m->nlev; l++) {
+        mg_level *L = &m->lv[l];
+        level_free_coeffs(L);
+        hv_free(L->u);
+        hv_free(L->f);
+        hv_free(L->r);
+        hv_free(L->d);
+        free(L->region);
+        free(L->bx);
+        free(L->bb);
+        free(L->br);
+        free(L->bp);
+        free(L->bq);
+    }
+    hv_free(m->rd);
+    hv_free(m->p);
+    hv_free(m->z);
+    hv_free(m->q);
+    free(m);
+}
+
+/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds). */
+static double estimate_lmax(const mg_state *m, mg_level *L)
+{
+    size_t n = L->count;
+    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y);
+    if (!x || !y) {
+        free(x);
+        free(y);
+        return 2.0;
+    }
+    unsigned s = 12345u;
+    for (size_t c = 0; c < n; c++) {
+        s = s * 1664525u + 1013904223u;
+        x[c] = (double)(s >> 8) / (1u << 24) - 0.5;
+    }
+    double lam = 2.0;
+    for (int it = 0; it < 12; it++) {
+        level_apply_d(m, L, x, y);
+        double nrm = 0, dot = 0, xx = 0;
+        for (size_t c = 0; c < n; c++) {
+            int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
+            double dg = level_diag_at(m, L, c, i, j, k);
+            y[c] = dg > 0 ? y[c] / dg : 0;
+            dot += x[c] * y[c];
+            xx += x[c] * x[c];
+            nrm += y[c] * y[c];
+        }
+        lam = xx > 0 ? dot / xx : 2.0;
+        nrm = sqrt(nrm);
+        if (!(nrm > 0))
+            break;
+        for (size_t c = 0; c < n; c++)
+            x[c] = y[c] / nrm;
+    }
+    free(x);
+    free(y);
+    lam *= 1.1;
+    return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
+}
+
+static hv_status mg_create(void **state, const hv_setup *s)
+{
+    mg_state *m = calloc(1, sizeof *m);
+    if (!m)
+        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory");
+    m->s = s;
+    m->dim = s->p.dim;
+    m->alpha = s->p.alpha;
+    m->smoother = s->o.smoother;
+    m->pre = s->o.pre_smooth;
+    m->post = s->o.post_smooth;
+    m->use_pcg = s->p.solid != NULL;
+    hv_status st = HV_OK;
+
+    /* Level 0. */
+    mg_level *L = &m->lv[0];
+    for (int b = 0; b < 3; b++) {
+        L->n[b] = b < m->dim ? s->p.n[b] : 1;
+        L->c[b] = b < m->dim ? s->p.beta / (s->p.h * s->p.h) : 0.0;
+    }
+    double hh[3] = {s->p.h, s->p.h, s->p.h};
+    m->nlev = 1;
+    for (;;) {
+        L = &m->lv[m->nlev - 1];
+        L->count = (size_t)L->n[0] * L->n[1] * L->n[2];
+        L->sy = (size_t)L->n[0];
+        L->sz = (size_t)L->n[0] * L->n[1];
+        L->u = hv_calloc(L->count, sizeof(float));
+        L->f = hv_calloc(L->count, sizeof(float));
+        L->r = hv_calloc(L->count, sizeof(float));
+        if (m->smoother != HV_SMOOTH_RBGS)
+            L->d = hv_calloc(L->count, sizeof(float));
+        if (!L->u || !L->f || !L->r || (m->smoother != HV_SMOOTH_RBGS && !L->d)) {
+            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)",
+                          m->nlev - 1, L->count);
+            goto fail;
+        }
+        if (m->nlev == 1) {
+            L->plain = s->p.solid == NULL;
+            if (!L->plain && (st = level_from_mask(m, L, s->p.solid)))
+                goto fail;
+        } else if ((st = level_coarsen(m, &m->lv[m->nlev - 2], L))) {
+            goto fail;
+        }
+        if (m->smoother == HV_SMOOTH_CHEBYSHEV)
+            L->lmax = estimate_lmax(m, L);
+        /* Semi-coarsen: halve the axes of finest spacing that still have > 2 cells. */
+        double hmin = INFINITY;
+        for (int b = 0; b < m->dim; b++)
+            if (L->n[b] > 2 && hh[b] < hmin)
+                hmin = hh[b];
+        int any = 0;
+        for (int b = 0; b < m->dim; b++) {
+            L->coarsen[b] = L->n[b] > 2 && hh[b] <= hmin * 1.01;
+            any |= L->coarsen[b];
+        }
+        if (!any || L->count <= MG_BOTTOM_CELLS || m->nlev == MG_MAX_LEVELS) {
+            for (int b = 0; b < 3; b++)
+                L->coarsen[b] = 0;
+            break;
+        }
+        mg_level *C = &m->lv[m->nlev];
+        for (int b = 0; b < 3; b++) {
+            C->n[b] = L->coarsen[b] ? (L->n[b] + 1) / 2 : L->n[b];
+            C->c[b] = L->coarsen[b] ? L->c[b] / 4 : L->c[b];
+            if (L->coarsen[b])
+                hh[b] *= 2;
+        }
+        m->nlev++;
+    }
+    /* Bottom: CG work and (Poisson) regions. */
+    L = &m->lv[m->nlev - 1];
+    L->bx = malloc(L->count * sizeof(double));
+    L->bb = malloc(L->count * sizeof(double));
+    L->br = malloc(L->count * sizeof(double));
+    L->bp = malloc(L->count * sizeof(double));
+    L->bq = malloc(L->count * sizeof(double));
+    if (!L->bx || !L->bb || !L->br || !L->bp || !L->bq) {
+        st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
+        goto fail;
+    }
+    if (m->alpha == 0 && (st = level_regions(m, L)))
+        goto fail;
+    size_t n0 = s->count;
+    m->rd = hv_malloc(n0 * sizeof(double));
+    if (m->use_pcg) {
+        m->p = hv_malloc(n0 * sizeof(double));
+        m->z = hv_malloc(n0 * sizeof(double));
+        m->q = hv_malloc(n0 * sizeof(double));
+    }
+    if (!m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
+        st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
+        goto fail;
+    }
+    *state = m;
+    return HV_OK;
+fail:
+    mg_destroy(m);
+    return st;
+}
+
+/* rd = f - A x in double, level-0 float rhs = rd; returns ||rd||. */
+static double fine_residual(const mg_state *m, const double *f, const double *x)
+{
+    const mg_level *L = &m->lv[0];
+    double *rd = m->rd;
+    level_apply_d(m, L, x, rd);
+    double nn = 0;
+#pragma omp parallel for reduction(+ : nn) schedule(static)
+    for (size_t c = 0; c < L->count; c++) {
+        double r = (L->plain || L->a[c] != 0.0f) ? f[c] - rd[c] : 0.0;
+        rd[c] = r;
+        L->f[c] = (float)r;
+        nn += r * r;
+    }
+    return sqrt(nn);
+}
+
+static int stagnated(const hv_solve_info *info)
+{
+    int n = info->nhistory;
+    return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
+}
+
+static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv_solve_info *info,
+                                     double fn)
+{
+    const hv_setup *s = m->s;
+    mg_level *L0 = &m->lv[0];
+    double rel = fine_residual(m, f, u) / fn;
+    hv_info_push(info, rel);
+    for (int it = 0; it < s->o.max_iter; it++) {
+        if (rel <= s->o.tol) {
+            info->reason = HV_STOP_CONVERGED;
+            return HV_OK;
+        }
+        if (it == 0 && m->alpha == 0)
+            fmg(m);
+        else
+            vcycle(m, 0, 0, 0);
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < L0->count; c++)
+            u[c] += L0->u[c];
+        if (m->alpha == 0)
+            hv_project_mean(s, u);
+        rel = fine_residual(m, f, u) / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "multigrid diverged (residual %g)", rel);
+        if (stagnated(info) && rel > s->o.tol) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+    }
+    info->reason = rel <= s->o.tol ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+/* z = M r: one symmetric V-cycle from zero on r (float), projected for Poisson. */
+static void precondition(mg_state *m, const double *r, double *z)
+{
+    mg_level *L0 = &m->lv[0];
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < L0->count; c++)
+        L0->f[c] = (float)r[c];
+    vcycle(m, 0, 0, 1);
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < L0->count; c++)
+        z[c] = L0->u[c];
+    if (m->alpha == 0)
+        hv_project_mean(m->s, z);
+}
+
+static double pdot(const double *a, const double *b, size_t n)
+{
+    double s = 0;
+#pragma omp parallel for reduction(+ : s) schedule(static)
+    for (size_t i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+/* Preconditioned CG in double with a symmetric V-cycle (masked grids). */
+static hv_status mg_solve_pcg(mg_state *m, const double *f, double *u, hv_solve_info *info,
+                              double fn)
+{
+    const hv_setup *s = m->s;
+    size_t n = s->count;
+    double *r = m->rd, *p = m->p, *z = m->z, *q = m->q;
+    double rel = fine_residual(m, f, u) / fn;
+    hv_info_push(info, rel);
+    if (rel <= s->o.tol) {
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
+    precondition(m, r, z);
+    memcpy(p, z, n * sizeof *p);
+    double rz = pdot(r, z, n), best = rel;
+    int since_best = 0;
+    for (int it = 0; it < s->o.max_iter; it++) {
+        level_apply_d(m, &m->lv[0], p, q);
+        double pq = pdot(p, q, n);
+        if (!(pq > 0)) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+        double al = rz / pq, nn = 0;
+#pragma omp parallel for reduction(+ : nn) schedule(static)
+        for (size_t c = 0; c < n; c++) {
+            u[c] += al * p[c];
+            r[c] -= al * q[c];
+            nn += r[c] * r[c];
+        }
+        rel = sqrt(nn) / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "preconditioned CG diverged (residual %g)", rel);
+        if (rel <= s->o.tol)
+            break;
+        if (rel < 0.9 * best) {
+            best = rel;
+            since_best = 0;
+        } else if (++since_best >= 10) {
+            info->reason = HV_STOP_STAGNATED;
+            break;
+        }
+        precondition(m, r, z);
+        double rz2 = pdot(r, z, n), be = rz2 / rz;
+        rz = rz2;
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < n; c++)
+            p[c] = z[c] + be * p[c];
+    }
+    if (m->alpha == 0)
+        hv_project_mean(s, u);
+    /* Report the true residual of the returned iterate. */
+    rel = fine_residual(m, f, u) / fn;
+    info->relres = rel;
+    if (info->reason != HV_STOP_STAGNATED)
+        info->reason = rel <= s->o.tol * 1.0001 ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info *info)
+{
+    mg_state *m = state;
+    const hv_setup *s = m->s;
+    if (!s->o.nonzero_guess)
+        memset(u, 0, s->count * sizeof *u);
+    double fn = hv_norm2(s, f);
+    if (fn == 0) {
+        memset(u, 0, s->count * sizeof *u);
+        hv_info_push(info, 0.0);
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
+    hv_status st = m->use_pcg ? mg_solve_pcg(m, f, u, info, fn) : mg_solve_stationary(m, f, u, info, fn);
+    if (st == HV_OK && s->p.solid)
+        for (size_t c = 0; c < s->count; c++)
+            if (s->p.solid[c])
+                u[c] = 0;
+    return st;
+}
+
+const hv_backend_ops hv_backend_mg_ops = {"mg", mg_create, mg_solve, NULL, mg_destroy};
+
+/* Number of levels and the size of each, for benchmarks and tests. */
+int hv_mg_levels(const void *state, int sizes[][3], int max);
+int hv_mg_levels(const void *state, int sizes[][3], int max)
+{
+    const mg_state *m = state;
+    for (int l = 0; l < m->nlev && l < max; l++)
+        memcpy(sizes[l], m->lv[l].n, sizeof sizes[l]);
+    return m->nlev;
+}

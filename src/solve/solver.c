@@ -1,0 +1,301 @@
+/*
+ * The solver front end: validates problems, labels connected fluid regions,
+ * projects Poisson right-hand sides onto the operator's range, converts float
+ * arrays and dispatches to the backend chosen at run time.
+ */
+#include "backend.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct hv_solver {
+    hv_setup setup;
+    const hv_backend_ops *ops;
+    void *state;
+    hv_backend backend;
+    uint8_t *solid;   /* owned copy of the mask */
+    int32_t *region;  /* owned region labels */
+    double *fd, *ud;  /* double buffers for the float interface */
+};
+
+const char *hv_backend_name(hv_backend b)
+{
+    switch (b) {
+    case HV_BACKEND_AUTO: return "auto";
+    case HV_BACKEND_MG: return "mg";
+    case HV_BACKEND_FFTW: return "fftw";
+    case HV_BACKEND_OPENCL: return "opencl";
+    }
+    return "unknown";
+}
+
+hv_status hv_backend_parse(const char *s, hv_backend *out)
+{
+    static const hv_backend all[] = {HV_BACKEND_AUTO, HV_BACKEND_MG, HV_BACKEND_FFTW, HV_BACKEND_OPENCL};
+    for (size_t i = 0; s && i < sizeof all / sizeof all[0]; i++)
+        if (!strcmp(s, hv_backend_name(all[i]))) {
+            *out = all[i];
+            return HV_OK;
+        }
+    return hv_error(HV_ERR_INVALID_ARG, "unknown backend '%s' (expected auto, mg, fftw or opencl)",
+                    s ? s : "(null)");
+}
+
+const char *hv_stop_reason_str(hv_stop_reason r)
+{
+    switch (r) {
+    case HV_STOP_NONE: return "none";
+    case HV_STOP_CONVERGED: return "converged";
+    case HV_STOP_MAX_ITER: return "max-iterations";
+    case HV_STOP_STAGNATED: return "stagnated";
+    case HV_STOP_EXACT: return "exact";
+    }
+    return "unknown";
+}
+
+void hv_solver_opts_default(hv_solver_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->backend = HV_BACKEND_AUTO;
+    o->smoother = HV_SMOOTH_RBGS;
+    o->tol = 1e-6;
+    o->max_iter = 50;
+    o->pre_smooth = 2;
+    o->post_smooth = 2;
+    o->fftw_double = 1;
+}
+
+/* 6-connected (4 in 2D) flood fill of the fluid cells. */
+static hv_status label_regions(hv_solver *sv)
+{
+    const hv_setup *s = &sv->setup;
+    const int *n = s->p.n;
+    size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    sv->region = malloc(s->count * sizeof(int32_t));
+    size_t *stack = malloc(s->count * sizeof(size_t));
+    if (!sv->region || !stack) {
+        free(stack);
+        return hv_error(HV_ERR_NOMEM, "solver: out of memory labelling fluid regions");
+    }
+    for (size_t c = 0; c < s->count; c++)
+        sv->region[c] = -1;
+    int nr = 0;
+    for (size_t seed = 0; seed < s->count; seed++) {
+        if (sv->solid[seed] || sv->region[seed] >= 0)
+            continue;
+        size_t top = 0;
+        stack[top++] = seed;
+        sv->region[seed] = nr;
+        while (top) {
+            size_t c = stack[--top];
+            size_t i = c % sy, j = (c / sy) % (size_t)n[1], k = c / sz;
+            size_t nb[6];
+            int m = 0;
+            if (i > 0) nb[m++] = c - 1;
+            if (i + 1 < (size_t)n[0]) nb[m++] = c + 1;
+            if (j > 0) nb[m++] = c - sy;
+            if (j + 1 < (size_t)n[1]) nb[m++] = c + sy;
+            if (s->p.dim == 3 && k > 0) nb[m++] = c - sz;
+            if (s->p.dim == 3 && k + 1 < (size_t)n[2]) nb[m++] = c + sz;
+            for (int q = 0; q < m; q++)
+                if (!sv->solid[nb[q]] && sv->region[nb[q]] < 0) {
+                    sv->region[nb[q]] = nr;
+                    stack[top++] = nb[q];
+                }
+        }
+        nr++;
+    }
+    free(stack);
+    sv->setup.nregion = nr;
+    sv->setup.region = sv->region;
+    return HV_OK;
+}
+
+static const hv_backend_ops *backend_ops(hv_backend b)
+{
+    switch (b) {
+    case HV_BACKEND_MG: return &hv_backend_mg_ops;
+    case HV_BACKEND_FFTW: return &hv_backend_fftw_ops;  /* NULL when not built in */
+    case HV_BACKEND_OPENCL: return &hv_backend_opencl_ops;
+    default: return NULL;
+    }
+}
+
+hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts)
+{
+    if (!out || !p)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_create: NULL argument");
+    *out = NULL;
+    hv_status st = hv_check_dims(p->dim, p->n, p->h, 40);
+    if (st)
+        return st;
+    if (!(p->alpha >= 0) || !isfinite(p->alpha))
+        return hv_error(HV_ERR_INVALID_ARG, "solver: alpha must be finite and >= 0, got %g", p->alpha);
+    if (!(p->beta > 0) || !isfinite(p->beta))
+        return hv_error(HV_ERR_INVALID_ARG, "solver: beta must be finite and > 0, got %g", p->beta);
+    hv_solver_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_solver_opts_default(&o);
+    if (!(o.tol >= 1e-12) || !(o.tol < 1))
+        return hv_error(HV_ERR_INVALID_ARG, "solver: tolerance must be in [1e-12, 1), got %g", o.tol);
+    if (o.max_iter <= 0 || o.pre_smooth < 0 || o.post_smooth < 0 || o.pre_smooth + o.post_smooth == 0)
+        return hv_error(HV_ERR_INVALID_ARG, "solver: max_iter must be positive and smoothing steps non-negative (not both zero)");
+
+    hv_solver *sv = calloc(1, sizeof *sv);
+    if (!sv)
+        return hv_error(HV_ERR_NOMEM, "solver: out of memory");
+    hv_setup *s = &sv->setup;
+    s->p = *p;
+    if (p->dim == 2)
+        s->p.n[2] = 1;
+    s->count = (size_t)s->p.n[0] * s->p.n[1] * s->p.n[2];
+    s->nregion = 1;
+    s->p.solid = NULL;
+    if (p->solid) {
+        size_t nsolid = 0;
+        for (size_t c = 0; c < s->count; c++)
+            nsolid += p->solid[c] != 0;
+        if (nsolid == s->count) {
+            free(sv);
+            return hv_error(HV_ERR_INVALID_ARG, "solver: every cell of the mask is solid");
+        }
+        if (nsolid) { /* an all-fluid mask is a plain box */
+            sv->solid = malloc(s->count);
+            if (!sv->solid) {
+                hv_solver_destroy(&sv);
+                return hv_error(HV_ERR_NOMEM, "solver: out of memory copying the mask");
+            }
+            for (size_t c = 0; c < s->count; c++)
+                sv->solid[c] = p->solid[c] != 0;
+            s->p.solid = sv->solid;
+            if ((st = label_regions(sv))) {
+                hv_solver_destroy(&sv);
+                return st;
+            }
+        }
+    }
+    hv_backend b = o.backend;
+    if (b == HV_BACKEND_AUTO)
+        b = s->p.solid ? HV_BACKEND_MG : HV_BACKEND_FFTW;
+    if (b == HV_BACKEND_FFTW && s->p.solid) {
+        hv_solver_destroy(&sv);
+        return hv_error(HV_ERR_UNSUPPORTED, "the FFTW backend solves plain boxes only; this grid has solid cells (use mg)");
+    }
+    s->o = o;
+    sv->backend = b;
+    sv->ops = backend_ops(b);
+    if (!sv->ops) {
+        hv_solver_destroy(&sv);
+        return hv_error(HV_ERR_UNSUPPORTED, "solver: backend '%s' is not built into this heatvox",
+                        hv_backend_name(b));
+    }
+    if ((st = sv->ops->create(&sv->state, s))) {
+        sv->state = NULL;
+        hv_solver_destroy(&sv);
+        return st;
+    }
+    *out = sv;
+    return HV_OK;
+}
+
+static hv_status solve_prepared(hv_solver *sv, double *f, double *u, hv_solve_info *info)
+{
+    const hv_setup *s = &sv->setup;
+    hv_solve_info local;
+    if (!info)
+        info = &local;
+    memset(info, 0, sizeof *info);
+    info->backend = sv->backend;
+    if (s->p.solid)
+        for (size_t c = 0; c < s->count; c++)
+            if (s->p.solid[c])
+                f[c] = 0;
+    if (s->p.alpha == 0)
+        hv_project_mean(s, f);
+    double t0 = hv_now();
+    hv_status st = sv->ops->solve(sv->state, f, u, info);
+    info->seconds = hv_now() - t0;
+    info->backend = sv->backend;
+    return st;
+}
+
+static hv_status ensure_buffers(hv_solver *sv)
+{
+    if (sv->fd)
+        return HV_OK;
+    sv->fd = hv_malloc(sv->setup.count * sizeof(double));
+    sv->ud = hv_malloc(sv->setup.count * sizeof(double));
+    if (!sv->fd || !sv->ud)
+        return hv_error(HV_ERR_NOMEM, "solver: out of memory for %zu-cell buffers", sv->setup.count);
+    return HV_OK;
+}
+
+hv_status hv_solver_solve_d(hv_solver *sv, const double *f, double *u, hv_solve_info *info)
+{
+    if (!sv || !f || !u)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve_d: NULL argument");
+    hv_status st = hv_check_finite_d(f, sv->setup.count, "the right-hand side");
+    if (st || (st = ensure_buffers(sv)))
+        return st;
+    memcpy(sv->fd, f, sv->setup.count * sizeof(double));
+    return solve_prepared(sv, sv->fd, u, info);
+}
+
+hv_status hv_solver_solve(hv_solver *sv, const float *f, float *u, hv_solve_info *info)
+{
+    if (!sv || !f || !u)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve: NULL argument");
+    size_t n = sv->setup.count;
+    hv_status st = hv_check_finite(f, n, "the right-hand side");
+    if (st || (st = ensure_buffers(sv)))
+        return st;
+    int guess = sv->setup.o.nonzero_guess;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++) {
+        sv->fd[c] = f[c];
+        sv->ud[c] = guess ? u[c] : 0.0;
+    }
+    st = solve_prepared(sv, sv->fd, sv->ud, info);
+    if (st)
+        return st;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++)
+        u[c] = (float)sv->ud[c];
+    return HV_OK;
+}
+
+hv_status hv_solver_solve_many(hv_solver *sv, int k, const float *const *f, float *const *u,
+                               hv_solve_info *info)
+{
+    if (!sv || k < 0 || (k > 0 && (!f || !u)))
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve_many: bad arguments");
+    for (int i = 0; i < k; i++) {
+        hv_status st = hv_solver_solve(sv, f[i], u[i], info ? &info[i] : NULL);
+        if (st)
+            return st;
+    }
+    return HV_OK;
+}
+
+hv_backend hv_solver_backend(const hv_solver *sv) { return sv->backend; }
+
+const hv_problem *hv_solver_problem(const hv_solver *sv) { return &sv->setup.p; }
+
+void hv_solver_destroy(hv_solver **s)
+{
+    if (!s || !*s)
+        return;
+    hv_solver *sv = *s;
+    if (sv->ops && sv->state)
+        sv->ops->destroy(sv->state);
+    free(sv->solid);
+    free(sv->region);
+    hv_free(sv->fd);
+    hv_free(sv->ud);
+    free(sv);
+    *s = NULL;
+}
