@@ -48,12 +48,12 @@ static void help(void)
         "exit: 0 success, 1 failure (unreadable mesh, bad geometry, I/O), 2 usage error\n");
 }
 
+/* One line rewritten in place on a terminal, one line per stage otherwise. */
 static int on_progress(double fraction, const char *stage, void *user)
 {
-    (void)user;
-    fprintf(stderr, "\rheatvox sdf: %-10s %3d%%", stage, (int)(100 * fraction + 0.5));
-    if (fraction >= 1)
-        fputc('\n', stderr);
+    int tty = *(const int *)user;
+    fprintf(stderr, "%sheatvox sdf: %-10s %3d%%%s", tty ? "\r" : "", stage,
+            (int)(100 * fraction + 0.5), tty && fraction < 1 ? "" : "\n");
     fflush(stderr);
     return 0;
 }
@@ -176,8 +176,10 @@ int cmd_sdf(int argc, char **argv)
     o.threads = threads;
     if (check_writable(out) || (npy && check_writable(npy)))
         return HV_EXIT_FAIL;
-    if (cli_verbose >= 1 || (cli_verbose >= 0 && isatty(2)))
-        hv_set_progress(on_progress, NULL);
+    static int tty;
+    tty = isatty(2);
+    if (cli_verbose >= 1 || (cli_verbose >= 0 && tty))
+        hv_set_progress(on_progress, &tty);
 
     double t0 = hv_now();
     hv_mesh *m = NULL;
@@ -190,8 +192,7 @@ int cmd_sdf(int argc, char **argv)
     hv_grid *g = NULL;
     hv_sdf_stats S;
     st = hv_sdf_compute(m, &o, &g, &S);
-    if (cli_verbose >= 1 || (cli_verbose >= 0 && isatty(2)))
-        hv_set_progress(NULL, NULL);
+    hv_set_progress(NULL, NULL);
     if (st) {
         if (st == HV_ERR_CANCELLED)
             fputc('\n', stderr);

@@ -94,7 +94,8 @@ typedef struct hv_sdf_opts {
     hv_backend backend;   /* default HV_BACKEND_AUTO */
     double diffuse_tol;   /* relative residual of the heat solves; default 1e-10 */
     double poisson_tol;   /* relative residual of the Poisson solve; default 1e-8 */
-    int threads;          /* worker threads; 0 (default) leaves the current setting */
+    int threads;          /* > 0: calls hv_set_threads(threads) (process-wide) first;
+                             0 (default) leaves the current setting */
 } hv_sdf_opts;
 
 typedef struct hv_sdf_repair_report {
