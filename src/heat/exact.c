@@ -37,11 +37,13 @@ static inline void atomic_min_u64(_Atomic uint64_t *p, uint64_t v)
         ;
 }
 
-static double tri_cell_d(const hv_mesh *m, uint32_t t, const double p[3])
+static inline double tri_cell_d(const hv_mesh *m, uint32_t t, const double p[3])
 {
     const uint32_t *v = m->tris + 3 * (size_t)t;
-    return sqrt(hv_point_triangle_d2(p, m->verts + 3 * (size_t)v[0], m->verts + 3 * (size_t)v[1],
-                                     m->verts + 3 * (size_t)v[2]));
+    double q[3];
+    int region;
+    return sqrt(hv_closest(p, m->verts + 3 * (size_t)v[0], m->verts + 3 * (size_t)v[1],
+                           m->verts + 3 * (size_t)v[2], q, &region));
 }
 
 /* Writes the distance of triangle t into the cells within W of it. */
@@ -159,41 +161,68 @@ static double descend(const hv_mesh *m, const ring *r, const double p[3], uint32
 }
 
 /* One pass along axis ax in direction dir over every row; returns updates. */
-/* stamp[c] is the number of the last pass that changed cell c. Pass `pass`
- * only compares c with its upwind neighbour when that neighbour changed after
- * the previous pass of the same direction began (pass - 6 in 3D); otherwise
- * that comparison was already made. */
+/* Compares cell c with its upwind neighbour prev (at p) and takes the
+ * neighbour's triangle if it is nearer. */
+static inline int relax(const hv_mesh *m, const ring *r, float *dist, uint32_t *tri,
+                        uint16_t *stamp, size_t c, size_t prev, const double p[3], int pass,
+                        int period)
+{
+    uint32_t cand = tri[prev];
+    if (cand == UINT32_MAX || cand == tri[c] || (int)stamp[prev] <= pass - period)
+        return 0;
+    double dd = tri_cell_d(m, cand, p);
+    if (!((float)dd < dist[c]))
+        return 0;
+    dd = descend(m, r, p, &cand, dd);
+    dist[c] = (float)dd;
+    tri[c] = cand;
+    stamp[c] = (uint16_t)pass;
+    return 1;
+}
+
+/* One pass along axis ax in direction dir; returns updates. stamp[c] is the
+ * number of the last pass that changed cell c: pass `pass` only compares c
+ * with its upwind neighbour when that neighbour changed after the previous
+ * pass of the same direction began (pass - period); otherwise that
+ * comparison was already made. Passes along y and z walk whole x-rows at a
+ * time, so that memory is read contiguously. */
 static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, int dir, float *dist,
                     uint32_t *tri, uint16_t *stamp, int pass, int period)
 {
     const int *n = g->n;
-    size_t stride[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
-    int e1 = (ax + 1) % 3, e2 = (ax + 2) % 3;
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    const double h = g->h, *o = g->origin;
     size_t updates = 0;
+    if (ax == 0) {
 #pragma omp parallel for collapse(2) schedule(dynamic, 16) reduction(+ : updates)
-    for (int k = 0; k < n[e2]; k++)
-        for (int j = 0; j < n[e1]; j++) {
-            size_t base = (size_t)j * stride[e1] + (size_t)k * stride[e2];
-            double p[3];
-            p[e1] = g->origin[e1] + (j + 0.5) * g->h;
-            p[e2] = g->origin[e2] + (k + 0.5) * g->h;
-            int start = dir > 0 ? 1 : n[ax] - 2, end = dir > 0 ? n[ax] : -1;
-            for (int i = start; i != end; i += dir) {
-                size_t c = base + (size_t)i * stride[ax], prev = c - dir * (ptrdiff_t)stride[ax];
-                uint32_t cand = tri[prev];
-                if (cand == UINT32_MAX || cand == tri[c] || (int)stamp[prev] <= pass - period)
-                    continue;
-                p[ax] = g->origin[ax] + (i + 0.5) * g->h;
-                double dd = tri_cell_d(m, cand, p);
-                if ((float)dd < dist[c]) {
-                    dd = descend(m, r, p, &cand, dd);
-                    dist[c] = (float)dd;
-                    tri[c] = cand;
-                    stamp[c] = (uint16_t)pass;
-                    updates++;
+        for (int k = 0; k < n[2]; k++)
+            for (int j = 0; j < n[1]; j++) {
+                double p[3] = {0, o[1] + (j + 0.5) * h, o[2] + (k + 0.5) * h};
+                int start = dir > 0 ? 1 : n[0] - 2, end = dir > 0 ? n[0] : -1;
+                for (int i = start; i != end; i += dir) {
+                    size_t c = (size_t)i + sy * j + sz * k;
+                    p[0] = o[0] + (i + 0.5) * h;
+                    updates += relax(m, r, dist, tri, stamp, c, c - dir, p, pass, period);
                 }
             }
+        return updates;
+    }
+    /* y: parallel over z-planes, sequential in y; z: parallel over y, sequential in z. */
+    const int outer = ax == 1 ? n[2] : n[1], along = n[ax];
+    const ptrdiff_t step = ax == 1 ? (ptrdiff_t)sy : (ptrdiff_t)sz;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : updates)
+    for (int q = 0; q < outer; q++) {
+        int start = dir > 0 ? 1 : along - 2, end = dir > 0 ? along : -1;
+        for (int s = start; s != end; s += dir) {
+            int j = ax == 1 ? s : q, k = ax == 1 ? q : s;
+            double p[3] = {0, o[1] + (j + 0.5) * h, o[2] + (k + 0.5) * h};
+            size_t base = sy * j + sz * k;
+            for (int i = 0; i < n[0]; i++) {
+                p[0] = o[0] + (i + 0.5) * h;
+                updates += relax(m, r, dist, tri, stamp, base + i, base + i - dir * step, p, pass, period);
+            }
         }
+    }
     return updates;
 }
 
