@@ -106,6 +106,19 @@ hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_i
 hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
                                hv_solve_info *info);
 
+#define HV_MAX_LEVELS 40
+
+typedef struct hv_solver_stats {
+    int levels;                  /* multigrid levels (1 for direct solvers) */
+    int n[HV_MAX_LEVELS][3];     /* cells per axis on each level */
+    int plain[HV_MAX_LEVELS];    /* 1 where a level needs no coefficient arrays */
+    double bytes_per_iteration;  /* modelled memory traffic of one outer iteration */
+    size_t memory_bytes;         /* memory held by the backend's arrays */
+} hv_solver_stats;
+
+/* Describes the backend's data structures (for benchmarks and tests). */
+hv_status hv_solver_get_stats(const hv_solver *s, hv_solver_stats *st);
+
 hv_backend hv_solver_backend(const hv_solver *s);
 const hv_problem *hv_solver_problem(const hv_solver *s);
 

@@ -32,6 +32,8 @@ typedef struct hv_backend_ops {
     hv_status (*solve_many)(void *state, int k, const double *const *f, double *const *u,
                             hv_solve_info *info);
     void (*destroy)(void *state);
+    /* Fills levels, sizes, traffic model and memory; NULL: the front end reports one level. */
+    void (*stats)(const void *state, hv_solver_stats *st);
 } hv_backend_ops;
 
 /* The multigrid backend always builds; the others are weak so that a build

@@ -281,6 +281,19 @@ hv_status hv_solver_solve_many(hv_solver *sv, int k, const float *const *f, floa
     return HV_OK;
 }
 
+hv_status hv_solver_get_stats(const hv_solver *sv, hv_solver_stats *st)
+{
+    if (!sv || !st)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_get_stats: NULL argument");
+    memset(st, 0, sizeof *st);
+    st->levels = 1;
+    memcpy(st->n[0], sv->setup.p.n, sizeof st->n[0]);
+    st->plain[0] = sv->setup.p.solid == NULL;
+    if (sv->ops->stats)
+        sv->ops->stats(sv->state, st);
+    return HV_OK;
+}
+
 hv_backend hv_solver_backend(const hv_solver *sv) { return sv->backend; }
 
 const hv_problem *hv_solver_problem(const hv_solver *sv) { return &sv->setup.p; }
