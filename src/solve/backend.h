@@ -36,10 +36,10 @@ typedef struct hv_backend_ops {
     void (*stats)(const void *state, hv_solver_stats *st);
 } hv_backend_ops;
 
-/* The multigrid backend always builds; the others are weak so that a build
- * without FFTW or OpenCL still links and reports HV_ERR_UNSUPPORTED. */
+/* OpenCL is weak until its backend lands: a build without it still links and
+ * reports HV_ERR_UNSUPPORTED. */
 extern const hv_backend_ops hv_backend_mg_ops;
-extern const hv_backend_ops hv_backend_fftw_ops __attribute__((weak));
+extern const hv_backend_ops hv_backend_fftw_ops;
 extern const hv_backend_ops hv_backend_opencl_ops __attribute__((weak));
 
 /* Records relres into info->history (capped) and bumps nhistory. */

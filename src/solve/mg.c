@@ -7,7 +7,8 @@
  * CG on the bottom level) inside a double-precision defect-correction loop, so
  * tolerances reach 1e-10 although the hierarchy is float. With solid cells the
  * cycle preconditions CG instead (thin walls can stall plain geometric MG), and
- * the smoother order is then made symmetric. Poisson starts with full multigrid.
+ * the smoother order is then made symmetric. Solves from a zero guess start with
+ * full multigrid, which saves one cycle of five for the heat step at 1e-6.
  */
 #include "mg_level.h"
 #include "backend.h"
@@ -140,6 +141,14 @@ static hv_status level_from_mask(const mg_state *m, mg_level *L, const uint8_t *
  * weight = mean of the fine faces that tile the coarse face. */
 static hv_status level_coarsen(const mg_state *m, const mg_level *F, mg_level *C)
 {
+    int even = F->plain;
+    for (int b = 0; b < m->dim; b++)
+        if (F->coarsen[b] && F->n[b] % 2)
+            even = 0;
+    if (even) { /* a plain level halved along even axes stays plain */
+        C->plain = 1;
+        return HV_OK;
+    }
     hv_status st = level_alloc_coeffs(C, m->dim);
     if (st)
         return st;
@@ -308,11 +317,50 @@ static void rb_sweep(const mg_state *m, mg_level *L, int col)
             }
 }
 
+/* Neighbour rows and diagonal of a plain-level row (walls drop their faces). */
+typedef struct plain_row {
+    size_t base;
+    ptrdiff_t ym, yp, zm, zp; /* offsets of the neighbour rows (0 at a wall) */
+    double wym, wyp, wzm, wzp; /* 1 for an open face, 0 at a wall */
+    double dyz;                /* alpha + the y and z face coefficients */
+} plain_row;
+
+static inline plain_row plain_row_at(const mg_state *m, const mg_level *L, int j, int k)
+{
+    plain_row R;
+    R.base = L->sy * (size_t)j + L->sz * (size_t)k;
+    R.wym = j > 0;
+    R.wyp = j < L->n[1] - 1;
+    R.wzm = m->dim == 3 && k > 0;
+    R.wzp = m->dim == 3 && k < L->n[2] - 1;
+    R.ym = R.wym ? -(ptrdiff_t)L->sy : 0;
+    R.yp = R.wyp ? (ptrdiff_t)L->sy : 0;
+    R.zm = R.wzm ? -(ptrdiff_t)L->sz : 0;
+    R.zp = R.wzp ? (ptrdiff_t)L->sz : 0;
+    R.dyz = m->alpha + L->c[1] * (R.wym + R.wyp) + L->c[2] * (R.wzm + R.wzp);
+    return R;
+}
+
+/* out = f - A u along one plain row, for float or double vectors (T); the
+ * interior loop has no branches so that it vectorizes. */
+#define PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUT, NORM)                                              do {                                                                                                   const int nx_ = (L)->n[0];                                                                         const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                                TO *o_ = (OUT) + (R).base;                                                                         const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                                const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;                const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;             const T din_ = (T)((R).dyz + 2 * (L)->c[0]);                                                       for (int i_ = 0; i_ < nx_; i_++) {                                                                     T s_ = cy_ * (wym_ * ym_[i_] + wyp_ * yp_[i_]) + cz_ * (wzm_ * zm_[i_] + wzp_ * zp_[i_]);             T d_;                                                                                              if (i_ > 0 && i_ < nx_ - 1) {                                                                          s_ += cx_ * (u_[i_ - 1] + u_[i_ + 1]);                                                             d_ = din_;                                                                                     } else {                                                                                               d_ = (T)(R).dyz;                                                                                   if (i_ > 0) { s_ += cx_ * u_[i_ - 1]; d_ += cx_; }                                                 if (i_ < nx_ - 1) { s_ += cx_ * u_[i_ + 1]; d_ += cx_; }                                       }                                                                                                  T r_ = f_[i_] - (d_ * u_[i_] - s_);                                                                o_[i_] = (TO)r_;                                                                                   NORM += (double)r_ * (double)r_;                                                               }                                                                                              } while (0)
+
 /* r = f - A u on a level (float). */
 static void level_residual(const mg_state *m, mg_level *L)
 {
     const float *u = L->u, *f = L->f;
     float *r = L->r;
+    if (L->plain) {
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int k = 0; k < L->n[2]; k++)
+            for (int j = 0; j < L->n[1]; j++) {
+                plain_row R = plain_row_at(m, L, j, k);
+                float unused = 0;
+                PLAIN_ROW_RESIDUAL(float, float, L, R, u, f, r, unused);
+                (void)unused;
+            }
+        return;
+    }
 #pragma omp parallel for collapse(2) schedule(static)
     for (int k = 0; k < L->n[2]; k++)
         for (int j = 0; j < L->n[1]; j++)
@@ -360,12 +408,39 @@ static void level_jacobi_update(const mg_state *m, mg_level *L, double cd, doubl
             }
 }
 
+/* One full red-black sweep of a plain 3D level in a single pass over memory:
+ * the first colour on plane k, then the second colour on plane k-1, whose
+ * neighbours on planes k-2..k are all final by then. Same arithmetic as two
+ * colour sweeps, half the memory traffic. */
+static void rb_sweep_fused(const mg_state *m, mg_level *L, int first)
+{
+    const int nz = L->n[2], ny = L->n[1];
+#pragma omp parallel
+    for (int k = 0; k <= nz; k++) {
+        if (k < nz) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k, first);
+        }
+        if (k > 0) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k - 1, !first);
+        }
+    }
+}
+
 static void smooth(const mg_state *m, mg_level *L, int steps, int reverse)
 {
     if (steps <= 0)
         return;
     if (m->smoother == HV_SMOOTH_RBGS) {
+        int fused = L->plain && m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
         for (int s = 0; s < steps; s++) {
+            if (fused) {
+                rb_sweep_fused(m, L, reverse ? 1 : 0);
+                continue;
+            }
             rb_sweep(m, L, reverse ? 1 : 0);
             rb_sweep(m, L, reverse ? 0 : 1);
         }
@@ -442,6 +517,45 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
+    if (C->plain) {
+        /* Blend the (up to) four coarse rows in y and z into one line, then
+         * interpolate along x: 4 + 2 flops per fine cell instead of 8 products. */
+#pragma omp parallel
+        {
+            float *line = hv_malloc((size_t)C->n[0] * sizeof(float));
+#pragma omp for collapse(2) schedule(static)
+            for (int k = 0; k < F->n[2]; k++)
+                for (int j = 0; j < F->n[1]; j++) {
+                    int K0, K1, J0, J1;
+                    float wk1, wj1;
+                    prolong_axis(co[2], C->n[2], k, &K0, &K1, &wk1);
+                    prolong_axis(co[1], C->n[1], j, &J0, &J1, &wj1);
+                    const float *r00 = uc + C->sy * J0 + C->sz * K0, *r01 = uc + C->sy * J1 + C->sz * K0;
+                    const float *r10 = uc + C->sy * J0 + C->sz * K1, *r11 = uc + C->sy * J1 + C->sz * K1;
+                    const float a00 = (1 - wk1) * (1 - wj1), a01 = (1 - wk1) * wj1;
+                    const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
+                    for (int I = 0; I < C->n[0]; I++)
+                        line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
+                    float *uf = F->u + F->sy * (size_t)j + F->sz * (size_t)k;
+                    if (!co[0]) {
+                        for (int i = 0; i < F->n[0]; i++)
+                            uf[i] += line[i];
+                        continue;
+                    }
+                    const int nc = C->n[0], nf = F->n[0];
+                    /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
+                    uf[0] += line[0];
+                    for (int I = 1; I < nc; I++)
+                        uf[2 * I] += 0.75f * line[I] + 0.25f * line[I - 1];
+                    for (int I = 0; I + 1 < nc && 2 * I + 1 < nf; I++)
+                        uf[2 * I + 1] += 0.75f * line[I] + 0.25f * line[I + 1];
+                    if (2 * (nc - 1) + 1 < nf)
+                        uf[2 * (nc - 1) + 1] += line[nc - 1];
+                }
+            hv_free(line);
+        }
+        return;
+    }
 #pragma omp parallel for collapse(2) schedule(static)
     for (int k = 0; k < F->n[2]; k++)
         for (int j = 0; j < F->n[1]; j++) {
@@ -630,7 +744,8 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
 }
 
 /* Full multigrid: restrict f down, solve the bottom, then interpolate and
- * V-cycle on each finer level (for Poisson, NOTES §2). */
+ * V-cycle on each finer level (NOTES §2 suggests it for Poisson; measured, it
+ * also takes the heat step's first factor from 0.014 to 0.009). */
 static void fmg(const mg_state *m)
 {
     for (int l = 0; l + 1 < m->nlev; l++) {
@@ -816,13 +931,24 @@ fail:
     return st;
 }
 
-/* rd = f - A x in double, level-0 float rhs = rd; returns ||rd||. */
+/* Level-0 float right-hand side = f - A x computed in double; returns its norm.
+ * Weighted (masked) levels also keep the double residual in rd for PCG. */
 static double fine_residual(const mg_state *m, const double *f, const double *x)
 {
     const mg_level *L = &m->lv[0];
     double *rd = m->rd;
-    level_apply_d(m, L, x, rd);
     double nn = 0;
+    if (L->plain) {
+        /* One pass: the residual in double, stored as the cycle's float input. */
+#pragma omp parallel for collapse(2) reduction(+ : nn) schedule(static)
+        for (int k = 0; k < L->n[2]; k++)
+            for (int j = 0; j < L->n[1]; j++) {
+                plain_row R = plain_row_at(m, L, j, k);
+                PLAIN_ROW_RESIDUAL(double, float, L, R, x, f, L->f, nn);
+            }
+        return sqrt(nn);
+    }
+    level_apply_d(m, L, x, rd);
 #pragma omp parallel for reduction(+ : nn) schedule(static)
     for (size_t c = 0; c < L->count; c++) {
         double r = (L->plain || L->a[c] != 0.0f) ? f[c] - rd[c] : 0.0;
@@ -851,7 +977,7 @@ static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv
             info->reason = HV_STOP_CONVERGED;
             return HV_OK;
         }
-        if (it == 0 && m->alpha == 0)
+        if (it == 0 && !s->o.nonzero_guess)
             fmg(m);
         else
             vcycle(m, 0, 0, 0);
