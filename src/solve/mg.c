@@ -18,9 +18,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define MG_MAX_LEVELS 40
-#define MG_BOTTOM_CELLS 512
-
 typedef struct mg_state {
     const hv_setup *s;
     int dim;
@@ -33,225 +30,7 @@ typedef struct mg_state {
     double *rd, *p, *z, *q; /* fine double work */
 } mg_state;
 
-/* ---------- coefficients ---------- */
-
-static size_t face_index(const mg_level *L, int a, int i, int j, int k)
-{
-    size_t m0 = (size_t)L->n[0] + (a == 0), m1 = (size_t)L->n[1] + (a == 1);
-    return (size_t)i + m0 * ((size_t)j + m1 * (size_t)k);
-}
-
-/* Face weight with plain levels, walls and out-of-range indices handled. */
-static float level_w(const mg_level *L, int a, int i, int j, int k)
-{
-    int idx[3] = {i, j, k};
-    for (int b = 0; b < 3; b++)
-        if (idx[b] < 0 || idx[b] > L->n[b] - (b != a))
-            return 0.0f;
-    if (idx[a] == 0 || idx[a] == L->n[a])
-        return 0.0f;
-    return L->plain ? 1.0f : L->w[a][face_index(L, a, i, j, k)];
-}
-
-static float level_a(const mg_level *L, int i, int j, int k)
-{
-    if (i < 0 || j < 0 || k < 0 || i >= L->n[0] || j >= L->n[1] || k >= L->n[2])
-        return 0.0f;
-    return L->plain ? 1.0f : L->a[(size_t)i + L->sy * j + L->sz * k];
-}
-
-static double level_diag(const mg_state *m, const mg_level *L, int i, int j, int k)
-{
-    double d = m->alpha * level_a(L, i, j, k);
-    int idx[3] = {i, j, k};
-    for (int b = 0; b < m->dim; b++) {
-        int lo[3] = {i, j, k}, hi[3] = {i, j, k};
-        hi[b] = idx[b] + 1;
-        (void)lo;
-        d += L->c[b] * (level_w(L, b, i, j, k) + level_w(L, b, hi[0], hi[1], hi[2]));
-    }
-    return d;
-}
-
-static hv_status level_alloc_coeffs(mg_level *L, int dim)
-{
-    L->a = hv_malloc(L->count * sizeof(float));
-    L->dinv = hv_malloc(L->count * sizeof(float));
-    if (!L->a || !L->dinv)
-        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level coefficients");
-    for (int b = 0; b < dim; b++) {
-        size_t nf = (L->count / L->n[b]) * (size_t)(L->n[b] + 1);
-        L->w[b] = hv_calloc(nf, sizeof(float));
-        if (!L->w[b])
-            return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for face weights");
-    }
-    return HV_OK;
-}
-
-static void level_free_coeffs(mg_level *L)
-{
-    hv_free(L->a);
-    hv_free(L->dinv);
-    L->a = L->dinv = NULL;
-    for (int b = 0; b < 3; b++) {
-        hv_free(L->w[b]);
-        L->w[b] = NULL;
-    }
-}
-
-static void level_fill_dinv(const mg_state *m, mg_level *L)
-{
-#pragma omp parallel for collapse(2) schedule(static)
-    for (int k = 0; k < L->n[2]; k++)
-        for (int j = 0; j < L->n[1]; j++)
-            for (int i = 0; i < L->n[0]; i++) {
-                double d = level_diag(m, L, i, j, k);
-                L->dinv[(size_t)i + L->sy * j + L->sz * k] = d > 0 ? (float)(1.0 / d) : 0.0f;
-            }
-}
-
-/* Fine level from the solid mask: a = fluid, w = 1 between two fluid cells. */
-static hv_status level_from_mask(const mg_state *m, mg_level *L, const uint8_t *solid)
-{
-    hv_status st = level_alloc_coeffs(L, m->dim);
-    if (st)
-        return st;
-    for (size_t c = 0; c < L->count; c++)
-        L->a[c] = solid[c] ? 0.0f : 1.0f;
-    for (int b = 0; b < m->dim; b++) {
-        size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
-#pragma omp parallel for collapse(2) schedule(static)
-        for (int k = 0; k < L->n[2] + (b == 2); k++)
-            for (int j = 0; j < L->n[1] + (b == 1); j++)
-                for (int i = 0; i < L->n[0] + (b == 0); i++) {
-                    int idx[3] = {i, j, k};
-                    float w = 0.0f;
-                    if (idx[b] > 0 && idx[b] < L->n[b]) {
-                        size_t hi = (size_t)i + L->sy * j + L->sz * k;
-                        w = (!solid[hi] && !solid[hi - stride]) ? 1.0f : 0.0f;
-                    }
-                    L->w[b][face_index(L, b, i, j, k)] = w;
-                }
-    }
-    level_fill_dinv(m, L);
-    return HV_OK;
-}
-
-/* Coarse coefficients from fine ones (NOTES §2): a = mean of children, face
- * weight = mean of the fine faces that tile the coarse face. */
-static hv_status level_coarsen(const mg_state *m, const mg_level *F, mg_level *C)
-{
-    int even = F->plain;
-    for (int b = 0; b < m->dim; b++)
-        if (F->coarsen[b] && F->n[b] % 2)
-            even = 0;
-    if (even) { /* a plain level halved along even axes stays plain */
-        C->plain = 1;
-        return HV_OK;
-    }
-    hv_status st = level_alloc_coeffs(C, m->dim);
-    if (st)
-        return st;
-    int nchild = 1;
-    for (int b = 0; b < m->dim; b++)
-        nchild *= F->coarsen[b] ? 2 : 1;
-    const int *co = F->coarsen;
-#pragma omp parallel for collapse(2) schedule(static)
-    for (int K = 0; K < C->n[2]; K++)
-        for (int J = 0; J < C->n[1]; J++)
-            for (int I = 0; I < C->n[0]; I++) {
-                double sum = 0;
-                for (int dk = 0; dk <= co[2]; dk++)
-                    for (int dj = 0; dj <= co[1]; dj++)
-                        for (int di = 0; di <= co[0]; di++)
-                            sum += level_a(F, co[0] ? 2 * I + di : I, co[1] ? 2 * J + dj : J,
-                                           co[2] ? 2 * K + dk : K);
-                C->a[(size_t)I + C->sy * J + C->sz * K] = (float)(sum / nchild);
-            }
-    for (int b = 0; b < m->dim; b++) {
-        int nface = nchild / (co[b] ? 2 : 1);
-#pragma omp parallel for collapse(2) schedule(static)
-        for (int K = 0; K < C->n[2] + (b == 2); K++)
-            for (int J = 0; J < C->n[1] + (b == 1); J++)
-                for (int I = 0; I < C->n[0] + (b == 0); I++) {
-                    int CI[3] = {I, J, K};
-                    double sum = 0;
-                    int lim[3];
-                    for (int e = 0; e < 3; e++)
-                        lim[e] = (e == b) ? 0 : co[e];
-                    for (int dk = 0; dk <= lim[2]; dk++)
-                        for (int dj = 0; dj <= lim[1]; dj++)
-                            for (int di = 0; di <= lim[0]; di++) {
-                                int d[3] = {di, dj, dk}, f[3];
-                                for (int e = 0; e < 3; e++)
-                                    f[e] = co[e] ? 2 * CI[e] + d[e] : CI[e];
-                                sum += level_w(F, b, f[0], f[1], f[2]);
-                            }
-                    C->w[b][face_index(C, b, I, J, K)] = (float)(sum / nface);
-                }
-    }
-    /* A coarse level whose weights all equal one inside is plain. */
-    int plain = 1;
-    for (size_t c = 0; c < C->count && plain; c++)
-        plain = C->a[c] == 1.0f;
-    for (int b = 0; b < m->dim && plain; b++)
-        for (int K = 0; K < C->n[2] + (b == 2) && plain; K++)
-            for (int J = 0; J < C->n[1] + (b == 1) && plain; J++)
-                for (int I = 0; I < C->n[0] + (b == 0) && plain; I++) {
-                    int CI[3] = {I, J, K};
-                    if (CI[b] > 0 && CI[b] < C->n[b])
-                        plain = C->w[b][face_index(C, b, I, J, K)] == 1.0f;
-                }
-    if (plain) {
-        level_free_coeffs(C);
-        C->plain = 1;
-    } else {
-        level_fill_dinv(m, C);
-    }
-    return HV_OK;
-}
-
 /* ---------- stencil kernels ---------- */
-
-/* Off-diagonal sum  sum_faces c_b w_f u_nb  and diagonal at cell (i,j,k).
- * The macro body serves float and double vectors. */
-#define MG_STENCIL(L, m, U, i, j, k, c, S, D)                                                     \
-    do {                                                                                           \
-        if ((L)->plain) {                                                                          \
-            double cx_ = (L)->c[0], cy_ = (L)->c[1], cz_ = (L)->c[2];                              \
-            D = (m)->alpha;                                                                        \
-            S = 0;                                                                                 \
-            if (i > 0) { S += cx_ * U[c - 1]; D += cx_; }                                          \
-            if (i < (L)->n[0] - 1) { S += cx_ * U[c + 1]; D += cx_; }                              \
-            if (j > 0) { S += cy_ * U[c - (L)->sy]; D += cy_; }                                    \
-            if (j < (L)->n[1] - 1) { S += cy_ * U[c + (L)->sy]; D += cy_; }                        \
-            if ((m)->dim == 3) {                                                                   \
-                if (k > 0) { S += cz_ * U[c - (L)->sz]; D += cz_; }                                \
-                if (k < (L)->n[2] - 1) { S += cz_ * U[c + (L)->sz]; D += cz_; }                    \
-            }                                                                                      \
-        } else {                                                                                   \
-            const float *wx_ = (L)->w[0], *wy_ = (L)->w[1];                                        \
-            size_t fx_ = face_index(L, 0, i, j, k), fy_ = face_index(L, 1, i, j, k);               \
-            double wl_, wh_;                                                                       \
-            D = (m)->alpha * (L)->a[c];                                                            \
-            S = 0;                                                                                 \
-            wl_ = wx_[fx_]; wh_ = wx_[fx_ + 1];                                                    \
-            if (wl_ != 0) S += (L)->c[0] * wl_ * U[c - 1];                                         \
-            if (wh_ != 0) S += (L)->c[0] * wh_ * U[c + 1];                                         \
-            D += (L)->c[0] * (wl_ + wh_);                                                          \
-            wl_ = wy_[fy_]; wh_ = wy_[fy_ + (size_t)(L)->n[0]];                                    \
-            if (wl_ != 0) S += (L)->c[1] * wl_ * U[c - (L)->sy];                                   \
-            if (wh_ != 0) S += (L)->c[1] * wh_ * U[c + (L)->sy];                                   \
-            D += (L)->c[1] * (wl_ + wh_);                                                          \
-            if ((m)->dim == 3) {                                                                   \
-                size_t fz_ = face_index(L, 2, i, j, k);                                            \
-                wl_ = (L)->w[2][fz_]; wh_ = (L)->w[2][fz_ + (L)->sz];                              \
-                if (wl_ != 0) S += (L)->c[2] * wl_ * U[c - (L)->sz];                               \
-                if (wh_ != 0) S += (L)->c[2] * wh_ * U[c + (L)->sz];                               \
-                D += (L)->c[2] * (wl_ + wh_);                                                      \
-            }                                                                                      \
-        }                                                                                          \
-    } while (0)
 
 /* Plain-level interior row update: the hot loop of the smoother, branch-free. */
 static void rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
@@ -343,7 +122,31 @@ static inline plain_row plain_row_at(const mg_state *m, const mg_level *L, int j
 
 /* out = f - A u along one plain row, for float or double vectors (T); the
  * interior loop has no branches so that it vectorizes. */
-#define PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUT, NORM)                                              do {                                                                                                   const int nx_ = (L)->n[0];                                                                         const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                                TO *o_ = (OUT) + (R).base;                                                                         const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                                const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;                const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;             const T din_ = (T)((R).dyz + 2 * (L)->c[0]);                                                       for (int i_ = 0; i_ < nx_; i_++) {                                                                     T s_ = cy_ * (wym_ * ym_[i_] + wyp_ * yp_[i_]) + cz_ * (wzm_ * zm_[i_] + wzp_ * zp_[i_]);             T d_;                                                                                              if (i_ > 0 && i_ < nx_ - 1) {                                                                          s_ += cx_ * (u_[i_ - 1] + u_[i_ + 1]);                                                             d_ = din_;                                                                                     } else {                                                                                               d_ = (T)(R).dyz;                                                                                   if (i_ > 0) { s_ += cx_ * u_[i_ - 1]; d_ += cx_; }                                                 if (i_ < nx_ - 1) { s_ += cx_ * u_[i_ + 1]; d_ += cx_; }                                       }                                                                                                  T r_ = f_[i_] - (d_ * u_[i_] - s_);                                                                o_[i_] = (TO)r_;                                                                                   NORM += (double)r_ * (double)r_;                                                               }                                                                                              } while (0)
+#define PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUT, NORM)                                              \
+    do {                                                                                              \
+        const int nx_ = (L)->n[0];                                                                    \
+        const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                           \
+        TO *o_ = (OUT) + (R).base;                                                                    \
+        const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                           \
+        const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;           \
+        const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;       \
+        const T din_ = (T)((R).dyz + 2 * (L)->c[0]);                                                  \
+        for (int i_ = 0; i_ < nx_; i_++) {                                                            \
+            T s_ = cy_ * (wym_ * ym_[i_] + wyp_ * yp_[i_]) + cz_ * (wzm_ * zm_[i_] + wzp_ * zp_[i_]); \
+            T d_;                                                                                     \
+            if (i_ > 0 && i_ < nx_ - 1) {                                                             \
+                s_ += cx_ * (u_[i_ - 1] + u_[i_ + 1]);                                                \
+                d_ = din_;                                                                            \
+            } else {                                                                                  \
+                d_ = (T)(R).dyz;                                                                      \
+                if (i_ > 0) { s_ += cx_ * u_[i_ - 1]; d_ += cx_; }                                    \
+                if (i_ < nx_ - 1) { s_ += cx_ * u_[i_ + 1]; d_ += cx_; }                              \
+            }                                                                                         \
+            T r_ = f_[i_] - (d_ * u_[i_] - s_);                                                       \
+            o_[i_] = (TO)r_;                                                                          \
+            NORM += (double)r_ * (double)r_;                                                          \
+        }                                                                                             \
+    } while (0)
 
 /* r = f - A u on a level (float). */
 static void level_residual(const mg_state *m, mg_level *L)
@@ -375,20 +178,12 @@ static void level_residual(const mg_state *m, mg_level *L)
 /* y = A x in double on a level (fine residuals, bottom CG). */
 static void level_apply_d(const mg_state *m, const mg_level *L, const double *x, double *y)
 {
-#pragma omp parallel for collapse(2) schedule(static)
-    for (int k = 0; k < L->n[2]; k++)
-        for (int j = 0; j < L->n[1]; j++)
-            for (int i = 0; i < L->n[0]; i++) {
-                size_t c = (size_t)i + L->sy * j + L->sz * k;
-                double S, D;
-                MG_STENCIL(L, m, x, i, j, k, c, S, D);
-                y[c] = D * x[c] - S;
-            }
+    mg_level_apply_d(L, m->dim, m->alpha, x, y);
 }
 
 static double level_diag_at(const mg_state *m, const mg_level *L, size_t c, int i, int j, int k)
 {
-    return L->plain ? level_diag(m, L, i, j, k) : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
+    return L->plain ? mg_level_diag(L, m->dim, m->alpha, i, j, k) : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
 }
 
 /* u += omega_k D^-1 r, the Jacobi-type update; with cheb != NULL the Chebyshev
@@ -668,49 +463,6 @@ static void bottom_solve(const mg_state *m, mg_level *L)
         L->u[c] = (float)x[c];
 }
 
-/* Connected regions of a level: cells with a > 0 joined through faces w > 0. */
-static hv_status level_regions(const mg_state *m, mg_level *L)
-{
-    L->region = malloc(L->count * sizeof(int32_t));
-    size_t *stack = malloc(L->count * sizeof(size_t));
-    if (!L->region || !stack) {
-        free(stack);
-        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory labelling regions");
-    }
-    for (size_t c = 0; c < L->count; c++)
-        L->region[c] = -1;
-    int nr = 0;
-    for (size_t seed = 0; seed < L->count; seed++) {
-        int si = (int)(seed % L->n[0]), sj = (int)((seed / L->sy) % L->n[1]), sk = (int)(seed / L->sz);
-        if (L->region[seed] >= 0 || level_a(L, si, sj, sk) == 0.0f)
-            continue;
-        size_t top = 0;
-        stack[top++] = seed;
-        L->region[seed] = nr;
-        while (top) {
-            size_t c = stack[--top];
-            int idx[3] = {(int)(c % L->n[0]), (int)((c / L->sy) % L->n[1]), (int)(c / L->sz)};
-            for (int b = 0; b < m->dim; b++)
-                for (int sgn = 0; sgn < 2; sgn++) {
-                    int f[3] = {idx[0], idx[1], idx[2]};
-                    f[b] += sgn; /* face index: lo face = idx, hi face = idx + 1 */
-                    if (level_w(L, b, f[0], f[1], f[2]) == 0.0f)
-                        continue;
-                    size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
-                    size_t nb = sgn ? c + stride : c - stride;
-                    if (L->region[nb] < 0) {
-                        L->region[nb] = nr;
-                        stack[top++] = nb;
-                    }
-                }
-        }
-        nr++;
-    }
-    free(stack);
-    L->nregion = nr;
-    return HV_OK;
-}
-
 /* ---------- cycles ---------- */
 
 static void zero_f(float *v, size_t n)
@@ -771,7 +523,7 @@ static void mg_destroy(void *state)
         return;
     for (int l = 0; l < m->nlev; l++) {
         mg_level *L = &m->lv[l];
-        level_free_coeffs(L);
+        mg_level_free_coeffs(L);
         hv_free(L->u);
         hv_free(L->f);
         hv_free(L->r);
@@ -790,46 +542,6 @@ static void mg_destroy(void *state)
     free(m);
 }
 
-/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds). */
-static double estimate_lmax(const mg_state *m, mg_level *L)
-{
-    size_t n = L->count;
-    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y);
-    if (!x || !y) {
-        free(x);
-        free(y);
-        return 2.0;
-    }
-    unsigned s = 12345u;
-    for (size_t c = 0; c < n; c++) {
-        s = s * 1664525u + 1013904223u;
-        x[c] = (double)(s >> 8) / (1u << 24) - 0.5;
-    }
-    double lam = 2.0;
-    for (int it = 0; it < 12; it++) {
-        level_apply_d(m, L, x, y);
-        double nrm = 0, dot = 0, xx = 0;
-        for (size_t c = 0; c < n; c++) {
-            int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
-            double dg = level_diag_at(m, L, c, i, j, k);
-            y[c] = dg > 0 ? y[c] / dg : 0;
-            dot += x[c] * y[c];
-            xx += x[c] * x[c];
-            nrm += y[c] * y[c];
-        }
-        lam = xx > 0 ? dot / xx : 2.0;
-        nrm = sqrt(nrm);
-        if (!(nrm > 0))
-            break;
-        for (size_t c = 0; c < n; c++)
-            x[c] = y[c] / nrm;
-    }
-    free(x);
-    free(y);
-    lam *= 1.1;
-    return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
-}
-
 static hv_status mg_create(void **state, const hv_setup *s)
 {
     mg_state *m = calloc(1, sizeof *m);
@@ -844,64 +556,27 @@ static hv_status mg_create(void **state, const hv_setup *s)
     m->use_pcg = s->p.solid != NULL;
     hv_status st = HV_OK;
 
-    /* Level 0. */
-    mg_level *L = &m->lv[0];
-    for (int b = 0; b < 3; b++) {
-        L->n[b] = b < m->dim ? s->p.n[b] : 1;
-        L->c[b] = b < m->dim ? s->p.beta / (s->p.h * s->p.h) : 0.0;
-    }
-    double hh[3] = {s->p.h, s->p.h, s->p.h};
-    m->nlev = 1;
-    for (;;) {
-        L = &m->lv[m->nlev - 1];
-        L->count = (size_t)L->n[0] * L->n[1] * L->n[2];
-        L->sy = (size_t)L->n[0];
-        L->sz = (size_t)L->n[0] * L->n[1];
+    /* Levels and coefficients (mg_setup.c); the state takes them over. */
+    mg_hierarchy H;
+    if ((st = mg_hierarchy_build(&H, s, m->smoother == HV_SMOOTH_CHEBYSHEV)))
+        goto fail;
+    m->nlev = H.nlev;
+    memcpy(m->lv, H.lv, (size_t)H.nlev * sizeof H.lv[0]);
+    for (int l = 0; l < m->nlev; l++) {
+        mg_level *L = &m->lv[l];
         L->u = hv_calloc(L->count, sizeof(float));
         L->f = hv_calloc(L->count, sizeof(float));
         L->r = hv_calloc(L->count, sizeof(float));
         if (m->smoother != HV_SMOOTH_RBGS)
             L->d = hv_calloc(L->count, sizeof(float));
         if (!L->u || !L->f || !L->r || (m->smoother != HV_SMOOTH_RBGS && !L->d)) {
-            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)",
-                          m->nlev - 1, L->count);
+            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)", l,
+                          L->count);
             goto fail;
         }
-        if (m->nlev == 1) {
-            L->plain = s->p.solid == NULL;
-            if (!L->plain && (st = level_from_mask(m, L, s->p.solid)))
-                goto fail;
-        } else if ((st = level_coarsen(m, &m->lv[m->nlev - 2], L))) {
-            goto fail;
-        }
-        if (m->smoother == HV_SMOOTH_CHEBYSHEV)
-            L->lmax = estimate_lmax(m, L);
-        /* Semi-coarsen: halve the axes of finest spacing that still have > 2 cells. */
-        double hmin = INFINITY;
-        for (int b = 0; b < m->dim; b++)
-            if (L->n[b] > 2 && hh[b] < hmin)
-                hmin = hh[b];
-        int any = 0;
-        for (int b = 0; b < m->dim; b++) {
-            L->coarsen[b] = L->n[b] > 2 && hh[b] <= hmin * 1.01;
-            any |= L->coarsen[b];
-        }
-        if (!any || L->count <= MG_BOTTOM_CELLS || m->nlev == MG_MAX_LEVELS) {
-            for (int b = 0; b < 3; b++)
-                L->coarsen[b] = 0;
-            break;
-        }
-        mg_level *C = &m->lv[m->nlev];
-        for (int b = 0; b < 3; b++) {
-            C->n[b] = L->coarsen[b] ? (L->n[b] + 1) / 2 : L->n[b];
-            C->c[b] = L->coarsen[b] ? L->c[b] / 4 : L->c[b];
-            if (L->coarsen[b])
-                hh[b] *= 2;
-        }
-        m->nlev++;
     }
-    /* Bottom: CG work and (Poisson) regions. */
-    L = &m->lv[m->nlev - 1];
+    /* Bottom: CG work. */
+    mg_level *L = &m->lv[m->nlev - 1];
     L->bx = malloc(L->count * sizeof(double));
     L->bb = malloc(L->count * sizeof(double));
     L->br = malloc(L->count * sizeof(double));
@@ -911,8 +586,6 @@ static hv_status mg_create(void **state, const hv_setup *s)
         st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
         goto fail;
     }
-    if (m->alpha == 0 && (st = level_regions(m, L)))
-        goto fail;
     size_t n0 = s->count;
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
