@@ -2,6 +2,9 @@
  * Triangle meshes: readers for OBJ, PLY (ascii, binary little/big endian), STL
  * (ascii, binary) and OFF; polygons are fanned into triangles and vertices are
  * welded by exact position. A defect report describes what is broken.
+ *
+ * Generators (icosphere, torus) and defect makers (holes, flips, duplicates,
+ * soups) build known-truth test cases; they never touch files.
  */
 #ifndef HEATVOX_MESH_H
 #define HEATVOX_MESH_H
@@ -17,6 +20,11 @@ typedef struct hv_mesh {
     size_t ntris;
     double *verts;    /* 3 * nverts coordinates, owned */
     uint32_t *tris;   /* 3 * ntris vertex indices, owned */
+    /* What the reader did (0 / NULL for meshes not read from a file). */
+    const char *format;           /* static name, e.g. "PLY binary_little_endian" */
+    size_t input_vertices;        /* vertices in the input, before welding */
+    size_t unreferenced_vertices; /* input vertices no face used; dropped */
+    size_t polygons_fanned;       /* input faces with more than 3 corners */
 } hv_mesh;
 
 typedef struct hv_mesh_report {
@@ -30,27 +38,85 @@ typedef struct hv_mesh_report {
     size_t degenerate_faces;    /* repeated vertex index or zero area */
     size_t nonfinite_vertices;  /* NaN or Inf coordinates */
     size_t components;          /* edge-connected components of triangles */
+    /* Added fields. */
+    size_t edges;               /* distinct undirected edges */
+    size_t vertex_components;   /* components joined through shared vertices (an hourglass
+                                   touching at one vertex is 1 here, 2 in components) */
+    size_t input_vertices;      /* copied from the mesh (0 when not read from a file) */
+    size_t unreferenced_vertices; /* copied from the mesh */
+    double signed_volume;       /* sum of det(a,b,c)/6 over finite triangles: > 0 when a
+                                   closed mesh is oriented outward */
 } hv_mesh_report;
 
 /* Reads a mesh, choosing the format by extension (.obj .ply .stl .off, any case)
  * and falling back to the content. Errors name the file and the line or byte
- * offset. An empty mesh (no triangles) is an error. The caller owns *out. */
+ * offset. An empty mesh (no triangles) is an error. The caller owns *out.
+ * Vertices that no face uses are dropped (counted in unreferenced_vertices).
+ * A PLY `tristrips` element (lists with -1 restarts) is converted to triangles
+ * with alternating winding; strip triangles repeating a vertex (the stitching
+ * between strips) are dropped. Faces with fewer than 3 corners are an error. */
 hv_status hv_mesh_read(const char *path, hv_mesh **out);
 
-/* Builds a mesh from arrays (copied); vertices are welded by exact position. */
+/* Builds a mesh from arrays (copied); vertices are welded by exact position
+ * (-0 equals +0; vertices with a NaN coordinate are never merged) and vertices
+ * no triangle uses are dropped. Indices must be < nverts; ntris must be > 0. */
 hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
                               const uint32_t *tris, size_t ntris);
 
+/* Deep copy. The caller owns *out. */
+hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out);
+
+/* Frees *m and sets it to NULL; accepts NULL and *m == NULL. */
 void hv_mesh_destroy(hv_mesh **m);
 
-/* Axis-aligned bounds of the finite vertices. */
+/* Axis-aligned bounds of the finite vertices (HV_ERR_NUMERIC when none is finite). */
 hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3]);
 
-/* Fills the defect report. */
+/* Fills the defect report. O(n log n) in the number of triangles. Triangles that
+ * repeat a vertex index are counted as degenerate and left out of the edge,
+ * orientation and component counts (their "edges" are not edges). */
 hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r);
 
-/* Writes the mesh as OBJ (temporary file then rename). */
+/* Writes the mesh as OBJ (temporary file then rename). Coordinates are written
+ * with 17 significant digits, so reading the file back gives the same doubles. */
 hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path);
+
+/* ---- Generators (pure functions; the caller owns *out) ---- */
+
+/* Icosphere: the icosahedron subdivided `subdiv` times (0..9), 20·4^subdiv
+ * triangles, vertices on the sphere of centre c and radius r, counter-clockwise
+ * seen from outside (outward normals, positive signed volume). */
+hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int subdiv);
+
+/* Torus around the z axis through c: major radius R, tube radius r (0 < r < R),
+ * nu segments around z and nv around the tube (each >= 3); 2·nu·nv triangles,
+ * oriented outward. */
+hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double r, int nu,
+                             int nv);
+
+/* ---- Defect makers for tests (modify m in place; deterministic for a seed) ---- */
+
+/* Removes nholes patches: around each of nholes random vertices, every triangle
+ * with a corner within radius_frac × (bounding-box diagonal) of it (at least the
+ * triangles around that vertex). Unused vertices are dropped. Fails with
+ * HV_ERR_INVALID_ARG if no triangle would remain. */
+hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsigned seed);
+
+/* Reverses round(fraction × ntris) triangles chosen at random (fraction in [0,1]). */
+hv_status hv_mesh_defect_flip(hv_mesh *m, double fraction, unsigned seed);
+
+/* Reverses every triangle whose centroid lies on the + side (along axis 0,1,2) of
+ * the mean of the triangle centroids. */
+hv_status hv_mesh_defect_flip_half(hv_mesh *m, int axis);
+
+/* Appends copies of round(fraction × ntris) distinct random triangles (fraction in
+ * [0,1]); the first half of the copies (k/2 rounded down) have reversed orientation. */
+hv_status hv_mesh_defect_duplicate(hv_mesh *m, double fraction, unsigned seed);
+
+/* Unwelds: every triangle gets its own 3 vertices (nverts = 3·ntris). With
+ * jitter_rel > 0 each coordinate moves by a uniform random amount of at most
+ * jitter_rel × (bounding-box diagonal). */
+hv_status hv_mesh_defect_soup(hv_mesh *m, double jitter_rel, unsigned seed);
 
 #ifdef __cplusplus
 }
