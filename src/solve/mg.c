@@ -21,6 +21,8 @@
 /* Levels below this many cells run on one thread: fork-join and barrier costs
  * dominate there (measured: 84% of a 2048^2 solve spun in barriers without it). */
 #define MG_PAR_MIN 32768
+/* Rows up to this length take the vectorized smoother path. */
+#define MG_ROW_BUF 4096
 
 typedef struct mg_state {
     const hv_setup *s;
@@ -61,10 +63,23 @@ static void rb_row_plain(const mg_state *m, const mg_level *L, float *u, const f
         i = 2;
     }
     int last = nx - 1;
-    for (; i < last; i += 2)
-        ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
-                 cz * (wzm * zm[i] + wzp * zp[i])) *
-                inv_in;
+    if (nx <= MG_ROW_BUF) {
+        /* Update every interior cell into a buffer (contiguous, so it vectorizes;
+         * the other colour's values are not changed by this colour), then keep
+         * this colour's cells: twice the flops, a fraction of the time. */
+        float buf[MG_ROW_BUF];
+        for (int q = 1; q < last; q++)
+            buf[q] = (fr[q] + cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                      cz * (wzm * zm[q] + wzp * zp[q])) *
+                     inv_in;
+        for (; i < last; i += 2)
+            ur[i] = buf[i];
+    } else {
+        for (; i < last; i += 2)
+            ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                     cz * (wzm * zm[i] + wzp * zp[i])) *
+                    inv_in;
+    }
     if (i == last && last > 0) {
         float d = dyz + cx;
         float s = fr[i] + cx * ur[i - 1] + cy * (wym * ym[i] + wyp * yp[i]) +
