@@ -59,7 +59,7 @@ $(STAMP):
 
 $(BUILD)/gen/kernels.c: $(CL_SRC) Makefile | $(STAMP)
 	@mkdir -p $(dir $@)
-	@{ echo '/* Generated from kernels/*.cl by the Makefile: do not edit. */'; \
+	@{ echo '/* Generated from the kernels/ directory by the Makefile: do not edit. */'; \
 	   echo '#include <stddef.h>'; \
 	   for f in $(CL_SRC); do \
 	     n=$$(basename $$f .cl | tr -c 'a-zA-Z0-9_\n' _); \

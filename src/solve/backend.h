@@ -34,11 +34,15 @@ typedef struct hv_backend_ops {
     void (*destroy)(void *state);
 } hv_backend_ops;
 
-/* The multigrid backend always builds; the others are weak so that a build
- * without FFTW or OpenCL still links and reports HV_ERR_UNSUPPORTED. */
+/* The multigrid backend always builds; FFTW is weak so that a build without
+ * it still links and reports HV_ERR_UNSUPPORTED. OpenCL always builds (it
+ * links only the ICD loader; without a platform its create fails with
+ * HV_ERR_UNSUPPORTED) and must be a strong reference: a weak undefined symbol
+ * does not pull its object out of libheatvox.a, so static binaries would
+ * never contain the backend (the same holds for FFTW). */
 extern const hv_backend_ops hv_backend_mg_ops;
 extern const hv_backend_ops hv_backend_fftw_ops __attribute__((weak));
-extern const hv_backend_ops hv_backend_opencl_ops __attribute__((weak));
+extern const hv_backend_ops hv_backend_opencl_ops;
 
 /* Records relres into info->history (capped) and bumps nhistory. */
 static inline void hv_info_push(hv_solve_info *info, double relres)
