@@ -7,6 +7,7 @@
 #include "heatvox/grid.h"
 #include "heatvox/ops.h"
 #include "heatvox/solve.h"
+#include "heatvox/opencl.h"
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
 #include "heatvox/vdb.h"

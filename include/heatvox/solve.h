@@ -36,7 +36,8 @@ typedef enum hv_backend {
 typedef enum hv_smoother {
     HV_SMOOTH_RBGS = 0,    /* red-black Gauss-Seidel (CPU default) */
     HV_SMOOTH_JACOBI,      /* weighted Jacobi, omega 6/7 (3D) or 4/5 (2D) */
-    HV_SMOOTH_CHEBYSHEV    /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+    HV_SMOOTH_CHEBYSHEV,   /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+    HV_SMOOTH_AUTO         /* the backend's default: RBGS (mg), CHEBYSHEV (opencl) */
 } hv_smoother;
 
 typedef enum hv_stop_reason {
@@ -63,7 +64,7 @@ typedef struct hv_problem {
 
 typedef struct hv_solver_opts {
     hv_backend backend;     /* default AUTO */
-    hv_smoother smoother;   /* default RBGS (mg), CHEBYSHEV (opencl) */
+    hv_smoother smoother;   /* default AUTO: RBGS (mg), CHEBYSHEV (opencl) */
     double tol;             /* relative residual ||f - A u|| / ||f||, default 1e-6; >= 1e-12 */
     int max_iter;           /* outer iterations (cycles), default 50 */
     int pre_smooth;         /* default 2 */
