@@ -341,7 +341,7 @@ static hv_status solve_stationary(ocl_state *o, hv_solve_info *info, double fn)
             info->reason = HV_STOP_CONVERGED;
             return HV_OK;
         }
-        fv_correct(o, it == 0 && s->p.alpha == 0);
+        fv_correct(o, it == 0 && !s->o.nonzero_guess); /* FMG start, as mg.c */
         fv_residual(o);
         if ((st = fv_sync(o, S)))
             return st;
