@@ -957,6 +957,7 @@ START_TEST(device_list_should_describe_and_mark_the_selected_device)
     ck_assert_int_ge(count, 1);
     for (int i = 0; i < count && i < 16; i++) {
         ck_assert(list[i].name[0] != 0);
+        ck_assert_msg(!strncmp(list[i].version, "OpenCL ", 7), "version '%s'", list[i].version);
         ck_assert(list[i].global_mem > 0);
         if (list[i].selected) {
             selected++;

@@ -25,7 +25,7 @@ typedef struct hv_opencl_device {
     int device;              /* D */
     char name[128];
     char platform_name[128];
-    char version[64];        /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
+    char version[128];       /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
     uint64_t global_mem;     /* bytes */
     int compute_units;
     int fp64;                /* double precision: the defect correction runs on the device */

@@ -93,6 +93,18 @@ typedef struct devlist {
     hv_opencl_device info[MAX_DEVICES];
 } devlist;
 
+/* A string property, truncated to size (the query itself fails on a short buffer). */
+static void info_string(cl_platform_id p, cl_device_id d, cl_uint param, char *dst, size_t size)
+{
+    char buf[1024] = "";
+    cl_int e = d ? clGetDeviceInfo(d, param, sizeof buf - 1, buf, NULL)
+                 : clGetPlatformInfo(p, param, sizeof buf - 1, buf, NULL);
+    if (e != CL_SUCCESS)
+        buf[0] = 0;
+    buf[sizeof buf - 1] = 0;
+    snprintf(dst, size, "%s", buf);
+}
+
 static void device_info(cl_platform_id p, cl_device_id d, hv_opencl_device *o)
 {
     cl_ulong mem = 0;
@@ -100,17 +112,15 @@ static void device_info(cl_platform_id p, cl_device_id d, hv_opencl_device *o)
     cl_device_type type = 0;
     cl_device_fp_config fp = 0;
     char ext[8192] = "";
-    clGetDeviceInfo(d, CL_DEVICE_NAME, sizeof o->name, o->name, NULL);
-    clGetPlatformInfo(p, CL_PLATFORM_NAME, sizeof o->platform_name, o->platform_name, NULL);
-    clGetDeviceInfo(d, CL_DEVICE_VERSION, sizeof o->version, o->version, NULL);
+    info_string(p, d, CL_DEVICE_NAME, o->name, sizeof o->name);
+    info_string(p, NULL, CL_PLATFORM_NAME, o->platform_name, sizeof o->platform_name);
+    info_string(p, d, CL_DEVICE_VERSION, o->version, sizeof o->version);
     clGetDeviceInfo(d, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof mem, &mem, NULL);
     clGetDeviceInfo(d, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof cu, &cu, NULL);
     clGetDeviceInfo(d, CL_DEVICE_TYPE, sizeof type, &type, NULL);
     if (clGetDeviceInfo(d, CL_DEVICE_DOUBLE_FP_CONFIG, sizeof fp, &fp, NULL) != CL_SUCCESS)
         fp = 0;
     clGetDeviceInfo(d, CL_DEVICE_EXTENSIONS, sizeof ext - 1, ext, NULL);
-    o->name[sizeof o->name - 1] = o->platform_name[sizeof o->platform_name - 1] = 0;
-    o->version[sizeof o->version - 1] = 0;
     o->global_mem = mem;
     o->compute_units = (int)cu;
     o->gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
