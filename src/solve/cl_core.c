@@ -311,8 +311,11 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
     }
     const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
                          hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
+    char opts[128];
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
+             HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");
     hv_status st = build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]),
-                                 fp64 ? "-cl-std=CL1.2 -DHV_FP64=1" : "-cl-std=CL1.2", &s->prog);
+                                 opts, &s->prog);
     if (st) {
         clReleaseContext(s->ctx);
         free(s);
@@ -595,6 +598,17 @@ void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const 
     }
 }
 
+size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
+{
+    size_t kwg = 0;
+    if (!cl->k[k] || clGetKernelWorkGroupInfo(cl->k[k], cl->dev, CL_KERNEL_WORK_GROUP_SIZE,
+                                              sizeof kwg, &kwg, NULL) != CL_SUCCESS)
+        kwg = cl->max_wg;
+    while (want > 1 && want > kwg)
+        want >>= 1;
+    return want;
+}
+
 static size_t round_up(size_t n, size_t m) { return (n + m - 1) / m * m; }
 
 void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
@@ -625,9 +639,7 @@ size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1])
 
 void hv_cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
 {
-    size_t l = 256;
-    while (l > cl->max_wg)
-        l >>= 1;
+    size_t l = hv_cl_group_limit(cl, HV_K_RED_FINISH, 256);
     hv_cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
     hv_cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
 }

@@ -82,12 +82,7 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
     }
     if ((st = hv_cl_alloc(cl, (5 * S->count + (size_t)m->bnregion) * cl->acc, NULL, &m->bscr)))
         return st;
-    size_t kwg = 0;
-    clGetKernelWorkGroupInfo(cl->k[HV_K_MG_BOTTOM_CG], cl->dev, CL_KERNEL_WORK_GROUP_SIZE, sizeof kwg,
-                             &kwg, NULL);
-    m->bl = BOTTOM_WG;
-    while (m->bl > 1 && kwg && m->bl > kwg)
-        m->bl >>= 1;
+    m->bl = hv_cl_group_limit(cl, HV_K_MG_BOTTOM_CG, BOTTOM_WG);
     return HV_OK;
 }
 
