@@ -14,7 +14,8 @@
     int4 N, float4 C, __global const float *a, __global const float *w0,                          \
         __global const float *w1, __global const float *w2
 
-/* Cell of a 2D range over (x, rows); returns 0 outside the level. */
+/* Cell (i,j,k) and index c of a 2D range over (x, rows); work-items outside the
+ * level return. */
 #define HV_CELL_OR_RETURN(N, i, j, k, c)                                                          \
     const int i = get_global_id(0), row_ = get_global_id(1);                                      \
     if (i >= (N).x || row_ >= (N).y * (N).z)                                                      \

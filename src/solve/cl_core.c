@@ -463,6 +463,8 @@ hv_status hv_cl_finish(hv_cl *cl)
 hv_status hv_cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
 {
     cl_int e;
+    if (bytes == 0) /* OpenCL has no empty buffers */
+        init = NULL;
     *out = clCreateBuffer(cl->ctx, CL_MEM_READ_WRITE | (init ? CL_MEM_COPY_HOST_PTR : 0),
                           bytes ? bytes : 1, (void *)init, &e);
     if (e == CL_SUCCESS)
