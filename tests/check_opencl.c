@@ -853,6 +853,123 @@ START_TEST(chebyshev_should_be_the_default_smoother_and_match_mg_iterations)
 }
 END_TEST
 
+/* A buffer of `bytes` at the start of a larger one filled with a sentinel, so
+ * that writes past its end show (on CPU devices they would hit the heap). */
+#define GUARD_BYTES 8192
+static cl_mem guarded(size_t bytes, cl_mem *parent)
+{
+    ck_assert_int_le(bytes, GUARD_BYTES / 2);
+    ck_assert_int_eq(hv_cl_alloc(CL, GUARD_BYTES, NULL, parent), HV_OK);
+    const cl_uchar pattern = 0xab;
+    ck_assert_int_eq(clEnqueueFillBuffer(CL->q, *parent, &pattern, 1, 0, GUARD_BYTES, 0, NULL, NULL), CL_SUCCESS);
+    cl_buffer_region reg = {0, bytes};
+    cl_int e;
+    cl_mem sub = clCreateSubBuffer(*parent, CL_MEM_READ_WRITE, CL_BUFFER_CREATE_TYPE_REGION, &reg, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    return sub;
+}
+
+static void check_guard(cl_mem parent, size_t bytes, const char *what)
+{
+    unsigned char *h = malloc(GUARD_BYTES);
+    hv_cl_read(CL, parent, 0, GUARD_BYTES, h);
+    ck_assert_int_eq(hv_cl_check(CL), HV_OK);
+    for (size_t i = bytes; i < GUARD_BYTES; i++)
+        ck_assert_msg(h[i] == 0xab, "%s wrote %zu bytes past its %zu-byte buffer", what, i - bytes, bytes);
+    free(h);
+}
+
+START_TEST(kernels_should_write_only_inside_tiny_levels)
+{
+    const cfg tiny[] = {
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},
+        {"2d one cell poisson", 2, {1, 1, 1}, 0.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},
+        {"2d 2x5 heat", 2, {2, 5, 1}, 1.0, 0},
+    };
+    const hv_smoother sms[] = {HV_SMOOTH_RBGS, HV_SMOOTH_CHEBYSHEV};
+    for (int ci = 0; ci < (int)(sizeof tiny / sizeof tiny[0]); ci++)
+        for (int si = 0; si < 2; si++) {
+            hier h;
+            memset(&h, 0, sizeof h);
+            h.s.p = make_problem(&tiny[ci], NULL);
+            h.s.p.n[2] = tiny[ci].dim == 3 ? tiny[ci].n[2] : 1;
+            hv_solver_opts_default(&h.s.o);
+            h.s.count = cfg_count(&tiny[ci]);
+            ck_assert_int_eq(mg_hierarchy_build(&h.H, &h.s, 1), HV_OK);
+            ck_assert_int_eq(h.H.nlev, 1);
+            ck_assert_int_eq(hv_clmg_create(&h.m, CL, &h.H, sms[si], 2, 2), HV_OK);
+            hv_clmg_level *L = &h.m.lv[0];
+            size_t bytes = L->count * sizeof(float);
+            cl_mem pu[2] = {NULL, NULL}, pf, pd = NULL, pr;
+            for (int q = 0; q < 2; q++)
+                if (L->u[q]) {
+                    hv_cl_free(&L->u[q]);
+                    L->u[q] = guarded(bytes, &pu[q]);
+                }
+            hv_cl_free(&L->f);
+            L->f = guarded(bytes, &pf);
+            if (L->d) {
+                hv_cl_free(&L->d);
+                L->d = guarded(bytes, &pd);
+            }
+            cl_mem r = guarded(bytes, &pr);
+            float *v = malloc(bytes);
+            fill_f(v, L->count);
+            upload(L->f, v, L->count);
+            hv_clmg_bottom(&h.m);
+            hv_clmg_smooth(&h.m, 0, 2, 1);
+            hv_clmg_apply(&h.m, 0, L->u[L->cur], r);
+            hv_clmg_residual(&h.m, 0, L->u[L->cur], L->f, r);
+            ck_assert_int_eq(hv_cl_finish(CL), HV_OK);
+            check_guard(pu[0], bytes, "u");
+            if (pu[1])
+                check_guard(pu[1], bytes, "u (ping-pong)");
+            check_guard(pf, bytes, "f");
+            if (pd)
+                check_guard(pd, bytes, "d");
+            check_guard(pr, bytes, "r");
+            hv_cl_free(&r);
+            hv_cl_free(&pr);
+            hv_cl_free(&pf);
+            hv_cl_free(&pd);
+            hier_free(&h);
+            hv_cl_free(&pu[0]);
+            hv_cl_free(&pu[1]);
+            free(v);
+        }
+}
+END_TEST
+
+START_TEST(tiny_and_degenerate_grids_should_solve_like_mg)
+{
+    /* one-cell and one-row grids: the bottom kernel once wrote past such
+     * levels (PoCL), which only a heap checker or a later crash revealed */
+    const cfg tiny[] = {
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},   {"2d one cell heat", 2, {1, 1, 1}, 1.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},   {"2d 1x700 heat", 2, {1, 700, 1}, 1.0, 0},
+        {"3d 1000x2x2 poisson", 3, {1000, 2, 2}, 0.0, 0}, {"3d 5x7x9 poisson", 3, {5, 7, 9}, 0.0, 0},
+    };
+    for (int ci = 0; ci < (int)(sizeof tiny / sizeof tiny[0]); ci++) {
+        hv_problem p = make_problem(&tiny[ci], NULL);
+        size_t n = cfg_count(&tiny[ci]);
+        double *f = make_rhs(&p, n), *ucl = malloc(n * 8), *umg = malloc(n * 8);
+        hv_solve_info icl, img;
+        for (int rep = 0; rep < 2; rep++) {
+            solve_with(&p, HV_BACKEND_OPENCL, HV_SMOOTH_AUTO, 1e-10, f, ucl, &icl);
+            solve_with(&p, HV_BACKEND_MG, HV_SMOOTH_CHEBYSHEV, 1e-10, f, umg, &img);
+            ck_assert_msg(icl.reason == HV_STOP_CONVERGED, "%s: %s", tiny[ci].name,
+                          hv_stop_reason_str(icl.reason));
+            ck_assert_msg(rel_diff_d(ucl, umg, n) < 1e-6, "%s: %g", tiny[ci].name,
+                          rel_diff_d(ucl, umg, n));
+        }
+        free(f);
+        free(ucl);
+        free(umg);
+    }
+}
+END_TEST
+
 START_TEST(float_interface_and_initial_guess_should_work)
 {
     const cfg c = {"2d masked heat", 2, {50, 40, 1}, 1.0, 1};
@@ -1101,6 +1218,8 @@ int main(int argc, char **argv)
         tcase_add_test(tc, solves_should_agree_with_mg_and_reach_the_tolerance);
         tcase_add_test(tc, rbgs_and_jacobi_smoothers_should_converge_on_the_device);
         tcase_add_test(tc, chebyshev_should_be_the_default_smoother_and_match_mg_iterations);
+        tcase_add_test(tc, kernels_should_write_only_inside_tiny_levels);
+        tcase_add_test(tc, tiny_and_degenerate_grids_should_solve_like_mg);
         tcase_add_test(tc, float_interface_and_initial_guess_should_work);
         tcase_add_test(tc, float_only_devices_should_still_reach_1e10);
         tcase_add_test(tc, invalid_device_choice_should_fail_with_a_clear_message);
