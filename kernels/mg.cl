@@ -230,6 +230,33 @@ __kernel void mg_prolong(int4 N, __global const float *af, int4 NC, int4 co,
 #undef HV_ROW_VALUE
 }
 
+/* mg_prolong for the common case, plain fine and coarse levels with x
+ * coarsened, without branches (1.8x faster on PoCL). */
+__kernel void mg_prolong_x2(int4 N, int4 NC, int4 co, __global const float *uc,
+                            __global float *uf)
+{
+    const int X = get_global_id(0), row = get_global_id(1);
+    if (X >= NC.x || row >= N.y * N.z)
+        return;
+    const int j = row % N.y, k = row / N.y;
+    HV_PROLONG_AXIS(co.z, NC.z, k, K0, K1, wk1);
+    HV_PROLONG_AXIS(co.y, NC.y, j, J0, J1, wj1);
+    const float w00 = (1.0f - wk1) * (1.0f - wj1), w01 = (1.0f - wk1) * wj1;
+    const float w10 = wk1 * (1.0f - wj1), w11 = wk1 * wj1;
+    __global const float *c00 = uc + (size_t)NC.x * ((size_t)J0 + (size_t)NC.y * K0);
+    __global const float *c01 = uc + (size_t)NC.x * ((size_t)J1 + (size_t)NC.y * K0);
+    __global const float *c10 = uc + (size_t)NC.x * ((size_t)J0 + (size_t)NC.y * K1);
+    __global const float *c11 = uc + (size_t)NC.x * ((size_t)J1 + (size_t)NC.y * K1);
+    const int Xl = max(X - 1, 0), Xr = min(X + 1, NC.x - 1);
+    const float v = w00 * c00[X] + w01 * c01[X] + w10 * c10[X] + w11 * c11[X];
+    const float vl = w00 * c00[Xl] + w01 * c01[Xl] + w10 * c10[Xl] + w11 * c11[Xl];
+    const float vr = w00 * c00[Xr] + w01 * c01[Xr] + w10 * c10[Xr] + w11 * c11[Xr];
+    __global float *o = uf + (size_t)N.x * (size_t)row + 2 * X;
+    o[0] += 0.75f * v + 0.25f * vl;
+    if (2 * X + 1 < N.x)
+        o[1] += 0.75f * v + 0.25f * vr;
+}
+
 /* The bottom kernel's loops give every work-item the same trip count, guard
  * the body, and end on flags rather than break: with
  * for (c = lid; c < n; c += L), PoCL 3.1 stored past the end of a one-cell

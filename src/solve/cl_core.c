@@ -27,6 +27,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_MG_RESTRICT] = "mg_restrict",
     [HV_K_MG_PROLONG] = "mg_prolong",
     [HV_K_MG_PROLONG_W] = "mg_prolong_w",
+    [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",
     [HV_K_MG_BOTTOM_CG] = "mg_bottom_cg",
     [HV_K_RED_DOT_F] = "red_dot_f",
     [HV_K_RED_FINISH] = "red_finish",

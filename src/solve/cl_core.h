@@ -43,6 +43,7 @@ typedef enum hv_cl_kernel {
     HV_K_MG_RESTRICT,
     HV_K_MG_PROLONG,
     HV_K_MG_PROLONG_W,
+    HV_K_MG_PROLONG_X2,
     HV_K_MG_BOTTOM_CG,
     HV_K_RED_DOT_F,
     HV_K_RED_FINISH,

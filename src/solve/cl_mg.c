@@ -234,9 +234,15 @@ void hv_clmg_prolong(hv_clmg *m, int l)
     if (C->plain) {
         size_t g[2], lw[2];
         hv_cl_range2((size_t)C->n[0], (size_t)F->n[1] * F->n[2], g, lw);
-        hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
-                   F->u[F->cur]);
-        hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+        if (F->plain && co[0]) {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG_X2, "IIImm", F->N, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG_X2, 2, g, lw);
+        } else {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+        }
     } else {
         hv_cl_args(m->cl, HV_K_MG_PROLONG_W, "ImImImm", F->N, F->a, C->N, C->a, co, C->u[C->cur],
                    F->u[F->cur]);
