@@ -26,10 +26,11 @@ typedef float4 acc4_t;
 /* Reductions: work-item l of group g takes the elements
  *     g * HV_WG * HV_RED_BLOCK + q * HV_WG + l,   q < HV_RED_BLOCK,
  * coalesced on GPUs, and a fixed trip count that CPU compilers (PoCL) unroll
- * and vectorize across work-items; then one tree per group. The host uses the
- * same numbers (src/solve/cl_core.h). */
-#define HV_WG 64
-#define HV_RED_BLOCK 16
+ * and vectorize across work-items; then one tree per group. The host passes
+ * both numbers as build options (src/solve/cl_core.h). */
+#ifndef HV_WG
+#error "build with -DHV_WG=<work-group size> -DHV_RED_BLOCK=<elements per work-item>"
+#endif
 
 /*
  * Off-diagonal sum S = sum_faces c_b w_f u_nb and diagonal D of

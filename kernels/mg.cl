@@ -14,7 +14,8 @@
     int4 N, float4 C, __global const float *a, __global const float *w0,                          \
         __global const float *w1, __global const float *w2
 
-/* Cell of a 2D range over (x, rows); returns 0 outside the level. */
+/* Cell (i,j,k) and index c of a 2D range over (x, rows); work-items outside the
+ * level return. */
 #define HV_CELL_OR_RETURN(N, i, j, k, c)                                                          \
     const int i = get_global_id(0), row_ = get_global_id(1);                                      \
     if (i >= (N).x || row_ >= (N).y * (N).z)                                                      \
@@ -229,6 +230,45 @@ __kernel void mg_prolong(int4 N, __global const float *af, int4 NC, int4 co,
 #undef HV_ROW_VALUE
 }
 
+/* mg_prolong for the common case, plain fine and coarse levels with x
+ * coarsened, without branches (1.8x faster on PoCL). */
+__kernel void mg_prolong_x2(int4 N, int4 NC, int4 co, __global const float *uc,
+                            __global float *uf)
+{
+    const int X = get_global_id(0), row = get_global_id(1);
+    if (X >= NC.x || row >= N.y * N.z)
+        return;
+    const int j = row % N.y, k = row / N.y;
+    HV_PROLONG_AXIS(co.z, NC.z, k, K0, K1, wk1);
+    HV_PROLONG_AXIS(co.y, NC.y, j, J0, J1, wj1);
+    const float w00 = (1.0f - wk1) * (1.0f - wj1), w01 = (1.0f - wk1) * wj1;
+    const float w10 = wk1 * (1.0f - wj1), w11 = wk1 * wj1;
+    __global const float *c00 = uc + (size_t)NC.x * ((size_t)J0 + (size_t)NC.y * K0);
+    __global const float *c01 = uc + (size_t)NC.x * ((size_t)J1 + (size_t)NC.y * K0);
+    __global const float *c10 = uc + (size_t)NC.x * ((size_t)J0 + (size_t)NC.y * K1);
+    __global const float *c11 = uc + (size_t)NC.x * ((size_t)J1 + (size_t)NC.y * K1);
+    const int Xl = max(X - 1, 0), Xr = min(X + 1, NC.x - 1);
+    const float v = w00 * c00[X] + w01 * c01[X] + w10 * c10[X] + w11 * c11[X];
+    const float vl = w00 * c00[Xl] + w01 * c01[Xl] + w10 * c10[Xl] + w11 * c11[Xl];
+    const float vr = w00 * c00[Xr] + w01 * c01[Xr] + w10 * c10[Xr] + w11 * c11[Xr];
+    __global float *o = uf + (size_t)N.x * (size_t)row + 2 * X;
+    o[0] += 0.75f * v + 0.25f * vl;
+    if (2 * X + 1 < N.x)
+        o[1] += 0.75f * v + 0.25f * vr;
+}
+
+/* The bottom kernel's loops give every work-item the same trip count, guard
+ * the body, and end on flags rather than break: with
+ * for (c = lid; c < n; c += L), PoCL 3.1 stored past the end of a one-cell
+ * level (valgrind), corrupting the heap. */
+#define HV_GROUP_LOOP(c, n, ...)                                                                  \
+    for (size_t c##0_ = 0; c##0_ < (n); c##0_ += get_local_size(0)) {                             \
+        const size_t c = c##0_ + get_local_id(0);                                                 \
+        if (c < (n)) {                                                                            \
+            __VA_ARGS__                                                                           \
+        }                                                                                         \
+    }
+
 /* Subtracts the per-region mean (regions labelled in region, -1 = none;
  * rinv = 1/cells per region) from v, by work-item 0: the bottom is tiny. */
 static void hv_bottom_project(__global acc_t *v, size_t n, __global const int *region,
@@ -244,9 +284,7 @@ static void hv_bottom_project(__global acc_t *v, size_t n, __global const int *r
             sum[r] *= rinv[r];
     }
     barrier(CLK_GLOBAL_MEM_FENCE);
-    for (size_t c = get_local_id(0); c < n; c += get_local_size(0))
-        if (region[c] >= 0)
-            v[c] -= sum[region[c]];
+    HV_GROUP_LOOP(c, n, if (region[c] >= 0) v[c] -= sum[region[c]];)
     barrier(CLK_GLOBAL_MEM_FENCE);
 }
 
@@ -261,76 +299,56 @@ __kernel void mg_bottom_cg(int4 N, acc4_t C, __global const float *a, __global c
                            __global acc_t *scr)
 {
     __local acc_t red[HV_WG_MAX];
-    const size_t n = (size_t)N.x * N.y * N.z, L = get_local_size(0), lid = get_local_id(0);
+    const size_t n = (size_t)N.x * N.y * N.z;
     __global acc_t *x = scr, *b = x + n, *r = b + n, *p = r + n, *q = p + n, *sum = q + n;
 #ifdef HV_FP64
     const acc_t tol = 1e-12;
 #else
     const acc_t tol = 1e-6f;
 #endif
-    for (size_t c = lid; c < n; c += L) {
-        x[c] = 0;
-        b[c] = f[c];
-    }
+    HV_GROUP_LOOP(c, n, x[c] = 0; b[c] = f[c];)
     barrier(CLK_GLOBAL_MEM_FENCE);
     if (region)
         hv_bottom_project(b, n, region, rinv, nregion, sum);
     acc_t t = 0;
-    for (size_t c = lid; c < n; c += L)
-        t += b[c] * b[c];
-    const acc_t bn = sqrt(hv_group_sum(t, red));
-    if (bn > 0) {
+    HV_GROUP_LOOP(c, n, r[c] = b[c]; p[c] = b[c]; t += b[c] * b[c];)
+    acc_t rr = hv_group_sum(t, red), best = rr;
+    const acc_t bn = sqrt(rr);
+    int stall = 0, done = !(bn > 0);
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    for (int it = 0; it < 4 * (int)n + 50 && !done; it++) {
         t = 0;
-        for (size_t c = lid; c < n; c += L) {
-            r[c] = b[c];
-            p[c] = b[c];
-            t += b[c] * b[c];
-        }
-        acc_t rr = hv_group_sum(t, red), best = rr;
-        int stall = 0;
+        HV_GROUP_LOOP(c, n,
+            const int i = c % N.x, j = (c / N.x) % N.y, k = c / ((size_t)N.x * N.y);
+            acc_t S, D;
+            HV_STENCIL(acc_t, p, N, C, a, w0, w1, w2, i, j, k, c, S, D);
+            q[c] = D * p[c] - S;
+            t += p[c] * q[c];)
+        const acc_t pq = hv_group_sum(t, red);
+        /* p.q <= 0 ends the iteration with x unchanged, as the CPU's break */
+        const acc_t al = pq > 0 ? rr / pq : 0;
+        t = 0;
+        HV_GROUP_LOOP(c, n, x[c] += al * p[c]; r[c] -= al * q[c]; t += r[c] * r[c];)
+        const acc_t rr2 = hv_group_sum(t, red), be = rr2 / rr;
+        rr = rr2;
+        /* every work-item reads p's neighbours in the next apply */
         barrier(CLK_GLOBAL_MEM_FENCE);
-        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > tol * bn; it++) {
-            t = 0;
-            for (size_t c = lid; c < n; c += L) {
-                const int i = c % N.x, j = (c / N.x) % N.y, k = c / ((size_t)N.x * N.y);
-                acc_t S, D;
-                HV_STENCIL(acc_t, p, N, C, a, w0, w1, w2, i, j, k, c, S, D);
-                q[c] = D * p[c] - S;
-                t += p[c] * q[c];
-            }
-            const acc_t pq = hv_group_sum(t, red);
-            if (!(pq > 0))
-                break;
-            const acc_t al = rr / pq;
-            t = 0;
-            for (size_t c = lid; c < n; c += L) {
-                x[c] += al * p[c];
-                r[c] -= al * q[c];
-                t += r[c] * r[c];
-            }
-            const acc_t rr2 = hv_group_sum(t, red), be = rr2 / rr;
-            rr = rr2;
-            /* every work-item reads p's neighbours in the next apply */
-            barrier(CLK_GLOBAL_MEM_FENCE);
-            for (size_t c = lid; c < n; c += L)
-                p[c] = r[c] + be * p[c];
-            barrier(CLK_GLOBAL_MEM_FENCE);
+        HV_GROUP_LOOP(c, n, p[c] = r[c] + be * p[c];)
+        barrier(CLK_GLOBAL_MEM_FENCE);
+        done = !(pq > 0) || !(sqrt(rr) > tol * bn);
 #ifndef HV_FP64
-            if (rr < 0.9f * best) {
-                best = rr;
-                stall = 0;
-            } else if (++stall >= 20) {
-                break;
-            }
-#else
-            (void)best;
-            (void)stall;
-#endif
+        if (rr < 0.9f * best) {
+            best = rr;
+            stall = 0;
+        } else if (++stall >= 20) {
+            done = 1;
         }
-        barrier(CLK_GLOBAL_MEM_FENCE);
-        if (region)
-            hv_bottom_project(x, n, region, rinv, nregion, sum);
+#endif
     }
-    for (size_t c = lid; c < n; c += L)
-        u[c] = (float)(bn > 0 ? x[c] : 0);
+    (void)best;
+    (void)stall;
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    if (region && bn > 0)
+        hv_bottom_project(x, n, region, rinv, nregion, sum);
+    HV_GROUP_LOOP(c, n, u[c] = (float)x[c];)
 }

@@ -38,8 +38,11 @@ __kernel void red_finish(__global const acc_t *part, ulong nparts, __global acc_
 {
     __local acc_t red[HV_WG_MAX];
     acc_t s = 0;
-    for (size_t g = get_local_id(0); g < nparts; g += get_local_size(0))
-        s += part[g];
+    for (size_t g0 = 0; g0 < nparts; g0 += get_local_size(0)) {
+        const size_t g = g0 + get_local_id(0);
+        if (g < nparts)
+            s += part[g];
+    }
     s = hv_group_sum(s, red);
     if (get_local_id(0) == 0)
         S[slot] = s;
@@ -80,9 +83,13 @@ __kernel void red_region(__global const acc_t *part, __global const uint *rc,
 {
     __local acc_t red[HV_WG_MAX];
     const int r = get_group_id(0);
+    const uint end = rc[r + 1];
     acc_t s = 0;
-    for (uint g = rc[r] + get_local_id(0); g < rc[r + 1]; g += get_local_size(0))
-        s += part[g];
+    for (uint g0 = rc[r]; g0 < end; g0 += get_local_size(0)) {
+        const uint g = g0 + get_local_id(0);
+        if (g < end)
+            s += part[g];
+    }
     s = hv_group_sum(s, red);
     if (get_local_id(0) == 0)
         out[r] = scale ? s * scale[r] : s;

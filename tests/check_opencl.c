@@ -131,7 +131,6 @@ static void hier_make(hier *h, const cfg *c, hv_smoother sm)
     h->s.nregion = 1;
     ck_assert_int_eq(mg_hierarchy_build(&h->H, &h->s, 1), HV_OK);
     ck_assert_msg(hv_clmg_create(&h->m, CL, &h->H, sm, 2, 2) == HV_OK, "%s", hv_last_error());
-    ck_assert_int_ge(h->H.nlev, 2);
 }
 
 static void hier_free(hier *h)
@@ -296,6 +295,7 @@ START_TEST(apply_and_residual_should_match_cpu_on_every_level)
     for (int ci = 0; ci < NCFG; ci++) {
         hier h;
         hier_make(&h, &CFGS[ci], HV_SMOOTH_RBGS);
+        ck_assert_int_ge(h.H.nlev, 2);
         for (int l = 0; l < h.H.nlev; l++) {
             const mg_level *L = &h.H.lv[l];
             size_t n = L->count;
@@ -853,6 +853,113 @@ START_TEST(chebyshev_should_be_the_default_smoother_and_match_mg_iterations)
 }
 END_TEST
 
+/* A buffer of `bytes` at the start of a larger one filled with a sentinel, so
+ * that writes past its end show (on CPU devices they would hit the heap). */
+#define GUARD_BYTES 8192
+static cl_mem guarded(size_t bytes, cl_mem *parent)
+{
+    ck_assert_int_le(bytes, GUARD_BYTES / 2);
+    ck_assert_int_eq(hv_cl_alloc(CL, GUARD_BYTES, NULL, parent), HV_OK);
+    const cl_uchar pattern = 0xab;
+    ck_assert_int_eq(clEnqueueFillBuffer(CL->q, *parent, &pattern, 1, 0, GUARD_BYTES, 0, NULL, NULL), CL_SUCCESS);
+    cl_buffer_region reg = {0, bytes};
+    cl_int e;
+    cl_mem sub = clCreateSubBuffer(*parent, CL_MEM_READ_WRITE, CL_BUFFER_CREATE_TYPE_REGION, &reg, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    return sub;
+}
+
+static void check_guard(cl_mem parent, size_t bytes, const char *what)
+{
+    unsigned char *h = malloc(GUARD_BYTES);
+    hv_cl_read(CL, parent, 0, GUARD_BYTES, h);
+    ck_assert_int_eq(hv_cl_check(CL), HV_OK);
+    for (size_t i = bytes; i < GUARD_BYTES; i++)
+        ck_assert_msg(h[i] == 0xab, "%s wrote %zu bytes past its %zu-byte buffer", what, i - bytes, bytes);
+    free(h);
+}
+
+START_TEST(kernels_should_write_only_inside_tiny_levels)
+{
+    const cfg tiny[] = {
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},
+        {"2d one cell poisson", 2, {1, 1, 1}, 0.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},
+        {"2d 2x5 heat", 2, {2, 5, 1}, 1.0, 0},
+        {"2d 1x601 poisson", 2, {1, 601, 1}, 0.0, 0}, /* two levels */
+        {"3d 9x9x9 heat", 3, {9, 9, 9}, 1.0, 0},      /* odd: weighted coarse level */
+        {"3d 9x8x9 masked", 3, {9, 8, 9}, 0.0, 1},
+    };
+    const hv_smoother sms[] = {HV_SMOOTH_RBGS, HV_SMOOTH_CHEBYSHEV};
+    for (int ci = 0; ci < (int)(sizeof tiny / sizeof tiny[0]); ci++)
+        for (int si = 0; si < 2; si++) {
+            hier h;
+            hier_make(&h, &tiny[ci], sms[si]);
+            enum { NB = 4 };
+            cl_mem parent[MG_MAX_LEVELS][NB];
+            memset(parent, 0, sizeof parent);
+            for (int l = 0; l < h.m.nlev; l++) {
+                hv_clmg_level *L = &h.m.lv[l];
+                cl_mem *slot[NB] = {&L->u[0], &L->u[1], &L->f, &L->d};
+                for (int q = 0; q < NB; q++)
+                    if (*slot[q]) {
+                        hv_cl_free(slot[q]);
+                        *slot[q] = guarded(L->count * sizeof(float), &parent[l][q]);
+                    }
+            }
+            hv_clmg_level *L0 = &h.m.lv[0];
+            float *v = malloc(L0->count * sizeof(float));
+            fill_f(v, L0->count);
+            upload(L0->f, v, L0->count);
+            hv_clmg_vcycle(&h.m, 0, 0, 1);
+            hv_clmg_fmg(&h.m);
+            hv_clmg_smooth(&h.m, 0, 1, 0);
+            ck_assert_int_eq(hv_cl_finish(CL), HV_OK);
+            for (int l = 0; l < h.m.nlev; l++)
+                for (int q = 0; q < NB; q++)
+                    if (parent[l][q]) {
+                        char what[64];
+                        snprintf(what, sizeof what, "%s: level %d buffer %d", tiny[ci].name, l, q);
+                        check_guard(parent[l][q], h.m.lv[l].count * sizeof(float), what);
+                    }
+            hier_free(&h);
+            for (int l = 0; l < MG_MAX_LEVELS; l++)
+                for (int q = 0; q < NB; q++)
+                    hv_cl_free(&parent[l][q]);
+            free(v);
+        }
+}
+END_TEST
+
+START_TEST(tiny_and_degenerate_grids_should_solve_like_mg)
+{
+    /* one-cell and one-row grids: the bottom kernel once wrote past such
+     * levels (PoCL), which only a heap checker or a later crash revealed */
+    const cfg tiny[] = {
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},   {"2d one cell heat", 2, {1, 1, 1}, 1.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},   {"2d 1x700 heat", 2, {1, 700, 1}, 1.0, 0},
+        {"3d 1000x2x2 poisson", 3, {1000, 2, 2}, 0.0, 0}, {"3d 5x7x9 poisson", 3, {5, 7, 9}, 0.0, 0},
+    };
+    for (int ci = 0; ci < (int)(sizeof tiny / sizeof tiny[0]); ci++) {
+        hv_problem p = make_problem(&tiny[ci], NULL);
+        size_t n = cfg_count(&tiny[ci]);
+        double *f = make_rhs(&p, n), *ucl = malloc(n * 8), *umg = malloc(n * 8);
+        hv_solve_info icl, img;
+        for (int rep = 0; rep < 2; rep++) {
+            solve_with(&p, HV_BACKEND_OPENCL, HV_SMOOTH_AUTO, 1e-10, f, ucl, &icl);
+            solve_with(&p, HV_BACKEND_MG, HV_SMOOTH_CHEBYSHEV, 1e-10, f, umg, &img);
+            ck_assert_msg(icl.reason == HV_STOP_CONVERGED, "%s: %s", tiny[ci].name,
+                          hv_stop_reason_str(icl.reason));
+            ck_assert_msg(rel_diff_d(ucl, umg, n) < 1e-6, "%s: %g", tiny[ci].name,
+                          rel_diff_d(ucl, umg, n));
+        }
+        free(f);
+        free(ucl);
+        free(umg);
+    }
+}
+END_TEST
+
 START_TEST(float_interface_and_initial_guess_should_work)
 {
     const cfg c = {"2d masked heat", 2, {50, 40, 1}, 1.0, 1};
@@ -957,6 +1064,7 @@ START_TEST(device_list_should_describe_and_mark_the_selected_device)
     ck_assert_int_ge(count, 1);
     for (int i = 0; i < count && i < 16; i++) {
         ck_assert(list[i].name[0] != 0);
+        ck_assert_msg(!strncmp(list[i].version, "OpenCL ", 7), "version '%s'", list[i].version);
         ck_assert(list[i].global_mem > 0);
         if (list[i].selected) {
             selected++;
@@ -1069,6 +1177,9 @@ int main(int argc, char **argv)
                  "../pocl-cache");
         setenv("POCL_CACHE_DIR", dir, 1);
     }
+    /* The CPU references run on one thread: libgomp's spinning workers and
+     * PoCL's worker threads interleaved on a busy 2-core machine took minutes. */
+    hv_set_threads(1);
     Suite *su = suite_create("opencl");
     TCase *tc = tcase_create("opencl");
     tcase_set_timeout(tc, 600);
@@ -1097,6 +1208,8 @@ int main(int argc, char **argv)
         tcase_add_test(tc, solves_should_agree_with_mg_and_reach_the_tolerance);
         tcase_add_test(tc, rbgs_and_jacobi_smoothers_should_converge_on_the_device);
         tcase_add_test(tc, chebyshev_should_be_the_default_smoother_and_match_mg_iterations);
+        tcase_add_test(tc, kernels_should_write_only_inside_tiny_levels);
+        tcase_add_test(tc, tiny_and_degenerate_grids_should_solve_like_mg);
         tcase_add_test(tc, float_interface_and_initial_guess_should_work);
         tcase_add_test(tc, float_only_devices_should_still_reach_1e10);
         tcase_add_test(tc, invalid_device_choice_should_fail_with_a_clear_message);

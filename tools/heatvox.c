@@ -20,6 +20,7 @@ static const struct command commands[] = {
     {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
+    {"devices", cmd_devices, "list OpenCL devices for --backend opencl"},
 };
 
 static void usage(FILE *out)

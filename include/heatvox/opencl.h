@@ -25,7 +25,7 @@ typedef struct hv_opencl_device {
     int device;              /* D */
     char name[128];
     char platform_name[128];
-    char version[64];        /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
+    char version[128];       /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
     uint64_t global_mem;     /* bytes */
     int compute_units;
     int fp64;                /* double precision: the defect correction runs on the device */
@@ -43,8 +43,12 @@ hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count);
  * HV_ERR_UNSUPPORTED when there is no OpenCL platform or device,
  * HV_ERR_INVALID_ARG when HEATVOX_OPENCL_DEVICE names no device; the message
  * (hv_last_error) says which and lists the devices. Cheap (no context is
- * created): a front end that wants "OpenCL if available, else the CPU" calls
- * it once, prints one warning with hv_last_error() and picks HV_BACKEND_MG. */
+ * created). For "OpenCL if available, else the CPU", call it once:
+ *     if (hv_opencl_probe(NULL) != HV_OK) {
+ *         fprintf(stderr, "warning: %s; using the CPU multigrid\n", hv_last_error());
+ *         opts.backend = HV_BACKEND_MG;
+ *     }
+ * (HV_BACKEND_AUTO never picks OpenCL, so it needs no such check.) */
 hv_status hv_opencl_probe(hv_opencl_device *out);
 
 #ifdef __cplusplus

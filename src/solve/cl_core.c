@@ -27,6 +27,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_MG_RESTRICT] = "mg_restrict",
     [HV_K_MG_PROLONG] = "mg_prolong",
     [HV_K_MG_PROLONG_W] = "mg_prolong_w",
+    [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",
     [HV_K_MG_BOTTOM_CG] = "mg_bottom_cg",
     [HV_K_RED_DOT_F] = "red_dot_f",
     [HV_K_RED_FINISH] = "red_finish",
@@ -93,6 +94,18 @@ typedef struct devlist {
     hv_opencl_device info[MAX_DEVICES];
 } devlist;
 
+/* A string property, truncated to size (the query itself fails on a short buffer). */
+static void info_string(cl_platform_id p, cl_device_id d, cl_uint param, char *dst, size_t size)
+{
+    char buf[1024] = "";
+    cl_int e = d ? clGetDeviceInfo(d, param, sizeof buf - 1, buf, NULL)
+                 : clGetPlatformInfo(p, param, sizeof buf - 1, buf, NULL);
+    if (e != CL_SUCCESS)
+        buf[0] = 0;
+    buf[sizeof buf - 1] = 0;
+    snprintf(dst, size, "%s", buf);
+}
+
 static void device_info(cl_platform_id p, cl_device_id d, hv_opencl_device *o)
 {
     cl_ulong mem = 0;
@@ -100,17 +113,15 @@ static void device_info(cl_platform_id p, cl_device_id d, hv_opencl_device *o)
     cl_device_type type = 0;
     cl_device_fp_config fp = 0;
     char ext[8192] = "";
-    clGetDeviceInfo(d, CL_DEVICE_NAME, sizeof o->name, o->name, NULL);
-    clGetPlatformInfo(p, CL_PLATFORM_NAME, sizeof o->platform_name, o->platform_name, NULL);
-    clGetDeviceInfo(d, CL_DEVICE_VERSION, sizeof o->version, o->version, NULL);
+    info_string(p, d, CL_DEVICE_NAME, o->name, sizeof o->name);
+    info_string(p, NULL, CL_PLATFORM_NAME, o->platform_name, sizeof o->platform_name);
+    info_string(p, d, CL_DEVICE_VERSION, o->version, sizeof o->version);
     clGetDeviceInfo(d, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof mem, &mem, NULL);
     clGetDeviceInfo(d, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof cu, &cu, NULL);
     clGetDeviceInfo(d, CL_DEVICE_TYPE, sizeof type, &type, NULL);
     if (clGetDeviceInfo(d, CL_DEVICE_DOUBLE_FP_CONFIG, sizeof fp, &fp, NULL) != CL_SUCCESS)
         fp = 0;
     clGetDeviceInfo(d, CL_DEVICE_EXTENSIONS, sizeof ext - 1, ext, NULL);
-    o->name[sizeof o->name - 1] = o->platform_name[sizeof o->platform_name - 1] = 0;
-    o->version[sizeof o->version - 1] = 0;
     o->global_mem = mem;
     o->compute_units = (int)cu;
     o->gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
@@ -301,8 +312,11 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
     }
     const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
                          hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
+    char opts[128];
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
+             HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");
     hv_status st = build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]),
-                                 fp64 ? "-cl-std=CL1.2 -DHV_FP64=1" : "-cl-std=CL1.2", &s->prog);
+                                 opts, &s->prog);
     if (st) {
         clReleaseContext(s->ctx);
         free(s);
@@ -450,6 +464,8 @@ hv_status hv_cl_finish(hv_cl *cl)
 hv_status hv_cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
 {
     cl_int e;
+    if (bytes == 0) /* OpenCL has no empty buffers */
+        init = NULL;
     *out = clCreateBuffer(cl->ctx, CL_MEM_READ_WRITE | (init ? CL_MEM_COPY_HOST_PTR : 0),
                           bytes ? bytes : 1, (void *)init, &e);
     if (e == CL_SUCCESS)
@@ -585,6 +601,17 @@ void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const 
     }
 }
 
+size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
+{
+    size_t kwg = 0;
+    if (!cl->k[k] || clGetKernelWorkGroupInfo(cl->k[k], cl->dev, CL_KERNEL_WORK_GROUP_SIZE,
+                                              sizeof kwg, &kwg, NULL) != CL_SUCCESS)
+        kwg = cl->max_wg;
+    while (want > 1 && want > kwg)
+        want >>= 1;
+    return want;
+}
+
 static size_t round_up(size_t n, size_t m) { return (n + m - 1) / m * m; }
 
 void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
@@ -615,9 +642,7 @@ size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1])
 
 void hv_cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
 {
-    size_t l = 256;
-    while (l > cl->max_wg)
-        l >>= 1;
+    size_t l = hv_cl_group_limit(cl, HV_K_RED_FINISH, 256);
     hv_cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
     hv_cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
 }

@@ -43,6 +43,7 @@ typedef enum hv_cl_kernel {
     HV_K_MG_RESTRICT,
     HV_K_MG_PROLONG,
     HV_K_MG_PROLONG_W,
+    HV_K_MG_PROLONG_X2,
     HV_K_MG_BOTTOM_CG,
     HV_K_RED_DOT_F,
     HV_K_RED_FINISH,
@@ -129,6 +130,8 @@ void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const 
  * over n items. */
 void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2]);
 void hv_cl_range1(size_t n, size_t g[1], size_t l[1]);
+/* want (a power of two) halved until kernel k accepts work-groups that large. */
+size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want);
 /* Range of a block reduction over n elements; returns the number of groups. */
 size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1]);
 

@@ -82,12 +82,7 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
     }
     if ((st = hv_cl_alloc(cl, (5 * S->count + (size_t)m->bnregion) * cl->acc, NULL, &m->bscr)))
         return st;
-    size_t kwg = 0;
-    clGetKernelWorkGroupInfo(cl->k[HV_K_MG_BOTTOM_CG], cl->dev, CL_KERNEL_WORK_GROUP_SIZE, sizeof kwg,
-                             &kwg, NULL);
-    m->bl = BOTTOM_WG;
-    while (m->bl > 1 && kwg && m->bl > kwg)
-        m->bl >>= 1;
+    m->bl = hv_cl_group_limit(cl, HV_K_MG_BOTTOM_CG, BOTTOM_WG);
     return HV_OK;
 }
 
@@ -239,9 +234,15 @@ void hv_clmg_prolong(hv_clmg *m, int l)
     if (C->plain) {
         size_t g[2], lw[2];
         hv_cl_range2((size_t)C->n[0], (size_t)F->n[1] * F->n[2], g, lw);
-        hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
-                   F->u[F->cur]);
-        hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+        if (F->plain && co[0]) {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG_X2, "IIImm", F->N, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG_X2, 2, g, lw);
+        } else {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+        }
     } else {
         hv_cl_args(m->cl, HV_K_MG_PROLONG_W, "ImImImm", F->N, F->a, C->N, C->a, co, C->u[C->cur],
                    F->u[F->cur]);

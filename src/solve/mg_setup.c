@@ -240,15 +240,24 @@ static hv_status level_regions(const mg_hierarchy *H, mg_level *L)
     return HV_OK;
 }
 
-/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds). */
+/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds).
+ * The diagonal is computed once, in parallel; the sums stay serial so that
+ * the estimate does not depend on the thread count. */
 static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
 {
     size_t n = L->count;
-    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y);
-    if (!x || !y) {
+    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y), *dg = malloc(n * sizeof *dg);
+    if (!x || !y || !dg) {
         free(x);
         free(y);
+        free(dg);
         return 2.0;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++) {
+        int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
+        dg[c] = L->plain ? mg_level_diag(L, H->dim, H->alpha, i, j, k)
+                         : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
     }
     unsigned s = 12345u;
     for (size_t c = 0; c < n; c++) {
@@ -260,10 +269,7 @@ static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
         mg_level_apply_d(L, H->dim, H->alpha, x, y);
         double nrm = 0, dot = 0, xx = 0;
         for (size_t c = 0; c < n; c++) {
-            int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
-            double dg = L->plain ? mg_level_diag(L, H->dim, H->alpha, i, j, k)
-                                 : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
-            y[c] = dg > 0 ? y[c] / dg : 0;
+            y[c] = dg[c] > 0 ? y[c] / dg[c] : 0;
             dot += x[c] * y[c];
             xx += x[c] * x[c];
             nrm += y[c] * y[c];
@@ -272,11 +278,13 @@ static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
         nrm = sqrt(nrm);
         if (!(nrm > 0))
             break;
+#pragma omp parallel for schedule(static)
         for (size_t c = 0; c < n; c++)
             x[c] = y[c] / nrm;
     }
     free(x);
     free(y);
+    free(dg);
     lam *= 1.1;
     return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
 }
