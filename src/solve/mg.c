@@ -799,38 +799,10 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
     return st;
 }
 
-/* Traffic model of one outer iteration, in bytes: each smoothing step streams
- * u, f and writes u once per colour (RBGS) or reads u, f, r, d and writes r, d, u
- * (Jacobi/Chebyshev); the residual reads u, f and writes r; restriction reads r
- * and writes the coarse f; prolongation reads the coarse u and updates u.
- * Weighted levels also read their coefficients in every sweep. The double
- * defect correction (fine level) reads x and f and writes r (double) plus the
- * float right-hand side, and adds the correction into x. */
 static void mg_stats(const void *state, hv_solver_stats *st)
 {
     const mg_state *m = state;
-    st->levels = m->nlev;
-    double bytes = 0;
-    size_t mem = 0;
-    for (int l = 0; l < m->nlev; l++) {
-        const mg_level *L = &m->lv[l];
-        memcpy(st->n[l], L->n, sizeof st->n[l]);
-        st->plain[l] = L->plain;
-        double cells = (double)L->count, coef = L->plain ? 0 : 4.0 * (1 + m->dim);
-        double sweep = m->smoother == HV_SMOOTH_RBGS ? 2 * (12 + coef) : 28 + coef;
-        int steps = m->smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (m->pre + m->post) : m->pre + m->post;
-        if (l + 1 < m->nlev)
-            bytes += cells * (steps * sweep + (12 + coef) + 4 + 8) + cells / 2; /* + coarse f */
-        else
-            bytes += cells * 8 * 40; /* bottom CG, a few dozen iterations on a tiny level */
-        mem += L->count * (3 + (L->d != NULL)) * sizeof(float);
-        if (!L->plain)
-            mem += L->count * (2 + m->dim) * sizeof(float);
-    }
-    bytes += (double)m->lv[0].count * (8 + 8 + 8 + 4 + 4 + 8 + 8);
-    mem += m->s->count * sizeof(double) * (m->use_pcg ? 4 : 1);
-    st->bytes_per_iteration = bytes;
-    st->memory_bytes = mem;
+    mg_model_stats(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, st);
 }
 
 const hv_backend_ops hv_backend_mg_ops = {"mg", mg_create, mg_solve, NULL, mg_destroy, mg_stats};

@@ -57,6 +57,11 @@ hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax);
 void mg_hierarchy_free(mg_hierarchy *H);
 void mg_level_free_coeffs(mg_level *L);
 
+/* Levels, sizes, a memory-traffic model of one outer iteration and memory held,
+ * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
+void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                    int post, int pcg, hv_solver_stats *st);
+
 /* Diagonal of the operator at cell (i,j,k) (plain or weighted level). */
 double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
 /* y = A x in double on a level. */

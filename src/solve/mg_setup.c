@@ -358,3 +358,40 @@ fail:
     mg_hierarchy_free(H);
     return st;
 }
+
+/* Traffic model of one outer iteration, in bytes. A red-black sweep streams u
+ * and f and writes u: once per colour, or once in all on plain 3D levels where
+ * the two colours are fused plane by plane. A Jacobi or Chebyshev step computes
+ * the residual (reads u, f, writes r) and then updates d and u (reads r, d, u,
+ * writes d, u). Weighted levels read their coefficients (a, w, 1/diag) in every
+ * pass. The residual reads u, f and writes r; restriction reads r and writes the
+ * coarse f; prolongation reads the coarse u and updates u. The double defect
+ * correction reads x and f and writes the float right-hand side, then adds the
+ * correction into x. */
+void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                    int post, int pcg, hv_solver_stats *st)
+{
+    st->levels = nlev;
+    double bytes = 0;
+    size_t mem = 0;
+    for (int l = 0; l < nlev; l++) {
+        const mg_level *L = &lv[l];
+        memcpy(st->n[l], L->n, sizeof st->n[l]);
+        st->plain[l] = L->plain;
+        double cells = (double)L->count, coef = L->plain ? 0 : 4.0 * (2 + dim);
+        int fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
+        double sweep = smoother == HV_SMOOTH_RBGS ? (fused ? 1 : 2) * (12 + coef) : 32 + coef;
+        int steps = smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (pre + post) : pre + post;
+        if (l + 1 < nlev)
+            bytes += cells * (steps * sweep + (12 + coef) + 4 + 8) + cells / 2;
+        else
+            bytes += cells * 8 * 40; /* bottom CG: a few dozen iterations on a tiny level */
+        mem += L->count * (3 + (smoother != HV_SMOOTH_RBGS)) * sizeof(float);
+        if (!L->plain)
+            mem += L->count * (2 + dim) * sizeof(float);
+    }
+    bytes += (double)lv[0].count * (8 + 8 + 4 + 8 + 4 + 8);
+    mem += lv[0].count * sizeof(double) * (pcg ? 4 : 1);
+    st->bytes_per_iteration = bytes;
+    st->memory_bytes = mem;
+}

@@ -462,4 +462,12 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
     return st;
 }
 
-const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy};
+static void ocl_stats(const void *state, hv_solver_stats *st)
+{
+    const ocl_state *o = state;
+    mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post, o->use_pcg,
+                   st);
+}
+
+const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy,
+                                              ocl_stats};
