@@ -24,5 +24,6 @@ int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 int cmd_bench(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
+int cmd_batch(int argc, char **argv);
 
 #endif

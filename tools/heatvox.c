@@ -18,6 +18,7 @@ struct command {
 
 static const struct command commands[] = {
     {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
+    {"batch", cmd_batch, "signed distance volumes for many meshes, in parallel, resumable"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
 };
