@@ -11,5 +11,6 @@
 #include "heatvox/io.h"
 #include "heatvox/sdf.h"
 #include "heatvox/image.h"
+#include "heatvox/curves.h"
 
 #endif
