@@ -19,6 +19,8 @@ struct command {
 static const struct command commands[] = {
     {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
     {"batch", cmd_batch, "signed distance volumes for many meshes, in parallel, resumable"},
+    {"sdf2d", cmd_sdf2d, "2D signed distance from (broken) curves, SVG or text, to EXR/PNG"},
+    {"slice", cmd_slice, "one slice of a volume as EXR data or a PNG preview"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
 };
