@@ -315,6 +315,29 @@ START_TEST(square_from_separate_sides_with_a_reversed_side_and_an_overlap)
 }
 END_TEST
 
+START_TEST(overlapping_collinear_pieces_drawn_backwards_should_not_cancel)
+{
+    /* bottom side once as one segment, and again backwards in pieces that
+     * overlap it only partly and end at other points */
+    double prm[4] = {-3.5, 4.5, 30, 0};
+    double a = prm[2], x0 = prm[0] - a, x1 = prm[0] + a, y0 = prm[1] - a, y1 = prm[1] + a;
+    cset cs = {0};
+    double loop[] = {x0, y0, x1, y0, x1, y1, x0, y1};
+    cs_line(&cs, loop, 4, 1);
+    double back[] = {x1 - 5, y0, x0 + 20, y0, x0 + 3, y0};
+    cs_line(&cs, back, 3, 0);
+    double right_back[] = {x1, y1 - 4, x1, y0 + 4}; /* inside the right side, backwards */
+    cs_line(&cs, right_back, 2, 0);
+    hv_curves *c = cs_finish(&cs);
+    hv_sdf2d_stats st;
+    expect_good(run_case(c, square_sdf, prm, "square, partial overlaps backwards", &st),
+                "overlaps");
+    ck_assert_int_ge(st.segments_split, 2);
+    ck_assert_int_ge(st.duplicates_removed, 3);
+    hv_curves_destroy(&c);
+}
+END_TEST
+
 START_TEST(nested_circles_both_counter_clockwise_should_give_an_annulus)
 {
     double prm[4] = {2.2, 1.1, 45, 20};
@@ -572,6 +595,7 @@ int main(void)
     tcase_add_test(tc, circle_with_gaps_and_flipped_segments_should_keep_sign_and_distance);
     tcase_add_test(tc, rotated_square_with_gaps_and_flips_should_keep_sign_and_distance);
     tcase_add_test(tc, square_from_separate_sides_with_a_reversed_side_and_an_overlap);
+    tcase_add_test(tc, overlapping_collinear_pieces_drawn_backwards_should_not_cancel);
     tcase_add_test(tc, nested_circles_both_counter_clockwise_should_give_an_annulus);
     tcase_add_test(tc, broken_shapes_side_by_side_and_nested_should_each_find_their_inside);
     tcase_add_test(tc, without_repair_a_duplicate_drawn_backwards_should_break_the_sign);

@@ -81,14 +81,21 @@ typedef struct hv_sdf2d_opts {
 
 /*
  * Repair (repair = 1):
- *  1. weld endpoints closer than weld_tol * h, drop zero-length segments;
+ *  1. weld endpoints closer than weld_tol * h, drop zero-length segments, and
+ *     split segments at points lying on them (within weld_tol * h), so that
+ *     overlapping collinear pieces become duplicates;
  *  2. drop segments repeating the endpoints of an earlier one (either way);
  *  3. join segments into chains through points used by exactly two segments
  *     and make each chain's direction consistent, keeping the direction that
  *     the larger length of its segments had (a vote);
- *  4. closed chains (cycles) are oriented by nesting: counter-clockwise when
- *     inside an even number of other cycles, clockwise when odd.
- * A whole open chain drawn backwards is kept as drawn (nothing tells it apart).
+ *  4. open chains are turned to agree with each other: the coupling of two
+ *     chains through their generalized winding numbers depends only on their
+ *     end points (see sdf2d.c) and is positive when one continues the other
+ *     or when they face each other as two sides of one shape;
+ *  5. loops (closed chains, and groups of strongly coupled open chains) are
+ *     oriented by nesting: counter-clockwise when inside an even number of
+ *     other loops (|generalized winding number| > 1/2), clockwise when odd.
+ * A lone straight chain has no inside: it keeps the direction it was drawn in.
  */
 typedef struct hv_sdf2d_stats {
     int n[2];
@@ -97,6 +104,7 @@ typedef struct hv_sdf2d_stats {
     int levels;
     size_t segments_in, segments_out;
     size_t points_welded, zero_length_removed, duplicates_removed;
+    size_t segments_split;   /* segments cut at points lying on them (overlaps) */
     size_t segments_flipped; /* by the repair */
     size_t chains, cycles;
     size_t dead_faces;

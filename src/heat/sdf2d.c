@@ -382,11 +382,144 @@ out:
     return status;
 }
 
+/* Overlaps: splits every segment at the points that lie on it (within tol,
+ * away from its ends), so that collinear overlaps become exact duplicates and
+ * T-junctions become shared points. Points are bucketed on a grid of cell
+ * `cell` (>= tol); each segment visits the buckets around samples cell/2 apart.
+ * *S is replaced by a new array. */
+typedef struct tp {
+    double t;
+    uint32_t p;
+} tp;
+
+static int by_t(const void *a, const void *b)
+{
+    double x = ((const tp *)a)->t, y = ((const tp *)b)->t;
+    return (x > y) - (x < y);
+}
+
+static int by_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+static uint64_t bucket_key(int64_t bx, int64_t by)
+{
+    return ((uint64_t)(bx + (1ll << 31)) << 32) | (uint64_t)(by + (1ll << 31));
+}
+
+static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *ns, double tol,
+                                double cell, size_t *nsplit)
+{
+    seg2 *S = *Sp;
+    uint8_t *used = calloc(np ? np : 1, 1);
+    uint64_t *keys = NULL; /* (bucket key, point) pairs sorted by key */
+    seg2 *out = NULL;
+    tp *hits = NULL;
+    size_t nu = 0, nout = 0, capout = 0, caphits = 0;
+    hv_status status = HV_OK;
+    if (!used)
+        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (size_t k = 0; k < *ns; k++)
+        used[S[k].a] = used[S[k].b] = 1;
+    for (size_t i = 0; i < np; i++)
+        nu += used[i];
+    keys = malloc(2 * (nu ? nu : 1) * sizeof *keys);
+    if (!keys) {
+        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        goto done;
+    }
+    nu = 0;
+    for (size_t i = 0; i < np; i++)
+        if (used[i]) {
+            keys[2 * nu] = bucket_key((int64_t)floor(P[2 * i] / cell), (int64_t)floor(P[2 * i + 1] / cell));
+            keys[2 * nu + 1] = i;
+            nu++;
+        }
+    qsort(keys, nu, 2 * sizeof *keys, by_u64);
+    for (size_t k = 0; k < *ns; k++) {
+        const double *a = P + 2 * S[k].a, *b = P + 2 * S[k].b;
+        double dx = b[0] - a[0], dy = b[1] - a[1], L = hypot(dx, dy);
+        size_t nh = 0;
+        int steps = (int)ceil(L / (0.5 * cell));
+        for (int m = 0; m <= steps; m++) {
+            double t = steps ? (double)m / steps : 0;
+            int64_t bx = (int64_t)floor((a[0] + t * dx) / cell), by = (int64_t)floor((a[1] + t * dy) / cell);
+            for (int64_t ox = -1; ox <= 1; ox++)
+                for (int64_t oy = -1; oy <= 1; oy++) {
+                    uint64_t key = bucket_key(bx + ox, by + oy);
+                    size_t lo = 0, hi = nu;
+                    while (lo < hi) {
+                        size_t mid = (lo + hi) / 2;
+                        if (keys[2 * mid] < key)
+                            lo = mid + 1;
+                        else
+                            hi = mid;
+                    }
+                    for (size_t q = lo; q < nu && keys[2 * q] == key; q++) {
+                        uint32_t p = (uint32_t)keys[2 * q + 1];
+                        if (p == S[k].a || p == S[k].b)
+                            continue;
+                        double px = P[2 * p] - a[0], py = P[2 * p + 1] - a[1];
+                        double along = (px * dx + py * dy) / L;
+                        double off = fabs(px * dy - py * dx) / L;
+                        if (off > tol || along <= tol || along >= L - tol)
+                            continue;
+                        int seen = 0;
+                        for (size_t e = 0; e < nh && !seen; e++)
+                            seen = hits[e].p == p;
+                        if (seen)
+                            continue;
+                        if (nh == caphits) {
+                            caphits = caphits ? 2 * caphits : 16;
+                            tp *nhits = realloc(hits, caphits * sizeof *hits);
+                            if (!nhits) {
+                                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                                goto done;
+                            }
+                            hits = nhits;
+                        }
+                        hits[nh++] = (tp){along, p};
+                    }
+                }
+        }
+        if (nout + nh + 1 > capout) {
+            capout = 2 * (nout + nh + 1) + *ns;
+            seg2 *no = realloc(out, capout * sizeof *out);
+            if (!no) {
+                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                goto done;
+            }
+            out = no;
+        }
+        qsort(hits, nh, sizeof *hits, by_t);
+        uint32_t prev = S[k].a;
+        for (size_t e = 0; e < nh; e++) {
+            out[nout++] = (seg2){prev, hits[e].p};
+            prev = hits[e].p;
+        }
+        out[nout++] = (seg2){prev, S[k].b};
+        *nsplit += nh > 0;
+    }
+    free(S);
+    *Sp = out;
+    *ns = nout;
+    out = NULL;
+done:
+    free(used);
+    free(keys);
+    free(hits);
+    free(out);
+    return status;
+}
+
 /* Welds, drops zero-length and duplicate segments, orients chains. S and ns are
  * updated in place. */
-static hv_status repair(const double *P, size_t np, seg2 *S, size_t *ns, double tol,
+static hv_status repair(const double *P, size_t np, seg2 **Sp, size_t *ns, double tol, double h,
                         hv_sdf2d_stats *st)
 {
+    seg2 *S = *Sp;
     hv_status status = HV_OK;
     uint32_t *par = malloc(np * sizeof *par), *order = malloc(np * sizeof *order);
     if (!par || !order) {
@@ -421,6 +554,12 @@ static hv_status repair(const double *P, size_t np, seg2 *S, size_t *ns, double 
             continue;
         }
         S[n++] = s;
+    }
+    /* 1b. Overlaps: split at points lying on other segments. */
+    if (tol > 0 && n > 0) {
+        if ((status = split_overlaps(P, np, Sp, &n, tol, h, &st->segments_split)) != HV_OK)
+            goto out;
+        S = *Sp;
     }
     /* 2. Duplicates (either direction): keep the first. */
     uint64_t *key = malloc(n * 2 * sizeof *key);
@@ -814,7 +953,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     /* 1. Repair. */
     if ((st = hv_progress(0.0, "repair")))
         goto done;
-    if (o.repair && (st = repair(P, c->npoints, Sg, &ns, o.weld_tol * h, &S)))
+    if (o.repair && (st = repair(P, c->npoints, &Sg, &ns, o.weld_tol * h, h, &S)))
         goto done;
     S.segments_out = ns;
     S.t_repair = hv_now() - tt;
