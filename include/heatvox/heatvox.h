@@ -9,6 +9,7 @@
 #include "heatvox/solve.h"
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
+#include "heatvox/vdb.h"
 #include "heatvox/sdf.h"
 #include "heatvox/image.h"
 #include "heatvox/curves.h"

@@ -48,7 +48,7 @@ void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x,
         int dim;
         double alpha;
     } op = {dim, alpha}, *m = &op;
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > 32768)
     for (int k = 0; k < L->n[2]; k++)
         for (int j = 0; j < L->n[1]; j++)
             for (int i = 0; i < L->n[0]; i++) {
