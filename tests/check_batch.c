@@ -241,7 +241,8 @@ static int run_in_dir(const char *args)
 START_TEST(mixed_batch_should_isolate_failures_and_resume)
 {
     make_inputs();
-    const char *args = "batch in list.txt -o out -j 2 --res 24 --preview --report report.jsonl";
+    const char *args =
+        "batch in list.txt -o out -j 2 --res 24 --format exr --preview --report report.jsonl";
     int rc = run_in_dir(args);
     char *err = read_text(path("stderr.txt")), *out = read_text(path("stdout.txt"));
     char *rep = read_text(path("report.jsonl"));
@@ -319,26 +320,26 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
     free(out);
 
     /* Other options: recomputed. --force: recomputed. */
-    rc = run_in_dir("batch in -o out --res 20 --preview");
+    rc = run_in_dir("batch in -o out --res 20 --format exr --preview");
     out = read_text(path("stdout.txt"));
     ck_assert_int_eq(rc, 1); /* broken.obj and empty.obj */
     ck_assert_msg(strstr(out, "4 inputs: 2 written, 0 up to date, 2 failed") != NULL,
                   "stdout:\n%s", out);
     check_sdf_exr(path("out/sphere.exr"), 20, 1);
     free(out);
-    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --preview");
+    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --format exr --preview");
     out = read_text(path("stdout.txt"));
     ck_assert_int_eq(rc, 0);
     ck_assert_msg(strstr(out, "1 input: 0 written, 1 up to date") != NULL, "stdout:\n%s", out);
     free(out);
-    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --preview --force");
+    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --format exr --preview --force");
     out = read_text(path("stdout.txt"));
     ck_assert_int_eq(rc, 0);
     ck_assert_msg(strstr(out, "1 input: 1 written, 0 up to date") != NULL, "stdout:\n%s", out);
     free(out);
     /* A removed preview makes the output stale when previews are asked for. */
     unlink(path("out/sphere.png"));
-    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --preview --dry-run");
+    rc = run_in_dir("batch in/sphere.obj -o out --res 20 --format exr --preview --dry-run");
     out = read_text(path("stdout.txt"));
     ck_assert_msg(strstr(out, "run  in/sphere.obj -> out/sphere.exr") != NULL, "stdout:\n%s",
                   out);
@@ -348,10 +349,49 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
 }
 END_TEST
 
+START_TEST(default_output_should_be_a_vdb_level_set_that_slice_can_cut)
+{
+    make_inputs();
+    /* a directory's files land in OUTDIR under their path below that directory */
+    int rc = run_in_dir("batch in/sub -o out --res 24 --band 2");
+    ck_assert_int_eq(rc, 0);
+    hv_grid *g = NULL;
+    int cls = -1;
+    TL_ASSERT_OK(hv_vdb_read_float(path("out/torus.vdb"), "sdf", NULL, &g, &cls));
+    ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
+    ck_assert_int_eq(g->n[0], 24); /* the torus is widest along x and y */
+    ck_assert_int_eq(g->n[1], 24);
+    /* narrow band of 2 voxels: values are clamped to +-2h, positive in the hole */
+    double x[3] = {0.1, -0.2, 0.3};
+    int ijk[3];
+    for (int a = 0; a < 3; a++)
+        ijk[a] = (int)floor((x[a] - g->origin[a]) / g->h);
+    float v = g->v[ijk[0] + (size_t)g->n[0] * (ijk[1] + (size_t)g->n[1] * ijk[2])];
+    ck_assert(fabsf(v - (float)(2 * g->h)) < 1e-5f);
+    char meta[2048];
+    TL_ASSERT_OK(hv_vdb_read_meta(path("out/torus.vdb"), NULL, "heatvox_options", meta,
+                                  sizeof meta));
+    ck_assert_ptr_nonnull(strstr(meta, "res=24"));
+    ck_assert_ptr_nonnull(strstr(meta, "band=2 dense=0"));
+    hv_grid_destroy(&g);
+    rc = run_in_dir("slice out/torus.vdb --axis y -o y.png");
+    ck_assert_int_eq(rc, 0);
+    uint8_t *rgb = NULL;
+    int w, h;
+    TL_ASSERT_OK(hv_png_read_rgb(path("y.png"), &rgb, &w, &h));
+    ck_assert_int_eq(w, 24);
+    ck_assert_int_gt(h, 6); /* z extent of the torus block */
+    free(rgb);
+    ck_assert_int_eq(run_in_dir("slice out/torus.vdb --grid nope -o y.png"), 1);
+    ck_assert_int_eq(run_in_dir("slice out/torus.vdb --index 99 -o y.png"), 1);
+    remove_inputs();
+}
+END_TEST
+
 START_TEST(dry_run_should_list_jobs_and_write_nothing)
 {
     make_inputs();
-    int rc = run_in_dir("batch in list.txt -o out --res 24 --dry-run");
+    int rc = run_in_dir("batch in list.txt -o out --res 24 --format exr --dry-run");
     char *out = read_text(path("stdout.txt"));
     ck_assert_int_eq(rc, 1); /* the manifest names a missing file and a bad option */
     ck_assert_ptr_nonnull(strstr(out, "run  in/sphere.obj -> out/sphere.exr"));
@@ -398,7 +438,7 @@ START_TEST(interrupted_batch_should_leave_no_partial_outputs)
         dup2(fd, 1);
         dup2(fd, 2);
         execl(bin, "heatvox", "batch", path("many"), "-o", path("out"), "-j", "2", "--res", "64",
-              "--preview", (char *)NULL);
+              "--format", "exr", "--preview", (char *)NULL);
         _exit(127);
     }
     ck_assert_int_gt(pid, 0);
@@ -434,6 +474,7 @@ int main(void)
     TCase *tc = tcase_create("cli");
     tcase_set_timeout(tc, 240);
     tcase_add_test(tc, mixed_batch_should_isolate_failures_and_resume);
+    tcase_add_test(tc, default_output_should_be_a_vdb_level_set_that_slice_can_cut);
     tcase_add_test(tc, dry_run_should_list_jobs_and_write_nothing);
     tcase_add_test(tc, usage_errors_should_exit_2);
     tcase_add_test(tc, interrupted_batch_should_leave_no_partial_outputs);

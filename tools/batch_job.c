@@ -81,7 +81,7 @@ void batch_opts_default(batch_opts *o)
 {
     memset(o, 0, sizeof *o);
     hv_sdf_opts_default(&o->sdf);
-    o->format = BATCH_EXR;
+    o->format = BATCH_VDB;
     o->band = 3.0;
 }
 
@@ -351,14 +351,21 @@ static int write_sidecar(const char *input, const char *output, const char *cano
 static int write_volume(const char *output, const hv_grid *g, const batch_opts *o,
                         const char *input, const char *canon, char *err, size_t errsize)
 {
-    (void)input;
-    (void)canon;
     hv_status st;
-    if (o->format == BATCH_EXR)
+    if (o->format == BATCH_EXR) {
         st = hv_exr_write(output, g, "distance");
-    else {
-        snprintf(err, errsize, "%s: VDB output is not built into this heatvox", output);
-        return -1;
+    } else {
+        hv_vdb_writer *w = NULL;
+        st = hv_vdb_writer_create(&w);
+        if (!st)
+            st = hv_vdb_writer_add_levelset(w, g, "sdf", o->band, o->dense);
+        if (!st)
+            st = hv_vdb_writer_set_meta(w, "source", input);
+        if (!st)
+            st = hv_vdb_writer_set_meta(w, "heatvox_options", canon);
+        if (!st)
+            st = hv_vdb_writer_write(w, output);
+        hv_vdb_writer_destroy(&w);
     }
     if (st) {
         error_text(st, output, err, errsize);

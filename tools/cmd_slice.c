@@ -16,16 +16,16 @@ static void help(void)
            "The slice keeps the other two axes in order: a z slice shows x to the right\n"
            "and y up, a y slice x and z, an x slice y and z.\n"
            "\n"
-           "VOLUME is a heatvox EXR volume (one part per z slice, as written by heatvox\n"
-           "batch --format exr)%s.\n"
+           "VOLUME is an OpenVDB file (.vdb: a float or double grid, read densely over\n"
+           "the block heatvox wrote, else over its active voxels) or a heatvox EXR volume\n"
+           "(one part per z slice, as written by heatvox batch --format exr).\n"
            "\n"
            "  --grid NAME   the grid or EXR channel to read (default: the only one, or\n"
            "                \"distance\"/\"Y\")\n"
            "  --range R     PNG colour range (default: max |value| of the slice)\n"
            "\n"
            "exit: 0 written, 1 failure (unreadable volume, index out of range, I/O),\n"
-           "2 usage error\n",
-           "");
+           "2 usage error\n");
 }
 
 static int ends_with(const char *s, const char *ext)
@@ -34,8 +34,35 @@ static int ends_with(const char *s, const char *ext)
     return n > e && !strcasecmp(s + n - e, ext);
 }
 
+/* The grid to slice in a VDB file: the named one, else the only float grid,
+ * else "sdf" (heatvox's level sets). */
+static hv_status read_vdb(const char *path, const char *grid, hv_grid **out)
+{
+    char pick[256];
+    if (!grid) {
+        size_t count = 0;
+        hv_vdb_grid_info info[64];
+        hv_status st = hv_vdb_list(path, info, 64, &count);
+        if (st)
+            return st;
+        int nfloat = 0;
+        snprintf(pick, sizeof pick, "sdf");
+        for (size_t i = 0; i < count && i < 64; i++)
+            if (!strcmp(info[i].value_type, "float") || !strcmp(info[i].value_type, "double")) {
+                if (!nfloat++)
+                    snprintf(pick, sizeof pick, "%s", info[i].name);
+            }
+        if (nfloat > 1)
+            snprintf(pick, sizeof pick, "sdf");
+        grid = pick;
+    }
+    return hv_vdb_read_float(path, grid, NULL, out, NULL);
+}
+
 static hv_status read_volume(const char *path, const char *grid, hv_grid **out)
 {
+    if (ends_with(path, ".vdb"))
+        return read_vdb(path, grid, out);
     if (!grid) {
         /* heatvox writes volumes with a "distance" channel; other files name theirs */
         hv_status st = hv_exr_read(path, "distance", out);

@@ -21,6 +21,7 @@ static const struct command commands[] = {
     {"batch", cmd_batch, "signed distance volumes for many meshes, in parallel, resumable"},
     {"sdf2d", cmd_sdf2d, "2D signed distance from (broken) curves, SVG or text, to EXR/PNG"},
     {"slice", cmd_slice, "one slice of a volume as EXR data or a PNG preview"},
+    {"make-scenes", cmd_make_scenes, "write the generated demo inputs (broken meshes, a level set)"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
 };
@@ -29,7 +30,7 @@ static void usage(FILE *out)
 {
     fprintf(out, "usage: heatvox <command> [options]   (heatvox <command> --help)\n\ncommands:\n");
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        fprintf(out, "  %-10s %s\n", commands[i].name, commands[i].summary);
+        fprintf(out, "  %-12s %s\n", commands[i].name, commands[i].summary);
     fprintf(out, "\nexit codes: 0 success, 1 failure (bad input, I/O, solver), 2 usage error\n");
 }
 
