@@ -45,6 +45,9 @@ void batch_preview_path(const char *output, char *buf, size_t size);
 int batch_up_to_date(const char *input, const char *output, const batch_opts *o,
                      const char *hash);
 
+/* mkdir -p; 0 or -1 with errno. */
+int batch_mkdirs(const char *dir);
+
 /* The worker: `heatvox batch --job INPUT OUTPUT [job options]`. Prints one
  * JSON object on stdout (the report line) and returns the exit code. */
 int batch_job_main(int argc, char **argv);

@@ -282,24 +282,35 @@ int batch_up_to_date(const char *input, const char *output, const batch_opts *o,
 
 /* ---- the job ---- */
 
-static hv_status mkdir_parents(const char *path)
+int batch_mkdirs(const char *dir)
+{
+    char d[4096];
+    if (snprintf(d, sizeof d, "%s", dir) >= (int)sizeof d) {
+        errno = ENAMETOOLONG;
+        return -1;
+    }
+    for (char *p = d + 1; *p; p++)
+        if (*p == '/') {
+            *p = '\0';
+            if (mkdir(d, 0777) != 0 && errno != EEXIST)
+                return -1;
+            *p = '/';
+        }
+    if (mkdir(d, 0777) != 0 && errno != EEXIST)
+        return -1;
+    return 0;
+}
+
+/* Creates the directory that will hold `path`. */
+static int mkdir_parents(const char *path)
 {
     char dir[4096];
     snprintf(dir, sizeof dir, "%s", path);
     char *slash = strrchr(dir, '/');
     if (!slash || slash == dir)
-        return HV_OK;
+        return 0;
     *slash = '\0';
-    for (char *p = dir + 1; *p; p++)
-        if (*p == '/') {
-            *p = '\0';
-            if (mkdir(dir, 0777) != 0 && errno != EEXIST)
-                return HV_ERR_IO;
-            *p = '/';
-        }
-    if (mkdir(dir, 0777) != 0 && errno != EEXIST)
-        return HV_ERR_IO;
-    return HV_OK;
+    return batch_mkdirs(dir);
 }
 
 /* Message of the last library error, starting with the file name. */
@@ -425,7 +436,7 @@ int batch_job_main(int argc, char **argv)
     }
     have_stats = 1;
     stage = "write";
-    if (mkdir_parents(output) != HV_OK) {
+    if (mkdir_parents(output) != 0) {
         snprintf(err, sizeof err, "%s: cannot create its directory: %s", output, strerror(errno));
         st = HV_ERR_IO;
         goto report;

@@ -952,6 +952,12 @@ int cmd_batch(int argc, char **argv)
     p.tty = isatty(2) && cli_verbose >= 0;
     for (size_t i = 0; i < l.n; i++)
         p.to_run += !l.v[i].error && !l.v[i].skip;
+    if (batch_mkdirs(od) != 0) {
+        fprintf(stderr, "heatvox batch: %s: cannot create the output directory: %s\n", od,
+                strerror(errno));
+        rc = HV_EXIT_FAIL;
+        goto done;
+    }
     if (report) {
         p.report = fopen(report, "we");
         if (!p.report) {
@@ -960,14 +966,6 @@ int cmd_batch(int argc, char **argv)
             rc = HV_EXIT_FAIL;
             goto done;
         }
-    }
-    if (mkdir(od, 0777) != 0 && errno != EEXIST) {
-        fprintf(stderr, "heatvox batch: %s: cannot create the output directory: %s\n", od,
-                strerror(errno));
-        if (p.report)
-            fclose(p.report);
-        rc = HV_EXIT_FAIL;
-        goto done;
     }
     int sig = run_pool(&l, &p, exe, nworkers, gargc, gargv);
     clear_bar(&p);
