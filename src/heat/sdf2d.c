@@ -493,7 +493,8 @@ static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *n
             }
             out = no;
         }
-        qsort(hits, nh, sizeof *hits, by_t);
+        if (nh > 1)
+            qsort(hits, nh, sizeof *hits, by_t);
         uint32_t prev = S[k].a;
         for (size_t e = 0; e < nh; e++) {
             out[nout++] = (seg2){prev, hits[e].p};
@@ -572,7 +573,8 @@ static hv_status repair(const double *P, size_t np, seg2 **Sp, size_t *ns, doubl
         key[2 * k] = ((uint64_t)lo << 32) | hi;
         key[2 * k + 1] = k;
     }
-    qsort(key, n, 2 * sizeof *key, by_key);
+    if (n > 1)
+        qsort(key, n, 2 * sizeof *key, by_key);
     uint8_t *drop = calloc(n ? n : 1, 1);
     if (!drop) {
         free(key);
