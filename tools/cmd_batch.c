@@ -84,7 +84,10 @@ static void help(void)
         "file on stderr. The summary goes to stdout.\n"
         "\n"
         "exit: 0 every input written or up to date, 1 some input failed (each named on\n"
-        "stderr with its error), 2 usage error; killed by the signal on Ctrl-C\n");
+        "stderr with its error), 2 usage error; killed by the signal on Ctrl-C\n"
+        "\n"
+        "Workers run `heatvox batch --job INPUT OUTPUT [job options]`, which computes one\n"
+        "output and prints its report line on stdout (exit 0 ok, 1 failed).\n");
 }
 
 /* ---- jobs ---- */
