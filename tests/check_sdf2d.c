@@ -5,7 +5,9 @@
 #include "testlib.h"
 
 #include <check.h>
+#include <limits.h>
 #include <math.h>
+#include <sys/wait.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -585,6 +587,81 @@ START_TEST(svg_circle_file_should_give_a_circle_distance)
 }
 END_TEST
 
+/* The command: $HEATVOX_BIN, else ../heatvox next to this test's directory. */
+static const char *heatvox_bin(void)
+{
+    static char bin[PATH_MAX];
+    const char *env = getenv("HEATVOX_BIN");
+    if (env && *env) {
+        snprintf(bin, sizeof bin, "%s", env);
+    } else {
+        char self[PATH_MAX];
+        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+        ck_assert_int_gt(n, 0);
+        self[n] = '\0';
+        *strrchr(self, '/') = '\0';
+        snprintf(bin, sizeof bin, "%.4000s/../heatvox", self);
+    }
+    ck_assert_msg(access(bin, X_OK) == 0, "heatvox binary %s not found (set HEATVOX_BIN)", bin);
+    return bin;
+}
+
+static int run_cmd(const char *fmt, const char *a, const char *b, const char *c)
+{
+    char cmd[8192];
+    snprintf(cmd, sizeof cmd, fmt, heatvox_bin(), a, b, c);
+    int st = system(cmd);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+}
+
+START_TEST(sdf2d_command_should_write_the_library_result_as_exr_and_png)
+{
+    char dir[] = "/tmp/hv_check_sdf2d_cli_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char in[128], exr[128], png[128];
+    snprintf(in, sizeof in, "%s/sq.txt", dir);
+    snprintf(exr, sizeof exr, "%s/sq.exr", dir);
+    snprintf(png, sizeof png, "%s/sq.png", dir);
+    FILE *f = fopen(in, "w");
+    /* a square with a gap in its left side and the top drawn backwards */
+    fputs("M -10 -10\nL 10 -10\nL 10 10\n-10 10 10 10\nM -10 10\nL -10 2\n", f);
+    fclose(f);
+    ck_assert_int_eq(run_cmd("'%s' sdf2d '%s' -o '%s' --png '%s' --res 64 -q", in, exr, png), 0);
+    hv_grid *g = NULL, *ref = NULL;
+    TL_ASSERT_OK(hv_exr_read(exr, "distance", &g));
+    hv_curves *c = NULL;
+    TL_ASSERT_OK(hv_curves_read(in, &c));
+    hv_sdf2d_opts o;
+    hv_sdf2d_opts_default(&o);
+    o.res = 64;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &ref, NULL));
+    ck_assert_int_eq(g->n[0], ref->n[0]);
+    ck_assert_int_eq(g->n[1], ref->n[1]);
+    ck_assert(fabs(g->h - ref->h) < 1e-12 && fabs(g->origin[0] - ref->origin[0]) < 1e-12);
+    for (size_t i = 0; i < hv_grid_count(g); i++)
+        ck_assert_msg(fabsf(g->v[i] - ref->v[i]) <= 1e-5f * (1 + fabsf(ref->v[i])),
+                      "cell %zu: %g vs %g", i, g->v[i], ref->v[i]);
+    /* the centre is inside */
+    ck_assert(g->v[g->n[0] / 2 + (size_t)g->n[0] * (g->n[1] / 2)] < -5);
+    uint8_t *rgb = NULL;
+    int w, h;
+    TL_ASSERT_OK(hv_png_read_rgb(png, &rgb, &w, &h));
+    ck_assert_int_eq(w, g->n[0]);
+    ck_assert_int_eq(h, g->n[1]);
+    free(rgb);
+    hv_grid_destroy(&g);
+    hv_grid_destroy(&ref);
+    hv_curves_destroy(&c);
+    /* failures: unreadable input 1, usage 2 */
+    ck_assert_int_eq(run_cmd("'%s' sdf2d '%s/none.txt' -o '%s' 2>/dev/null %s", dir, exr, ""), 1);
+    ck_assert_int_eq(run_cmd("'%s' sdf2d '%s' --res x -o '%s' 2>/dev/null %s", in, exr, ""), 2);
+    unlink(in);
+    unlink(exr);
+    unlink(png);
+    rmdir(dir);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("sdf2d");
@@ -606,6 +683,10 @@ int main(void)
     tcase_add_test(tc, text_format_should_read_commands_and_number_lines);
     tcase_add_test(tc, svg_paths_should_read_absolute_relative_and_implicit_commands);
     tcase_add_test(tc, svg_circle_file_should_give_a_circle_distance);
+    suite_add_tcase(s, tc);
+    tc = tcase_create("command");
+    tcase_set_timeout(tc, 60);
+    tcase_add_test(tc, sdf2d_command_should_write_the_library_result_as_exr_and_png);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }
