@@ -11,7 +11,8 @@
  *   3. diffuse    one backward-Euler heat step per component, (I - t Lap) Y = Y0
  *   4. normalize  X = Y/|Y| on cell faces (MAC), then div X
  *   5. poisson    Lap(phi) = div X, Neumann walls
- *   6. shift      phi -= area-weighted mean of phi at the surface samples
+ *   6. shift      phi -= area-weighted mean of phi at the surface samples, then
+ *                 the local residual extended by normalized heat convolution
  *   7. redistance (HV_SDF_EXACT, the default) |phi| replaced by the exact
  *                 distance to the repaired triangles, keeping the heat sign
  * Values are negative inside. The grid is cell-centred (grid.h).
@@ -27,14 +28,16 @@
 extern "C" {
 #endif
 
-/* Mesh repair steps (bit flags, applied in this order). */
+/* Mesh repair steps (bit flags), applied in the order listed. */
 enum {
     HV_SDF_REPAIR_WELD = 1u << 0,        /* merge vertices at exactly the same position */
     HV_SDF_REPAIR_DEGENERATE = 1u << 1,  /* drop faces with a repeated vertex or zero area */
     HV_SDF_REPAIR_DUPLICATES = 1u << 2,  /* drop faces repeating an earlier face's vertex set */
     HV_SDF_REPAIR_ORIENT = 1u << 3,      /* one orientation per manifold-connected component */
-    HV_SDF_REPAIR_OUTWARD = 1u << 4,     /* flip components whose signed volume is negative */
-    HV_SDF_REPAIR_ALL = 0x1fu
+    HV_SDF_REPAIR_FILL_HOLES = 1u << 5,  /* close boundary loops with fans (see max_hole) */
+    HV_SDF_REPAIR_OUTWARD = 1u << 4,     /* orient components outward by winding number,
+                                            cavities inward */
+    HV_SDF_REPAIR_ALL = 0x3fu
 };
 
 /* How |phi| is obtained. */
@@ -61,6 +64,15 @@ typedef struct hv_sdf_opts {
                              shorter ones have decayed below solver accuracy; -1 (default): as many
                              as needed to reach the whole grid (0 with HV_SDF_EXACT) */
     unsigned repair;      /* HV_SDF_REPAIR_* flags; default HV_SDF_REPAIR_ALL */
+    double max_hole;      /* holes wider than this times their component's bounding-box diagonal
+                             stay open (rims of bowls and sheets); default 0.5 */
+    double near_sign;     /* HV_SDF_EXACT, signed: within this many voxels of the mesh (and where
+                             |phi| < 1.5 times it) the sign comes from the nearest feature's
+                             angle-weighted pseudonormal when that feature is clean; 0 = off;
+                             default 1 */
+    int local_shift;      /* 1 (default): after the global shift, subtract the residual of phi
+                             at the surface extended into the volume by normalized heat
+                             convolution, so the zero set follows the mesh (signed only) */
 
     /* Solves. */
     hv_backend backend;   /* default HV_BACKEND_AUTO */
@@ -74,6 +86,10 @@ typedef struct hv_sdf_repair_report {
     size_t vertices_welded;       /* vertices merged into an earlier one */
     size_t degenerate_removed;
     size_t duplicates_removed;    /* same vertex set as an earlier face, either orientation */
+    size_t holes_filled;          /* boundary loops closed with caps */
+    size_t holes_left_open;       /* loops too wide, or not traceable (non-manifold rims) */
+    size_t cap_triangles;
+    size_t boundary_edges_closed; /* boundary edges on filled loops */
     size_t boundary_edges;        /* after repair */
     size_t nonmanifold_edges;     /* after repair */
     size_t inconsistent_before;   /* manifold edges traversed the same way by both faces */
@@ -98,9 +114,13 @@ typedef struct hv_sdf_stats {
     double diffuse_relres;       /* worst final relative residual */
     int poisson_iterations;
     double poisson_relres;
-    double shift;                /* value subtracted from phi */
+    double shift;                /* value subtracted from phi (global shift) */
+    double surface_rms_before;   /* rms of phi at the surface samples, voxels, after the global shift */
+    double surface_rms_after;    /* the same after the local correction */
     size_t dead_faces;           /* faces where no level was above solver accuracy (X = 0) */
     size_t band_cells;           /* cells whose exact distance came from rasterization */
+    size_t near_sign_cells;      /* cells signed by a pseudonormal */
+    size_t near_sign_changed;    /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
 } hv_sdf_stats;
 
@@ -112,10 +132,10 @@ void hv_sdf_opts_default(hv_sdf_opts *o);
 hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *o, int n[3], double *h,
                                double origin[3]);
 
-/* Repairs a copy of `in` with the steps in `flags`; *out is a new mesh that the
- * caller frees with hv_mesh_destroy (its arrays come from malloc). report may be
+/* Repairs a copy of `in` with the steps in `flags` (max_hole as in hv_sdf_opts);
+ * *out is a new mesh that the caller frees with hv_mesh_destroy. report may be
  * NULL. Fails on NaN/Inf coordinates, out-of-range indices and empty meshes. */
-hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, hv_mesh **out,
+hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
                         hv_sdf_repair_report *report);
 
 /* Computes the distance volume of m. opts may be NULL (defaults); stats may be

@@ -3,9 +3,9 @@
  * normals survives ~30% random flips but not coherent flips or duplicated
  * sheets of opposite orientation, which cancel. Where connectivity exists we
  * can do better: weld, drop degenerate and duplicate faces, propagate one
- * orientation across manifold edges, then orient each component so that its
- * signed volume is positive (negative for shells nested inside an odd number
- * of other shells, e.g. the inner wall of a hollow ball).
+ * orientation across manifold edges, then orient each component outward by
+ * its generalized winding number (inward for shells nested inside an odd
+ * number of others, e.g. the inner wall of a hollow ball).
  */
 #include "sdf_internal.h"
 #include "core/error.h"
@@ -14,9 +14,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Components smaller than this share of the total area are not used as
- * enclosing shells in the nesting test, and at most this many are tested. */
-#define NEST_MIN_AREA_SHARE 0.01
+/* Face samples per component for its winding number, and the number of
+ * largest components that take part in the nesting test. */
+#define ORIENT_SAMPLES 256
 #define NEST_MAX_SHELLS 64
 
 static const double *g_sort_v; /* qsort has no context argument in C11 */
@@ -76,27 +76,6 @@ static void cross_at(const double *V, const uint32_t *t, double n[3])
     n[0] = u[1] * w[2] - u[2] * w[1];
     n[1] = u[2] * w[0] - u[0] * w[2];
     n[2] = u[0] * w[1] - u[1] * w[0];
-}
-
-/* Solid angle of triangle abc seen from p (Van Oosterom & Strackee), signed
- * so that a counter-clockwise triangle seen from behind its normal is positive. */
-static double solid_angle(const double p[3], const double *a, const double *b, const double *c)
-{
-    double A[3], B[3], C[3];
-    for (int d = 0; d < 3; d++) {
-        A[d] = a[d] - p[d];
-        B[d] = b[d] - p[d];
-        C[d] = c[d] - p[d];
-    }
-    double la = sqrt(A[0] * A[0] + A[1] * A[1] + A[2] * A[2]);
-    double lb = sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2]);
-    double lc = sqrt(C[0] * C[0] + C[1] * C[1] + C[2] * C[2]);
-    double det = A[0] * (B[1] * C[2] - B[2] * C[1]) - A[1] * (B[0] * C[2] - B[2] * C[0]) +
-                 A[2] * (B[0] * C[1] - B[1] * C[0]);
-    double den = la * lb * lc + (A[0] * B[0] + A[1] * B[1] + A[2] * B[2]) * lc +
-                 (A[0] * C[0] + A[1] * C[1] + A[2] * C[2]) * lb +
-                 (B[0] * C[0] + B[1] * C[1] + B[2] * C[2]) * la;
-    return 2.0 * atan2(det, den);
 }
 
 /* Union-find-free component labelling and orientation propagation by BFS over
@@ -176,112 +155,391 @@ static void count_edges(const edge_rec *E, const uint32_t *estart, size_t ne, co
     *boundary = b, *nonmanifold = nm, *inconsistent = inc;
 }
 
-/* Decides the orientation of each component: positive signed volume unless
- * nested inside an odd number of other large shells. */
-static void orient_outward(const double *V, const uint32_t *T, size_t nt, uint8_t *flip,
-                           const uint32_t *comp, size_t nc, size_t *faces_flipped,
-                           size_t *comps_flipped)
+/* Decides the orientation of each component with generalized winding numbers
+ * (Jacobson et al. 2013). A correctly oriented solid's boundary has winding
+ * number 1/2 on it (1 inside, 0 outside); an open piece of it, e.g. a tube
+ * segment between holes, still has a positive principal value where signed
+ * volume about a centroid can come out either way. So: (1) each component
+ * takes the orientation that makes its own winding number at its face
+ * centroids positive; (2) the largest components, outermost first, take the
+ * orientation that brings the total winding number at their faces closest to
+ * 1/2, which turns shells nested in odd numbers of others (cavities) inward. */
+typedef struct area_idx {
+    double area;
+    uint32_t idx;
+} area_idx;
+
+static int cmp_area_desc(const void *pa, const void *pb)
 {
-    double *acc = calloc(nc * 8, sizeof *acc); /* centroid*area (3), area, volume, best area, best face */
-    if (!acc)
-        return; /* best effort: leave orientation as propagated */
-    for (size_t f = 0; f < nt; f++) {
-        double n[3];
-        cross_at(V, T + 3 * f, n);
-        double a = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        double *c = acc + 8 * comp[f];
-        for (int d = 0; d < 3; d++)
-            c[d] += a * (V[3 * (size_t)T[3 * f] + d] + V[3 * (size_t)T[3 * f + 1] + d] +
-                         V[3 * (size_t)T[3 * f + 2] + d]) / 3.0;
-        c[3] += a;
-        if (a > c[5]) {
-            c[5] = a;
-            c[6] = (double)f;
-        }
-    }
-    double total_area = 0;
-    for (size_t k = 0; k < nc; k++) {
-        double *c = acc + 8 * k;
-        if (c[3] > 0)
-            for (int d = 0; d < 3; d++)
-                c[d] /= c[3];
-        total_area += c[3];
-    }
-    /* Signed volume about the component's centroid, with the propagated flips. */
-    for (size_t f = 0; f < nt; f++) {
-        double *c = acc + 8 * comp[f];
-        const double *a = V + 3 * (size_t)T[3 * f], *b = V + 3 * (size_t)T[3 * f + 1],
-                     *e = V + 3 * (size_t)T[3 * f + 2];
-        double A[3], B[3], C[3];
-        for (int d = 0; d < 3; d++)
-            A[d] = a[d] - c[d], B[d] = b[d] - c[d], C[d] = e[d] - c[d];
-        double det = A[0] * (B[1] * C[2] - B[2] * C[1]) - A[1] * (B[0] * C[2] - B[2] * C[0]) +
-                     A[2] * (B[0] * C[1] - B[1] * C[0]);
-        c[4] += flip[f] ? -det / 6 : det / 6;
-    }
-    /* Large shells for the nesting test, largest first. */
-    size_t nshell = 0;
-    uint32_t shells[NEST_MAX_SHELLS];
-    for (size_t k = 0; k < nc; k++) {
-        if (acc[8 * k + 3] < NEST_MIN_AREA_SHARE * total_area || acc[8 * k + 4] == 0)
-            continue;
-        if (nshell < NEST_MAX_SHELLS)
-            shells[nshell++] = (uint32_t)k;
-    }
-    int *depth = calloc(nc, sizeof *depth);
-    if (nshell > 1 && depth) {
-        uint8_t *is_shell = calloc(nc, 1);
-        double *w = calloc(nshell * nshell, sizeof *w); /* w[i*ns+j]: winding of shell j at a point of i */
-        if (is_shell && w) {
-            for (size_t s = 0; s < nshell; s++)
-                is_shell[shells[s]] = (uint8_t)(s + 1);
-            for (size_t f = 0; f < nt; f++) {
-                int js = is_shell[comp[f]];
-                if (!js)
-                    continue;
-                double sign = ((acc[8 * comp[f] + 4] > 0) ^ flip[f]) ? 1.0 : -1.0;
-                for (size_t i = 0; i < nshell; i++) {
-                    if ((size_t)(js - 1) == i)
-                        continue;
-                    size_t bf = (size_t)acc[8 * shells[i] + 6];
-                    const uint32_t *t = T + 3 * bf;
-                    double p[3];
-                    for (int d = 0; d < 3; d++)
-                        p[d] = (V[3 * (size_t)t[0] + d] + V[3 * (size_t)t[1] + d] +
-                                V[3 * (size_t)t[2] + d]) / 3.0;
-                    const uint32_t *u = T + 3 * f;
-                    w[i * nshell + (size_t)(js - 1)] +=
-                        sign * solid_angle(p, V + 3 * (size_t)u[0], V + 3 * (size_t)u[1],
-                                           V + 3 * (size_t)u[2]) / (4 * M_PI);
-                }
-            }
-            for (size_t i = 0; i < nshell; i++)
-                for (size_t j = 0; j < nshell; j++)
-                    if (i != j && fabs(w[i * nshell + j]) > 0.5)
-                        depth[shells[i]]++;
-        }
-        free(is_shell);
-        free(w);
-    }
-    size_t ff = 0, cf = 0;
-    for (size_t k = 0; k < nc; k++) {
-        double vol = acc[8 * k + 4];
-        int want_positive = !(depth && (depth[k] & 1));
-        acc[8 * k + 7] = (vol != 0 && (vol > 0) != want_positive) ? 1 : 0;
-        cf += acc[8 * k + 7] != 0;
-    }
-    for (size_t f = 0; f < nt; f++)
-        if (acc[8 * comp[f] + 7] != 0) {
-            flip[f] ^= 1;
-            ff++;
-        }
-    free(depth);
-    free(acc);
-    *faces_flipped += ff;
-    *comps_flipped += cf;
+    const area_idx *a = pa, *b = pb;
+    if (a->area != b->area)
+        return a->area > b->area ? -1 : 1;
+    return a->idx < b->idx ? -1 : a->idx > b->idx;
 }
 
-hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, hv_mesh **out,
+typedef struct comp_samples {
+    size_t first, count; /* into the sample arrays */
+} comp_samples;
+
+static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, uint8_t *flip,
+                                const uint32_t *comp, size_t nc, size_t *faces_flipped,
+                                size_t *comps_flipped)
+{
+    hv_status st = HV_ERR_NOMEM;
+    uint32_t *start = calloc(nc + 1, sizeof *start), *faces = malloc(nt * sizeof *faces);
+    double *carea = calloc(nc, sizeof *carea);
+    signed char *sgn = malloc(nc);
+    uint32_t *big = malloc(nc * sizeof *big);
+    hv_wn_tree *trees = NULL;
+    comp_samples *cs = calloc(nc, sizeof *cs);
+    double *sx = NULL, *sa = NULL, *sw = NULL;
+    uint32_t *sf = NULL;
+    double *depth = NULL;
+    size_t nbig = 0;
+    if (!start || !faces || !carea || !sgn || !big || !cs)
+        goto out;
+    for (size_t f = 0; f < nt; f++)
+        start[comp[f] + 1]++;
+    for (size_t k = 0; k < nc; k++)
+        start[k + 1] += start[k];
+    {
+        uint32_t *fill = malloc(nc * sizeof *fill);
+        if (!fill)
+            goto out;
+        memcpy(fill, start, nc * sizeof *fill);
+        for (size_t f = 0; f < nt; f++)
+            faces[fill[comp[f]]++] = (uint32_t)f;
+        free(fill);
+    }
+    /* Sample faces: at most ORIENT_SAMPLES per component, evenly strided. */
+    size_t ns = 0;
+    for (size_t k = 0; k < nc; k++) {
+        size_t nf = start[k + 1] - start[k];
+        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
+        cs[k].first = ns;
+        cs[k].count = (nf + stride - 1) / stride;
+        ns += cs[k].count;
+    }
+    sx = malloc(3 * ns * sizeof *sx);
+    sa = malloc(ns * sizeof *sa);
+    sw = malloc(ns * sizeof *sw);
+    sf = malloc(ns * sizeof *sf);
+    if (!sx || !sa || !sw || !sf)
+        goto out;
+    for (size_t k = 0; k < nc; k++) {
+        size_t nf = start[k + 1] - start[k];
+        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
+        for (size_t q = 0; q < cs[k].count; q++) {
+            uint32_t f = faces[start[k] + q * stride];
+            size_t i = cs[k].first + q;
+            double n[3];
+            cross_at(V, T + 3 * (size_t)f, n);
+            sa[i] = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            sf[i] = f;
+            for (int d = 0; d < 3; d++)
+                sx[3 * i + d] = (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
+                                 V[3 * (size_t)T[3 * (size_t)f + 2] + d]) / 3.0;
+        }
+        for (size_t q = start[k]; q < start[k + 1]; q++) {
+            double n[3];
+            cross_at(V, T + 3 * (size_t)faces[q], n);
+            carea[k] += 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        }
+    }
+    /* The largest components take part in the nesting test. */
+    {
+        area_idx *ai = malloc(nc * sizeof *ai);
+        if (!ai)
+            goto out;
+        for (size_t k = 0; k < nc; k++)
+            ai[k].area = carea[k], ai[k].idx = (uint32_t)k;
+        qsort(ai, nc, sizeof *ai, cmp_area_desc);
+        for (size_t k = 0; k < nc; k++)
+            big[k] = ai[k].idx;
+        free(ai);
+    }
+    nbig = nc < NEST_MAX_SHELLS ? nc : NEST_MAX_SHELLS;
+    trees = calloc(nbig ? nbig : 1, sizeof *trees);
+    if (!trees)
+        goto out;
+    /* (1) Own winding number. */
+    for (size_t b = 0; b < nc; b++) {
+        size_t k = big[b]; /* every component, largest first */
+        hv_wn_tree W;
+        if ((st = hv_wn_build(&W, V, T, faces + start[k], start[k + 1] - start[k], flip)))
+            goto out;
+        double num = 0, den = 0;
+        for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+            sw[i] = hv_wn_eval(&W, sx + 3 * i, sf[i]);
+            num += sa[i] * sw[i];
+            den += sa[i];
+        }
+        sgn[k] = (den > 0 && num < -1e-3 * den) ? -1 : 1;
+        if (b < nbig)
+            trees[b] = W;
+        else
+            hv_wn_free(&W);
+    }
+    st = HV_OK;
+    /* (2) Nesting among the big components, outermost first. */
+    if (nbig > 1) {
+        depth = calloc(nbig, sizeof *depth);
+        size_t *ord = malloc(nbig * sizeof *ord);
+        if (!depth || !ord) {
+            free(ord);
+            st = HV_ERR_NOMEM;
+            goto out;
+        }
+        for (size_t b = 0; b < nbig; b++) {
+            size_t k = big[b];
+            double num = 0, den = 0;
+            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+                double wo = 0;
+                for (size_t o = 0; o < nbig; o++)
+                    if (o != b)
+                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                num += sa[i] * wo;
+                den += sa[i];
+            }
+            depth[b] = den > 0 ? num / den : 0;
+            ord[b] = b;
+        }
+        for (size_t i = 1; i < nbig; i++) {
+            size_t v = ord[i], j = i;
+            while (j > 0 && depth[ord[j - 1]] > depth[v])
+                ord[j] = ord[j - 1], j--;
+            ord[j] = v;
+        }
+        for (size_t r = 0; r < nbig; r++) {
+            size_t b = ord[r], k = big[b];
+            if (depth[b] < 0.5)
+                continue; /* enclosed by nothing: outward */
+            double cost[2] = {0, 0};
+            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+                double wo = 0;
+                for (size_t o = 0; o < nbig; o++)
+                    if (o != b)
+                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                double ws = sgn[k] * sw[i];
+                cost[0] += sa[i] * fabs(wo + ws - 0.5);
+                cost[1] += sa[i] * fabs(wo - ws - 0.5);
+            }
+            if (cost[1] < cost[0])
+                sgn[k] = (signed char)-sgn[k];
+        }
+        free(ord);
+    }
+    for (size_t k = 0; k < nc; k++)
+        if (sgn[k] < 0) {
+            (*comps_flipped)++;
+            for (size_t q = start[k]; q < start[k + 1]; q++) {
+                flip[faces[q]] ^= 1;
+                (*faces_flipped)++;
+            }
+        }
+out:
+    if (trees)
+        for (size_t b = 0; b < nbig; b++)
+            hv_wn_free(&trees[b]);
+    free(trees);
+    free(start), free(faces), free(carea), free(sgn), free(big), free(cs);
+    free(sx), free(sa), free(sw), free(sf), free(depth);
+    if (st == HV_ERR_NOMEM)
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory orienting %zu components", nc);
+    return st;
+}
+
+/* Growing face and vertex arrays while holes are filled. */
+typedef struct cap_ctx {
+    double *V;
+    uint32_t *T, *comp;
+    uint8_t *flip;
+    size_t nv, nt;
+    const double *cbox; /* per component bounding box (lo, hi) */
+    double max_rel;
+    hv_sdf_repair_report *rep;
+} cap_ctx;
+
+/* Closes one loop (vertices in cap direction). Returns HV_ERR_NOMEM or HV_OK. */
+static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t comp)
+{
+    if (k < 3) {
+        x->rep->holes_left_open++;
+        return HV_OK;
+    }
+    double c[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < k; i++)
+        for (int d = 0; d < 3; d++) {
+            double v = x->V[3 * (size_t)loop[i] + d];
+            c[d] += v / (double)k;
+            lo[d] = v < lo[d] ? v : lo[d];
+            hi[d] = v > hi[d] ? v : hi[d];
+        }
+    const double *b = x->cbox + 6 * (size_t)comp;
+    double ext = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                      (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    double diag = sqrt((b[3] - b[0]) * (b[3] - b[0]) + (b[4] - b[1]) * (b[4] - b[1]) +
+                       (b[5] - b[2]) * (b[5] - b[2]));
+    size_t add_t = k == 3 ? 1 : k, add_v = k == 3 ? 0 : 1;
+    if (!(ext <= x->max_rel * diag) || x->nv + add_v >= UINT32_MAX || x->nt + add_t >= UINT32_MAX / 3) {
+        x->rep->holes_left_open++;
+        return HV_OK;
+    }
+    double *nV = realloc(x->V, 3 * (x->nv + add_v) * sizeof *nV);
+    if (!nV)
+        return HV_ERR_NOMEM;
+    x->V = nV;
+    uint32_t *nT = realloc(x->T, 3 * (x->nt + add_t) * sizeof *nT);
+    if (!nT)
+        return HV_ERR_NOMEM;
+    x->T = nT;
+    uint8_t *nF = realloc(x->flip, x->nt + add_t);
+    if (!nF)
+        return HV_ERR_NOMEM;
+    x->flip = nF;
+    uint32_t *nC = realloc(x->comp, (x->nt + add_t) * sizeof *nC);
+    if (!nC)
+        return HV_ERR_NOMEM;
+    x->comp = nC;
+    if (k == 3) {
+        memcpy(x->T + 3 * x->nt, loop, 3 * sizeof *loop);
+        x->flip[x->nt] = 0;
+        x->comp[x->nt++] = comp;
+    } else {
+        memcpy(x->V + 3 * x->nv, c, sizeof c);
+        for (size_t i = 0; i < k; i++) {
+            uint32_t *t = x->T + 3 * x->nt;
+            t[0] = loop[i], t[1] = loop[(i + 1) % k], t[2] = (uint32_t)x->nv;
+            x->flip[x->nt] = 0;
+            x->comp[x->nt++] = comp;
+        }
+        x->nv++;
+    }
+    x->rep->holes_filled++;
+    x->rep->cap_triangles += add_t;
+    x->rep->boundary_edges_closed += k;
+    return HV_OK;
+}
+
+/* Closes boundary loops with a fan around their centroid (a single triangle
+ * for three corners), oriented against the faces along the loop. A walk that
+ * comes back to a vertex it already passed (two holes touching at a vertex)
+ * is split there, so each simple loop gets its own cap. Loops wider than
+ * max_rel times their component's bounding-box diagonal stay open: the rim of
+ * a bowl or of a single sheet is not a hole. Without caps the heat method
+ * cannot close the end of an open tube (the wall normals have no component
+ * along the axis, so the tube continues to the grid boundary); a fan closes
+ * it where a flat cap belongs. On a hole in a curved wall the cap is a chord,
+ * as the winding number's closure is. */
+static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp, uint8_t **flipp,
+                            uint32_t **compp, const edge_rec *E, const uint32_t *estart, size_t ne,
+                            double max_rel, hv_sdf_repair_report *rep)
+{
+    cap_ctx x = {*Vp, *Tp, *compp, *flipp, *nvp, *ntp, NULL, max_rel, rep};
+    size_t nb = 0, nv0 = x.nv;
+    for (size_t g = 0; g < ne; g++)
+        nb += estart[g + 1] - estart[g] == 1;
+    if (nb == 0)
+        return HV_OK;
+    hv_status st = HV_ERR_NOMEM;
+    size_t ncomp = 0;
+    for (size_t f = 0; f < x.nt; f++)
+        ncomp = x.comp[f] + 1 > ncomp ? x.comp[f] + 1 : ncomp;
+    uint32_t *from = malloc(nb * sizeof *from), *to = malloc(nb * sizeof *to), *ecomp = malloc(nb * sizeof *ecomp);
+    uint32_t *start = calloc(nv0 + 1, sizeof *start), *adj = malloc(nb * sizeof *adj);
+    uint8_t *used = calloc(nb, 1);
+    uint32_t *loop = malloc((nb + 1) * sizeof *loop);
+    int64_t *pos = malloc(nv0 * sizeof *pos);
+    double *cbox = malloc(6 * (ncomp ? ncomp : 1) * sizeof *cbox);
+    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !pos || !cbox)
+        goto out;
+    x.cbox = cbox;
+    for (size_t v = 0; v < nv0; v++)
+        pos[v] = -1;
+    for (size_t k = 0; k < ncomp; k++)
+        for (int d = 0; d < 3; d++)
+            cbox[6 * k + d] = INFINITY, cbox[6 * k + 3 + d] = -INFINITY;
+    for (size_t f = 0; f < x.nt; f++)
+        for (int c = 0; c < 3; c++)
+            for (int d = 0; d < 3; d++) {
+                double v = x.V[3 * (size_t)x.T[3 * f + c] + d];
+                double *b = cbox + 6 * (size_t)x.comp[f];
+                b[d] = v < b[d] ? v : b[d];
+                b[3 + d] = v > b[3 + d] ? v : b[3 + d];
+            }
+    /* Cap edges v -> u for every boundary edge its face traverses u -> v. */
+    nb = 0;
+    for (size_t g = 0; g < ne; g++) {
+        if (estart[g + 1] - estart[g] != 1)
+            continue;
+        const edge_rec *r = &E[estart[g]];
+        uint32_t lo = (uint32_t)(r->key >> 32), hi = (uint32_t)r->key;
+        int fwd = r->fwd ^ x.flip[r->face]; /* the face traverses lo -> hi */
+        from[nb] = fwd ? hi : lo;
+        to[nb] = fwd ? lo : hi;
+        ecomp[nb] = x.comp[r->face];
+        start[from[nb] + 1]++;
+        nb++;
+    }
+    for (size_t v = 0; v < nv0; v++)
+        start[v + 1] += start[v];
+    {
+        uint32_t *fill = malloc((nv0 ? nv0 : 1) * sizeof *fill);
+        if (!fill)
+            goto out;
+        memcpy(fill, start, nv0 * sizeof *fill);
+        for (size_t e = 0; e < nb; e++)
+            adj[fill[from[e]]++] = (uint32_t)e;
+        free(fill);
+    }
+    for (size_t e0 = 0; e0 < nb; e0++) {
+        if (used[e0])
+            continue;
+        size_t k = 0;
+        uint32_t e = (uint32_t)e0, v = from[e0];
+        for (;;) {
+            used[e] = 1;
+            pos[v] = (int64_t)k;
+            loop[k++] = v;
+            uint32_t w = to[e];
+            if (pos[w] >= 0) {
+                /* Back at a vertex of this walk: cap the simple loop from it
+                 * and go on from w with the rest of the walk. */
+                size_t p = (size_t)pos[w];
+                for (size_t i = p; i < k; i++)
+                    pos[loop[i]] = -1;
+                if (add_cap(&x, loop + p, k - p, ecomp[e0]))
+                    goto out;
+                k = p;
+            }
+            v = w;
+            uint32_t next = UINT32_MAX;
+            for (uint32_t q = start[v]; q < start[v + 1]; q++)
+                if (!used[adj[q]]) {
+                    next = adj[q];
+                    break;
+                }
+            if (next == UINT32_MAX) {
+                /* What remains of the walk, if anything, is not a loop. */
+                for (size_t i = 0; i < k; i++)
+                    pos[loop[i]] = -1;
+                if (k)
+                    rep->holes_left_open++;
+                break;
+            }
+            e = next;
+        }
+    }
+    st = HV_OK;
+out:
+    *Vp = x.V, *Tp = x.T, *flipp = x.flip, *compp = x.comp, *nvp = x.nv, *ntp = x.nt;
+    free(from), free(to), free(ecomp), free(start), free(adj), free(used), free(loop), free(pos), free(cbox);
+    if (st)
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory filling holes");
+    return HV_OK;
+}
+
+hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
                         hv_sdf_repair_report *report)
 {
     if (!in || !out)
@@ -291,6 +549,8 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, hv_mesh **out,
     memset(&rep, 0, sizeof rep);
     size_t nv = in->nverts, nt = in->ntris;
     rep.vertices_in = nv, rep.triangles_in = nt;
+    if (!(max_hole >= 0) || !isfinite(max_hole))
+        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: max hole size must be finite and >= 0, got %g", max_hole);
     if (nt == 0 || nv == 0 || !in->verts || !in->tris)
         return hv_error(HV_ERR_INVALID_ARG, "mesh repair: the mesh is empty (%zu vertices, %zu triangles)", nv, nt);
     if (nv >= UINT32_MAX || nt >= UINT32_MAX / 3)
@@ -434,11 +694,18 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, hv_mesh **out,
     rep.components = nc;
     for (size_t f = 0; f < ntk; f++)
         rep.faces_flipped += flip[f];
-    if (flags & HV_SDF_REPAIR_OUTWARD)
-        orient_outward(V, T, ntk, flip, comp, nc, &rep.faces_flipped, &rep.components_flipped);
+    size_t nt_orig = ntk;
+    if ((flags & HV_SDF_REPAIR_FILL_HOLES) &&
+        (st = fill_holes(&V, &nvo, &T, &ntk, &flip, &comp, E, estart, ne, max_hole, &rep)))
+        goto fail;
+    if ((flags & HV_SDF_REPAIR_OUTWARD) &&
+        (st = orient_outward(V, T, ntk, flip, comp, nc, &rep.faces_flipped, &rep.components_flipped)))
+        goto fail;
+    /* Edge counts over the faces before filling; caps close their loops. */
     count_edges(E, estart, ne, flip, &rep.boundary_edges, &rep.nonmanifold_edges,
                 &rep.inconsistent_after);
-    (void)bnd, (void)nm;
+    rep.boundary_edges -= rep.boundary_edges_closed;
+    (void)bnd, (void)nm, (void)nt_orig;
 
     /* Output mesh. */
     m = calloc(1, sizeof *m);

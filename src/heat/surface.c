@@ -147,11 +147,11 @@ void hv_trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3
 }
 
 /* Ericson, Real-Time Collision Detection, 5.1.5: closest point on a triangle
- * by Voronoi regions. */
-double hv_point_triangle_d2(const double p[3], const double a[3], const double b[3],
-                            const double c[3])
+ * by Voronoi regions. diff = p - closest point; region as in sdf_internal.h. */
+static inline double closest(const double p[3], const double a[3], const double b[3],
+                             const double c[3], double q[3], int *region)
 {
-    double ab[3], ac[3], ap[3], q[3];
+    double ab[3], ac[3], ap[3];
     for (int i = 0; i < 3; i++) {
         ab[i] = b[i] - a[i];
         ac[i] = c[i] - a[i];
@@ -159,28 +159,39 @@ double hv_point_triangle_d2(const double p[3], const double a[3], const double b
     }
 #define DOT(u, v) ((u)[0] * (v)[0] + (u)[1] * (v)[1] + (u)[2] * (v)[2])
     double d1 = DOT(ab, ap), d2 = DOT(ac, ap);
-    if (d1 <= 0 && d2 <= 0)
+    if (d1 <= 0 && d2 <= 0) {
+        memcpy(q, ap, sizeof ap);
+        *region = 1;
         return DOT(ap, ap);
+    }
     double bp[3] = {p[0] - b[0], p[1] - b[1], p[2] - b[2]};
     double d3 = DOT(ab, bp), d4 = DOT(ac, bp);
-    if (d3 >= 0 && d4 <= d3)
+    if (d3 >= 0 && d4 <= d3) {
+        memcpy(q, bp, sizeof bp);
+        *region = 2;
         return DOT(bp, bp);
+    }
     double vc = d1 * d4 - d3 * d2;
     if (vc <= 0 && d1 >= 0 && d3 <= 0) {
         double v = d1 / (d1 - d3);
         for (int i = 0; i < 3; i++)
             q[i] = ap[i] - v * ab[i];
+        *region = 4;
         return DOT(q, q);
     }
     double cp[3] = {p[0] - c[0], p[1] - c[1], p[2] - c[2]};
     double d5 = DOT(ab, cp), d6 = DOT(ac, cp);
-    if (d6 >= 0 && d5 <= d6)
+    if (d6 >= 0 && d5 <= d6) {
+        memcpy(q, cp, sizeof cp);
+        *region = 3;
         return DOT(cp, cp);
+    }
     double vb = d5 * d2 - d1 * d6;
     if (vb <= 0 && d2 >= 0 && d6 <= 0) {
         double w = d2 / (d2 - d6);
         for (int i = 0; i < 3; i++)
             q[i] = ap[i] - w * ac[i];
+        *region = 6;
         return DOT(q, q);
     }
     double va = d3 * d6 - d5 * d4;
@@ -188,12 +199,28 @@ double hv_point_triangle_d2(const double p[3], const double a[3], const double b
         double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
         for (int i = 0; i < 3; i++)
             q[i] = bp[i] - w * (c[i] - b[i]);
+        *region = 5;
         return DOT(q, q);
     }
     double denom = 1.0 / (va + vb + vc);
     double v = vb * denom, w = vc * denom;
     for (int i = 0; i < 3; i++)
         q[i] = ap[i] - ab[i] * v - ac[i] * w;
+    *region = 0;
     return DOT(q, q);
 #undef DOT
+}
+
+double hv_point_triangle_d2(const double p[3], const double a[3], const double b[3],
+                            const double c[3])
+{
+    double q[3];
+    int region;
+    return closest(p, a, b, c, q, &region);
+}
+
+double hv_point_triangle_region(const double p[3], const double a[3], const double b[3],
+                                const double c[3], double diff[3], int *region)
+{
+    return closest(p, a, b, c, diff, region);
 }
