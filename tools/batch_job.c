@@ -508,11 +508,13 @@ report:;
         bb_printf(&b,
                   ",\"repair\":{\"vertices_welded\":%zu,\"degenerate_removed\":%zu"
                   ",\"duplicates_removed\":%zu,\"faces_flipped\":%zu,\"components_flipped\":%zu"
+                  ",\"holes_filled\":%zu,\"holes_left_open\":%zu"
                   ",\"boundary_edges\":%zu,\"inconsistent_after\":%zu}"
                   ",\"solver\":{\"levels\":%d,\"diffuse_iterations\":%d,\"diffuse_relres\":%.3g"
                   ",\"poisson_iterations\":%d,\"poisson_relres\":%.3g,\"dead_faces\":%zu}",
                   r->vertices_welded, r->degenerate_removed, r->duplicates_removed,
-                  r->faces_flipped, r->components_flipped, r->boundary_edges,
+                  r->faces_flipped, r->components_flipped, r->holes_filled, r->holes_left_open,
+                  r->boundary_edges,
                   r->inconsistent_after, stats.levels, stats.diffuse_iterations,
                   stats.diffuse_relres, stats.poisson_iterations, stats.poisson_relres,
                   stats.dead_faces);
