@@ -159,8 +159,12 @@ static double descend(const hv_mesh *m, const ring *r, const double p[3], uint32
 }
 
 /* One pass along axis ax in direction dir over every row; returns updates. */
+/* stamp[c] is the number of the last pass that changed cell c. Pass `pass`
+ * only compares c with its upwind neighbour when that neighbour changed after
+ * the previous pass of the same direction began (pass - 6 in 3D); otherwise
+ * that comparison was already made. */
 static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, int dir, float *dist,
-                    uint32_t *tri)
+                    uint32_t *tri, uint16_t *stamp, int pass, int period)
 {
     const int *n = g->n;
     size_t stride[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
@@ -177,7 +181,7 @@ static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, i
             for (int i = start; i != end; i += dir) {
                 size_t c = base + (size_t)i * stride[ax], prev = c - dir * (ptrdiff_t)stride[ax];
                 uint32_t cand = tri[prev];
-                if (cand == UINT32_MAX || cand == tri[c])
+                if (cand == UINT32_MAX || cand == tri[c] || (int)stamp[prev] <= pass - period)
                     continue;
                 p[ax] = g->origin[ax] + (i + 0.5) * g->h;
                 double dd = tri_cell_d(m, cand, p);
@@ -185,6 +189,7 @@ static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, i
                     dd = descend(m, r, p, &cand, dd);
                     dist[c] = (float)dd;
                     tri[c] = cand;
+                    stamp[c] = (uint16_t)pass;
                     updates++;
                 }
             }
@@ -252,15 +257,31 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, flo
             hv_free(tri);
         return st;
     }
+    /* Passes are numbered from `period` on, so that every seed counts as
+     * changed for the first pass of each direction. */
+    uint16_t *stamp = hv_malloc(count * sizeof *stamp);
+    if (!stamp) {
+        free(r.start);
+        free(r.tris);
+        if (!tri_out)
+            hv_free(tri);
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu cells", count);
+    }
+    const int period = 2 * g->dim;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < count; c++)
+        stamp[c] = (uint16_t)period;
+    int pass = period;
     for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
         size_t upd = 0;
         for (int ax = 0; ax < g->dim; ax++) {
-            upd += sweep(m, &r, g, ax, +1, dist, tri);
-            upd += sweep(m, &r, g, ax, -1, dist, tri);
+            upd += sweep(m, &r, g, ax, +1, dist, tri, stamp, ++pass, period);
+            upd += sweep(m, &r, g, ax, -1, dist, tri, stamp, ++pass, period);
         }
         if (!upd)
             break;
     }
+    hv_free(stamp);
     free(r.start);
     free(r.tris);
     if (!tri_out)

@@ -281,11 +281,7 @@ typedef struct sdf_work {
 
 static void work_free(sdf_work *w)
 {
-    if (w->repaired) {
-        free(w->repaired->verts);
-        free(w->repaired->tris);
-        free(w->repaired);
-    }
+    hv_mesh_destroy(&w->repaired);
     hv_quad_free(&w->q);
     for (int b = 0; b < 3; b++)
         hv_free(w->Y0[b]);
