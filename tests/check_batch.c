@@ -388,6 +388,29 @@ START_TEST(default_output_should_be_a_vdb_level_set_that_slice_can_cut)
 }
 END_TEST
 
+START_TEST(sdf_preview_should_show_the_three_middle_slices)
+{
+    make_inputs();
+    ck_assert_int_eq(run_in_dir("sdf in/sphere.obj -o s.vdb --res 16 --preview s.png -q"), 0);
+    uint8_t *rgb = NULL;
+    int w, h;
+    TL_ASSERT_OK(hv_png_read_rgb(path("s.png"), &rgb, &w, &h));
+    /* a sphere: a 16^3 block, three 16 x 16 slices and two gaps */
+    ck_assert_int_eq(w, 3 * 16 + 2 * HV_PNG_GAP);
+    ck_assert_int_eq(h, 16);
+    for (int s = 0; s < 3; s++) {
+        const uint8_t *centre = rgb + 3 * ((size_t)8 * w + s * (16 + HV_PNG_GAP) + 8);
+        const uint8_t *corner = rgb + 3 * ((size_t)s * (16 + HV_PNG_GAP));
+        ck_assert_msg(centre[2] > centre[0], "slice %d: centre not blue", s);
+        ck_assert_msg(corner[0] > corner[2], "slice %d: corner not red", s);
+    }
+    free(rgb);
+    ck_assert_int_eq(run_in_dir("sdf in/sphere.obj -o s.vdb --res 16 --preview /nonexistent/p.png"),
+                     1);
+    remove_inputs();
+}
+END_TEST
+
 START_TEST(dry_run_should_list_jobs_and_write_nothing)
 {
     make_inputs();
@@ -475,6 +498,7 @@ int main(void)
     tcase_set_timeout(tc, 240);
     tcase_add_test(tc, mixed_batch_should_isolate_failures_and_resume);
     tcase_add_test(tc, default_output_should_be_a_vdb_level_set_that_slice_can_cut);
+    tcase_add_test(tc, sdf_preview_should_show_the_three_middle_slices);
     tcase_add_test(tc, dry_run_should_list_jobs_and_write_nothing);
     tcase_add_test(tc, usage_errors_should_exit_2);
     tcase_add_test(tc, interrupted_batch_should_leave_no_partial_outputs);
