@@ -25,5 +25,9 @@ int cmd_bench(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
 int cmd_devices(int argc, char **argv);
+int cmd_batch(int argc, char **argv);
+int cmd_sdf2d(int argc, char **argv);
+int cmd_slice(int argc, char **argv);
+int cmd_make_scenes(int argc, char **argv);
 
 #endif

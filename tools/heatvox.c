@@ -18,6 +18,10 @@ struct command {
 
 static const struct command commands[] = {
     {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
+    {"batch", cmd_batch, "signed distance volumes for many meshes, in parallel, resumable"},
+    {"sdf2d", cmd_sdf2d, "2D signed distance from (broken) curves, SVG or text, to EXR/PNG"},
+    {"slice", cmd_slice, "one slice of a volume as EXR data or a PNG preview"},
+    {"make-scenes", cmd_make_scenes, "write the generated demo inputs (broken meshes, a level set)"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
     {"devices", cmd_devices, "list OpenCL devices for --backend opencl"},
@@ -27,7 +31,7 @@ static void usage(FILE *out)
 {
     fprintf(out, "usage: heatvox <command> [options]   (heatvox <command> --help)\n\ncommands:\n");
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        fprintf(out, "  %-10s %s\n", commands[i].name, commands[i].summary);
+        fprintf(out, "  %-12s %s\n", commands[i].name, commands[i].summary);
     fprintf(out, "\nexit codes: 0 success, 1 failure (bad input, I/O, solver), 2 usage error\n");
 }
 

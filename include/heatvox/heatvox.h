@@ -11,5 +11,8 @@
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
 #include "heatvox/vdb.h"
+#include "heatvox/sdf.h"
+#include "heatvox/image.h"
+#include "heatvox/curves.h"
 
 #endif

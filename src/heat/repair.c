@@ -1,0 +1,743 @@
+/*
+ * Mesh-side repair before the signed heat method (NOTES §3): diffusing raw
+ * normals survives ~30% random flips but not coherent flips or duplicated
+ * sheets of opposite orientation, which cancel. Where connectivity exists we
+ * can do better: weld, drop degenerate and duplicate faces, propagate one
+ * orientation across manifold edges, then orient each component outward by
+ * its generalized winding number (inward for shells nested inside an odd
+ * number of others, e.g. the inner wall of a hollow ball).
+ */
+#include "sdf_internal.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Face samples per component for its winding number, and the number of
+ * largest components that take part in the nesting test. */
+#define ORIENT_SAMPLES 256
+#define NEST_MAX_SHELLS 64
+
+static const double *g_sort_v; /* qsort has no context argument in C11 */
+
+static int cmp_vertex(const void *pa, const void *pb)
+{
+    const double *a = g_sort_v + 3 * (size_t) * (const uint32_t *)pa;
+    const double *b = g_sort_v + 3 * (size_t) * (const uint32_t *)pb;
+    for (int d = 0; d < 3; d++)
+        if (a[d] != b[d])
+            return a[d] < b[d] ? -1 : 1;
+    uint32_t ia = *(const uint32_t *)pa, ib = *(const uint32_t *)pb;
+    return ia < ib ? -1 : ia > ib;
+}
+
+typedef struct face_key {
+    uint32_t v[3]; /* sorted vertex ids */
+    uint32_t face;
+} face_key;
+
+static int cmp_face_key(const void *pa, const void *pb)
+{
+    const face_key *a = pa, *b = pb;
+    for (int d = 0; d < 3; d++)
+        if (a->v[d] != b->v[d])
+            return a->v[d] < b->v[d] ? -1 : 1;
+    return a->face < b->face ? -1 : a->face > b->face;
+}
+
+typedef struct edge_rec {
+    uint64_t key;   /* lo << 32 | hi */
+    uint32_t face;
+    uint32_t fwd;   /* 1 if the face traverses lo -> hi */
+} edge_rec;
+
+static int cmp_edge(const void *pa, const void *pb)
+{
+    const edge_rec *a = pa, *b = pb;
+    if (a->key != b->key)
+        return a->key < b->key ? -1 : 1;
+    return a->face < b->face ? -1 : a->face > b->face;
+}
+
+static void sort3(uint32_t v[3])
+{
+    uint32_t t;
+    if (v[0] > v[1]) t = v[0], v[0] = v[1], v[1] = t;
+    if (v[1] > v[2]) t = v[1], v[1] = v[2], v[2] = t;
+    if (v[0] > v[1]) t = v[0], v[0] = v[1], v[1] = t;
+}
+
+static void cross_at(const double *V, const uint32_t *t, double n[3])
+{
+    const double *a = V + 3 * (size_t)t[0], *b = V + 3 * (size_t)t[1], *c = V + 3 * (size_t)t[2];
+    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    double w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    n[0] = u[1] * w[2] - u[2] * w[1];
+    n[1] = u[2] * w[0] - u[0] * w[2];
+    n[2] = u[0] * w[1] - u[1] * w[0];
+}
+
+/* Union-find-free component labelling and orientation propagation by BFS over
+ * manifold edges. flip[f] is toggled so that both faces of every manifold edge
+ * reached by the BFS traverse it in opposite directions. */
+static hv_status orient_components(size_t nt, const edge_rec *E, size_t ne, const uint32_t *estart,
+                                   uint8_t *flip, uint32_t *comp, size_t *ncomp, int propagate)
+{
+    /* Per face, up to three manifold neighbours and whether they agree. */
+    uint32_t *nb = malloc(nt * 3 * sizeof *nb);
+    uint8_t *same = malloc(nt * 3);
+    uint32_t *queue = malloc(nt * sizeof *queue);
+    if (!nb || !same || !queue) {
+        free(nb), free(same), free(queue);
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
+    }
+    for (size_t i = 0; i < nt * 3; i++)
+        nb[i] = UINT32_MAX;
+    uint8_t *slot = calloc(nt, 1);
+    if (!slot) {
+        free(nb), free(same), free(queue);
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
+    }
+    for (size_t g = 0; g < ne; g++) {
+        size_t s = estart[g], e = estart[g + 1];
+        if (e - s != 2)
+            continue;
+        uint32_t f0 = E[s].face, f1 = E[s + 1].face;
+        /* Same traversal direction means inconsistent orientation. */
+        uint8_t agree = E[s].fwd == E[s + 1].fwd;
+        if (slot[f0] < 3) nb[3 * f0 + slot[f0]] = f1, same[3 * f0 + slot[f0]++] = agree;
+        if (slot[f1] < 3) nb[3 * f1 + slot[f1]] = f0, same[3 * f1 + slot[f1]++] = agree;
+    }
+    free(slot);
+    for (size_t f = 0; f < nt; f++)
+        comp[f] = UINT32_MAX;
+    size_t nc = 0;
+    for (size_t seed = 0; seed < nt; seed++) {
+        if (comp[seed] != UINT32_MAX)
+            continue;
+        size_t head = 0, tail = 0;
+        queue[tail++] = (uint32_t)seed;
+        comp[seed] = (uint32_t)nc;
+        while (head < tail) {
+            uint32_t f = queue[head++];
+            for (int q = 0; q < 3; q++) {
+                uint32_t g = nb[3 * (size_t)f + q];
+                if (g == UINT32_MAX || comp[g] != UINT32_MAX)
+                    continue;
+                comp[g] = (uint32_t)nc;
+                if (propagate)
+                    flip[g] = flip[f] ^ same[3 * (size_t)f + q];
+                queue[tail++] = g;
+            }
+        }
+        nc++;
+    }
+    free(nb), free(same), free(queue);
+    *ncomp = nc;
+    return HV_OK;
+}
+
+/* Counts boundary, non-manifold and inconsistent edges under the flips. */
+static void count_edges(const edge_rec *E, const uint32_t *estart, size_t ne, const uint8_t *flip,
+                        size_t *boundary, size_t *nonmanifold, size_t *inconsistent)
+{
+    size_t b = 0, nm = 0, inc = 0;
+    for (size_t g = 0; g < ne; g++) {
+        size_t s = estart[g], e = estart[g + 1];
+        if (e - s == 1)
+            b++;
+        else if (e - s > 2)
+            nm++;
+        else if ((E[s].fwd ^ flip[E[s].face]) == (E[s + 1].fwd ^ flip[E[s + 1].face]))
+            inc++;
+    }
+    *boundary = b, *nonmanifold = nm, *inconsistent = inc;
+}
+
+/* Decides the orientation of each component with generalized winding numbers
+ * (Jacobson et al. 2013). A correctly oriented solid's boundary has winding
+ * number 1/2 on it (1 inside, 0 outside); an open piece of it, e.g. a tube
+ * segment between holes, still has a positive principal value where signed
+ * volume about a centroid can come out either way. So: (1) each component
+ * takes the orientation that makes its own winding number at its face
+ * centroids positive; (2) the largest components, outermost first, take the
+ * orientation that brings the total winding number at their faces closest to
+ * 1/2, which turns shells nested in odd numbers of others (cavities) inward. */
+typedef struct area_idx {
+    double area;
+    uint32_t idx;
+} area_idx;
+
+static int cmp_area_desc(const void *pa, const void *pb)
+{
+    const area_idx *a = pa, *b = pb;
+    if (a->area != b->area)
+        return a->area > b->area ? -1 : 1;
+    return a->idx < b->idx ? -1 : a->idx > b->idx;
+}
+
+typedef struct comp_samples {
+    size_t first, count; /* into the sample arrays */
+} comp_samples;
+
+static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, uint8_t *flip,
+                                const uint32_t *comp, size_t nc, size_t *faces_flipped,
+                                size_t *comps_flipped)
+{
+    hv_status st = HV_ERR_NOMEM;
+    uint32_t *start = calloc(nc + 1, sizeof *start), *faces = malloc(nt * sizeof *faces);
+    double *carea = calloc(nc, sizeof *carea);
+    signed char *sgn = malloc(nc);
+    uint32_t *big = malloc(nc * sizeof *big);
+    hv_wn_tree *trees = NULL;
+    comp_samples *cs = calloc(nc, sizeof *cs);
+    double *sx = NULL, *sa = NULL, *sw = NULL;
+    uint32_t *sf = NULL;
+    double *depth = NULL;
+    size_t nbig = 0;
+    if (!start || !faces || !carea || !sgn || !big || !cs)
+        goto out;
+    for (size_t f = 0; f < nt; f++)
+        start[comp[f] + 1]++;
+    for (size_t k = 0; k < nc; k++)
+        start[k + 1] += start[k];
+    {
+        uint32_t *fill = malloc(nc * sizeof *fill);
+        if (!fill)
+            goto out;
+        memcpy(fill, start, nc * sizeof *fill);
+        for (size_t f = 0; f < nt; f++)
+            faces[fill[comp[f]]++] = (uint32_t)f;
+        free(fill);
+    }
+    /* Sample faces: at most ORIENT_SAMPLES per component, evenly strided. */
+    size_t ns = 0;
+    for (size_t k = 0; k < nc; k++) {
+        size_t nf = start[k + 1] - start[k];
+        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
+        cs[k].first = ns;
+        cs[k].count = (nf + stride - 1) / stride;
+        ns += cs[k].count;
+    }
+    sx = malloc(3 * ns * sizeof *sx);
+    sa = malloc(ns * sizeof *sa);
+    sw = malloc(ns * sizeof *sw);
+    sf = malloc(ns * sizeof *sf);
+    if (!sx || !sa || !sw || !sf)
+        goto out;
+    for (size_t k = 0; k < nc; k++) {
+        size_t nf = start[k + 1] - start[k];
+        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
+        for (size_t q = 0; q < cs[k].count; q++) {
+            uint32_t f = faces[start[k] + q * stride];
+            size_t i = cs[k].first + q;
+            double n[3];
+            cross_at(V, T + 3 * (size_t)f, n);
+            sa[i] = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            sf[i] = f;
+            for (int d = 0; d < 3; d++)
+                sx[3 * i + d] = (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
+                                 V[3 * (size_t)T[3 * (size_t)f + 2] + d]) / 3.0;
+        }
+        for (size_t q = start[k]; q < start[k + 1]; q++) {
+            double n[3];
+            cross_at(V, T + 3 * (size_t)faces[q], n);
+            carea[k] += 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        }
+    }
+    /* The largest components take part in the nesting test. */
+    {
+        area_idx *ai = malloc(nc * sizeof *ai);
+        if (!ai)
+            goto out;
+        for (size_t k = 0; k < nc; k++)
+            ai[k].area = carea[k], ai[k].idx = (uint32_t)k;
+        qsort(ai, nc, sizeof *ai, cmp_area_desc);
+        for (size_t k = 0; k < nc; k++)
+            big[k] = ai[k].idx;
+        free(ai);
+    }
+    nbig = nc < NEST_MAX_SHELLS ? nc : NEST_MAX_SHELLS;
+    trees = calloc(nbig ? nbig : 1, sizeof *trees);
+    if (!trees)
+        goto out;
+    /* (1) Own winding number. */
+    for (size_t b = 0; b < nc; b++) {
+        size_t k = big[b]; /* every component, largest first */
+        hv_wn_tree W;
+        if ((st = hv_wn_build(&W, V, T, faces + start[k], start[k + 1] - start[k], flip)))
+            goto out;
+        double num = 0, den = 0;
+        for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+            sw[i] = hv_wn_eval(&W, sx + 3 * i, sf[i]);
+            num += sa[i] * sw[i];
+            den += sa[i];
+        }
+        sgn[k] = (den > 0 && num < -1e-3 * den) ? -1 : 1;
+        if (b < nbig)
+            trees[b] = W;
+        else
+            hv_wn_free(&W);
+    }
+    st = HV_OK;
+    /* (2) Nesting among the big components, outermost first. */
+    if (nbig > 1) {
+        depth = calloc(nbig, sizeof *depth);
+        size_t *ord = malloc(nbig * sizeof *ord);
+        if (!depth || !ord) {
+            free(ord);
+            st = HV_ERR_NOMEM;
+            goto out;
+        }
+        for (size_t b = 0; b < nbig; b++) {
+            size_t k = big[b];
+            double num = 0, den = 0;
+            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+                double wo = 0;
+                for (size_t o = 0; o < nbig; o++)
+                    if (o != b)
+                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                num += sa[i] * wo;
+                den += sa[i];
+            }
+            depth[b] = den > 0 ? num / den : 0;
+            ord[b] = b;
+        }
+        for (size_t i = 1; i < nbig; i++) {
+            size_t v = ord[i], j = i;
+            while (j > 0 && depth[ord[j - 1]] > depth[v])
+                ord[j] = ord[j - 1], j--;
+            ord[j] = v;
+        }
+        for (size_t r = 0; r < nbig; r++) {
+            size_t b = ord[r], k = big[b];
+            if (depth[b] < 0.5)
+                continue; /* enclosed by nothing: outward */
+            double cost[2] = {0, 0};
+            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
+                double wo = 0;
+                for (size_t o = 0; o < nbig; o++)
+                    if (o != b)
+                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                double ws = sgn[k] * sw[i];
+                cost[0] += sa[i] * fabs(wo + ws - 0.5);
+                cost[1] += sa[i] * fabs(wo - ws - 0.5);
+            }
+            if (cost[1] < cost[0])
+                sgn[k] = (signed char)-sgn[k];
+        }
+        free(ord);
+    }
+    for (size_t k = 0; k < nc; k++)
+        if (sgn[k] < 0) {
+            (*comps_flipped)++;
+            for (size_t q = start[k]; q < start[k + 1]; q++) {
+                flip[faces[q]] ^= 1;
+                (*faces_flipped)++;
+            }
+        }
+out:
+    if (trees)
+        for (size_t b = 0; b < nbig; b++)
+            hv_wn_free(&trees[b]);
+    free(trees);
+    free(start), free(faces), free(carea), free(sgn), free(big), free(cs);
+    free(sx), free(sa), free(sw), free(sf), free(depth);
+    if (st == HV_ERR_NOMEM)
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory orienting %zu components", nc);
+    return st;
+}
+
+/* Growing face and vertex arrays while holes are filled. */
+typedef struct cap_ctx {
+    double *V;
+    uint32_t *T, *comp;
+    uint8_t *flip;
+    size_t nv, nt;
+    const double *cbox; /* per component bounding box (lo, hi) */
+    double max_rel;
+    hv_sdf_repair_report *rep;
+} cap_ctx;
+
+/* Closes one loop (vertices in cap direction). Returns HV_ERR_NOMEM or HV_OK. */
+static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t comp)
+{
+    if (k < 3) {
+        x->rep->holes_left_open++;
+        return HV_OK;
+    }
+    double c[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < k; i++)
+        for (int d = 0; d < 3; d++) {
+            double v = x->V[3 * (size_t)loop[i] + d];
+            c[d] += v / (double)k;
+            lo[d] = v < lo[d] ? v : lo[d];
+            hi[d] = v > hi[d] ? v : hi[d];
+        }
+    const double *b = x->cbox + 6 * (size_t)comp;
+    double ext = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                      (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    double diag = sqrt((b[3] - b[0]) * (b[3] - b[0]) + (b[4] - b[1]) * (b[4] - b[1]) +
+                       (b[5] - b[2]) * (b[5] - b[2]));
+    size_t add_t = k == 3 ? 1 : k, add_v = k == 3 ? 0 : 1;
+    if (!(ext <= x->max_rel * diag) || x->nv + add_v >= UINT32_MAX || x->nt + add_t >= UINT32_MAX / 3) {
+        x->rep->holes_left_open++;
+        return HV_OK;
+    }
+    double *nV = realloc(x->V, 3 * (x->nv + add_v) * sizeof *nV);
+    if (!nV)
+        return HV_ERR_NOMEM;
+    x->V = nV;
+    uint32_t *nT = realloc(x->T, 3 * (x->nt + add_t) * sizeof *nT);
+    if (!nT)
+        return HV_ERR_NOMEM;
+    x->T = nT;
+    uint8_t *nF = realloc(x->flip, x->nt + add_t);
+    if (!nF)
+        return HV_ERR_NOMEM;
+    x->flip = nF;
+    uint32_t *nC = realloc(x->comp, (x->nt + add_t) * sizeof *nC);
+    if (!nC)
+        return HV_ERR_NOMEM;
+    x->comp = nC;
+    if (k == 3) {
+        memcpy(x->T + 3 * x->nt, loop, 3 * sizeof *loop);
+        x->flip[x->nt] = 0;
+        x->comp[x->nt++] = comp;
+    } else {
+        memcpy(x->V + 3 * x->nv, c, sizeof c);
+        for (size_t i = 0; i < k; i++) {
+            uint32_t *t = x->T + 3 * x->nt;
+            t[0] = loop[i], t[1] = loop[(i + 1) % k], t[2] = (uint32_t)x->nv;
+            x->flip[x->nt] = 0;
+            x->comp[x->nt++] = comp;
+        }
+        x->nv++;
+    }
+    x->rep->holes_filled++;
+    x->rep->cap_triangles += add_t;
+    x->rep->boundary_edges_closed += k;
+    return HV_OK;
+}
+
+/* Closes boundary loops with a fan around their centroid (a single triangle
+ * for three corners), oriented against the faces along the loop. A walk that
+ * comes back to a vertex it already passed (two holes touching at a vertex)
+ * is split there, so each simple loop gets its own cap. Loops wider than
+ * max_rel times their component's bounding-box diagonal stay open: the rim of
+ * a bowl or of a single sheet is not a hole. Without caps the heat method
+ * cannot close the end of an open tube (the wall normals have no component
+ * along the axis, so the tube continues to the grid boundary); a fan closes
+ * it where a flat cap belongs. On a hole in a curved wall the cap is a chord,
+ * as the winding number's closure is. */
+static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp, uint8_t **flipp,
+                            uint32_t **compp, const edge_rec *E, const uint32_t *estart, size_t ne,
+                            double max_rel, hv_sdf_repair_report *rep)
+{
+    cap_ctx x = {*Vp, *Tp, *compp, *flipp, *nvp, *ntp, NULL, max_rel, rep};
+    size_t nb = 0, nv0 = x.nv;
+    for (size_t g = 0; g < ne; g++)
+        nb += estart[g + 1] - estart[g] == 1;
+    if (nb == 0)
+        return HV_OK;
+    hv_status st = HV_ERR_NOMEM;
+    size_t ncomp = 0;
+    for (size_t f = 0; f < x.nt; f++)
+        ncomp = x.comp[f] + 1 > ncomp ? x.comp[f] + 1 : ncomp;
+    uint32_t *from = malloc(nb * sizeof *from), *to = malloc(nb * sizeof *to), *ecomp = malloc(nb * sizeof *ecomp);
+    uint32_t *start = calloc(nv0 + 1, sizeof *start), *adj = malloc(nb * sizeof *adj);
+    uint8_t *used = calloc(nb, 1);
+    uint32_t *loop = malloc((nb + 1) * sizeof *loop);
+    int64_t *pos = malloc(nv0 * sizeof *pos);
+    double *cbox = malloc(6 * (ncomp ? ncomp : 1) * sizeof *cbox);
+    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !pos || !cbox)
+        goto out;
+    x.cbox = cbox;
+    for (size_t v = 0; v < nv0; v++)
+        pos[v] = -1;
+    for (size_t k = 0; k < ncomp; k++)
+        for (int d = 0; d < 3; d++)
+            cbox[6 * k + d] = INFINITY, cbox[6 * k + 3 + d] = -INFINITY;
+    for (size_t f = 0; f < x.nt; f++)
+        for (int c = 0; c < 3; c++)
+            for (int d = 0; d < 3; d++) {
+                double v = x.V[3 * (size_t)x.T[3 * f + c] + d];
+                double *b = cbox + 6 * (size_t)x.comp[f];
+                b[d] = v < b[d] ? v : b[d];
+                b[3 + d] = v > b[3 + d] ? v : b[3 + d];
+            }
+    /* Cap edges v -> u for every boundary edge its face traverses u -> v. */
+    nb = 0;
+    for (size_t g = 0; g < ne; g++) {
+        if (estart[g + 1] - estart[g] != 1)
+            continue;
+        const edge_rec *r = &E[estart[g]];
+        uint32_t lo = (uint32_t)(r->key >> 32), hi = (uint32_t)r->key;
+        int fwd = r->fwd ^ x.flip[r->face]; /* the face traverses lo -> hi */
+        from[nb] = fwd ? hi : lo;
+        to[nb] = fwd ? lo : hi;
+        ecomp[nb] = x.comp[r->face];
+        start[from[nb] + 1]++;
+        nb++;
+    }
+    for (size_t v = 0; v < nv0; v++)
+        start[v + 1] += start[v];
+    {
+        uint32_t *fill = malloc((nv0 ? nv0 : 1) * sizeof *fill);
+        if (!fill)
+            goto out;
+        memcpy(fill, start, nv0 * sizeof *fill);
+        for (size_t e = 0; e < nb; e++)
+            adj[fill[from[e]]++] = (uint32_t)e;
+        free(fill);
+    }
+    for (size_t e0 = 0; e0 < nb; e0++) {
+        if (used[e0])
+            continue;
+        size_t k = 0;
+        uint32_t e = (uint32_t)e0, v = from[e0];
+        for (;;) {
+            used[e] = 1;
+            pos[v] = (int64_t)k;
+            loop[k++] = v;
+            uint32_t w = to[e];
+            if (pos[w] >= 0) {
+                /* Back at a vertex of this walk: cap the simple loop from it
+                 * and go on from w with the rest of the walk. */
+                size_t p = (size_t)pos[w];
+                for (size_t i = p; i < k; i++)
+                    pos[loop[i]] = -1;
+                if (add_cap(&x, loop + p, k - p, ecomp[e0]))
+                    goto out;
+                k = p;
+            }
+            v = w;
+            uint32_t next = UINT32_MAX;
+            for (uint32_t q = start[v]; q < start[v + 1]; q++)
+                if (!used[adj[q]]) {
+                    next = adj[q];
+                    break;
+                }
+            if (next == UINT32_MAX) {
+                /* What remains of the walk, if anything, is not a loop. */
+                for (size_t i = 0; i < k; i++)
+                    pos[loop[i]] = -1;
+                if (k)
+                    rep->holes_left_open++;
+                break;
+            }
+            e = next;
+        }
+    }
+    st = HV_OK;
+out:
+    *Vp = x.V, *Tp = x.T, *flipp = x.flip, *compp = x.comp, *nvp = x.nv, *ntp = x.nt;
+    free(from), free(to), free(ecomp), free(start), free(adj), free(used), free(loop), free(pos), free(cbox);
+    if (st)
+        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory filling holes");
+    return HV_OK;
+}
+
+hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
+                        hv_sdf_repair_report *report)
+{
+    if (!in || !out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_repair: NULL argument");
+    *out = NULL;
+    hv_sdf_repair_report rep;
+    memset(&rep, 0, sizeof rep);
+    size_t nv = in->nverts, nt = in->ntris;
+    rep.vertices_in = nv, rep.triangles_in = nt;
+    if (!(max_hole >= 0) || !isfinite(max_hole))
+        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: max hole size must be finite and >= 0, got %g", max_hole);
+    if (nt == 0 || nv == 0 || !in->verts || !in->tris)
+        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: the mesh is empty (%zu vertices, %zu triangles)", nv, nt);
+    if (nv >= UINT32_MAX || nt >= UINT32_MAX / 3)
+        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: too many vertices or triangles (%zu, %zu)", nv, nt);
+    for (size_t i = 0; i < 3 * nv; i++)
+        if (!isfinite(in->verts[i]))
+            return hv_error(HV_ERR_NUMERIC, "mesh repair: vertex %zu has a non-finite coordinate (%g)",
+                            i / 3, in->verts[i]);
+    for (size_t i = 0; i < 3 * nt; i++)
+        if (in->tris[i] >= nv)
+            return hv_error(HV_ERR_INVALID_ARG, "mesh repair: triangle %zu uses vertex %u of %zu",
+                            i / 3, in->tris[i], nv);
+
+    hv_status st = HV_ERR_NOMEM;
+    uint32_t *remap = malloc(nv * sizeof *remap);
+    uint32_t *T = malloc(3 * nt * sizeof *T);
+    double *V = malloc(3 * nv * sizeof *V);
+    uint8_t *keep = malloc(nt);
+    face_key *fk = NULL;
+    edge_rec *E = NULL;
+    uint32_t *estart = NULL, *comp = NULL;
+    uint8_t *flip = NULL;
+    hv_mesh *m = NULL;
+    if (!remap || !T || !V || !keep)
+        goto fail;
+
+    /* 1. Weld by exact position: sort vertices, map each to its first twin. */
+    size_t nvo = nv;
+    if (flags & HV_SDF_REPAIR_WELD) {
+        uint32_t *order = malloc(nv * sizeof *order);
+        if (!order)
+            goto fail;
+        for (size_t i = 0; i < nv; i++)
+            order[i] = (uint32_t)i;
+        g_sort_v = in->verts;
+        qsort(order, nv, sizeof *order, cmp_vertex);
+        nvo = 0;
+        for (size_t r = 0; r < nv; r++) {
+            const double *b = in->verts + 3 * (size_t)order[r];
+            const double *a = r ? in->verts + 3 * (size_t)order[r - 1] : NULL;
+            if (!a || a[0] != b[0] || a[1] != b[1] || a[2] != b[2]) {
+                memcpy(V + 3 * nvo, b, 3 * sizeof *V);
+                nvo++;
+            }
+            remap[order[r]] = (uint32_t)(nvo - 1);
+        }
+        free(order);
+        rep.vertices_welded = nv - nvo;
+    } else {
+        memcpy(V, in->verts, 3 * nv * sizeof *V);
+        for (size_t i = 0; i < nv; i++)
+            remap[i] = (uint32_t)i;
+    }
+    for (size_t i = 0; i < 3 * nt; i++)
+        T[i] = remap[in->tris[i]];
+
+    /* 2. Degenerate faces: a repeated vertex, or an area negligible against the
+     * longest edge (collinear corners up to rounding). */
+    for (size_t f = 0; f < nt; f++) {
+        keep[f] = 1;
+        if (!(flags & HV_SDF_REPAIR_DEGENERATE))
+            continue;
+        const uint32_t *t = T + 3 * f;
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+            keep[f] = 0;
+            continue;
+        }
+        double n[3], L2 = 0;
+        cross_at(V, t, n);
+        for (int e = 0; e < 3; e++) {
+            const double *a = V + 3 * (size_t)t[e], *b = V + 3 * (size_t)t[(e + 1) % 3];
+            double l2 = (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                        (a[2] - b[2]) * (a[2] - b[2]);
+            L2 = l2 > L2 ? l2 : L2;
+        }
+        if (sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) <= 1e-12 * L2)
+            keep[f] = 0;
+    }
+    for (size_t f = 0; f < nt; f++)
+        rep.degenerate_removed += !keep[f];
+
+    /* 3. Duplicates: the same vertex set as an earlier face, either orientation. */
+    if (flags & HV_SDF_REPAIR_DUPLICATES) {
+        fk = malloc(nt * sizeof *fk);
+        if (!fk)
+            goto fail;
+        size_t nk = 0;
+        for (size_t f = 0; f < nt; f++) {
+            if (!keep[f])
+                continue;
+            memcpy(fk[nk].v, T + 3 * f, sizeof fk[nk].v);
+            sort3(fk[nk].v);
+            fk[nk++].face = (uint32_t)f;
+        }
+        qsort(fk, nk, sizeof *fk, cmp_face_key);
+        for (size_t r = 1; r < nk; r++)
+            if (!memcmp(fk[r].v, fk[r - 1].v, sizeof fk[r].v)) {
+                keep[fk[r].face] = 0;
+                rep.duplicates_removed++;
+            }
+        free(fk);
+        fk = NULL;
+    }
+
+    /* Compact the faces (unreferenced vertices are kept: they are harmless). */
+    size_t ntk = 0;
+    for (size_t f = 0; f < nt; f++)
+        if (keep[f])
+            memmove(T + 3 * ntk++, T + 3 * f, 3 * sizeof *T);
+    if (ntk == 0) {
+        st = hv_error(HV_ERR_INVALID_ARG, "mesh repair: all %zu triangles are degenerate", nt);
+        goto fail;
+    }
+    /* 4. Edges, orientation propagation, components. */
+    E = malloc(3 * ntk * sizeof *E);
+    estart = malloc((3 * ntk + 1) * sizeof *estart);
+    comp = malloc(ntk * sizeof *comp);
+    flip = calloc(ntk, 1);
+    if (!E || !estart || !comp || !flip)
+        goto fail;
+    for (size_t f = 0; f < ntk; f++)
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = T[3 * f + e], b = T[3 * f + (e + 1) % 3];
+            edge_rec *r = E + 3 * f + e;
+            r->key = a < b ? ((uint64_t)a << 32 | b) : ((uint64_t)b << 32 | a);
+            r->face = (uint32_t)f;
+            r->fwd = a < b;
+        }
+    qsort(E, 3 * ntk, sizeof *E, cmp_edge);
+    size_t ne = 0;
+    for (size_t r = 0; r < 3 * ntk; r++)
+        if (r == 0 || E[r].key != E[r - 1].key)
+            estart[ne++] = (uint32_t)r;
+    estart[ne] = (uint32_t)(3 * ntk);
+    size_t bnd, nm;
+    count_edges(E, estart, ne, flip, &bnd, &nm, &rep.inconsistent_before);
+    size_t nc = 0;
+    if ((st = orient_components(ntk, E, ne, estart, flip, comp, &nc,
+                                (flags & HV_SDF_REPAIR_ORIENT) != 0)))
+        goto fail;
+    rep.components = nc;
+    for (size_t f = 0; f < ntk; f++)
+        rep.faces_flipped += flip[f];
+    size_t nt_orig = ntk;
+    if ((flags & HV_SDF_REPAIR_FILL_HOLES) &&
+        (st = fill_holes(&V, &nvo, &T, &ntk, &flip, &comp, E, estart, ne, max_hole, &rep)))
+        goto fail;
+    if ((flags & HV_SDF_REPAIR_OUTWARD) &&
+        (st = orient_outward(V, T, ntk, flip, comp, nc, &rep.faces_flipped, &rep.components_flipped)))
+        goto fail;
+    /* Edge counts over the faces before filling; caps close their loops. */
+    count_edges(E, estart, ne, flip, &rep.boundary_edges, &rep.nonmanifold_edges,
+                &rep.inconsistent_after);
+    rep.boundary_edges -= rep.boundary_edges_closed;
+    (void)bnd, (void)nm, (void)nt_orig;
+
+    /* Output mesh. */
+    m = calloc(1, sizeof *m);
+    if (!m)
+        goto fail;
+    m->nverts = nvo;
+    m->ntris = ntk;
+    m->verts = malloc(3 * nvo * sizeof *m->verts);
+    m->tris = malloc(3 * ntk * sizeof *m->tris);
+    if (!m->verts || !m->tris)
+        goto fail;
+    memcpy(m->verts, V, 3 * nvo * sizeof *V);
+    for (size_t f = 0; f < ntk; f++) {
+        m->tris[3 * f] = T[3 * f];
+        m->tris[3 * f + 1] = flip[f] ? T[3 * f + 2] : T[3 * f + 1];
+        m->tris[3 * f + 2] = flip[f] ? T[3 * f + 1] : T[3 * f + 2];
+    }
+    rep.vertices_out = nvo;
+    rep.triangles_out = ntk;
+    free(remap), free(T), free(V), free(keep), free(E), free(estart), free(comp), free(flip);
+    if (report)
+        *report = rep;
+    *out = m;
+    return HV_OK;
+fail:
+    if (st == HV_ERR_NOMEM)
+        st = hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu vertices, %zu triangles", nv, nt);
+    free(remap), free(T), free(V), free(keep), free(fk), free(E), free(estart), free(comp), free(flip);
+    if (m) {
+        free(m->verts);
+        free(m->tris);
+        free(m);
+    }
+    return st;
+}

@@ -1,0 +1,79 @@
+/* Private pieces of the signed heat method (src/heat/). */
+#ifndef HV_HEAT_SDF_INTERNAL_H
+#define HV_HEAT_SDF_INTERNAL_H
+
+#include "heatvox/sdf.h"
+
+/* Surface quadrature: triangles subdivided until sub-edges are <= h/2; one
+ * point per sub-triangle at its centroid. Points outside the box [lo, hi]
+ * (the voxel block) are dropped. */
+typedef struct hv_quad {
+    size_t count;
+    double *x;      /* 3 * count positions */
+    double *w;      /* 3 * count area-weighted normals (vector areas) */
+    double *area;   /* count areas */
+} hv_quad;
+
+hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3],
+                        hv_quad *q);
+void hv_quad_free(hv_quad *q);
+
+/* Trilinear weights of world point x on the cell centres of g (clamped to the
+ * block): base cell in c0, weights for the 8 corners (x fastest) in w, and the
+ * per-axis steps (0 where clamped to one cell) in step. */
+void hv_trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3], double w[8]);
+
+/* Closest point on triangle abc to p; returns the squared distance. */
+double hv_point_triangle_d2(const double p[3], const double a[3], const double b[3],
+                            const double c[3]);
+
+/* The same with p - closest point in diff and the closest feature in region:
+ * 0 the face, 1..3 vertex a, b, c, 4 edge ab, 5 edge bc, 6 edge ca. */
+double hv_point_triangle_region(const double p[3], const double a[3], const double b[3],
+                                const double c[3], double diff[3], int *region);
+
+/* Exact unsigned distance from every cell centre of g to the triangles of m:
+ * rasterized within `band` cells of each triangle, then propagated by
+ * closest-triangle sweeps. Writes dist (world units) and, if tri is not NULL,
+ * the nearest triangle (UINT32_MAX where none). band_cells counts rasterized cells. */
+hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, float *dist,
+                            uint32_t *tri, size_t *band_cells);
+
+/* Fast generalized winding number over a subset of a mesh's faces. */
+typedef struct hv_wn_node {
+    double c[3], N[3], r; /* area-weighted centre, summed vector area, radius */
+    int left, right;      /* children or -1 */
+    size_t first, count;  /* range in order[] */
+} hv_wn_node;
+
+typedef struct hv_wn_tree {
+    const double *V;
+    const uint32_t *T;
+    uint32_t *order;
+    signed char *sign;    /* -1 for faces taken reversed */
+    hv_wn_node *nodes;
+    int nnodes;
+} hv_wn_tree;
+
+/* Builds the tree over faces[0..nfaces) of (V, T); flip (may be NULL) reverses faces. */
+hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
+                      size_t nfaces, const uint8_t *flip);
+/* Winding number at p, leaving out face `skip` (UINT32_MAX: none). */
+double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip);
+void hv_wn_free(hv_wn_tree *W);
+
+/* Angle-weighted pseudonormals of a mesh, with cleanliness of each feature. */
+typedef struct hv_pseudo {
+    double *fn;      /* 3 * ntris unit face normals */
+    double *vn;      /* 3 * nverts angle-weighted vertex normals */
+    uint32_t *other; /* 3 * ntris: face across each edge, UINT32_MAX if the edge is not clean */
+    uint8_t *vok;    /* nverts: every edge at the vertex is clean */
+    uint8_t *ftrust; /* ntris: the face's component is closed (all edges clean) */
+} hv_pseudo;
+
+hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps);
+void hv_pseudo_free(hv_pseudo *ps);
+/* +1 outside, -1 inside, 0 when the nearest feature of triangle tri is not clean. */
+int hv_pseudo_sign(const hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3]);
+
+#endif
