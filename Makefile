@@ -39,6 +39,7 @@ LIB_SO  := $(BUILD)/libheatvox.so
 BIN     := $(BUILD)/heatvox
 
 .PHONY: all deps check sanitize bench demo install format clean
+.SECONDARY:
 all: $(LIB_A) $(LIB_SO) $(BIN)
 
 deps: $(STAMP)
