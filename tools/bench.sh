@@ -1,17 +1,34 @@
 #!/bin/sh
 # make bench: the benchmark set, one JSON object per line on stdout.
 # Usage: tools/bench.sh path/to/heatvox
+# Rows that need an OpenCL platform or ../shared/meshes are skipped (with a
+# note on stderr) where those are missing.
 set -e
 hv=${1:-build/heatvox}
 dir=$(dirname "$hv")
 wisdom="$dir/fftw.wisdom"
+shared=${HEATVOX_SHARED:-../shared}
+export POCL_CACHE_DIR=${POCL_CACHE_DIR:-$(pwd)/$dir/pocl-cache}
+
+backends="mg fftw"
+if "$hv" devices -q >/dev/null 2>&1; then backends="$backends opencl"; else echo "bench: no OpenCL device, opencl rows skipped" >&2; fi
+
 for n in 128 256; do
-  for b in mg fftw; do
+  for b in $backends; do
     "$hv" bench solve --n $n --t-scale 4 --backend $b --wisdom "$wisdom"
     "$hv" bench solve --n $n --poisson --backend $b --wisdom "$wisdom"
   done
 done
-for b in mg fftw; do
+for b in $backends; do
   "$hv" bench solve --n 2048 --dim 2 --t-scale 4 --backend $b --wisdom "$wisdom"
   "$hv" bench solve --n 2048 --dim 2 --poisson --backend $b --wisdom "$wisdom"
 done
+
+bunny="$shared/meshes/stanford-bunny.obj"
+if [ -f "$bunny" ]; then
+  for n in 128 256; do
+    "$hv" bench sdf "$bunny" --n $n
+  done
+else
+  echo "bench: $bunny not found, sdf rows skipped" >&2
+fi
