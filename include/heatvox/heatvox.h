@@ -9,5 +9,6 @@
 #include "heatvox/solve.h"
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
+#include "heatvox/heat.h"
 
 #endif

@@ -1,0 +1,258 @@
+/* Heat-method distance around obstacles against exact geodesic distances:
+ * rectangles aligned with cell faces, exact distance by a visibility graph
+ * over their corners (2D), extruded along z for 3D (where the geodesic length
+ * is sqrt(d_xy^2 + dz^2)). */
+#include "testlib.h"
+#include "heatvox/heat.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+    double x0, y0, x1, y1;
+} rect;
+
+typedef struct {
+    int nrect;
+    rect r[4];
+    double s[2]; /* source */
+} scene;
+
+/* A wall at x in [0.5, 0.53125] with a gap for y in [0.625, 0.75]. Obstacles
+ * run past the unit square so that no path grazes along its edge around them;
+ * corners outside the square are not graph vertices. */
+static const scene wall_gap = {2, {{0.5, -1.0, 0.53125, 0.625}, {0.5, 0.75, 0.53125, 2.0}}, {0.25, 0.3}};
+/* An L-shaped room: the top-right quarter is solid. */
+static const scene l_room = {1, {{0.5, 0.5, 2.0, 2.0}}, {0.8, 0.2}};
+
+/* Does segment p-q cross the open interior of rectangle r? (Liang-Barsky on
+ * the rectangle shrunk by a hair, so grazing a corner or an edge is allowed.) */
+static int crosses(const rect *r, const double p[2], const double q[2])
+{
+    const double eps = 1e-9;
+    double lo[2] = {r->x0 + eps, r->y0 + eps}, hi[2] = {r->x1 - eps, r->y1 - eps};
+    double t0 = 0, t1 = 1;
+    for (int a = 0; a < 2; a++) {
+        double d = q[a] - p[a];
+        if (fabs(d) < 1e-300) {
+            if (p[a] <= lo[a] || p[a] >= hi[a])
+                return 0;
+            continue;
+        }
+        double ta = (lo[a] - p[a]) / d, tb = (hi[a] - p[a]) / d;
+        if (ta > tb) {
+            double x = ta;
+            ta = tb;
+            tb = x;
+        }
+        t0 = fmax(t0, ta);
+        t1 = fmin(t1, tb);
+    }
+    return t0 < t1;
+}
+
+static int visible(const scene *sc, const double p[2], const double q[2])
+{
+    for (int i = 0; i < sc->nrect; i++)
+        if (crosses(&sc->r[i], p, q))
+            return 0;
+    return 1;
+}
+
+typedef struct {
+    int nv;
+    double v[17][2];
+    double D[17]; /* geodesic distance from the source to vertex */
+} vgraph;
+
+static void build_graph(const scene *sc, vgraph *g)
+{
+    g->nv = 0;
+    for (int i = 0; i < sc->nrect; i++) {
+        const rect *r = &sc->r[i];
+        double c[4][2] = {{r->x0, r->y0}, {r->x1, r->y0}, {r->x0, r->y1}, {r->x1, r->y1}};
+        for (int q = 0; q < 4; q++) {
+            if (c[q][0] < 0 || c[q][0] > 1 || c[q][1] < 0 || c[q][1] > 1)
+                continue;
+            g->v[g->nv][0] = c[q][0];
+            g->v[g->nv][1] = c[q][1];
+            g->nv++;
+        }
+    }
+    int done[17] = {0};
+    for (int i = 0; i < g->nv; i++)
+        g->D[i] = visible(sc, sc->s, g->v[i]) ? hypot(g->v[i][0] - sc->s[0], g->v[i][1] - sc->s[1])
+                                              : INFINITY;
+    for (int it = 0; it < g->nv; it++) { /* Dijkstra, O(V^2) */
+        int b = -1;
+        for (int i = 0; i < g->nv; i++)
+            if (!done[i] && (b < 0 || g->D[i] < g->D[b]))
+                b = i;
+        done[b] = 1;
+        for (int i = 0; i < g->nv; i++)
+            if (!done[i] && visible(sc, g->v[b], g->v[i]))
+                g->D[i] = fmin(g->D[i], g->D[b] + hypot(g->v[i][0] - g->v[b][0], g->v[i][1] - g->v[b][1]));
+    }
+}
+
+static double exact2(const scene *sc, const vgraph *g, const double x[2])
+{
+    if (visible(sc, sc->s, x))
+        return hypot(x[0] - sc->s[0], x[1] - sc->s[1]);
+    double best = INFINITY;
+    for (int i = 0; i < g->nv; i++)
+        if (isfinite(g->D[i]) && visible(sc, g->v[i], x))
+            best = fmin(best, g->D[i] + hypot(x[0] - g->v[i][0], x[1] - g->v[i][1]));
+    return best;
+}
+
+static int in_rect(const scene *sc, const double x[2])
+{
+    for (int i = 0; i < sc->nrect; i++)
+        if (x[0] > sc->r[i].x0 && x[0] < sc->r[i].x1 && x[1] > sc->r[i].y0 && x[1] < sc->r[i].y1)
+            return 1;
+    return 0;
+}
+
+typedef struct {
+    double mean, max; /* |phi - exact| in voxels over fluid cells */
+    double src;       /* distance interpolated at the source point, voxels */
+    hv_distance_stats st;
+} dist_err;
+
+/* Distance on the unit square (dim 2) or cube (dim 3, extruded scene, source at
+ * z = 0.4) with n cells per axis. */
+static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opts *o)
+{
+    int ns[3] = {n, n, dim == 3 ? n : 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, dim, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    for (int k = 0; k < ns[2]; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                g->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)in_rect(sc, x);
+            }
+    double pt[3] = {sc->s[0], sc->s[1], 0.4};
+    hv_distance_sources src = {0};
+    src.points = pt;
+    src.npoints = 1;
+    dist_err e = {0};
+    TL_ASSERT_OK(hv_distance_compute(g, &src, o, &e.st));
+    vgraph vg;
+    build_graph(sc, &vg);
+    size_t m = 0;
+    for (int k = 0; k < ns[2]; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                if (g->solid[c]) {
+                    ck_assert(isinf(g->v[c]));
+                    continue;
+                }
+                double ex = exact2(sc, &vg, x);
+                if (dim == 3)
+                    ex = sqrt(ex * ex + (x[2] - pt[2]) * (x[2] - pt[2]));
+                double err = fabs(g->v[c] - ex) * n;
+                e.mean += err;
+                e.max = fmax(e.max, err);
+                m++;
+            }
+    e.mean /= (double)m;
+    /* Bilinear value at the source point (2D scenes put it inside fluid cells). */
+    double p = sc->s[0] * n - 0.5, q = sc->s[1] * n - 0.5;
+    int i0 = (int)floor(p), j0 = (int)floor(q);
+    double fp = p - i0, fq = q - j0, v = 0;
+    int k0 = dim == 3 ? (int)floor(pt[2] * n - 0.5) : 0;
+    double fr = dim == 3 ? pt[2] * n - 0.5 - k0 : 0;
+    for (int c = 0; c < (dim == 3 ? 8 : 4); c++) {
+        int a = c & 1, b = (c >> 1) & 1, z = (c >> 2) & 1;
+        double wgt = (a ? fp : 1 - fp) * (b ? fq : 1 - fq) * (dim == 3 ? (z ? fr : 1 - fr) : 1);
+        v += wgt * g->v[(i0 + a) + (size_t)n * ((j0 + b) + (size_t)n * (k0 + z))];
+    }
+    e.src = v * n;
+    hv_grid_destroy(&g);
+    return e;
+}
+
+static void report(const char *name, int dim, int n, const dist_err *e)
+{
+    printf("  %s %dD n=%d: mean %.3f max %.3f voxels, at source %.3f; stages %d, faces/stage "
+           "%zu %zu %zu %zu, dead %zu; %.2f s\n",
+           name, dim, n, e->mean, e->max, e->src, e->st.stages, e->st.faces_per_stage[0],
+           e->st.faces_per_stage[1], e->st.faces_per_stage[2], e->st.faces_per_stage[3],
+           e->st.dead_faces, e->st.t_total);
+}
+
+START_TEST(wall_with_gap_2d_should_be_within_one_voxel_at_128)
+{
+    dist_err e = run_scene(&wall_gap, 2, 128, NULL);
+    report("wall-gap", 2, 128, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+    ck_assert_msg(fabs(e.src) < 0.5, "distance at the source %.3f voxels", e.src);
+}
+END_TEST
+
+START_TEST(l_room_2d_should_be_within_one_voxel_at_128)
+{
+    dist_err e = run_scene(&l_room, 2, 128, NULL);
+    report("L-room", 2, 128, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+}
+END_TEST
+
+START_TEST(error_should_shrink_under_refinement_2d)
+{
+    const int ns[] = {64, 128, 256};
+    double prev = INFINITY;
+    for (int q = 0; q < 3; q++) {
+        dist_err e = run_scene(&wall_gap, 2, ns[q], NULL);
+        report("wall-gap", 2, ns[q], &e);
+        double world = e.mean / ns[q];
+        ck_assert_msg(world < prev, "world error %.3g at n=%d not below %.3g", world, ns[q], prev);
+        prev = world;
+    }
+}
+END_TEST
+
+START_TEST(wall_with_gap_3d_should_be_within_one_voxel_at_48)
+{
+    dist_err e = run_scene(&wall_gap, 3, 48, NULL);
+    report("wall-gap", 3, 48, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+}
+END_TEST
+
+START_TEST(l_room_3d_error_should_shrink_from_32_to_64)
+{
+    dist_err a = run_scene(&l_room, 3, 32, NULL), b = run_scene(&l_room, 3, 64, NULL);
+    report("L-room", 3, 32, &a);
+    report("L-room", 3, 64, &b);
+    ck_assert_msg(b.mean <= 1.0, "mean error %.3f voxels", b.mean);
+    ck_assert_msg(b.mean / 64 < a.mean / 32, "world error %.3g at 64 not below %.3g at 32",
+                  b.mean / 64, a.mean / 32);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("distance");
+    TCase *tc = tcase_create("geodesic");
+    tcase_set_timeout(tc, 120);
+    tcase_add_test(tc, wall_with_gap_2d_should_be_within_one_voxel_at_128);
+    tcase_add_test(tc, l_room_2d_should_be_within_one_voxel_at_128);
+    tcase_add_test(tc, error_should_shrink_under_refinement_2d);
+    tcase_add_test(tc, wall_with_gap_3d_should_be_within_one_voxel_at_48);
+    tcase_add_test(tc, l_room_3d_error_should_shrink_from_32_to_64);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}
