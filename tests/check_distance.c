@@ -243,6 +243,201 @@ START_TEST(l_room_3d_error_should_shrink_from_32_to_64)
 }
 END_TEST
 
+START_TEST(sealed_room_should_be_unreachable_unless_it_has_a_source)
+{
+    const int n = 64;
+    int ns[3] = {n, n, 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 2, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    /* Walls of the room [40,56)^2, two cells thick; its inside is [42,54)^2. */
+    size_t inside = 0;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            int in_box = i >= 40 && i < 56 && j >= 40 && j < 56;
+            int in_room = i >= 42 && i < 54 && j >= 42 && j < 54;
+            g->solid[i + n * j] = (uint8_t)(in_box && !in_room);
+            inside += in_room;
+        }
+    int vox[6] = {10, 10, 0, 47, 48, 0};
+    hv_distance_sources src = {0};
+    src.voxels = vox;
+    src.nvoxels = 1;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.unreachable_cells, inside);
+    ck_assert_int_eq(st.regions, 1);
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            float v = g->v[i + n * j];
+            if (i >= 42 && i < 54 && j >= 42 && j < 54)
+                ck_assert(isinf(v) && v > 0);
+            else if (!g->solid[i + n * j])
+                ck_assert(isfinite(v) && v >= 0);
+        }
+    /* With a source in the room too, both regions get distances, each zero at its source. */
+    src.nvoxels = 2;
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.unreachable = -1;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, &o, &st));
+    ck_assert_int_eq(st.unreachable_cells, 0);
+    ck_assert_int_eq(st.regions, 2);
+    /* Outside, the room's walls are one rectangular obstacle. */
+    const scene outer = {1, {{40.0 / n, 40.0 / n, 56.0 / n, 56.0 / n}}, {10.5 / n, 10.5 / n}};
+    vgraph vg;
+    build_graph(&outer, &vg);
+    double worst = 0;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            if (g->solid[i + n * j])
+                continue;
+            int room = i >= 42 && i < 54 && j >= 42 && j < 54;
+            double x[2] = {(i + 0.5) / n, (j + 0.5) / n};
+            double ex = room ? hypot(i - vox[3], j - vox[4]) / n : exact2(&outer, &vg, x);
+            worst = fmax(worst, fabs(g->v[i + n * j] - ex) * n);
+        }
+    ck_assert_msg(worst < 1.5, "worst error %.3f voxels with a source in each room", worst);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+/* Geodesic distance from point s around a ball (centre 0, radius R) to x, both outside it. */
+static double around_ball(const double s[3], const double x[3], double R)
+{
+    double ls = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+    double lx = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    double cosg = (s[0] * x[0] + s[1] * x[1] + s[2] * x[2]) / (ls * lx);
+    double gam = acos(fmax(-1, fmin(1, cosg)));
+    double arc = gam - acos(R / ls) - acos(R / lx);
+    if (arc <= 0) /* visible */
+        return sqrt((s[0] - x[0]) * (s[0] - x[0]) + (s[1] - x[1]) * (s[1] - x[1]) + (s[2] - x[2]) * (s[2] - x[2]));
+    return sqrt(ls * ls - R * R) + R * arc + sqrt(lx * lx - R * R);
+}
+
+START_TEST(distance_should_go_around_a_mesh_obstacle)
+{
+    const int n = 48;
+    const double R = 0.25;
+    int ns[3] = {n, n, n};
+    double org[3] = {-0.5, -0.5, -0.5}, c[3] = {0, 0, 0};
+    hv_grid *g = NULL;
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, ns, 1.0 / n, org));
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, R, 4));
+    size_t nsolid = 0;
+    TL_ASSERT_OK(hv_mask_from_mesh(g, m, &nsolid));
+    ck_assert(nsolid > 0);
+    double pt[3] = {-0.4, 0.05, 0.03};
+    hv_distance_sources src = {0};
+    src.points = pt;
+    src.npoints = 1;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.regions, 1);
+    ck_assert(st.unreachable_cells > 0); /* the shell's inside */
+    double mean = 0, behind = 0;
+    size_t cnt = 0, nb = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t q = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+                if (g->solid[q] || r < R)
+                    continue;
+                double err = fabs(g->v[q] - around_ball(pt, x, R)) * n;
+                mean += err;
+                cnt++;
+                if (x[0] > R) {
+                    behind += err;
+                    nb++;
+                }
+            }
+    mean /= cnt;
+    behind /= nb;
+    printf("  around a ball (mesh shell) 48^3: mean %.3f voxels, behind it %.3f; %zu shell cells\n",
+           mean, behind, nsolid);
+    ck_assert_msg(mean <= 1.0, "mean error %.3f voxels", mean);
+    ck_assert_msg(behind <= 1.5, "error behind the ball %.3f voxels", behind);
+    hv_mesh_destroy(&m);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+START_TEST(mesh_source_should_give_unsigned_distance_to_its_surface)
+{
+    const int n = 48;
+    const double R = 0.3;
+    int ns[3] = {n, n, n};
+    double org[3] = {-0.5, -0.5, -0.5}, c[3] = {0.02, -0.01, 0.015};
+    hv_grid *g = NULL;
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, ns, 1.0 / n, org));
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, R, 5));
+    hv_distance_sources src = {0};
+    src.mesh = m;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.dead_faces, 0);
+    double mean = 0, near = 0;
+    size_t nn = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                double ex = fabs(sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
+                                      (x[2] - c[2]) * (x[2] - c[2])) - R);
+                double err = fabs(g->v[i + (size_t)n * (j + (size_t)n * k)] - ex) * n;
+                mean += err;
+                if (ex < 3.0 / n) {
+                    near += err;
+                    nn++;
+                }
+            }
+    mean /= hv_grid_count(g);
+    near /= nn;
+    printf("  unsigned distance to a sphere mesh 48^3: mean %.3f voxels, within 3 voxels %.3f\n",
+           mean, near);
+    ck_assert_msg(mean <= 0.5, "mean error %.3f voxels", mean);
+    ck_assert_msg(near <= 0.5, "error near the surface %.3f voxels", near);
+    hv_mesh_destroy(&m);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+START_TEST(bad_sources_should_fail_clearly)
+{
+    const int n = 16;
+    int ns[3] = {n, n, 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 2, ns, 1.0 / n, NULL));
+    hv_distance_sources src = {0};
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    int vox[3] = {n, 0, 0};
+    src.voxels = vox;
+    src.nvoxels = 1;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    ck_assert(strstr(hv_last_error(), "outside") != NULL);
+    double pt[3] = {2, 0.5, 0};
+    src.nvoxels = 0;
+    src.points = pt;
+    src.npoints = 1;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    /* A source inside an obstacle only. */
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    for (int j = 4; j < 12; j++)
+        for (int i = 4; i < 12; i++)
+            g->solid[i + n * j] = 1;
+    pt[0] = 0.5;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    ck_assert(strstr(hv_last_error(), "solid") != NULL);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("distance");
@@ -253,6 +448,10 @@ int main(void)
     tcase_add_test(tc, error_should_shrink_under_refinement_2d);
     tcase_add_test(tc, wall_with_gap_3d_should_be_within_one_voxel_at_48);
     tcase_add_test(tc, l_room_3d_error_should_shrink_from_32_to_64);
+    tcase_add_test(tc, sealed_room_should_be_unreachable_unless_it_has_a_source);
+    tcase_add_test(tc, distance_should_go_around_a_mesh_obstacle);
+    tcase_add_test(tc, mesh_source_should_give_unsigned_distance_to_its_surface);
+    tcase_add_test(tc, bad_sources_should_fail_clearly);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -239,17 +239,17 @@ static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k
 
 /* Where the extension of cell c is read: its closest point on the zero set
  * when phi is a distance there (|grad phi| near 1, and phi interpolated at the
- * point is within half the band of 0), else the cell itself. Returns 1 for a
- * closest point. */
+ * point is within half the band of 0), else the cell itself. Fills the
+ * interpolation stencil and returns 1 for a closest point. */
 static int evaluation_point(const hv_extender *e, const float *phi, int i, int j, int k,
-                            double p[3])
+                            size_t idx[8], double wt[8], int *m)
 {
-    p[0] = i;
-    p[1] = j;
-    p[2] = k;
+    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+    idx[0] = c;
+    wt[0] = 1;
+    *m = 1;
     if (!e->o.closest_point)
         return 0;
-    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
     double g[3], gn = 0;
     grad_phi(e, phi, i, j, k, g);
     for (int a = 0; a < e->dim; a++)
@@ -257,30 +257,28 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
     gn = sqrt(gn);
     if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
         return 0;
-    double s = phi[c] / (gn * e->h);
+    double s = phi[c] / (gn * e->h), p[3] = {i, j, k};
     for (int a = 0; a < e->dim; a++) {
         p[a] -= s * g[a];
         if (p[a] < -0.5 || p[a] > e->n[a] - 0.5)
             return 0;
     }
-    size_t idx[8];
-    double wt[8];
-    int m = stencil(e, p, idx, wt);
-    if (fabs(sample(phi, idx, wt, m)) > 0.5 * fmax(e->o.band, 1.0) * e->h) {
-        p[0] = i;
-        p[1] = j;
-        p[2] = k;
+    size_t ci[8];
+    double cw[8];
+    int cm = stencil(e, p, ci, cw);
+    if (fabs(sample(phi, ci, cw, cm)) > 0.5 * fmax(e->o.band, 1.0) * e->h)
         return 0;
-    }
+    memcpy(idx, ci, sizeof ci);
+    memcpy(wt, cw, sizeof cw);
+    *m = cm;
     return 1;
 }
 
 /* Writes the extension of every field at cell c from the current level's
  * solutions sampled at p. */
 static void write_cell(const hv_extender *e, int nfields, const hv_extend_field *f, size_t c,
-                       const size_t idx[8], const double wt[8], int m)
+                       const size_t idx[8], const double wt[8], int m, double W)
 {
-    double W = sample(e->sol[0], idx, wt, m);
     int r = 1;
     for (int i = 0; i < nfields; i++) {
         if (f[i].ncomp == 1) {
@@ -415,27 +413,25 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         t0 = hv_now();
         const int last = l + 1 == e->o.max_levels;
         size_t left = 0, cp = 0, ratio = 0, weak = 0;
-#pragma omp parallel for collapse(2) reduction(+ : left, cp, ratio, weak) schedule(dynamic, 4)
+#pragma omp parallel for collapse(2) reduction(+ : left, cp, ratio, weak) schedule(static)
         for (int k = 0; k < e->n[2]; k++)
             for (int j = 0; j < e->n[1]; j++)
                 for (int i = 0; i < e->n[0]; i++) {
                     size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
                     if (!pending[c])
                         continue;
-                    double p[3];
                     size_t idx[8];
                     double wt[8];
-                    int at_cp = evaluation_point(e, phi, i, j, k, p);
-                    int m = stencil(e, p, idx, wt);
+                    int m;
+                    int at_cp = evaluation_point(e, phi, i, j, k, idx, wt, &m);
                     double W = sample(e->sol[0], idx, wt, m);
                     if (!(W > thr) && at_cp) {
                         /* Closest point but no weight there: fall back to the cell. */
                         at_cp = 0;
-                        p[0] = i;
-                        p[1] = j;
-                        p[2] = k;
-                        m = stencil(e, p, idx, wt);
-                        W = sample(e->sol[0], idx, wt, m);
+                        idx[0] = c;
+                        wt[0] = 1;
+                        m = 1;
+                        W = e->sol[0][c];
                     }
                     if (!(W > thr) && !last) {
                         left++;
@@ -446,7 +442,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                             for (int q = 0; q < f[fi].ncomp; q++)
                                 f[fi].out[q][c] = e->o.background;
                     } else {
-                        write_cell(e, nfields, f, c, idx, wt, m);
+                        write_cell(e, nfields, f, c, idx, wt, m, W);
                     }
                     weak += !(W > thr);
                     cp += at_cp;
