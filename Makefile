@@ -22,7 +22,7 @@ LDLIBS   += -lopenvdb -ltbb -lImath-3_1 -lOpenEXRCore-3_1 -lpng \
 LDFLAGS  += -fopenmp $(SANFLAGS)
 
 # Debian 12 packages the build and tests need; installed once when missing.
-DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libopenvdb-tools \
+DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
             ocl-icd-opencl-dev opencl-headers pocl-opencl-icd
 

@@ -9,6 +9,7 @@
 #include "heatvox/solve.h"
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
+#include "heatvox/vdb.h"
 #include "heatvox/heat.h"
 
 #endif

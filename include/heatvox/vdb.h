@@ -1,0 +1,184 @@
+/*
+ * OpenVDB files and OpenVDB reference tools, behind a C API.
+ *
+ * Index convention: voxel (i,j,k) of an hv_grid is OpenVDB index (i,j,k), and
+ * the grid's linear transform has voxel size h and maps that index to the cell
+ * centre origin + (i+1/2, j+1/2, k+1/2) * h (OpenVDB indices are voxel centres).
+ * A 2D grid (dim 2) is written as the slab k = 0. Grids read back are dim 3
+ * (n[2] may be 1).
+ *
+ * Level sets follow OpenVDB's conventions: class "level set", background = half
+ * band width in world units (positive), negative inside, inactive voxels hold
+ * -background inside and +background outside.
+ *
+ * Writers follow the library's safe-output rule (temporary name, then rename).
+ * All functions are thread-compatible (no shared mutable state besides
+ * OpenVDB's one-time initialization); errors are reported as hv_status with a
+ * message naming the file and grid (hv_last_error()).
+ */
+#ifndef HEATVOX_VDB_H
+#define HEATVOX_VDB_H
+
+#include "grid.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Grid classes, equal to openvdb::GridClass. */
+typedef enum hv_vdb_class {
+    HV_VDB_UNKNOWN = 0,
+    HV_VDB_LEVEL_SET = 1,
+    HV_VDB_FOG_VOLUME = 2,
+    HV_VDB_STAGGERED = 3
+} hv_vdb_class;
+
+/* ---- Writing ------------------------------------------------------------ */
+
+/* A writer collects grids (copied when added) and file metadata, then writes
+ * them all into one .vdb file. */
+typedef struct hv_vdb_writer hv_vdb_writer;
+
+/* Creates an empty writer. The caller owns *out (hv_vdb_writer_destroy). */
+hv_status hv_vdb_writer_create(hv_vdb_writer **out);
+
+/* Frees the writer and its grids, sets *w to NULL. Accepts NULL and *w == NULL. */
+void hv_vdb_writer_destroy(hv_vdb_writer **w);
+
+/* Adds a signed distance field as a float grid of class level set.
+ * background = band_voxels * h (must be > 0). With dense == 0 only voxels with
+ * |phi| < background are active; the other voxels are inactive and hold
+ * -background where phi < 0 and +background elsewhere. With dense != 0 every
+ * voxel of the block is active with its own value. Names must be unique and
+ * non-empty. The grid is copied: g may be freed after the call. */
+hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const char *name,
+                                     double band_voxels, int dense);
+
+/* Adds a scalar float grid of class unknown, every voxel active, background 0. */
+hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
+
+/* Adds a Vec3s grid (e.g. a velocity or gradient field) from three component
+ * grids of equal size, voxel size and origin; every voxel active, background 0.
+ * Vector type VEC_CONTRAVARIANT_RELATIVE: values are in world units and scale
+ * with the transform but do not translate (right for velocities/displacements;
+ * with heatvox's axis-aligned uniform transforms no value ever changes). */
+hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
+                                 const hv_grid *gz, const char *name);
+
+/* Adds a bool grid active (and true) where g->solid is non-zero (g->v is
+ * ignored); an all-fluid grid, or one without a mask, gives an empty grid. */
+hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name);
+
+/* Sets a string metadata entry of the file (e.g. "source", "parameters").
+ * The writer adds "creator" = "heatvox <version>" by itself. */
+hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value);
+
+/* Sets a string metadata entry on a grid already added under grid_name. */
+hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name, const char *key,
+                                      const char *value);
+
+/* Writes every grid added so far to path (Blosc compression with active-mask
+ * compression, floats stored as 32 bit), through a temporary file in the same
+ * directory that is renamed into place only when complete. The writer stays
+ * usable (it can write again). Fails with HV_ERR_INVALID_ARG when no grid was
+ * added, HV_ERR_IO when the file cannot be written (no temporary is left). */
+hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path);
+
+/* ---- Reading ------------------------------------------------------------ */
+
+/* Description of one grid in a file. */
+typedef struct hv_vdb_grid_info {
+    char name[256];          /* truncated if longer */
+    char value_type[32];     /* OpenVDB's value type name: "float", "double", "vec3s", "bool", ... */
+    int grid_class;          /* hv_vdb_class */
+    int uniform;             /* 1: linear, axis-aligned, uniform scale (readable by heatvox) */
+    double voxel_size[3];    /* world units per index step along each index axis */
+    double index0_world[3];  /* world position of index (0,0,0), a voxel centre */
+    int64_t active_voxels;   /* number of active voxels (tiles counted by their voxels) */
+    int bbox_lo[3];          /* active voxel bounding box, inclusive; lo > hi when empty */
+    int bbox_hi[3];
+} hv_vdb_grid_info;
+
+/* Lists the grids of a file. Fills up to cap entries of info (info may be NULL
+ * when cap is 0) and sets *count to the number of grids in the file.
+ * Missing or unreadable file: HV_ERR_IO naming the file. */
+hv_status hv_vdb_list(const char *path, hv_vdb_grid_info *info, size_t cap, size_t *count);
+
+/* Which index box a read copies into a dense grid. Pass NULL for the default:
+ * the block recorded by heatvox's writer (grid metadata heatvox_block_min and
+ * heatvox_block_max), else the grid's active voxel bounding box (an error for a
+ * grid without active voxels). With use_box != 0, the inclusive index box
+ * [box_lo, box_hi]; voxels outside the grid's data read as its background
+ * (with the level set's sign where the tree stores one). */
+typedef struct hv_vdb_read_opts {
+    int use_box;
+    int box_lo[3];
+    int box_hi[3];
+} hv_vdb_read_opts;
+
+/* Reads a float or double grid into a new dense grid (float); inactive voxels
+ * take their stored value (for level sets: -background inside, +background
+ * outside). h and origin come from the transform, which must be linear,
+ * axis-aligned and uniform. grid_class may be NULL; it receives hv_vdb_class.
+ * Missing grid: HV_ERR_INVALID_ARG naming the grid and file and listing the
+ * grids present. Wrong value type: HV_ERR_INVALID_ARG. The caller owns *out. */
+hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                            hv_grid **out, int *grid_class);
+
+/* Reads a vec3s or vec3d grid into three new dense component grids. */
+hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                           hv_grid **gx, hv_grid **gy, hv_grid **gz);
+
+/* Reads an obstacle mask into a new grid with a solid mask: v = 1 and solid = 1
+ * where solid, 0 elsewhere. Bool and mask grids: solid where the voxel is
+ * active or true. Float/double level sets: solid where the value is < 0.
+ * Other float/double grids: solid where the value is non-zero. */
+hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                           hv_grid **out);
+
+/* Computes one index box for reading several grids of a file onto the same
+ * dense block: the union of their default boxes (see hv_vdb_read_opts).
+ * Fails with HV_ERR_INVALID_ARG naming both grids when their transforms differ
+ * (voxel size or translation), or naming a missing grid. */
+hv_status hv_vdb_common_box(const char *path, const char *const *names, size_t count, int lo[3],
+                            int hi[3]);
+
+/* Copies a metadata entry (file metadata when grid_name is NULL, else the
+ * grid's) as text into buf. Missing key: HV_ERR_INVALID_ARG naming it. */
+hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key, char *buf,
+                           size_t bufsize);
+
+/* ---- OpenVDB reference tools (for comparisons and benchmarks) ----------- */
+
+/* Narrow-band signed distance of a closed triangle mesh by
+ * openvdb::tools::meshToLevelSet (exact distance in the band, sign by flood
+ * fill), sampled on out's voxels (out: dim 3, caller-created; its n, h and
+ * origin define the samples). Voxels outside the band take -/+ band_voxels*h by
+ * sign. verts: 3*nv world coordinates; tris: 3*nt indices < nv. seconds, if
+ * not NULL, receives the time spent inside OpenVDB (without the dense copy). */
+hv_status hv_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                  double band_voxels, hv_grid *out, double *seconds);
+
+/* Extends a scalar field off the zero level set of phi by
+ * openvdb::tools::sdfToExt (fast sweeping): on the surface the value is field
+ * sampled trilinearly at the crossing points; elsewhere it is constant along
+ * the characteristics (normals). phi, field and out must share n, h and origin.
+ * band_voxels > 0 restricts the computation to |phi| < band_voxels*h (voxels
+ * outside get `background`); band_voxels <= 0 computes on every voxel.
+ * n_iter: fast-sweeping iterations (8 sweeps each; 0 means 1).
+ * Note: OpenVDB 10.0.1 hands the boundary callback index-space coordinates
+ * (upstream bug #1640); this function runs OpenVDB in index space so that the
+ * result is right with either behaviour. */
+hv_status hv_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
+                            int n_iter, float background, hv_grid *out, double *seconds);
+
+/* The same for a vector field (three components), extended as a Vec3s grid. */
+hv_status hv_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
+                                 const hv_grid *fz, double band_voxels, int n_iter,
+                                 float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
+                                 double *seconds);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
