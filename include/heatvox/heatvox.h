@@ -10,6 +10,7 @@
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
 #include "heatvox/vdb.h"
+#include "heatvox/sdf.h"
 #include "heatvox/heat.h"
 
 #endif

@@ -1,0 +1,551 @@
+/*
+ * The signed heat method on a cell-centred grid (Feng & Crane 2024), with the
+ * grid-specific choices of NOTES §1/§3:
+ *   - t tied to the grid, t = (t_scale h)^2, not to the mesh's edge lengths;
+ *   - the normalized field lives on cell faces (MAC) and the Poisson operator
+ *     is exactly div(grad), which keeps the zero set in place;
+ *   - far from the surface the diffused field decays like e^{-r/sqrt(t)} below
+ *     solver accuracy; faces where it has are either served by a longer
+ *     diffusion (far levels, t x16 each) or left with X = 0, where phi is then
+ *     harmonic and keeps the sign of its surroundings (maximum principle);
+ *   - by default |phi| is replaced by the exact distance to the triangles and
+ *     the heat method supplies only the sign, its robust part.
+ */
+#include "sdf_internal.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Estimated bytes per cell of the whole pipeline, for hv_check_dims. */
+#define SDF_BYTES_PER_CELL 96
+/* Faces whose diffused vector is below this many times the solver's error
+ * bound count as decayed. */
+#define SDF_NOISE_FACTOR 4.0
+/* Rasterization radius of the exact distance, in voxels. */
+#define SDF_EXACT_BAND 2.0
+
+void hv_sdf_opts_default(hv_sdf_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->res = 128;
+    o->pad = 4;
+    o->round_to = 8;
+    o->magnitude = HV_SDF_EXACT;
+    o->t_scale = 1.0;
+    o->far_levels = -1;
+    o->repair = HV_SDF_REPAIR_ALL;
+    o->backend = HV_BACKEND_AUTO;
+    o->diffuse_tol = 1e-10;
+    o->poisson_tol = 1e-8;
+}
+
+static hv_status check_opts(const hv_sdf_opts *o)
+{
+    if (!(o->voxel_size >= 0) || !isfinite(o->voxel_size))
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size must be positive and finite, got %g", o->voxel_size);
+    if (o->voxel_size == 0 && o->res <= 0)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: resolution must be positive, got %d", o->res);
+    if (o->pad < 0)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: padding must be >= 0 cells, got %d", o->pad);
+    if (!o->use_bbox && o->voxel_size == 0 && o->res <= 2 * o->pad)
+        return hv_error(HV_ERR_INVALID_ARG,
+                        "sdf: resolution %d leaves no cells inside a padding of %d on each side",
+                        o->res, o->pad);
+    if (o->round_to < 0 || o->round_to > 64)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: round_to must be in [0, 64], got %d", o->round_to);
+    if (!(o->t_scale > 0) || !isfinite(o->t_scale) || o->t_scale > 1e4)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: t scale must be in (0, 1e4], got %g", o->t_scale);
+    if (o->far_levels < -1 || o->far_levels > 8)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: far levels must be in [-1, 8], got %d", o->far_levels);
+    if (o->magnitude != HV_SDF_EXACT && o->magnitude != HV_SDF_HEAT)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown magnitude mode %d", (int)o->magnitude);
+    if (o->repair & ~(unsigned)HV_SDF_REPAIR_ALL)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown repair flags 0x%x", o->repair);
+    if (!(o->diffuse_tol >= 1e-12 && o->diffuse_tol < 1) || !(o->poisson_tol >= 1e-12 && o->poisson_tol < 1))
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: tolerances must be in [1e-12, 1), got %g and %g",
+                        o->diffuse_tol, o->poisson_tol);
+    if (o->threads < 0)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: thread count must be >= 0, got %d", o->threads);
+    if (o->use_bbox) {
+        for (int a = 0; a < 6; a++)
+            if (!isfinite(o->bbox[a]))
+                return hv_error(HV_ERR_INVALID_ARG, "sdf: bounding box coordinate %d is not finite", a);
+        for (int a = 0; a < 3; a++)
+            if (!(o->bbox[3 + a] > o->bbox[a]))
+                return hv_error(HV_ERR_INVALID_ARG, "sdf: bounding box is empty along %c (%g to %g)",
+                                "xyz"[a], o->bbox[a], o->bbox[3 + a]);
+    }
+    return HV_OK;
+}
+
+/* Bounds of the vertices used by triangles; checks indices and finiteness. */
+static hv_status used_bounds(const hv_mesh *m, double lo[3], double hi[3])
+{
+    if (!m || m->ntris == 0 || m->nverts == 0 || !m->tris || !m->verts)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: the mesh is empty (%zu vertices, %zu triangles)",
+                        m ? m->nverts : 0, m ? m->ntris : 0);
+    for (int a = 0; a < 3; a++)
+        lo[a] = INFINITY, hi[a] = -INFINITY;
+    for (size_t i = 0; i < 3 * m->ntris; i++) {
+        uint32_t v = m->tris[i];
+        if (v >= m->nverts)
+            return hv_error(HV_ERR_INVALID_ARG, "sdf: triangle %zu uses vertex %u of %zu", i / 3, v, m->nverts);
+        const double *x = m->verts + 3 * (size_t)v;
+        for (int a = 0; a < 3; a++) {
+            if (!isfinite(x[a]))
+                return hv_error(HV_ERR_NUMERIC, "sdf: vertex %u has a non-finite coordinate (%g)", v, x[a]);
+            lo[a] = x[a] < lo[a] ? x[a] : lo[a];
+            hi[a] = x[a] > hi[a] ? x[a] : hi[a];
+        }
+    }
+    return HV_OK;
+}
+
+static int levels_for(const hv_sdf_opts *o, const int n[3])
+{
+    if (o->far_levels >= 0)
+        return 1 + o->far_levels;
+    if (o->magnitude == HV_SDF_EXACT && !o->unsigned_distance)
+        return 1;
+    /* The field stays above the solver's error bound for roughly
+     * r < sqrt(t) ln(1/tol) / 2 (measured margin); add levels until that
+     * covers the block's diagonal. */
+    double diag = sqrt((double)n[0] * n[0] + (double)n[1] * n[1] + (double)n[2] * n[2]);
+    double reach = o->t_scale * 0.5 * log(1.0 / o->diffuse_tol);
+    int L = 1;
+    while (reach < diag && L < 9) {
+        reach *= 4;
+        L++;
+    }
+    return L;
+}
+
+hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[3], double *h,
+                               double origin[3])
+{
+    hv_sdf_opts def;
+    if (!opts) {
+        hv_sdf_opts_default(&def);
+        opts = &def;
+    }
+    if (!n || !h || !origin)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
+    hv_status st = check_opts(opts);
+    double lo[3], hi[3];
+    if (st || (st = used_bounds(m, lo, hi)))
+        return st;
+    if (opts->use_bbox) {
+        const double *b = opts->bbox;
+        double L = fmax(b[3] - b[0], fmax(b[4] - b[1], b[5] - b[2]));
+        *h = opts->voxel_size > 0 ? opts->voxel_size : L / opts->res;
+        for (int a = 0; a < 3; a++) {
+            double c = ceil((b[3 + a] - b[a]) / *h - 1e-9);
+            if (!(c < 1e9))
+                return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c", *h, c, "xyz"[a]);
+            n[a] = c < 1 ? 1 : (int)c;
+            origin[a] = b[a];
+        }
+    } else {
+        double L = fmax(hi[0] - lo[0], fmax(hi[1] - lo[1], hi[2] - lo[2]));
+        if (opts->voxel_size > 0)
+            *h = opts->voxel_size;
+        else if (L > 0)
+            *h = L / (opts->res - 2 * opts->pad);
+        else
+            return hv_error(HV_ERR_INVALID_ARG, "sdf: the mesh has no extent (all vertices at one point); give a voxel size");
+        int longest = (hi[0] - lo[0] == L) ? 0 : (hi[1] - lo[1] == L) ? 1 : 2;
+        for (int a = 0; a < 3; a++) {
+            double c = ceil((hi[a] - lo[a]) / *h - 1e-9) + 2.0 * opts->pad;
+            if (!(c < 1e9))
+                return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c", *h, c, "xyz"[a]);
+            n[a] = c < 1 ? 1 : (int)c;
+            /* Extra padding for multigrid; the longest axis keeps --res exactly. */
+            int r = opts->round_to > 1 ? opts->round_to : 1;
+            if (r > 1 && !(opts->voxel_size == 0 && a == longest) && n[a] % r)
+                n[a] += r - n[a] % r;
+            origin[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * *h;
+        }
+    }
+    int L = levels_for(opts, n);
+    return hv_check_dims(3, n, *h, SDF_BYTES_PER_CELL + 12 * (size_t)L);
+}
+
+/* Face vector at the face between cells lo = c - s[a] and c, for the signed
+ * (three components Y[0..2]) or unsigned (Y[0] scalar, gradient) field. */
+static inline void face_vec(const float *const *Y, int unsig, const int n[3], const size_t s[3],
+                            double h, int a, size_t c, const int idx[3], double v[3])
+{
+    size_t lo = c - s[a];
+    if (!unsig) {
+        for (int b = 0; b < 3; b++)
+            v[b] = 0.5 * ((double)Y[b][c] + Y[b][lo]);
+        return;
+    }
+    const float *u = Y[0];
+    v[a] = ((double)u[c] - u[lo]) / h;
+    for (int b = 0; b < 3; b++) {
+        if (b == a)
+            continue;
+        /* Central differences at both cells, one-sided (mirror) at walls. */
+        double g = 0;
+        for (int side = 0; side < 2; side++) {
+            size_t cc = side ? c : lo;
+            int ib = idx[b];
+            size_t up = ib < n[b] - 1 ? cc + s[b] : cc, dn = ib > 0 ? cc - s[b] : cc;
+            g += ((double)u[up] - u[dn]) / (2 * h);
+        }
+        v[b] = 0.5 * g;
+    }
+}
+
+/* Normalized flux through the face (axis a, between c - s[a] and c) from the
+ * first level whose field is above its noise threshold; 0 if none. */
+static inline double face_flux(float ***Y, int nlev, const double *tau, int unsig,
+                               const int n[3], const size_t s[3], double h, int a, size_t c,
+                               const int idx[3], int *dead)
+{
+    for (int k = 0; k < nlev; k++) {
+        double v[3];
+        face_vec((const float *const *)Y[k], unsig, n, s, h, a, c, idx, v);
+        double len = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        if (len > tau[k]) {
+            *dead = 0;
+            return unsig ? -v[a] / len : v[a] / len;
+        }
+    }
+    *dead = 1;
+    return 0.0;
+}
+
+/* rhs = -div X for the Poisson solve (alpha = 0: -Lap phi = -div X). */
+static size_t build_rhs(float ***Y, int nlev, const double *tau, int unsig,
+                        const hv_grid *g, float *rhs)
+{
+    const int *n = g->n;
+    const size_t s[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
+    const double h = g->h;
+    size_t dead_total = 0;
+#pragma omp parallel for collapse(2) schedule(static) reduction(+ : dead_total)
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                int idx[3] = {i, j, k};
+                size_t c = (size_t)i + s[1] * j + s[2] * k;
+                double div = 0;
+                for (int a = 0; a < 3; a++) {
+                    int dead;
+                    if (idx[a] > 0) {
+                        div -= face_flux(Y, nlev, tau, unsig, n, s, h, a, c, idx, &dead);
+                        dead_total += dead;
+                    }
+                    if (idx[a] < n[a] - 1) {
+                        int up[3] = {i, j, k};
+                        up[a]++;
+                        div += face_flux(Y, nlev, tau, unsig, n, s, h, a, c + s[a], up, &dead);
+                    }
+                }
+                rhs[c] = (float)(-div / h);
+            }
+    return dead_total;
+}
+
+static double norm2(const float *v, size_t count)
+{
+    double acc = 0;
+#pragma omp parallel for reduction(+ : acc) schedule(static)
+    for (size_t c = 0; c < count; c++)
+        acc += (double)v[c] * v[c];
+    return acc;
+}
+
+typedef struct sdf_work {
+    hv_mesh *repaired;
+    hv_quad q;
+    float *Y0[3];
+    float **Y[9]; /* Y[level][component] */
+    float *Ybuf;
+    float *rhs;
+    float *dist;
+    hv_solver *solver;
+    hv_grid *g;
+} sdf_work;
+
+static void work_free(sdf_work *w)
+{
+    if (w->repaired) {
+        free(w->repaired->verts);
+        free(w->repaired->tris);
+        free(w->repaired);
+    }
+    hv_quad_free(&w->q);
+    for (int b = 0; b < 3; b++)
+        hv_free(w->Y0[b]);
+    for (int k = 0; k < 9; k++)
+        free(w->Y[k]);
+    hv_free(w->Ybuf);
+    hv_free(w->rhs);
+    hv_free(w->dist);
+    hv_solver_destroy(&w->solver);
+    hv_grid_destroy(&w->g);
+}
+
+/* AUTO prefers FFTW on plain boxes; fall back to multigrid when this build
+ * has no FFTW backend. */
+static hv_status solver_create(hv_solver **s, const hv_problem *p, const hv_solver_opts *so)
+{
+    hv_status st = hv_solver_create(s, p, so);
+    if (st == HV_ERR_UNSUPPORTED && so->backend == HV_BACKEND_AUTO) {
+        hv_solver_opts mg = *so;
+        mg.backend = HV_BACKEND_MG;
+        st = hv_solver_create(s, p, &mg);
+    }
+    return st;
+}
+
+static hv_status stage(double f, const char *name)
+{
+    return hv_progress(f, name);
+}
+
+hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out, hv_sdf_stats *stats)
+{
+    if (!out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_compute: out is NULL");
+    *out = NULL;
+    hv_sdf_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_sdf_opts_default(&o);
+    hv_sdf_stats S;
+    memset(&S, 0, sizeof S);
+    sdf_work w;
+    memset(&w, 0, sizeof w);
+    hv_status st = check_opts(&o);
+    double lo[3], hi[3];
+    if (st || (st = used_bounds(m, lo, hi)))
+        return st;
+    if (o.threads > 0)
+        hv_set_threads(o.threads);
+    const int unsig = o.unsigned_distance != 0;
+    const int exact = o.magnitude == HV_SDF_EXACT;
+    double t0 = hv_now(), tt;
+
+    /* 1. Repair. */
+    const hv_mesh *M = m;
+    if ((st = stage(0.0, "repair")))
+        return st;
+    tt = hv_now();
+    if (o.repair) {
+        if ((st = hv_sdf_repair(m, unsig ? (o.repair & (HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DEGENERATE |
+                                                         HV_SDF_REPAIR_DUPLICATES))
+                                         : o.repair,
+                                &w.repaired, &S.repair)))
+            return st;
+        M = w.repaired;
+    } else {
+        S.repair.vertices_in = S.repair.vertices_out = m->nverts;
+        S.repair.triangles_in = S.repair.triangles_out = m->ntris;
+    }
+    S.t_repair = hv_now() - tt;
+
+    /* Grid. */
+    int n[3];
+    double h, origin[3];
+    if ((st = hv_sdf_grid_for_mesh(M, &o, n, &h, origin)))
+        goto done;
+    if ((st = hv_grid_create(&w.g, 3, n, h, origin)))
+        goto done;
+    const size_t count = hv_grid_count(w.g);
+    memcpy(S.n, n, sizeof S.n);
+    S.h = h;
+    memcpy(S.origin, origin, sizeof S.origin);
+    const int need_heat = !(unsig && exact);
+    const int nlev = need_heat ? levels_for(&o, n) : 0;
+    S.levels = nlev;
+    S.t = (o.t_scale * h) * (o.t_scale * h);
+
+    /* 2. Splat. */
+    if ((st = stage(0.05, "splat")))
+        goto done;
+    tt = hv_now();
+    double blo[3], bhi[3];
+    for (int a = 0; a < 3; a++) {
+        blo[a] = origin[a];
+        bhi[a] = origin[a] + n[a] * h;
+    }
+    if ((st = hv_quad_build(M, h, blo, bhi, &w.q)))
+        goto done;
+    S.surface_samples = w.q.count;
+    if (w.q.count == 0) {
+        st = hv_error(HV_ERR_INVALID_ARG, "sdf: no part of the mesh lies inside the grid block");
+        goto done;
+    }
+    const int ncomp = unsig ? 1 : 3;
+    if (need_heat) {
+        for (int b = 0; b < ncomp; b++)
+            if (!(w.Y0[b] = hv_calloc(count, sizeof(float)))) {
+                st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)", count);
+                goto done;
+            }
+        const double inv_h3 = 1.0 / (h * h * h);
+#pragma omp parallel for schedule(static)
+        for (size_t p = 0; p < w.q.count; p++) {
+            size_t c0, step[3];
+            double wt[8];
+            hv_trilinear(w.g, w.q.x + 3 * p, &c0, step, wt);
+            for (int q = 0; q < 8; q++) {
+                if (wt[q] == 0)
+                    continue;
+                size_t c = c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0);
+                for (int b = 0; b < ncomp; b++) {
+                    float val = (float)(wt[q] * inv_h3 * (unsig ? w.q.area[p] : w.q.w[3 * p + b]));
+#pragma omp atomic
+                    w.Y0[b][c] += val;
+                }
+            }
+        }
+    }
+    S.t_splat = hv_now() - tt;
+
+    /* 3. Diffuse: one backward-Euler step per level, the components sharing a solver. */
+    tt = hv_now();
+    double tau[9] = {0};
+    if (need_heat) {
+        w.Ybuf = hv_malloc((size_t)nlev * ncomp * count * sizeof(float));
+        if (!w.Ybuf) {
+            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells", nlev * ncomp, count);
+            goto done;
+        }
+        double f2 = 0;
+        for (int b = 0; b < ncomp; b++)
+            f2 += norm2(w.Y0[b], count);
+        hv_solver_opts so;
+        hv_solver_opts_default(&so);
+        so.backend = o.backend;
+        so.tol = o.diffuse_tol;
+        so.max_iter = 100;
+        for (int k = 0; k < nlev; k++) {
+            if (!(w.Y[k] = malloc(3 * sizeof(float *)))) {
+                st = hv_error(HV_ERR_NOMEM, "sdf: out of memory");
+                goto done;
+            }
+            for (int b = 0; b < ncomp; b++)
+                w.Y[k][b] = w.Ybuf + ((size_t)k * ncomp + b) * count;
+            double t = S.t * pow(16.0, k);
+            hv_problem pb = {3, {n[0], n[1], n[2]}, h, NULL, 1.0, t};
+            if ((st = stage(0.1 + 0.5 * k / nlev, "diffuse")))
+                goto done;
+            if ((st = solver_create(&w.solver, &pb, &so)))
+                goto done;
+            for (int b = 0; b < ncomp; b++) {
+                hv_solve_info info;
+                if ((st = hv_solver_solve(w.solver, w.Y0[b], w.Y[k][b], &info)))
+                    goto done;
+                S.diffuse_iterations += info.iterations;
+                S.diffuse_relres = fmax(S.diffuse_relres, info.relres);
+                S.backend = info.backend;
+            }
+            hv_solver_destroy(&w.solver);
+            /* ||e||_2 <= ||r||_2 <= relres ||f||_2 since (I - t Lap) >= I; for the
+             * unsigned gradient the bound grows by 2/h per component. */
+            double bound = fmax(S.diffuse_relres, o.diffuse_tol) * sqrt(f2);
+            tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / h : 1.0);
+        }
+        for (int b = 0; b < ncomp; b++) {
+            hv_free(w.Y0[b]);
+            w.Y0[b] = NULL;
+        }
+    }
+    S.t_diffuse = hv_now() - tt;
+
+    float *phi = w.g->v;
+    if (need_heat) {
+        /* 4. Normalize on faces, divergence. */
+        if ((st = stage(0.6, "normalize")))
+            goto done;
+        tt = hv_now();
+        if (!(w.rhs = hv_malloc(count * sizeof(float)))) {
+            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)", count);
+            goto done;
+        }
+        S.dead_faces = build_rhs(w.Y, nlev, tau, unsig, w.g, w.rhs);
+        hv_free(w.Ybuf);
+        w.Ybuf = NULL;
+        S.t_normalize = hv_now() - tt;
+
+        /* 5. Poisson. */
+        if ((st = stage(0.65, "poisson")))
+            goto done;
+        tt = hv_now();
+        hv_problem pb = {3, {n[0], n[1], n[2]}, h, NULL, 0.0, 1.0};
+        hv_solver_opts so;
+        hv_solver_opts_default(&so);
+        so.backend = o.backend;
+        so.tol = o.poisson_tol;
+        so.max_iter = 100;
+        if ((st = solver_create(&w.solver, &pb, &so)))
+            goto done;
+        hv_solve_info info;
+        if ((st = hv_solver_solve(w.solver, w.rhs, phi, &info)))
+            goto done;
+        S.poisson_iterations = info.iterations;
+        S.poisson_relres = info.relres;
+        S.backend = info.backend;
+        hv_solver_destroy(&w.solver);
+        hv_free(w.rhs);
+        w.rhs = NULL;
+        S.t_poisson = hv_now() - tt;
+
+        /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
+        if ((st = stage(0.8, "shift")))
+            goto done;
+        tt = hv_now();
+        double num = 0, den = 0;
+#pragma omp parallel for reduction(+ : num, den) schedule(static)
+        for (size_t p = 0; p < w.q.count; p++) {
+            size_t c0, step[3];
+            double wt[8], val = 0;
+            hv_trilinear(w.g, w.q.x + 3 * p, &c0, step, wt);
+            for (int q = 0; q < 8; q++)
+                val += wt[q] * phi[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
+            num += w.q.area[p] * val;
+            den += w.q.area[p];
+        }
+        S.shift = den > 0 ? num / den : 0;
+        const float sh = (float)S.shift;
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < count; c++)
+            phi[c] -= sh;
+        S.t_shift = hv_now() - tt;
+    }
+
+    /* 7. Exact magnitude with the heat method's sign. */
+    if (exact) {
+        if ((st = stage(0.85, "redistance")))
+            goto done;
+        tt = hv_now();
+        if (!(w.dist = hv_malloc(count * sizeof(float)))) {
+            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the exact distance (%zu cells)", count);
+            goto done;
+        }
+        if ((st = hv_exact_distance(M, w.g, SDF_EXACT_BAND, w.dist, NULL, &S.band_cells)))
+            goto done;
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < count; c++)
+            phi[c] = (!unsig && phi[c] < 0) ? -w.dist[c] : w.dist[c];
+        S.t_redistance = hv_now() - tt;
+    }
+    if ((st = stage(1.0, "done")))
+        goto done;
+    S.t_total = hv_now() - t0;
+    *out = w.g;
+    w.g = NULL;
+done:
+    work_free(&w);
+    if (stats)
+        *stats = S;
+    return st;
+}
