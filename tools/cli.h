@@ -24,5 +24,10 @@ int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 int cmd_bench(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
+int cmd_distance(int argc, char **argv);
+int cmd_extend(int argc, char **argv);
+
+/* heatvox bench extend (tools/bench_extend.c). */
+int bench_extend(int argc, char **argv);
 
 #endif

@@ -19,6 +19,8 @@ struct command {
 static const struct command commands[] = {
     {"sdf", cmd_sdf, "signed (or unsigned) distance volume from a triangle mesh"},
     {"info", cmd_info, "read a mesh and print its defect report"},
+    {"distance", cmd_distance, "geodesic distance around obstacles (heat method)"},
+    {"extend", cmd_extend, "extend fields off a level set (VDB in, VDB out)"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
 };
 

@@ -127,6 +127,8 @@ typedef struct hv_extend_stats {
     size_t weak_cells;     /* ratio cells whose weight no level brought above the error
                               bound (value taken from the last level anyway) */
     int levels;            /* diffusion times used in this call */
+    size_t solve_cells;    /* cells of the first level's solve: the box around the weights
+                              and the cells read at themselves, plus 6 sqrt(t) */
     int solves;            /* right-hand sides solved */
     double relres;         /* worst relative residual */
     double t_weights, t_solve, t_eval, t_total; /* seconds */
@@ -145,8 +147,10 @@ typedef struct hv_extender hv_extender;
 void hv_extend_opts_default(hv_extend_opts *o);
 
 /* Creates an extender for grids of this shape (solid may be NULL; copied).
- * Solvers are built on first use and kept, so repeated calls (a simulation's
- * time steps) pay only for the solves. Not thread-safe. The caller owns *out. */
+ * Solvers are built on first use and kept while the box they solve on keeps
+ * its size (a box around the band plus 6 sqrt(t) on each side, grown to hold
+ * the cells read at themselves), so repeated calls (a simulation's time steps)
+ * mostly pay only for the solves. Not thread-safe. The caller owns *out. */
 hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double h,
                              const uint8_t *solid, const hv_extend_opts *opts);
 

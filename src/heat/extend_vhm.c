@@ -10,7 +10,13 @@
 #include <string.h>
 
 #define MAX_LEVELS 8
+/* Fields per hv_extend_many call (each takes up to 4 right-hand sides). */
+#define MAX_FIELDS_PER_CALL 64
 #define LEVEL_FACTOR 16.0
+/* A level's solve covers the cells it must answer for plus BOX_MARGIN sqrt(t)
+ * on every side: Neumann walls there reflect e^{-2 BOX_MARGIN} (6e-6) of what
+ * reaches them. */
+#define BOX_MARGIN 6.0
 /* Ratios are trusted where the diffused weight is RELIABLE times the solve's
  * pointwise error bound (relres * ||rhs||_2; the heat operator's inverse has
  * norm <= 1). */
@@ -26,9 +32,13 @@ struct hv_extender {
     uint8_t *solid;                /* owned copy or NULL */
     hv_extend_opts o;
     hv_solver *sv[MAX_LEVELS];     /* level l: t * 16^l, built on first use */
+    int blo[MAX_LEVELS][3];        /* the box level l's solver was built for */
+    int bn[MAX_LEVELS][3];
     double *fd, *ud;               /* one right-hand side and solution (double) */
     float *w;                      /* weights */
-    float **sol;                   /* solutions of the current level, nsol arrays */
+    float *sol;                    /* solutions of the current level, interleaved: right-hand
+                                      side r of cell c at c * nsol + r (a closest point's 8
+                                      corners then cost a few cache lines for all fields) */
     int nsol, capsol;
 };
 
@@ -105,9 +115,7 @@ void hv_extender_destroy(hv_extender **ep)
     hv_extender *e = *ep;
     for (int l = 0; l < MAX_LEVELS; l++)
         hv_solver_destroy(&e->sv[l]);
-    for (int i = 0; i < e->capsol; i++)
-        hv_free(e->sol[i]);
-    free(e->sol);
+    hv_free(e->sol);
     hv_free(e->fd);
     hv_free(e->ud);
     hv_free(e->w);
@@ -121,24 +129,20 @@ static int is_solid(const hv_extender *e, size_t c) { return e->solid && e->soli
 static hv_status ensure_solutions(hv_extender *e, int k)
 {
     if (k > e->capsol) {
-        float **p = realloc(e->sol, (size_t)k * sizeof *p);
-        if (!p)
-            return hv_error(HV_ERR_NOMEM, "extend: out of memory");
-        e->sol = p;
-        for (int i = e->capsol; i < k; i++)
-            e->sol[i] = NULL;
+        hv_free(e->sol);
+        e->capsol = 0;
+        if (!(e->sol = hv_malloc(e->count * (size_t)k * sizeof(float))))
+            return hv_error(HV_ERR_NOMEM, "extend: out of memory for %d solutions", k);
         e->capsol = k;
     }
-    for (int i = 0; i < k; i++)
-        if (!e->sol[i] && !(e->sol[i] = hv_malloc(e->count * sizeof(float))))
-            return hv_error(HV_ERR_NOMEM, "extend: out of memory for %d solution arrays", k);
     e->nsol = k;
     return HV_OK;
 }
 
 /* Right-hand side r of the layout: 0 = weights; then per field, for a scalar
  * w f, for a vector w |v| followed by w v_c per component. */
-static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_field *f, double *out)
+static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_field *f,
+                      const int lo[3], const int bn[3], double *out)
 {
     int field = -1, part = 0, base = 1;
     for (int i = 0; i < nfields && r > 0; i++) {
@@ -151,8 +155,12 @@ static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_
         base += k;
     }
     const float *w = e->w;
+    const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
 #pragma omp parallel for schedule(static)
-    for (size_t c = 0; c < e->count; c++) {
+    for (size_t b = 0; b < bcount; b++) {
+        size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+        size_t bk = b / ((size_t)bn[0] * bn[1]);
+        size_t c = (lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk));
         double v = 0;
         if (w[c] > 0) {
             if (field < 0) {
@@ -168,7 +176,7 @@ static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_
                 v = (double)w[c] * f[field].in[part - 1][c];
             }
         }
-        out[c] = v;
+        out[b] = v;
     }
 }
 
@@ -220,6 +228,21 @@ static double sample(const float *v, const size_t idx[8], const double wt[8], in
     return s;
 }
 
+/* All nsol solutions at once from the interleaved array. */
+static void sample_all(const hv_extender *e, const size_t idx[8], const double wt[8], int m,
+                       double *out)
+{
+    const int k = e->nsol;
+    out[0] = 0;
+    for (int r = 1; r < k; r++)
+        out[r] = 0;
+    for (int q = 0; q < m; q++) {
+        const float *v = e->sol + idx[q] * (size_t)k;
+        for (int r = 0; r < k; r++)
+            out[r] += wt[q] * v[r];
+    }
+}
+
 /* Central-difference gradient of phi at cell (i,j,k), one-sided at walls, in
  * world units. */
 static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k, double g[3])
@@ -242,7 +265,7 @@ static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k
  * point is within half the band of 0), else the cell itself. Fills the
  * interpolation stencil and returns 1 for a closest point. */
 static int evaluation_point(const hv_extender *e, const float *phi, int i, int j, int k,
-                            size_t idx[8], double wt[8], int *m)
+                            int validate, size_t idx[8], double wt[8], int *m)
 {
     size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
     idx[0] = c;
@@ -266,7 +289,7 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
     size_t ci[8];
     double cw[8];
     int cm = stencil(e, p, ci, cw);
-    if (fabs(sample(phi, ci, cw, cm)) > 0.5 * fmax(e->o.band, 1.0) * e->h)
+    if (validate && fabs(sample(phi, ci, cw, cm)) > 0.5 * fmax(e->o.band, 1.0) * e->h)
         return 0;
     memcpy(idx, ci, sizeof ci);
     memcpy(wt, cw, sizeof cw);
@@ -277,18 +300,19 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
 /* Writes the extension of every field at cell c from the current level's
  * solutions sampled at p. */
 static void write_cell(const hv_extender *e, int nfields, const hv_extend_field *f, size_t c,
-                       const size_t idx[8], const double wt[8], int m, double W)
+                       const double *val)
 {
+    const double W = val[0];
     int r = 1;
     for (int i = 0; i < nfields; i++) {
         if (f[i].ncomp == 1) {
-            f[i].out[0][c] = (float)(sample(e->sol[r], idx, wt, m) / W);
+            f[i].out[0][c] = (float)(val[r] / W);
             r++;
             continue;
         }
-        double mag = sample(e->sol[r], idx, wt, m) / W, v[3] = {0, 0, 0}, vn = 0;
+        double mag = val[r] / W, v[3] = {0, 0, 0}, vn = 0;
         for (int q = 0; q < f[i].ncomp; q++) {
-            v[q] = sample(e->sol[r + 1 + q], idx, wt, m);
+            v[q] = val[r + 1 + q];
             vn += v[q] * v[q];
         }
         vn = sqrt(vn);
@@ -298,41 +322,141 @@ static void write_cell(const hv_extender *e, int nfields, const hv_extend_field 
     }
 }
 
-static hv_status solve_level(hv_extender *e, int l, int nrhs, int nfields,
-                             const hv_extend_field *f, double *thr, hv_extend_stats *S)
+/* Solves every right-hand side for level l on the box [lo, lo + bn) (Neumann
+ * walls at its faces) and stores the solutions on the full grid, 0 outside. */
+static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
+                             int nfields, const hv_extend_field *f, double *thr,
+                             hv_extend_stats *S)
 {
     hv_status st;
+    if (e->sv[l] && (memcmp(e->bn[l], bn, sizeof e->bn[l]) ||
+                     (e->solid && memcmp(e->blo[l], lo, sizeof e->blo[l]))))
+        hv_solver_destroy(&e->sv[l]);
+    const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
+    const int full = bcount == e->count;
     if (!e->sv[l]) {
-        hv_problem p = {e->dim, {e->n[0], e->n[1], e->n[2]}, e->h, e->solid, 1.0,
+        uint8_t *sub = NULL;
+        if (e->solid) {
+            if (!(sub = malloc(bcount)))
+                return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+            for (size_t b = 0; b < bcount; b++) {
+                size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+                size_t bk = b / ((size_t)bn[0] * bn[1]);
+                sub[b] = e->solid[(lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk))];
+            }
+        }
+        hv_problem p = {e->dim, {bn[0], bn[1], bn[2]}, e->h, sub, 1.0,
                         e->o.t_scale * e->h * e->h * pow(LEVEL_FACTOR, l)};
         hv_solver_opts so;
         hv_solver_opts_default(&so);
         so.backend = e->o.backend;
         so.tol = e->o.tol;
         so.max_iter = 200;
-        if ((st = hv_solver_create(&e->sv[l], &p, &so)))
+        st = hv_solver_create(&e->sv[l], &p, &so);
+        free(sub);
+        if (st)
             return st;
+        memcpy(e->blo[l], lo, sizeof e->blo[l]);
+        memcpy(e->bn[l], bn, sizeof e->bn[l]);
     }
     double relmax = 0, wn = 0;
     for (int r = 0; r < nrhs; r++) {
-        build_rhs(e, r, nfields, f, e->fd);
+        build_rhs(e, r, nfields, f, lo, bn, e->fd);
         if (r == 0)
-            wn = norm2_d(e->fd, e->count);
+            wn = norm2_d(e->fd, bcount);
         hv_solve_info info;
         if ((st = hv_solver_solve_d(e->sv[l], e->fd, e->ud, &info)))
             return st;
         relmax = fmax(relmax, info.relres);
-        float *out = e->sol[r];
+        float *out = e->sol;
         const double *ud = e->ud;
+        const size_t k = (size_t)e->nsol;
+        if (!full && r == 0)
+            memset(out, 0, e->count * k * sizeof *out);
 #pragma omp parallel for schedule(static)
-        for (size_t c = 0; c < e->count; c++)
-            out[c] = (float)ud[c];
+        for (size_t b = 0; b < bcount; b++) {
+            size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+            size_t bk = b / ((size_t)bn[0] * bn[1]);
+            size_t c = (lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk));
+            out[c * k + r] = (float)ud[b];
+        }
         S->solves++;
     }
     S->relres = fmax(S->relres, relmax);
+    if (l == 0)
+        S->solve_cells = bcount;
     /* Float storage caps the range too: trust W only well above float's smallest normal. */
     *thr = fmax(RELIABLE * fmax(relmax, 1e-14) * wn, 1e-30);
     return HV_OK;
+}
+
+typedef struct {
+    int lo[3], hi[3]; /* inclusive; lo > hi when empty */
+} ibox;
+
+static void box_empty(ibox *b)
+{
+    for (int a = 0; a < 3; a++) {
+        b->lo[a] = 1 << 30;
+        b->hi[a] = -(1 << 30);
+    }
+}
+
+static void box_add(ibox *b, int i, int j, int k)
+{
+    const int p[3] = {i, j, k};
+    for (int a = 0; a < 3; a++) {
+        if (p[a] < b->lo[a])
+            b->lo[a] = p[a];
+        if (p[a] > b->hi[a])
+            b->hi[a] = p[a];
+    }
+}
+
+static void box_union(ibox *b, const ibox *o)
+{
+    for (int a = 0; a < 3; a++) {
+        if (o->lo[a] < b->lo[a])
+            b->lo[a] = o->lo[a];
+        if (o->hi[a] > b->hi[a])
+            b->hi[a] = o->hi[a];
+    }
+}
+
+/* Smallest size >= m, a multiple of 4 with no prime factor above 7 (fast
+ * transforms, even multigrid coarsening), or cap when that is larger. */
+static int nice_size(int m, int cap)
+{
+    for (int s = (m + 3) & ~3; s < cap; s += 4) {
+        int r = s;
+        for (int p = 2; p <= 7; p++)
+            while (r % p == 0)
+                r /= p;
+        if (r == 1)
+            return s;
+    }
+    return cap;
+}
+
+/* Grows b by g cells on every side, then to a nice size, within the grid:
+ * lo and size. */
+static void box_grow(const hv_extender *e, const ibox *b, int g, int lo[3], int bn[3])
+{
+    for (int a = 0; a < 3; a++) {
+        int l = b->lo[a] - g, h = b->hi[a] + g;
+        if (l < 0)
+            l = 0;
+        if (h > e->n[a] - 1)
+            h = e->n[a] - 1;
+        int m = nice_size(h - l + 1, e->n[a]);
+        l -= (m - (h - l + 1)) / 2;
+        if (l < 0)
+            l = 0;
+        if (l + m > e->n[a])
+            l = e->n[a] - m;
+        lo[a] = l;
+        bn[a] = m;
+    }
 }
 
 hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
@@ -345,6 +469,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     hv_extend_stats *S = stats ? stats : &lst;
     memset(S, 0, sizeof *S);
     int nrhs = 1;
+    if (nfields > MAX_FIELDS_PER_CALL)
+        return hv_error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
+                        MAX_FIELDS_PER_CALL);
     for (int i = 0; i < nfields; i++) {
         if (f[i].ncomp < 1 || f[i].ncomp > 3)
             return hv_error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 to 3)", i,
@@ -387,26 +514,70 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         return st;
     S->t_weights = hv_now() - t0;
 
-    /* Output cells: 1 = pending, 0 = done (background or written). */
+    /* Output cells: 0 = done (background or written), 1 = read at the closest
+     * point, 2 = read at the cell. The boxes: cells with a weight, and cells to
+     * be read at themselves. */
     uint8_t *pending = malloc(e->count);
     if (!pending)
         return hv_error(HV_ERR_NOMEM, "extend: out of memory");
     const double ob = e->o.out_band * e->h;
     size_t npend = 0;
-    for (size_t c = 0; c < e->count; c++) {
-        int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
-        pending[c] = (uint8_t)want;
-        npend += want;
-        if (!want)
-            for (int i = 0; i < nfields; i++)
-                for (int q = 0; q < f[i].ncomp; q++)
-                    f[i].out[q][c] = e->o.background;
-    }
+    ibox band_box, ratio_box;
+    box_empty(&band_box);
+    box_empty(&ratio_box);
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++) {
+                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                if (e->w[c] > 0)
+                    box_add(&band_box, i, j, k);
+                int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
+                pending[c] = (uint8_t)want;
+                npend += want;
+                if (!want)
+                    for (int fi = 0; fi < nfields; fi++)
+                        for (int q = 0; q < f[fi].ncomp; q++)
+                            f[fi].out[q][c] = e->o.background;
+            }
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++) {
+                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                if (!pending[c])
+                    continue;
+                size_t idx[8];
+                double wt[8];
+                int m;
+                pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+            }
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++)
+                if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)] == 2)
+                    box_add(&ratio_box, i, j, k);
+    /* Closest points lie within half the band of the zero set, their stencils a
+     * voxel further: inside the weights' box grown by 2. */
+    band_box.lo[0] -= 2;
+    band_box.lo[1] -= 2;
+    band_box.lo[2] -= 2;
+    band_box.hi[0] += 2;
+    band_box.hi[1] += 2;
+    band_box.hi[2] += 2;
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
         double thr;
+        ibox need = band_box;
+        box_union(&need, &ratio_box);
+        int lo[3], bn[3];
+        box_grow(e, &need, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale) * pow(sqrt(LEVEL_FACTOR), l)),
+                 lo, bn);
+        if (e->dim == 2) {
+            lo[2] = 0;
+            bn[2] = 1;
+        }
         t0 = hv_now();
-        if ((st = solve_level(e, l, nrhs, nfields, f, &thr, S)))
+        if ((st = solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
@@ -420,18 +591,23 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                     size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
                     if (!pending[c])
                         continue;
-                    size_t idx[8];
-                    double wt[8];
-                    int m;
-                    int at_cp = evaluation_point(e, phi, i, j, k, idx, wt, &m);
-                    double W = sample(e->sol[0], idx, wt, m);
+                    size_t idx[8] = {c};
+                    double wt[8] = {1};
+                    int m = 1, at_cp = 0;
+                    if (pending[c] == 1)
+                        at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
+                    double val[1 + 4 * MAX_FIELDS_PER_CALL];
+                    sample_all(e, idx, wt, m, val);
+                    double W = val[0];
                     if (!(W > thr) && at_cp) {
-                        /* Closest point but no weight there: fall back to the cell. */
+                        /* Closest point but no weight there: read at the cell from now on. */
                         at_cp = 0;
+                        pending[c] = 2;
                         idx[0] = c;
                         wt[0] = 1;
                         m = 1;
-                        W = e->sol[0][c];
+                        sample_all(e, idx, wt, m, val);
+                        W = val[0];
                     }
                     if (!(W > thr) && !last) {
                         left++;
@@ -442,7 +618,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                             for (int q = 0; q < f[fi].ncomp; q++)
                                 f[fi].out[q][c] = e->o.background;
                     } else {
-                        write_cell(e, nfields, f, c, idx, wt, m, W);
+                        write_cell(e, nfields, f, c, val);
                     }
                     weak += !(W > thr);
                     cp += at_cp;
@@ -454,6 +630,13 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         S->weak_cells += weak;
         npend = left;
         S->t_eval += hv_now() - t0;
+        box_empty(&ratio_box);
+        if (npend)
+            for (int k = 0; k < e->n[2]; k++)
+                for (int j = 0; j < e->n[1]; j++)
+                    for (int i = 0; i < e->n[0]; i++)
+                        if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)])
+                            box_add(&ratio_box, i, j, k);
     }
     free(pending);
     S->t_total = hv_now() - t_start;
