@@ -9,6 +9,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 typedef struct {
     double x0, y0, x1, y1;
@@ -438,6 +440,123 @@ START_TEST(bad_sources_should_fail_clearly)
 }
 END_TEST
 
+/* ---- heatvox distance ------------------------------------------------------ */
+
+static const char *heatvox_bin(void)
+{
+    const char *b = getenv("HEATVOX_BIN");
+    if (!b || !*b)
+        b = "build/heatvox";
+    return access(b, X_OK) == 0 ? b : NULL;
+}
+
+static int run(const char *cmd, const char *dir, char *err, size_t errsize)
+{
+    char full[4096], errfile[1024];
+    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
+    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
+    int rc = system(full);
+    err[0] = 0;
+    FILE *f = fopen(errfile, "r");
+    if (f) {
+        size_t n = fread(err, 1, errsize - 1, f);
+        err[n] = 0;
+        fclose(f);
+    }
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
+{
+    const char *bin = heatvox_bin();
+    if (!bin) {
+        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
+        return;
+    }
+    char dir[] = "/tmp/hv_distance_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char path[512], cmd[2048], err[4096];
+    /* The wall with a gap, extruded, as a bool mask on the unit cube, 32^3. */
+    const int n = 32;
+    int ns[3] = {n, n, n};
+    hv_grid *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&m, 3, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(m));
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(m, i, j, k, x);
+                m->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)in_rect(&wall_gap, x);
+            }
+    hv_vdb_writer *w = NULL;
+    snprintf(path, sizeof path, "%s/mask.vdb", dir);
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_mask(w, m, "walls"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, path));
+    hv_vdb_writer_destroy(&w);
+    snprintf(path, sizeof path, "%s/src.txt", dir);
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "# the source\npoint %.17g %.17g 0.4\n", wall_gap.s[0], wall_gap.s[1]);
+    fclose(f);
+    snprintf(cmd, sizeof cmd,
+             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0 0 0 1 1 1 "
+             "-o %s/d.vdb -q", bin, dir, dir, dir);
+    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
+
+    snprintf(path, sizeof path, "%s/d.vdb", dir);
+    hv_grid *d = NULL;
+    TL_ASSERT_OK(hv_vdb_read_float(path, "distance", NULL, &d, NULL));
+    ck_assert_int_eq(d->n[0], n);
+    ck_assert_int_eq(d->n[2], n);
+    vgraph vg;
+    build_graph(&wall_gap, &vg);
+    double mean = 0;
+    size_t cnt = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(d, i, j, k, x);
+                ck_assert(fabs(x[0] - (i + 0.5) / n) < 1e-9); /* same placement */
+                if (m->solid[c]) {
+                    ck_assert(isinf(d->v[c]));
+                    continue;
+                }
+                double ex = exact2(&wall_gap, &vg, x);
+                ex = sqrt(ex * ex + (x[2] - 0.4) * (x[2] - 0.4));
+                mean += fabs(d->v[c] - ex) * n;
+                cnt++;
+            }
+    mean /= cnt;
+    printf("  heatvox distance around a VDB wall mask 32^3: mean error %.3f voxels\n", mean);
+    ck_assert_msg(mean <= 1.0, "mean error %.3f voxels", mean);
+    hv_grid_destroy(&d);
+    hv_grid_destroy(&m);
+
+    /* Errors: a source file with a bad line, a missing mask grid. */
+    snprintf(path, sizeof path, "%s/bad.txt", dir);
+    f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "0.5 0.5 0.5\nvoxel 1 2\n");
+    fclose(f);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s --bbox 0 0 0 1 1 1 -o %s/e.vdb", bin, path, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "bad.txt:2") != NULL, "message: %s", err);
+    snprintf(cmd, sizeof cmd,
+             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --obstacle-grid nope -o %s/e.vdb",
+             bin, dir, dir, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "nope") && strstr(err, "walls"), "message: %s", err);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s/src.txt -o %s/e.vdb --res 2", bin, dir, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 2);
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    ck_assert_int_eq(system(cmd), 0);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("distance");
@@ -452,6 +571,7 @@ int main(void)
     tcase_add_test(tc, distance_should_go_around_a_mesh_obstacle);
     tcase_add_test(tc, mesh_source_should_give_unsigned_distance_to_its_surface);
     tcase_add_test(tc, bad_sources_should_fail_clearly);
+    tcase_add_test(tc, heatvox_distance_should_go_around_a_vdb_mask);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -8,6 +8,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 typedef enum { SPHERE, TORUS, CIRCLE } shape_kind;
 
@@ -352,6 +354,188 @@ START_TEST(bad_input_should_fail_clearly)
 }
 END_TEST
 
+/* ---- heatvox extend, VDB in and out ---------------------------------------- */
+
+/* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (skip) if absent. */
+static const char *heatvox_bin(void)
+{
+    const char *b = getenv("HEATVOX_BIN");
+    if (!b || !*b)
+        b = "build/heatvox";
+    return access(b, X_OK) == 0 ? b : NULL;
+}
+
+/* Runs a shell command; returns its exit code, stderr in err (may be NULL). */
+static int run(const char *cmd, const char *dir, char *err, size_t errsize)
+{
+    char full[4096], errfile[1024];
+    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
+    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
+    int rc = system(full);
+    if (err) {
+        err[0] = 0;
+        FILE *f = fopen(errfile, "r");
+        if (f) {
+            size_t n = fread(err, 1, errsize - 1, f);
+            err[n] = 0;
+            fclose(f);
+        }
+    }
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+/* A narrow-band sphere level set 'surface', a velocity 'v' and a scalar 'temp'
+ * (both given within 3 voxels of the surface, 0 elsewhere) on n^3 cells of
+ * [-1,1]^3; temp_h != 0 writes 'temp' with that voxel size instead. */
+static void write_input(const char *path, int n, double temp_h)
+{
+    int ns[3] = {n, n, n};
+    double h = 2.0 / n, org[3] = {-1, -1, -1};
+    hv_grid *phi = NULL, *t = NULL, *v[3];
+    TL_ASSERT_OK(hv_grid_create(&phi, 3, ns, h, org));
+    TL_ASSERT_OK(hv_grid_create(&t, 3, ns, temp_h ? temp_h : h, org));
+    for (int q = 0; q < 3; q++)
+        TL_ASSERT_OK(hv_grid_create(&v[q], 3, ns, h, org));
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3], cp[3], ph, g[3];
+                hv_grid_cell_center(phi, i, j, k, x);
+                closest(SPHERE, x, &ph, cp);
+                phi->v[c] = (float)ph;
+                int band = fabs(ph) < 3 * h;
+                g_vector(cp, g);
+                for (int q = 0; q < 3; q++)
+                    v[q]->v[c] = band ? (float)g[q] : 0.0f;
+                t->v[c] = band ? (float)g_scalar(cp) : 0.0f;
+            }
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, phi, "surface", 3, 0));
+    TL_ASSERT_OK(hv_vdb_writer_add_vec3(w, v[0], v[1], v[2], "v"));
+    TL_ASSERT_OK(hv_vdb_writer_add_float(w, t, "temp"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, path));
+    hv_vdb_writer_destroy(&w);
+    hv_grid_destroy(&phi);
+    hv_grid_destroy(&t);
+    for (int q = 0; q < 3; q++)
+        hv_grid_destroy(&v[q]);
+}
+
+START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
+{
+    const char *bin = heatvox_bin();
+    if (!bin) {
+        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
+        return;
+    }
+    char dir[] = "/tmp/hv_extend_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char in[256], out[256], cmd[2048], err[4096];
+    snprintf(in, sizeof in, "%s/in.vdb", dir);
+    snprintf(out, sizeof out, "%s/out.vdb", dir);
+    const int n = 48;
+    write_input(in, n, 0);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s -q", bin,
+             in, out);
+    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
+
+    /* Names, value types and classes. */
+    hv_vdb_grid_info info[8];
+    size_t count = 0;
+    TL_ASSERT_OK(hv_vdb_list(out, info, 8, &count));
+    ck_assert_int_eq(count, 3);
+    int seen = 0;
+    for (size_t i = 0; i < count; i++) {
+        if (!strcmp(info[i].name, "surface")) {
+            ck_assert_int_eq(info[i].grid_class, HV_VDB_LEVEL_SET);
+            ck_assert_str_eq(info[i].value_type, "float");
+            seen |= 1;
+        } else if (!strcmp(info[i].name, "v")) {
+            ck_assert_str_eq(info[i].value_type, "vec3s");
+            seen |= 2;
+        } else if (!strcmp(info[i].name, "temp")) {
+            ck_assert_str_eq(info[i].value_type, "float");
+            seen |= 4;
+        }
+        ck_assert(fabs(info[i].voxel_size[0] - 2.0 / n) < 1e-9);
+    }
+    ck_assert_int_eq(seen, 7);
+
+    /* Same world placement, the level set unchanged, the fields extended. */
+    hv_grid *phi = NULL, *v[3] = {NULL, NULL, NULL}, *t = NULL, *phi0 = NULL;
+    int cls;
+    TL_ASSERT_OK(hv_vdb_read_float(out, "surface", NULL, &phi, &cls));
+    TL_ASSERT_OK(hv_vdb_read_float(in, "surface", NULL, &phi0, NULL));
+    ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
+    hv_vdb_read_opts ro = {1, {0, 0, 0}, {n - 1, n - 1, n - 1}};
+    TL_ASSERT_OK(hv_vdb_read_vec3(out, "v", &ro, &v[0], &v[1], &v[2]));
+    TL_ASSERT_OK(hv_vdb_read_float(out, "temp", &ro, &t, NULL));
+    for (int a = 0; a < 3; a++) {
+        ck_assert(fabs(v[0]->origin[a] + 1) < 1e-6);
+        ck_assert_int_eq(v[0]->n[a], n);
+        ck_assert(fabs(phi->origin[a] - phi0->origin[a]) < 1e-6);
+    }
+    ck_assert(memcmp(phi->v, phi0->v, hv_grid_count(phi) * sizeof(float)) == 0);
+    double ev = 0, et = 0, evn = 0, etn = 0;
+    size_t m = 0, mn = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3], cp[3], ph, g[3];
+                hv_grid_cell_center(v[0], i, j, k, x);
+                if (!closest(SPHERE, x, &ph, cp))
+                    continue;
+                g_vector(cp, g);
+                double d2 = 0, g2 = 0;
+                for (int q = 0; q < 3; q++) {
+                    d2 += (v[q]->v[c] - g[q]) * (v[q]->v[c] - g[q]);
+                    g2 += g[q] * g[q];
+                }
+                double e1 = sqrt(d2 / g2), e2 = fabs(t->v[c] - g_scalar(cp)) / g_scalar(cp);
+                ev += e1;
+                et += e2;
+                m++;
+                if (fabs(ph) < 3 * v[0]->h) {
+                    evn += e1;
+                    etn += e2;
+                    mn++;
+                }
+            }
+    printf("  heatvox extend round trip (narrow-band level set, 48^3): velocity %.2e within 3 "
+           "voxels, %.2e everywhere; temp %.2e / %.2e\n", evn / mn, ev / m, etn / mn, et / m);
+    ck_assert_msg(evn / mn <= 0.01 && etn / mn <= 0.01, "near errors %.3g %.3g", evn / mn, etn / mn);
+    /* Beyond the level set's band phi is clamped: plain diffusion there, coarser. */
+    ck_assert_msg(ev / m <= 0.1 && et / m <= 0.1, "overall errors %.3g %.3g", ev / m, et / m);
+    hv_grid_destroy(&phi);
+    hv_grid_destroy(&phi0);
+    hv_grid_destroy(&t);
+    for (int q = 0; q < 3; q++)
+        hv_grid_destroy(&v[q]);
+
+    /* Missing grids and mismatched transforms fail with the names. */
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field nothere -o %s/x.vdb", bin, in,
+             dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "nothere") && strstr(err, "'v'"), "message: %s", err);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset nosurface --field v -o %s/x.vdb", bin, in, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "nosurface") != NULL, "message: %s", err);
+    write_input(in, n, 1.5 * 2.0 / n);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s/x.vdb",
+             bin, in, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "temp") != NULL, "message: %s", err);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface -o %s/x.vdb", bin, in, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 2);
+    ck_assert(access(dir, F_OK) == 0);
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    ck_assert_int_eq(system(cmd), 0);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("extend");
@@ -366,6 +550,7 @@ int main(void)
     tcase_add_test(tc, out_band_should_leave_background_outside);
     tcase_add_test(tc, extender_should_be_reusable_across_steps);
     tcase_add_test(tc, bad_input_should_fail_clearly);
+    tcase_add_test(tc, heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }
