@@ -140,12 +140,16 @@ static int read_sources(const char *path, int dim, source_list *s)
                 rc = HV_EXIT_FAIL;
                 break;
             }
-            char full[4096];
+            char full[8192];
             const char *slash = strrchr(path, '/');
-            if (*p != '/' && slash)
-                snprintf(full, sizeof full, "%.*s/%s", (int)(slash - path), path, p);
-            else
-                snprintf(full, sizeof full, "%s", p);
+            int len = *p != '/' && slash
+                          ? snprintf(full, sizeof full, "%.*s/%s", (int)(slash - path), path, p)
+                          : snprintf(full, sizeof full, "%s", p);
+            if (len < 0 || (size_t)len >= sizeof full) {
+                fprintf(stderr, "heatvox distance: %s:%d: mesh path too long\n", path, lineno);
+                rc = HV_EXIT_FAIL;
+                break;
+            }
             rc = load_mesh_source(s, full);
             continue;
         }
@@ -534,9 +538,11 @@ int cmd_distance(int argc, char **argv)
     if (cli_verbose >= 0)
         printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
                "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
-               "\"backend\":\"%s\",\"seconds\":%.3f}\n",
+               "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
+               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f}\n",
                g->n[0], g->n[1], g->n[2], g->h, st_d.stages, st_d.source_cells, st_d.regions,
                st_d.unreachable_cells, st_d.dead_faces, hv_backend_name(st_d.backend),
+               st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
                hv_now() - t_start);
 done:
     free_sources(&src);
