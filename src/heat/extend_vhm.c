@@ -46,7 +46,7 @@ void hv_extend_opts_default(hv_extend_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->band = 1.5;
-    o->t_scale = 1;
+    o->t_scale = 0.5;
     o->closest_point = 1;
     o->out_band = 0;
     o->background = 0;
