@@ -4,21 +4,31 @@
  *
  * Distance (Crane, Weischedel & Wardetzky, "The Heat Method for Distance
  * Computation", 2017) on a cell-centred grid whose solid cells are obstacles:
- *   1. diffuse    (I - t Lap) u = delta_sources in double precision, t a few h^2
- *   2. normalize  X = -grad u / |grad u| on cell faces (MAC): the face's own
+ *   1. diffuse    (I - t Lap) u = delta_sources for t and 4t (t = t_scale h^2),
+ *                 double precision; solid faces carry no heat, so the heat, and
+ *                 the distance, go around obstacles
+ *   2. normalize  X = -grad psi / |grad psi| on cell faces (MAC: the face's own
  *                 difference, normalized with the mean of the open transverse
- *                 faces around it, on the faces where u is above the solve's
- *                 error bound
+ *                 face differences around it), psi = ln u(t) - ln u(4t): the
+ *                 logarithm keeps face and transverse differences consistent,
+ *                 and the difference of two times cancels the amplitude that
+ *                 tilts directions behind corners; only where both solves are
+ *                 well above their error bound
  *   3. march      e^{-r/sqrt t} leaves the far field below that bound (NOTES §3),
  *                 and a larger t bends directions near walls and corners. So
- *                 the diffusion is repeated from a front: a level set of u
- *                 inside the trusted zone, i.e. a wavefront of the distance,
- *                 whose own heat flow continues the directions outward
- *                 (Huygens). Stages repeat until every open face has a
- *                 direction.
+ *                 the diffusion is repeated from a front: a wavefront of the
+ *                 distance inside the trusted zone (placed with the lattice's
+ *                 own decay rate per direction, so fronts stay round), whose
+ *                 own heat flow continues the directions outward (Huygens).
+ *                 Stages repeat until every open face has a direction.
  *   4. poisson    Lap(phi) = div X with Neumann walls and solid faces closed
- *   5. shift      per connected fluid region, so that the sources sit at 0
- * Distance goes around obstacles because solid faces carry no heat.
+ *   5. shift      per connected fluid region, fitted on the cells 1.5-3 voxels
+ *                 from the sources, where phi should equal the distance to them
+ * Measured (mean |error| in voxels): wall with a gap 0.57 and L-shaped room 0.21
+ * at 128^2, 0.36 / 0.24 in 3D at 48^3 / 64^3; roughly constant in voxels under
+ * refinement (the error is mostly a jump of ~1.5 voxels at re-entrant corners).
+ * Fluid cells connected to no source are "unreachable": they get
+ * opts.unreachable (default +inf) and are counted in the stats.
  *
  * Extension (Sharp, Soliman & Crane, "The Vector Heat Method", 2019; in flat
  * space the connection Laplacian acts componentwise): weights w (a smooth bump

@@ -414,6 +414,7 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     S->t = sq * sq;
     d.tau[0] = 1.0 / o.t_scale;
     d.tau[1] = 1.0 / (o.t_scale * T_RATIO);
+    int idle = 0;
     for (int l = 0; l < o.max_stages && left > 0; l++) {
         t0 = hv_now();
         hv_solve_info info[2];
@@ -444,6 +445,9 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
         if (l < 8)
             S->faces_per_stage[l] = got;
         S->stages = l + 1;
+        idle = got ? 0 : idle + 1;
+        if (idle == 2) /* two stages without a new face: the rest is out of reach */
+            break;
         if (left && !next_front(&d, u2, u, ok, lthr, inside, w))
             break;
         S->t_normalize += hv_now() - t0;
