@@ -32,3 +32,15 @@ if [ -f "$bunny" ]; then
 else
   echo "bench: $bunny not found, sdf rows skipped" >&2
 fi
+
+# Extension off a level set against OpenVDB tools::sdfToExt in the same run
+# (velocity field; dense sphere, narrow-band stanford-bunny when the shared
+# meshes are there).
+for n in 128 256; do
+  "$hv" bench extend --n $n --shape sphere
+done
+if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
+  "$hv" bench extend --n 128 --shape "mesh:$shared/meshes/stanford-bunny.obj"
+else
+  echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
+fi

@@ -30,5 +30,10 @@ int cmd_batch(int argc, char **argv);
 int cmd_sdf2d(int argc, char **argv);
 int cmd_slice(int argc, char **argv);
 int cmd_make_scenes(int argc, char **argv);
+int cmd_distance(int argc, char **argv);
+int cmd_extend(int argc, char **argv);
+
+/* heatvox bench extend (tools/bench_extend.c). */
+int bench_extend(int argc, char **argv);
 
 #endif

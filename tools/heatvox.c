@@ -23,6 +23,8 @@ static const struct command commands[] = {
     {"slice", cmd_slice, "one slice of a volume as EXR data or a PNG preview"},
     {"make-scenes", cmd_make_scenes, "write the generated demo inputs (broken meshes, a level set)"},
     {"info", cmd_info, "read a mesh and print its defect report"},
+    {"distance", cmd_distance, "geodesic distance around obstacles (heat method)"},
+    {"extend", cmd_extend, "extend fields off a level set (VDB in, VDB out)"},
     {"bench", cmd_bench, "benchmarks; prints one JSON object per line"},
     {"devices", cmd_devices, "list OpenCL devices for --backend opencl"},
 };

@@ -14,5 +14,6 @@
 #include "heatvox/sdf.h"
 #include "heatvox/image.h"
 #include "heatvox/curves.h"
+#include "heatvox/heat.h"
 
 #endif
