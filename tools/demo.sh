@@ -37,7 +37,7 @@ echo
 echo "== extension of a velocity off a level set"
 if "$hv" extend --help >/dev/null 2>&1; then
     mkdir -p "$out/extend"
-    "$hv" extend scenes/levelset/sphere_velocity.vdb --phi sdf --field v \
+    "$hv" extend scenes/levelset/sphere_velocity.vdb --levelset sdf --field v \
         -o "$out/extend/sphere_velocity_ext.vdb" ||
         echo "(heatvox extend failed with these options; see heatvox extend --help)"
 else
