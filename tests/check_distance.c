@@ -28,6 +28,13 @@ typedef struct {
 static const scene wall_gap = {2, {{0.5, -1.0, 0.53125, 0.625}, {0.5, 0.75, 0.53125, 2.0}}, {0.25, 0.3}};
 /* An L-shaped room: the top-right quarter is solid. */
 static const scene l_room = {1, {{0.5, 0.5, 2.0, 2.0}}, {0.8, 0.2}};
+/* A serpentine corridor: four walls from alternate sides, eight corners to turn. */
+static const scene serpentine = {4,
+                                 {{0.1875, -1, 0.21875, 0.8125},
+                                  {0.40625, 0.1875, 0.4375, 2},
+                                  {0.625, -1, 0.65625, 0.8125},
+                                  {0.84375, 0.1875, 0.875, 2}},
+                                 {0.08, 0.1}};
 
 /* Does segment p-q cross the open interior of rectangle r? (Liang-Barsky on
  * the rectangle shrunk by a hair, so grazing a corner or an edge is allowed.) */
@@ -185,11 +192,10 @@ static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opt
 
 static void report(const char *name, int dim, int n, const dist_err *e)
 {
-    printf("  %s %dD n=%d: mean %.3f max %.3f voxels, at source %.3f; stages %d, faces/stage "
-           "%zu %zu %zu %zu, dead %zu; %.2f s\n",
-           name, dim, n, e->mean, e->max, e->src, e->st.stages, e->st.faces_per_stage[0],
-           e->st.faces_per_stage[1], e->st.faces_per_stage[2], e->st.faces_per_stage[3],
-           e->st.dead_faces, e->st.t_total);
+    printf("  %s %dD n=%d: mean %.3f max %.3f voxels, at source %.3f; stages %d, dead faces %zu, "
+           "Poisson %d iterations (%d restarts) to %.1e; %.2f s\n",
+           name, dim, n, e->mean, e->max, e->src, e->st.stages, e->st.dead_faces,
+           e->st.poisson_iterations, e->st.poisson_restarts, e->st.poisson_relres, e->st.t_total);
 }
 
 START_TEST(wall_with_gap_2d_should_be_within_one_voxel_at_128)
@@ -208,6 +214,17 @@ START_TEST(l_room_2d_should_be_within_one_voxel_at_128)
     report("L-room", 2, 128, &e);
     ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
     ck_assert_int_eq(e.st.dead_faces, 0);
+}
+END_TEST
+
+START_TEST(serpentine_corridor_distance_should_follow_the_corridor)
+{
+    dist_err e = run_scene(&serpentine, 2, 128, NULL);
+    report("serpentine", 2, 128, &e);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+    ck_assert_msg(e.st.poisson_relres <= 1e-8, "Poisson residual %.2e", e.st.poisson_relres);
+    /* About half a voxel per corner turned (5.7 at the far end, ~420 voxels away). */
+    ck_assert_msg(e.mean <= 3.0, "mean error %.3f voxels", e.mean);
 }
 END_TEST
 
@@ -564,6 +581,7 @@ int main(void)
     tcase_set_timeout(tc, 120);
     tcase_add_test(tc, wall_with_gap_2d_should_be_within_one_voxel_at_128);
     tcase_add_test(tc, l_room_2d_should_be_within_one_voxel_at_128);
+    tcase_add_test(tc, serpentine_corridor_distance_should_follow_the_corridor);
     tcase_add_test(tc, error_should_shrink_under_refinement_2d);
     tcase_add_test(tc, wall_with_gap_3d_should_be_within_one_voxel_at_48);
     tcase_add_test(tc, l_room_3d_error_should_shrink_from_32_to_64);

@@ -277,6 +277,43 @@ START_TEST(constant_fields_should_be_reproduced_exactly)
 }
 END_TEST
 
+START_TEST(solid_cells_should_not_break_extension)
+{
+    /* A solid slab cutting through the sphere: multigrid backend, constant and
+     * smooth fields still right on the fluid side. */
+    const int n = 40;
+    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *o = make_grid(3, n);
+    uint8_t *solid = calloc(hv_grid_count(phi), 1);
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3], cp[3], ph;
+                hv_grid_cell_center(phi, i, j, k, x);
+                closest(SPHERE, x, &ph, cp);
+                phi->v[c] = (float)ph;
+                f->v[c] = 1.75f;
+                solid[c] = (uint8_t)(x[0] > 0.3 && x[0] < 0.45);
+            }
+    hv_extender *e = NULL;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, phi->n, phi->h, solid, NULL));
+    hv_extend_stats st;
+    TL_ASSERT_OK(hv_extend_scalar(e, phi, f, o, &st));
+    double worst = 0;
+    for (size_t c = 0; c < hv_grid_count(phi); c++)
+        if (!solid[c])
+            worst = fmax(worst, fabs(o->v[c] - 1.75) / 1.75);
+        else
+            ck_assert(o->v[c] == 0.0f);
+    ck_assert_msg(worst <= 4e-6, "constant reproduced to %.3g with solid cells", worst);
+    hv_extender_destroy(&e);
+    free(solid);
+    hv_grid_destroy(&phi);
+    hv_grid_destroy(&f);
+    hv_grid_destroy(&o);
+}
+END_TEST
+
 START_TEST(out_band_should_leave_background_outside)
 {
     hv_extend_opts o;
@@ -547,6 +584,7 @@ int main(void)
     tcase_add_test(tc, circle_2d_should_match_closest_point_extension);
     tcase_add_test(tc, plain_diffusion_ratio_should_blur_more_than_closest_point);
     tcase_add_test(tc, constant_fields_should_be_reproduced_exactly);
+    tcase_add_test(tc, solid_cells_should_not_break_extension);
     tcase_add_test(tc, out_band_should_leave_background_outside);
     tcase_add_test(tc, extender_should_be_reusable_across_steps);
     tcase_add_test(tc, bad_input_should_fail_clearly);

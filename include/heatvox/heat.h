@@ -88,8 +88,9 @@ typedef struct hv_distance_stats {
     size_t unreachable_cells; /* fluid cells in regions without a source */
     int diffuse_iterations;   /* summed over stages */
     double diffuse_relres;    /* worst final relative residual of the heat solves */
-    int poisson_iterations;
-    double poisson_relres;
+    int poisson_iterations;   /* summed over restarts */
+    int poisson_restarts;     /* defect-correction restarts of the Poisson solve */
+    double poisson_relres;    /* final relative residual */
     hv_backend backend;       /* backend of the solves */
     double t_splat, t_diffuse, t_normalize, t_poisson, t_total; /* seconds */
 } hv_distance_stats;
