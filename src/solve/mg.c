@@ -34,6 +34,8 @@ typedef struct mg_state {
     int pre, post;
     int use_pcg;
     double *rd, *p, *z, *q; /* fine double work */
+    float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
+                                    the coarse level is weighted (renormalized) */
 } mg_state;
 
 /* ---------- stencil kernels ---------- */
@@ -325,6 +327,91 @@ static inline void prolong_axis(int coarsen, int nc, int i, int *I0, int *I1, fl
     }
 }
 
+/* Sum of the prolongation weights that reach non-empty coarse cells from fine
+ * cell (i,j,k): the renormalization of prolong_add on weighted coarse levels. */
+static float prolong_weight_sum(const mg_level *F, const mg_level *C, int i, int j, int k)
+{
+    const int *co = F->coarsen;
+    int I[2], J[2], K[2];
+    float wi1, wj1, wk1;
+    prolong_axis(co[0], C->n[0], i, &I[0], &I[1], &wi1);
+    prolong_axis(co[1], C->n[1], j, &J[0], &J[1], &wj1);
+    prolong_axis(co[2], C->n[2], k, &K[0], &K[1], &wk1);
+    float wi[2] = {1 - wi1, wi1}, wj[2] = {1 - wj1, wj1}, wk[2] = {1 - wk1, wk1}, ws = 0;
+    for (int c = 0; c < 2; c++)
+        for (int b = 0; b < 2; b++)
+            for (int a = 0; a < 2; a++) {
+                float w = wk[c] * wj[b] * wi[a];
+                if (w != 0 && C->a[(size_t)I[a] + C->sy * J[b] + C->sz * K[c]] != 0.0f)
+                    ws += w;
+            }
+    return ws;
+}
+
+/* Weight of coarse index I in the prolongation stencil of fine index i (one axis). */
+static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
+{
+    int I0, I1;
+    float w1;
+    prolong_axis(coarsen, nc, i, &I0, &I1, &w1);
+    return (I0 == I ? 1 - w1 : 0) + (I1 == I ? w1 : 0);
+}
+
+/* f_C = P^T r_F / 2^d: the restriction that makes the V-cycle a symmetric
+ * operator, for use as a CG preconditioner (mean-of-children restriction is not
+ * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
+ * corridors stalled near 3e-2). Gathers, for each coarse cell, the fine cells
+ * whose interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes). */
+static void restrict_transpose(const mg_state *m, int l)
+{
+    const mg_level *F = &m->lv[l];
+    mg_level *C = (mg_level *)&m->lv[l + 1];
+    const int *co = F->coarsen;
+    const float *pn = m->pnorm[l];
+    int nchild = 1;
+    for (int b = 0; b < m->dim; b++)
+        nchild *= co[b] ? 2 : 1;
+    const float scale = 1.0f / (float)nchild;
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
+    for (int K = 0; K < C->n[2]; K++)
+        for (int J = 0; J < C->n[1]; J++)
+            for (int I = 0; I < C->n[0]; I++) {
+                size_t cc = (size_t)I + C->sy * J + C->sz * K;
+                if (!C->plain && C->a[cc] == 0.0f) {
+                    C->f[cc] = 0;
+                    continue;
+                }
+                int lo[3], hi[3], CI[3] = {I, J, K};
+                for (int b = 0; b < 3; b++) {
+                    lo[b] = co[b] ? 2 * CI[b] - 1 : CI[b];
+                    hi[b] = co[b] ? 2 * CI[b] + 2 : CI[b];
+                    if (lo[b] < 0)
+                        lo[b] = 0;
+                    if (hi[b] > F->n[b] - 1)
+                        hi[b] = F->n[b] - 1;
+                }
+                float s = 0;
+                for (int k = lo[2]; k <= hi[2]; k++) {
+                    float wk = prolong_axis_weight(co[2], C->n[2], k, K);
+                    if (wk == 0)
+                        continue;
+                    for (int j = lo[1]; j <= hi[1]; j++) {
+                        float wj = prolong_axis_weight(co[1], C->n[1], j, J);
+                        if (wj == 0)
+                            continue;
+                        for (int i = lo[0]; i <= hi[0]; i++) {
+                            float w = wk * wj * prolong_axis_weight(co[0], C->n[0], i, I);
+                            if (w == 0)
+                                continue;
+                            size_t fc = (size_t)i + F->sy * j + F->sz * k;
+                            s += w * (pn ? pn[fc] : 1.0f) * F->r[fc];
+                        }
+                    }
+                }
+                C->f[cc] = s * scale;
+            }
+}
+
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
  * levels empty coarse cells are left out and the weights renormalized. */
 static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
@@ -506,7 +593,10 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
         zero_f(L->d, L->count);
     smooth(m, L, m->pre, 0);
     level_residual(m, L);
-    restrict_residual(m, L, (mg_level *)&m->lv[l + 1]);
+    if (sym)
+        restrict_transpose(m, l);
+    else
+        restrict_residual(m, L, (mg_level *)&m->lv[l + 1]);
     vcycle(m, l + 1, 0, sym);
     prolong_add(m, L, &m->lv[l + 1]);
     if (m->smoother != HV_SMOOTH_RBGS)
@@ -542,6 +632,7 @@ static void mg_destroy(void *state)
         return;
     for (int l = 0; l < m->nlev; l++) {
         mg_level *L = &m->lv[l];
+        hv_free(m->pnorm[l]);
         mg_level_free_coeffs(L);
         hv_free(L->u);
         hv_free(L->f);
@@ -593,6 +684,25 @@ static hv_status mg_create(void **state, const hv_setup *s)
                           L->count);
             goto fail;
         }
+    }
+    /* PCG restricts with P^T; renormalized prolongation needs its weight sums. */
+    for (int l = 0; m->use_pcg && l + 1 < m->nlev; l++) {
+        const mg_level *F = &m->lv[l], *C = &m->lv[l + 1];
+        if (C->plain)
+            continue;
+        float *pn = m->pnorm[l] = hv_malloc(F->count * sizeof(float));
+        if (!pn) {
+            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
+            goto fail;
+        }
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
+        for (int k = 0; k < F->n[2]; k++)
+            for (int j = 0; j < F->n[1]; j++)
+                for (int i = 0; i < F->n[0]; i++) {
+                    size_t fc = (size_t)i + F->sy * j + F->sz * k;
+                    float ws = (F->plain || F->a[fc] != 0.0f) ? prolong_weight_sum(F, C, i, j, k) : 0;
+                    pn[fc] = ws > 0 ? 1.0f / ws : 0.0f;
+                }
     }
     /* Bottom: CG work. */
     mg_level *L = &m->lv[m->nlev - 1];
@@ -757,7 +867,7 @@ static hv_status mg_solve_pcg(mg_state *m, const double *f, double *u, hv_solve_
         if (rel < 0.9 * best) {
             best = rel;
             since_best = 0;
-        } else if (++since_best >= 10) {
+        } else if (++since_best >= 50) {
             info->reason = HV_STOP_STAGNATED;
             break;
         }
