@@ -30,6 +30,7 @@ static void help(void)
         "  -o, --output FILE  the .vdb file (required; written to a temporary, then renamed)\n"
         "  --band W           narrow band half width in voxels (default 3)\n"
         "  --dense            store every voxel of the block as active\n"
+        "                     (--unsigned always writes a dense float grid, class unknown)\n"
         "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
         "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
         "                     (blue inside, red outside, black zero contour)\n"
@@ -216,8 +217,10 @@ int cmd_sdf(int argc, char **argv)
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
              band, dense ? " dense" : "");
     hv_vdb_writer *w = NULL;
+    /* An unsigned distance is no level set (no inside): a plain float grid. */
     if (!(st = hv_vdb_writer_create(&w)) &&
-        !(st = hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
+        !(st = o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
+                                   : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
         !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&
         !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
         !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&

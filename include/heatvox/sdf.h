@@ -2,20 +2,36 @@
  * Signed (and unsigned) distance volumes from triangle meshes with the signed
  * heat method on grids (Feng & Crane, "A Heat Method for Generalized Signed
  * Distance", 2024), made robust to broken meshes: holes, flipped faces,
- * duplicated sheets, soups, self-intersections.
+ * duplicated sheets, soups, self-intersections, n-gons (fanned by the readers).
  *
  * Pipeline (hv_sdf_compute):
- *   1. repair     weld, drop degenerate and duplicate faces, make orientation
- *                 consistent across manifold edges, orient components outward
- *   2. splat      area-weighted normals (or areas, unsigned) onto cell centres
- *   3. diffuse    one backward-Euler heat step per component, (I - t Lap) Y = Y0
- *   4. normalize  X = Y/|Y| on cell faces (MAC), then div X
- *   5. poisson    Lap(phi) = div X, Neumann walls
+ *   1. repair     weld by position, drop degenerate faces and faces repeating a
+ *                 vertex set (either orientation), propagate one orientation
+ *                 across manifold edges, orient components outward by winding
+ *                 number (cavities inward), close boundary loops with domed caps
+ *   2. splat      area-weighted normals (areas, unsigned) onto cell centres,
+ *                 triangles split until sub-edges are <= h/2, trilinear weights
+ *   3. diffuse    one backward-Euler step per component, (I - t Lap) Y = Y0,
+ *                 t = (t_scale h)^2, the three components sharing one solver
+ *   4. normalize  X = Y/|Y| on cell faces (MAC: the two cells' mean, normalized
+ *                 on the face); faces where Y is below the solver's error
+ *                 bound get X = 0, where phi is then harmonic and keeps the
+ *                 sign of its surroundings (maximum principle)
+ *   5. poisson    Lap(phi) = div X, Neumann walls, the same solver interface
  *   6. shift      phi -= area-weighted mean of phi at the surface samples, then
  *                 the local residual extended by normalized heat convolution
- *   7. redistance (HV_SDF_EXACT, the default) |phi| replaced by the exact
- *                 distance to the repaired triangles, keeping the heat sign
+ *   7. redistance (HV_SDF_EXACT, the default) |phi| := exact distance to the
+ *                 repaired triangles (rasterized near them, propagated by
+ *                 closest-triangle sweeps elsewhere); the sign is the heat
+ *                 method's, except within a voxel of clean closed surface
+ *                 where the angle-weighted pseudonormal decides
  * Values are negative inside. The grid is cell-centred (grid.h).
+ *
+ * Why the exact magnitude: the heat method's own phi is right near the
+ * surface but not far away (far-field error 0.3 voxel on a sphere, 5 voxels on
+ * a torus at 128^3: diffused normals are not a gradient), while its sign is
+ * robust. With HV_SDF_EXACT the error on a sphere or torus is the meshes'
+ * faceting (< 0.01 voxel over the whole grid, tests/check_sdf.c).
  */
 #ifndef HEATVOX_SDF_H
 #define HEATVOX_SDF_H

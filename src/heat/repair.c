@@ -17,6 +17,10 @@
 /* Face samples per component for its winding number, and the number of
  * largest components that take part in the nesting test. */
 #define ORIENT_SAMPLES 256
+/* Caps rise to this share of the spherical continuation of their rim: on
+ * holes cut from bunny_small and spot (5 holes of 5% of the diagonal, 8
+ * seeds, 64^3) mean inside-IoU 0.9910 flat, 0.9936 at 0.5, 0.9934 at 1. */
+#define DOME_SCALE 0.5
 #define NEST_MAX_SHELLS 64
 
 static const double *g_sort_v; /* qsort has no context argument in C11 */
@@ -360,8 +364,22 @@ typedef struct cap_ctx {
     hv_sdf_repair_report *rep;
 } cap_ctx;
 
-/* Closes one loop (vertices in cap direction). Returns HV_ERR_NOMEM or HV_OK. */
-static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t comp)
+static void face_unit_normal(const double *V, const uint32_t *t, int flipped, double n[3])
+{
+    cross_at(V, t, n);
+    double l = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int d = 0; d < 3; d++)
+        n[d] = l > 0 ? (flipped ? -n[d] : n[d]) / l : 0.0;
+}
+
+/* Closes one loop (vertices in cap direction; rimf[i] is the face along the
+ * edge loop[i] -> loop[i+1]). The cap is a dome of two rings: its height
+ * follows the rim's tilt as a spherical cap would, H = a tan(theta/2) for a
+ * rim tilted by theta against the cap's axis, scaled by DOME_SCALE and
+ * tapered to flat between 45 and 70 degrees, so that a hole in a curved wall bulges like the wall around it
+ * and the open end of a tube (theta = 90) gets a flat lid. */
+static hv_status add_cap(cap_ctx *x, const uint32_t *loop, const uint32_t *rimf, size_t k,
+                         uint32_t comp)
 {
     if (k < 3) {
         x->rep->holes_left_open++;
@@ -380,7 +398,7 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t co
                       (hi[2] - lo[2]) * (hi[2] - lo[2]));
     double diag = sqrt((b[3] - b[0]) * (b[3] - b[0]) + (b[4] - b[1]) * (b[4] - b[1]) +
                        (b[5] - b[2]) * (b[5] - b[2]));
-    size_t add_t = k == 3 ? 1 : k, add_v = k == 3 ? 0 : 1;
+    size_t add_t = k == 3 ? 1 : 3 * k, add_v = k == 3 ? 0 : k + 1;
     if (!(ext <= x->max_rel * diag) || x->nv + add_v >= UINT32_MAX || x->nt + add_t >= UINT32_MAX / 3) {
         x->rep->holes_left_open++;
         return HV_OK;
@@ -406,14 +424,60 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t co
         x->flip[x->nt] = 0;
         x->comp[x->nt++] = comp;
     } else {
-        memcpy(x->V + 3 * x->nv, c, sizeof c);
+        /* Cap axis: the loop's Newell normal, which points out of the solid
+         * for a cap traversed in cap direction. */
+        double N[3] = {0, 0, 0}, a = 0, ct = 0, wsum = 0;
         for (size_t i = 0; i < k; i++) {
-            uint32_t *t = x->T + 3 * x->nt;
-            t[0] = loop[i], t[1] = loop[(i + 1) % k], t[2] = (uint32_t)x->nv;
-            x->flip[x->nt] = 0;
-            x->comp[x->nt++] = comp;
+            const double *p = x->V + 3 * (size_t)loop[i], *q = x->V + 3 * (size_t)loop[(i + 1) % k];
+            N[0] += (p[1] - q[1]) * (p[2] + q[2]);
+            N[1] += (p[2] - q[2]) * (p[0] + q[0]);
+            N[2] += (p[0] - q[0]) * (p[1] + q[1]);
         }
-        x->nv++;
+        double nl = sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);
+        double H = 0;
+        if (nl > 0) {
+            for (int d = 0; d < 3; d++)
+                N[d] /= nl;
+            for (size_t i = 0; i < k; i++) {
+                const double *p = x->V + 3 * (size_t)loop[i], *q = x->V + 3 * (size_t)loop[(i + 1) % k];
+                double r[3], e = 0, nf[3];
+                for (int d = 0; d < 3; d++) {
+                    r[d] = p[d] - c[d];
+                    e += (q[d] - p[d]) * (q[d] - p[d]);
+                }
+                double rn = r[0] * N[0] + r[1] * N[1] + r[2] * N[2];
+                a += sqrt(fmax(0.0, r[0] * r[0] + r[1] * r[1] + r[2] * r[2] - rn * rn)) / (double)k;
+                face_unit_normal(x->V, x->T + 3 * (size_t)rimf[i], x->flip[rimf[i]], nf);
+                e = sqrt(e);
+                ct += e * (nf[0] * N[0] + nf[1] * N[1] + nf[2] * N[2]);
+                wsum += e;
+            }
+            ct = wsum > 0 ? ct / wsum : 0;
+            double theta = acos(ct < -1 ? -1 : ct > 1 ? 1 : ct) * 180 / M_PI;
+            double taper = theta <= 45 ? 1 : theta >= 70 ? 0 : (70 - theta) / 25;
+            H = DOME_SCALE * taper * a * tan(0.5 * theta * M_PI / 180);
+        } else {
+            N[0] = N[1] = N[2] = 0;
+        }
+        /* Inner ring halfway in, at 3/4 of the dome height; apex at H. */
+        size_t ring = x->nv, apex = x->nv + k;
+        for (size_t i = 0; i < k; i++)
+            for (int d = 0; d < 3; d++)
+                x->V[3 * (ring + i) + d] = 0.5 * (c[d] + x->V[3 * (size_t)loop[i] + d]) + 0.75 * H * N[d];
+        for (int d = 0; d < 3; d++)
+            x->V[3 * apex + d] = c[d] + H * N[d];
+        for (size_t i = 0; i < k; i++) {
+            size_t j = (i + 1) % k;
+            uint32_t tri[3][3] = {{loop[i], loop[j], (uint32_t)(ring + j)},
+                                  {loop[i], (uint32_t)(ring + j), (uint32_t)(ring + i)},
+                                  {(uint32_t)(ring + i), (uint32_t)(ring + j), (uint32_t)apex}};
+            for (int q = 0; q < 3; q++) {
+                memcpy(x->T + 3 * x->nt, tri[q], sizeof tri[q]);
+                x->flip[x->nt] = 0;
+                x->comp[x->nt++] = comp;
+            }
+        }
+        x->nv += k + 1;
     }
     x->rep->holes_filled++;
     x->rep->cap_triangles += add_t;
@@ -421,16 +485,15 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, size_t k, uint32_t co
     return HV_OK;
 }
 
-/* Closes boundary loops with a fan around their centroid (a single triangle
- * for three corners), oriented against the faces along the loop. A walk that
+/* Closes boundary loops with domed caps (add_cap; a single triangle for three
+ * corners), oriented against the faces along the loop. A walk that
  * comes back to a vertex it already passed (two holes touching at a vertex)
  * is split there, so each simple loop gets its own cap. Loops wider than
  * max_rel times their component's bounding-box diagonal stay open: the rim of
  * a bowl or of a single sheet is not a hole. Without caps the heat method
  * cannot close the end of an open tube (the wall normals have no component
- * along the axis, so the tube continues to the grid boundary); a fan closes
- * it where a flat cap belongs. On a hole in a curved wall the cap is a chord,
- * as the winding number's closure is. */
+ * along the axis, so the tube continues to the grid boundary); a flat lid
+ * closes it there. */
 static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp, uint8_t **flipp,
                             uint32_t **compp, const edge_rec *E, const uint32_t *estart, size_t ne,
                             double max_rel, hv_sdf_repair_report *rep)
@@ -448,10 +511,11 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
     uint32_t *from = malloc(nb * sizeof *from), *to = malloc(nb * sizeof *to), *ecomp = malloc(nb * sizeof *ecomp);
     uint32_t *start = calloc(nv0 + 1, sizeof *start), *adj = malloc(nb * sizeof *adj);
     uint8_t *used = calloc(nb, 1);
-    uint32_t *loop = malloc((nb + 1) * sizeof *loop);
+    uint32_t *loop = malloc((nb + 1) * sizeof *loop), *loopf = malloc((nb + 1) * sizeof *loopf);
+    uint32_t *eface = malloc(nb * sizeof *eface);
     int64_t *pos = malloc(nv0 * sizeof *pos);
     double *cbox = malloc(6 * (ncomp ? ncomp : 1) * sizeof *cbox);
-    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !pos || !cbox)
+    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !loopf || !eface || !pos || !cbox)
         goto out;
     x.cbox = cbox;
     for (size_t v = 0; v < nv0; v++)
@@ -478,6 +542,7 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
         from[nb] = fwd ? hi : lo;
         to[nb] = fwd ? lo : hi;
         ecomp[nb] = x.comp[r->face];
+        eface[nb] = r->face;
         start[from[nb] + 1]++;
         nb++;
     }
@@ -500,6 +565,7 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
         for (;;) {
             used[e] = 1;
             pos[v] = (int64_t)k;
+            loopf[k] = eface[e];
             loop[k++] = v;
             uint32_t w = to[e];
             if (pos[w] >= 0) {
@@ -508,7 +574,7 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
                 size_t p = (size_t)pos[w];
                 for (size_t i = p; i < k; i++)
                     pos[loop[i]] = -1;
-                if (add_cap(&x, loop + p, k - p, ecomp[e0]))
+                if (add_cap(&x, loop + p, loopf + p, k - p, ecomp[e0]))
                     goto out;
                 k = p;
             }
@@ -533,7 +599,8 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
     st = HV_OK;
 out:
     *Vp = x.V, *Tp = x.T, *flipp = x.flip, *compp = x.comp, *nvp = x.nv, *ntp = x.nt;
-    free(from), free(to), free(ecomp), free(start), free(adj), free(used), free(loop), free(pos), free(cbox);
+    free(from), free(to), free(ecomp), free(start), free(adj), free(used), free(loop), free(loopf);
+    free(eface), free(pos), free(cbox);
     if (st)
         return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory filling holes");
     return HV_OK;
@@ -692,15 +759,21 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
                                 (flags & HV_SDF_REPAIR_ORIENT) != 0)))
         goto fail;
     rep.components = nc;
-    for (size_t f = 0; f < ntk; f++)
-        rep.faces_flipped += flip[f];
-    size_t nt_orig = ntk;
+    size_t nt_orig = ntk, dummy = 0;
+    /* Outward before filling, so that domes bulge out of the solid; again
+     * after, when the caps have closed components whose orientation was
+     * ambiguous while open. */
+    if ((flags & HV_SDF_REPAIR_OUTWARD) &&
+        (st = orient_outward(V, T, ntk, flip, comp, nc, &dummy, &rep.components_flipped)))
+        goto fail;
     if ((flags & HV_SDF_REPAIR_FILL_HOLES) &&
         (st = fill_holes(&V, &nvo, &T, &ntk, &flip, &comp, E, estart, ne, max_hole, &rep)))
         goto fail;
-    if ((flags & HV_SDF_REPAIR_OUTWARD) &&
-        (st = orient_outward(V, T, ntk, flip, comp, nc, &rep.faces_flipped, &rep.components_flipped)))
+    if ((flags & HV_SDF_REPAIR_OUTWARD) && rep.holes_filled &&
+        (st = orient_outward(V, T, ntk, flip, comp, nc, &dummy, &rep.components_flipped)))
         goto fail;
+    for (size_t f = 0; f < nt_orig; f++)
+        rep.faces_flipped += flip[f];
     /* Edge counts over the faces before filling; caps close their loops. */
     count_edges(E, estart, ne, flip, &rep.boundary_edges, &rep.nonmanifold_edges,
                 &rep.inconsistent_after);
