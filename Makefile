@@ -107,7 +107,7 @@ check: all $(TESTS)
 	@pass=0; fail=0; bad=""; \
 	for t in $(TESTS); do \
 	  echo "== $$t"; \
-	  CK_FORK=no HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$t.log 2>&1; rc=$$?; cat $$t.log; \
+	  CK_FORK=no GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$t.log 2>&1; rc=$$?; cat $$t.log; \
 	  line=$$(grep -E '^[0-9]+%: Checks: ' $$t.log | tail -n 1); \
 	  c=$$(echo "$$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/'); \
 	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \

@@ -16,7 +16,7 @@ static int usage(FILE *out)
             "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
             "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb\n"
             "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 x1 y1 z1]\n"
-            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend auto|mg|fftw]\n"
+            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend auto|mg|fftw|opencl]\n"
             "                        [--unreachable V] [--threads T] [-q] [-v]\n"
             "\n"
             "Geodesic distance from the sources through free space, around obstacles, by the\n"
@@ -395,8 +395,8 @@ int cmd_distance(int argc, char **argv)
             if (cli_parse_double(v, &o.t_scale) || o.t_scale <= 0)
                 return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &o.backend) || o.backend == HV_BACKEND_OPENCL)
-                return cli_usage_error(CMD, "--backend must be auto, mg or fftw, got '%s'", v);
+            if (hv_backend_parse(v, &o.backend))
+                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
         } else if (!strcmp(a, "--unreachable")) {
             if (parse_unreachable(v, &o.unreachable))
                 return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);

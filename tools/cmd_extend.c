@@ -16,7 +16,7 @@ static int usage(FILE *out)
     fprintf(out,
             "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...] -o OUT.vdb\n"
             "                      [--band W] [--t-scale K] [--dense | --out-band W] [--plain]\n"
-            "                      [--backend auto|mg|fftw] [--threads T] [-q] [-v]\n"
+            "                      [--backend auto|mg|fftw|opencl] [--threads T] [-q] [-v]\n"
             "\n"
             "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
             "velocity) off the zero set of the level set by diffusion (heat.h): the values\n"
@@ -122,8 +122,8 @@ int cmd_extend(int argc, char **argv)
             if (cli_parse_double(v, &o.out_band) || o.out_band <= 0)
                 return cli_usage_error(CMD, "--out-band must be positive (voxels), got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &o.backend) || o.backend == HV_BACKEND_OPENCL)
-                return cli_usage_error(CMD, "--backend must be auto, mg or fftw, got '%s'", v);
+            if (hv_backend_parse(v, &o.backend))
+                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
             if (cli_parse_int(v, &threads) || threads < 1)
                 return cli_usage_error(CMD, "--threads must be >= 1, got '%s'", v);

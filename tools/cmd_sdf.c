@@ -41,7 +41,7 @@ static void help(void)
         "                     to the triangles (sign from the heat method either way)\n"
         "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
         "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
-        "  --backend B        linear solver: auto, mg, fftw (default auto)\n"
+        "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
         "  --threads N        worker threads (default: all cores)\n"
         "  -v                 progress and details on stderr\n"
         "  -q                 no summary line\n"
