@@ -39,6 +39,7 @@ LIB_SO  := $(BUILD)/libheatvox.so
 BIN     := $(BUILD)/heatvox
 
 .PHONY: all deps check sanitize bench demo install format clean
+.SECONDARY:
 all: $(LIB_A) $(LIB_SO) $(BIN)
 
 deps: $(STAMP)
@@ -59,7 +60,7 @@ $(STAMP):
 
 $(BUILD)/gen/kernels.c: $(CL_SRC) Makefile | $(STAMP)
 	@mkdir -p $(dir $@)
-	@{ echo '/* Generated from kernels/*.cl by the Makefile: do not edit. */'; \
+	@{ echo '/* Generated from the OpenCL sources in kernels/ by the Makefile: do not edit. */'; \
 	   echo '#include <stddef.h>'; \
 	   for f in $(CL_SRC); do \
 	     n=$$(basename $$f .cl | tr -c 'a-zA-Z0-9_\n' _); \
@@ -106,7 +107,7 @@ check: all $(TESTS)
 	@pass=0; fail=0; bad=""; \
 	for t in $(TESTS); do \
 	  echo "== $$t"; \
-	  CK_FORK=no HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$t.log 2>&1; rc=$$?; cat $$t.log; \
+	  CK_FORK=no GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$t.log 2>&1; rc=$$?; cat $$t.log; \
 	  line=$$(grep -E '^[0-9]+%: Checks: ' $$t.log | tail -n 1); \
 	  c=$$(echo "$$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/'); \
 	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \

@@ -22,7 +22,18 @@ int cli_parse_double(const char *s, double *out);
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
 int cmd_bench(int argc, char **argv);
+int cmd_bench_sdf(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
+int cmd_devices(int argc, char **argv);
+int cmd_batch(int argc, char **argv);
+int cmd_sdf2d(int argc, char **argv);
+int cmd_slice(int argc, char **argv);
+int cmd_make_scenes(int argc, char **argv);
+int cmd_distance(int argc, char **argv);
+int cmd_extend(int argc, char **argv);
+
+/* heatvox bench extend (tools/bench_extend.c). */
+int bench_extend(int argc, char **argv);
 
 #endif

@@ -32,6 +32,8 @@ static void help(void)
         "  --dense            store every voxel of the block as active\n"
         "                     (--unsigned always writes a dense float grid, class unknown)\n"
         "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
+        "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
+        "                     (blue inside, red outside, black zero contour)\n"
         "  --name NAME        grid name in the .vdb (default \"sdf\")\n"
         "method:\n"
         "  --unsigned         unsigned distance to the mesh (no inside)\n"
@@ -39,7 +41,7 @@ static void help(void)
         "                     to the triangles (sign from the heat method either way)\n"
         "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
         "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
-        "  --backend B        linear solver: auto, mg, fftw (default auto)\n"
+        "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
         "  --threads N        worker threads (default: all cores)\n"
         "  -v                 progress and details on stderr\n"
         "  -q                 no summary line\n"
@@ -79,7 +81,7 @@ static int check_writable(const char *path)
 
 int cmd_sdf(int argc, char **argv)
 {
-    const char *mesh_path = NULL, *out = NULL, *npy = NULL, *name = "sdf";
+    const char *mesh_path = NULL, *out = NULL, *npy = NULL, *name = "sdf", *preview = NULL;
     double band = 3.0;
     int dense = 0, have_res = 0, have_h = 0, threads = 0;
     hv_sdf_opts o;
@@ -101,6 +103,9 @@ int cmd_sdf(int argc, char **argv)
         } else if (!strcmp(a, "--npy")) {
             NEED(1);
             npy = argv[++i];
+        } else if (!strcmp(a, "--preview")) {
+            NEED(1);
+            preview = argv[++i];
         } else if (!strcmp(a, "--name")) {
             NEED(1);
             name = argv[++i];
@@ -174,7 +179,7 @@ int cmd_sdf(int argc, char **argv)
     if (!have_h)
         o.voxel_size = 0;
     o.threads = threads;
-    if (check_writable(out) || (npy && check_writable(npy)))
+    if (check_writable(out) || (npy && check_writable(npy)) || (preview && check_writable(preview)))
         return HV_EXIT_FAIL;
     static int tty;
     tty = isatty(2);
@@ -230,6 +235,10 @@ int cmd_sdf(int argc, char **argv)
     if (npy && (st = hv_write_npy(npy, g))) {
         hv_grid_destroy(&g);
         return cli_fail("sdf", npy, st);
+    }
+    if (preview && (st = hv_png_write_preview(preview, g, 0))) {
+        hv_grid_destroy(&g);
+        return cli_fail("sdf", preview, st);
     }
     tw = hv_now() - tw;
     hv_grid_destroy(&g);

@@ -7,9 +7,13 @@
 #include "heatvox/grid.h"
 #include "heatvox/ops.h"
 #include "heatvox/solve.h"
+#include "heatvox/opencl.h"
 #include "heatvox/mesh.h"
 #include "heatvox/io.h"
 #include "heatvox/vdb.h"
 #include "heatvox/sdf.h"
+#include "heatvox/image.h"
+#include "heatvox/curves.h"
+#include "heatvox/heat.h"
 
 #endif

@@ -36,7 +36,8 @@ typedef enum hv_backend {
 typedef enum hv_smoother {
     HV_SMOOTH_RBGS = 0,    /* red-black Gauss-Seidel (CPU default) */
     HV_SMOOTH_JACOBI,      /* weighted Jacobi, omega 6/7 (3D) or 4/5 (2D) */
-    HV_SMOOTH_CHEBYSHEV    /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+    HV_SMOOTH_CHEBYSHEV,   /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+    HV_SMOOTH_AUTO         /* the backend's default: RBGS (mg), CHEBYSHEV (opencl) */
 } hv_smoother;
 
 typedef enum hv_stop_reason {
@@ -63,7 +64,7 @@ typedef struct hv_problem {
 
 typedef struct hv_solver_opts {
     hv_backend backend;     /* default AUTO */
-    hv_smoother smoother;   /* default RBGS (mg), CHEBYSHEV (opencl) */
+    hv_smoother smoother;   /* default AUTO: RBGS (mg), CHEBYSHEV (opencl) */
     double tol;             /* relative residual ||f - A u|| / ||f||, default 1e-6; >= 1e-12 */
     int max_iter;           /* outer iterations (cycles), default 50 */
     int pre_smooth;         /* default 2 */
@@ -105,6 +106,19 @@ hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_i
  * info is NULL or an array of k entries. */
 hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
                                hv_solve_info *info);
+
+#define HV_MAX_LEVELS 40
+
+typedef struct hv_solver_stats {
+    int levels;                  /* multigrid levels (1 for direct solvers) */
+    int n[HV_MAX_LEVELS][3];     /* cells per axis on each level */
+    int plain[HV_MAX_LEVELS];    /* 1 where a level needs no coefficient arrays */
+    double bytes_per_iteration;  /* modelled memory traffic of one outer iteration */
+    size_t memory_bytes;         /* memory held by the backend's arrays */
+} hv_solver_stats;
+
+/* Describes the backend's data structures (for benchmarks and tests). */
+hv_status hv_solver_get_stats(const hv_solver *s, hv_solver_stats *st);
 
 hv_backend hv_solver_backend(const hv_solver *s);
 const hv_problem *hv_solver_problem(const hv_solver *s);

@@ -32,13 +32,16 @@ typedef struct hv_backend_ops {
     hv_status (*solve_many)(void *state, int k, const double *const *f, double *const *u,
                             hv_solve_info *info);
     void (*destroy)(void *state);
+    /* Fills levels, sizes, traffic model and memory; NULL: the front end reports one level. */
+    void (*stats)(const void *state, hv_solver_stats *st);
 } hv_backend_ops;
 
-/* The multigrid backend always builds; the others are weak so that a build
- * without FFTW or OpenCL still links and reports HV_ERR_UNSUPPORTED. */
+/* Every backend always builds and is referenced strongly: a weak undefined
+ * symbol would not pull its object out of libheatvox.a. OpenCL links only the
+ * ICD loader; without a platform its create fails with HV_ERR_UNSUPPORTED. */
 extern const hv_backend_ops hv_backend_mg_ops;
-extern const hv_backend_ops hv_backend_fftw_ops __attribute__((weak));
-extern const hv_backend_ops hv_backend_opencl_ops __attribute__((weak));
+extern const hv_backend_ops hv_backend_fftw_ops;
+extern const hv_backend_ops hv_backend_opencl_ops;
 
 /* Records relres into info->history (capped) and bumps nhistory. */
 static inline void hv_info_push(hv_solve_info *info, double relres)

@@ -13,8 +13,13 @@
 #ifndef HV_SOLVE_MG_LEVEL_H
 #define HV_SOLVE_MG_LEVEL_H
 
+#include "backend.h"
+
 #include <stddef.h>
 #include <stdint.h>
+
+#define MG_MAX_LEVELS 40
+#define MG_BOTTOM_CELLS 512
 
 typedef struct mg_level {
     int n[3];
@@ -33,5 +38,81 @@ typedef struct mg_level {
     int32_t *region;
     double *bx, *bb, *br, *bp, *bq;
 } mg_level;
+
+/* The host-side hierarchy that every multigrid backend (CPU, OpenCL) builds the
+ * same way: level sizes, coarsening flags, coefficients (a, w, dinv on weighted
+ * levels), Chebyshev bounds and the bottom level's regions (Poisson only).
+ * Work vectors (u, f, r, d, b*) are left NULL for the backend to allocate. */
+typedef struct mg_hierarchy {
+    int dim;
+    double alpha;
+    int nlev;
+    mg_level lv[MG_MAX_LEVELS];
+} mg_hierarchy;
+
+/* Builds H for setup s; with_lmax estimates lmax (Chebyshev) on every level.
+ * On failure H holds nothing to free. */
+hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax);
+/* Frees what mg_hierarchy_build allocated (coefficients and bottom regions). */
+void mg_hierarchy_free(mg_hierarchy *H);
+void mg_level_free_coeffs(mg_level *L);
+
+/* Levels, sizes, a memory-traffic model of one outer iteration and memory held,
+ * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
+void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                    int post, int pcg, hv_solver_stats *st);
+
+/* Diagonal of the operator at cell (i,j,k) (plain or weighted level). */
+double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
+/* y = A x in double on a level. */
+void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
+
+/* Index of the axis-a face (i,j,k) (the low face of cell (i,j,k)). */
+static inline size_t mg_face_index(const mg_level *L, int a, int i, int j, int k)
+{
+    size_t m0 = (size_t)L->n[0] + (a == 0), m1 = (size_t)L->n[1] + (a == 1);
+    return (size_t)i + m0 * ((size_t)j + m1 * (size_t)k);
+}
+
+/* Off-diagonal sum  sum_faces c_b w_f u_nb  and diagonal at cell (i,j,k).
+ * m is anything with fields dim and alpha; the body serves float and double
+ * vectors. kernels/mg.cl computes the same stencil on devices. */
+#define MG_STENCIL(L, m, U, i, j, k, c, S, D)                                                     \
+    do {                                                                                           \
+        if ((L)->plain) {                                                                          \
+            double cx_ = (L)->c[0], cy_ = (L)->c[1], cz_ = (L)->c[2];                              \
+            D = (m)->alpha;                                                                        \
+            S = 0;                                                                                 \
+            if (i > 0) { S += cx_ * U[c - 1]; D += cx_; }                                          \
+            if (i < (L)->n[0] - 1) { S += cx_ * U[c + 1]; D += cx_; }                              \
+            if (j > 0) { S += cy_ * U[c - (L)->sy]; D += cy_; }                                    \
+            if (j < (L)->n[1] - 1) { S += cy_ * U[c + (L)->sy]; D += cy_; }                        \
+            if ((m)->dim == 3) {                                                                   \
+                if (k > 0) { S += cz_ * U[c - (L)->sz]; D += cz_; }                                \
+                if (k < (L)->n[2] - 1) { S += cz_ * U[c + (L)->sz]; D += cz_; }                    \
+            }                                                                                      \
+        } else {                                                                                   \
+            const float *wx_ = (L)->w[0], *wy_ = (L)->w[1];                                        \
+            size_t fx_ = mg_face_index(L, 0, i, j, k), fy_ = mg_face_index(L, 1, i, j, k);         \
+            double wl_, wh_;                                                                       \
+            D = (m)->alpha * (L)->a[c];                                                            \
+            S = 0;                                                                                 \
+            wl_ = wx_[fx_]; wh_ = wx_[fx_ + 1];                                                    \
+            if (wl_ != 0) S += (L)->c[0] * wl_ * U[c - 1];                                         \
+            if (wh_ != 0) S += (L)->c[0] * wh_ * U[c + 1];                                         \
+            D += (L)->c[0] * (wl_ + wh_);                                                          \
+            wl_ = wy_[fy_]; wh_ = wy_[fy_ + (size_t)(L)->n[0]];                                    \
+            if (wl_ != 0) S += (L)->c[1] * wl_ * U[c - (L)->sy];                                   \
+            if (wh_ != 0) S += (L)->c[1] * wh_ * U[c + (L)->sy];                                   \
+            D += (L)->c[1] * (wl_ + wh_);                                                          \
+            if ((m)->dim == 3) {                                                                   \
+                size_t fz_ = mg_face_index(L, 2, i, j, k);                                         \
+                wl_ = (L)->w[2][fz_]; wh_ = (L)->w[2][fz_ + (L)->sz];                              \
+                if (wl_ != 0) S += (L)->c[2] * wl_ * U[c - (L)->sz];                               \
+                if (wh_ != 0) S += (L)->c[2] * wh_ * U[c + (L)->sz];                               \
+                D += (L)->c[2] * (wl_ + wh_);                                                      \
+            }                                                                                      \
+        }                                                                                          \
+    } while (0)
 
 #endif

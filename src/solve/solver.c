@@ -59,7 +59,7 @@ void hv_solver_opts_default(hv_solver_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->backend = HV_BACKEND_AUTO;
-    o->smoother = HV_SMOOTH_RBGS;
+    o->smoother = HV_SMOOTH_AUTO;
     o->tol = 1e-6;
     o->max_iter = 50;
     o->pre_smooth = 2;
@@ -117,7 +117,7 @@ static const hv_backend_ops *backend_ops(hv_backend b)
 {
     switch (b) {
     case HV_BACKEND_MG: return &hv_backend_mg_ops;
-    case HV_BACKEND_FFTW: return &hv_backend_fftw_ops;  /* NULL when not built in */
+    case HV_BACKEND_FFTW: return &hv_backend_fftw_ops;
     case HV_BACKEND_OPENCL: return &hv_backend_opencl_ops;
     default: return NULL;
     }
@@ -185,13 +185,14 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
         hv_solver_destroy(&sv);
         return hv_error(HV_ERR_UNSUPPORTED, "the FFTW backend solves plain boxes only; this grid has solid cells (use mg)");
     }
+    if (o.smoother == HV_SMOOTH_AUTO)
+        o.smoother = b == HV_BACKEND_OPENCL ? HV_SMOOTH_CHEBYSHEV : HV_SMOOTH_RBGS;
     s->o = o;
     sv->backend = b;
     sv->ops = backend_ops(b);
     if (!sv->ops) {
         hv_solver_destroy(&sv);
-        return hv_error(HV_ERR_UNSUPPORTED, "solver: backend '%s' is not built into this heatvox",
-                        hv_backend_name(b));
+        return hv_error(HV_ERR_INVALID_ARG, "solver: unknown backend %d", (int)b);
     }
     if ((st = sv->ops->create(&sv->state, s))) {
         sv->state = NULL;
@@ -278,6 +279,19 @@ hv_status hv_solver_solve_many(hv_solver *sv, int k, const float *const *f, floa
         if (st)
             return st;
     }
+    return HV_OK;
+}
+
+hv_status hv_solver_get_stats(const hv_solver *sv, hv_solver_stats *st)
+{
+    if (!sv || !st)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_get_stats: NULL argument");
+    memset(st, 0, sizeof *st);
+    st->levels = 1;
+    memcpy(st->n[0], sv->setup.p.n, sizeof st->n[0]);
+    st->plain[0] = sv->setup.p.solid == NULL;
+    if (sv->ops->stats)
+        sv->ops->stats(sv->state, st);
     return HV_OK;
 }
 

@@ -1,0 +1,125 @@
+/*
+ * 2D curves and their signed distance: polylines read from a small text format
+ * or from SVG, and the signed heat method on a 2D cell-centred grid (the
+ * 5-point Laplacian), robust to broken input: gaps, flipped segments,
+ * overlapping and duplicated pieces.
+ *
+ * Text format (.txt, .curves; one command per line, '#' starts a comment):
+ *     M x y     start a new polyline at (x, y)
+ *     L x y     line from the current point to (x, y)
+ *     Z         close the current polyline (a segment back to its first point)
+ *     x0 y0 x1 y1 ...   a whole open polyline on one line (at least two points)
+ * Numbers are decimal (C syntax); commas may separate them. Coordinates are
+ * world units with y up.
+ *
+ * SVG (.svg): every <path d="...">, <polygon points="..."> and
+ * <polyline points="..."> element. Path commands M L H V Z in absolute and
+ * relative forms (implicit repeats: pairs after M/m are line-tos), plus C S Q T
+ * (cubic and quadratic Bezier, flattened into 16 segments each). Arcs (A) are
+ * not supported (an error naming the byte offset). transform attributes,
+ * <use> and CSS are ignored. SVG's y axis points down; the reader negates y so
+ * the drawing keeps its look in heatvox's y-up grids.
+ *
+ * Orientation: a segment a -> b has its outward normal on its right,
+ * (b - a) rotated by -90 degrees, so a counter-clockwise closed curve has
+ * outward normals. Distances are negative inside.
+ */
+#ifndef HEATVOX_CURVES_H
+#define HEATVOX_CURVES_H
+
+#include "grid.h"
+#include "solve.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct hv_curves {
+    size_t npoints;
+    double *pts;      /* 2 * npoints coordinates, owned */
+    size_t nlines;
+    size_t *start;    /* nlines + 1 offsets into the points: polyline k is points
+                         start[k] .. start[k+1]-1, owned */
+    uint8_t *closed;  /* nlines flags: 1 = a segment joins the last point to the first */
+} hv_curves;
+
+/* Reads curves, choosing the format by extension (.svg, else the text format).
+ * Errors name the file and the line (text) or byte offset (SVG). A file without
+ * any segment is an error. The caller owns *out (hv_curves_destroy). */
+hv_status hv_curves_read(const char *path, hv_curves **out);
+
+/* Parses curves from memory; `name` is used in messages. svg selects the format. */
+hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *name,
+                          hv_curves **out);
+
+/* Builds curves from arrays (copied): npoints points, nlines polylines. */
+hv_status hv_curves_from_arrays(hv_curves **out, const double *pts, size_t npoints,
+                                const size_t *start, size_t nlines, const uint8_t *closed);
+
+void hv_curves_destroy(hv_curves **c);
+
+/* Number of segments (zero-length ones included). */
+size_t hv_curves_segments(const hv_curves *c);
+
+/* Bounds of the points; HV_ERR_INVALID_ARG when there are none. */
+hv_status hv_curves_bounds(const hv_curves *c, double lo[2], double hi[2]);
+
+typedef struct hv_sdf2d_opts {
+    int res;            /* cells along the longest axis of the padded box; default 256 */
+    double voxel_size;  /* h; used when > 0 instead of res */
+    int pad;            /* cells between the curves' bounds and the block; default 8 */
+    int use_bbox;       /* 1: bbox below is the block (pad ignored) */
+    double bbox[4];     /* x0 y0 x1 y1 */
+    int heat_magnitude; /* 1: |phi| from the heat method; 0 (default): exact distance to the
+                           segments with the heat method's sign */
+    double t_scale;     /* diffusion time (t_scale h)^2; default 1 */
+    int repair;         /* 1 (default): weld endpoints, drop duplicates, orient (below) */
+    double weld_tol;    /* endpoints closer than weld_tol * h are one point; default 1e-3 */
+    hv_backend backend; /* default AUTO */
+    double tol;         /* solver relative residual; default 1e-10 */
+} hv_sdf2d_opts;
+
+/*
+ * Repair (repair = 1):
+ *  1. weld endpoints closer than weld_tol * h, drop zero-length segments, and
+ *     split segments at points lying on them (within weld_tol * h), so that
+ *     overlapping collinear pieces become duplicates;
+ *  2. drop segments repeating the endpoints of an earlier one (either way);
+ *  3. join segments into chains through points used by exactly two segments
+ *     and make each chain's direction consistent, keeping the direction that
+ *     the larger length of its segments had (a vote);
+ *  4. open chains are turned to agree with each other: the coupling of two
+ *     chains through their generalized winding numbers depends only on their
+ *     end points (see sdf2d.c) and is positive when one continues the other
+ *     or when they face each other as two sides of one shape;
+ *  5. loops (closed chains, and groups of strongly coupled open chains) are
+ *     oriented by nesting: counter-clockwise when inside an even number of
+ *     other loops (|generalized winding number| > 1/2), clockwise when odd.
+ * A lone straight chain has no inside: it keeps the direction it was drawn in.
+ */
+typedef struct hv_sdf2d_stats {
+    int n[2];
+    double h;
+    double origin[2];
+    int levels;
+    size_t segments_in, segments_out;
+    size_t points_welded, zero_length_removed, duplicates_removed;
+    size_t segments_split;   /* segments cut at points lying on them (overlaps) */
+    size_t segments_flipped; /* by the repair */
+    size_t chains, cycles;
+    size_t dead_faces;
+    hv_backend backend;
+    double t_repair, t_splat, t_diffuse, t_normalize, t_poisson, t_distance, t_total;
+} hv_sdf2d_stats;
+
+void hv_sdf2d_opts_default(hv_sdf2d_opts *o);
+
+/* Signed distance of curves c on a new 2D grid (dim 2, origin[2] = 0). opts and
+ * stats may be NULL. The caller owns *out. */
+hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid **out,
+                        hv_sdf2d_stats *stats);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,696 @@
+/* Extension of scalar and vector fields off a level set by diffusion (heat.h):
+ * the vector heat method's split (Sharp, Soliman & Crane 2019) in flat space,
+ * where the connection Laplacian acts on each component, evaluated at the
+ * closest point where phi is a distance. */
+#include "heatvox/heat.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MAX_LEVELS 8
+/* Fields per hv_extend_many call (each takes up to 4 right-hand sides). */
+#define MAX_FIELDS_PER_CALL 64
+#define LEVEL_FACTOR 16.0
+/* A level's solve covers the cells it must answer for plus BOX_MARGIN sqrt(t)
+ * on every side: Neumann walls there reflect e^{-2 BOX_MARGIN} (6e-6) of what
+ * reaches them. */
+#define BOX_MARGIN 6.0
+/* Ratios are trusted where the diffused weight is RELIABLE times the solve's
+ * pointwise error bound (relres * ||rhs||_2; the heat operator's inverse has
+ * norm <= 1). */
+#define RELIABLE 1e3
+/* |grad phi| must lie in this range for phi to be taken as a distance. */
+#define GRAD_MIN 0.5
+#define GRAD_MAX 1.5
+
+struct hv_extender {
+    int dim, n[3];
+    double h;
+    size_t count;
+    uint8_t *solid;                /* owned copy or NULL */
+    hv_extend_opts o;
+    hv_solver *sv[MAX_LEVELS];     /* level l: t * 16^l, built on first use */
+    int blo[MAX_LEVELS][3];        /* the box level l's solver was built for */
+    int bn[MAX_LEVELS][3];
+    double *fd, *ud;               /* one right-hand side and solution (double) */
+    float *w;                      /* weights */
+    float *sol;                    /* solutions of the current level, interleaved: right-hand
+                                      side r of cell c at c * nsol + r (a closest point's 8
+                                      corners then cost a few cache lines for all fields) */
+    int nsol, capsol;
+};
+
+void hv_extend_opts_default(hv_extend_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->band = 1.5;
+    o->t_scale = 0.5;
+    o->closest_point = 1;
+    o->out_band = 0;
+    o->background = 0;
+    o->max_levels = 6;
+    o->backend = HV_BACKEND_AUTO;
+    o->tol = 1e-10;
+}
+
+hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double h,
+                             const uint8_t *solid, const hv_extend_opts *opts)
+{
+    if (!out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_extender_create: out is NULL");
+    *out = NULL;
+    hv_status st = hv_check_dims(dim, n, h, 2 * sizeof(double) + 6 * sizeof(float));
+    if (st)
+        return st;
+    hv_extend_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_extend_opts_default(&o);
+    if (!(o.band > 0) || !isfinite(o.band))
+        return hv_error(HV_ERR_INVALID_ARG, "extend: band must be positive (voxels), got %g", o.band);
+    if (!(o.t_scale > 0) || !isfinite(o.t_scale))
+        return hv_error(HV_ERR_INVALID_ARG, "extend: t_scale must be positive, got %g", o.t_scale);
+    if (!(o.out_band >= 0) || !isfinite(o.out_band))
+        return hv_error(HV_ERR_INVALID_ARG, "extend: out_band must be >= 0 (0 = every cell), got %g",
+                        o.out_band);
+    if (o.max_levels < 1 || o.max_levels > MAX_LEVELS)
+        return hv_error(HV_ERR_INVALID_ARG, "extend: max_levels must be in 1..%d, got %d", MAX_LEVELS,
+                        o.max_levels);
+    if (!(o.tol >= 1e-12) || !(o.tol < 1))
+        return hv_error(HV_ERR_INVALID_ARG, "extend: tol must be in [1e-12, 1), got %g", o.tol);
+    hv_extender *e = calloc(1, sizeof *e);
+    if (!e)
+        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+    e->dim = dim;
+    e->n[0] = n[0];
+    e->n[1] = n[1];
+    e->n[2] = dim == 3 ? n[2] : 1;
+    e->h = h;
+    e->count = (size_t)e->n[0] * e->n[1] * e->n[2];
+    e->o = o;
+    e->fd = hv_malloc(e->count * sizeof(double));
+    e->ud = hv_malloc(e->count * sizeof(double));
+    e->w = hv_malloc(e->count * sizeof(float));
+    if (solid) {
+        e->solid = malloc(e->count);
+        if (e->solid)
+            memcpy(e->solid, solid, e->count);
+    }
+    if (!e->fd || !e->ud || !e->w || (solid && !e->solid)) {
+        hv_extender_destroy(&e);
+        return hv_error(HV_ERR_NOMEM, "extend: out of memory for a %d x %d x %d grid", e->n[0],
+                        e->n[1], e->n[2]);
+    }
+    *out = e;
+    return HV_OK;
+}
+
+void hv_extender_destroy(hv_extender **ep)
+{
+    if (!ep || !*ep)
+        return;
+    hv_extender *e = *ep;
+    for (int l = 0; l < MAX_LEVELS; l++)
+        hv_solver_destroy(&e->sv[l]);
+    hv_free(e->sol);
+    hv_free(e->fd);
+    hv_free(e->ud);
+    hv_free(e->w);
+    free(e->solid);
+    free(e);
+    *ep = NULL;
+}
+
+static int is_solid(const hv_extender *e, size_t c) { return e->solid && e->solid[c]; }
+
+static hv_status ensure_solutions(hv_extender *e, int k)
+{
+    if (k > e->capsol) {
+        hv_free(e->sol);
+        e->capsol = 0;
+        if (!(e->sol = hv_malloc(e->count * (size_t)k * sizeof(float))))
+            return hv_error(HV_ERR_NOMEM, "extend: out of memory for %d solutions", k);
+        e->capsol = k;
+    }
+    e->nsol = k;
+    return HV_OK;
+}
+
+/* Right-hand side r of the layout: 0 = weights; then per field, for a scalar
+ * w f, for a vector w |v| followed by w v_c per component. */
+static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_field *f,
+                      const int lo[3], const int bn[3], double *out)
+{
+    int field = -1, part = 0, base = 1;
+    for (int i = 0; i < nfields && r > 0; i++) {
+        int k = f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+        if (r < base + k) {
+            field = i;
+            part = r - base;
+            break;
+        }
+        base += k;
+    }
+    const float *w = e->w;
+    const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
+#pragma omp parallel for schedule(static)
+    for (size_t b = 0; b < bcount; b++) {
+        size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+        size_t bk = b / ((size_t)bn[0] * bn[1]);
+        size_t c = (lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk));
+        double v = 0;
+        if (w[c] > 0) {
+            if (field < 0) {
+                v = w[c];
+            } else if (f[field].ncomp == 1) {
+                v = (double)w[c] * f[field].in[0][c];
+            } else if (part == 0) {
+                double m = 0;
+                for (int q = 0; q < f[field].ncomp; q++)
+                    m += (double)f[field].in[q][c] * f[field].in[q][c];
+                v = w[c] * sqrt(m);
+            } else {
+                v = (double)w[c] * f[field].in[part - 1][c];
+            }
+        }
+        out[b] = v;
+    }
+}
+
+static double norm2_d(const double *v, size_t n)
+{
+    double s = 0;
+#pragma omp parallel for reduction(+ : s) schedule(static)
+    for (size_t c = 0; c < n; c++)
+        s += v[c] * v[c];
+    return sqrt(s);
+}
+
+/* Trilinear (bilinear in 2D) stencil at index-space point p (cell centres at
+ * integers), clamped to the grid. Returns the number of corners. */
+static int stencil(const hv_extender *e, const double p[3], size_t idx[8], double wt[8])
+{
+    int i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0};
+    double fr[3] = {0, 0, 0};
+    for (int a = 0; a < e->dim; a++) {
+        double q = p[a];
+        if (q < 0)
+            q = 0;
+        if (q > e->n[a] - 1)
+            q = e->n[a] - 1;
+        int f = (int)floor(q);
+        if (f > e->n[a] - 2)
+            f = e->n[a] - 2;
+        if (f < 0)
+            f = 0;
+        i0[a] = f;
+        i1[a] = e->n[a] > 1 ? f + 1 : f;
+        fr[a] = e->n[a] > 1 ? q - f : 0;
+    }
+    int m = e->dim == 3 ? 8 : 4;
+    for (int q = 0; q < m; q++) {
+        int ii = (q & 1) ? i1[0] : i0[0], jj = (q & 2) ? i1[1] : i0[1], kk = (q & 4) ? i1[2] : i0[2];
+        idx[q] = ii + (size_t)e->n[0] * (jj + (size_t)e->n[1] * kk);
+        wt[q] = ((q & 1) ? fr[0] : 1 - fr[0]) * ((q & 2) ? fr[1] : 1 - fr[1]) *
+                (e->dim == 3 ? ((q & 4) ? fr[2] : 1 - fr[2]) : 1.0);
+    }
+    return m;
+}
+
+static double sample(const float *v, const size_t idx[8], const double wt[8], int m)
+{
+    double s = 0;
+    for (int q = 0; q < m; q++)
+        s += wt[q] * v[idx[q]];
+    return s;
+}
+
+/* All nsol solutions at once from the interleaved array. */
+static void sample_all(const hv_extender *e, const size_t idx[8], const double wt[8], int m,
+                       double *out)
+{
+    const int k = e->nsol;
+    out[0] = 0;
+    for (int r = 1; r < k; r++)
+        out[r] = 0;
+    for (int q = 0; q < m; q++) {
+        const float *v = e->sol + idx[q] * (size_t)k;
+        for (int r = 0; r < k; r++)
+            out[r] += wt[q] * v[r];
+    }
+}
+
+/* Central-difference gradient of phi at cell (i,j,k), one-sided at walls, in
+ * world units. */
+static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k, double g[3])
+{
+    const int ijk[3] = {i, j, k};
+    const size_t st[3] = {1, (size_t)e->n[0], (size_t)e->n[0] * e->n[1]};
+    size_t c = i + st[1] * j + st[2] * k;
+    g[0] = g[1] = g[2] = 0;
+    for (int a = 0; a < e->dim; a++) {
+        int lo = ijk[a] > 0, hi = ijk[a] + 1 < e->n[a];
+        if (!lo && !hi)
+            continue;
+        double vp = hi ? phi[c + st[a]] : phi[c], vm = lo ? phi[c - st[a]] : phi[c];
+        g[a] = (vp - vm) / ((lo + hi) * e->h);
+    }
+}
+
+/* Where the extension of cell c is read: its closest point on the zero set
+ * when phi is a distance there (|grad phi| near 1, and phi interpolated at the
+ * point is within half the band of 0), else the cell itself. Fills the
+ * interpolation stencil and returns 1 for a closest point. */
+static int evaluation_point(const hv_extender *e, const float *phi, int i, int j, int k,
+                            int validate, size_t idx[8], double wt[8], int *m)
+{
+    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+    idx[0] = c;
+    wt[0] = 1;
+    *m = 1;
+    if (!e->o.closest_point)
+        return 0;
+    double g[3], gn = 0;
+    grad_phi(e, phi, i, j, k, g);
+    for (int a = 0; a < e->dim; a++)
+        gn += g[a] * g[a];
+    gn = sqrt(gn);
+    if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+        return 0;
+    double s = phi[c] / (gn * e->h), p[3] = {i, j, k};
+    for (int a = 0; a < e->dim; a++) {
+        p[a] -= s * g[a];
+        if (p[a] < -0.5 || p[a] > e->n[a] - 0.5)
+            return 0;
+    }
+    size_t ci[8];
+    double cw[8];
+    int cm = stencil(e, p, ci, cw);
+    if (validate && fabs(sample(phi, ci, cw, cm)) > 0.5 * fmax(e->o.band, 1.0) * e->h)
+        return 0;
+    memcpy(idx, ci, sizeof ci);
+    memcpy(wt, cw, sizeof cw);
+    *m = cm;
+    return 1;
+}
+
+/* Writes the extension of every field at cell c from the current level's
+ * solutions sampled at p. */
+static void write_cell(const hv_extender *e, int nfields, const hv_extend_field *f, size_t c,
+                       const double *val)
+{
+    const double W = val[0];
+    int r = 1;
+    for (int i = 0; i < nfields; i++) {
+        if (f[i].ncomp == 1) {
+            f[i].out[0][c] = (float)(val[r] / W);
+            r++;
+            continue;
+        }
+        double mag = val[r] / W, v[3] = {0, 0, 0}, vn = 0;
+        for (int q = 0; q < f[i].ncomp; q++) {
+            v[q] = val[r + 1 + q];
+            vn += v[q] * v[q];
+        }
+        vn = sqrt(vn);
+        for (int q = 0; q < f[i].ncomp; q++)
+            f[i].out[q][c] = vn > 0 ? (float)(mag * v[q] / vn) : 0.0f;
+        r += f[i].ncomp + 1;
+    }
+}
+
+/* Solves every right-hand side for level l on the box [lo, lo + bn) (Neumann
+ * walls at its faces) and stores the solutions on the full grid, 0 outside. */
+static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
+                             int nfields, const hv_extend_field *f, double *thr,
+                             hv_extend_stats *S)
+{
+    hv_status st;
+    if (e->sv[l] && (memcmp(e->bn[l], bn, sizeof e->bn[l]) ||
+                     (e->solid && memcmp(e->blo[l], lo, sizeof e->blo[l]))))
+        hv_solver_destroy(&e->sv[l]);
+    const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
+    const int full = bcount == e->count;
+    if (!e->sv[l]) {
+        uint8_t *sub = NULL;
+        if (e->solid) {
+            if (!(sub = malloc(bcount)))
+                return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+            for (size_t b = 0; b < bcount; b++) {
+                size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+                size_t bk = b / ((size_t)bn[0] * bn[1]);
+                sub[b] = e->solid[(lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk))];
+            }
+        }
+        hv_problem p = {e->dim, {bn[0], bn[1], bn[2]}, e->h, sub, 1.0,
+                        e->o.t_scale * e->h * e->h * pow(LEVEL_FACTOR, l)};
+        hv_solver_opts so;
+        hv_solver_opts_default(&so);
+        so.backend = e->o.backend;
+        so.tol = e->o.tol;
+        so.max_iter = 200;
+        st = hv_solver_create(&e->sv[l], &p, &so);
+        free(sub);
+        if (st)
+            return st;
+        memcpy(e->blo[l], lo, sizeof e->blo[l]);
+        memcpy(e->bn[l], bn, sizeof e->bn[l]);
+    }
+    double relmax = 0, wn = 0;
+    for (int r = 0; r < nrhs; r++) {
+        build_rhs(e, r, nfields, f, lo, bn, e->fd);
+        if (r == 0)
+            wn = norm2_d(e->fd, bcount);
+        hv_solve_info info;
+        if ((st = hv_solver_solve_d(e->sv[l], e->fd, e->ud, &info)))
+            return st;
+        relmax = fmax(relmax, info.relres);
+        float *out = e->sol;
+        const double *ud = e->ud;
+        const size_t k = (size_t)e->nsol;
+        if (!full && r == 0)
+            memset(out, 0, e->count * k * sizeof *out);
+#pragma omp parallel for schedule(static)
+        for (size_t b = 0; b < bcount; b++) {
+            size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+            size_t bk = b / ((size_t)bn[0] * bn[1]);
+            size_t c = (lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk));
+            out[c * k + r] = (float)ud[b];
+        }
+        S->solves++;
+    }
+    S->relres = fmax(S->relres, relmax);
+    if (l == 0)
+        S->solve_cells = bcount;
+    /* Float storage caps the range too: trust W only well above float's smallest normal. */
+    *thr = fmax(RELIABLE * fmax(relmax, 1e-14) * wn, 1e-30);
+    return HV_OK;
+}
+
+typedef struct {
+    int lo[3], hi[3]; /* inclusive; lo > hi when empty */
+} ibox;
+
+static void box_empty(ibox *b)
+{
+    for (int a = 0; a < 3; a++) {
+        b->lo[a] = 1 << 30;
+        b->hi[a] = -(1 << 30);
+    }
+}
+
+static void box_add(ibox *b, int i, int j, int k)
+{
+    const int p[3] = {i, j, k};
+    for (int a = 0; a < 3; a++) {
+        if (p[a] < b->lo[a])
+            b->lo[a] = p[a];
+        if (p[a] > b->hi[a])
+            b->hi[a] = p[a];
+    }
+}
+
+static void box_union(ibox *b, const ibox *o)
+{
+    for (int a = 0; a < 3; a++) {
+        if (o->lo[a] < b->lo[a])
+            b->lo[a] = o->lo[a];
+        if (o->hi[a] > b->hi[a])
+            b->hi[a] = o->hi[a];
+    }
+}
+
+/* Smallest size >= m, a multiple of 4 with no prime factor above 7 (fast
+ * transforms, even multigrid coarsening), or cap when that is larger. */
+static int nice_size(int m, int cap)
+{
+    for (int s = (m + 3) & ~3; s < cap; s += 4) {
+        int r = s;
+        for (int p = 2; p <= 7; p++)
+            while (r % p == 0)
+                r /= p;
+        if (r == 1)
+            return s;
+    }
+    return cap;
+}
+
+/* Grows b by g cells on every side, then to a nice size, within the grid:
+ * lo and size. */
+static void box_grow(const hv_extender *e, const ibox *b, int g, int lo[3], int bn[3])
+{
+    for (int a = 0; a < 3; a++) {
+        int l = b->lo[a] - g, h = b->hi[a] + g;
+        if (l < 0)
+            l = 0;
+        if (h > e->n[a] - 1)
+            h = e->n[a] - 1;
+        int m = nice_size(h - l + 1, e->n[a]);
+        l -= (m - (h - l + 1)) / 2;
+        if (l < 0)
+            l = 0;
+        if (l + m > e->n[a])
+            l = e->n[a] - m;
+        lo[a] = l;
+        bn[a] = m;
+    }
+}
+
+hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
+                         const hv_extend_field *f, hv_extend_stats *stats)
+{
+    double t_start = hv_now();
+    if (!e || !phi || nfields < 0 || (nfields > 0 && !f))
+        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_many: bad arguments");
+    hv_extend_stats lst;
+    hv_extend_stats *S = stats ? stats : &lst;
+    memset(S, 0, sizeof *S);
+    int nrhs = 1;
+    if (nfields > MAX_FIELDS_PER_CALL)
+        return hv_error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
+                        MAX_FIELDS_PER_CALL);
+    for (int i = 0; i < nfields; i++) {
+        if (f[i].ncomp < 1 || f[i].ncomp > 3)
+            return hv_error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 to 3)", i,
+                            f[i].ncomp);
+        for (int q = 0; q < f[i].ncomp; q++)
+            if (!f[i].in[q] || !f[i].out[q])
+                return hv_error(HV_ERR_INVALID_ARG, "extend: field %d component %d has no array", i, q);
+        nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+    }
+    hv_status st = hv_check_finite(phi, e->count, "the level set");
+    if (st)
+        return st;
+
+    /* Weights: a smooth bump of |phi| / (band h) on fluid cells. */
+    double t0 = hv_now();
+    const double bh = e->o.band * e->h;
+    size_t nsrc = 0;
+#pragma omp parallel for reduction(+ : nsrc) schedule(static)
+    for (size_t c = 0; c < e->count; c++) {
+        double s = phi[c] / bh, v = 0;
+        if (fabs(s) < 1 && !is_solid(e, c)) {
+            v = (1 - s * s) * (1 - s * s);
+            nsrc++;
+        }
+        e->w[c] = (float)v;
+    }
+    S->source_cells = nsrc;
+    if (!nsrc)
+        return hv_error(HV_ERR_INVALID_ARG,
+                        "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
+                        "zero crossing in the grid, or the band is too thin)", bh);
+    for (int i = 0; i < nfields; i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            for (size_t c = 0; c < e->count; c++)
+                if (e->w[c] > 0 && !isfinite(f[i].in[q][c]))
+                    return hv_error(HV_ERR_NUMERIC,
+                                    "extend: field %d component %d is NaN/Inf at cell %zu, inside "
+                                    "the source band", i, q, c);
+    if ((st = ensure_solutions(e, nrhs)))
+        return st;
+    S->t_weights = hv_now() - t0;
+
+    /* Output cells: 0 = done (background or written), 1 = read at the closest
+     * point, 2 = read at the cell. The boxes: cells with a weight, and cells to
+     * be read at themselves. */
+    uint8_t *pending = malloc(e->count);
+    if (!pending)
+        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+    const double ob = e->o.out_band * e->h;
+    size_t npend = 0;
+    ibox band_box, ratio_box;
+    box_empty(&band_box);
+    box_empty(&ratio_box);
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++) {
+                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                if (e->w[c] > 0)
+                    box_add(&band_box, i, j, k);
+                int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
+                pending[c] = (uint8_t)want;
+                npend += want;
+                if (!want)
+                    for (int fi = 0; fi < nfields; fi++)
+                        for (int q = 0; q < f[fi].ncomp; q++)
+                            f[fi].out[q][c] = e->o.background;
+            }
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++) {
+                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                if (!pending[c])
+                    continue;
+                size_t idx[8];
+                double wt[8];
+                int m;
+                pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+            }
+    for (int k = 0; k < e->n[2]; k++)
+        for (int j = 0; j < e->n[1]; j++)
+            for (int i = 0; i < e->n[0]; i++)
+                if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)] == 2)
+                    box_add(&ratio_box, i, j, k);
+    /* Closest points lie within half the band of the zero set, their stencils a
+     * voxel further: inside the weights' box grown by 2. */
+    band_box.lo[0] -= 2;
+    band_box.lo[1] -= 2;
+    band_box.lo[2] -= 2;
+    band_box.hi[0] += 2;
+    band_box.hi[1] += 2;
+    band_box.hi[2] += 2;
+
+    for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
+        double thr;
+        ibox need = band_box;
+        box_union(&need, &ratio_box);
+        int lo[3], bn[3];
+        box_grow(e, &need, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale) * pow(sqrt(LEVEL_FACTOR), l)),
+                 lo, bn);
+        if (e->dim == 2) {
+            lo[2] = 0;
+            bn[2] = 1;
+        }
+        t0 = hv_now();
+        if ((st = solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
+            break;
+        S->t_solve += hv_now() - t0;
+        S->levels = l + 1;
+        t0 = hv_now();
+        const int last = l + 1 == e->o.max_levels;
+        size_t left = 0, cp = 0, ratio = 0, weak = 0;
+#pragma omp parallel for collapse(2) reduction(+ : left, cp, ratio, weak) schedule(static)
+        for (int k = 0; k < e->n[2]; k++)
+            for (int j = 0; j < e->n[1]; j++)
+                for (int i = 0; i < e->n[0]; i++) {
+                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    if (!pending[c])
+                        continue;
+                    size_t idx[8] = {c};
+                    double wt[8] = {1};
+                    int m = 1, at_cp = 0;
+                    if (pending[c] == 1)
+                        at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
+                    double val[1 + 4 * MAX_FIELDS_PER_CALL];
+                    sample_all(e, idx, wt, m, val);
+                    double W = val[0];
+                    if (!(W > thr) && at_cp) {
+                        /* Closest point but no weight there: read at the cell from now on. */
+                        at_cp = 0;
+                        pending[c] = 2;
+                        idx[0] = c;
+                        wt[0] = 1;
+                        m = 1;
+                        sample_all(e, idx, wt, m, val);
+                        W = val[0];
+                    }
+                    if (!(W > thr) && !last) {
+                        left++;
+                        continue;
+                    }
+                    if (!(W > 0)) {
+                        for (int fi = 0; fi < nfields; fi++)
+                            for (int q = 0; q < f[fi].ncomp; q++)
+                                f[fi].out[q][c] = e->o.background;
+                    } else {
+                        write_cell(e, nfields, f, c, val);
+                    }
+                    weak += !(W > thr);
+                    cp += at_cp;
+                    ratio += !at_cp;
+                    pending[c] = 0;
+                }
+        S->cp_cells += cp;
+        S->ratio_cells += ratio;
+        S->weak_cells += weak;
+        npend = left;
+        S->t_eval += hv_now() - t0;
+        box_empty(&ratio_box);
+        if (npend)
+            for (int k = 0; k < e->n[2]; k++)
+                for (int j = 0; j < e->n[1]; j++)
+                    for (int i = 0; i < e->n[0]; i++)
+                        if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)])
+                            box_add(&ratio_box, i, j, k);
+    }
+    free(pending);
+    S->t_total = hv_now() - t_start;
+    return st;
+}
+
+static hv_status check_grid(const hv_extender *e, const hv_grid *g, const hv_grid *phi,
+                            const char *what)
+{
+    if (!g)
+        return hv_error(HV_ERR_INVALID_ARG, "extend: %s is NULL", what);
+    if (g->dim != e->dim || g->n[0] != e->n[0] || g->n[1] != e->n[1] || g->n[2] != e->n[2] ||
+        fabs(g->h - e->h) > 1e-9 * e->h)
+        return hv_error(HV_ERR_INVALID_ARG,
+                        "extend: %s is %dD %d x %d x %d with h = %g; the extender was made for %dD "
+                        "%d x %d x %d with h = %g", what, g->dim, g->n[0], g->n[1], g->n[2], g->h,
+                        e->dim, e->n[0], e->n[1], e->n[2], e->h);
+    for (int a = 0; a < 3; a++)
+        if (fabs(g->origin[a] - phi->origin[a]) > 1e-6 * e->h)
+            return hv_error(HV_ERR_INVALID_ARG,
+                            "extend: %s has origin (%g %g %g), the level set (%g %g %g)", what,
+                            g->origin[0], g->origin[1], g->origin[2], phi->origin[0],
+                            phi->origin[1], phi->origin[2]);
+    return HV_OK;
+}
+
+hv_status hv_extend_scalar(hv_extender *e, const hv_grid *phi, const hv_grid *field,
+                           hv_grid *out, hv_extend_stats *stats)
+{
+    if (!e || !phi)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_scalar: NULL argument");
+    hv_status st;
+    if ((st = check_grid(e, phi, phi, "the level set")) || (st = check_grid(e, field, phi, "the field")) ||
+        (st = check_grid(e, out, phi, "the output")))
+        return st;
+    hv_extend_field f = {1, {field->v, NULL, NULL}, {out->v, NULL, NULL}};
+    return hv_extend_many(e, phi->v, 1, &f, stats);
+}
+
+hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *const in[3],
+                         hv_grid *const out[3], hv_extend_stats *stats)
+{
+    if (!e || !phi || !in || !out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_vec3: NULL argument");
+    hv_status st;
+    if ((st = check_grid(e, phi, phi, "the level set")))
+        return st;
+    hv_extend_field f = {3, {NULL, NULL, NULL}, {NULL, NULL, NULL}};
+    static const char *names[3] = {"the x component", "the y component", "the z component"};
+    for (int q = 0; q < 3; q++) {
+        if ((st = check_grid(e, in[q], phi, names[q])) || (st = check_grid(e, out[q], phi, "an output")))
+            return st;
+        f.in[q] = in[q]->v;
+        f.out[q] = out[q]->v;
+    }
+    return hv_extend_many(e, phi->v, 1, &f, stats);
+}

@@ -1,0 +1,372 @@
+/* OpenEXR files through the OpenEXR Core C API (layout in heatvox/image.h). */
+#include "heatvox/image.h"
+#include "heatvox/io.h"
+#include "core/error.h"
+
+/* The quoted includes inside openexr.h resolve next to it, so no -I is needed. */
+#include <OpenEXR/openexr.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The Core library reports through a callback whose default prints to stderr;
+ * ours keeps the last message for this thread so the error names it. */
+static _Thread_local char exr_msg[512];
+
+static void on_exr_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void)ctxt;
+    (void)code;
+    snprintf(exr_msg, sizeof exr_msg, "%s", msg ? msg : "");
+}
+
+static const char *exr_reason(exr_result_t rv)
+{
+    return exr_msg[0] ? exr_msg : exr_get_default_error_message(rv);
+}
+
+static exr_context_initializer_t exr_init(void)
+{
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = on_exr_error;
+    /* A damaged offset table must fail, not be patched up from the chunk data. */
+    init.flags = EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION;
+    exr_msg[0] = '\0';
+    return init;
+}
+
+static void part_name(char *buf, size_t size, int k) { snprintf(buf, size, "slice_%04d", k); }
+
+/* ---- writing ---- */
+
+static hv_status write_part(exr_context_t ctx, int part, const float *slice, int nx, int ny,
+                            float *buf, const char *tmp, const char *path)
+{
+    int lpc = 1;
+    exr_result_t rv = exr_get_scanlines_per_chunk(ctx, part, &lpc);
+    if (rv != EXR_ERR_SUCCESS || lpc < 1)
+        return hv_error(HV_ERR_BACKEND, "%s: OpenEXR: lines per chunk: %s", path, exr_reason(rv));
+    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    int started = 0;
+    hv_status st = HV_OK;
+    for (int y = 0; y < ny && st == HV_OK; y += lpc) {
+        exr_chunk_info_t ci;
+        rv = exr_write_scanline_chunk_info(ctx, part, y, &ci);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = started ? exr_encoding_update(ctx, part, &ci, &enc)
+                         : exr_encoding_initialize(ctx, part, &ci, &enc);
+        if (rv != EXR_ERR_SUCCESS) {
+            st = hv_error(HV_ERR_IO, "%s: writing part %d, line %d: %s", path, part, y,
+                          exr_reason(rv));
+            break;
+        }
+        /* Image row y shows grid row ny-1-y (second axis up). */
+        for (int r = 0; r < ci.height; r++)
+            memcpy(buf + (size_t)r * nx, slice + (size_t)(ny - 1 - (y + r)) * nx,
+                   sizeof(float) * (size_t)nx);
+        exr_coding_channel_info_t *c = &enc.channels[0];
+        c->encode_from_ptr = (const uint8_t *)buf;
+        c->user_pixel_stride = (int32_t)sizeof(float);
+        c->user_line_stride = (int32_t)(sizeof(float) * (size_t)nx);
+        c->user_data_type = EXR_PIXEL_FLOAT;
+        c->user_bytes_per_element = (int16_t)sizeof(float);
+        if (!started) {
+            rv = exr_encoding_choose_default_routines(ctx, part, &enc);
+            started = 1;
+        }
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_encoding_run(ctx, part, &enc);
+        if (rv != EXR_ERR_SUCCESS)
+            st = hv_error(HV_ERR_IO, "%s (writing %s): part %d, line %d: %s", path, tmp, part, y,
+                          exr_reason(rv));
+    }
+    if (started)
+        exr_encoding_destroy(ctx, &enc);
+    return st;
+}
+
+hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel)
+{
+    if (!path || !g || !g->v)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_write: path or grid is NULL");
+    if (!channel)
+        channel = "Y";
+    size_t clen = strlen(channel);
+    if (clen < 1 || clen > 31)
+        return hv_error(HV_ERR_INVALID_ARG, "%s: EXR channel name '%s' must be 1 to 31 characters",
+                        path, channel);
+    int nx = g->n[0], ny = g->n[1], nparts = g->dim == 3 ? g->n[2] : 1;
+    char tmp[4096];
+    hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
+    if (st)
+        return st;
+    float *buf = malloc(sizeof(float) * (size_t)nx * 64);
+    if (!buf) {
+        hv_tmp_discard(tmp);
+        return hv_error(HV_ERR_NOMEM, "%s: no memory for an EXR line buffer", path);
+    }
+    exr_context_initializer_t init = exr_init();
+    exr_context_t ctx = NULL;
+    exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
+    if (rv != EXR_ERR_SUCCESS) {
+        st = hv_error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, exr_reason(rv));
+        goto done;
+    }
+    exr_attr_v3d_t org = {{{g->origin[0], g->origin[1], g->origin[2]}}};
+    exr_attr_v3i_t dims = {{{g->n[0], g->n[1], g->n[2]}}};
+    for (int k = 0; k < nparts; k++) {
+        char name[32];
+        part_name(name, sizeof name, k);
+        int part = -1;
+        rv = exr_add_part(ctx, g->dim == 3 ? name : "heatvox", EXR_STORAGE_SCANLINE, &part);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_initialize_required_attr_simple(ctx, part, nx, ny, EXR_COMPRESSION_ZIP);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_add_channel(ctx, part, channel, EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1,
+                                 1);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_attr_set_double(ctx, part, "heatvox:voxelSize", g->h);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_attr_set_v3d(ctx, part, "heatvox:origin", &org);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_attr_set_v3i(ctx, part, "heatvox:dims", &dims);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_attr_set_int(ctx, part, "heatvox:sliceIndex", k);
+        if (rv != EXR_ERR_SUCCESS) {
+            st = hv_error(HV_ERR_BACKEND, "%s: OpenEXR header of part %d: %s", path, k,
+                          exr_reason(rv));
+            goto done;
+        }
+    }
+    rv = exr_write_header(ctx);
+    if (rv != EXR_ERR_SUCCESS) {
+        st = hv_error(HV_ERR_IO, "%s: writing the EXR header: %s", path, exr_reason(rv));
+        goto done;
+    }
+    for (int k = 0; k < nparts && st == HV_OK; k++) {
+        st = hv_progress((double)k / nparts, "exr");
+        if (st == HV_OK)
+            st = write_part(ctx, k, g->v + (size_t)k * nx * ny, nx, ny, buf, tmp, path);
+    }
+done:
+    free(buf);
+    if (ctx) {
+        rv = exr_finish(&ctx);
+        if (st == HV_OK && rv != EXR_ERR_SUCCESS)
+            st = hv_error(HV_ERR_IO, "%s: finishing %s: %s", path, tmp, exr_reason(rv));
+    }
+    if (st != HV_OK) {
+        hv_tmp_discard(tmp);
+        return st;
+    }
+    return hv_tmp_commit(tmp, path);
+}
+
+/* ---- reading ---- */
+
+static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *dw,
+                           const char *channel, float *rows, int nx, const char *path,
+                           const char *pname)
+{
+    int lpc = 1;
+    exr_result_t rv = exr_get_scanlines_per_chunk(ctx, part, &lpc);
+    if (rv != EXR_ERR_SUCCESS || lpc < 1)
+        return hv_error(HV_ERR_PARSE, "%s: part %d (%s): lines per chunk: %s", path, part, pname,
+                        exr_reason(rv));
+    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+    int started = 0;
+    hv_status st = HV_OK;
+    for (int y = dw->min.y; y <= dw->max.y && st == HV_OK; y += lpc) {
+        exr_chunk_info_t ci;
+        rv = exr_read_scanline_chunk_info(ctx, part, y, &ci);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = started ? exr_decoding_update(ctx, part, &ci, &dec)
+                         : exr_decoding_initialize(ctx, part, &ci, &dec);
+        if (rv != EXR_ERR_SUCCESS) {
+            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s), line %d: %s", path, part, pname, y,
+                          exr_reason(rv));
+            break;
+        }
+        int found = 0;
+        for (int c = 0; c < dec.channel_count; c++) {
+            exr_coding_channel_info_t *ch = &dec.channels[c];
+            if (!found && !strcmp(ch->channel_name, channel)) {
+                found = 1;
+                ch->decode_to_ptr = (uint8_t *)(rows + (size_t)(ci.start_y - dw->min.y) * nx);
+                ch->user_pixel_stride = (int32_t)sizeof(float);
+                ch->user_line_stride = (int32_t)(sizeof(float) * (size_t)nx);
+                ch->user_data_type = EXR_PIXEL_FLOAT;
+                ch->user_bytes_per_element = (int16_t)sizeof(float);
+            } else {
+                ch->decode_to_ptr = NULL;
+            }
+        }
+        if (!found) {
+            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s): channel '%s' missing from a chunk", path,
+                          part, pname, channel);
+            break;
+        }
+        if (!started) {
+            rv = exr_decoding_choose_default_routines(ctx, part, &dec);
+            started = 1;
+        }
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_decoding_run(ctx, part, &dec);
+        if (rv != EXR_ERR_SUCCESS)
+            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s), lines %d..%d: %s", path, part, pname,
+                          ci.start_y, ci.start_y + ci.height - 1, exr_reason(rv));
+    }
+    if (started)
+        exr_decoding_destroy(ctx, &dec);
+    return st;
+}
+
+/* Picks the channel to read from part 0 and checks it has full resolution. */
+static hv_status choose_channel(exr_context_t ctx, const char *want, const char *path,
+                                char *out, size_t outsize)
+{
+    const exr_attr_chlist_t *chl = NULL;
+    exr_result_t rv = exr_get_channels(ctx, 0, &chl);
+    if (rv != EXR_ERR_SUCCESS || !chl || chl->num_channels < 1)
+        return hv_error(HV_ERR_PARSE, "%s: no channels: %s", path,
+                        rv != EXR_ERR_SUCCESS ? exr_reason(rv) : "empty channel list");
+    const exr_attr_chlist_entry_t *pick = NULL;
+    const char *name = want ? want : chl->num_channels == 1 ? chl->entries[0].name.str : "Y";
+    for (int c = 0; c < chl->num_channels; c++)
+        if (!strcmp(chl->entries[c].name.str, name))
+            pick = &chl->entries[c];
+    if (!pick) {
+        char list[256] = "";
+        for (int c = 0; c < chl->num_channels; c++) {
+            size_t l = strlen(list);
+            snprintf(list + l, sizeof list - l, "%s%s", c ? ", " : "", chl->entries[c].name.str);
+        }
+        return hv_error(HV_ERR_PARSE, "%s: no channel '%s' (channels: %s)%s", path, name, list,
+                        want ? "" : "; name one");
+    }
+    if (pick->x_sampling != 1 || pick->y_sampling != 1)
+        return hv_error(HV_ERR_UNSUPPORTED, "%s: channel '%s' is subsampled (%d x %d)", path, name,
+                        pick->x_sampling, pick->y_sampling);
+    snprintf(out, outsize, "%s", name);
+    return HV_OK;
+}
+
+hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
+{
+    if (!out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_read: out is NULL");
+    *out = NULL;
+    if (!path)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_read: path is NULL");
+    FILE *probe = fopen(path, "rb");
+    if (!probe)
+        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    fclose(probe);
+    exr_context_initializer_t init = exr_init();
+    exr_context_t ctx = NULL;
+    exr_result_t rv = exr_start_read(&ctx, path, &init);
+    if (rv != EXR_ERR_SUCCESS) {
+        hv_status st = hv_error(HV_ERR_PARSE, "%s: not a readable EXR file: %s", path,
+                                exr_reason(rv));
+        if (ctx)
+            exr_finish(&ctx);
+        return st;
+    }
+    hv_grid *g = NULL;
+    float *rows = NULL;
+    hv_status st = HV_OK;
+    int nparts = 0;
+    exr_attr_box2i_t dw0;
+    char chan[64];
+    rv = exr_get_count(ctx, &nparts);
+    if (rv != EXR_ERR_SUCCESS || nparts < 1) {
+        st = hv_error(HV_ERR_PARSE, "%s: no image parts", path);
+        goto done;
+    }
+    for (int p = 0; p < nparts; p++) {
+        exr_storage_t storage;
+        exr_attr_box2i_t dw;
+        rv = exr_get_storage(ctx, p, &storage);
+        if (rv == EXR_ERR_SUCCESS)
+            rv = exr_get_data_window(ctx, p, &dw);
+        if (rv != EXR_ERR_SUCCESS) {
+            st = hv_error(HV_ERR_PARSE, "%s: part %d: %s", path, p, exr_reason(rv));
+            goto done;
+        }
+        if (storage != EXR_STORAGE_SCANLINE) {
+            st = hv_error(HV_ERR_UNSUPPORTED, "%s: part %d is %s; only scanline images are read",
+                          path, p,
+                          storage == EXR_STORAGE_TILED ? "tiled" : "deep");
+            goto done;
+        }
+        if (p == 0)
+            dw0 = dw;
+        else if (memcmp(&dw, &dw0, sizeof dw) != 0) {
+            st = hv_error(HV_ERR_PARSE,
+                          "%s: part %d has data window (%d,%d)-(%d,%d), part 0 (%d,%d)-(%d,%d); "
+                          "parts of one volume must match",
+                          path, p, dw.min.x, dw.min.y, dw.max.x, dw.max.y, dw0.min.x, dw0.min.y,
+                          dw0.max.x, dw0.max.y);
+            goto done;
+        }
+    }
+    if ((st = choose_channel(ctx, channel, path, chan, sizeof chan)) != HV_OK)
+        goto done;
+    const char *name0 = NULL;
+    exr_get_name(ctx, 0, &name0);
+    int dim = nparts > 1 || (name0 && !strcmp(name0, "slice_0000")) ? 3 : 2;
+    int n[3] = {dw0.max.x - dw0.min.x + 1, dw0.max.y - dw0.min.y + 1, nparts};
+    double h = 1.0;
+    exr_attr_v3d_t org = {{{0, 0, 0}}};
+    if (exr_attr_get_double(ctx, 0, "heatvox:voxelSize", &h) != EXR_ERR_SUCCESS || !(h > 0) ||
+        !isfinite(h))
+        h = 1.0;
+    if (exr_attr_get_v3d(ctx, 0, "heatvox:origin", &org) != EXR_ERR_SUCCESS ||
+        !isfinite(org.x + org.y + org.z))
+        org.x = org.y = org.z = 0;
+    exr_msg[0] = '\0';
+    double origin[3] = {org.x, org.y, org.z};
+    if ((st = hv_grid_create(&g, dim, n, h, origin)) != HV_OK)
+        goto done;
+    size_t plane = (size_t)n[0] * n[1];
+    rows = malloc(sizeof(float) * plane);
+    if (!rows) {
+        st = hv_error(HV_ERR_NOMEM, "%s: no memory for a %d x %d image", path, n[0], n[1]);
+        goto done;
+    }
+    for (int p = 0; p < nparts && st == HV_OK; p++) {
+        const char *pname = NULL;
+        if (exr_get_name(ctx, p, &pname) != EXR_ERR_SUCCESS || !pname)
+            pname = "unnamed";
+        const exr_attr_chlist_t *chl = NULL;
+        int has = 0;
+        if (exr_get_channels(ctx, p, &chl) == EXR_ERR_SUCCESS && chl)
+            for (int c = 0; c < chl->num_channels; c++)
+                has |= !strcmp(chl->entries[c].name.str, chan) && chl->entries[c].x_sampling == 1 &&
+                       chl->entries[c].y_sampling == 1;
+        if (!has) {
+            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s) has no full-resolution channel '%s'",
+                          path, p, pname, chan);
+            break;
+        }
+        st = read_part(ctx, p, &dw0, chan, rows, n[0], path, pname);
+        if (st == HV_OK) {
+            float *dst = g->v + plane * (size_t)p;
+            for (int y = 0; y < n[1]; y++)
+                memcpy(dst + (size_t)(n[1] - 1 - y) * n[0], rows + (size_t)y * n[0],
+                       sizeof(float) * (size_t)n[0]);
+        }
+    }
+done:
+    free(rows);
+    exr_finish(&ctx);
+    if (st != HV_OK) {
+        hv_grid_destroy(&g);
+        return st;
+    }
+    *out = g;
+    return HV_OK;
+}

@@ -1,0 +1,681 @@
+/* OpenCL devices, the shared context and program, and launch helpers (cl_core.h). */
+#include "cl_core.h"
+#include "core/error.h"
+
+#include <CL/cl_ext.h>
+#include <ctype.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef CL_PLATFORM_NOT_FOUND_KHR
+#define CL_PLATFORM_NOT_FOUND_KHR -1001
+#endif
+
+#define MAX_PLATFORMS 16
+#define MAX_DEVICES 64
+
+static const char *const kernel_names[HV_K_COUNT] = {
+    [HV_K_MG_APPLY] = "mg_apply",
+    [HV_K_MG_RESIDUAL] = "mg_residual",
+    [HV_K_MG_RBGS] = "mg_rbgs",
+    [HV_K_MG_CHEB] = "mg_cheb",
+    [HV_K_MG_JACOBI] = "mg_jacobi",
+    [HV_K_MG_RESTRICT_RESIDUAL] = "mg_restrict_residual",
+    [HV_K_MG_RESTRICT] = "mg_restrict",
+    [HV_K_MG_PROLONG] = "mg_prolong",
+    [HV_K_MG_PROLONG_W] = "mg_prolong_w",
+    [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",
+    [HV_K_MG_BOTTOM_CG] = "mg_bottom_cg",
+    [HV_K_RED_DOT_F] = "red_dot_f",
+    [HV_K_RED_FINISH] = "red_finish",
+    [HV_K_RED_CHUNK_F] = "red_chunk_f",
+    [HV_K_RED_REGION] = "red_region",
+    [HV_K_REGION_SUB_F] = "region_sub_f",
+    [HV_K_FACE_GRADIENT] = "face_gradient",
+    [HV_K_FACE_DIVERGENCE] = "face_divergence",
+    [HV_K_FACE_NORMALIZE] = "face_normalize",
+    [HV_K_PW_RATIO] = "pw_ratio",
+    [HV_K_PW_AXPY] = "pw_axpy",
+    [HV_K_FINE_RESIDUAL] = "fine_residual",
+    [HV_K_FINE_APPLY] = "fine_apply",
+    [HV_K_FINE_ADD] = "fine_add",
+    [HV_K_FINE_F2D] = "fine_f2d",
+    [HV_K_FINE_DOT] = "fine_dot",
+    [HV_K_FINE_PCG_UPDATE] = "fine_pcg_update",
+    [HV_K_FINE_XPAY] = "fine_xpay",
+    [HV_K_RED_CHUNK_D] = "red_chunk_d",
+    [HV_K_REGION_SUB_D] = "region_sub_d",
+};
+
+const char *hv_cl_strerror(cl_int e)
+{
+    switch (e) {
+    case CL_SUCCESS: return "CL_SUCCESS";
+    case CL_DEVICE_NOT_FOUND: return "CL_DEVICE_NOT_FOUND";
+    case CL_DEVICE_NOT_AVAILABLE: return "CL_DEVICE_NOT_AVAILABLE";
+    case CL_COMPILER_NOT_AVAILABLE: return "CL_COMPILER_NOT_AVAILABLE";
+    case CL_MEM_OBJECT_ALLOCATION_FAILURE: return "CL_MEM_OBJECT_ALLOCATION_FAILURE";
+    case CL_OUT_OF_RESOURCES: return "CL_OUT_OF_RESOURCES";
+    case CL_OUT_OF_HOST_MEMORY: return "CL_OUT_OF_HOST_MEMORY";
+    case CL_BUILD_PROGRAM_FAILURE: return "CL_BUILD_PROGRAM_FAILURE";
+    case CL_INVALID_VALUE: return "CL_INVALID_VALUE";
+    case CL_INVALID_DEVICE: return "CL_INVALID_DEVICE";
+    case CL_INVALID_CONTEXT: return "CL_INVALID_CONTEXT";
+    case CL_INVALID_COMMAND_QUEUE: return "CL_INVALID_COMMAND_QUEUE";
+    case CL_INVALID_MEM_OBJECT: return "CL_INVALID_MEM_OBJECT";
+    case CL_INVALID_BUILD_OPTIONS: return "CL_INVALID_BUILD_OPTIONS";
+    case CL_INVALID_PROGRAM: return "CL_INVALID_PROGRAM";
+    case CL_INVALID_PROGRAM_EXECUTABLE: return "CL_INVALID_PROGRAM_EXECUTABLE";
+    case CL_INVALID_KERNEL_NAME: return "CL_INVALID_KERNEL_NAME";
+    case CL_INVALID_KERNEL: return "CL_INVALID_KERNEL";
+    case CL_INVALID_ARG_INDEX: return "CL_INVALID_ARG_INDEX";
+    case CL_INVALID_ARG_VALUE: return "CL_INVALID_ARG_VALUE";
+    case CL_INVALID_ARG_SIZE: return "CL_INVALID_ARG_SIZE";
+    case CL_INVALID_KERNEL_ARGS: return "CL_INVALID_KERNEL_ARGS";
+    case CL_INVALID_WORK_DIMENSION: return "CL_INVALID_WORK_DIMENSION";
+    case CL_INVALID_WORK_GROUP_SIZE: return "CL_INVALID_WORK_GROUP_SIZE";
+    case CL_INVALID_GLOBAL_WORK_SIZE: return "CL_INVALID_GLOBAL_WORK_SIZE";
+    case CL_INVALID_BUFFER_SIZE: return "CL_INVALID_BUFFER_SIZE";
+    case CL_INVALID_OPERATION: return "CL_INVALID_OPERATION";
+    case CL_PLATFORM_NOT_FOUND_KHR: return "CL_PLATFORM_NOT_FOUND_KHR";
+    }
+    return "unknown OpenCL error";
+}
+
+/* ---------- devices ---------- */
+
+typedef struct devlist {
+    int n;
+    cl_platform_id plat[MAX_DEVICES];
+    cl_device_id dev[MAX_DEVICES];
+    hv_opencl_device info[MAX_DEVICES];
+} devlist;
+
+/* A string property, truncated to size (the query itself fails on a short buffer). */
+static void info_string(cl_platform_id p, cl_device_id d, cl_uint param, char *dst, size_t size)
+{
+    char buf[1024] = "";
+    cl_int e = d ? clGetDeviceInfo(d, param, sizeof buf - 1, buf, NULL)
+                 : clGetPlatformInfo(p, param, sizeof buf - 1, buf, NULL);
+    if (e != CL_SUCCESS)
+        buf[0] = 0;
+    buf[sizeof buf - 1] = 0;
+    snprintf(dst, size, "%s", buf);
+}
+
+static void device_info(cl_platform_id p, cl_device_id d, hv_opencl_device *o)
+{
+    cl_ulong mem = 0;
+    cl_uint cu = 0;
+    cl_device_type type = 0;
+    cl_device_fp_config fp = 0;
+    char ext[8192] = "";
+    info_string(p, d, CL_DEVICE_NAME, o->name, sizeof o->name);
+    info_string(p, NULL, CL_PLATFORM_NAME, o->platform_name, sizeof o->platform_name);
+    info_string(p, d, CL_DEVICE_VERSION, o->version, sizeof o->version);
+    clGetDeviceInfo(d, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof mem, &mem, NULL);
+    clGetDeviceInfo(d, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof cu, &cu, NULL);
+    clGetDeviceInfo(d, CL_DEVICE_TYPE, sizeof type, &type, NULL);
+    if (clGetDeviceInfo(d, CL_DEVICE_DOUBLE_FP_CONFIG, sizeof fp, &fp, NULL) != CL_SUCCESS)
+        fp = 0;
+    clGetDeviceInfo(d, CL_DEVICE_EXTENSIONS, sizeof ext - 1, ext, NULL);
+    o->global_mem = mem;
+    o->compute_units = (int)cu;
+    o->gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
+    o->fp64 = fp != 0 || strstr(ext, "cl_khr_fp64") != NULL;
+}
+
+static hv_status enumerate(devlist *L)
+{
+    cl_platform_id p[MAX_PLATFORMS];
+    cl_uint np = 0;
+    L->n = 0;
+    cl_int e = clGetPlatformIDs(MAX_PLATFORMS, p, &np);
+    if (e == CL_PLATFORM_NOT_FOUND_KHR || (e == CL_SUCCESS && np == 0))
+        return hv_error(HV_ERR_UNSUPPORTED, "no OpenCL platform is installed (an ICD such as "
+                                            "Debian's pocl-opencl-icd or a GPU driver provides one)");
+    if (e != CL_SUCCESS)
+        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL: clGetPlatformIDs failed: %s", hv_cl_strerror(e));
+    if (np > MAX_PLATFORMS)
+        np = MAX_PLATFORMS;
+    for (cl_uint pi = 0; pi < np; pi++) {
+        cl_device_id d[MAX_DEVICES];
+        cl_uint nd = 0;
+        if (clGetDeviceIDs(p[pi], CL_DEVICE_TYPE_ALL, MAX_DEVICES, d, &nd) != CL_SUCCESS)
+            continue;
+        for (cl_uint di = 0; di < nd && di < MAX_DEVICES && L->n < MAX_DEVICES; di++) {
+            hv_opencl_device *o = &L->info[L->n];
+            memset(o, 0, sizeof *o);
+            o->platform = (int)pi;
+            o->device = (int)di;
+            device_info(p[pi], d[di], o);
+            L->plat[L->n] = p[pi];
+            L->dev[L->n] = d[di];
+            L->n++;
+        }
+    }
+    if (L->n == 0)
+        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL platforms are installed but offer no device");
+    return HV_OK;
+}
+
+/* Index into L of the device HEATVOX_OPENCL_DEVICE names (or the default). */
+static hv_status choose(const devlist *L, int *index)
+{
+    const char *spec = getenv("HEATVOX_OPENCL_DEVICE");
+    *index = -1;
+    if (!spec || !*spec) {
+        for (int i = 0; i < L->n && *index < 0; i++)
+            if (L->info[i].gpu)
+                *index = i;
+        if (*index < 0)
+            *index = 0;
+        return HV_OK;
+    }
+    int P, D, used = 0;
+    if (sscanf(spec, "%d:%d%n", &P, &D, &used) == 2 && spec[used] == '\0') {
+        for (int i = 0; i < L->n; i++)
+            if (L->info[i].platform == P && L->info[i].device == D)
+                *index = i;
+    } else {
+        for (int i = 0; i < L->n && *index < 0; i++)
+            if (strcasestr(L->info[i].name, spec))
+                *index = i;
+    }
+    if (*index >= 0)
+        return HV_OK;
+    char list[600] = "";
+    size_t len = 0;
+    for (int i = 0; i < L->n && len < sizeof list - 1; i++) {
+        int w = snprintf(list + len, sizeof list - len, "%s%d:%d '%s'", i ? ", " : "",
+                         L->info[i].platform, L->info[i].device, L->info[i].name);
+        if (w < 0)
+            break;
+        len += (size_t)w;
+    }
+    return hv_error(HV_ERR_INVALID_ARG,
+                    "HEATVOX_OPENCL_DEVICE='%s' names no OpenCL device (give \"P:D\" or part of a "
+                    "device name); devices: %s",
+                    spec, list);
+}
+
+hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count)
+{
+    if (!count || max < 0 || (max > 0 && !out))
+        return hv_error(HV_ERR_INVALID_ARG, "hv_opencl_list_devices: bad arguments");
+    *count = 0;
+    devlist *L = malloc(sizeof *L);
+    if (!L)
+        return hv_error(HV_ERR_NOMEM, "hv_opencl_list_devices: out of memory");
+    hv_status st = enumerate(L);
+    if (st == HV_OK) {
+        int sel = -1;
+        if (choose(L, &sel) != HV_OK)
+            sel = -1;
+        hv_clear_error();
+        for (int i = 0; i < L->n && i < max; i++) {
+            out[i] = L->info[i];
+            out[i].selected = i == sel;
+        }
+        *count = L->n;
+    }
+    free(L);
+    return st;
+}
+
+hv_status hv_opencl_probe(hv_opencl_device *out)
+{
+    devlist *L = malloc(sizeof *L);
+    if (!L)
+        return hv_error(HV_ERR_NOMEM, "hv_opencl_probe: out of memory");
+    int sel = -1;
+    hv_status st = enumerate(L);
+    if (st == HV_OK)
+        st = choose(L, &sel);
+    if (st == HV_OK && out) {
+        *out = L->info[sel];
+        out->selected = 1;
+    }
+    free(L);
+    return st;
+}
+
+/* ---------- the shared context and program ---------- */
+
+struct hv_cl_shared {
+    hv_cl_shared *next;
+    int refs;
+    cl_device_id dev;
+    int fp64;
+    cl_context ctx;
+    cl_program prog;
+};
+
+static pthread_mutex_t shared_lock = PTHREAD_MUTEX_INITIALIZER;
+static hv_cl_shared *shared_list;
+
+static hv_status build_program(cl_context ctx, cl_device_id dev, const char *devname,
+                               const char *const *sources, int nsrc, const char *options,
+                               cl_program *prog)
+{
+    cl_int e;
+    *prog = clCreateProgramWithSource(ctx, (cl_uint)nsrc, (const char **)sources, NULL, &e);
+    if (e != CL_SUCCESS)
+        return hv_error(HV_ERR_BACKEND, "OpenCL: clCreateProgramWithSource failed: %s",
+                        hv_cl_strerror(e));
+    e = clBuildProgram(*prog, 1, &dev, options, NULL, NULL);
+    if (e == CL_SUCCESS)
+        return HV_OK;
+    /* The first lines of the log name the first error; keep those. */
+    char log[640] = "";
+    size_t got = 0;
+    clGetProgramBuildInfo(*prog, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &got);
+    char *full = got ? malloc(got + 1) : NULL;
+    if (full && clGetProgramBuildInfo(*prog, dev, CL_PROGRAM_BUILD_LOG, got, full, NULL) == CL_SUCCESS) {
+        full[got] = 0;
+        const char *s = full;
+        while (*s && isspace((unsigned char)*s))
+            s++;
+        snprintf(log, sizeof log, "%s", s);
+        if (strlen(s) >= sizeof log)
+            memcpy(log + sizeof log - 5, "...", 4);
+    }
+    free(full);
+    clReleaseProgram(*prog);
+    *prog = NULL;
+    return hv_error(HV_ERR_BACKEND, "OpenCL kernels failed to build on '%s' (%s): %s", devname,
+                    hv_cl_strerror(e), *log ? log : "(no build log)");
+}
+
+static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, const char *devname,
+                            hv_cl_shared **out)
+{
+    for (hv_cl_shared *s = shared_list; s; s = s->next)
+        if (s->dev == dev && s->fp64 == fp64) {
+            s->refs++;
+            *out = s;
+            return HV_OK;
+        }
+    hv_cl_shared *s = calloc(1, sizeof *s);
+    if (!s)
+        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+    cl_context_properties props[] = {CL_CONTEXT_PLATFORM, (cl_context_properties)plat, 0};
+    cl_int e;
+    s->ctx = clCreateContext(props, 1, &dev, NULL, NULL, &e);
+    if (e != CL_SUCCESS) {
+        free(s);
+        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
+                        hv_cl_strerror(e));
+    }
+    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
+                         hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
+    char opts[128];
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
+             HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");
+    hv_status st = build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]),
+                                 opts, &s->prog);
+    if (st) {
+        clReleaseContext(s->ctx);
+        free(s);
+        return st;
+    }
+    s->dev = dev;
+    s->fp64 = fp64;
+    s->refs = 1;
+    s->next = shared_list;
+    shared_list = s;
+    *out = s;
+    return HV_OK;
+}
+
+static void shared_put(hv_cl_shared *s)
+{
+    pthread_mutex_lock(&shared_lock);
+    if (--s->refs == 0) {
+        for (hv_cl_shared **pp = &shared_list; *pp; pp = &(*pp)->next)
+            if (*pp == s) {
+                *pp = s->next;
+                break;
+            }
+        clReleaseProgram(s->prog);
+        clReleaseContext(s->ctx);
+        free(s);
+    }
+    pthread_mutex_unlock(&shared_lock);
+}
+
+void hv_cl_close(hv_cl **pcl)
+{
+    if (!pcl || !*pcl)
+        return;
+    hv_cl *cl = *pcl;
+    hv_cl_free(&cl->part);
+    for (int k = 0; k < HV_K_COUNT; k++)
+        if (cl->k[k])
+            clReleaseKernel(cl->k[k]);
+    if (cl->q)
+        clReleaseCommandQueue(cl->q);
+    if (cl->sh)
+        shared_put(cl->sh);
+    free(cl);
+    *pcl = NULL;
+}
+
+hv_status hv_cl_open(hv_cl **out)
+{
+    *out = NULL;
+    hv_cl *cl = calloc(1, sizeof *cl);
+    devlist *L = malloc(sizeof *L);
+    if (!cl || !L) {
+        free(cl);
+        free(L);
+        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+    }
+    pthread_mutex_lock(&shared_lock);
+    int sel = -1;
+    hv_status st = enumerate(L);
+    if (st == HV_OK)
+        st = choose(L, &sel);
+    if (st == HV_OK) {
+        const char *no64 = getenv("HEATVOX_OPENCL_FP64");
+        cl->info = L->info[sel];
+        cl->info.selected = 1;
+        cl->fp64 = cl->info.fp64 && !(no64 && !strcmp(no64, "0"));
+        cl->dev = L->dev[sel];
+        st = shared_get(L->plat[sel], cl->dev, cl->fp64, cl->info.name, &cl->sh);
+    }
+    pthread_mutex_unlock(&shared_lock);
+    free(L);
+    if (st) {
+        free(cl);
+        return st;
+    }
+    cl->ctx = cl->sh->ctx;
+    cl->acc = cl->fp64 ? sizeof(cl_double) : sizeof(cl_float);
+    cl_int e;
+    cl->q = clCreateCommandQueue(cl->ctx, cl->dev, 0, &e);
+    if (e != CL_SUCCESS) {
+        hv_cl_close(&cl);
+        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s", hv_cl_strerror(e));
+    }
+    for (int k = 0; k < HV_K_COUNT; k++) {
+        if (k >= HV_K_FIRST_FP64 && !cl->fp64)
+            continue;
+        cl->k[k] = clCreateKernel(cl->sh->prog, kernel_names[k], &e);
+        if (e != CL_SUCCESS) {
+            hv_cl_close(&cl);
+            return hv_error(HV_ERR_BACKEND, "OpenCL: kernel '%s' is missing: %s", kernel_names[k],
+                            hv_cl_strerror(e));
+        }
+    }
+    size_t wg = 0;
+    clGetDeviceInfo(cl->dev, CL_DEVICE_MAX_WORK_GROUP_SIZE, sizeof wg, &wg, NULL);
+    cl->max_wg = wg;
+    if (wg < HV_CL_WG) {
+        hv_cl_close(&cl);
+        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL device '%s' allows work-groups of %zu items; "
+                        "heatvox needs %d", cl->info.name, wg, HV_CL_WG);
+    }
+    *out = cl;
+    return HV_OK;
+}
+
+hv_status hv_cl_build(hv_cl *cl, const char *const *sources, int nsrc, const char *options,
+                      cl_program *prog)
+{
+    return build_program(cl->ctx, cl->dev, cl->info.name, sources, nsrc, options, prog);
+}
+
+/* ---------- errors, buffers, launches ---------- */
+
+int hv_cl_fail(hv_cl *cl, cl_int e, const char *where)
+{
+    if (e == CL_SUCCESS)
+        return 0;
+    if (cl->err == CL_SUCCESS) {
+        cl->err = e;
+        snprintf(cl->err_where, sizeof cl->err_where, "%s", where);
+    }
+    return 1;
+}
+
+hv_status hv_cl_check(hv_cl *cl)
+{
+    if (cl->err == CL_SUCCESS)
+        return HV_OK;
+    cl_int e = cl->err;
+    cl->err = CL_SUCCESS;
+    hv_status st = (e == CL_MEM_OBJECT_ALLOCATION_FAILURE || e == CL_OUT_OF_HOST_MEMORY)
+                       ? HV_ERR_NOMEM
+                       : HV_ERR_BACKEND;
+    return hv_error(st, "OpenCL: %s failed on '%s': %s", cl->err_where, cl->info.name,
+                    hv_cl_strerror(e));
+}
+
+hv_status hv_cl_finish(hv_cl *cl)
+{
+    hv_cl_fail(cl, clFinish(cl->q), "clFinish");
+    return hv_cl_check(cl);
+}
+
+hv_status hv_cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
+{
+    cl_int e;
+    if (bytes == 0) /* OpenCL has no empty buffers */
+        init = NULL;
+    *out = clCreateBuffer(cl->ctx, CL_MEM_READ_WRITE | (init ? CL_MEM_COPY_HOST_PTR : 0),
+                          bytes ? bytes : 1, (void *)init, &e);
+    if (e == CL_SUCCESS)
+        return HV_OK;
+    *out = NULL;
+    if (e == CL_INVALID_BUFFER_SIZE || e == CL_MEM_OBJECT_ALLOCATION_FAILURE ||
+        e == CL_OUT_OF_RESOURCES || e == CL_OUT_OF_HOST_MEMORY)
+        return hv_error(HV_ERR_NOMEM, "OpenCL: cannot allocate %zu bytes on '%s': %s", bytes,
+                        cl->info.name, hv_cl_strerror(e));
+    return hv_error(HV_ERR_BACKEND, "OpenCL: clCreateBuffer(%zu bytes) failed: %s", bytes,
+                    hv_cl_strerror(e));
+}
+
+void hv_cl_free(cl_mem *m)
+{
+    if (m && *m) {
+        clReleaseMemObject(*m);
+        *m = NULL;
+    }
+}
+
+void hv_cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *src)
+{
+    if (bytes)
+        hv_cl_fail(cl, clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL, NULL),
+                   "clEnqueueWriteBuffer");
+}
+
+void hv_cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst)
+{
+    if (bytes)
+        hv_cl_fail(cl, clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL, NULL),
+                   "clEnqueueReadBuffer");
+}
+
+void hv_cl_zero(hv_cl *cl, cl_mem m, size_t bytes)
+{
+    const cl_uchar zero = 0;
+    if (bytes)
+        hv_cl_fail(cl, clEnqueueFillBuffer(cl->q, m, &zero, 1, 0, bytes, 0, NULL, NULL),
+                   "clEnqueueFillBuffer");
+}
+
+void hv_cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
+{
+    if (bytes)
+        hv_cl_fail(cl, clEnqueueCopyBuffer(cl->q, src, dst, 0, 0, bytes, 0, NULL, NULL),
+                   "clEnqueueCopyBuffer");
+}
+
+void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
+{
+    cl_kernel kk = cl->k[k];
+    if (!kk) {
+        hv_cl_fail(cl, CL_INVALID_KERNEL, kernel_names[k]);
+        return;
+    }
+    va_list ap;
+    va_start(ap, fmt);
+    for (cl_uint i = 0; fmt[i]; i++) {
+        cl_int e = CL_INVALID_VALUE;
+        switch (fmt[i]) {
+        case 'm': {
+            cl_mem m = va_arg(ap, cl_mem);
+            e = clSetKernelArg(kk, i, sizeof m, &m);
+            break;
+        }
+        case 'i': {
+            cl_int v = va_arg(ap, int);
+            e = clSetKernelArg(kk, i, sizeof v, &v);
+            break;
+        }
+        case 'l': {
+            cl_ulong v = va_arg(ap, size_t);
+            e = clSetKernelArg(kk, i, sizeof v, &v);
+            break;
+        }
+        case 'f': {
+            cl_float v = (cl_float)va_arg(ap, double);
+            e = clSetKernelArg(kk, i, sizeof v, &v);
+            break;
+        }
+        case 'a': {
+            double v = va_arg(ap, double);
+            cl_float f = (cl_float)v;
+            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof v, &v) : clSetKernelArg(kk, i, sizeof f, &f);
+            break;
+        }
+        case 'I': {
+            const cl_int *v = va_arg(ap, const cl_int *);
+            cl_int4 x = {{v[0], v[1], v[2], v[3]}};
+            e = clSetKernelArg(kk, i, sizeof x, &x);
+            break;
+        }
+        case 'F': {
+            const cl_float *v = va_arg(ap, const cl_float *);
+            cl_float4 x = {{v[0], v[1], v[2], v[3]}};
+            e = clSetKernelArg(kk, i, sizeof x, &x);
+            break;
+        }
+        case 'A': {
+            const double *v = va_arg(ap, const double *);
+            cl_double4 d = {{v[0], v[1], v[2], v[3]}};
+            cl_float4 f = {{(cl_float)v[0], (cl_float)v[1], (cl_float)v[2], (cl_float)v[3]}};
+            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof d, &d) : clSetKernelArg(kk, i, sizeof f, &f);
+            break;
+        }
+        }
+        if (e != CL_SUCCESS) {
+            char where[96];
+            snprintf(where, sizeof where, "argument %u of kernel %s", i, kernel_names[k]);
+            hv_cl_fail(cl, e, where);
+            break;
+        }
+    }
+    va_end(ap);
+}
+
+void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const size_t *local)
+{
+    for (int d = 0; d < dims; d++)
+        if (global[d] == 0)
+            return;
+    if (!cl->k[k]) {
+        hv_cl_fail(cl, CL_INVALID_KERNEL, kernel_names[k]);
+        return;
+    }
+    cl_int e = clEnqueueNDRangeKernel(cl->q, cl->k[k], (cl_uint)dims, NULL, global, local, 0, NULL, NULL);
+    if (e != CL_SUCCESS) {
+        char where[96];
+        snprintf(where, sizeof where, "kernel %s", kernel_names[k]);
+        hv_cl_fail(cl, e, where);
+    }
+}
+
+size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
+{
+    size_t kwg = 0;
+    if (!cl->k[k] || clGetKernelWorkGroupInfo(cl->k[k], cl->dev, CL_KERNEL_WORK_GROUP_SIZE,
+                                              sizeof kwg, &kwg, NULL) != CL_SUCCESS)
+        kwg = cl->max_wg;
+    while (want > 1 && want > kwg)
+        want >>= 1;
+    return want;
+}
+
+static size_t round_up(size_t n, size_t m) { return (n + m - 1) / m * m; }
+
+void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
+{
+    /* One work-group shape for every level: PoCL compiles a kernel once per
+     * local size, and idle items on narrow (coarse) levels cost little. */
+    l[0] = HV_CL_WG;
+    l[1] = 1;
+    g[0] = round_up(nx, HV_CL_WG);
+    g[1] = rows;
+}
+
+void hv_cl_range1(size_t n, size_t g[1], size_t l[1])
+{
+    l[0] = HV_CL_WG;
+    g[0] = round_up(n, HV_CL_WG);
+}
+
+size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1])
+{
+    size_t per = (size_t)HV_CL_WG * HV_CL_RED_BLOCK, groups = (n + per - 1) / per;
+    if (groups == 0)
+        groups = 1;
+    l[0] = HV_CL_WG;
+    g[0] = groups * HV_CL_WG;
+    return groups;
+}
+
+void hv_cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
+{
+    size_t l = hv_cl_group_limit(cl, HV_K_RED_FINISH, 256);
+    hv_cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
+    hv_cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
+}
+
+void hv_cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot)
+{
+    size_t g[1], l[1];
+    size_t groups = hv_cl_range_red(n, g, l);
+    if (groups > cl->part_cap) {
+        hv_cl_free(&cl->part);
+        cl->part_cap = 0;
+        if (hv_cl_alloc(cl, groups * cl->acc, NULL, &cl->part) != HV_OK) {
+            hv_cl_fail(cl, CL_MEM_OBJECT_ALLOCATION_FAILURE, "partial sums of a reduction");
+            return;
+        }
+        cl->part_cap = groups;
+    }
+    hv_cl_args(cl, HV_K_RED_DOT_F, "mmlm", a, b, n, cl->part);
+    hv_cl_run(cl, HV_K_RED_DOT_F, 1, g, l);
+    hv_cl_finish_sum(cl, cl->part, groups, S, slot);
+}
+
+void hv_cl_read_acc(hv_cl *cl, cl_mem S, int first, int n, double *out)
+{
+    if (cl->fp64) {
+        hv_cl_read(cl, S, (size_t)first * sizeof(double), (size_t)n * sizeof(double), out);
+        return;
+    }
+    float tmp[64];
+    for (int done = 0; done < n; done += 64) {
+        int m = n - done < 64 ? n - done : 64;
+        hv_cl_read(cl, S, (size_t)(first + done) * sizeof(float), (size_t)m * sizeof(float), tmp);
+        for (int i = 0; i < m; i++)
+            out[done + i] = cl->err ? 0.0 : tmp[i];
+    }
+}

@@ -1,0 +1,291 @@
+/* The multigrid hierarchy and V-cycle on an OpenCL device (cl_mg.h). */
+#include "cl_mg.h"
+#include "core/error.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#define BOTTOM_WG 64
+
+static hv_status upload_level(hv_clmg *m, const mg_hierarchy *H, int l)
+{
+    hv_cl *cl = m->cl;
+    const mg_level *S = &H->lv[l];
+    hv_clmg_level *L = &m->lv[l];
+    memcpy(L->n, S->n, sizeof L->n);
+    memcpy(L->coarsen, S->coarsen, sizeof L->coarsen);
+    memcpy(L->c, S->c, sizeof L->c);
+    L->count = S->count;
+    L->plain = S->plain;
+    L->lmax = S->lmax;
+    for (int b = 0; b < 3; b++) {
+        L->N[b] = S->n[b];
+        L->C[b] = (cl_float)S->c[b];
+    }
+    L->N[3] = S->plain;
+    L->C[3] = (cl_float)H->alpha;
+    hv_cl_range2((size_t)S->n[0], (size_t)S->n[1] * S->n[2], L->g, L->l);
+    const size_t bytes = S->count * sizeof(float);
+    hv_status st = HV_OK;
+    if (!S->plain) {
+        if ((st = hv_cl_alloc(cl, bytes, S->a, &L->a)))
+            return st;
+        for (int b = 0; b < H->dim; b++) {
+            size_t nf = (S->count / S->n[b]) * (size_t)(S->n[b] + 1);
+            if ((st = hv_cl_alloc(cl, nf * sizeof(float), S->w[b], &L->w[b])))
+                return st;
+        }
+    }
+    const int jac = m->smoother != HV_SMOOTH_RBGS;
+    if ((st = hv_cl_alloc(cl, bytes, NULL, &L->u[0])) || (st = hv_cl_alloc(cl, bytes, NULL, &L->f)) ||
+        (jac && ((st = hv_cl_alloc(cl, bytes, NULL, &L->u[1])) || (st = hv_cl_alloc(cl, bytes, NULL, &L->d)))))
+        return st;
+    hv_cl_zero(cl, L->u[0], bytes);
+    hv_cl_zero(cl, L->f, bytes);
+    if (jac) {
+        hv_cl_zero(cl, L->u[1], bytes);
+        hv_cl_zero(cl, L->d, bytes);
+    }
+    return HV_OK;
+}
+
+static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
+{
+    hv_cl *cl = m->cl;
+    const mg_level *S = &H->lv[H->nlev - 1];
+    hv_status st;
+    m->bnregion = 0;
+    if (H->alpha == 0 && S->region && S->nregion > 0) {
+        m->bnregion = S->nregion;
+        double *cnt = calloc((size_t)S->nregion, sizeof *cnt);
+        float *cntf = calloc((size_t)S->nregion, sizeof *cntf);
+        if (!cnt || !cntf) {
+            free(cnt);
+            free(cntf);
+            return hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory");
+        }
+        for (size_t c = 0; c < S->count; c++)
+            if (S->region[c] >= 0)
+                cnt[S->region[c]] += 1;
+        for (int r = 0; r < S->nregion; r++) {
+            cnt[r] = 1.0 / cnt[r];
+            cntf[r] = (float)cnt[r];
+        }
+        st = hv_cl_alloc(cl, S->count * sizeof(int32_t), S->region, &m->bregion);
+        if (!st)
+            st = hv_cl_alloc(cl, (size_t)S->nregion * cl->acc, cl->fp64 ? (void *)cnt : (void *)cntf,
+                             &m->brinv);
+        free(cnt);
+        free(cntf);
+        if (st)
+            return st;
+    }
+    if ((st = hv_cl_alloc(cl, (5 * S->count + (size_t)m->bnregion) * cl->acc, NULL, &m->bscr)))
+        return st;
+    m->bl = hv_cl_group_limit(cl, HV_K_MG_BOTTOM_CG, BOTTOM_WG);
+    return HV_OK;
+}
+
+hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
+                         int pre, int post)
+{
+    memset(m, 0, sizeof *m);
+    m->cl = cl;
+    m->dim = H->dim;
+    m->alpha = H->alpha;
+    m->smoother = smoother;
+    m->pre = pre;
+    m->post = post;
+    hv_status st = HV_OK;
+    for (int l = 0; l < H->nlev && !st; l++) {
+        m->nlev = l + 1;
+        st = upload_level(m, H, l);
+    }
+    if (!st)
+        st = upload_bottom(m, H);
+    if (!st)
+        st = hv_cl_finish(cl);
+    if (st)
+        hv_clmg_destroy(m);
+    return st;
+}
+
+void hv_clmg_destroy(hv_clmg *m)
+{
+    for (int l = 0; l < m->nlev; l++) {
+        hv_clmg_level *L = &m->lv[l];
+        hv_cl_free(&L->a);
+        for (int b = 0; b < 3; b++)
+            hv_cl_free(&L->w[b]);
+        hv_cl_free(&L->u[0]);
+        hv_cl_free(&L->u[1]);
+        hv_cl_free(&L->f);
+        hv_cl_free(&L->d);
+    }
+    hv_cl_free(&m->bregion);
+    hv_cl_free(&m->brinv);
+    hv_cl_free(&m->bscr);
+    m->nlev = 0;
+}
+
+/* ---------- level kernels ---------- */
+
+void hv_clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y)
+{
+    hv_clmg_level *L = &m->lv[l];
+    hv_cl_args(m->cl, HV_K_MG_APPLY, "IFmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2], u, y);
+    hv_cl_run(m->cl, HV_K_MG_APPLY, 2, L->g, L->l);
+}
+
+void hv_clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r)
+{
+    hv_clmg_level *L = &m->lv[l];
+    hv_cl_args(m->cl, HV_K_MG_RESIDUAL, "IFmmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2], u,
+               f, r);
+    hv_cl_run(m->cl, HV_K_MG_RESIDUAL, 2, L->g, L->l);
+}
+
+static void rbgs(hv_clmg *m, hv_clmg_level *L, int col)
+{
+    size_t g[2], lw[2];
+    hv_cl_range2(((size_t)L->n[0] + 1) / 2, (size_t)L->n[1] * L->n[2], g, lw);
+    hv_cl_args(m->cl, HV_K_MG_RBGS, "IFmmmmmmi", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2],
+               L->u[L->cur], L->f, col);
+    hv_cl_run(m->cl, HV_K_MG_RBGS, 2, g, lw);
+}
+
+/* d = cd d + cr D^-1 (f - A u);  u += d  (ping-pong); cd == 0 runs the
+ * kernel that does not read d. */
+static void cheb_step(hv_clmg *m, hv_clmg_level *L, double cd, double cr)
+{
+    if (cd == 0) {
+        hv_cl_args(m->cl, HV_K_MG_JACOBI, "IFmmmmmmmmf", L->N, L->C, L->a, L->w[0], L->w[1],
+                   L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cr);
+        hv_cl_run(m->cl, HV_K_MG_JACOBI, 2, L->g, L->l);
+    } else {
+        hv_cl_args(m->cl, HV_K_MG_CHEB, "IFmmmmmmmmff", L->N, L->C, L->a, L->w[0], L->w[1],
+                   L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cd, cr);
+        hv_cl_run(m->cl, HV_K_MG_CHEB, 2, L->g, L->l);
+    }
+    L->cur = 1 - L->cur;
+}
+
+void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
+{
+    hv_clmg_level *L = &m->lv[l];
+    if (steps <= 0)
+        return;
+    if (m->smoother == HV_SMOOTH_RBGS) {
+        for (int s = 0; s < steps; s++) {
+            rbgs(m, L, reverse ? 1 : 0);
+            rbgs(m, L, reverse ? 0 : 1);
+        }
+    } else if (m->smoother == HV_SMOOTH_JACOBI) {
+        double omega = m->dim == 3 ? 6.0 / 7.0 : 4.0 / 5.0;
+        for (int s = 0; s < steps; s++)
+            cheb_step(m, L, 0.0, omega);
+    } else {
+        /* Chebyshev of degree 2*steps on [lmax/8, lmax], as mg.c. */
+        double lmax = L->lmax, lmin = lmax / 8;
+        double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin);
+        double sigma = theta / delta, rho_old = 1.0 / sigma;
+        cheb_step(m, L, 0.0, 1.0 / theta);
+        for (int s = 1; s < 2 * steps; s++) {
+            double rho = 1.0 / (2 * sigma - rho_old);
+            cheb_step(m, L, rho * rho_old, 2 * rho / delta);
+            rho_old = rho;
+        }
+    }
+}
+
+static void coarsen_flags(const hv_clmg_level *F, cl_int co[4])
+{
+    co[3] = 1;
+    for (int b = 0; b < 3; b++) {
+        co[b] = F->coarsen[b];
+        co[3] *= F->coarsen[b] ? 2 : 1;
+    }
+}
+
+void hv_clmg_restrict_residual(hv_clmg *m, int l)
+{
+    hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
+    cl_int co[4];
+    coarsen_flags(F, co);
+    hv_cl_args(m->cl, HV_K_MG_RESTRICT_RESIDUAL, "IFmmmmmmIIm", F->N, F->C, F->a, F->w[0], F->w[1],
+               F->w[2], F->u[F->cur], F->f, C->N, co, C->f);
+    hv_cl_run(m->cl, HV_K_MG_RESTRICT_RESIDUAL, 2, C->g, C->l);
+}
+
+void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst)
+{
+    hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
+    cl_int co[4];
+    coarsen_flags(F, co);
+    hv_cl_args(m->cl, HV_K_MG_RESTRICT, "ImIIm", F->N, src, C->N, co, dst);
+    hv_cl_run(m->cl, HV_K_MG_RESTRICT, 2, C->g, C->l);
+}
+
+void hv_clmg_prolong(hv_clmg *m, int l)
+{
+    hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
+    cl_int co[4];
+    coarsen_flags(F, co);
+    if (C->plain) {
+        size_t g[2], lw[2];
+        hv_cl_range2((size_t)C->n[0], (size_t)F->n[1] * F->n[2], g, lw);
+        if (F->plain && co[0]) {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG_X2, "IIImm", F->N, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG_X2, 2, g, lw);
+        } else {
+            hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
+                       F->u[F->cur]);
+            hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+        }
+    } else {
+        hv_cl_args(m->cl, HV_K_MG_PROLONG_W, "ImImImm", F->N, F->a, C->N, C->a, co, C->u[C->cur],
+                   F->u[F->cur]);
+        hv_cl_run(m->cl, HV_K_MG_PROLONG_W, 2, F->g, F->l);
+    }
+}
+
+void hv_clmg_bottom(hv_clmg *m)
+{
+    hv_clmg_level *L = &m->lv[m->nlev - 1];
+    double C[4] = {L->c[0], L->c[1], L->c[2], m->alpha};
+    hv_cl_args(m->cl, HV_K_MG_BOTTOM_CG, "IAmmmmmmmmim", L->N, C, L->a, L->w[0], L->w[1], L->w[2],
+               L->f, L->u[L->cur], m->bregion, m->brinv, m->bnregion, m->bscr);
+    hv_cl_run(m->cl, HV_K_MG_BOTTOM_CG, 1, &m->bl, &m->bl);
+}
+
+/* ---------- cycles ---------- */
+
+void hv_clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
+{
+    hv_clmg_level *L = &m->lv[l];
+    if (l == m->nlev - 1) {
+        hv_clmg_bottom(m);
+        return;
+    }
+    if (!guess)
+        hv_cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
+    hv_clmg_smooth(m, l, m->pre, 0);
+    hv_clmg_restrict_residual(m, l);
+    hv_clmg_vcycle(m, l + 1, 0, sym);
+    hv_clmg_prolong(m, l);
+    hv_clmg_smooth(m, l, m->post, sym);
+}
+
+void hv_clmg_fmg(hv_clmg *m)
+{
+    for (int l = 0; l + 1 < m->nlev; l++)
+        hv_clmg_restrict(m, l, m->lv[l].f, m->lv[l + 1].f);
+    hv_clmg_bottom(m);
+    for (int l = m->nlev - 2; l >= 0; l--) {
+        hv_clmg_level *L = &m->lv[l];
+        hv_cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
+        hv_clmg_prolong(m, l);
+        hv_clmg_vcycle(m, l, 1, 0);
+    }
+}

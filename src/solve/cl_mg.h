@@ -1,0 +1,71 @@
+/*
+ * Private: the multigrid hierarchy on an OpenCL device, uploaded once from the
+ * host hierarchy (mg_setup.c) so that it coarsens exactly like the CPU backend,
+ * and the float V-cycle run entirely on the device's in-order queue (no host
+ * synchronization inside a cycle; the bottom level is solved by a one-work-
+ * group CG kernel). The launchers are separate so that tests can compare each
+ * kernel with the CPU code.
+ */
+#ifndef HV_SOLVE_CL_MG_H
+#define HV_SOLVE_CL_MG_H
+
+#include "cl_core.h"
+#include "mg_level.h"
+
+typedef struct hv_clmg_level {
+    int n[3];
+    size_t count;
+    int plain;
+    int coarsen[3];
+    double c[3];
+    double lmax;
+    cl_int N[4];           /* (nx, ny, nz, plain) */
+    cl_float C[4];         /* (cx, cy, cz, alpha) */
+    cl_mem a, w[3];        /* NULL on plain levels */
+    cl_mem u[2];           /* u[cur] is the iterate; u[1] only for Jacobi/Chebyshev */
+    int cur;
+    cl_mem f, d;           /* right-hand side; Chebyshev direction (not with RBGS) */
+    size_t g[2], l[2];     /* range over the cells */
+} hv_clmg_level;
+
+typedef struct hv_clmg {
+    hv_cl *cl;
+    int dim;
+    double alpha;
+    int nlev;
+    hv_clmg_level lv[MG_MAX_LEVELS];
+    hv_smoother smoother;
+    int pre, post;
+    /* bottom level: regions (Poisson), 1/cells per region, CG scratch */
+    int bnregion;
+    cl_mem bregion, brinv, bscr;
+    size_t bl;
+} hv_clmg;
+
+/* Uploads H's coefficients and allocates the level vectors. On failure m
+ * holds nothing to free. */
+hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
+                         int pre, int post);
+void hv_clmg_destroy(hv_clmg *m);
+
+/* Level kernels on level l's coefficients. */
+void hv_clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y);
+void hv_clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r);
+/* steps smoothing steps on lv[l].u[cur] for lv[l].f, as mg.c's smooth(). */
+void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse);
+/* lv[l+1].f = restriction of the residual lv[l].f - A lv[l].u[cur]. */
+void hv_clmg_restrict_residual(hv_clmg *m, int l);
+/* dst (level l+1) = mean of the children of src (level l). */
+void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst);
+/* lv[l].u[cur] += P lv[l+1].u[cur] */
+void hv_clmg_prolong(hv_clmg *m, int l);
+/* lv[nlev-1].u[cur] = CG solution for lv[nlev-1].f */
+void hv_clmg_bottom(hv_clmg *m);
+
+/* One V-cycle on level l (u from zero unless guess; sym reverses the
+ * post-smoothing order for use as a CG preconditioner), and full multigrid
+ * for lv[0].f, as mg.c. The result is lv[0].u[lv[0].cur]. */
+void hv_clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
+void hv_clmg_fmg(hv_clmg *m);
+
+#endif

@@ -1,0 +1,55 @@
+/*
+ * Private: grid operations on an OpenCL device for the heat methods and the
+ * solver: per-region sums and mean projections (one constant per connected
+ * fluid region, NOTES §2), face gradient and divergence (as src/ops/faces.c),
+ * the heat methods' face normalization, ratio and axpy. Arrays are cl_mem of
+ * float unless named _d (double, fp64 devices only). Everything is enqueued on
+ * cl's queue; errors surface at hv_cl_check / hv_cl_finish.
+ */
+#ifndef HV_SOLVE_CL_OPS_H
+#define HV_SOLVE_CL_OPS_H
+
+#include "cl_core.h"
+
+/* Cells sorted by region and cut into chunks (one work-group each), so that
+ * per-region sums take two kernels whatever the number and size of regions. */
+typedef struct hv_cl_regions {
+    size_t count;      /* cells */
+    int nregion;
+    size_t nchunk;
+    cl_mem region;     /* int32 labels (-1 = none), NULL for one region = the whole grid */
+    cl_mem perm;       /* region-sorted cells, NULL without labels */
+    cl_mem cb;         /* chunk bounds in perm, nchunk + 1 */
+    cl_mem rc;         /* first chunk of each region, nregion + 1 */
+    cl_mem rinv;       /* acc_t 1 / cells per region */
+    cl_mem part;       /* acc_t per chunk */
+    cl_mem sum;        /* acc_t per region: the result of the last sum or mean */
+} hv_cl_regions;
+
+/* region: NULL (one region, all cells) or count labels in [0, nregion) and -1. */
+hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const int32_t *region,
+                               int nregion);
+void hv_cl_regions_destroy(hv_cl_regions *R);
+/* R->sum[r] = sum (mean: mean) of v over region r. */
+void hv_cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean);
+/* v -= its region's mean; 0 outside every region. */
+void hv_cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v);
+void hv_cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v);
+
+/* g[a] (axis-a faces, a < dim) = face gradient of u; solid may be NULL (uint8 per cell). */
+void hv_cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid, cl_mem u,
+                         cl_mem const g[3]);
+/* out = divergence of the face field F (F[2] unused in 2D). */
+void hv_cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid,
+                           cl_mem const F[3], cl_mem out);
+/* out[a] = axis-a component of the normalized mean of the cell vectors v at
+ * axis-a faces (v[2] unused in 2D); 0 on walls, solid faces and where the
+ * mean's largest component is <= eps. */
+void hv_cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
+                          cl_mem const out[3], double eps);
+/* out = b > eps ? a / b : 0 */
+void hv_cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps);
+/* y += alpha x */
+void hv_cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
+
+#endif

@@ -1,0 +1,397 @@
+/*
+ * The multigrid hierarchy on the host, shared by the CPU (mg.c) and OpenCL
+ * (opencl.c) backends so that both coarsen the same way: level sizes by
+ * semi-coarsening, coefficients by averaging (NOTES §2), Chebyshev bounds by
+ * power iteration and the bottom level's connected regions.
+ */
+#include "mg_level.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Face weight with plain levels, walls and out-of-range indices handled. */
+static float level_w(const mg_level *L, int a, int i, int j, int k)
+{
+    int idx[3] = {i, j, k};
+    for (int b = 0; b < 3; b++)
+        if (idx[b] < 0 || idx[b] > L->n[b] - (b != a))
+            return 0.0f;
+    if (idx[a] == 0 || idx[a] == L->n[a])
+        return 0.0f;
+    return L->plain ? 1.0f : L->w[a][mg_face_index(L, a, i, j, k)];
+}
+
+static float level_a(const mg_level *L, int i, int j, int k)
+{
+    if (i < 0 || j < 0 || k < 0 || i >= L->n[0] || j >= L->n[1] || k >= L->n[2])
+        return 0.0f;
+    return L->plain ? 1.0f : L->a[(size_t)i + L->sy * j + L->sz * k];
+}
+
+double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k)
+{
+    double d = alpha * level_a(L, i, j, k);
+    int idx[3] = {i, j, k};
+    for (int b = 0; b < dim; b++) {
+        int hi[3] = {i, j, k};
+        hi[b] = idx[b] + 1;
+        d += L->c[b] * (level_w(L, b, i, j, k) + level_w(L, b, hi[0], hi[1], hi[2]));
+    }
+    return d;
+}
+
+void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y)
+{
+    const struct {
+        int dim;
+        double alpha;
+    } op = {dim, alpha}, *m = &op;
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > 32768)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                double S, D;
+                MG_STENCIL(L, m, x, i, j, k, c, S, D);
+                y[c] = D * x[c] - S;
+            }
+}
+
+static hv_status level_alloc_coeffs(mg_level *L, int dim)
+{
+    L->a = hv_malloc(L->count * sizeof(float));
+    L->dinv = hv_malloc(L->count * sizeof(float));
+    if (!L->a || !L->dinv)
+        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level coefficients");
+    for (int b = 0; b < dim; b++) {
+        size_t nf = (L->count / L->n[b]) * (size_t)(L->n[b] + 1);
+        L->w[b] = hv_calloc(nf, sizeof(float));
+        if (!L->w[b])
+            return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for face weights");
+    }
+    return HV_OK;
+}
+
+void mg_level_free_coeffs(mg_level *L)
+{
+    hv_free(L->a);
+    hv_free(L->dinv);
+    L->a = L->dinv = NULL;
+    for (int b = 0; b < 3; b++) {
+        hv_free(L->w[b]);
+        L->w[b] = NULL;
+    }
+}
+
+static void level_fill_dinv(const mg_hierarchy *H, mg_level *L)
+{
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                double d = mg_level_diag(L, H->dim, H->alpha, i, j, k);
+                L->dinv[(size_t)i + L->sy * j + L->sz * k] = d > 0 ? (float)(1.0 / d) : 0.0f;
+            }
+}
+
+/* Fine level from the solid mask: a = fluid, w = 1 between two fluid cells. */
+static hv_status level_from_mask(const mg_hierarchy *H, mg_level *L, const uint8_t *solid)
+{
+    hv_status st = level_alloc_coeffs(L, H->dim);
+    if (st)
+        return st;
+    for (size_t c = 0; c < L->count; c++)
+        L->a[c] = solid[c] ? 0.0f : 1.0f;
+    for (int b = 0; b < H->dim; b++) {
+        size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int k = 0; k < L->n[2] + (b == 2); k++)
+            for (int j = 0; j < L->n[1] + (b == 1); j++)
+                for (int i = 0; i < L->n[0] + (b == 0); i++) {
+                    int idx[3] = {i, j, k};
+                    float w = 0.0f;
+                    if (idx[b] > 0 && idx[b] < L->n[b]) {
+                        size_t hi = (size_t)i + L->sy * j + L->sz * k;
+                        w = (!solid[hi] && !solid[hi - stride]) ? 1.0f : 0.0f;
+                    }
+                    L->w[b][mg_face_index(L, b, i, j, k)] = w;
+                }
+    }
+    level_fill_dinv(H, L);
+    return HV_OK;
+}
+
+/* Coarse coefficients from fine ones (NOTES §2): a = mean of children, face
+ * weight = mean of the fine faces that tile the coarse face. */
+static hv_status level_coarsen(const mg_hierarchy *H, const mg_level *F, mg_level *C)
+{
+    int even = F->plain;
+    for (int b = 0; b < H->dim; b++)
+        if (F->coarsen[b] && F->n[b] % 2)
+            even = 0;
+    if (even) { /* a plain level halved along even axes stays plain */
+        C->plain = 1;
+        return HV_OK;
+    }
+    hv_status st = level_alloc_coeffs(C, H->dim);
+    if (st)
+        return st;
+    int nchild = 1;
+    for (int b = 0; b < H->dim; b++)
+        nchild *= F->coarsen[b] ? 2 : 1;
+    const int *co = F->coarsen;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int K = 0; K < C->n[2]; K++)
+        for (int J = 0; J < C->n[1]; J++)
+            for (int I = 0; I < C->n[0]; I++) {
+                double sum = 0;
+                for (int dk = 0; dk <= co[2]; dk++)
+                    for (int dj = 0; dj <= co[1]; dj++)
+                        for (int di = 0; di <= co[0]; di++)
+                            sum += level_a(F, co[0] ? 2 * I + di : I, co[1] ? 2 * J + dj : J,
+                                           co[2] ? 2 * K + dk : K);
+                C->a[(size_t)I + C->sy * J + C->sz * K] = (float)(sum / nchild);
+            }
+    for (int b = 0; b < H->dim; b++) {
+        int nface = nchild / (co[b] ? 2 : 1);
+#pragma omp parallel for collapse(2) schedule(static)
+        for (int K = 0; K < C->n[2] + (b == 2); K++)
+            for (int J = 0; J < C->n[1] + (b == 1); J++)
+                for (int I = 0; I < C->n[0] + (b == 0); I++) {
+                    int CI[3] = {I, J, K};
+                    double sum = 0;
+                    int lim[3];
+                    for (int e = 0; e < 3; e++)
+                        lim[e] = (e == b) ? 0 : co[e];
+                    for (int dk = 0; dk <= lim[2]; dk++)
+                        for (int dj = 0; dj <= lim[1]; dj++)
+                            for (int di = 0; di <= lim[0]; di++) {
+                                int d[3] = {di, dj, dk}, f[3];
+                                for (int e = 0; e < 3; e++)
+                                    f[e] = co[e] ? 2 * CI[e] + d[e] : CI[e];
+                                sum += level_w(F, b, f[0], f[1], f[2]);
+                            }
+                    C->w[b][mg_face_index(C, b, I, J, K)] = (float)(sum / nface);
+                }
+    }
+    /* A coarse level whose weights all equal one inside is plain. */
+    int plain = 1;
+    for (size_t c = 0; c < C->count && plain; c++)
+        plain = C->a[c] == 1.0f;
+    for (int b = 0; b < H->dim && plain; b++)
+        for (int K = 0; K < C->n[2] + (b == 2) && plain; K++)
+            for (int J = 0; J < C->n[1] + (b == 1) && plain; J++)
+                for (int I = 0; I < C->n[0] + (b == 0) && plain; I++) {
+                    int CI[3] = {I, J, K};
+                    if (CI[b] > 0 && CI[b] < C->n[b])
+                        plain = C->w[b][mg_face_index(C, b, I, J, K)] == 1.0f;
+                }
+    if (plain) {
+        mg_level_free_coeffs(C);
+        C->plain = 1;
+    } else {
+        level_fill_dinv(H, C);
+    }
+    return HV_OK;
+}
+
+/* Connected regions of a level: cells with a > 0 joined through faces w > 0. */
+static hv_status level_regions(const mg_hierarchy *H, mg_level *L)
+{
+    L->region = malloc(L->count * sizeof(int32_t));
+    size_t *stack = malloc(L->count * sizeof(size_t));
+    if (!L->region || !stack) {
+        free(stack);
+        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory labelling regions");
+    }
+    for (size_t c = 0; c < L->count; c++)
+        L->region[c] = -1;
+    int nr = 0;
+    for (size_t seed = 0; seed < L->count; seed++) {
+        int si = (int)(seed % L->n[0]), sj = (int)((seed / L->sy) % L->n[1]), sk = (int)(seed / L->sz);
+        if (L->region[seed] >= 0 || level_a(L, si, sj, sk) == 0.0f)
+            continue;
+        size_t top = 0;
+        stack[top++] = seed;
+        L->region[seed] = nr;
+        while (top) {
+            size_t c = stack[--top];
+            int idx[3] = {(int)(c % L->n[0]), (int)((c / L->sy) % L->n[1]), (int)(c / L->sz)};
+            for (int b = 0; b < H->dim; b++)
+                for (int sgn = 0; sgn < 2; sgn++) {
+                    int f[3] = {idx[0], idx[1], idx[2]};
+                    f[b] += sgn; /* face index: lo face = idx, hi face = idx + 1 */
+                    if (level_w(L, b, f[0], f[1], f[2]) == 0.0f)
+                        continue;
+                    size_t stride = b == 0 ? 1 : b == 1 ? L->sy : L->sz;
+                    size_t nb = sgn ? c + stride : c - stride;
+                    if (L->region[nb] < 0) {
+                        L->region[nb] = nr;
+                        stack[top++] = nb;
+                    }
+                }
+        }
+        nr++;
+    }
+    free(stack);
+    L->nregion = nr;
+    return HV_OK;
+}
+
+/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds).
+ * The diagonal is computed once, in parallel; the sums stay serial so that
+ * the estimate does not depend on the thread count. */
+static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
+{
+    size_t n = L->count;
+    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y), *dg = malloc(n * sizeof *dg);
+    if (!x || !y || !dg) {
+        free(x);
+        free(y);
+        free(dg);
+        return 2.0;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++) {
+        int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
+        dg[c] = L->plain ? mg_level_diag(L, H->dim, H->alpha, i, j, k)
+                         : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
+    }
+    unsigned s = 12345u;
+    for (size_t c = 0; c < n; c++) {
+        s = s * 1664525u + 1013904223u;
+        x[c] = (double)(s >> 8) / (1u << 24) - 0.5;
+    }
+    double lam = 2.0;
+    for (int it = 0; it < 12; it++) {
+        mg_level_apply_d(L, H->dim, H->alpha, x, y);
+        double nrm = 0, dot = 0, xx = 0;
+        for (size_t c = 0; c < n; c++) {
+            y[c] = dg[c] > 0 ? y[c] / dg[c] : 0;
+            dot += x[c] * y[c];
+            xx += x[c] * x[c];
+            nrm += y[c] * y[c];
+        }
+        lam = xx > 0 ? dot / xx : 2.0;
+        nrm = sqrt(nrm);
+        if (!(nrm > 0))
+            break;
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < n; c++)
+            x[c] = y[c] / nrm;
+    }
+    free(x);
+    free(y);
+    free(dg);
+    lam *= 1.1;
+    return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
+}
+
+void mg_hierarchy_free(mg_hierarchy *H)
+{
+    for (int l = 0; l < H->nlev; l++) {
+        mg_level_free_coeffs(&H->lv[l]);
+        free(H->lv[l].region);
+        H->lv[l].region = NULL;
+    }
+    H->nlev = 0;
+}
+
+hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax)
+{
+    memset(H, 0, sizeof *H);
+    H->dim = s->p.dim;
+    H->alpha = s->p.alpha;
+    hv_status st = HV_OK;
+
+    mg_level *L = &H->lv[0];
+    for (int b = 0; b < 3; b++) {
+        L->n[b] = b < H->dim ? s->p.n[b] : 1;
+        L->c[b] = b < H->dim ? s->p.beta / (s->p.h * s->p.h) : 0.0;
+    }
+    double hh[3] = {s->p.h, s->p.h, s->p.h};
+    H->nlev = 1;
+    for (;;) {
+        L = &H->lv[H->nlev - 1];
+        L->count = (size_t)L->n[0] * L->n[1] * L->n[2];
+        L->sy = (size_t)L->n[0];
+        L->sz = (size_t)L->n[0] * L->n[1];
+        if (H->nlev == 1) {
+            L->plain = s->p.solid == NULL;
+            if (!L->plain && (st = level_from_mask(H, L, s->p.solid)))
+                goto fail;
+        } else if ((st = level_coarsen(H, &H->lv[H->nlev - 2], L))) {
+            goto fail;
+        }
+        if (with_lmax)
+            L->lmax = estimate_lmax(H, L);
+        /* Semi-coarsen: halve the axes of finest spacing that still have > 2 cells. */
+        double hmin = INFINITY;
+        for (int b = 0; b < H->dim; b++)
+            if (L->n[b] > 2 && hh[b] < hmin)
+                hmin = hh[b];
+        int any = 0;
+        for (int b = 0; b < H->dim; b++) {
+            L->coarsen[b] = L->n[b] > 2 && hh[b] <= hmin * 1.01;
+            any |= L->coarsen[b];
+        }
+        if (!any || L->count <= MG_BOTTOM_CELLS || H->nlev == MG_MAX_LEVELS) {
+            for (int b = 0; b < 3; b++)
+                L->coarsen[b] = 0;
+            break;
+        }
+        mg_level *C = &H->lv[H->nlev];
+        for (int b = 0; b < 3; b++) {
+            C->n[b] = L->coarsen[b] ? (L->n[b] + 1) / 2 : L->n[b];
+            C->c[b] = L->coarsen[b] ? L->c[b] / 4 : L->c[b];
+            if (L->coarsen[b])
+                hh[b] *= 2;
+        }
+        H->nlev++;
+    }
+    if (H->alpha == 0 && (st = level_regions(H, &H->lv[H->nlev - 1])))
+        goto fail;
+    return HV_OK;
+fail:
+    mg_hierarchy_free(H);
+    return st;
+}
+
+/* Traffic model of one outer iteration, in bytes. A red-black sweep streams u
+ * and f and writes u: once per colour, or once in all on plain 3D levels where
+ * the two colours are fused plane by plane. A Jacobi or Chebyshev step computes
+ * the residual (reads u, f, writes r) and then updates d and u (reads r, d, u,
+ * writes d, u). Weighted levels read their coefficients (a, w, 1/diag) in every
+ * pass. The residual reads u, f and writes r; restriction reads r and writes the
+ * coarse f; prolongation reads the coarse u and updates u. The double defect
+ * correction reads x and f and writes the float right-hand side, then adds the
+ * correction into x. */
+void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                    int post, int pcg, hv_solver_stats *st)
+{
+    st->levels = nlev;
+    double bytes = 0;
+    size_t mem = 0;
+    for (int l = 0; l < nlev; l++) {
+        const mg_level *L = &lv[l];
+        memcpy(st->n[l], L->n, sizeof st->n[l]);
+        st->plain[l] = L->plain;
+        double cells = (double)L->count, coef = L->plain ? 0 : 4.0 * (2 + dim);
+        int fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
+        double sweep = smoother == HV_SMOOTH_RBGS ? (fused ? 1 : 2) * (12 + coef) : 32 + coef;
+        int steps = smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (pre + post) : pre + post;
+        if (l + 1 < nlev)
+            bytes += cells * (steps * sweep + (12 + coef) + 4 + 8) + cells / 2;
+        else
+            bytes += cells * 8 * 40; /* bottom CG: a few dozen iterations on a tiny level */
+        mem += L->count * (3 + (smoother != HV_SMOOTH_RBGS)) * sizeof(float);
+        if (!L->plain)
+            mem += L->count * (2 + dim) * sizeof(float);
+    }
+    bytes += (double)lv[0].count * (8 + 8 + 4 + 8 + 4 + 8);
+    mem += lv[0].count * sizeof(double) * (pcg ? 4 : 1);
+    st->bytes_per_iteration = bytes;
+    st->memory_bytes = mem;
+}

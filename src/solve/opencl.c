@@ -1,0 +1,473 @@
+/*
+ * The OpenCL solver backend: the multigrid of mg.c on an OpenCL device.
+ *
+ * The hierarchy is built on the host exactly as for the CPU backend
+ * (mg_setup.c) and uploaded once. Each solve runs on one in-order queue: float
+ * V-cycles (Chebyshev by default, RBGS and Jacobi too) inside a double-
+ * precision defect-correction loop, or, with solid cells, inside preconditioned
+ * CG with a symmetric cycle (NOTES §2). CG coefficients live in a small device
+ * buffer that later kernels read, so the only host synchronization per cycle
+ * or CG iteration is reading back the residual norm. On devices without fp64
+ * the double part (residuals, CG vectors) runs on the host and each cycle
+ * moves the fine residual and correction across.
+ */
+#include "backend.h"
+#include "cl_mg.h"
+#include "cl_ops.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { VX, VF, VR, VP, VZ, VQ, NVEC };
+enum { S_RR, S_PQ, S_RZ0, S_RZ1, NSLOT };
+
+typedef struct ocl_state {
+    const hv_setup *s;
+    hv_cl *cl;
+    hv_clmg mg;
+    mg_hierarchy H;     /* host copy; level 0 kept for the host path only */
+    int dev64;          /* double defect correction on the device */
+    int use_pcg;
+    /* device path */
+    cl_mem v[NVEC];     /* double fine vectors */
+    cl_mem S;           /* double scalars */
+    cl_mem part;        /* double partial sums */
+    hv_cl_regions reg;  /* Poisson projections */
+    /* host path */
+    double *h[NVEC];    /* h[VX] and h[VF] point at the caller's arrays during a solve */
+    float *stage;       /* fine float vector on its way to or from the device */
+    double hs[NSLOT];
+} ocl_state;
+
+static void ocl_destroy(void *state)
+{
+    ocl_state *o = state;
+    if (!o)
+        return;
+    for (int i = 0; i < NVEC; i++)
+        hv_cl_free(&o->v[i]);
+    hv_cl_free(&o->S);
+    hv_cl_free(&o->part);
+    hv_cl_regions_destroy(&o->reg);
+    if (o->mg.cl)
+        hv_clmg_destroy(&o->mg);
+    mg_hierarchy_free(&o->H);
+    for (int i = VR; i < NVEC; i++)
+        hv_free(o->h[i]);
+    hv_free(o->stage);
+    hv_cl_close(&o->cl);
+    free(o);
+}
+
+static hv_status ocl_create(void **state, const hv_setup *s)
+{
+    if (s->count > (size_t)INT32_MAX)
+        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL backend: %zu cells exceed its 2^31 limit", s->count);
+    ocl_state *o = calloc(1, sizeof *o);
+    if (!o)
+        return hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory");
+    o->s = s;
+    o->use_pcg = s->p.solid != NULL;
+    hv_status st = hv_cl_open(&o->cl);
+    if (st) {
+        free(o);
+        return st;
+    }
+    hv_cl *cl = o->cl;
+    o->dev64 = cl->fp64;
+    if ((st = mg_hierarchy_build(&o->H, s, s->o.smoother == HV_SMOOTH_CHEBYSHEV)) ||
+        (st = hv_clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth)))
+        goto fail;
+    const size_t n = s->count;
+    if (o->dev64) {
+        size_t g, l, np = hv_cl_range_red(n, &g, &l);
+        for (int i = 0; i < NVEC && !st; i++)
+            if (i <= VR || o->use_pcg)
+                st = hv_cl_alloc(cl, n * sizeof(double), NULL, &o->v[i]);
+        if (st || (st = hv_cl_alloc(cl, NSLOT * sizeof(double), NULL, &o->S)) ||
+            (st = hv_cl_alloc(cl, np * sizeof(double), NULL, &o->part)))
+            goto fail;
+        if (s->p.alpha == 0 && (st = hv_cl_regions_create(cl, &o->reg, n, s->region, s->nregion)))
+            goto fail;
+        mg_hierarchy_free(&o->H);
+    } else {
+        for (int i = VR; i < NVEC && !st; i++)
+            if (i == VR || o->use_pcg)
+                if (!(o->h[i] = hv_malloc(n * sizeof(double))))
+                    st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+        if (!st && !(o->stage = hv_malloc(n * sizeof(float))))
+            st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+        if (st)
+            goto fail;
+        /* the host residual needs level 0 only */
+        for (int l = 1; l < o->H.nlev; l++) {
+            mg_level_free_coeffs(&o->H.lv[l]);
+            free(o->H.lv[l].region);
+            o->H.lv[l].region = NULL;
+        }
+    }
+    if ((st = hv_cl_finish(cl)))
+        goto fail;
+    *state = o;
+    return HV_OK;
+fail:
+    ocl_destroy(o);
+    return st;
+}
+
+/* ---------- fine-level steps, on the device (fp64) or on the host ---------- */
+
+static void fv_dot(ocl_state *o, int a, int b, int slot);
+
+static void host_project(ocl_state *o, double *v)
+{
+    if (o->s->p.alpha == 0)
+        hv_project_mean(o->s, v);
+}
+
+/* R = F - A X on fluid cells; level-0 f = (float)R; slot RR = R.R */
+static void fv_residual(ocl_state *o)
+{
+    hv_cl *cl = o->cl;
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    if (o->dev64) {
+        const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
+        hv_cl_args(cl, HV_K_FINE_RESIDUAL, "IAmmmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
+                   L0->w[2], o->v[VX], o->v[VF], o->v[VR], L0->f);
+        hv_cl_run(cl, HV_K_FINE_RESIDUAL, 2, L0->g, L0->l);
+        fv_dot(o, VR, VR, S_RR);
+        return;
+    }
+    const mg_level *H0 = &o->H.lv[0];
+    const double *x = o->h[VX], *f = o->h[VF];
+    double *r = o->h[VR], nn = 0;
+    mg_level_apply_d(H0, o->H.dim, o->H.alpha, x, r);
+#pragma omp parallel for reduction(+ : nn) schedule(static)
+    for (size_t c = 0; c < H0->count; c++) {
+        double v = (H0->plain || H0->a[c] != 0.0f) ? f[c] - r[c] : 0.0;
+        r[c] = v;
+        o->stage[c] = (float)v;
+        nn += v * v;
+    }
+    o->hs[S_RR] = nn;
+}
+
+/* Host path: level-0 f <- stage, cycle, stage <- level-0 u. */
+static void host_cycle(ocl_state *o, int fmg, int sym)
+{
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    hv_cl_write(o->cl, L0->f, 0, L0->count * sizeof(float), o->stage);
+    if (fmg)
+        hv_clmg_fmg(&o->mg);
+    else
+        hv_clmg_vcycle(&o->mg, 0, 0, sym);
+    hv_cl_read(o->cl, L0->u[L0->cur], 0, L0->count * sizeof(float), o->stage);
+}
+
+/* One cycle on the residual in level-0 f, added to X (then projected). */
+static void fv_correct(ocl_state *o, int fmg)
+{
+    hv_cl *cl = o->cl;
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    const size_t n = o->s->count;
+    if (o->dev64) {
+        if (fmg)
+            hv_clmg_fmg(&o->mg);
+        else
+            hv_clmg_vcycle(&o->mg, 0, 0, 0);
+        size_t g[1], l[1];
+        hv_cl_range1(n, g, l);
+        hv_cl_args(cl, HV_K_FINE_ADD, "mml", o->v[VX], L0->u[L0->cur], n);
+        hv_cl_run(cl, HV_K_FINE_ADD, 1, g, l);
+        if (o->s->p.alpha == 0)
+            hv_cl_project_d(cl, &o->reg, o->v[VX]);
+        return;
+    }
+    host_cycle(o, fmg, 0);
+    double *x = o->h[VX];
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++)
+        x[c] += o->stage[c];
+    host_project(o, x);
+}
+
+/* Z = M R: a symmetric V-cycle on level-0 f (= (float)R), projected. */
+static void fv_precondition(ocl_state *o)
+{
+    hv_cl *cl = o->cl;
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    const size_t n = o->s->count;
+    if (o->dev64) {
+        hv_clmg_vcycle(&o->mg, 0, 0, 1);
+        size_t g[1], l[1];
+        hv_cl_range1(n, g, l);
+        hv_cl_args(cl, HV_K_FINE_F2D, "mml", L0->u[L0->cur], o->v[VZ], n);
+        hv_cl_run(cl, HV_K_FINE_F2D, 1, g, l);
+        if (o->s->p.alpha == 0)
+            hv_cl_project_d(cl, &o->reg, o->v[VZ]);
+        return;
+    }
+    host_cycle(o, 0, 1);
+    double *z = o->h[VZ];
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++)
+        z[c] = o->stage[c];
+    host_project(o, z);
+}
+
+static double host_dot(const double *a, const double *b, size_t n)
+{
+    double s = 0;
+#pragma omp parallel for reduction(+ : s) schedule(static)
+    for (size_t i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+/* slot = a.b */
+static void fv_dot(ocl_state *o, int a, int b, int slot)
+{
+    const size_t n = o->s->count;
+    if (!o->dev64) {
+        o->hs[slot] = host_dot(o->h[a], o->h[b], n);
+        return;
+    }
+    size_t g, l, groups = hv_cl_range_red(n, &g, &l);
+    hv_cl_args(o->cl, HV_K_FINE_DOT, "mmlm", o->v[a], o->v[b], n, o->part);
+    hv_cl_run(o->cl, HV_K_FINE_DOT, 1, &g, &l);
+    hv_cl_finish_sum(o->cl, o->part, groups, o->S, slot);
+}
+
+/* Q = A P; slot PQ = P.Q */
+static void fv_apply_dot(ocl_state *o)
+{
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    if (o->dev64) {
+        const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
+        hv_cl_args(o->cl, HV_K_FINE_APPLY, "IAmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
+                   L0->w[2], o->v[VP], o->v[VQ]);
+        hv_cl_run(o->cl, HV_K_FINE_APPLY, 2, L0->g, L0->l);
+        fv_dot(o, VP, VQ, S_PQ);
+        return;
+    }
+    mg_level_apply_d(&o->H.lv[0], o->H.dim, o->H.alpha, o->h[VP], o->h[VQ]);
+    o->hs[S_PQ] = host_dot(o->h[VP], o->h[VQ], o->s->count);
+}
+
+/* al = slot irz / slot PQ (0 unless PQ > 0): X += al P, R -= al Q,
+ * level-0 f = (float)R, slot RR = R.R */
+static void fv_pcg_update(ocl_state *o, int irz)
+{
+    const size_t n = o->s->count;
+    if (o->dev64) {
+        size_t g, l, groups = hv_cl_range_red(n, &g, &l);
+        hv_cl_args(o->cl, HV_K_FINE_PCG_UPDATE, "mmmmmiimlm", o->v[VX], o->v[VR], o->v[VP], o->v[VQ],
+                   o->S, irz, (int)S_PQ, o->mg.lv[0].f, n, o->part);
+        hv_cl_run(o->cl, HV_K_FINE_PCG_UPDATE, 1, &g, &l);
+        hv_cl_finish_sum(o->cl, o->part, groups, o->S, S_RR);
+        return;
+    }
+    double pq = o->hs[S_PQ], al = pq > 0 ? o->hs[irz] / pq : 0.0, nn = 0;
+    double *x = o->h[VX], *r = o->h[VR];
+    const double *p = o->h[VP], *q = o->h[VQ];
+#pragma omp parallel for reduction(+ : nn) schedule(static)
+    for (size_t c = 0; c < n; c++) {
+        x[c] += al * p[c];
+        r[c] -= al * q[c];
+        o->stage[c] = (float)r[c];
+        nn += r[c] * r[c];
+    }
+    o->hs[S_RR] = nn;
+}
+
+/* P = Z + (slot inew / slot iold) P */
+static void fv_xpay(ocl_state *o, int inew, int iold)
+{
+    const size_t n = o->s->count;
+    if (o->dev64) {
+        size_t g[1], l[1];
+        hv_cl_range1(n, g, l);
+        hv_cl_args(o->cl, HV_K_FINE_XPAY, "mmmiil", o->v[VP], o->v[VZ], o->S, inew, iold, n);
+        hv_cl_run(o->cl, HV_K_FINE_XPAY, 1, g, l);
+        return;
+    }
+    double be = o->hs[iold] != 0 ? o->hs[inew] / o->hs[iold] : 0.0, *p = o->h[VP];
+    const double *z = o->h[VZ];
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++)
+        p[c] = z[c] + be * p[c];
+}
+
+static void fv_copy(ocl_state *o, int dst, int src)
+{
+    if (o->dev64)
+        hv_cl_copy(o->cl, o->v[src], o->v[dst], o->s->count * sizeof(double));
+    else
+        memcpy(o->h[dst], o->h[src], o->s->count * sizeof(double));
+}
+
+/* Waits for the queue and reads the scalars: the one synchronization of a cycle. */
+static hv_status fv_sync(ocl_state *o, double out[NSLOT])
+{
+    if (o->dev64)
+        hv_cl_read_acc(o->cl, o->S, 0, NSLOT, out);
+    else
+        memcpy(out, o->hs, sizeof o->hs);
+    return hv_cl_check(o->cl);
+}
+
+/* ---------- outer iterations, as mg.c ---------- */
+
+static int stagnated(const hv_solve_info *info)
+{
+    int n = info->nhistory;
+    return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
+}
+
+static hv_status solve_stationary(ocl_state *o, hv_solve_info *info, double fn)
+{
+    const hv_setup *s = o->s;
+    double S[NSLOT];
+    hv_status st;
+    fv_residual(o);
+    if ((st = fv_sync(o, S)))
+        return st;
+    double rel = sqrt(S[S_RR]) / fn;
+    hv_info_push(info, rel);
+    for (int it = 0; it < s->o.max_iter; it++) {
+        if (rel <= s->o.tol) {
+            info->reason = HV_STOP_CONVERGED;
+            return HV_OK;
+        }
+        fv_correct(o, it == 0 && !s->o.nonzero_guess); /* FMG start, as mg.c */
+        fv_residual(o);
+        if ((st = fv_sync(o, S)))
+            return st;
+        rel = sqrt(S[S_RR]) / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "OpenCL multigrid diverged (residual %g)", rel);
+        if (stagnated(info) && rel > s->o.tol) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+    }
+    info->reason = rel <= s->o.tol ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+static hv_status solve_pcg(ocl_state *o, hv_solve_info *info, double fn)
+{
+    const hv_setup *s = o->s;
+    double S[NSLOT];
+    hv_status st;
+    fv_residual(o);
+    if ((st = fv_sync(o, S)))
+        return st;
+    double rel = sqrt(S[S_RR]) / fn;
+    hv_info_push(info, rel);
+    if (rel <= s->o.tol) {
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
+    fv_precondition(o);
+    fv_copy(o, VP, VZ);
+    int rz = S_RZ0;
+    fv_dot(o, VR, VZ, rz);
+    double best = rel;
+    int since_best = 0;
+    for (int it = 0; it < s->o.max_iter; it++) {
+        fv_apply_dot(o);
+        fv_pcg_update(o, rz); /* a no-op when p.q <= 0 */
+        if ((st = fv_sync(o, S)))
+            return st;
+        if (!(S[S_PQ] > 0)) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+        rel = sqrt(S[S_RR]) / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "OpenCL preconditioned CG diverged (residual %g)", rel);
+        if (rel <= s->o.tol)
+            break;
+        if (rel < 0.9 * best) {
+            best = rel;
+            since_best = 0;
+        } else if (++since_best >= 10) {
+            info->reason = HV_STOP_STAGNATED;
+            break;
+        }
+        fv_precondition(o);
+        int rz_new = rz == S_RZ0 ? S_RZ1 : S_RZ0;
+        fv_dot(o, VR, VZ, rz_new);
+        fv_xpay(o, rz_new, rz);
+        rz = rz_new;
+    }
+    if (s->p.alpha == 0) {
+        if (o->dev64)
+            hv_cl_project_d(o->cl, &o->reg, o->v[VX]);
+        else
+            host_project(o, o->h[VX]);
+    }
+    /* Report the true residual of the returned iterate. */
+    fv_residual(o);
+    if ((st = fv_sync(o, S)))
+        return st;
+    rel = sqrt(S[S_RR]) / fn;
+    info->relres = rel;
+    if (info->reason != HV_STOP_STAGNATED)
+        info->reason = rel <= s->o.tol * 1.0001 ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_info *info)
+{
+    ocl_state *o = state;
+    const hv_setup *s = o->s;
+    const size_t n = s->count;
+    if (!s->o.nonzero_guess)
+        memset(u, 0, n * sizeof *u);
+    double fn = hv_norm2(s, f);
+    if (fn == 0) {
+        memset(u, 0, n * sizeof *u);
+        hv_info_push(info, 0.0);
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
+    hv_status st;
+    if (o->dev64) {
+        hv_cl_write(o->cl, o->v[VF], 0, n * sizeof(double), f);
+        hv_cl_write(o->cl, o->v[VX], 0, n * sizeof(double), u);
+    } else {
+        o->h[VX] = u;
+        o->h[VF] = (double *)f;
+    }
+    st = o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
+    if (o->dev64) {
+        hv_cl_read(o->cl, o->v[VX], 0, n * sizeof(double), u);
+        hv_status st2 = hv_cl_check(o->cl);
+        if (!st)
+            st = st2;
+    }
+    o->h[VX] = o->h[VF] = NULL;
+    if (st == HV_OK && s->p.solid)
+        for (size_t c = 0; c < n; c++)
+            if (s->p.solid[c])
+                u[c] = 0;
+    return st;
+}
+
+static void ocl_stats(const void *state, hv_solver_stats *st)
+{
+    const ocl_state *o = state;
+    mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post, o->use_pcg,
+                   st);
+}
+
+const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy,
+                                              ocl_stats};

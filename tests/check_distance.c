@@ -1,0 +1,595 @@
+/* Heat-method distance around obstacles against exact geodesic distances:
+ * rectangles aligned with cell faces, exact distance by a visibility graph
+ * over their corners (2D), extruded along z for 3D (where the geodesic length
+ * is sqrt(d_xy^2 + dz^2)). */
+#include "testlib.h"
+#include "heatvox/heat.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+typedef struct {
+    double x0, y0, x1, y1;
+} rect;
+
+typedef struct {
+    int nrect;
+    rect r[4];
+    double s[2]; /* source */
+} scene;
+
+/* A wall at x in [0.5, 0.53125] with a gap for y in [0.625, 0.75]. Obstacles
+ * run past the unit square so that no path grazes along its edge around them;
+ * corners outside the square are not graph vertices. */
+static const scene wall_gap = {2, {{0.5, -1.0, 0.53125, 0.625}, {0.5, 0.75, 0.53125, 2.0}}, {0.25, 0.3}};
+/* An L-shaped room: the top-right quarter is solid. */
+static const scene l_room = {1, {{0.5, 0.5, 2.0, 2.0}}, {0.8, 0.2}};
+/* A serpentine corridor: four walls from alternate sides, eight corners to turn. */
+static const scene serpentine = {4,
+                                 {{0.1875, -1, 0.21875, 0.8125},
+                                  {0.40625, 0.1875, 0.4375, 2},
+                                  {0.625, -1, 0.65625, 0.8125},
+                                  {0.84375, 0.1875, 0.875, 2}},
+                                 {0.08, 0.1}};
+
+/* Does segment p-q cross the open interior of rectangle r? (Liang-Barsky on
+ * the rectangle shrunk by a hair, so grazing a corner or an edge is allowed.) */
+static int crosses(const rect *r, const double p[2], const double q[2])
+{
+    const double eps = 1e-9;
+    double lo[2] = {r->x0 + eps, r->y0 + eps}, hi[2] = {r->x1 - eps, r->y1 - eps};
+    double t0 = 0, t1 = 1;
+    for (int a = 0; a < 2; a++) {
+        double d = q[a] - p[a];
+        if (fabs(d) < 1e-300) {
+            if (p[a] <= lo[a] || p[a] >= hi[a])
+                return 0;
+            continue;
+        }
+        double ta = (lo[a] - p[a]) / d, tb = (hi[a] - p[a]) / d;
+        if (ta > tb) {
+            double x = ta;
+            ta = tb;
+            tb = x;
+        }
+        t0 = fmax(t0, ta);
+        t1 = fmin(t1, tb);
+    }
+    return t0 < t1;
+}
+
+static int visible(const scene *sc, const double p[2], const double q[2])
+{
+    for (int i = 0; i < sc->nrect; i++)
+        if (crosses(&sc->r[i], p, q))
+            return 0;
+    return 1;
+}
+
+typedef struct {
+    int nv;
+    double v[17][2];
+    double D[17]; /* geodesic distance from the source to vertex */
+} vgraph;
+
+static void build_graph(const scene *sc, vgraph *g)
+{
+    g->nv = 0;
+    for (int i = 0; i < sc->nrect; i++) {
+        const rect *r = &sc->r[i];
+        double c[4][2] = {{r->x0, r->y0}, {r->x1, r->y0}, {r->x0, r->y1}, {r->x1, r->y1}};
+        for (int q = 0; q < 4; q++) {
+            if (c[q][0] < 0 || c[q][0] > 1 || c[q][1] < 0 || c[q][1] > 1)
+                continue;
+            g->v[g->nv][0] = c[q][0];
+            g->v[g->nv][1] = c[q][1];
+            g->nv++;
+        }
+    }
+    int done[17] = {0};
+    for (int i = 0; i < g->nv; i++)
+        g->D[i] = visible(sc, sc->s, g->v[i]) ? hypot(g->v[i][0] - sc->s[0], g->v[i][1] - sc->s[1])
+                                              : INFINITY;
+    for (int it = 0; it < g->nv; it++) { /* Dijkstra, O(V^2) */
+        int b = -1;
+        for (int i = 0; i < g->nv; i++)
+            if (!done[i] && (b < 0 || g->D[i] < g->D[b]))
+                b = i;
+        done[b] = 1;
+        for (int i = 0; i < g->nv; i++)
+            if (!done[i] && visible(sc, g->v[b], g->v[i]))
+                g->D[i] = fmin(g->D[i], g->D[b] + hypot(g->v[i][0] - g->v[b][0], g->v[i][1] - g->v[b][1]));
+    }
+}
+
+static double exact2(const scene *sc, const vgraph *g, const double x[2])
+{
+    if (visible(sc, sc->s, x))
+        return hypot(x[0] - sc->s[0], x[1] - sc->s[1]);
+    double best = INFINITY;
+    for (int i = 0; i < g->nv; i++)
+        if (isfinite(g->D[i]) && visible(sc, g->v[i], x))
+            best = fmin(best, g->D[i] + hypot(x[0] - g->v[i][0], x[1] - g->v[i][1]));
+    return best;
+}
+
+static int in_rect(const scene *sc, const double x[2])
+{
+    for (int i = 0; i < sc->nrect; i++)
+        if (x[0] > sc->r[i].x0 && x[0] < sc->r[i].x1 && x[1] > sc->r[i].y0 && x[1] < sc->r[i].y1)
+            return 1;
+    return 0;
+}
+
+typedef struct {
+    double mean, max; /* |phi - exact| in voxels over fluid cells */
+    double src;       /* distance interpolated at the source point, voxels */
+    hv_distance_stats st;
+} dist_err;
+
+/* Distance on the unit square (dim 2) or cube (dim 3, extruded scene, source at
+ * z = 0.4) with n cells per axis. */
+static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opts *o)
+{
+    int ns[3] = {n, n, dim == 3 ? n : 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, dim, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    for (int k = 0; k < ns[2]; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                g->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)in_rect(sc, x);
+            }
+    double pt[3] = {sc->s[0], sc->s[1], 0.4};
+    hv_distance_sources src = {0};
+    src.points = pt;
+    src.npoints = 1;
+    dist_err e = {0};
+    TL_ASSERT_OK(hv_distance_compute(g, &src, o, &e.st));
+    vgraph vg;
+    build_graph(sc, &vg);
+    size_t m = 0;
+    for (int k = 0; k < ns[2]; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                if (g->solid[c]) {
+                    ck_assert(isinf(g->v[c]));
+                    continue;
+                }
+                double ex = exact2(sc, &vg, x);
+                if (dim == 3)
+                    ex = sqrt(ex * ex + (x[2] - pt[2]) * (x[2] - pt[2]));
+                double err = fabs(g->v[c] - ex) * n;
+                e.mean += err;
+                e.max = fmax(e.max, err);
+                m++;
+            }
+    e.mean /= (double)m;
+    /* Bilinear value at the source point (2D scenes put it inside fluid cells). */
+    double p = sc->s[0] * n - 0.5, q = sc->s[1] * n - 0.5;
+    int i0 = (int)floor(p), j0 = (int)floor(q);
+    double fp = p - i0, fq = q - j0, v = 0;
+    int k0 = dim == 3 ? (int)floor(pt[2] * n - 0.5) : 0;
+    double fr = dim == 3 ? pt[2] * n - 0.5 - k0 : 0;
+    for (int c = 0; c < (dim == 3 ? 8 : 4); c++) {
+        int a = c & 1, b = (c >> 1) & 1, z = (c >> 2) & 1;
+        double wgt = (a ? fp : 1 - fp) * (b ? fq : 1 - fq) * (dim == 3 ? (z ? fr : 1 - fr) : 1);
+        v += wgt * g->v[(i0 + a) + (size_t)n * ((j0 + b) + (size_t)n * (k0 + z))];
+    }
+    e.src = v * n;
+    hv_grid_destroy(&g);
+    return e;
+}
+
+static void report(const char *name, int dim, int n, const dist_err *e)
+{
+    printf("  %s %dD n=%d: mean %.3f max %.3f voxels, at source %.3f; stages %d, dead faces %zu, "
+           "Poisson %d iterations (%d restarts) to %.1e; %.2f s\n",
+           name, dim, n, e->mean, e->max, e->src, e->st.stages, e->st.dead_faces,
+           e->st.poisson_iterations, e->st.poisson_restarts, e->st.poisson_relres, e->st.t_total);
+}
+
+START_TEST(wall_with_gap_2d_should_be_within_one_voxel_at_128)
+{
+    dist_err e = run_scene(&wall_gap, 2, 128, NULL);
+    report("wall-gap", 2, 128, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+    ck_assert_msg(fabs(e.src) < 0.5, "distance at the source %.3f voxels", e.src);
+}
+END_TEST
+
+START_TEST(l_room_2d_should_be_within_one_voxel_at_128)
+{
+    dist_err e = run_scene(&l_room, 2, 128, NULL);
+    report("L-room", 2, 128, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+}
+END_TEST
+
+START_TEST(serpentine_corridor_distance_should_follow_the_corridor)
+{
+    dist_err e = run_scene(&serpentine, 2, 128, NULL);
+    report("serpentine", 2, 128, &e);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+    ck_assert_msg(e.st.poisson_relres <= 1e-8, "Poisson residual %.2e", e.st.poisson_relres);
+    /* About half a voxel per corner turned (5.7 at the far end, ~420 voxels away). */
+    ck_assert_msg(e.mean <= 3.0, "mean error %.3f voxels", e.mean);
+}
+END_TEST
+
+START_TEST(error_should_shrink_under_refinement_2d)
+{
+    const int ns[] = {64, 128, 256};
+    double prev = INFINITY;
+    for (int q = 0; q < 3; q++) {
+        dist_err e = run_scene(&wall_gap, 2, ns[q], NULL);
+        report("wall-gap", 2, ns[q], &e);
+        double world = e.mean / ns[q];
+        ck_assert_msg(world < prev, "world error %.3g at n=%d not below %.3g", world, ns[q], prev);
+        prev = world;
+    }
+}
+END_TEST
+
+START_TEST(wall_with_gap_3d_should_be_within_one_voxel_at_48)
+{
+    dist_err e = run_scene(&wall_gap, 3, 48, NULL);
+    report("wall-gap", 3, 48, &e);
+    ck_assert_msg(e.mean <= 1.0, "mean error %.3f voxels", e.mean);
+    ck_assert_int_eq(e.st.dead_faces, 0);
+}
+END_TEST
+
+START_TEST(l_room_3d_error_should_shrink_from_32_to_64)
+{
+    dist_err a = run_scene(&l_room, 3, 32, NULL), b = run_scene(&l_room, 3, 64, NULL);
+    report("L-room", 3, 32, &a);
+    report("L-room", 3, 64, &b);
+    ck_assert_msg(b.mean <= 1.0, "mean error %.3f voxels", b.mean);
+    ck_assert_msg(b.mean / 64 < a.mean / 32, "world error %.3g at 64 not below %.3g at 32",
+                  b.mean / 64, a.mean / 32);
+}
+END_TEST
+
+START_TEST(sealed_room_should_be_unreachable_unless_it_has_a_source)
+{
+    const int n = 64;
+    int ns[3] = {n, n, 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 2, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    /* Walls of the room [40,56)^2, two cells thick; its inside is [42,54)^2. */
+    size_t inside = 0;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            int in_box = i >= 40 && i < 56 && j >= 40 && j < 56;
+            int in_room = i >= 42 && i < 54 && j >= 42 && j < 54;
+            g->solid[i + n * j] = (uint8_t)(in_box && !in_room);
+            inside += in_room;
+        }
+    int vox[6] = {10, 10, 0, 47, 48, 0};
+    hv_distance_sources src = {0};
+    src.voxels = vox;
+    src.nvoxels = 1;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.unreachable_cells, inside);
+    ck_assert_int_eq(st.regions, 1);
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            float v = g->v[i + n * j];
+            if (i >= 42 && i < 54 && j >= 42 && j < 54)
+                ck_assert(isinf(v) && v > 0);
+            else if (!g->solid[i + n * j])
+                ck_assert(isfinite(v) && v >= 0);
+        }
+    /* With a source in the room too, both regions get distances, each zero at its source. */
+    src.nvoxels = 2;
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.unreachable = -1;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, &o, &st));
+    ck_assert_int_eq(st.unreachable_cells, 0);
+    ck_assert_int_eq(st.regions, 2);
+    /* Outside, the room's walls are one rectangular obstacle. */
+    const scene outer = {1, {{40.0 / n, 40.0 / n, 56.0 / n, 56.0 / n}}, {10.5 / n, 10.5 / n}};
+    vgraph vg;
+    build_graph(&outer, &vg);
+    double worst = 0;
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            if (g->solid[i + n * j])
+                continue;
+            int room = i >= 42 && i < 54 && j >= 42 && j < 54;
+            double x[2] = {(i + 0.5) / n, (j + 0.5) / n};
+            double ex = room ? hypot(i - vox[3], j - vox[4]) / n : exact2(&outer, &vg, x);
+            worst = fmax(worst, fabs(g->v[i + n * j] - ex) * n);
+        }
+    ck_assert_msg(worst < 1.5, "worst error %.3f voxels with a source in each room", worst);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+/* Geodesic distance from point s around a ball (centre 0, radius R) to x, both outside it. */
+static double around_ball(const double s[3], const double x[3], double R)
+{
+    double ls = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+    double lx = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    double cosg = (s[0] * x[0] + s[1] * x[1] + s[2] * x[2]) / (ls * lx);
+    double gam = acos(fmax(-1, fmin(1, cosg)));
+    double arc = gam - acos(R / ls) - acos(R / lx);
+    if (arc <= 0) /* visible */
+        return sqrt((s[0] - x[0]) * (s[0] - x[0]) + (s[1] - x[1]) * (s[1] - x[1]) + (s[2] - x[2]) * (s[2] - x[2]));
+    return sqrt(ls * ls - R * R) + R * arc + sqrt(lx * lx - R * R);
+}
+
+START_TEST(distance_should_go_around_a_mesh_obstacle)
+{
+    const int n = 48;
+    const double R = 0.25;
+    int ns[3] = {n, n, n};
+    double org[3] = {-0.5, -0.5, -0.5}, c[3] = {0, 0, 0};
+    hv_grid *g = NULL;
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, ns, 1.0 / n, org));
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, R, 4));
+    size_t nsolid = 0;
+    TL_ASSERT_OK(hv_mask_from_mesh(g, m, &nsolid));
+    ck_assert(nsolid > 0);
+    double pt[3] = {-0.4, 0.05, 0.03};
+    hv_distance_sources src = {0};
+    src.points = pt;
+    src.npoints = 1;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.regions, 1);
+    ck_assert(st.unreachable_cells > 0); /* the shell's inside */
+    double mean = 0, behind = 0;
+    size_t cnt = 0, nb = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t q = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+                if (g->solid[q] || r < R)
+                    continue;
+                double err = fabs(g->v[q] - around_ball(pt, x, R)) * n;
+                mean += err;
+                cnt++;
+                if (x[0] > R) {
+                    behind += err;
+                    nb++;
+                }
+            }
+    mean /= cnt;
+    behind /= nb;
+    printf("  around a ball (mesh shell) 48^3: mean %.3f voxels, behind it %.3f; %zu shell cells\n",
+           mean, behind, nsolid);
+    ck_assert_msg(mean <= 1.0, "mean error %.3f voxels", mean);
+    ck_assert_msg(behind <= 1.5, "error behind the ball %.3f voxels", behind);
+    hv_mesh_destroy(&m);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+START_TEST(mesh_source_should_give_unsigned_distance_to_its_surface)
+{
+    const int n = 48;
+    const double R = 0.3;
+    int ns[3] = {n, n, n};
+    double org[3] = {-0.5, -0.5, -0.5}, c[3] = {0.02, -0.01, 0.015};
+    hv_grid *g = NULL;
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, ns, 1.0 / n, org));
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, R, 5));
+    hv_distance_sources src = {0};
+    src.mesh = m;
+    hv_distance_stats st;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, NULL, &st));
+    ck_assert_int_eq(st.dead_faces, 0);
+    double mean = 0, near = 0;
+    size_t nn = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                double ex = fabs(sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
+                                      (x[2] - c[2]) * (x[2] - c[2])) - R);
+                double err = fabs(g->v[i + (size_t)n * (j + (size_t)n * k)] - ex) * n;
+                mean += err;
+                if (ex < 3.0 / n) {
+                    near += err;
+                    nn++;
+                }
+            }
+    mean /= hv_grid_count(g);
+    near /= nn;
+    printf("  unsigned distance to a sphere mesh 48^3: mean %.3f voxels, within 3 voxels %.3f\n",
+           mean, near);
+    ck_assert_msg(mean <= 0.5, "mean error %.3f voxels", mean);
+    ck_assert_msg(near <= 0.5, "error near the surface %.3f voxels", near);
+    hv_mesh_destroy(&m);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+START_TEST(bad_sources_should_fail_clearly)
+{
+    const int n = 16;
+    int ns[3] = {n, n, 1};
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 2, ns, 1.0 / n, NULL));
+    hv_distance_sources src = {0};
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    int vox[3] = {n, 0, 0};
+    src.voxels = vox;
+    src.nvoxels = 1;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    ck_assert(strstr(hv_last_error(), "outside") != NULL);
+    double pt[3] = {2, 0.5, 0};
+    src.nvoxels = 0;
+    src.points = pt;
+    src.npoints = 1;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    /* A source inside an obstacle only. */
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    for (int j = 4; j < 12; j++)
+        for (int i = 4; i < 12; i++)
+            g->solid[i + n * j] = 1;
+    pt[0] = 0.5;
+    ck_assert_int_eq(hv_distance_compute(g, &src, NULL, NULL), HV_ERR_INVALID_ARG);
+    ck_assert(strstr(hv_last_error(), "solid") != NULL);
+    hv_grid_destroy(&g);
+}
+END_TEST
+
+/* ---- heatvox distance ------------------------------------------------------ */
+
+static const char *heatvox_bin(void)
+{
+    const char *b = getenv("HEATVOX_BIN");
+    if (!b || !*b)
+        b = "build/heatvox";
+    return access(b, X_OK) == 0 ? b : NULL;
+}
+
+static int run(const char *cmd, const char *dir, char *err, size_t errsize)
+{
+    char full[4096], errfile[1024];
+    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
+    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
+    int rc = system(full);
+    err[0] = 0;
+    FILE *f = fopen(errfile, "r");
+    if (f) {
+        size_t n = fread(err, 1, errsize - 1, f);
+        err[n] = 0;
+        fclose(f);
+    }
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
+{
+    const char *bin = heatvox_bin();
+    if (!bin) {
+        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
+        return;
+    }
+    char dir[] = "/tmp/hv_distance_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char path[512], cmd[2048], err[4096];
+    /* The wall with a gap, extruded, as a bool mask on the unit cube, 32^3. */
+    const int n = 32;
+    int ns[3] = {n, n, n};
+    hv_grid *m = NULL;
+    TL_ASSERT_OK(hv_grid_create(&m, 3, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(m));
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(m, i, j, k, x);
+                m->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)in_rect(&wall_gap, x);
+            }
+    hv_vdb_writer *w = NULL;
+    snprintf(path, sizeof path, "%s/mask.vdb", dir);
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_mask(w, m, "walls"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, path));
+    hv_vdb_writer_destroy(&w);
+    snprintf(path, sizeof path, "%s/src.txt", dir);
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "# the source\npoint %.17g %.17g 0.4\n", wall_gap.s[0], wall_gap.s[1]);
+    fclose(f);
+    snprintf(cmd, sizeof cmd,
+             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0 0 0 1 1 1 "
+             "-o %s/d.vdb -q", bin, dir, dir, dir);
+    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
+
+    snprintf(path, sizeof path, "%s/d.vdb", dir);
+    hv_grid *d = NULL;
+    TL_ASSERT_OK(hv_vdb_read_float(path, "distance", NULL, &d, NULL));
+    ck_assert_int_eq(d->n[0], n);
+    ck_assert_int_eq(d->n[2], n);
+    vgraph vg;
+    build_graph(&wall_gap, &vg);
+    double mean = 0;
+    size_t cnt = 0;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(d, i, j, k, x);
+                ck_assert(fabs(x[0] - (i + 0.5) / n) < 1e-9); /* same placement */
+                if (m->solid[c]) {
+                    ck_assert(isinf(d->v[c]));
+                    continue;
+                }
+                double ex = exact2(&wall_gap, &vg, x);
+                ex = sqrt(ex * ex + (x[2] - 0.4) * (x[2] - 0.4));
+                mean += fabs(d->v[c] - ex) * n;
+                cnt++;
+            }
+    mean /= cnt;
+    printf("  heatvox distance around a VDB wall mask 32^3: mean error %.3f voxels\n", mean);
+    ck_assert_msg(mean <= 1.0, "mean error %.3f voxels", mean);
+    hv_grid_destroy(&d);
+    hv_grid_destroy(&m);
+
+    /* Errors: a source file with a bad line, a missing mask grid. */
+    snprintf(path, sizeof path, "%s/bad.txt", dir);
+    f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "0.5 0.5 0.5\nvoxel 1 2\n");
+    fclose(f);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s --bbox 0 0 0 1 1 1 -o %s/e.vdb", bin, path, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "bad.txt:2") != NULL, "message: %s", err);
+    snprintf(cmd, sizeof cmd,
+             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --obstacle-grid nope -o %s/e.vdb",
+             bin, dir, dir, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "nope") && strstr(err, "walls"), "message: %s", err);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s/src.txt -o %s/e.vdb --res 2", bin, dir, dir);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 2);
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    ck_assert_int_eq(system(cmd), 0);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("distance");
+    TCase *tc = tcase_create("geodesic");
+    tcase_set_timeout(tc, 120);
+    tcase_add_test(tc, wall_with_gap_2d_should_be_within_one_voxel_at_128);
+    tcase_add_test(tc, l_room_2d_should_be_within_one_voxel_at_128);
+    tcase_add_test(tc, serpentine_corridor_distance_should_follow_the_corridor);
+    tcase_add_test(tc, error_should_shrink_under_refinement_2d);
+    tcase_add_test(tc, wall_with_gap_3d_should_be_within_one_voxel_at_48);
+    tcase_add_test(tc, l_room_3d_error_should_shrink_from_32_to_64);
+    tcase_add_test(tc, sealed_room_should_be_unreachable_unless_it_has_a_source);
+    tcase_add_test(tc, distance_should_go_around_a_mesh_obstacle);
+    tcase_add_test(tc, mesh_source_should_give_unsigned_distance_to_its_surface);
+    tcase_add_test(tc, bad_sources_should_fail_clearly);
+    tcase_add_test(tc, heatvox_distance_should_go_around_a_vdb_mask);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}

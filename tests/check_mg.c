@@ -1,0 +1,389 @@
+/* Multigrid and the solver interface: convergence factors, exactness against
+ * analytic solutions and the FFTW oracle, null spaces, and bad input. */
+#include "testlib.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+    int dim, n[3];
+    int mask; /* 0 none, 1 bulky ball, 2 two rooms split by a wall */
+} shape;
+
+static uint8_t *make_mask(const shape *s)
+{
+    if (!s->mask)
+        return NULL;
+    int nz = s->dim == 3 ? s->n[2] : 1;
+    uint8_t *m = calloc((size_t)s->n[0] * s->n[1] * nz, 1);
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < s->n[1]; j++)
+            for (int i = 0; i < s->n[0]; i++) {
+                double x = (i + 0.5) / s->n[0] - 0.5, y = (j + 0.5) / s->n[1] - 0.5,
+                       z = s->dim == 3 ? (k + 0.5) / nz - 0.5 : 0;
+                size_t c = i + (size_t)s->n[0] * (j + (size_t)s->n[1] * k);
+                if (s->mask == 1)
+                    m[c] = x * x + y * y + z * z < 0.09;
+                else
+                    m[c] = i == s->n[0] / 2 || i == s->n[0] / 2 + 1;
+            }
+    return m;
+}
+
+/* Solves a random right-hand side; returns the worst per-iteration residual
+ * factor over the iterations above 1e-9 (past that float/double rounding rules). */
+static double worst_factor(const shape *sh, double t_over_h2, int poisson, hv_smoother sm,
+                           hv_solve_info *out)
+{
+    double h = 1.0 / sh->n[0];
+    uint8_t *mask = make_mask(sh);
+    hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, mask, poisson ? 0.0 : 1.0,
+                    poisson ? 1.0 : t_over_h2 * h * h};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    o.smoother = sm;
+    o.tol = 1e-9;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
+    float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
+    tl_fill_random(f, n, 42);
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
+    ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
+    ck_assert(info.relres <= 1e-9);
+    ck_assert_int_eq(info.nhistory, info.iterations + 1);
+    double worst = 0;
+    for (int i = 1; i < info.nhistory; i++)
+        if (info.history[i - 1] > 1e-9)
+            worst = fmax(worst, info.history[i] / info.history[i - 1]);
+    if (out)
+        *out = info;
+    free(f);
+    free(u);
+    free(mask);
+    hv_solver_destroy(&s);
+    ck_assert_ptr_null(s);
+    return worst;
+}
+
+static const shape shapes[] = {
+    {3, {48, 48, 48}, 0},  {3, {37, 64, 80}, 0}, {3, {100, 100, 100}, 0}, {3, {48, 48, 48}, 1},
+    {2, {128, 128, 1}, 0}, {2, {101, 77, 1}, 0}, {2, {96, 96, 1}, 1},
+};
+#define NSHAPES (int)(sizeof shapes / sizeof shapes[0])
+
+START_TEST(vcycle_should_reduce_heat_residual_below_0_12_per_cycle)
+{
+    const double ts[] = {0.1, 4, 100};
+    for (int t = 0; t < 3; t++) {
+        double w = worst_factor(&shapes[_i], ts[t], 0, HV_SMOOTH_RBGS, NULL);
+        ck_assert_msg(w <= 0.12, "shape %d (%dD %dx%dx%d mask %d) t/h2=%g: factor %.3f", _i,
+                      shapes[_i].dim, shapes[_i].n[0], shapes[_i].n[1], shapes[_i].n[2],
+                      shapes[_i].mask, ts[t], w);
+    }
+}
+END_TEST
+
+START_TEST(vcycle_should_reduce_poisson_residual_below_0_15_per_cycle)
+{
+    double w = worst_factor(&shapes[_i], 0, 1, HV_SMOOTH_RBGS, NULL);
+    ck_assert_msg(w <= 0.15, "shape %d: Poisson factor %.3f", _i, w);
+}
+END_TEST
+
+START_TEST(gpu_smoothers_should_converge)
+{
+    shape sh = {3, {40, 40, 40}, 0};
+    hv_solve_info info;
+    double wj = worst_factor(&sh, 4, 0, HV_SMOOTH_JACOBI, &info);
+    ck_assert_msg(wj <= 0.3, "Jacobi factor %.3f", wj);
+    double wc = worst_factor(&sh, 4, 0, HV_SMOOTH_CHEBYSHEV, &info);
+    ck_assert_msg(wc <= 0.12, "Chebyshev factor %.3f", wc);
+    double wp = worst_factor(&sh, 0, 1, HV_SMOOTH_CHEBYSHEV, &info);
+    ck_assert_msg(wp <= 0.15, "Chebyshev Poisson factor %.3f", wp);
+}
+END_TEST
+
+/* u = cos(pi x) cos(pi y) [cos(pi z)] on the unit box solves both problems with
+ * f = (alpha + beta lambda) u, lambda = d pi^2. */
+static double analytic_error(int dim, int n, int poisson, hv_backend b)
+{
+    double h = 1.0 / n, lam = dim * M_PI * M_PI, t = 4 * h * h;
+    double alpha = poisson ? 0 : 1, beta = poisson ? 1 : t;
+    hv_problem p = {dim, {n, n, n}, h, NULL, alpha, beta};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = b;
+    o.tol = 1e-10;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    size_t cnt = (size_t)n * n * (dim == 3 ? n : 1);
+    double *f = malloc(cnt * sizeof *f), *u = calloc(cnt, sizeof *u), *ex = malloc(cnt * sizeof *ex);
+    for (size_t c = 0; c < cnt; c++) {
+        int i = c % n, j = (c / n) % n, k = (int)(c / ((size_t)n * n));
+        double v = cos(M_PI * (i + 0.5) * h) * cos(M_PI * (j + 0.5) * h) *
+                   (dim == 3 ? cos(M_PI * (k + 0.5) * h) : 1);
+        ex[c] = v;
+        f[c] = (alpha + beta * lam) * v;
+    }
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve_d(s, f, u, &info));
+    ck_assert_msg(info.relres <= 1e-10, "relres %g", info.relres);
+    double e = 0;
+    for (size_t c = 0; c < cnt; c++)
+        e = fmax(e, fabs(u[c] - ex[c]));
+    free(f);
+    free(u);
+    free(ex);
+    hv_solver_destroy(&s);
+    return e;
+}
+
+START_TEST(solutions_should_converge_at_second_order)
+{
+    for (int dim = 2; dim <= 3; dim++)
+        for (int poisson = 0; poisson <= 1; poisson++) {
+            double e1 = analytic_error(dim, 16, poisson, HV_BACKEND_MG);
+            double e2 = analytic_error(dim, 32, poisson, HV_BACKEND_MG);
+            double e3 = analytic_error(dim, 64, poisson, HV_BACKEND_MG);
+            ck_assert_msg(e1 / e2 > 3.5 && e2 / e3 > 3.5, "dim %d poisson %d: %g %g %g", dim,
+                          poisson, e1, e2, e3);
+        }
+}
+END_TEST
+
+START_TEST(multigrid_and_fftw_should_agree)
+{
+    const shape plain[] = {{3, {48, 48, 48}, 0}, {3, {37, 64, 80}, 0}, {2, {101, 77, 1}, 0}};
+    for (int q = 0; q < 3; q++)
+        for (int poisson = 0; poisson <= 1; poisson++) {
+            const shape *sh = &plain[q];
+            double h = 1.0 / sh->n[0];
+            hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, NULL, poisson ? 0 : 1,
+                            poisson ? 1 : 4 * h * h};
+            size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
+            float *f = malloc(n * sizeof *f), *u1 = calloc(n, sizeof *u1), *u2 = calloc(n, sizeof *u2);
+            tl_fill_random(f, n, 9);
+            hv_solver_opts o;
+            hv_solver_opts_default(&o);
+            o.tol = 1e-9;
+            hv_solver *mg = NULL, *ff = NULL;
+            o.backend = HV_BACKEND_MG;
+            TL_ASSERT_OK(hv_solver_create(&mg, &p, &o));
+            o.backend = HV_BACKEND_AUTO;
+            TL_ASSERT_OK(hv_solver_create(&ff, &p, &o));
+            ck_assert_int_eq(hv_solver_backend(ff), HV_BACKEND_FFTW);
+            TL_ASSERT_OK(hv_solver_solve(mg, f, u1, NULL));
+            hv_solve_info info;
+            TL_ASSERT_OK(hv_solver_solve(ff, f, u2, &info));
+            ck_assert_int_eq(info.reason, HV_STOP_EXACT);
+            double num = 0, den = 0;
+            for (size_t c = 0; c < n; c++) {
+                num += (double)(u1[c] - u2[c]) * (u1[c] - u2[c]);
+                den += (double)u2[c] * u2[c];
+            }
+            ck_assert_msg(sqrt(num / den) <= 1e-5, "shape %d poisson %d: rel diff %g", q, poisson,
+                          sqrt(num / den));
+            free(f);
+            free(u1);
+            free(u2);
+            hv_solver_destroy(&mg);
+            hv_solver_destroy(&ff);
+        }
+}
+END_TEST
+
+START_TEST(poisson_solution_should_be_mean_free_in_each_region)
+{
+    shape sh = {2, {64, 48, 1}, 2};
+    uint8_t *mask = make_mask(&sh);
+    double h = 1.0 / 64;
+    hv_problem p = {2, {64, 48, 1}, h, mask, 0.0, 1.0};
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, NULL));
+    ck_assert_int_eq(hv_solver_backend(s), HV_BACKEND_MG);
+    size_t n = 64 * 48;
+    float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
+    /* Incompatible data: a different mean in each room. The solver projects it. */
+    for (size_t c = 0; c < n; c++)
+        f[c] = (c % 64) < 32 ? 1.0f + 0.1f * (float)((c * 7) % 5) : -3.0f + 0.2f * (float)((c * 3) % 4);
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
+    ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
+    double sum[2] = {0, 0};
+    for (size_t c = 0; c < n; c++) {
+        if (mask[c]) {
+            ck_assert(u[c] == 0.0f);
+            continue;
+        }
+        sum[(c % 64) >= 32] += u[c];
+    }
+    ck_assert_msg(fabs(sum[0]) < 1e-3 && fabs(sum[1]) < 1e-3, "region sums %g %g", sum[0], sum[1]);
+    free(f);
+    free(u);
+    free(mask);
+    hv_solver_destroy(&s);
+}
+END_TEST
+
+/* A serpentine corridor (walls every 8 cells with a gap at alternate ends):
+ * coarse levels cannot see the walls, so the V-cycle is a weak preconditioner
+ * here, but it is a symmetric one (P^T restriction, symmetric smoothing) and CG
+ * must keep converging rather than stall. */
+START_TEST(pcg_should_converge_in_a_serpentine_corridor)
+{
+    const int n = 96;
+    size_t N = (size_t)n * n;
+    uint8_t *mask = calloc(N, 1);
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            int wall = (j % 8 == 7) && j < n - 2, gap_left = (j / 8) % 2;
+            if (wall && !(gap_left ? i < 3 : i >= n - 3))
+                mask[i + (size_t)n * j] = 1;
+        }
+    hv_problem p = {2, {n, n, 1}, 1.0 / n, mask, 0.0, 1.0};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    o.tol = 1e-10;
+    o.max_iter = 300;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    float *f = calloc(N, sizeof *f), *u = calloc(N, sizeof *u);
+    f[5 + 2 * n] = 1;
+    f[N - 10 - 2 * n] = -1;
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
+    ck_assert_msg(info.reason == HV_STOP_CONVERGED, "%s after %d iterations at %g",
+                  hv_stop_reason_str(info.reason), info.iterations, info.relres);
+    free(f);
+    free(u);
+    free(mask);
+    hv_solver_destroy(&s);
+}
+END_TEST
+
+START_TEST(solver_should_report_max_iterations_not_fail)
+{
+    hv_problem p = {3, {32, 32, 32}, 1.0 / 32, NULL, 0.0, 1.0};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    o.max_iter = 2;
+    o.tol = 1e-12;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    size_t n = 32 * 32 * 32;
+    float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
+    tl_fill_random(f, n, 3);
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
+    ck_assert_int_eq(info.reason, HV_STOP_MAX_ITER);
+    ck_assert_int_eq(info.iterations, 2);
+    ck_assert(info.relres > 1e-12 && info.relres < 0.1);
+    ck_assert(info.history[0] > info.history[1] && info.history[1] > info.history[2]);
+    free(f);
+    free(u);
+    hv_solver_destroy(&s);
+}
+END_TEST
+
+START_TEST(solver_should_reject_bad_input)
+{
+    hv_solver *s = NULL;
+    hv_problem p = {3, {16, 16, 16}, 0.1, NULL, 1.0, 0.01};
+    hv_problem bad = p;
+    bad.n[1] = 0;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, NULL), HV_ERR_INVALID_ARG);
+    bad = p;
+    bad.n[0] = -5;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, NULL), HV_ERR_INVALID_ARG);
+    bad = p;
+    bad.beta = 0;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, NULL), HV_ERR_INVALID_ARG);
+    bad = p;
+    bad.alpha = -1;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, NULL), HV_ERR_INVALID_ARG);
+    bad = p;
+    bad.n[0] = bad.n[1] = bad.n[2] = 200000;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, NULL), HV_ERR_NOMEM);
+    ck_assert_ptr_null(s);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.tol = 0;
+    ck_assert_int_eq(hv_solver_create(&s, &p, &o), HV_ERR_INVALID_ARG);
+    /* FFTW cannot take obstacles. */
+    uint8_t *mask = calloc(16 * 16 * 16, 1);
+    mask[100] = 1;
+    bad = p;
+    bad.solid = mask;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_FFTW;
+    ck_assert_int_eq(hv_solver_create(&s, &bad, &o), HV_ERR_UNSUPPORTED);
+    free(mask);
+    /* NaN in the right-hand side is an error, not a silent NaN solution. */
+    TL_ASSERT_OK(hv_solver_create(&s, &p, NULL));
+    size_t n = 16 * 16 * 16;
+    float *f = calloc(n, sizeof *f), *u = calloc(n, sizeof *u);
+    f[77] = NAN;
+    ck_assert_int_eq(hv_solver_solve(s, f, u, NULL), HV_ERR_NUMERIC);
+    ck_assert(strstr(hv_last_error(), "right-hand side") != NULL);
+    f[77] = INFINITY;
+    ck_assert_int_eq(hv_solver_solve(s, f, u, NULL), HV_ERR_NUMERIC);
+    free(f);
+    free(u);
+    hv_solver_destroy(&s);
+}
+END_TEST
+
+START_TEST(solve_many_should_match_single_solves)
+{
+    hv_problem p = {3, {24, 20, 16}, 0.05, NULL, 1.0, 0.01};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    size_t n = 24 * 20 * 16;
+    float *f[3], *u[3], *v = calloc(n, sizeof *v);
+    for (int i = 0; i < 3; i++) {
+        f[i] = malloc(n * sizeof(float));
+        u[i] = calloc(n, sizeof(float));
+        tl_fill_random(f[i], n, 100 + i);
+    }
+    hv_solve_info info[3];
+    TL_ASSERT_OK(hv_solver_solve_many(s, 3, (const float *const *)f, u, info));
+    for (int i = 0; i < 3; i++) {
+        ck_assert_int_eq(info[i].reason, HV_STOP_CONVERGED);
+        TL_ASSERT_OK(hv_solver_solve(s, f[i], v, NULL));
+        for (size_t c = 0; c < n; c++)
+            ck_assert_float_eq(u[i][c], v[c]);
+        free(f[i]);
+        free(u[i]);
+    }
+    free(v);
+    hv_solver_destroy(&s);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("mg");
+    TCase *tc = tcase_create("multigrid");
+    tcase_set_timeout(tc, 120);
+    tcase_add_loop_test(tc, vcycle_should_reduce_heat_residual_below_0_12_per_cycle, 0, NSHAPES);
+    tcase_add_loop_test(tc, vcycle_should_reduce_poisson_residual_below_0_15_per_cycle, 0, NSHAPES);
+    tcase_add_test(tc, gpu_smoothers_should_converge);
+    tcase_add_test(tc, solutions_should_converge_at_second_order);
+    tcase_add_test(tc, multigrid_and_fftw_should_agree);
+    tcase_add_test(tc, poisson_solution_should_be_mean_free_in_each_region);
+    tcase_add_test(tc, pcg_should_converge_in_a_serpentine_corridor);
+    tcase_add_test(tc, solver_should_report_max_iterations_not_fail);
+    tcase_add_test(tc, solver_should_reject_bad_input);
+    tcase_add_test(tc, solve_many_should_match_single_solves);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}

@@ -1,0 +1,77 @@
+/*
+ * The same signed distance from every solver backend: the mg and opencl
+ * backends must agree to 1e-4 voxel (issue: OpenCL backend), and both with the
+ * FFTW solve of the same plain box. The heat method's own magnitude is compared
+ * (HV_SDF_HEAT), where the solves decide every value, as well as the default
+ * exact magnitude, where they decide the sign.
+ */
+#include "heatvox/heatvox.h"
+#include "testlib.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+static hv_grid *run(hv_backend b, hv_sdf_magnitude mag, const hv_mesh *m)
+{
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = 40;
+    o.use_bbox = 1;
+    double box[6] = {-1, -1, -1, 1, 1, 1};
+    for (int i = 0; i < 6; i++)
+        o.bbox[i] = box[i];
+    o.backend = b;
+    o.magnitude = mag;
+    hv_grid *g = NULL;
+    hv_sdf_stats st;
+    TL_ASSERT_OK(hv_sdf_compute(m, &o, &g, &st));
+    ck_assert_int_eq(st.backend, b);
+    return g;
+}
+
+static double max_diff_voxels(const hv_grid *a, const hv_grid *b)
+{
+    double d = 0;
+    for (size_t c = 0; c < hv_grid_count(a); c++)
+        d = fmax(d, fabs((double)a->v[c] - b->v[c]));
+    return d / a->h;
+}
+
+START_TEST(mg_and_opencl_should_give_the_same_sdf)
+{
+    hv_opencl_device dev;
+    if (hv_opencl_probe(&dev) != HV_OK) {
+        printf("check_sdf_backends: no OpenCL device (%s): skipped\n", hv_last_error());
+        return;
+    }
+    const double c[3] = {0.02, -0.03, 0.01};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_torus(&m, c, 0.55, 0.2, 96, 48));
+    TL_ASSERT_OK(hv_mesh_defect_flip(m, 0.3, 7)); /* broken: 30% flipped faces */
+    for (int mag = HV_SDF_EXACT; mag <= HV_SDF_HEAT; mag++) {
+        hv_grid *g_mg = run(HV_BACKEND_MG, (hv_sdf_magnitude)mag, m);
+        hv_grid *g_cl = run(HV_BACKEND_OPENCL, (hv_sdf_magnitude)mag, m);
+        hv_grid *g_ff = run(HV_BACKEND_FFTW, (hv_sdf_magnitude)mag, m);
+        double d_cl = max_diff_voxels(g_mg, g_cl), d_ff = max_diff_voxels(g_mg, g_ff);
+        printf("check_sdf_backends: magnitude %s: max |mg - opencl| %.2e voxel, |mg - fftw| %.2e voxel\n",
+               mag == HV_SDF_EXACT ? "exact" : "heat", d_cl, d_ff);
+        ck_assert_msg(d_cl <= 1e-4, "mg vs opencl: %g voxel", d_cl);
+        ck_assert_msg(d_ff <= 1e-3, "mg vs fftw: %g voxel", d_ff);
+        hv_grid_destroy(&g_mg);
+        hv_grid_destroy(&g_cl);
+        hv_grid_destroy(&g_ff);
+    }
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("sdf_backends");
+    TCase *tc = tcase_create("backends");
+    tcase_set_timeout(tc, 300);
+    tcase_add_test(tc, mg_and_opencl_should_give_the_same_sdf);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}

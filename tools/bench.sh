@@ -1,0 +1,46 @@
+#!/bin/sh
+# make bench: the benchmark set, one JSON object per line on stdout.
+# Usage: tools/bench.sh path/to/heatvox
+# Rows that need an OpenCL platform or ../shared/meshes are skipped (with a
+# note on stderr) where those are missing.
+set -e
+hv=${1:-build/heatvox}
+dir=$(dirname "$hv")
+wisdom="$dir/fftw.wisdom"
+shared=${HEATVOX_SHARED:-../shared}
+export POCL_CACHE_DIR=${POCL_CACHE_DIR:-$(pwd)/$dir/pocl-cache}
+
+backends="mg fftw"
+if "$hv" devices -q >/dev/null 2>&1; then backends="$backends opencl"; else echo "bench: no OpenCL device, opencl rows skipped" >&2; fi
+
+for n in 128 256; do
+  for b in $backends; do
+    "$hv" bench solve --n $n --t-scale 4 --backend $b --wisdom "$wisdom"
+    "$hv" bench solve --n $n --poisson --backend $b --wisdom "$wisdom"
+  done
+done
+for b in $backends; do
+  "$hv" bench solve --n 2048 --dim 2 --t-scale 4 --backend $b --wisdom "$wisdom"
+  "$hv" bench solve --n 2048 --dim 2 --poisson --backend $b --wisdom "$wisdom"
+done
+
+bunny="$shared/meshes/stanford-bunny.obj"
+if [ -f "$bunny" ]; then
+  for n in 128 256; do
+    "$hv" bench sdf "$bunny" --n $n
+  done
+else
+  echo "bench: $bunny not found, sdf rows skipped" >&2
+fi
+
+# Extension off a level set against OpenVDB tools::sdfToExt in the same run
+# (velocity field; dense sphere, narrow-band stanford-bunny when the shared
+# meshes are there).
+for n in 128 256; do
+  "$hv" bench extend --n $n --shape sphere
+done
+if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
+  "$hv" bench extend --n 128 --shape "mesh:$shared/meshes/stanford-bunny.obj"
+else
+  echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
+fi

@@ -1,0 +1,230 @@
+/* heatvox bench: benchmarks that print one JSON object per line. Ratios are
+ * taken against references measured in the same process (a plain memory copy,
+ * FFTW), because absolute times drift on shared machines. */
+#include "cli.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* Best-of-5 bandwidth of a threaded streaming copy, counting read + write. */
+static double copy_bandwidth(size_t bytes)
+{
+    size_t n = bytes / sizeof(float);
+    float *a = hv_malloc(n * sizeof(float)), *b = hv_malloc(n * sizeof(float));
+    if (!a || !b) {
+        hv_free(a);
+        hv_free(b);
+        return 0;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < n; i++) {
+        a[i] = (float)i;
+        b[i] = 0;
+    }
+    double best = 1e30;
+    for (int r = 0; r < 5; r++) {
+        double t0 = hv_now();
+#pragma omp parallel for schedule(static)
+        for (size_t i = 0; i < n; i++)
+            b[i] = a[i];
+        double t = hv_now() - t0;
+        if (t < best)
+            best = t;
+    }
+    volatile float sink = b[n / 2];
+    (void)sink;
+    hv_free(a);
+    hv_free(b);
+    return 2.0 * (double)n * sizeof(float) / best / 1e9;
+}
+
+static void fill_rhs(float *f, size_t n)
+{
+    uint64_t s = 0x9e3779b97f4a7c15ull;
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < n; i++) {
+        uint64_t x = (s ^ (i * 0xbf58476d1ce4e5b9ull)) * 0x94d049bb133111ebull;
+        f[i] = (float)((double)(x >> 40) / (double)(1ull << 24)) - 0.5f;
+    }
+}
+
+/* Times `repeat` solves after one warm-up; returns the best. */
+static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, double *best,
+                            hv_solve_info *info)
+{
+    *best = 1e30;
+    for (int r = 0; r <= repeat; r++) {
+        double t0 = hv_now();
+        hv_status st = hv_solver_solve(s, f, u, info);
+        double t = hv_now() - t0;
+        if (st)
+            return st;
+        if (r > 0 && t < *best)
+            *best = t;
+    }
+    return HV_OK;
+}
+
+static int usage_solve(FILE *out)
+{
+    fprintf(out,
+            "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
+            "                           [--backend mg|fftw|opencl] [--smoother rbgs|jacobi|chebyshev]\n"
+            "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
+            "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
+            "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
+            "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
+            "relres, copy_gbs (threaded streaming copy in the same process), cycle_gbs (modelled\n"
+            "bytes of one outer iteration / its time), and for mg/opencl ref \"fftw\",\n"
+            "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n");
+    return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
+}
+
+static int bench_solve(int argc, char **argv)
+{
+    int n = 0, dim = 3, poisson = 0, threads = 0, repeat = 3;
+    double tscale = 4, tol = 1e-6;
+    hv_backend backend = HV_BACKEND_MG;
+    hv_smoother smoother = HV_SMOOTH_RBGS;
+    int smoother_set = 0;
+    const char *wisdom = NULL;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
+            return usage_solve(stdout);
+        if (!strcmp(a, "--poisson")) {
+            poisson = 1;
+            continue;
+        }
+        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
+            continue;
+        if (!v)
+            return cli_usage_error("bench solve", "option %s needs a value", a);
+        i++;
+        if (!strcmp(a, "--n")) {
+            if (cli_parse_int(v, &n) || n < 2)
+                return cli_usage_error("bench solve", "--n must be an integer >= 2, got '%s'", v);
+        } else if (!strcmp(a, "--dim")) {
+            if (cli_parse_int(v, &dim) || (dim != 2 && dim != 3))
+                return cli_usage_error("bench solve", "--dim must be 2 or 3, got '%s'", v);
+        } else if (!strcmp(a, "--t-scale")) {
+            if (cli_parse_double(v, &tscale) || tscale <= 0)
+                return cli_usage_error("bench solve", "--t-scale must be positive, got '%s'", v);
+        } else if (!strcmp(a, "--tol")) {
+            if (cli_parse_double(v, &tol) || tol < 1e-12 || tol >= 1)
+                return cli_usage_error("bench solve", "--tol must be in [1e-12, 1), got '%s'", v);
+        } else if (!strcmp(a, "--threads")) {
+            if (cli_parse_int(v, &threads) || threads < 1)
+                return cli_usage_error("bench solve", "--threads must be >= 1, got '%s'", v);
+        } else if (!strcmp(a, "--repeat")) {
+            if (cli_parse_int(v, &repeat) || repeat < 1)
+                return cli_usage_error("bench solve", "--repeat must be >= 1, got '%s'", v);
+        } else if (!strcmp(a, "--backend")) {
+            if (hv_backend_parse(v, &backend) || backend == HV_BACKEND_AUTO)
+                return cli_usage_error("bench solve", "--backend must be mg, fftw or opencl, got '%s'", v);
+        } else if (!strcmp(a, "--smoother")) {
+            smoother_set = 1;
+            if (!strcmp(v, "rbgs"))
+                smoother = HV_SMOOTH_RBGS;
+            else if (!strcmp(v, "jacobi"))
+                smoother = HV_SMOOTH_JACOBI;
+            else if (!strcmp(v, "chebyshev"))
+                smoother = HV_SMOOTH_CHEBYSHEV;
+            else
+                return cli_usage_error("bench solve", "unknown smoother '%s'", v);
+        } else if (!strcmp(a, "--wisdom")) {
+            wisdom = v;
+        } else {
+            return cli_usage_error("bench solve", "unknown option '%s'", a);
+        }
+    }
+    if (!n)
+        return cli_usage_error("bench solve", "--n is required");
+    if (backend == HV_BACKEND_OPENCL && !smoother_set)
+        smoother = HV_SMOOTH_CHEBYSHEV;
+    hv_set_threads(threads);
+    threads = hv_get_threads();
+
+    double h = 1.0 / n;
+    hv_problem p = {dim, {n, n, dim == 3 ? n : 1}, h, NULL, poisson ? 0.0 : 1.0,
+                    poisson ? 1.0 : tscale * h * h};
+    size_t count = (size_t)n * n * (dim == 3 ? n : 1);
+    hv_status st = hv_check_dims(dim, p.n, h, 24);
+    if (st)
+        return cli_fail("bench solve", "grid", st);
+    float *f = hv_malloc(count * sizeof(float)), *u = hv_calloc(count, sizeof(float));
+    if (!f || !u)
+        return cli_fail("bench solve", "allocating the problem", HV_ERR_NOMEM);
+    fill_rhs(f, count);
+    double copy_gbs = copy_bandwidth(count * sizeof(float) > (256u << 20) ? count * sizeof(float) : (256u << 20));
+
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = backend;
+    o.smoother = smoother;
+    o.tol = tol;
+    o.fftw_double = 0;
+    o.fftw_measure = 1;
+    o.wisdom_file = wisdom;
+    hv_solver *s = NULL;
+    double t0 = hv_now();
+    if ((st = hv_solver_create(&s, &p, &o)))
+        return cli_fail("bench solve", "creating the solver", st);
+    double setup = hv_now() - t0, seconds;
+    hv_solve_info info;
+    if ((st = time_solve(s, f, u, repeat, &seconds, &info)))
+        return cli_fail("bench solve", "solving", st);
+    hv_solver_stats stats;
+    hv_solver_get_stats(s, &stats);
+    double cycle_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW
+                           ? stats.bytes_per_iteration * info.iterations / seconds / 1e9
+                           : 0;
+    hv_solver_destroy(&s);
+
+    printf("{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
+           "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
+           "\"seconds\":%.5f,\"iterations\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
+           "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f",
+           n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
+           smoother == HV_SMOOTH_RBGS ? "rbgs" : smoother == HV_SMOOTH_JACOBI ? "jacobi" : "chebyshev",
+           threads, tol, setup, seconds, info.iterations, info.relres,
+           hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs);
+    if (backend != HV_BACKEND_FFTW) {
+        o.backend = HV_BACKEND_FFTW;
+        double ref = 0;
+        hv_solve_info rinfo;
+        if (hv_solver_create(&s, &p, &o) == HV_OK && time_solve(s, f, u, repeat, &ref, &rinfo) == HV_OK)
+            printf(",\"ref\":\"fftw\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f", ref,
+                   rinfo.relres, seconds / ref);
+        hv_solver_destroy(&s);
+    }
+    if (copy_gbs > 0 && cycle_gbs > 0)
+        printf(",\"cycle_vs_copy\":%.3f", cycle_gbs / copy_gbs);
+    printf("}\n");
+    fflush(stdout);
+    hv_free(f);
+    hv_free(u);
+    return HV_EXIT_OK;
+}
+
+int cmd_bench(int argc, char **argv)
+{
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        FILE *out = argc < 2 ? stderr : stdout;
+        fprintf(out, "usage: heatvox bench <solve|sdf|extend> [options]   (heatvox bench <name> --help)\n");
+        return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
+    }
+    if (!strcmp(argv[1], "solve"))
+        return bench_solve(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "sdf"))
+        return cmd_bench_sdf(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "extend"))
+        return bench_extend(argc - 1, argv + 1);
+    return cli_usage_error("bench", "unknown benchmark '%s'", argv[1]);
+}

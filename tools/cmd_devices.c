@@ -1,0 +1,94 @@
+/* heatvox devices: the OpenCL devices --backend opencl can use. */
+#include "cli.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void usage(FILE *out)
+{
+    fprintf(out,
+            "usage: heatvox devices [--json] [-q] [-v]\n"
+            "\n"
+            "Lists the OpenCL devices of every platform; '*' marks the one --backend opencl\n"
+            "uses. Choose another with HEATVOX_OPENCL_DEVICE=\"P:D\" (platform:device) or\n"
+            "part of a device name; by default the first GPU, else the first device.\n"
+            "\n"
+            "  --json   one JSON object per device and line\n"
+            "\n"
+            "exit codes: 0 devices listed, 1 no OpenCL platform or HEATVOX_OPENCL_DEVICE\n"
+            "names no device, 2 usage error\n");
+}
+
+static void json_string(const char *s)
+{
+    putchar('"');
+    for (; *s; s++) {
+        if (*s == '"' || *s == '\\')
+            printf("\\%c", *s);
+        else if ((unsigned char)*s < 0x20)
+            printf("\\u%04x", (unsigned char)*s);
+        else
+            putchar(*s);
+    }
+    putchar('"');
+}
+
+int cmd_devices(int argc, char **argv)
+{
+    int json = 0;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
+            usage(stdout);
+            return HV_EXIT_OK;
+        } else if (!strcmp(argv[i], "--json")) {
+            json = 1;
+        } else if (strcmp(argv[i], "-q") && strcmp(argv[i], "-v")) {
+            return cli_usage_error("devices", "unknown option '%s'", argv[i]);
+        }
+    }
+    int count = 0;
+    hv_status st = hv_opencl_list_devices(NULL, 0, &count);
+    if (st)
+        return cli_fail("devices", "no OpenCL device", st);
+    hv_opencl_device *d = calloc((size_t)count, sizeof *d);
+    if (!d)
+        return cli_fail("devices", "listing devices", HV_ERR_NOMEM);
+    if ((st = hv_opencl_list_devices(d, count, &count))) {
+        free(d);
+        return cli_fail("devices", "no OpenCL device", st);
+    }
+    int selected = 0;
+    if (!json)
+        printf("%-5s %-36s %-30s %9s %5s\n", "P:D", "device", "platform", "memory", "fp64");
+    for (int i = 0; i < count; i++) {
+        selected |= d[i].selected;
+        char pd[24];
+        snprintf(pd, sizeof pd, "%d:%d", d[i].platform, d[i].device);
+        if (json) {
+            printf("{\"device\":\"%s\",\"name\":", pd);
+            json_string(d[i].name);
+            printf(",\"platform\":");
+            json_string(d[i].platform_name);
+            printf(",\"version\":");
+            json_string(d[i].version);
+            printf(",\"global_mem\":%llu,\"compute_units\":%d,\"fp64\":%s,\"gpu\":%s,\"selected\":%s}\n",
+                   (unsigned long long)d[i].global_mem, d[i].compute_units,
+                   d[i].fp64 ? "true" : "false", d[i].gpu ? "true" : "false",
+                   d[i].selected ? "true" : "false");
+        } else {
+            printf("%-5s %-36.36s %-30.30s %5.1f GiB %5s %s\n", pd, d[i].name, d[i].platform_name,
+                   (double)d[i].global_mem / (1024.0 * 1024.0 * 1024.0), d[i].fp64 ? "yes" : "no",
+                   d[i].selected ? "*" : "");
+            cli_info("      %s, %d compute units, %s\n", d[i].version, d[i].compute_units,
+                     d[i].gpu ? "GPU" : "not a GPU");
+        }
+    }
+    free(d);
+    if (!selected) {
+        /* HEATVOX_OPENCL_DEVICE names none of them: say why */
+        st = hv_opencl_probe(NULL);
+        return cli_fail("devices", "choosing a device", st ? st : HV_ERR_INTERNAL);
+    }
+    return HV_EXIT_OK;
+}

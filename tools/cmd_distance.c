@@ -1,0 +1,552 @@
+/* heatvox distance: geodesic distance around obstacles by the heat method. */
+#include "cli.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *CMD = "distance";
+
+static int usage(FILE *out)
+{
+    fprintf(out,
+            "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
+            "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb\n"
+            "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 x1 y1 z1]\n"
+            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend auto|mg|fftw|opencl]\n"
+            "                        [--unreachable V] [--threads T] [-q] [-v]\n"
+            "\n"
+            "Geodesic distance from the sources through free space, around obstacles, by the\n"
+            "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
+            "when there are obstacles, a bool grid 'obstacles'.\n"
+            "\n"
+            "Sources FILE: a mesh (.obj .ply .stl .off: its surface is the source), or text,\n"
+            "one source per line, '#' starts a comment:\n"
+            "  x y z           a world point (2D grids: x y)\n"
+            "  point x y z     the same\n"
+            "  voxel i j k     a voxel of the output grid (2D: voxel i j)\n"
+            "  mesh PATH       a mesh surface (PATH relative to the file's directory)\n"
+            "\n"
+            "Grid: with --obstacles MASK.vdb, the mask's voxels (its transform), over the mask's\n"
+            "block grown to hold the sources (or --bbox); solid where a bool/mask grid is\n"
+            "active, a level set is negative, another float grid is non-zero. Otherwise\n"
+            "--bbox (default: the sources and obstacle mesh bounds plus --pad cells, default\n"
+            "4) with --res cells along the longest axis (default 128) or --voxel-size.\n"
+            "--obstacle-mesh marks the cells its triangles touch (a watertight shell).\n"
+            "--dim 2: a 2D grid (bbox x0 y0 x1 y1), written as a one-voxel slab.\n"
+            "\n"
+            "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
+            "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
+            "Exit codes: 0 success, 1 failure, 2 usage error.\n");
+    return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
+}
+
+typedef struct {
+    int *vox;
+    size_t nvox, capvox;
+    double *pts;
+    size_t npts, cappts;
+    hv_mesh *mesh; /* at most one mesh source */
+    int dim;       /* dimension of the point records (2 or 3) */
+} source_list;
+
+static void free_sources(source_list *s)
+{
+    free(s->vox);
+    free(s->pts);
+    hv_mesh_destroy(&s->mesh);
+}
+
+static int push3(void **arr, size_t *n, size_t *cap, size_t elem, const void *v)
+{
+    if (*n == *cap) {
+        size_t nc = *cap ? 2 * *cap : 16;
+        void *p = realloc(*arr, nc * 3 * elem);
+        if (!p)
+            return -1;
+        *arr = p;
+        *cap = nc;
+    }
+    memcpy((char *)*arr + *n * 3 * elem, v, 3 * elem);
+    (*n)++;
+    return 0;
+}
+
+static int has_mesh_ext(const char *path)
+{
+    const char *dot = strrchr(path, '.');
+    if (!dot)
+        return 0;
+    const char *exts[] = {".obj", ".ply", ".stl", ".off"};
+    for (int i = 0; i < 4; i++)
+        if (!strcasecmp(dot, exts[i]))
+            return 1;
+    return 0;
+}
+
+static int load_mesh_source(source_list *s, const char *path)
+{
+    if (s->mesh) {
+        fprintf(stderr, "heatvox distance: %s: only one mesh source is supported\n", path);
+        return HV_EXIT_USAGE;
+    }
+    hv_status st = hv_mesh_read(path, &s->mesh);
+    if (st)
+        return cli_fail(CMD, path, st);
+    return 0;
+}
+
+/* Parses the sources file (see usage). */
+static int read_sources(const char *path, int dim, source_list *s)
+{
+    s->dim = dim;
+    if (has_mesh_ext(path))
+        return load_mesh_source(s, path);
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        fprintf(stderr, "heatvox distance: %s: cannot open: %s\n", path, strerror(errno));
+        return HV_EXIT_FAIL;
+    }
+    char line[4096];
+    int lineno = 0, rc = 0;
+    while (!rc && fgets(line, sizeof line, f)) {
+        lineno++;
+        char *hash = strchr(line, '#');
+        if (hash)
+            *hash = 0;
+        char *p = line;
+        while (isspace((unsigned char)*p))
+            p++;
+        if (!*p)
+            continue;
+        char kw[16] = "";
+        if (isalpha((unsigned char)*p)) {
+            int k = 0;
+            while (isalpha((unsigned char)*p) && k < 15)
+                kw[k++] = *p++;
+            kw[k] = 0;
+        }
+        if (!strcmp(kw, "mesh")) {
+            while (isspace((unsigned char)*p))
+                p++;
+            char *end = p + strlen(p);
+            while (end > p && isspace((unsigned char)end[-1]))
+                *--end = 0;
+            if (!*p) {
+                fprintf(stderr, "heatvox distance: %s:%d: 'mesh' needs a path\n", path, lineno);
+                rc = HV_EXIT_FAIL;
+                break;
+            }
+            char full[8192];
+            const char *slash = strrchr(path, '/');
+            int len = *p != '/' && slash
+                          ? snprintf(full, sizeof full, "%.*s/%s", (int)(slash - path), path, p)
+                          : snprintf(full, sizeof full, "%s", p);
+            if (len < 0 || (size_t)len >= sizeof full) {
+                fprintf(stderr, "heatvox distance: %s:%d: mesh path too long\n", path, lineno);
+                rc = HV_EXIT_FAIL;
+                break;
+            }
+            rc = load_mesh_source(s, full);
+            continue;
+        }
+        if (*kw && strcmp(kw, "voxel") && strcmp(kw, "point")) {
+            fprintf(stderr, "heatvox distance: %s:%d: unknown record '%s' (expected x y z, point, voxel or mesh)\n",
+                    path, lineno, kw);
+            rc = HV_EXIT_FAIL;
+            break;
+        }
+        double v[4];
+        int nv = 0;
+        char *q = p;
+        while (nv < 4) {
+            while (isspace((unsigned char)*q))
+                q++;
+            if (!*q)
+                break;
+            char *end;
+            v[nv] = strtod(q, &end);
+            if (end == q || !isfinite(v[nv])) {
+                nv = -1;
+                break;
+            }
+            nv++;
+            q = end;
+        }
+        while (nv >= 0 && isspace((unsigned char)*q))
+            q++;
+        if (nv != dim || *q) {
+            fprintf(stderr, "heatvox distance: %s:%d: expected %d numbers%s\n", path, lineno, dim,
+                    dim == 2 ? " (a 2D grid)" : "");
+            rc = HV_EXIT_FAIL;
+            break;
+        }
+        if (!strcmp(kw, "voxel")) {
+            int iv[3] = {0, 0, 0};
+            for (int a = 0; a < dim; a++) {
+                if (v[a] != floor(v[a]) || fabs(v[a]) > 1e9) {
+                    fprintf(stderr, "heatvox distance: %s:%d: voxel indices must be integers\n", path,
+                            lineno);
+                    rc = HV_EXIT_FAIL;
+                    break;
+                }
+                iv[a] = (int)v[a];
+            }
+            if (!rc && push3((void **)&s->vox, &s->nvox, &s->capvox, sizeof(int), iv))
+                rc = cli_fail(CMD, "reading sources", HV_ERR_NOMEM);
+        } else {
+            double pv[3] = {v[0], v[1], dim == 3 ? v[2] : 0};
+            if (push3((void **)&s->pts, &s->npts, &s->cappts, sizeof(double), pv))
+                rc = cli_fail(CMD, "reading sources", HV_ERR_NOMEM);
+        }
+    }
+    fclose(f);
+    if (!rc && !s->nvox && !s->npts && !s->mesh) {
+        fprintf(stderr, "heatvox distance: %s: no sources\n", path);
+        rc = HV_EXIT_FAIL;
+    }
+    return rc;
+}
+
+/* World bounds of the point and mesh sources and the obstacle mesh; returns 0 if none. */
+static int source_bounds(const source_list *s, const hv_mesh *obst, double lo[3], double hi[3])
+{
+    int any = 0;
+    for (int a = 0; a < 3; a++) {
+        lo[a] = INFINITY;
+        hi[a] = -INFINITY;
+    }
+    for (size_t i = 0; i < s->npts; i++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fmin(lo[a], s->pts[3 * i + a]);
+            hi[a] = fmax(hi[a], s->pts[3 * i + a]);
+            any = 1;
+        }
+    const hv_mesh *ms[2] = {s->mesh, obst};
+    for (int q = 0; q < 2; q++) {
+        double ml[3], mh[3];
+        if (ms[q] && hv_mesh_bounds(ms[q], ml, mh) == HV_OK) {
+            for (int a = 0; a < 3; a++) {
+                lo[a] = fmin(lo[a], ml[a]);
+                hi[a] = fmax(hi[a], mh[a]);
+            }
+            any = 1;
+        }
+    }
+    return any;
+}
+
+/* Grid from a VDB mask: the named grid's transform; the box is --bbox or its
+ * default block grown to hold the sources plus pad cells. */
+static int grid_from_mask(const char *path, const char *name, const source_list *s, int use_bbox,
+                          const double bbox[6], int pad, hv_grid **g)
+{
+    hv_vdb_grid_info info[64];
+    size_t count = 0;
+    hv_status st = hv_vdb_list(path, info, 64, &count);
+    if (st)
+        return cli_fail(CMD, path, st);
+    const hv_vdb_grid_info *gi = NULL;
+    if (!name && count == 1)
+        gi = &info[0];
+    for (size_t i = 0; name && i < count && i < 64; i++)
+        if (!strcmp(info[i].name, name))
+            gi = &info[i];
+    if (!gi) {
+        fprintf(stderr, "heatvox distance: %s: ", path);
+        if (name)
+            fprintf(stderr, "no grid named '%s'; grids:", name);
+        else
+            fprintf(stderr, "%zu grids, name one with --obstacle-grid:", count);
+        for (size_t i = 0; i < count && i < 64; i++)
+            fprintf(stderr, " '%s' (%s)", info[i].name, info[i].value_type);
+        fprintf(stderr, "\n");
+        return HV_EXIT_FAIL;
+    }
+    if (!gi->uniform) {
+        fprintf(stderr, "heatvox distance: %s: grid '%s' has a non-uniform or rotated transform\n",
+                path, gi->name);
+        return HV_EXIT_FAIL;
+    }
+    const double h = gi->voxel_size[0];
+    hv_vdb_read_opts ro = {1, {0, 0, 0}, {0, 0, 0}};
+    if (use_bbox) {
+        for (int a = 0; a < 3; a++) {
+            ro.box_lo[a] = (int)ceil((bbox[a] - gi->index0_world[a]) / h - 1e-9);
+            ro.box_hi[a] = (int)floor((bbox[3 + a] - gi->index0_world[a]) / h + 1e-9);
+            if (ro.box_hi[a] < ro.box_lo[a]) {
+                fprintf(stderr, "heatvox distance: --bbox holds no voxel centre of '%s' along %c\n",
+                        gi->name, "xyz"[a]);
+                return HV_EXIT_USAGE;
+            }
+        }
+    } else {
+        if (gi->bbox_lo[0] > gi->bbox_hi[0]) {
+            fprintf(stderr, "heatvox distance: %s: grid '%s' has no active voxels; give --bbox\n",
+                    path, gi->name);
+            return HV_EXIT_FAIL;
+        }
+        char buf[128];
+        int lo[3], hi[3];
+        memcpy(lo, gi->bbox_lo, sizeof lo);
+        memcpy(hi, gi->bbox_hi, sizeof hi);
+        if (hv_vdb_read_meta(path, gi->name, "heatvox_block_min", buf, sizeof buf) == HV_OK)
+            sscanf(buf, "[%d, %d, %d]", &lo[0], &lo[1], &lo[2]);
+        if (hv_vdb_read_meta(path, gi->name, "heatvox_block_max", buf, sizeof buf) == HV_OK)
+            sscanf(buf, "[%d, %d, %d]", &hi[0], &hi[1], &hi[2]);
+        hv_clear_error();
+        double sl[3], sh[3];
+        if (source_bounds(s, NULL, sl, sh))
+            for (int a = 0; a < 3; a++) {
+                lo[a] = (int)fmin(lo[a], floor((sl[a] - gi->index0_world[a]) / h) - pad);
+                hi[a] = (int)fmax(hi[a], ceil((sh[a] - gi->index0_world[a]) / h) + pad);
+            }
+        memcpy(ro.box_lo, lo, sizeof lo);
+        memcpy(ro.box_hi, hi, sizeof hi);
+    }
+    st = hv_vdb_read_mask(path, gi->name, &ro, g);
+    if (st)
+        return cli_fail(CMD, path, st);
+    return 0;
+}
+
+static int parse_unreachable(const char *v, float *out)
+{
+    if (!strcmp(v, "inf") || !strcmp(v, "+inf")) {
+        *out = INFINITY;
+        return 0;
+    }
+    double d;
+    if (cli_parse_double(v, &d))
+        return -1;
+    *out = (float)d;
+    return 0;
+}
+
+int cmd_distance(int argc, char **argv)
+{
+    const char *sources = NULL, *mask = NULL, *mask_grid = NULL, *obst_mesh = NULL;
+    const char *out = NULL, *npy = NULL;
+    int res = 0, dim = 3, pad = 4, use_bbox = 0, threads = 0, none = 0;
+    double vsize = 0, bbox[6] = {0};
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
+            return usage(stdout);
+        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
+            continue;
+        if (!strcmp(a, "--bbox")) {
+            /* 6 numbers (4 with --dim 2, which may come later: take what parses). */
+            int k = 0;
+            while (k < 6 && i + 1 + k < argc && cli_parse_double(argv[i + 1 + k], &bbox[k]) == 0)
+                k++;
+            if (k != 4 && k != 6)
+                return cli_usage_error(CMD, "--bbox needs x0 y0 z0 x1 y1 z1 (or x0 y0 x1 y1 in 2D)");
+            if (k == 4) {
+                double b4[4] = {bbox[0], bbox[1], bbox[2], bbox[3]};
+                bbox[0] = b4[0];
+                bbox[1] = b4[1];
+                bbox[2] = -0.5;
+                bbox[3] = b4[2];
+                bbox[4] = b4[3];
+                bbox[5] = 0.5;
+            }
+            use_bbox = k;
+            i += k;
+            continue;
+        }
+        if (!v)
+            return cli_usage_error(CMD, "option %s needs a value", a);
+        i++;
+        if (!strcmp(a, "--sources")) {
+            sources = v;
+        } else if (!strcmp(a, "--obstacles")) {
+            if (!strcmp(v, "none"))
+                none = 1;
+            else
+                mask = v;
+        } else if (!strcmp(a, "--obstacle-grid")) {
+            mask_grid = v;
+        } else if (!strcmp(a, "--obstacle-mesh")) {
+            obst_mesh = v;
+        } else if (!strcmp(a, "-o") || !strcmp(a, "--output")) {
+            out = v;
+        } else if (!strcmp(a, "--npy")) {
+            npy = v;
+        } else if (!strcmp(a, "--res")) {
+            if (cli_parse_int(v, &res) || res < 4)
+                return cli_usage_error(CMD, "--res must be an integer >= 4, got '%s'", v);
+        } else if (!strcmp(a, "--voxel-size")) {
+            if (cli_parse_double(v, &vsize) || vsize <= 0)
+                return cli_usage_error(CMD, "--voxel-size must be positive, got '%s'", v);
+        } else if (!strcmp(a, "--dim")) {
+            if (cli_parse_int(v, &dim) || (dim != 2 && dim != 3))
+                return cli_usage_error(CMD, "--dim must be 2 or 3, got '%s'", v);
+        } else if (!strcmp(a, "--pad")) {
+            if (cli_parse_int(v, &pad) || pad < 0)
+                return cli_usage_error(CMD, "--pad must be >= 0, got '%s'", v);
+        } else if (!strcmp(a, "--t-scale")) {
+            if (cli_parse_double(v, &o.t_scale) || o.t_scale <= 0)
+                return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
+        } else if (!strcmp(a, "--backend")) {
+            if (hv_backend_parse(v, &o.backend))
+                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
+        } else if (!strcmp(a, "--unreachable")) {
+            if (parse_unreachable(v, &o.unreachable))
+                return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);
+            o.solid_value = o.unreachable;
+        } else if (!strcmp(a, "--threads")) {
+            if (cli_parse_int(v, &threads) || threads < 1)
+                return cli_usage_error(CMD, "--threads must be >= 1, got '%s'", v);
+        } else {
+            return cli_usage_error(CMD, "unknown option '%s'", a);
+        }
+    }
+    if (!sources)
+        return cli_usage_error(CMD, "--sources is required");
+    if (!out && !npy)
+        return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
+    if ((mask != NULL) + (obst_mesh != NULL) + none > 1)
+        return cli_usage_error(CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");
+    if (mask && (res || vsize))
+        return cli_usage_error(CMD, "--res/--voxel-size cannot be used with --obstacles MASK.vdb (its voxels are the grid)");
+    if (mask && dim == 2)
+        return cli_usage_error(CMD, "--dim 2 cannot be used with a VDB mask (a one-voxel-thick mask is fine in 3D)");
+    if (obst_mesh && dim == 2)
+        return cli_usage_error(CMD, "--obstacle-mesh needs a 3D grid");
+    if (use_bbox && (use_bbox == 4) != (dim == 2))
+        return cli_usage_error(CMD, "--bbox takes %d numbers for a %dD grid", dim == 2 ? 4 : 6, dim);
+    if (res && vsize)
+        return cli_usage_error(CMD, "give --res or --voxel-size, not both");
+    hv_set_threads(threads);
+
+    double t_start = hv_now();
+    source_list src = {0};
+    hv_mesh *om = NULL;
+    hv_grid *g = NULL;
+    int rc = read_sources(sources, dim, &src);
+    if (rc)
+        goto done;
+    if (obst_mesh) {
+        hv_status st = hv_mesh_read(obst_mesh, &om);
+        if (st) {
+            rc = cli_fail(CMD, obst_mesh, st);
+            goto done;
+        }
+    }
+    if (mask) {
+        if ((rc = grid_from_mask(mask, mask_grid, &src, use_bbox == 6, bbox, pad, &g)))
+            goto done;
+    } else {
+        double lo[3], hi[3];
+        if (use_bbox) {
+            for (int a = 0; a < 3; a++) {
+                lo[a] = bbox[a];
+                hi[a] = bbox[3 + a];
+            }
+        } else if (src.nvox) {
+            rc = cli_usage_error(CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
+            goto done;
+        } else if (!source_bounds(&src, om, lo, hi)) {
+            rc = cli_usage_error(CMD, "cannot size the grid: give --bbox");
+            goto done;
+        }
+        double ext = 0;
+        for (int a = 0; a < dim; a++) {
+            if (!(hi[a] >= lo[a])) {
+                rc = cli_usage_error(CMD, "--bbox is empty along %c", "xyz"[a]);
+                goto done;
+            }
+            ext = fmax(ext, hi[a] - lo[a]);
+        }
+        int padc = use_bbox ? 0 : pad;
+        if (!(ext > 0) && !(vsize > 0)) {
+            rc = cli_usage_error(CMD, "the sources span no volume: give --bbox or --voxel-size");
+            goto done;
+        }
+        double h = vsize > 0 ? vsize : ext / ((res ? res : 128) - 2 * padc);
+        if (!(h > 0)) {
+            rc = cli_usage_error(CMD, "--res is too small for --pad %d", padc);
+            goto done;
+        }
+        int n[3] = {1, 1, 1};
+        double org[3] = {0, 0, 0};
+        for (int a = 0; a < dim; a++) {
+            n[a] = (int)ceil((hi[a] - lo[a]) / h - 1e-9) + 2 * padc;
+            if (n[a] < 1)
+                n[a] = 1;
+            org[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * h;
+        }
+        if (dim == 2)
+            org[2] = -0.5 * h;
+        hv_status st = hv_grid_create(&g, dim, n, h, org);
+        if (!st && om)
+            st = hv_mask_from_mesh(g, om, NULL);
+        if (st) {
+            rc = cli_fail(CMD, om ? obst_mesh : "creating the grid", st);
+            goto done;
+        }
+    }
+    cli_info("heatvox distance: grid %d x %d x %d, h = %g\n", g->n[0], g->n[1], g->n[2], g->h);
+
+    hv_distance_sources ds = {src.vox, src.nvox, src.pts, src.npts, src.mesh};
+    hv_distance_stats st_d;
+    hv_status st = hv_distance_compute(g, &ds, &o, &st_d);
+    if (st) {
+        rc = cli_fail(CMD, sources, st);
+        goto done;
+    }
+    if (st_d.sources_in_solid)
+        fprintf(stderr, "heatvox distance: warning: %zu sources lie in obstacles and were skipped\n",
+                st_d.sources_in_solid);
+    if (st_d.unreachable_cells && cli_verbose >= 0)
+        fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
+                st_d.unreachable_cells, (double)o.unreachable);
+    if (npy && (st = hv_write_npy(npy, g))) {
+        rc = cli_fail(CMD, npy, st);
+        goto done;
+    }
+    if (out) {
+        hv_vdb_writer *w = NULL;
+        char buf[256];
+        st = hv_vdb_writer_create(&w);
+        if (!st)
+            st = hv_vdb_writer_add_float(w, g, "distance");
+        if (!st && g->solid)
+            st = hv_vdb_writer_add_mask(w, g, "obstacles");
+        snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s",
+                 o.t_scale, st_d.stages, sources);
+        if (!st)
+            st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_method", buf);
+        snprintf(buf, sizeof buf, "%zu", st_d.unreachable_cells);
+        if (!st)
+            st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_unreachable_cells", buf);
+        if (!st)
+            st = hv_vdb_writer_write(w, out);
+        hv_vdb_writer_destroy(&w);
+        if (st) {
+            rc = cli_fail(CMD, out, st);
+            goto done;
+        }
+    }
+    if (cli_verbose >= 0)
+        printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
+               "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
+               "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
+               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f}\n",
+               g->n[0], g->n[1], g->n[2], g->h, st_d.stages, st_d.source_cells, st_d.regions,
+               st_d.unreachable_cells, st_d.dead_faces, hv_backend_name(st_d.backend),
+               st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
+               hv_now() - t_start);
+done:
+    free_sources(&src);
+    hv_mesh_destroy(&om);
+    hv_grid_destroy(&g);
+    return rc;
+}
