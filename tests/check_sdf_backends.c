@@ -66,12 +66,49 @@ START_TEST(mg_and_opencl_should_give_the_same_sdf)
 }
 END_TEST
 
+/* band_only (what heatvox sdf computes for a narrow-band .vdb) must give the
+ * whole-grid values inside the band and the same sign everywhere. */
+START_TEST(narrow_band_should_match_the_whole_grid_in_the_band)
+{
+    const double c[3] = {0.02, -0.03, 0.01};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_torus(&m, c, 0.55, 0.2, 96, 48));
+    TL_ASSERT_OK(hv_mesh_defect_holes(m, 4, 0.03, 3));
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = 48;
+    hv_grid *full = NULL, *band = NULL;
+    hv_sdf_stats sf, sb;
+    TL_ASSERT_OK(hv_sdf_compute(m, &o, &full, &sf));
+    o.band_only = 3;
+    TL_ASSERT_OK(hv_sdf_compute(m, &o, &band, &sb));
+    double h = full->h, worst = 0;
+    size_t sign_diff = 0;
+    for (size_t q = 0; q < hv_grid_count(full); q++) {
+        if ((full->v[q] < 0) != (band->v[q] < 0))
+            sign_diff++;
+        if (fabs(full->v[q]) < 3 * h)
+            worst = fmax(worst, fabs((double)full->v[q] - band->v[q]) / h);
+        else
+            ck_assert(fabs(band->v[q]) >= 3 * h);
+    }
+    printf("check_sdf_backends: band_only 3: max diff in the band %.2e voxel, redistance %.3f s vs %.3f s\n",
+           worst, sb.t_redistance, sf.t_redistance);
+    ck_assert_uint_eq(sign_diff, 0);
+    ck_assert_msg(worst <= 0.01, "band differs by %g voxel", worst);
+    hv_grid_destroy(&full);
+    hv_grid_destroy(&band);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("sdf_backends");
     TCase *tc = tcase_create("backends");
     tcase_set_timeout(tc, 300);
     tcase_add_test(tc, mg_and_opencl_should_give_the_same_sdf);
+    tcase_add_test(tc, narrow_band_should_match_the_whole_grid_in_the_band);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

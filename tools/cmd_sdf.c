@@ -179,6 +179,10 @@ int cmd_sdf(int argc, char **argv)
     if (!have_h)
         o.voxel_size = 0;
     o.threads = threads;
+    /* A narrow-band level set alone needs exact values only in its band (the
+     * rest is the background with the heat method's sign): skip the sweeps. */
+    if (!dense && !npy && !preview && !o.unsigned_distance && o.magnitude == HV_SDF_EXACT)
+        o.band_only = band;
     if (check_writable(out) || (npy && check_writable(npy)) || (preview && check_writable(preview)))
         return HV_EXIT_FAIL;
     static int tty;

@@ -89,6 +89,11 @@ typedef struct hv_sdf_opts {
     int local_shift;      /* 1 (default): after the global shift, subtract the residual of phi
                              at the surface extended into the volume by normalized heat
                              convolution, so the zero set follows the mesh (signed only) */
+    double band_only;     /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
+                             voxels of the mesh, as a narrow-band level set needs; farther cells
+                             get (band_only + 1) h with the heat method's sign. Skips the
+                             closest-triangle sweeps over the whole grid (most of the time).
+                             0 (default): exact everywhere */
 
     /* Solves. */
     hv_backend backend;   /* default HV_BACKEND_AUTO */

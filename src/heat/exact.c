@@ -165,13 +165,13 @@ static double descend(const hv_mesh *m, const ring *r, const double p[3], uint32
  * neighbour's triangle if it is nearer. */
 static inline int relax(const hv_mesh *m, const ring *r, float *dist, uint32_t *tri,
                         uint16_t *stamp, size_t c, size_t prev, const double p[3], int pass,
-                        int period)
+                        int period, double cap)
 {
     uint32_t cand = tri[prev];
     if (cand == UINT32_MAX || cand == tri[c] || (int)stamp[prev] <= pass - period)
         return 0;
     double dd = tri_cell_d(m, cand, p);
-    if (!((float)dd < dist[c]))
+    if (!((float)dd < dist[c]) || dd > cap)
         return 0;
     dd = descend(m, r, p, &cand, dd);
     dist[c] = (float)dd;
@@ -187,7 +187,7 @@ static inline int relax(const hv_mesh *m, const ring *r, float *dist, uint32_t *
  * comparison was already made. Passes along y and z walk whole x-rows at a
  * time, so that memory is read contiguously. */
 static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, int dir, float *dist,
-                    uint32_t *tri, uint16_t *stamp, int pass, int period)
+                    uint32_t *tri, uint16_t *stamp, int pass, int period, double cap)
 {
     const int *n = g->n;
     const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
@@ -202,7 +202,7 @@ static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, i
                 for (int i = start; i != end; i += dir) {
                     size_t c = (size_t)i + sy * j + sz * k;
                     p[0] = o[0] + (i + 0.5) * h;
-                    updates += relax(m, r, dist, tri, stamp, c, c - dir, p, pass, period);
+                    updates += relax(m, r, dist, tri, stamp, c, c - dir, p, pass, period, cap);
                 }
             }
         return updates;
@@ -219,15 +219,16 @@ static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, i
             size_t base = sy * j + sz * k;
             for (int i = 0; i < n[0]; i++) {
                 p[0] = o[0] + (i + 0.5) * h;
-                updates += relax(m, r, dist, tri, stamp, base + i, base + i - dir * step, p, pass, period);
+                updates += relax(m, r, dist, tri, stamp, base + i, base + i - dir * step, p, pass, period,
+                                 cap);
             }
         }
     }
     return updates;
 }
 
-hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, float *dist,
-                            uint32_t *tri_out, size_t *band_cells)
+hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
+                            float *dist, uint32_t *tri_out, size_t *band_cells)
 {
     size_t count = hv_grid_count(g);
     _Atomic uint64_t *best = hv_malloc(count * sizeof *best);
@@ -304,8 +305,8 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, flo
     for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
         size_t upd = 0;
         for (int ax = 0; ax < g->dim; ax++) {
-            upd += sweep(m, &r, g, ax, +1, dist, tri, stamp, ++pass, period);
-            upd += sweep(m, &r, g, ax, -1, dist, tri, stamp, ++pass, period);
+            upd += sweep(m, &r, g, ax, +1, dist, tri, stamp, ++pass, period, cap);
+            upd += sweep(m, &r, g, ax, -1, dist, tri, stamp, ++pass, period, cap);
         }
         if (!upd)
             break;

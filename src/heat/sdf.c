@@ -642,7 +642,10 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for nearest triangles (%zu cells)", count);
             goto done;
         }
-        if ((st = hv_exact_distance(M, w.g, SDF_EXACT_BAND, w.dist, tri, &S.band_cells))) {
+        const double cap = o.band_only > 0 ? (o.band_only + 1) * h : INFINITY;
+        /* Rasterizing 1 voxel instead of 2 saved 0.2 s of 1.8 at 128^3 but
+         * let 0.12-voxel errors through at 2-3 voxels: kept at 2. */
+        if ((st = hv_exact_distance(M, w.g, SDF_EXACT_BAND, cap, w.dist, tri, &S.band_cells))) {
             hv_free(tri);
             goto done;
         }
@@ -679,9 +682,12 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             hv_pseudo_free(&ps);
             hv_free(tri);
         }
+        const float far = (float)((o.band_only + 1) * h);
 #pragma omp parallel for schedule(static)
-        for (size_t c = 0; c < count; c++)
-            phi[c] = (!unsig && phi[c] < 0) ? -w.dist[c] : w.dist[c];
+        for (size_t c = 0; c < count; c++) {
+            float d = isinf(w.dist[c]) ? far : w.dist[c];
+            phi[c] = (!unsig && phi[c] < 0) ? -d : d;
+        }
         S.t_redistance = hv_now() - tt;
     }
     if ((st = stage(1.0, "done")))

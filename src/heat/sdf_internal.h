@@ -101,11 +101,13 @@ double hv_point_triangle_region(const double p[3], const double a[3], const doub
                                 const double c[3], double diff[3], int *region);
 
 /* Exact unsigned distance from every cell centre of g to the triangles of m:
- * rasterized within `band` cells of each triangle, then propagated by
- * closest-triangle sweeps. Writes dist (world units) and, if tri is not NULL,
- * the nearest triangle (UINT32_MAX where none). band_cells counts rasterized cells. */
-hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, float *dist,
-                            uint32_t *tri, size_t *band_cells);
+ * rasterized within `band` cells of each triangle, then carried to the rest of
+ * the grid by closest-triangle sweeps, up to the distance `cap` (world units;
+ * INFINITY for the whole grid): cells farther than cap get INFINITY. Writes
+ * dist (world units) and, if tri is not NULL, the nearest triangle
+ * (UINT32_MAX where none). band_cells counts rasterized cells. */
+hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
+                            float *dist, uint32_t *tri, size_t *band_cells);
 
 /* Fast generalized winding number over a subset of a mesh's faces. */
 typedef struct hv_wn_node {
