@@ -121,7 +121,8 @@ check: all $(TESTS)
 
 sanitize:
 	$(MAKE) BUILD=build-san SAN=1 check \
-	  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1
+	  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp
 
 bench: all
 	@sh tools/bench.sh $(BIN)
