@@ -54,9 +54,6 @@ static inline void hv_info_push(hv_solve_info *info, double relres)
 /* Subtracts the per-region mean of u (regions as in s; whole grid without mask). */
 void hv_project_mean(const hv_setup *s, double *u);
 
-/* ||f - A u||_2 in double, with A from the setup; optionally returns r. */
-double hv_residual_norm(const hv_setup *s, const double *f, const double *u, double *r);
-
 /* ||v||_2 over fluid cells. */
 double hv_norm2(const hv_setup *s, const double *v);
 

@@ -1,6 +1,5 @@
 /* Private helpers shared by the solver backends (see backend.h). */
 #include "backend.h"
-#include "heatvox/ops.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -42,23 +41,5 @@ double hv_norm2(const hv_setup *s, const double *v)
     for (size_t c = 0; c < s->count; c++)
         if (!solid || !solid[c])
             nn += v[c] * v[c];
-    return sqrt(nn);
-}
-
-double hv_residual_norm(const hv_setup *s, const double *f, const double *u, double *r)
-{
-    double *tmp = r ? r : hv_malloc(s->count * sizeof *tmp);
-    if (!tmp)
-        return NAN;
-    hv_apply_helmholtz_d(s->p.dim, s->p.n, s->p.h, s->p.solid, s->p.alpha, s->p.beta, u, tmp);
-    double nn = 0;
-#pragma omp parallel for reduction(+ : nn) schedule(static)
-    for (size_t c = 0; c < s->count; c++) {
-        double d = (s->p.solid && s->p.solid[c]) ? 0.0 : f[c] - tmp[c];
-        tmp[c] = d;
-        nn += d * d;
-    }
-    if (!r)
-        hv_free(tmp);
     return sqrt(nn);
 }
