@@ -553,6 +553,23 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     hv_grid_destroy(&d);
     hv_grid_destroy(&m);
 
+    /* A box that starts inside the mask's block: the output keeps the mask's
+     * transform, and its voxels their index coordinates (x from index 8). */
+    snprintf(cmd, sizeof cmd,
+             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0.25 0 0 1 1 1 "
+             "-o %s/d2.vdb -q", bin, dir, dir, dir);
+    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
+    hv_vdb_grid_info gi[2];
+    size_t gcount = 0;
+    snprintf(path, sizeof path, "%s/d2.vdb", dir);
+    TL_ASSERT_OK(hv_vdb_list(path, gi, 2, &gcount));
+    ck_assert_uint_eq(gcount, 2);
+    for (size_t q = 0; q < gcount; q++)
+        ck_assert_msg(fabs(gi[q].index0_world[0] - 0.5 / n) < 1e-9, "%s: index 0 at x = %g",
+                      gi[q].name, gi[q].index0_world[0]);
+    ck_assert_int_eq(gi[0].bbox_lo[0], n / 4);
+    ck_assert_int_eq(gi[0].bbox_hi[0], n - 1);
+
     /* Errors: a source file with a bad line, a missing mask grid. */
     snprintf(path, sizeof path, "%s/bad.txt", dir);
     f = fopen(path, "w");

@@ -421,9 +421,14 @@ static int run(const char *cmd, const char *dir, char *err, size_t errsize)
     return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }
 
+/* Where write_input puts its block in index space (not at 0, not leaf-aligned,
+ * as in a file another tool made). */
+static const int IN_OFF[3] = {-7, 2, 5};
+
 /* A narrow-band sphere level set 'surface', a velocity 'v' and a scalar 'temp'
  * (both given within 3 voxels of the surface, 0 elsewhere) on n^3 cells of
- * [-1,1]^3; temp_h != 0 writes 'temp' with that voxel size instead. */
+ * [-1,1]^3, the block at index IN_OFF; temp_h != 0 writes 'temp' with that voxel
+ * size instead (and the block at index 0). */
 static void write_input(const char *path, int n, double temp_h)
 {
     int ns[3] = {n, n, n};
@@ -449,6 +454,12 @@ static void write_input(const char *path, int n, double temp_h)
             }
     hv_vdb_writer *w = NULL;
     TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    if (!temp_h) {
+        double i0[3];
+        for (int a = 0; a < 3; a++)
+            i0[a] = org[a] + (0.5 - IN_OFF[a]) * h;
+        TL_ASSERT_OK(hv_vdb_writer_set_index_origin(w, i0));
+    }
     TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, phi, "surface", 3, 0));
     TL_ASSERT_OK(hv_vdb_writer_add_vec3(w, v[0], v[1], v[2], "v"));
     TL_ASSERT_OK(hv_vdb_writer_add_float(w, t, "temp"));
@@ -478,11 +489,21 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
              in, out);
     ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
 
-    /* Names, value types and classes. */
-    hv_vdb_grid_info info[8];
+    /* Names, value types, classes, and the input's index space. */
+    hv_vdb_grid_info info[8], info_in;
     size_t count = 0;
+    TL_ASSERT_OK(hv_vdb_list(in, &info_in, 1, &count));
     TL_ASSERT_OK(hv_vdb_list(out, info, 8, &count));
     ck_assert_int_eq(count, 3);
+    for (size_t i = 0; i < count; i++)
+        for (int a = 0; a < 3; a++) {
+            ck_assert_msg(fabs(info[i].index0_world[a] - info_in.index0_world[a]) < 1e-9,
+                          "grid %s: index (0,0,0) moved", info[i].name);
+            if (strcmp(info[i].name, "surface")) {
+                ck_assert_int_eq(info[i].bbox_lo[a], IN_OFF[a]);
+                ck_assert_int_eq(info[i].bbox_hi[a], IN_OFF[a] + n - 1);
+            }
+        }
     int seen = 0;
     for (size_t i = 0; i < count; i++) {
         if (!strcmp(info[i].name, "surface")) {
@@ -506,7 +527,8 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     TL_ASSERT_OK(hv_vdb_read_float(out, "surface", NULL, &phi, &cls));
     TL_ASSERT_OK(hv_vdb_read_float(in, "surface", NULL, &phi0, NULL));
     ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
-    hv_vdb_read_opts ro = {1, {0, 0, 0}, {n - 1, n - 1, n - 1}};
+    hv_vdb_read_opts ro = {1, {IN_OFF[0], IN_OFF[1], IN_OFF[2]},
+                           {IN_OFF[0] + n - 1, IN_OFF[1] + n - 1, IN_OFF[2] + n - 1}};
     TL_ASSERT_OK(hv_vdb_read_vec3(out, "v", &ro, &v[0], &v[1], &v[2]));
     TL_ASSERT_OK(hv_vdb_read_float(out, "temp", &ro, &t, NULL));
     for (int a = 0; a < 3; a++) {

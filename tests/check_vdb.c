@@ -399,6 +399,74 @@ START_TEST(vec3_round_trip_should_keep_each_component)
 }
 END_TEST
 
+START_TEST(index_origin_should_keep_the_input_index_space_and_refuse_off_lattice_blocks)
+{
+    /* Index (0,0,0) of the input sits at world I0; the block to write starts
+     * 5 voxels below it in x, 3 above in y and 13 above in z (offsets that are
+     * neither zero nor multiples of a leaf). */
+    const double h = 0.1, I0[3] = {0.25, -1.05, 2.0};
+    const int off[3] = {-5, 3, 13}, n[3] = {11, 9, 7};
+    double o[3];
+    for (int a = 0; a < 3; a++)
+        o[a] = I0[a] + (off[a] - 0.5) * h;
+    hv_grid *g = NULL, *c[3] = {NULL, NULL, NULL};
+    ck_assert_int_eq(hv_grid_create(&g, 3, n, h, o), HV_OK);
+    for (size_t i = 0; i < hv_grid_count(g); i++)
+        g->v[i] = (float)((double)i * 0.01 - 0.3);
+    for (int a = 0; a < 3; a++) {
+        ck_assert_int_eq(hv_grid_create(&c[a], 3, n, h, o), HV_OK);
+        for (size_t i = 0; i < hv_grid_count(g); i++)
+            c[a]->v[i] = (float)(a + 0.001 * (double)i);
+    }
+    char p[256];
+    path_in_dir(p, sizeof p, "index0.vdb");
+    hv_vdb_writer *w = NULL;
+    ck_assert_int_eq(hv_vdb_writer_create(&w), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_set_index_origin(w, I0), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_levelset(w, g, "ls", 100, 1), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_float(w, g, "f"), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_vec3(w, c[0], c[1], c[2], "v"), HV_OK);
+    /* a block half a voxel off the lattice cannot share the index space */
+    hv_grid *bad = NULL;
+    double ob[3] = {o[0] + 0.5 * h, o[1], o[2]};
+    ck_assert_int_eq(hv_grid_create(&bad, 3, n, h, ob), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_float(w, bad, "bad"), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "'bad'"));
+    hv_grid_destroy(&bad);
+    ck_assert_int_eq(hv_vdb_writer_write(w, p), HV_OK);
+    hv_vdb_writer_destroy(&w);
+
+    hv_vdb_grid_info info[3];
+    size_t count = 0;
+    ck_assert_int_eq(hv_vdb_list(p, info, 3, &count), HV_OK);
+    ck_assert_uint_eq(count, 3);
+    for (size_t q = 0; q < count; q++)
+        for (int a = 0; a < 3; a++) {
+            ck_assert_double_eq_tol(info[q].index0_world[a], I0[a], 1e-9);
+            ck_assert_int_eq(info[q].bbox_lo[a], off[a]);
+            ck_assert_int_eq(info[q].bbox_hi[a], off[a] + n[a] - 1);
+        }
+    hv_grid *r = NULL, *rv[3] = {NULL, NULL, NULL};
+    const char *names[2] = {"ls", "f"};
+    for (int q = 0; q < 2; q++) {
+        ck_assert_int_eq(hv_vdb_read_float(p, names[q], NULL, &r, NULL), HV_OK);
+        for (int a = 0; a < 3; a++) {
+            ck_assert_int_eq(r->n[a], n[a]);
+            ck_assert_double_eq_tol(r->origin[a], o[a], 1e-9);
+        }
+        ck_assert_mem_eq(r->v, g->v, hv_grid_count(g) * sizeof(float));
+        hv_grid_destroy(&r);
+    }
+    ck_assert_int_eq(hv_vdb_read_vec3(p, "v", NULL, &rv[0], &rv[1], &rv[2]), HV_OK);
+    for (int a = 0; a < 3; a++) {
+        ck_assert_mem_eq(rv[a]->v, c[a]->v, hv_grid_count(g) * sizeof(float));
+        hv_grid_destroy(&rv[a]);
+        hv_grid_destroy(&c[a]);
+    }
+    hv_grid_destroy(&g);
+}
+END_TEST
+
 START_TEST(writing_into_a_missing_directory_should_fail_with_io_and_leave_no_temporary)
 {
     char p[256];
@@ -757,6 +825,7 @@ int main(void)
     tcase_add_test(tc, missing_and_corrupt_files_should_give_io_errors_naming_the_file);
     tcase_add_test(tc, metadata_should_round_trip_on_file_and_grid);
     tcase_add_test(tc, common_box_should_cover_all_grids_and_refuse_mismatched_transforms);
+    tcase_add_test(tc, index_origin_should_keep_the_input_index_space_and_refuse_off_lattice_blocks);
     tcase_add_test(tc, masks_should_round_trip_and_level_sets_should_read_as_their_inside);
     tcase_add_test(tc, mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface);
     tcase_add_test(tc, sdf_to_ext_reference_should_extend_a_surface_field_along_normals);

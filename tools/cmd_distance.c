@@ -242,7 +242,7 @@ static int source_bounds(const source_list *s, const hv_mesh *obst, double lo[3]
 /* Grid from a VDB mask: the named grid's transform; the box is --bbox or its
  * default block grown to hold the sources plus pad cells. */
 static int grid_from_mask(const char *path, const char *name, const source_list *s, int use_bbox,
-                          const double bbox[6], int pad, hv_grid **g)
+                          const double bbox[6], int pad, hv_grid **g, double index0[3])
 {
     hv_vdb_grid_info info[64];
     size_t count = 0;
@@ -310,6 +310,7 @@ static int grid_from_mask(const char *path, const char *name, const source_list 
     st = hv_vdb_read_mask(path, gi->name, &ro, g);
     if (st)
         return cli_fail(CMD, path, st);
+    memcpy(index0, gi->index0_world, 3 * sizeof *index0);
     return 0;
 }
 
@@ -331,7 +332,8 @@ int cmd_distance(int argc, char **argv)
     const char *sources = NULL, *mask = NULL, *mask_grid = NULL, *obst_mesh = NULL;
     const char *out = NULL, *npy = NULL;
     int res = 0, dim = 3, pad = 4, use_bbox = 0, threads = 0, none = 0;
-    double vsize = 0, bbox[6] = {0};
+    double vsize = 0, bbox[6] = {0}, index0[3] = {0, 0, 0};
+    int have_index0 = 0;
     hv_distance_opts o;
     hv_distance_opts_default(&o);
     for (int i = 1; i < argc; i++) {
@@ -441,8 +443,9 @@ int cmd_distance(int argc, char **argv)
         }
     }
     if (mask) {
-        if ((rc = grid_from_mask(mask, mask_grid, &src, use_bbox == 6, bbox, pad, &g)))
+        if ((rc = grid_from_mask(mask, mask_grid, &src, use_bbox == 6, bbox, pad, &g, index0)))
             goto done;
+        have_index0 = 1;
     } else {
         double lo[3], hi[3];
         if (use_bbox) {
@@ -516,6 +519,9 @@ int cmd_distance(int argc, char **argv)
         hv_vdb_writer *w = NULL;
         char buf[256];
         st = hv_vdb_writer_create(&w);
+        /* With a VDB mask, the output keeps the mask's transform and index space. */
+        if (!st && have_index0)
+            st = hv_vdb_writer_set_index_origin(w, index0);
         if (!st)
             st = hv_vdb_writer_add_float(w, g, "distance");
         if (!st && g->solid)

@@ -34,7 +34,7 @@ static int usage(FILE *out)
             "The grids are read onto one dense block (the union of their active boxes, all\n"
             "transforms must match) and OUT.vdb gets the level set (a level set again, its\n"
             "band = its background) and the extended fields, with their names, voxel size,\n"
-            "world placement and classes; fields come back fully active. Other grids of\n"
+            "world placement, index coordinates and classes; fields come back fully active. Other grids of\n"
             "IN.vdb are not copied. Prints a JSON summary on stdout (not with -q).\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
@@ -249,6 +249,9 @@ int cmd_extend(int argc, char **argv)
     if (!(band >= 1))
         band = 1;
     st = hv_vdb_writer_create(&w);
+    /* Same transform and index coordinates as the input's level set. */
+    if (!st)
+        st = hv_vdb_writer_set_index_origin(w, lsi->index0_world);
     if (!st)
         st = hv_vdb_writer_add_levelset(w, phi, ls, band, 0);
     for (int q = 0; q < nfields && !st; q++) {

@@ -69,6 +69,15 @@ hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_g
  * ignored); an all-fluid grid, or one without a mask, gives an empty grid. */
 hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name);
 
+/* Makes every grid added afterwards share one index space whose index (0,0,0)
+ * sits at world position index0_world (a voxel centre), e.g. the
+ * index0_world of a grid that was read (hv_vdb_grid_info), so that the output
+ * has the input's transform and its voxels keep their index coordinates. A
+ * grid is then written at index offset round((origin + h/2 - index0_world)/h),
+ * which must be whole voxels (within 1e-4) or the add fails naming the grid.
+ * Without this call, index (0,0,0) is each grid's first voxel. */
+hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_world[3]);
+
 /* Sets a string metadata entry of the file (e.g. "source", "parameters").
  * The writer adds "creator" = "heatvox <version>" by itself. */
 hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value);

@@ -96,6 +96,13 @@ openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
     return xf;
 }
 
+// Where a dense block goes in index space: block voxel (i,j,k) is written at
+// index (i,j,k) + off, under transform xf.
+struct Placement {
+    int off[3] = {0, 0, 0};
+    openvdb::math::Transform::Ptr xf;
+};
+
 void check_grid(const hv_grid *g, const char *what)
 {
     if (!g || !g->v)
@@ -137,17 +144,26 @@ inline size_t lin(const hv_grid *g, int i, int j, int k)
 // or for a level set the background with that voxel's sign, so that the sign
 // stays continuous across the block's faces). Constant leaves are then
 // collapsed into tiles by tools::prune (tolerance 0, lossless).
+int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
+
 template <class GridT, class F, class G>
-void fill_block(GridT &grid, const int n[3], F &&value, G &&outside, bool prune)
+void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside,
+                bool prune)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
     using ValueT = typename GridT::ValueType;
     const int D = (int)LeafT::DIM;
-    const size_t L[3] = {(size_t)(n[0] + D - 1) / D, (size_t)(n[1] + D - 1) / D,
-                         (size_t)(n[2] + D - 1) / D};
+    // Leaves cover the index box [off, off + n), aligned to multiples of D.
+    int l0[3];
+    size_t L[3];
+    for (int a = 0; a < 3; a++) {
+        l0[a] = floor_div(off[a], D);
+        L[a] = (size_t)(floor_div(off[a] + n[a] - 1, D) - l0[a] + 1);
+    }
     const size_t nleaf = L[0] * L[1] * L[2];
     auto origin = [&](size_t l) {
-        return Coord((int)(l % L[0]) * D, (int)(l / L[0] % L[1]) * D, (int)(l / L[0] / L[1]) * D);
+        return Coord((l0[0] + (int)(l % L[0])) * D, (l0[1] + (int)(l / L[0] % L[1])) * D,
+                     (l0[2] + (int)(l / L[0] / L[1])) * D);
     };
     // Leaves are built in parallel; a leaf-sized region with no active voxel
     // and one value becomes a tile instead of a leaf.
@@ -162,15 +178,16 @@ void fill_block(GridT &grid, const int n[3], F &&value, G &&outside, bool prune)
             for (int x = o[0]; x < o[0] + D; x++)
                 for (int y = o[1]; y < o[1] + D; y++)
                     for (int z = o[2]; z < o[2] + D; z++) {
-                        const openvdb::Index off = LeafT::coordToOffset(Coord(x, y, z));
-                        const int i = std::min(x, n[0] - 1), j = std::min(y, n[1] - 1),
-                                  k = std::min(z, n[2] - 1);
+                        const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
+                        const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
+                        const int i = std::clamp(bi, 0, n[0] - 1), j = std::clamp(bj, 0, n[1] - 1),
+                                  k = std::clamp(bk, 0, n[2] - 1);
                         bool active = false;
-                        if (x < n[0] && y < n[1] && z < n[2])
-                            vals[off] = value(i, j, k, &active);
+                        if (bi == i && bj == j && bk == k)
+                            vals[q] = value(i, j, k, &active);
                         else
-                            vals[off] = outside(i, j, k);
-                        on[off] = active;
+                            vals[q] = outside(i, j, k);
+                        on[q] = active;
                         any_on |= active;
                     }
             bool uniform = !any_on;
@@ -201,20 +218,21 @@ void fill_block(GridT &grid, const int n[3], F &&value, G &&outside, bool prune)
         openvdb::tools::prune(tree);
 }
 
-void tag_block(openvdb::GridBase &grid, const int n[3])
+void tag_block(openvdb::GridBase &grid, const int n[3], const int off[3])
 {
-    grid.insertMeta(BLOCK_MIN, openvdb::Vec3IMetadata(Vec3i(0, 0, 0)));
-    grid.insertMeta(BLOCK_MAX, openvdb::Vec3IMetadata(Vec3i(n[0] - 1, n[1] - 1, n[2] - 1)));
+    grid.insertMeta(BLOCK_MIN, openvdb::Vec3IMetadata(Vec3i(off[0], off[1], off[2])));
+    grid.insertMeta(BLOCK_MAX, openvdb::Vec3IMetadata(Vec3i(off[0] + n[0] - 1, off[1] + n[1] - 1,
+                                                            off[2] + n[2] - 1)));
 }
 
 openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense,
-                                      bool prune)
+                                      bool prune, const Placement &pl = Placement())
 {
     const float bg = (float)(band_voxels * g->h);
     auto grid = openvdb::FloatGrid::create(bg);
     const float *v = g->v;
     fill_block(
-        *grid, g->n,
+        *grid, g->n, pl.off,
         [&](int i, int j, int k, bool *active) {
             float p = v[lin(g, i, j, k)];
             *active = dense || std::fabs(p) < bg;
@@ -223,7 +241,7 @@ openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool
             return p < 0 ? -bg : bg;
         },
         [&](int i, int j, int k) { return v[lin(g, i, j, k)] < 0 ? -bg : bg; }, prune);
-    grid->setTransform(make_transform(g->h, g->origin));
+    grid->setTransform(pl.xf ? pl.xf : make_transform(g->h, g->origin));
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     return grid;
 }
@@ -467,6 +485,8 @@ float sample(const hv_grid *g, const Vec3d &p)
 struct hv_vdb_writer {
     openvdb::GridPtrVec grids;
     openvdb::MetaMap meta;
+    bool has_index0 = false; // hv_vdb_writer_set_index_origin was called
+    double index0[3] = {0, 0, 0};
 };
 
 namespace {
@@ -494,13 +514,42 @@ void check_new_name(hv_vdb_writer *w, const char *name)
                  std::string("vdb writer: a grid named '") + name + "' was already added");
 }
 
+// The placement of block g in this writer's index space: by default index
+// (0,0,0) is the block's first voxel; after hv_vdb_writer_set_index_origin the
+// transform puts index (0,0,0) at that world position and the block is shifted
+// by whole voxels to keep its world position.
+Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    Placement pl;
+    if (!w->has_index0) {
+        pl.xf = make_transform(g->h, g->origin);
+        return pl;
+    }
+    for (int a = 0; a < 3; a++) {
+        double s = (g->origin[a] + 0.5 * g->h - w->index0[a]) / g->h;
+        double r = std::nearbyint(s);
+        if (!(std::fabs(s - r) <= 1e-4) || std::fabs(r) > 1e9) {
+            char msg[256];
+            std::snprintf(msg, sizeof msg,
+                          "grid '%s': its voxels are not on the index lattice of the writer's "
+                          "index origin (axis %d is %.6g voxels off)",
+                          name, a, s - r);
+            fail(HV_ERR_INVALID_ARG, msg);
+        }
+        pl.off[a] = (int)r;
+    }
+    pl.xf = openvdb::math::Transform::createLinearTransform(g->h);
+    pl.xf->postTranslate(Vec3d(w->index0[0], w->index0[1], w->index0[2]));
+    return pl;
+}
+
 void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g,
-                 const char *name)
+                 const char *name, const Placement &pl)
 {
     grid->setName(name);
     grid->setSaveFloatAsHalf(false);
     grid->setCreator(std::string("heatvox ") + HV_VERSION_STRING);
-    tag_block(*grid, g->n);
+    tag_block(*grid, g->n, pl.off);
     w->grids.push_back(grid);
 }
 
@@ -544,8 +593,9 @@ hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const c
         hv_status st = hv_check_finite(g->v, hv_grid_count(g), name);
         if (st)
             return st;
-        auto grid = levelset_from(g, band_voxels, dense != 0, true);
-        finish_grid(w, grid, g, name);
+        Placement pl = placement(w, g, name);
+        auto grid = levelset_from(g, band_voxels, dense != 0, true, pl);
+        finish_grid(w, grid, g, name, pl);
         return HV_OK;
     });
 }
@@ -555,17 +605,18 @@ hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char
     return guarded("hv_vdb_writer_add_float", [&] {
         check_new_name(w, name);
         check_grid(g, "float grid");
+        Placement pl = placement(w, g, name);
         auto grid = openvdb::FloatGrid::create(0.0f);
         fill_block(
-            *grid, g->n,
+            *grid, g->n, pl.off,
             [&](int i, int j, int k, bool *active) {
                 *active = true;
                 return g->v[lin(g, i, j, k)];
             },
             [](int, int, int) { return 0.0f; }, true);
-        grid->setTransform(make_transform(g->h, g->origin));
+        grid->setTransform(pl.xf);
         grid->setGridClass(openvdb::GRID_UNKNOWN);
-        finish_grid(w, grid, g, name);
+        finish_grid(w, grid, g, name, pl);
         return HV_OK;
     });
 }
@@ -580,19 +631,20 @@ hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_g
         check_grid(gz, "z component");
         check_same_shape(gx, gy, "x component", "y component");
         check_same_shape(gx, gz, "x component", "z component");
+        Placement pl = placement(w, gx, name);
         auto grid = openvdb::Vec3SGrid::create(Vec3f(0, 0, 0));
         fill_block(
-            *grid, gx->n,
+            *grid, gx->n, pl.off,
             [&](int i, int j, int k, bool *active) {
                 *active = true;
                 size_t c = lin(gx, i, j, k);
                 return Vec3f(gx->v[c], gy->v[c], gz->v[c]);
             },
             [](int, int, int) { return Vec3f(0, 0, 0); }, true);
-        grid->setTransform(make_transform(gx->h, gx->origin));
+        grid->setTransform(pl.xf);
         grid->setGridClass(openvdb::GRID_UNKNOWN);
         grid->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
-        finish_grid(w, grid, gx, name);
+        finish_grid(w, grid, gx, name, pl);
         return HV_OK;
     });
 }
@@ -602,6 +654,7 @@ hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char 
     return guarded("hv_vdb_writer_add_mask", [&] {
         check_new_name(w, name);
         check_grid(g, "mask grid");
+        Placement pl = placement(w, g, name);
         auto grid = openvdb::BoolGrid::create(false);
         if (g->solid) {
             auto acc = grid->getAccessor();
@@ -609,11 +662,26 @@ hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char 
                 for (int j = 0; j < g->n[1]; j++)
                     for (int i = 0; i < g->n[0]; i++)
                         if (g->solid[lin(g, i, j, k)])
-                            acc.setValueOn(Coord(i, j, k), true);
+                            acc.setValueOn(Coord(i + pl.off[0], j + pl.off[1], k + pl.off[2]), true);
             openvdb::tools::prune(grid->tree());
         }
-        grid->setTransform(make_transform(g->h, g->origin));
-        finish_grid(w, grid, g, name);
+        grid->setTransform(pl.xf);
+        finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_world[3])
+{
+    return guarded("hv_vdb_writer_set_index_origin", [&] {
+        if (!w || !index0_world)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: writer and position are required");
+        for (int a = 0; a < 3; a++)
+            if (!std::isfinite(index0_world[a]))
+                fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: position is not finite");
+        w->has_index0 = true;
+        for (int a = 0; a < 3; a++)
+            w->index0[a] = index0_world[a];
         return HV_OK;
     });
 }
