@@ -327,6 +327,50 @@ START_TEST(out_band_should_leave_background_outside)
 }
 END_TEST
 
+START_TEST(band_solve_should_agree_with_the_box_solve)
+{
+    /* A thin band around a sphere (out_band 3): the band solve covers a part of
+     * the box and gives the box solve's extension. */
+    const int n = 64;
+    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *a = make_grid(3, n), *b = make_grid(3, n);
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3], cp[3], ph;
+                hv_grid_cell_center(phi, i, j, k, x);
+                closest(SPHERE, x, &ph, cp);
+                phi->v[c] = (float)ph;
+                f->v[c] = fabs(ph) < 3 * phi->h ? (float)g_scalar(cp) : 0.0f;
+            }
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.out_band = 3;
+    hv_extend_stats sb, sx;
+    hv_extender *e = NULL;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, phi->n, phi->h, NULL, &o));
+    TL_ASSERT_OK(hv_extend_scalar(e, phi, f, a, &sb));
+    hv_extender_destroy(&e);
+    o.box_only = 1;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, phi->n, phi->h, NULL, &o));
+    TL_ASSERT_OK(hv_extend_scalar(e, phi, f, b, &sx));
+    hv_extender_destroy(&e);
+    double worst = 0;
+    for (size_t c = 0; c < hv_grid_count(a); c++)
+        worst = fmax(worst, fabs(a->v[c] - b->v[c]) / fmax(fabs(b->v[c]), 1e-3));
+    printf("  band solve vs box solve, sphere 64^3: %zu vs %zu cells, max relative difference %.2e, "
+           "%.3f vs %.3f s\n", sb.solve_cells, sx.solve_cells, worst, sb.t_solve, sx.t_solve);
+    ck_assert_msg(sb.solve_cells < sx.solve_cells / 2, "band %zu cells, box %zu", sb.solve_cells,
+                  sx.solve_cells);
+    ck_assert_msg(worst <= 2e-5, "band and box differ by %.3g", worst);
+    ck_assert_int_eq(sb.cp_cells, sx.cp_cells);
+    hv_grid_destroy(&phi);
+    hv_grid_destroy(&f);
+    hv_grid_destroy(&a);
+    hv_grid_destroy(&b);
+}
+END_TEST
+
 START_TEST(extender_should_be_reusable_across_steps)
 {
     const int n = 40;
@@ -608,6 +652,7 @@ int main(void)
     tcase_add_test(tc, constant_fields_should_be_reproduced_exactly);
     tcase_add_test(tc, solid_cells_should_not_break_extension);
     tcase_add_test(tc, out_band_should_leave_background_outside);
+    tcase_add_test(tc, band_solve_should_agree_with_the_box_solve);
     tcase_add_test(tc, extender_should_be_reusable_across_steps);
     tcase_add_test(tc, bad_input_should_fail_clearly);
     tcase_add_test(tc, heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb);

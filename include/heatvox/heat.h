@@ -130,7 +130,12 @@ typedef struct hv_extend_opts {
     int max_levels;        /* diffusion times t * 16^l for cells the first has not
                               reached reliably (plain-ratio cells only); default 6 */
     hv_backend backend;    /* default AUTO */
-    double tol;            /* relative residual of the iterative solves; default 1e-10 */
+    double tol;            /* relative residual of the iterative solves; default 1e-10 (the
+                              band solve below runs in float to max(tol, 1e-6)) */
+    int box_only;          /* 0 (default): for t_scale <= 8 without solid cells, the first
+                              diffusion time is solved only on the cells near the weights
+                              and the cells read (grown by 6 sqrt(t) voxels) when those are
+                              under half the box, by Chebyshev sweeps; 1: always the box */
 } hv_extend_opts;
 
 typedef struct hv_extend_stats {
@@ -141,7 +146,8 @@ typedef struct hv_extend_stats {
                               bound (value taken from the last level anyway) */
     int levels;            /* diffusion times used in this call */
     size_t solve_cells;    /* cells of the first level's solve: the box around the weights
-                              and the cells read at themselves, plus 6 sqrt(t) */
+                              and the cells read at themselves, plus 6 sqrt(t), or the
+                              band's cells */
     int solves;            /* right-hand sides solved */
     double relres;         /* worst relative residual */
     double t_weights, t_solve, t_eval, t_total; /* seconds */

@@ -390,6 +390,349 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
     return HV_OK;
 }
 
+/* ---- The band solve -------------------------------------------------------
+ * For short diffusion times the first level's solutions matter only near the
+ * cells that are read (closest-point stencils, cells read at themselves) and
+ * the weights: (I - t Lap)^-1 decays like e^{-r / sqrt(t)}. On a narrow band
+ * that is a small part of the box, so the first level solves on those cells
+ * grown by BOX_MARGIN sqrt(t) voxels only (u = 0 beyond: a reflection of
+ * e^{-2 BOX_MARGIN} of what reaches there, as for the box's walls), stored as
+ * x-runs of the grid, by Jacobi-preconditioned Chebyshev iteration. The
+ * operator is diagonally dominant there (D^-1 A has its spectrum in
+ * [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed count of sweeps
+ * reaches the tolerance: no inner products, no hierarchy, one streaming pass
+ * per sweep, and a solve that is linear in its right-hand side (constants
+ * come back exactly). Float sweeps: the tolerance is max(tol, BAND_TOL). */
+#define BAND_MAX_T_SCALE 8.0  /* longer times: the box solve (more sweeps than a V-cycle) */
+#define BAND_MAX_FRACTION 0.5 /* a band larger than this part of the box: the box solve */
+#define BAND_TOL 1e-6
+
+typedef struct {
+    int j, k, x0, x1; /* row (j, k), cells x0 <= x < x1 */
+} xrun;
+
+struct band {
+    xrun *runs;
+    size_t nruns, cells;
+    uint8_t *need; /* the cells read (before growing): trusted at level 0 */
+    float *f, *u0, *u1, *zero;
+    int iters;
+    double s;
+};
+
+static void band_free(struct band *b)
+{
+    free(b->runs);
+    free(b->need);
+    hv_free(b->f);
+    hv_free(b->u0);
+    hv_free(b->u1);
+    free(b->zero);
+    memset(b, 0, sizeof *b);
+}
+
+/* dst = src grown by m cells along axis a (box dilation, one axis). */
+static void grow_axis(uint8_t *dst, const uint8_t *src, const int n[3], int a, int m)
+{
+    const size_t st[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
+    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
+    const long nl = (long)n[b] * n[c];
+#pragma omp parallel for schedule(static)
+    for (long l = 0; l < nl; l++) {
+        size_t base = (size_t)(l % n[b]) * st[b] + (size_t)(l / n[b]) * st[c];
+        long last = -(1L << 40);
+        for (int i = 0; i < n[a]; i++) {
+            size_t q = base + (size_t)i * st[a];
+            if (src[q])
+                last = i;
+            dst[q] = (uint8_t)(i - last <= m);
+        }
+        last = 1L << 40;
+        for (int i = n[a] - 1; i >= 0; i--) {
+            size_t q = base + (size_t)i * st[a];
+            if (src[q])
+                last = i;
+            if (last - i <= m)
+                dst[q] = 1;
+        }
+    }
+}
+
+/* Builds the band from b->need: grown, cut into x-runs. Returns 0 (and frees
+ * nothing) when the band is not worth it (more than BAND_MAX_FRACTION of
+ * box_cells), 1 when built, -1 when out of memory. */
+static int band_build(hv_extender *e, struct band *b, size_t box_cells)
+{
+    const int m = (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale));
+    uint8_t *g0 = malloc(e->count), *g1 = malloc(e->count);
+    if (!g0 || !g1) {
+        free(g0);
+        free(g1);
+        return -1;
+    }
+    grow_axis(g0, b->need, e->n, 0, m);
+    grow_axis(g1, g0, e->n, 1, m);
+    uint8_t *dom = g1;
+    if (e->dim == 3) {
+        grow_axis(g0, g1, e->n, 2, m);
+        dom = g0;
+    }
+    size_t cells = 0, nr = 0;
+    const size_t rows = (size_t)e->n[1] * e->n[2];
+    for (size_t r = 0; r < rows; r++) {
+        const uint8_t *d = dom + r * e->n[0];
+        for (int x = 0; x < e->n[0]; x++) {
+            cells += d[x];
+            nr += d[x] && (x == 0 || !d[x - 1]);
+        }
+    }
+    if ((double)cells > BAND_MAX_FRACTION * (double)box_cells || !cells) {
+        free(g0);
+        free(g1);
+        return 0;
+    }
+    b->runs = malloc(nr * sizeof *b->runs);
+    if (!b->runs) {
+        free(g0);
+        free(g1);
+        return -1;
+    }
+    size_t q = 0;
+    for (size_t r = 0; r < rows; r++) {
+        const uint8_t *d = dom + r * e->n[0];
+        for (int x = 0; x < e->n[0]; x++)
+            if (d[x] && (x == 0 || !d[x - 1])) {
+                int x1 = x;
+                while (x1 < e->n[0] && d[x1])
+                    x1++;
+                b->runs[q++] = (xrun){(int)(r % e->n[1]), (int)(r / e->n[1]), x, x1};
+            }
+    }
+    free(g0);
+    free(g1);
+    b->nruns = nr;
+    b->cells = cells;
+    b->s = e->o.t_scale;
+    /* Sweeps for the error bound 2 c^k / (1 + c^2k) <= tol, c = (sqrt(K) - 1) / (sqrt(K) + 1),
+     * K = 1 + 4 d s the condition number of D^-1 A. */
+    const double K = 1 + 4 * e->dim * b->s, c = (sqrt(K) - 1) / (sqrt(K) + 1);
+    const double tol = fmax(e->o.tol, BAND_TOL);
+    b->iters = 1;
+    while (2 * pow(c, b->iters) / (1 + pow(c, 2 * b->iters)) > tol && b->iters < 1000)
+        b->iters++;
+    /* Work arrays on the whole grid (u = 0 off the band, rows of zeros for
+     * missing neighbours). */
+    b->f = hv_malloc(e->count * sizeof(float));
+    b->u0 = hv_malloc(e->count * sizeof(float));
+    b->u1 = hv_malloc(e->count * sizeof(float));
+    b->zero = calloc((size_t)e->n[0], sizeof(float));
+    if (!b->f || !b->u0 || !b->u1 || !b->zero)
+        return -1;
+    memset(b->u0, 0, e->count * sizeof(float));
+    memset(b->u1, 0, e->count * sizeof(float));
+    memset(b->f, 0, e->count * sizeof(float));
+    return 1;
+}
+
+/* The neighbour rows of run r in array v (the zero row where the grid ends)
+ * and their count. */
+static int run_rows(const hv_extender *e, const struct band *b, const xrun *r, const float *v,
+                    const float *nb[4])
+{
+    const size_t nx = (size_t)e->n[0], row = nx * (r->j + (size_t)e->n[1] * r->k);
+    const size_t plane = nx * e->n[1];
+    int cnt = 0;
+    cnt += r->j > 0;
+    nb[0] = r->j > 0 ? v + row - nx : b->zero;
+    cnt += r->j + 1 < e->n[1];
+    nb[1] = r->j + 1 < e->n[1] ? v + row + nx : b->zero;
+    if (e->dim == 3) {
+        cnt += r->k > 0;
+        nb[2] = r->k > 0 ? v + row - plane : b->zero;
+        cnt += r->k + 1 < e->n[2];
+        nb[3] = r->k + 1 < e->n[2] ? v + row + plane : b->zero;
+    } else {
+        nb[2] = nb[3] = b->zero;
+    }
+    return cnt;
+}
+
+/* One Chebyshev sweep on the band: out = cur + a (cur - out) + c D^-1 (f - A cur)
+ * (out holds the previous iterate on entry). */
+static void band_sweep(const hv_extender *e, const struct band *b, const float *cur, float *out,
+                       float a, float c)
+{
+    const float s = (float)b->s;
+    const int nx = e->n[0];
+#pragma omp parallel for schedule(static)
+    for (size_t q = 0; q < b->nruns; q++) {
+        const xrun *r = &b->runs[q];
+        const float *nb[4];
+        const int rc = run_rows(e, b, r, cur, nb);
+        const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
+        const float *restrict u = cur + row, *restrict f = b->f + row;
+        const float *restrict n0 = nb[0], *restrict n1 = nb[1], *restrict n2 = nb[2],
+                              *restrict n3 = nb[3];
+        float *restrict o = out + row;
+        int x = r->x0, xe = r->x1;
+        /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
+        for (; x < xe && (x == 0 || x + 1 == nx); x++) {
+            int cnt = rc + (x > 0) + (x + 1 < nx);
+            float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
+                        (x + 1 < nx ? u[x + 1] : 0);
+            const float d = 1 + s * cnt;
+            o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d * u[x] - s * sum)) / d;
+        }
+        int xi = xe < nx - 1 ? xe : nx - 1;
+        const float d = 1 + s * (rc + 2), cd = c / d;
+#pragma omp simd
+        for (int y = x; y < xi; y++) {
+            float sum = n0[y] + n1[y] + n2[y] + n3[y] + u[y - 1] + u[y + 1];
+            o[y] = u[y] + a * (u[y] - o[y]) + cd * (f[y] - (d * u[y] - s * sum));
+        }
+        for (x = xi > x ? xi : x; x < xe; x++) {
+            int cnt = rc + (x > 0) + (x + 1 < nx);
+            float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
+                        (x + 1 < nx ? u[x + 1] : 0);
+            const float dd = 1 + s * cnt;
+            o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (dd * u[x] - s * sum)) / dd;
+        }
+    }
+}
+
+/* Residual norms of u on the band: 2-norm and max-norm, and the 2-norm of f. */
+static void band_residual(const hv_extender *e, const struct band *b, const float *u, double *r2,
+                          double *rinf, double *f2)
+{
+    const double s = b->s;
+    const int nx = e->n[0];
+    double a2 = 0, am = 0, af = 0;
+#pragma omp parallel for reduction(+ : a2, af) reduction(max : am) schedule(static)
+    for (size_t q = 0; q < b->nruns; q++) {
+        const xrun *r = &b->runs[q];
+        const float *nb[4];
+        const int rc = run_rows(e, b, r, u, nb);
+        const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
+        const float *v = u + row, *f = b->f + row;
+        for (int x = r->x0; x < r->x1; x++) {
+            int cnt = rc;
+            double sum = (double)nb[0][x] + nb[1][x] + nb[2][x] + nb[3][x];
+            if (x > 0) {
+                sum += v[x - 1];
+                cnt++;
+            }
+            if (x + 1 < nx) {
+                sum += v[x + 1];
+                cnt++;
+            }
+            double res = f[x] - ((1 + s * cnt) * v[x] - s * sum);
+            a2 += res * res;
+            af += (double)f[x] * f[x];
+            if (fabs(res) > am)
+                am = fabs(res);
+        }
+    }
+    *r2 = sqrt(a2);
+    *rinf = am;
+    *f2 = sqrt(af);
+}
+
+/* build_rhs on the band's cells, into b->f (float). */
+static void build_rhs_band(const hv_extender *e, struct band *b, int r, int nfields,
+                           const hv_extend_field *f)
+{
+    int field = -1, part = 0, base = 1;
+    for (int i = 0; i < nfields && r > 0; i++) {
+        int k = f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+        if (r < base + k) {
+            field = i;
+            part = r - base;
+            break;
+        }
+        base += k;
+    }
+    const float *w = e->w;
+    const int nx = e->n[0];
+#pragma omp parallel for schedule(static)
+    for (size_t q = 0; q < b->nruns; q++) {
+        const xrun *run = &b->runs[q];
+        const size_t row = (size_t)nx * (run->j + (size_t)e->n[1] * run->k);
+        for (int x = run->x0; x < run->x1; x++) {
+            size_t c = row + x;
+            double v = 0;
+            if (w[c] > 0) {
+                if (field < 0) {
+                    v = w[c];
+                } else if (f[field].ncomp == 1) {
+                    v = (double)w[c] * f[field].in[0][c];
+                } else if (part == 0) {
+                    double m = 0;
+                    for (int p = 0; p < f[field].ncomp; p++)
+                        m += (double)f[field].in[p][c] * f[field].in[p][c];
+                    v = w[c] * sqrt(m);
+                } else {
+                    v = (double)w[c] * f[field].in[part - 1][c];
+                }
+            }
+            b->f[c] = (float)v;
+        }
+    }
+}
+
+/* Level 0 on the band: every right-hand side by Chebyshev sweeps; solutions
+ * stored interleaved, 0 off the band. thr as in solve_level, from the
+ * max-norm bound |u - u*| <= |r|_inf (A has unit diagonal excess, ||A^-1||_inf <= 1). */
+static hv_status solve_band(hv_extender *e, struct band *b, int nrhs, int nfields,
+                            const hv_extend_field *f, double *thr, hv_extend_stats *S)
+{
+    const size_t k = (size_t)e->nsol;
+    memset(e->sol, 0, e->count * k * sizeof(float));
+    const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
+    double relmax = 0, rinf0 = 0;
+    for (int rr = 0; rr < nrhs; rr++) {
+        /* The right-hand side on the band only (build_rhs on the whole grid
+         * would cost a pass over the box per right-hand side). */
+        build_rhs_band(e, b, rr, nfields, f);
+        float *cur = b->u0, *old = b->u1;
+        /* x1 = D^-1 f / theta from x0 = 0 (both zero on the band). */
+        band_sweep(e, b, cur, old, 0.0f, (float)(1 / theta));
+        float *t = cur;
+        cur = old;
+        old = t;
+        double rho = 1 / sigma;
+        for (int it = 1; it < b->iters; it++) {
+            double rn = 1 / (2 * sigma - rho);
+            band_sweep(e, b, cur, old, (float)(rn * rho), (float)(2 * rn / delta));
+            rho = rn;
+            t = cur;
+            cur = old;
+            old = t;
+        }
+        double r2, rinf, f2;
+        band_residual(e, b, cur, &r2, &rinf, &f2);
+        relmax = fmax(relmax, f2 > 0 ? r2 / f2 : 0);
+        if (rr == 0)
+            rinf0 = rinf;
+        float *out = e->sol;
+        const int nx = e->n[0];
+#pragma omp parallel for schedule(static)
+        for (size_t q = 0; q < b->nruns; q++) {
+            const xrun *r = &b->runs[q];
+            const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
+            for (int x = r->x0; x < r->x1; x++) {
+                out[(row + x) * k + rr] = cur[row + x];
+                cur[row + x] = 0;
+                old[row + x] = 0;
+            }
+        }
+        S->solves++;
+    }
+    S->relres = fmax(S->relres, relmax);
+    S->solve_cells = b->cells;
+    *thr = fmax(RELIABLE * rinf0, 1e-30);
+    return HV_OK;
+}
+
 typedef struct {
     int lo[3], hi[3]; /* inclusive; lo > hi when empty */
 } ibox;
@@ -539,6 +882,17 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         for (int q = 0; q < f[fi].ncomp; q++)
                             f[fi].out[q][c] = e->o.background;
             }
+    /* The band solve (short times, no obstacles): its cells start from the
+     * weights, the closest points' stencils and the cells read at themselves. */
+    struct band band;
+    memset(&band, 0, sizeof band);
+    uint8_t *need = NULL;
+    if (!e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
+        (need = malloc(e->count))) {
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < e->count; c++)
+            need[c] = e->w[c] > 0;
+    }
 #pragma omp parallel for collapse(2) schedule(static)
     for (int k = 0; k < e->n[2]; k++)
         for (int j = 0; j < e->n[1]; j++)
@@ -550,6 +904,11 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                 double wt[8];
                 int m;
                 pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+                if (need)
+                    for (int q = 0; q < m; q++) {
+#pragma omp atomic write
+                        need[idx[q]] = 1;
+                    }
             }
     for (int k = 0; k < e->n[2]; k++)
         for (int j = 0; j < e->n[1]; j++)
@@ -564,6 +923,21 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     band_box.hi[0] += 2;
     band_box.hi[1] += 2;
     band_box.hi[2] += 2;
+    if (need) {
+        ibox nb = band_box;
+        box_union(&nb, &ratio_box);
+        int lo[3], bn[3];
+        box_grow(e, &nb, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale)), lo, bn);
+        band.need = need;
+        int built = band_build(e, &band, (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1));
+        if (built < 0) {
+            band_free(&band);
+            free(pending);
+            return hv_error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+        }
+        if (!built)
+            band_free(&band);
+    }
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
         double thr;
@@ -577,7 +951,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
             bn[2] = 1;
         }
         t0 = hv_now();
-        if ((st = solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
+        const uint8_t *trusted = l == 0 && band.runs ? band.need : NULL;
+        if ((st = trusted ? solve_band(e, &band, nrhs, nfields, f, &thr, S)
+                          : solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
@@ -608,6 +984,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         m = 1;
                         sample_all(e, idx, wt, m, val);
                         W = val[0];
+                        /* Off the cells the band solve was made for: not at this level. */
+                        if (trusted && !trusted[c])
+                            W = 0;
                     }
                     if (!(W > thr) && !last) {
                         left++;
@@ -639,6 +1018,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                             box_add(&ratio_box, i, j, k);
     }
     free(pending);
+    band_free(&band);
     S->t_total = hv_now() - t_start;
     return st;
 }
