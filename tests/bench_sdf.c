@@ -184,6 +184,24 @@ static void real(int res)
                 continue;
             I += g->v[c] < 0 && wn[c], U += g->v[c] < 0 || wn[c];
         }
+        /* Winding numbers of the mesh after orientation repair (no caps), and
+         * after the full repair (caps included). */
+        double iou_or = -1, iou_full = -1;
+        hv_mesh *rm = NULL;
+        uint8_t *w2 = malloc(hv_grid_count(tg));
+        if (!hv_sdf_repair(m, HV_SDF_REPAIR_ALL & ~HV_SDF_REPAIR_FILL_HOLES, o.max_hole, &rm, NULL)) {
+            tu_winding(rm, tg, w2);
+            iou_or = tu_iou(g, w2);
+            hv_mesh_destroy(&rm);
+        }
+        if (!hv_sdf_repair(m, HV_SDF_REPAIR_ALL, o.max_hole, &rm, NULL)) {
+            tu_winding(rm, tg, w2);
+            iou_full = tu_iou(g, w2);
+            hv_mesh_destroy(&rm);
+        }
+        free(w2);
+        printf("real %-20s IoU vs winding after orientation repair %.5f, vs the closed solid "
+               "(flat caps) %.5f\n", names[f], iou_or, iou_full);
         printf("real %-20s %dx%dx%d IoU vs winding %.5f (beyond 1 vox %.5f) vs parity %.5f | holes %zu/%zu filled, "
                "%zu faces flipped | %.2f s\n",
                names[f], g->n[0], g->n[1], g->n[2], tu_iou(g, wn), U ? (double)I / U : 1, tu_iou(g, par),

@@ -50,10 +50,12 @@ enum {
     HV_SDF_REPAIR_DEGENERATE = 1u << 1,  /* drop faces with a repeated vertex or zero area */
     HV_SDF_REPAIR_DUPLICATES = 1u << 2,  /* drop faces repeating an earlier face's vertex set */
     HV_SDF_REPAIR_ORIENT = 1u << 3,      /* one orientation per manifold-connected component */
-    HV_SDF_REPAIR_FILL_HOLES = 1u << 5,  /* close boundary loops with fans (see max_hole) */
+    HV_SDF_REPAIR_FILL_HOLES = 1u << 5,  /* close boundary loops with planar caps (see max_hole) */
     HV_SDF_REPAIR_OUTWARD = 1u << 4,     /* orient components outward by winding number,
                                             cavities inward */
-    HV_SDF_REPAIR_ALL = 0x3fu
+    HV_SDF_REPAIR_ALL = 0x3fu,
+    HV_SDF_REPAIR_DOMED_CAPS = 1u << 6   /* with FILL_HOLES: caps that bulge like the wall
+                                            around the hole instead of planar ones (not in ALL) */
 };
 
 /* How |phi| is obtained. */

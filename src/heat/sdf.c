@@ -66,7 +66,7 @@ static hv_status check_opts(const hv_sdf_opts *o)
         return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown magnitude mode %d", (int)o->magnitude);
     if (!(o->max_hole >= 0) || !isfinite(o->max_hole))
         return hv_error(HV_ERR_INVALID_ARG, "sdf: max hole size must be finite and >= 0, got %g", o->max_hole);
-    if (o->repair & ~(unsigned)HV_SDF_REPAIR_ALL)
+    if (o->repair & ~(unsigned)(HV_SDF_REPAIR_ALL | HV_SDF_REPAIR_DOMED_CAPS))
         return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown repair flags 0x%x", o->repair);
     if (!(o->diffuse_tol >= 1e-12 && o->diffuse_tol < 1) || !(o->poisson_tol >= 1e-12 && o->poisson_tol < 1))
         return hv_error(HV_ERR_INVALID_ARG, "sdf: tolerances must be in [1e-12, 1), got %g and %g",
