@@ -126,3 +126,46 @@ __kernel void heat_sdf_rhs(int4 N, __global const float *Y, ulong count, int nle
     if (ndead)
         atomic_add(dead, ndead);
 }
+
+/* out[p] = trilinear interpolation of v at binned sample p (base cell
+ * base[p], fractions frac[p]): the transpose of heat_splat, as interp() in
+ * src/heat/sdf.c. Corners with zero weight are not read (clamped axes). */
+__kernel void heat_sample(int4 N, __global const uint *base, __global const float4 *frac,
+                          __global const float *v, __global float *out, ulong npts)
+{
+    const size_t p = get_global_id(0);
+    if (p >= npts)
+        return;
+    const size_t sy = (size_t)N.x, sz = (size_t)N.x * N.y, b = base[p];
+    const float4 f = frac[p];
+    acc_t sum = 0;
+    for (int q = 0; q < 8; q++) {
+        const int qx = q & 1, qy = (q >> 1) & 1, qz = (q >> 2) & 1;
+        const acc_t w = (qx ? (acc_t)f.x : (acc_t)1 - (acc_t)f.x) *
+                        (qy ? (acc_t)f.y : (acc_t)1 - (acc_t)f.y) *
+                        (qz ? (acc_t)f.z : (acc_t)1 - (acc_t)f.z);
+        if (w != 0)
+            sum += w * (acc_t)v[b + qx + qy * sy + qz * sz];
+    }
+    out[p] = (float)sum;
+}
+
+/* The zero-set correction of the signed heat method (local_shift in
+ * src/heat/sdf.c): phi -= shift, then phi -= taper(den) num / den where den is
+ * above 100 tau, the taper rising linearly to 1 at 1000 tau. */
+__kernel void heat_shift(__global float *phi, __global const float *num, __global const float *den,
+                         float shift, acc_t tau, int local_shift, ulong n)
+{
+    const size_t c = get_global_id(0);
+    if (c >= n)
+        return;
+    float p = phi[c] - shift;
+    if (local_shift) {
+        const acc_t d = den[c];
+        if (d > 100 * tau) {
+            const acc_t taper = d >= 1000 * tau ? (acc_t)1 : (d - 100 * tau) / (900 * tau);
+            p -= (float)(taper * (acc_t)num[c] / d);
+        }
+    }
+    phi[c] = p;
+}

@@ -488,7 +488,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         goto done;
     }
     const int ncomp = unsig ? 1 : 3;
-    /* Backend opencl: stages 2-5 keep their fields on the device (sdf_cl.c). */
+    /* Backend opencl: stages 2-6 keep their fields on the device (sdf_cl.c). */
     const int on_device = need_heat && o.backend == HV_BACKEND_OPENCL;
     if (on_device) {
         S.t_splat = hv_now() - tt;
@@ -612,7 +612,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         w.rhs = NULL;
         S.t_poisson = hv_now() - tt;
     }
-    if (need_heat) {
+    if (need_heat && !on_device) {
         /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
         if ((st = stage(0.8, "shift")))
             goto done;

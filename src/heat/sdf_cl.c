@@ -1,8 +1,10 @@
 /*
- * Stages 2-5 of the signed heat method (sdf.c) with every field on one OpenCL
- * device: splat, diffusion, face normalization with the divergence, Poisson.
- * Same quadrature, weights, noise bounds and face rule as the host path; the
- * host reads back only residual norms, the dead-face count and phi once.
+ * Stages 2-6 of the signed heat method (sdf.c) with every field on one OpenCL
+ * device: splat, diffusion, face normalization with the divergence, Poisson,
+ * zero-set shift. Same quadrature, weights, noise bounds, face rule and
+ * correction as the host path; the host reads back residual norms, the
+ * dead-face count, phi at the surface samples (for the area-weighted sums)
+ * and phi once.
  */
 #include "sdf_cl.h"
 #include "core/error.h"
@@ -18,7 +20,9 @@
 typedef struct sdf_cl_work {
     hv_cl *cl;
     hv_cl_splat sp;
-    cl_mem Y0[3], Y, tmp, tau, rhs, phi, dead, sums;
+    cl_mem Y0[3], Y, tmp, tau, rhs, phi, dead, sums, samp;
+    float *vals;
+    double *res;
     hv_solver *solver;
 } sdf_cl_work;
 
@@ -35,6 +39,9 @@ static void work_free(sdf_cl_work *w)
     hv_cl_free(&w->phi);
     hv_cl_free(&w->dead);
     hv_cl_free(&w->sums);
+    hv_cl_free(&w->samp);
+    free(w->vals);
+    free(w->res);
     hv_cl_close(&w->cl);
 }
 
@@ -48,6 +55,33 @@ static hv_status opencl_solver(hv_solver **s, const hv_grid *g, double alpha, do
     so.max_iter = 100;
     hv_problem pb = {3, {g->n[0], g->n[1], g->n[2]}, g->h, NULL, alpha, beta};
     return hv_solver_create(s, &pb, &so);
+}
+
+/* phi at the samples (w->vals, sorted order) and its area-weighted sums. */
+static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, double *den, double *rms)
+{
+    const size_t np = q->count;
+    hv_status st;
+    if (!w->samp && (st = hv_cl_alloc(w->cl, np * sizeof(float), NULL, &w->samp)))
+        return st;
+    if (!w->vals && !(w->vals = malloc(np * sizeof *w->vals)))
+        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+    if (!w->res && !(w->res = malloc(np * sizeof *w->res)))
+        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+    hv_cl_splat_sample(w->cl, &w->sp, w->phi, w->samp);
+    hv_cl_read(w->cl, w->samp, 0, np * sizeof(float), w->vals);
+    if ((st = hv_cl_check(w->cl)))
+        return st;
+    double a = 0, b = 0, c = 0;
+#pragma omp parallel for reduction(+ : a, b, c) schedule(static)
+    for (size_t k = 0; k < np; k++) {
+        const double ar = q->area[w->sp.order[k]], v = w->vals[k];
+        a += ar * v;
+        b += ar;
+        c += ar * v * v;
+    }
+    *num = a, *den = b, *rms = c;
+    return HV_OK;
 }
 
 hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
@@ -74,7 +108,6 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
             (st = hv_cl_splat_run(cl, &w.sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
                                   w.Y0[b])))
             goto done;
-    hv_cl_splat_destroy(&w.sp);
     if ((st = hv_cl_alloc(cl, 4 * sizeof(double), NULL, &w.sums)))
         goto done;
     for (int b = 0; b < ncomp; b++)
@@ -152,9 +185,59 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
         goto done;
     S->poisson_iterations = info.iterations;
     S->poisson_relres = info.relres;
+    if ((st = hv_cl_check(cl)))
+        goto done;
+    hv_solver_destroy(&w.solver);
+    hv_cl_free(&w.rhs);
+    S->t_poisson = hv_now() - tt;
+
+    /* 6. Shift: area-weighted mean of phi at the samples to zero, then the
+     * local zero-set correction, as sdf.c. */
+    if ((st = hv_progress(0.8, "shift")))
+        goto done;
+    tt = hv_now();
+    double num, den, rms;
+    if ((st = sample_sums(&w, q, &num, &den, &rms)))
+        goto done;
+    S->shift = den > 0 ? num / den : 0;
+    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / h;
+    S->surface_rms_after = S->surface_rms_before;
+    hv_cl_sdf_shift(cl, count, w.phi, NULL, NULL, (float)S->shift, 0.0, 0);
+    if (o->local_shift && !unsig) {
+        /* c = K*(a r) / K*(a), K = (I - t Lap)^-1, r = phi at the samples */
+        if ((st = sample_sums(&w, q, &num, &den, &rms)))
+            goto done;
+        for (size_t k = 0; k < q->count; k++)
+            w.res[w.sp.order[k]] = q->area[w.sp.order[k]] * w.vals[k];
+        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[0])) || (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
+            (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
+            (st = hv_cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
+            (st = hv_cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
+            goto done;
+        hv_cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
+        double f1sq = 0;
+        hv_cl_read_acc(cl, w.sums, 0, 1, &f1sq);
+        if ((st = hv_cl_finish(cl)) || (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
+            goto done;
+        hv_solve_info info;
+        if ((st = hv_cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))
+            goto done;
+        S->diffuse_iterations += info.iterations;
+        if ((st = hv_cl_solver_solve(w.solver, w.Y0[1], w.tmp, &info)))
+            goto done;
+        S->diffuse_iterations += info.iterations;
+        hv_solver_destroy(&w.solver);
+        const double tau_den = fmax(info.relres, o->diffuse_tol) * sqrt(f1sq);
+        hv_cl_sdf_shift(cl, count, w.phi, w.Y0[2], w.tmp, 0.0, tau_den, 1);
+        if ((st = sample_sums(&w, q, &num, &den, &rms)))
+            goto done;
+        S->surface_rms_after = sqrt(rms / den) / h;
+    }
+
+    /* phi to the host: the one read of a field */
     hv_cl_read(cl, w.phi, 0, bytes, g->v);
     st = hv_cl_check(cl);
-    S->t_poisson = hv_now() - tt;
+    S->t_shift = hv_now() - tt;
 done:
     work_free(&w);
     return st;

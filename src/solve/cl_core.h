@@ -58,6 +58,8 @@ typedef enum hv_cl_kernel {
     HV_K_PW_AXPY,
     HV_K_HEAT_SPLAT,
     HV_K_HEAT_SDF_RHS,
+    HV_K_HEAT_SAMPLE,
+    HV_K_HEAT_SHIFT,
     /* built only with fp64 */
     HV_K_FINE_RESIDUAL,
     HV_K_FINE_APPLY,

@@ -212,6 +212,7 @@ void hv_cl_splat_destroy(hv_cl_splat *S)
 {
     free(S->order);
     free(S->stage);
+    hv_cl_free(&S->base);
     hv_cl_free(&S->start);
     hv_cl_free(&S->frac);
     hv_cl_free(&S->val);
@@ -235,11 +236,12 @@ hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3],
     S->count = count;
     S->npts = npts;
     uint32_t *start = calloc(count + 1, sizeof *start), *base = malloc((npts + 1) * sizeof *base);
+    uint32_t *sbase = malloc((npts + 1) * sizeof *sbase);
     float *frac = malloc((npts + 1) * 4 * sizeof *frac), *f = malloc((npts + 1) * 4 * sizeof *f);
     S->order = malloc((npts + 1) * sizeof *S->order);
     S->stage = malloc((npts + 1) * sizeof *S->stage);
     hv_status st = HV_OK;
-    if (!start || !base || !frac || !f || !S->order || !S->stage) {
+    if (!start || !base || !sbase || !frac || !f || !S->order || !S->stage) {
         st = hv_error(HV_ERR_NOMEM, "OpenCL splat: out of memory for %zu samples", npts);
         goto done;
     }
@@ -271,6 +273,7 @@ hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3],
     for (size_t p = 0; p < npts; p++) {
         uint32_t q = start[base[p]]++;
         S->order[q] = (uint32_t)p;
+        sbase[q] = base[p];
         memcpy(frac + 4 * (size_t)q, f + 4 * p, 4 * sizeof *f);
     }
     for (size_t c = count; c > 0; c--)
@@ -278,11 +281,13 @@ hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3],
     start[0] = 0;
     if ((st = hv_cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
         (st = hv_cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
+        (st = hv_cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
         (st = hv_cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
         goto done;
 done:
     free(start);
     free(base);
+    free(sbase);
     free(frac);
     free(f);
     if (st)
@@ -314,4 +319,21 @@ void hv_cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int 
     hv_cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
     hv_cl_args(cl, HV_K_HEAT_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau, 1.0 / h, rhs, dead);
     hv_cl_run(cl, HV_K_HEAT_SDF_RHS, 2, g, l);
+}
+
+void hv_cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
+{
+    size_t g[1], l[1];
+    hv_cl_range1(S->npts, g, l);
+    hv_cl_args(cl, HV_K_HEAT_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out, S->npts);
+    hv_cl_run(cl, HV_K_HEAT_SAMPLE, 1, g, l);
+}
+
+void hv_cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
+                     double tau, int local_shift)
+{
+    size_t g[1], l[1];
+    hv_cl_range1(n, g, l);
+    hv_cl_args(cl, HV_K_HEAT_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift, n);
+    hv_cl_run(cl, HV_K_HEAT_SHIFT, 1, g, l);
 }

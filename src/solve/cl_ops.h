@@ -63,6 +63,7 @@ typedef struct hv_cl_splat {
     size_t npts;
     uint32_t *order;   /* host: sorted position -> sample index */
     float *stage;      /* host: values on their way to the device */
+    cl_mem base;       /* uint32 base cell per sorted sample */
     cl_mem start;      /* uint32, count + 1: samples of base cell b are [start[b], start[b+1]) */
     cl_mem frac;       /* float4 per sorted sample */
     cl_mem val;        /* float per sorted sample */
@@ -79,6 +80,16 @@ void hv_cl_splat_destroy(hv_cl_splat *S);
  * acc_t, independent of scheduling. val == NULL splats scale per sample. */
 hv_status hv_cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t stride, double scale,
                           cl_mem out);
+
+/* out[q] (npts floats, sorted order) = trilinear interpolation of v at sorted
+ * sample q, the transpose of the splat (interp in src/heat/sdf.c); S->order[q]
+ * names the sample. */
+void hv_cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out);
+
+/* phi -= shift; then, with local_shift, phi -= taper(den) num / den, the
+ * zero-set correction of src/heat/sdf.c (den above 100 tau, full at 1000 tau). */
+void hv_cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
+                     double tau, int local_shift);
 
 /* rhs = -div X / h of the signed heat method (build_rhs in src/heat/sdf.c)
  * on a 3D grid: X normalized at each face from the first of nlev levels of
