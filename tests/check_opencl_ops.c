@@ -168,6 +168,83 @@ START_TEST(splat_of_a_mesh_quadrature_should_match_the_cpu)
 }
 END_TEST
 
+/* interp() of src/heat/sdf.c */
+static double cpu_interp(const hv_grid *g, const float *v, const double x[3])
+{
+    size_t c0, step[3];
+    double wt[8], val = 0;
+    hv_trilinear(g, x, &c0, step, wt);
+    for (int q = 0; q < 8; q++)
+        val += wt[q] * v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
+    return val;
+}
+
+static void check_sample(int dim, const int n[3], size_t npts)
+{
+    const double origin[3] = {0.1, -0.2, 0.3}, h = 0.05;
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, dim, n, h, origin));
+    const size_t count = hv_grid_count(g);
+    double *x = malloc(3 * npts * sizeof *x), *val = malloc(3 * npts * sizeof *val);
+    random_samples(g, npts, x, val, 3);
+    float *v = malloc(count * sizeof *v), *got = malloc(npts * sizeof *got);
+    tl_fill_random(v, count, 17);
+    hv_cl_splat sp;
+    TL_ASSERT_OK(hv_cl_splat_create(CL, &sp, dim, n, h, origin, npts, x));
+    cl_mem dv = dev_alloc(count, v), dout = dev_alloc(npts, NULL);
+    hv_cl_splat_sample(CL, &sp, dv, dout);
+    download(dout, got, npts);
+    double d = 0;
+    for (size_t k = 0; k < npts; k++)
+        d = fmax(d, fabs(got[k] - cpu_interp(g, v, x + 3 * sp.order[k])));
+    d /= 0.5; /* max |v| */
+    printf("sample %dD %dx%dx%d at %zu points: max rel diff %.2e\n", dim, n[0], n[1], dim == 3 ? n[2] : 1,
+           npts, d);
+    ck_assert_msg(d < 1e-5, "interpolation differs by %g", d);
+    hv_cl_free(&dv), hv_cl_free(&dout);
+    hv_cl_splat_destroy(&sp);
+    free(x), free(val), free(v), free(got);
+    hv_grid_destroy(&g);
+}
+
+START_TEST(sample_should_match_cpu_interpolation)
+{
+    check_sample(3, (const int[3]){19, 14, 9}, 5000);
+    check_sample(2, (const int[3]){33, 21, 1}, 3000);
+}
+END_TEST
+
+START_TEST(shift_should_match_the_cpu_zero_set_correction)
+{
+    const size_t n = 5001;
+    float *phi = malloc(n * sizeof *phi), *num = malloc(n * sizeof *num), *den = malloc(n * sizeof *den);
+    float *ref = malloc(n * sizeof *ref), *got = malloc(n * sizeof *got);
+    tl_fill_random(phi, n, 1);
+    tl_fill_random(num, n, 2);
+    const double tau = 1e-3;
+    for (size_t c = 0; c < n; c++) /* den from 0 to 2000 tau: below, in and above the taper */
+        den[c] = (float)(2.0 * tau * (double)c / (double)n * 1000.0);
+    const float sh = 0.0625f;
+    for (size_t c = 0; c < n; c++) { /* sdf.c: global shift, then local_shift */
+        ref[c] = phi[c] - sh;
+        double d = den[c];
+        if (!(d > 100 * tau))
+            continue;
+        double taper = d >= 1000 * tau ? 1.0 : (d - 100 * tau) / (900 * tau);
+        ref[c] -= (float)(taper * num[c] / d);
+    }
+    cl_mem dphi = dev_alloc(n, phi), dnum = dev_alloc(n, num), dden = dev_alloc(n, den);
+    hv_cl_sdf_shift(CL, n, dphi, NULL, NULL, sh, 0.0, 0);
+    hv_cl_sdf_shift(CL, n, dphi, dnum, dden, 0.0, tau, 1);
+    download(dphi, got, n);
+    double d = rel_diff(got, ref, n);
+    printf("zero-set shift: max rel diff %.2e\n", d);
+    ck_assert_msg(d < 1e-5, "shift differs by %g", d);
+    hv_cl_free(&dphi), hv_cl_free(&dnum), hv_cl_free(&dden);
+    free(phi), free(num), free(den), free(ref), free(got);
+}
+END_TEST
+
 /* ---------- the signed heat method's right-hand side ---------- */
 
 /* build_rhs of src/heat/sdf.c, serial. */
@@ -441,6 +518,8 @@ int main(int argc, char **argv)
     tcase_add_test(tc, splat_should_match_the_cpu_splat_in_3d);
     tcase_add_test(tc, splat_should_match_the_cpu_splat_in_2d);
     tcase_add_test(tc, splat_of_a_mesh_quadrature_should_match_the_cpu);
+    tcase_add_test(tc, sample_should_match_cpu_interpolation);
+    tcase_add_test(tc, shift_should_match_the_cpu_zero_set_correction);
     tcase_add_test(tc, sdf_rhs_should_match_the_cpu_with_levels_and_dead_faces);
     tcase_add_test(tc, sdf_rhs_should_match_the_cpu_for_the_unsigned_gradient);
     tcase_add_test(tc, device_solve_should_match_the_host_interface);
