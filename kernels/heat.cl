@@ -101,30 +101,42 @@ __kernel void heat_sdf_rhs(int4 N, __global const float *Y, ulong count, int nle
                            __global const acc_t *tau, acc_t inv_h, __global float *rhs,
                            __global uint *dead)
 {
+    /* dead faces summed per work-group (a power of two, HV_CL_WG x 1), then
+     * one atomic: a far field has millions of them */
+    __local uint red[HV_WG_MAX];
+    const int lid = get_local_id(0) + get_local_size(0) * get_local_id(1);
+    const int lsize = get_local_size(0) * get_local_size(1);
     const int i = get_global_id(0), row = get_global_id(1);
-    if (i >= N.x || row >= N.y * N.z)
-        return;
-    const int j = row % N.y, k = row / N.y;
-    const size_t s[3] = {1, (size_t)N.x, (size_t)N.x * N.y};
-    const size_t c = (size_t)i + s[1] * (size_t)row;
-    const int idx[3] = {i, j, k}, n[3] = {N.x, N.y, N.z};
-    acc_t div = 0;
     uint ndead = 0;
-    for (int a = 0; a < 3; a++) {
-        int d;
-        if (idx[a] > 0) {
-            div -= heat_face_flux(N, Y, count, nlev, ncomp, tau, inv_h, a, c, i, j, k, &d);
-            ndead += d;
+    if (i < N.x && row < N.y * N.z) {
+        const int j = row % N.y, k = row / N.y;
+        const size_t s[3] = {1, (size_t)N.x, (size_t)N.x * N.y};
+        const size_t c = (size_t)i + s[1] * (size_t)row;
+        const int idx[3] = {i, j, k}, n[3] = {N.x, N.y, N.z};
+        acc_t div = 0;
+        for (int a = 0; a < 3; a++) {
+            int d;
+            if (idx[a] > 0) {
+                div -= heat_face_flux(N, Y, count, nlev, ncomp, tau, inv_h, a, c, i, j, k, &d);
+                ndead += d;
+            }
+            if (idx[a] < n[a] - 1) {
+                const int up[3] = {i + (a == 0), j + (a == 1), k + (a == 2)};
+                div += heat_face_flux(N, Y, count, nlev, ncomp, tau, inv_h, a, c + s[a], up[0],
+                                      up[1], up[2], &d);
+            }
         }
-        if (idx[a] < n[a] - 1) {
-            const int up[3] = {i + (a == 0), j + (a == 1), k + (a == 2)};
-            div += heat_face_flux(N, Y, count, nlev, ncomp, tau, inv_h, a, c + s[a], up[0], up[1],
-                                  up[2], &d);
-        }
+        rhs[c] = (float)(-div * inv_h);
     }
-    rhs[c] = (float)(-div * inv_h);
-    if (ndead)
-        atomic_add(dead, ndead);
+    red[lid] = ndead;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int h = lsize / 2; h > 0; h >>= 1) {
+        if (lid < h)
+            red[lid] += red[lid + h];
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0 && red[0])
+        atomic_add(dead, red[0]);
 }
 
 /* out[p] = trilinear interpolation of v at binned sample p (base cell
