@@ -59,6 +59,14 @@ __kernel void fine_f2d(__global const float *u, __global double *z, ulong n)
         z[c] = (double)u[c];
 }
 
+/* u = (float)x */
+__kernel void fine_d2f(__global const double *x, __global float *u, ulong n)
+{
+    const size_t c = get_global_id(0);
+    if (c < n)
+        u[c] = (float)x[c];
+}
+
 /* part[group] = sum of a*b over the group's elements (blocks as red_dot_f). */
 __kernel void fine_dot(__global const double *a, __global const double *b, ulong n,
                        __global double *part)

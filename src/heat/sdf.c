@@ -11,6 +11,7 @@
  *   - by default |phi| is replaced by the exact distance to the triangles and
  *     the heat method supplies only the sign, its robust part.
  */
+#include "sdf_cl.h"
 #include "sdf_internal.h"
 #include "core/error.h"
 
@@ -487,7 +488,14 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         goto done;
     }
     const int ncomp = unsig ? 1 : 3;
-    if (need_heat) {
+    /* Backend opencl: stages 2-6 keep their fields on the device (sdf_cl.c). */
+    const int on_device = need_heat && o.backend == HV_BACKEND_OPENCL;
+    if (on_device) {
+        S.t_splat = hv_now() - tt;
+        if ((st = hv_sdf_heat_cl(&w.q, w.g, nlev, unsig, &o, &S)))
+            goto done;
+    }
+    if (need_heat && !on_device) {
         for (int b = 0; b < ncomp; b++)
             if (!(w.Y0[b] = hv_calloc(count, sizeof(float)))) {
                 st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)", count);
@@ -511,12 +519,13 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             }
         }
     }
-    S.t_splat = hv_now() - tt;
+    if (!on_device)
+        S.t_splat = hv_now() - tt;
 
     /* 3. Diffuse: one backward-Euler step per level, the components sharing a solver. */
     tt = hv_now();
     double tau[9] = {0};
-    if (need_heat) {
+    if (need_heat && !on_device) {
         w.Ybuf = hv_malloc((size_t)nlev * ncomp * count * sizeof(float));
         if (!w.Ybuf) {
             st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells", nlev * ncomp, count);
@@ -562,10 +571,11 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             w.Y0[b] = NULL;
         }
     }
-    S.t_diffuse = hv_now() - tt;
+    if (!on_device)
+        S.t_diffuse = hv_now() - tt;
 
     float *phi = w.g->v;
-    if (need_heat) {
+    if (need_heat && !on_device) {
         /* 4. Normalize on faces, divergence. */
         if ((st = stage(0.6, "normalize")))
             goto done;
@@ -601,7 +611,8 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         hv_free(w.rhs);
         w.rhs = NULL;
         S.t_poisson = hv_now() - tt;
-
+    }
+    if (need_heat && !on_device) {
         /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
         if ((st = stage(0.8, "shift")))
             goto done;

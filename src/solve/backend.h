@@ -51,6 +51,11 @@ static inline void hv_info_push(hv_solve_info *info, double relres)
     info->relres = relres;
 }
 
+/* The backend behind a solver and its state, for backend-specific entry
+ * points (the OpenCL device-resident solve, cl_ops.h). */
+const hv_backend_ops *hv_solver_ops(const hv_solver *sv);
+void *hv_solver_state(hv_solver *sv);
+
 /* Subtracts the per-region mean of u (regions as in s; whole grid without mask). */
 void hv_project_mean(const hv_setup *s, double *u);
 

@@ -39,6 +39,10 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_FACE_NORMALIZE] = "face_normalize",
     [HV_K_PW_RATIO] = "pw_ratio",
     [HV_K_PW_AXPY] = "pw_axpy",
+    [HV_K_HEAT_SPLAT] = "heat_splat",
+    [HV_K_HEAT_SDF_RHS] = "heat_sdf_rhs",
+    [HV_K_HEAT_SAMPLE] = "heat_sample",
+    [HV_K_HEAT_SHIFT] = "heat_shift",
     [HV_K_FINE_RESIDUAL] = "fine_residual",
     [HV_K_FINE_APPLY] = "fine_apply",
     [HV_K_FINE_ADD] = "fine_add",
@@ -48,6 +52,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_FINE_XPAY] = "fine_xpay",
     [HV_K_RED_CHUNK_D] = "red_chunk_d",
     [HV_K_REGION_SUB_D] = "region_sub_d",
+    [HV_K_FINE_D2F] = "fine_d2f",
 };
 
 const char *hv_cl_strerror(cl_int e)
@@ -310,8 +315,8 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
                         hv_cl_strerror(e));
     }
-    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
-                         hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
+    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,   hv_kernel_fine,
+                         hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat};
     char opts[128];
     snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
              HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");

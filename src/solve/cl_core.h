@@ -26,6 +26,7 @@ extern const char hv_kernel_reduce[];
 extern const char hv_kernel_fine[];
 extern const char hv_kernel_faces[];
 extern const char hv_kernel_pointwise[];
+extern const char hv_kernel_heat[];
 
 /* Work-group size of every kernel but the single-group ones (x-major), and
  * the elements a work-item takes in a reduction (HV_WG, HV_RED_BLOCK in
@@ -55,6 +56,10 @@ typedef enum hv_cl_kernel {
     HV_K_FACE_NORMALIZE,
     HV_K_PW_RATIO,
     HV_K_PW_AXPY,
+    HV_K_HEAT_SPLAT,
+    HV_K_HEAT_SDF_RHS,
+    HV_K_HEAT_SAMPLE,
+    HV_K_HEAT_SHIFT,
     /* built only with fp64 */
     HV_K_FINE_RESIDUAL,
     HV_K_FINE_APPLY,
@@ -65,6 +70,7 @@ typedef enum hv_cl_kernel {
     HV_K_FINE_XPAY,
     HV_K_RED_CHUNK_D,
     HV_K_REGION_SUB_D,
+    HV_K_FINE_D2F,
     HV_K_COUNT
 } hv_cl_kernel;
 #define HV_K_FIRST_FP64 HV_K_FINE_RESIDUAL

@@ -471,3 +471,88 @@ static void ocl_stats(const void *state, hv_solver_stats *st)
 
 const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy,
                                               ocl_stats};
+
+/* ---------- device-resident solve (cl_ops.h) ---------- */
+
+static void cl_convert(hv_cl *cl, hv_cl_kernel k, cl_mem src, cl_mem dst, size_t n)
+{
+    size_t g[1], l[1];
+    hv_cl_range1(n, g, l);
+    hv_cl_args(cl, k, "mml", src, dst, n);
+    hv_cl_run(cl, k, 1, g, l);
+}
+
+/* Devices without fp64, and masked heat steps (whose right-hand side would
+ * need zeroing on solid cells): through the host front end. */
+static hv_status solve_cl_via_host(hv_solver *sv, ocl_state *o, cl_mem f, cl_mem u,
+                                   hv_solve_info *info)
+{
+    const size_t n = o->s->count;
+    float *hf = hv_malloc(n * sizeof *hf), *hu = hv_malloc(n * sizeof *hu);
+    hv_status st;
+    if (!hf || !hu) {
+        st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+        goto out;
+    }
+    hv_cl_read(o->cl, f, 0, n * sizeof *hf, hf);
+    if (o->s->o.nonzero_guess)
+        hv_cl_read(o->cl, u, 0, n * sizeof *hu, hu);
+    if ((st = hv_cl_check(o->cl)) || (st = hv_solver_solve(sv, hf, hu, info)))
+        goto out;
+    hv_cl_write(o->cl, u, 0, n * sizeof *hu, hu);
+    st = hv_cl_finish(o->cl);
+out:
+    hv_free(hf);
+    hv_free(hu);
+    return st;
+}
+
+hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+{
+    hv_solve_info local;
+    if (!info)
+        info = &local;
+    memset(info, 0, sizeof *info);
+    info->backend = HV_BACKEND_OPENCL;
+    if (!sv || !f || !u)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_solver_solve: NULL argument");
+    if (hv_solver_ops(sv) != &hv_backend_opencl_ops)
+        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve: the solver runs on the %s backend, not opencl",
+                        hv_backend_name(hv_solver_backend(sv)));
+    ocl_state *o = hv_solver_state(sv);
+    const hv_setup *s = o->s;
+    if (!o->dev64 || (s->p.solid && s->p.alpha != 0))
+        return solve_cl_via_host(sv, o, f, u, info);
+    hv_cl *cl = o->cl;
+    const size_t n = s->count;
+    double t0 = hv_now(), S[NSLOT];
+    /* As the front end: Poisson right-hand sides projected per region (which
+     * also zeroes solid cells), then ||f|| over the fluid. */
+    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n);
+    if (s->p.alpha == 0)
+        hv_cl_project_d(cl, &o->reg, o->v[VF]);
+    fv_dot(o, VF, VF, S_RR);
+    hv_status st = fv_sync(o, S);
+    if (st)
+        return st;
+    const double fn = sqrt(S[S_RR]);
+    if (!isfinite(fn))
+        return hv_error(HV_ERR_NUMERIC, "the right-hand side on the device holds NaN or Inf (norm %g)", fn);
+    if (fn == 0) {
+        hv_cl_zero(cl, u, n * sizeof(float));
+        hv_info_push(info, 0.0);
+        info->reason = HV_STOP_CONVERGED;
+    } else {
+        if (s->o.nonzero_guess)
+            cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
+        else
+            hv_cl_zero(cl, o->v[VX], n * sizeof(double));
+        st = o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
+        if (!st)
+            cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
+    }
+    hv_status st2 = hv_cl_finish(cl);
+    info->seconds = hv_now() - t0;
+    info->backend = HV_BACKEND_OPENCL;
+    return st ? st : st2;
+}

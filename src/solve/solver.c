@@ -297,6 +297,10 @@ hv_status hv_solver_get_stats(const hv_solver *sv, hv_solver_stats *st)
 
 hv_backend hv_solver_backend(const hv_solver *sv) { return sv->backend; }
 
+const hv_backend_ops *hv_solver_ops(const hv_solver *sv) { return sv->ops; }
+
+void *hv_solver_state(hv_solver *sv) { return sv->state; }
+
 const hv_problem *hv_solver_problem(const hv_solver *sv) { return &sv->setup.p; }
 
 void hv_solver_destroy(hv_solver **s)

@@ -1,0 +1,244 @@
+/*
+ * Stages 2-6 of the signed heat method (sdf.c) with every field on one OpenCL
+ * device: splat, diffusion, face normalization with the divergence, Poisson,
+ * zero-set shift. Same quadrature, weights, noise bounds, face rule and
+ * correction as the host path; the host reads back residual norms, the
+ * dead-face count, phi at the surface samples (for the area-weighted sums)
+ * and phi once.
+ */
+#include "sdf_cl.h"
+#include "core/error.h"
+#include "solve/cl_ops.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* As sdf.c. */
+#define SDF_NOISE_FACTOR 4.0
+
+typedef struct sdf_cl_work {
+    hv_cl *cl;
+    hv_cl_splat sp;
+    cl_mem Y0[3], Y, tmp, tau, rhs, phi, dead, sums, samp;
+    float *vals;
+    double *res;
+    hv_solver *solver;
+} sdf_cl_work;
+
+static void work_free(sdf_cl_work *w)
+{
+    hv_solver_destroy(&w->solver);
+    hv_cl_splat_destroy(&w->sp);
+    for (int b = 0; b < 3; b++)
+        hv_cl_free(&w->Y0[b]);
+    hv_cl_free(&w->Y);
+    hv_cl_free(&w->tmp);
+    hv_cl_free(&w->tau);
+    hv_cl_free(&w->rhs);
+    hv_cl_free(&w->phi);
+    hv_cl_free(&w->dead);
+    hv_cl_free(&w->sums);
+    hv_cl_free(&w->samp);
+    free(w->vals);
+    free(w->res);
+    hv_cl_close(&w->cl);
+}
+
+static hv_status opencl_solver(hv_solver **s, const hv_grid *g, double alpha, double beta,
+                               double tol)
+{
+    hv_solver_opts so;
+    hv_solver_opts_default(&so);
+    so.backend = HV_BACKEND_OPENCL;
+    so.tol = tol;
+    so.max_iter = 100;
+    hv_problem pb = {3, {g->n[0], g->n[1], g->n[2]}, g->h, NULL, alpha, beta};
+    return hv_solver_create(s, &pb, &so);
+}
+
+/* phi at the samples (w->vals, sorted order) and its area-weighted sums. */
+static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, double *den, double *rms)
+{
+    const size_t np = q->count;
+    hv_status st;
+    if (!w->samp && (st = hv_cl_alloc(w->cl, np * sizeof(float), NULL, &w->samp)))
+        return st;
+    if (!w->vals && !(w->vals = malloc(np * sizeof *w->vals)))
+        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+    if (!w->res && !(w->res = malloc(np * sizeof *w->res)))
+        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+    hv_cl_splat_sample(w->cl, &w->sp, w->phi, w->samp);
+    hv_cl_read(w->cl, w->samp, 0, np * sizeof(float), w->vals);
+    if ((st = hv_cl_check(w->cl)))
+        return st;
+    double a = 0, b = 0, c = 0;
+#pragma omp parallel for reduction(+ : a, b, c) schedule(static)
+    for (size_t k = 0; k < np; k++) {
+        const double ar = q->area[w->sp.order[k]], v = w->vals[k];
+        a += ar * v;
+        b += ar;
+        c += ar * v * v;
+    }
+    *num = a, *den = b, *rms = c;
+    return HV_OK;
+}
+
+hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
+                         hv_sdf_stats *S)
+{
+    sdf_cl_work w;
+    memset(&w, 0, sizeof w);
+    const int *n = g->n;
+    const double h = g->h;
+    const size_t count = hv_grid_count(g), bytes = count * sizeof(float);
+    const int ncomp = unsig ? 1 : 3;
+    hv_status st;
+    double tt = hv_now();
+
+    /* 2. Splat: bin the samples once, one gather per component. */
+    if ((st = hv_cl_open(&w.cl)))
+        return st;
+    hv_cl *cl = w.cl;
+    if ((st = hv_cl_splat_create(cl, &w.sp, 3, n, h, g->origin, q->count, q->x)))
+        goto done;
+    const double inv_h3 = 1.0 / (h * h * h);
+    for (int b = 0; b < ncomp; b++)
+        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[b])) ||
+            (st = hv_cl_splat_run(cl, &w.sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
+                                  w.Y0[b])))
+            goto done;
+    if ((st = hv_cl_alloc(cl, 4 * sizeof(double), NULL, &w.sums)))
+        goto done;
+    for (int b = 0; b < ncomp; b++)
+        hv_cl_dot_f(cl, w.Y0[b], w.Y0[b], count, w.sums, b);
+    double sq[3] = {0, 0, 0}, f2 = 0;
+    hv_cl_read_acc(cl, w.sums, 0, ncomp, sq);
+    if ((st = hv_cl_check(cl)))
+        goto done;
+    for (int b = 0; b < ncomp; b++)
+        f2 += sq[b];
+    S->t_splat += hv_now() - tt;
+
+    /* 3. Diffuse: one backward-Euler step per level, straight into Y. */
+    tt = hv_now();
+    double tau[9] = {0};
+    if ((st = hv_cl_alloc(cl, (size_t)nlev * ncomp * bytes, NULL, &w.Y)) ||
+        (st = hv_cl_alloc(cl, bytes, NULL, &w.tmp)) || (st = hv_cl_finish(cl)))
+        goto done;
+    for (int k = 0; k < nlev; k++) {
+        if ((st = hv_progress(0.1 + 0.5 * k / nlev, "diffuse")))
+            goto done;
+        if ((st = opencl_solver(&w.solver, g, 1.0, S->t * pow(16.0, k), o->diffuse_tol)))
+            goto done;
+        for (int b = 0; b < ncomp; b++) {
+            hv_solve_info info;
+            if ((st = hv_cl_solver_solve(w.solver, w.Y0[b], w.tmp, &info)))
+                goto done;
+            S->diffuse_iterations += info.iterations;
+            S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
+            hv_cl_fail(cl, clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
+                                               bytes, 0, NULL, NULL),
+                       "clEnqueueCopyBuffer");
+            if ((st = hv_cl_finish(cl)))
+                goto done;
+        }
+        hv_solver_destroy(&w.solver);
+        /* as sdf.c: ||e||_2 <= relres ||f||_2, grown by 2/h per component for the gradient */
+        double bound = fmax(S->diffuse_relres, o->diffuse_tol) * sqrt(f2);
+        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / h : 1.0);
+    }
+    S->backend = HV_BACKEND_OPENCL;
+    for (int b = 0; b < ncomp; b++)
+        hv_cl_free(&w.Y0[b]);
+    S->t_diffuse = hv_now() - tt;
+
+    /* 4. Normalize on faces, divergence. */
+    if ((st = hv_progress(0.6, "normalize")))
+        goto done;
+    tt = hv_now();
+    float tauf[9];
+    for (int k = 0; k < nlev; k++)
+        tauf[k] = (float)tau[k];
+    const uint32_t zero = 0;
+    if ((st = hv_cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf, &w.tau)) ||
+        (st = hv_cl_alloc(cl, sizeof zero, &zero, &w.dead)) || (st = hv_cl_alloc(cl, bytes, NULL, &w.rhs)))
+        goto done;
+    hv_cl_sdf_rhs(cl, n, h, w.Y, nlev, ncomp, w.tau, w.rhs, w.dead);
+    uint32_t dead = 0;
+    hv_cl_read(cl, w.dead, 0, sizeof dead, &dead);
+    if ((st = hv_cl_check(cl)))
+        goto done;
+    S->dead_faces = dead;
+    hv_cl_free(&w.Y);
+    S->t_normalize = hv_now() - tt;
+
+    /* 5. Poisson, then phi to the host: the one read of a field. */
+    if ((st = hv_progress(0.65, "poisson")))
+        goto done;
+    tt = hv_now();
+    if ((st = opencl_solver(&w.solver, g, 0.0, 1.0, o->poisson_tol)) ||
+        (st = hv_cl_alloc(cl, bytes, NULL, &w.phi)))
+        goto done;
+    hv_solve_info info;
+    if ((st = hv_cl_solver_solve(w.solver, w.rhs, w.phi, &info)))
+        goto done;
+    S->poisson_iterations = info.iterations;
+    S->poisson_relres = info.relres;
+    if ((st = hv_cl_check(cl)))
+        goto done;
+    hv_solver_destroy(&w.solver);
+    hv_cl_free(&w.rhs);
+    S->t_poisson = hv_now() - tt;
+
+    /* 6. Shift: area-weighted mean of phi at the samples to zero, then the
+     * local zero-set correction, as sdf.c. */
+    if ((st = hv_progress(0.8, "shift")))
+        goto done;
+    tt = hv_now();
+    double num, den, rms;
+    if ((st = sample_sums(&w, q, &num, &den, &rms)))
+        goto done;
+    S->shift = den > 0 ? num / den : 0;
+    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / h;
+    S->surface_rms_after = S->surface_rms_before;
+    hv_cl_sdf_shift(cl, count, w.phi, NULL, NULL, (float)S->shift, 0.0, 0);
+    if (o->local_shift && !unsig) {
+        /* c = K*(a r) / K*(a), K = (I - t Lap)^-1, r = phi at the samples */
+        if ((st = sample_sums(&w, q, &num, &den, &rms)))
+            goto done;
+        for (size_t k = 0; k < q->count; k++)
+            w.res[w.sp.order[k]] = q->area[w.sp.order[k]] * w.vals[k];
+        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[0])) || (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
+            (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
+            (st = hv_cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
+            (st = hv_cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
+            goto done;
+        hv_cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
+        double f1sq = 0;
+        hv_cl_read_acc(cl, w.sums, 0, 1, &f1sq);
+        if ((st = hv_cl_finish(cl)) || (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
+            goto done;
+        hv_solve_info info;
+        if ((st = hv_cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))
+            goto done;
+        S->diffuse_iterations += info.iterations;
+        if ((st = hv_cl_solver_solve(w.solver, w.Y0[1], w.tmp, &info)))
+            goto done;
+        S->diffuse_iterations += info.iterations;
+        hv_solver_destroy(&w.solver);
+        const double tau_den = fmax(info.relres, o->diffuse_tol) * sqrt(f1sq);
+        hv_cl_sdf_shift(cl, count, w.phi, w.Y0[2], w.tmp, 0.0, tau_den, 1);
+        if ((st = sample_sums(&w, q, &num, &den, &rms)))
+            goto done;
+        S->surface_rms_after = sqrt(rms / den) / h;
+    }
+
+    /* phi to the host: the one read of a field */
+    hv_cl_read(cl, w.phi, 0, bytes, g->v);
+    st = hv_cl_check(cl);
+    S->t_shift = hv_now() - tt;
+done:
+    work_free(&w);
+    return st;
+}
