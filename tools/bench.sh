@@ -40,7 +40,9 @@ for n in 128 256; do
   "$hv" bench extend --n $n --shape sphere
 done
 if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
-  "$hv" bench extend --n 128 --shape "mesh:$shared/meshes/stanford-bunny.obj"
+  for n in 128 256; do
+    "$hv" bench extend --n $n --shape "mesh:$shared/meshes/stanford-bunny.obj"
+  done
 else
   echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
 fi

@@ -41,6 +41,8 @@ static void help(void)
         "                     to the triangles (sign from the heat method either way)\n"
         "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
         "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
+        "  --domed-caps       close holes with caps that bulge like the wall around them\n"
+        "                     (default: planar caps)\n"
         "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
         "  --threads N        worker threads (default: all cores)\n"
         "  -v                 progress and details on stderr\n"
@@ -152,6 +154,8 @@ int cmd_sdf(int argc, char **argv)
                 return cli_usage_error("sdf", "--t-scale needs a positive number, got '%s'", argv[i]);
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
+        } else if (!strcmp(a, "--domed-caps")) {
+            o.repair |= HV_SDF_REPAIR_DOMED_CAPS;
         } else if (!strcmp(a, "--backend")) {
             NEED(1);
             if (hv_backend_parse(argv[++i], &o.backend))
