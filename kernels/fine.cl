@@ -119,6 +119,14 @@ __kernel void fine_xpay(__global double *p, __global const double *z, __global c
         p[c] = z[c] + be * p[c];
 }
 
+/* v = 0 on solid cells (level-0 weight a == 0) */
+__kernel void fine_mask(__global double *v, __global const float *a, ulong n)
+{
+    const size_t c = get_global_id(0);
+    if (c < n && a[c] == 0.0f)
+        v[c] = 0.0;
+}
+
 /* Double twins of red_chunk_f and region_sub_f (reduce.cl). */
 __kernel void red_chunk_d(__global const double *v, __global const uint *perm,
                           __global const uint *cb, __global double *part)

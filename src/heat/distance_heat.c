@@ -5,32 +5,13 @@
  * mean error at 128^2 with t = 512 h^2). Instead the diffusion marches: each
  * stage starts from a wavefront of the previous one, with t kept small. */
 #include "distance_internal.h"
+#include "distance_cl.h"
 #include "core/error.h"
 #include "heatvox/ops.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* A cell is trusted in a stage when u (both times) is above RELIABLE * (solve
- * error bound) * sqrt(t)/h: the solve error is at most relres * ||f||_2
- * pointwise (the heat operator's inverse has norm <= 1), and a face difference
- * of u is about u h / sqrt(t). */
-#define RELIABLE 1e3
-/* The next front lies where ln u(t) is FRONT_MARGIN above the trust bound:
- * about FRONT_MARGIN sqrt(t) inside the trusted zone, so that the next
- * stage's directions are in place before this stage's give out. */
-#define FRONT_MARGIN 8.0
-/* Each stage diffuses for t and T_RATIO t: where the heat has bent around an
- * obstacle its amplitude A varies across the rays, and grad ln u = -grad d /
- * sqrt(t) + grad ln A tilts the direction (diffraction; a voxel or two of error
- * behind a corner). grad ln A hardly depends on t, so in ln u(t) - ln u(4t) =
- * -d (1/sqrt t - 1/sqrt 4t) it cancels. Measured at 128^2 (mean error in
- * voxels, one t -> two): a wall with a gap 1.36 -> 0.71, an L-shaped room
- * 0.68 -> 0.32. */
-#define T_RATIO 4.0
-/* Half width of a front, in voxels (weights (1 - (s/FRONT_BAND)^2)^2). */
-#define FRONT_BAND 1.5
 
 void hv_distance_opts_default(hv_distance_opts *o)
 {
@@ -231,7 +212,7 @@ static void divergence(const dist_ctx *d, double *f)
 
 /* kappa h of the lattice plane wave travelling normal to direction nu (unit):
  * sum_b 2 (cosh(kappa h nu_b) - 1) = tau (Newton from the continuum value). */
-static double lattice_kappa(const double nu[3], int dim, double tau)
+double hv_dist_lattice_kappa(const double nu[3], int dim, double tau)
 {
     double k = sqrt(tau);
     for (int it = 0; it < 8; it++) {
@@ -275,7 +256,7 @@ static size_t next_front(const dist_ctx *d, const double *psi, const double *lu,
         return 0;
     const double psi0 = s0 / sw, lu0 = s1 / sw;
     const double axis[3] = {1, 0, 0};
-    const double step = (lu0 - lthr - FRONT_MARGIN) / lattice_kappa(axis, d->dim, d->tau[0]);
+    const double step = (lu0 - lthr - FRONT_MARGIN) / hv_dist_lattice_kappa(axis, d->dim, d->tau[0]);
     if (!(step >= 2))
         return 0;
     size_t nf = 0;
@@ -298,8 +279,8 @@ static size_t next_front(const dist_ctx *d, const double *psi, const double *lu,
                         nn = sqrt(nn);
                         for (int b = 0; b < d->dim; b++)
                             nu[b] = fabs(nu[b]) / nn;
-                        double dk = lattice_kappa(nu, d->dim, d->tau[0]) -
-                                    lattice_kappa(nu, d->dim, d->tau[1]);
+                        double dk = hv_dist_lattice_kappa(nu, d->dim, d->tau[0]) -
+                                    hv_dist_lattice_kappa(nu, d->dim, d->tau[1]);
                         double e = (psi0 - psi[c]) / dk;
                         double s = (e - step) / FRONT_BAND;
                         if (fabs(s) < 1) {
@@ -404,6 +385,15 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     }
     if ((st = label_regions(&d, w, &S->regions, &S->unreachable_cells)))
         goto done;
+    double sq = sqrt(o.t_scale) * d.h;
+    S->t = sq * sq;
+    if (o.backend == HV_BACKEND_OPENCL) { /* the rest on the device (fp64 devices) */
+        int handled = 0;
+        S->t_splat = hv_now() - t0;
+        st = hv_distance_heat_cl(g, &o, d.region, S->regions, w, ref, S, &handled);
+        if (st || handled)
+            goto done;
+    }
     size_t open = init_faces(&d), left = open;
     S->t_splat = hv_now() - t0;
 
@@ -411,8 +401,6 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
      * solve's error bound; the next front is a level set of u a margin inside the
      * trusted zone, beyond the current front (a wavefront of the distance, so by
      * Huygens' principle its own distance field continues the source's). */
-    double sq = sqrt(o.t_scale) * d.h;
-    S->t = sq * sq;
     d.tau[0] = 1.0 / o.t_scale;
     d.tau[1] = 1.0 / (o.t_scale * T_RATIO);
     int idle = 0;

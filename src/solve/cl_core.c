@@ -53,6 +53,15 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_RED_CHUNK_D] = "red_chunk_d",
     [HV_K_REGION_SUB_D] = "region_sub_d",
     [HV_K_FINE_D2F] = "fine_d2f",
+    [HV_K_FINE_MASK] = "fine_mask",
+    [HV_K_DIST_FACES] = "dist_faces",
+    [HV_K_DIST_LOG] = "dist_log",
+    [HV_K_DIST_ASSIGN] = "dist_assign",
+    [HV_K_DIST_FRONT_SUMS] = "dist_front_sums",
+    [HV_K_DIST_FRONT] = "dist_front",
+    [HV_K_DIST_DIV] = "dist_div",
+    [HV_K_DIST_GATHER] = "dist_gather",
+    [HV_K_DIST_OUTPUT] = "dist_output",
 };
 
 const char *hv_cl_strerror(cl_int e)
@@ -316,7 +325,8 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
                         hv_cl_strerror(e));
     }
     const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,   hv_kernel_fine,
-                         hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat};
+                         hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat,
+                         hv_kernel_distance};
     char opts[128];
     snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
              HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");

@@ -27,6 +27,7 @@ extern const char hv_kernel_fine[];
 extern const char hv_kernel_faces[];
 extern const char hv_kernel_pointwise[];
 extern const char hv_kernel_heat[];
+extern const char hv_kernel_distance[];
 
 /* Work-group size of every kernel but the single-group ones (x-major), and
  * the elements a work-item takes in a reduction (HV_WG, HV_RED_BLOCK in
@@ -71,6 +72,15 @@ typedef enum hv_cl_kernel {
     HV_K_RED_CHUNK_D,
     HV_K_REGION_SUB_D,
     HV_K_FINE_D2F,
+    HV_K_FINE_MASK,
+    HV_K_DIST_FACES,
+    HV_K_DIST_LOG,
+    HV_K_DIST_ASSIGN,
+    HV_K_DIST_FRONT_SUMS,
+    HV_K_DIST_FRONT,
+    HV_K_DIST_DIV,
+    HV_K_DIST_GATHER,
+    HV_K_DIST_OUTPUT,
     HV_K_COUNT
 } hv_cl_kernel;
 #define HV_K_FIRST_FP64 HV_K_FINE_RESIDUAL

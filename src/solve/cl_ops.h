@@ -107,5 +107,9 @@ void hv_cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int 
  * hv_solver_solve (Poisson right-hand sides projected, u zero on solid cells,
  * nonzero_guess honoured). Devices without fp64 go through the host. */
 hv_status hv_cl_solver_solve(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
+/* The same with f and u double device buffers (hv_solver_solve_d's
+ * precision): fp64 devices only, else HV_ERR_UNSUPPORTED. f is zeroed on
+ * solid cells as the front end does (also for heat steps). */
+hv_status hv_cl_solver_solve_d(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
 
 #endif

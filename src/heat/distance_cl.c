@@ -1,0 +1,326 @@
+/*
+ * The heat-method distance (distance_heat.c) with its fields on one OpenCL
+ * device: the stages' diffusion solves, trust test, face assignment and next
+ * front, the divergence, the Poisson solve and the output, in double where
+ * the host path uses double (fp64 devices only). Same rules and constants as
+ * the host path (distance_internal.h); the host reads back per stage the
+ * solves' residual norms, two face counts, the front's weighted sums (one
+ * double triple per work-group) and the front cell count, then phi at the
+ * cells near the sources (for the offsets) and the distance once.
+ */
+#include "distance_cl.h"
+#include "core/error.h"
+#include "heatvox/ops.h"
+#include "solve/cl_ops.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct dist_cl_work {
+    hv_cl *cl;
+    cl_mem region, X[3], w, u, u2, ok, inside, cnt, part, idx, gath, off, out;
+    hv_solver *sv[2];
+    double *hpart;
+    uint32_t *hidx;
+    double *hval, *num;
+} dist_cl_work;
+
+static void work_free(dist_cl_work *k)
+{
+    hv_solver_destroy(&k->sv[0]);
+    hv_solver_destroy(&k->sv[1]);
+    cl_mem *m[] = {&k->region, &k->X[0], &k->X[1], &k->X[2], &k->w,    &k->u,    &k->u2,
+                   &k->ok,     &k->inside, &k->cnt, &k->part, &k->idx, &k->gath, &k->off,
+                   &k->out};
+    for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
+        hv_cl_free(m[i]);
+    free(k->hpart);
+    free(k->hidx);
+    free(k->hval);
+    free(k->num);
+    hv_cl_close(&k->cl);
+}
+
+static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, double beta,
+                             double tol)
+{
+    /* as make_solver in distance_heat.c, on the opencl backend */
+    hv_problem p = {g->dim, {g->n[0], g->n[1], g->n[2]}, g->h, g->solid, alpha, beta};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    o.tol = tol;
+    o.max_iter = 200;
+    return hv_solver_create(s, &p, &o);
+}
+
+/* Reads the two counters and zeroes them. */
+static hv_status read_counts(hv_cl *cl, cl_mem cnt, uint32_t out[2])
+{
+    hv_cl_read(cl, cnt, 0, 2 * sizeof(uint32_t), out);
+    hv_cl_zero(cl, cnt, 2 * sizeof(uint32_t));
+    return hv_cl_check(cl);
+}
+
+/* Sum of the ngroups partials of stride nsum at the slot j (read beforehand). */
+static double sum_parts(const double *p, size_t ngroups, int nsum, int j)
+{
+    double s = 0;
+    for (size_t g = 0; g < ngroups; g++)
+        s += p[g * nsum + j];
+    return s;
+}
+
+/* The Poisson restart guard of distance_heat.c (idle since the symmetric
+ * preconditioner), on the host: rhs and u come from the device, u goes back. */
+static hv_status poisson_restarts(dist_cl_work *k, const hv_grid *g, const int32_t *region,
+                                  const hv_distance_opts *o, double *rel, hv_distance_stats *S)
+{
+    const size_t n = hv_grid_count(g), bytes = n * sizeof(double);
+    double *rhs = hv_malloc(bytes), *u = hv_malloc(bytes), *Au = hv_malloc(bytes),
+           *r = hv_malloc(bytes);
+    hv_status st = HV_OK;
+    if (!rhs || !u || !Au || !r) {
+        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for the Poisson restarts");
+        goto out;
+    }
+    hv_cl_read(k->cl, k->u2, 0, bytes, rhs);
+    hv_cl_read(k->cl, k->u, 0, bytes, u);
+    if ((st = hv_cl_check(k->cl)))
+        goto out;
+    double fn = 0;
+    for (size_t c = 0; c < n; c++)
+        fn += rhs[c] * rhs[c];
+    fn = sqrt(fn);
+    for (int rs = 0; *rel > o->poisson_tol && rs < 30; rs++) {
+        hv_apply_helmholtz_d(g->dim, g->n, g->h, g->solid, 0.0, 1.0, u, Au);
+        double rr = 0;
+        for (size_t c = 0; c < n; c++) {
+            r[c] = region[c] >= 0 ? rhs[c] - Au[c] : 0.0;
+            rr += r[c] * r[c];
+        }
+        *rel = fn > 0 ? sqrt(rr) / fn : 0;
+        if (*rel <= o->poisson_tol)
+            break;
+        hv_solve_info pinfo;
+        if ((st = hv_solver_solve_d(k->sv[0], r, Au, &pinfo)))
+            goto out;
+        for (size_t c = 0; c < n; c++)
+            u[c] += Au[c];
+        S->poisson_iterations += pinfo.iterations;
+        S->poisson_restarts++;
+    }
+    hv_cl_write(k->cl, k->u, 0, bytes, u);
+    st = hv_cl_finish(k->cl);
+out:
+    hv_free(rhs);
+    hv_free(u);
+    hv_free(Au);
+    hv_free(r);
+    return st;
+}
+
+hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32_t *region,
+                              size_t nregions, const double *w0, const float *ref,
+                              hv_distance_stats *S, int *handled)
+{
+    dist_cl_work k;
+    memset(&k, 0, sizeof k);
+    *handled = 0;
+    const char *env = getenv("HEATVOX_DISTANCE_CL");
+    if (env && !strcmp(env, "0")) /* tests: the host path with the same backend */
+        return HV_OK;
+    hv_status st = hv_cl_open(&k.cl);
+    if (st)
+        return st;
+    hv_cl *cl = k.cl;
+    if (!cl->fp64) {
+        hv_cl_close(&k.cl);
+        return HV_OK;
+    }
+    *handled = 1;
+    const int dim = g->dim;
+    const cl_int N[4] = {g->n[0], g->n[1], dim == 3 ? g->n[2] : 1, dim};
+    const size_t count = hv_grid_count(g), dbytes = count * sizeof(double);
+    size_t nface[3] = {0, 0, 0};
+    size_t g1[1], l1[1], g2[2], l2[2], gc[2], lc[2], gr, lr;
+    hv_cl_range1(count, g1, l1);
+    hv_cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
+    const size_t ngroups = hv_cl_range_red(count, &gr, &lr);
+    uint32_t cnt[2];
+    double t0 = hv_now();
+
+    /* Buffers; faces closed (0) or open (NaN). */
+    for (int a = 0; a < dim; a++)
+        nface[a] = (size_t)(N[0] + (a == 0)) * (N[1] + (a == 1)) * (N[2] + (a == 2));
+    if ((st = hv_cl_alloc(cl, count * sizeof(int32_t), region, &k.region)) ||
+        (st = hv_cl_alloc(cl, dbytes, w0, &k.w)) || (st = hv_cl_alloc(cl, dbytes, NULL, &k.u)) ||
+        (st = hv_cl_alloc(cl, dbytes, NULL, &k.u2)) || (st = hv_cl_alloc(cl, count, NULL, &k.ok)) ||
+        (st = hv_cl_alloc(cl, count, NULL, &k.inside)) ||
+        (st = hv_cl_alloc(cl, 2 * sizeof(uint32_t), NULL, &k.cnt)) ||
+        (st = hv_cl_alloc(cl, 3 * ngroups * sizeof(double), NULL, &k.part)))
+        goto done;
+    if (!(k.hpart = malloc(3 * ngroups * sizeof *k.hpart))) {
+        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for partial sums");
+        goto done;
+    }
+    for (int a = 0; a < dim; a++)
+        if ((st = hv_cl_alloc(cl, nface[a] * sizeof(float), NULL, &k.X[a])))
+            goto done;
+    hv_cl_zero(cl, k.inside, count);
+    hv_cl_zero(cl, k.cnt, 2 * sizeof(uint32_t));
+    for (int a = 0; a < dim; a++) {
+        hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2, l2);
+        hv_cl_args(cl, HV_K_DIST_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
+        hv_cl_run(cl, HV_K_DIST_FACES, 2, g2, l2);
+    }
+    if ((st = read_counts(cl, k.cnt, cnt)))
+        goto done;
+    size_t left = cnt[0];
+    S->t_splat += hv_now() - t0;
+
+    /* Stages, as distance_heat.c. */
+    const double tau[2] = {1.0 / o->t_scale, 1.0 / (o->t_scale * T_RATIO)};
+    int idle = 0;
+    for (int l = 0; l < o->max_stages && left > 0; l++) {
+        t0 = hv_now();
+        hv_solve_info info[2];
+        if ((st = hv_cl_finish(cl)))
+            goto done;
+        for (int q = 0; q < 2; q++) {
+            if (!k.sv[q] &&
+                (st = make_solver(&k.sv[q], g, 1.0, S->t * (q ? T_RATIO : 1), o->diffuse_tol)))
+                goto done;
+            if ((st = hv_cl_solver_solve_d(k.sv[q], k.w, q ? k.u2 : k.u, &info[q])))
+                goto done;
+            S->diffuse_iterations += info[q].iterations;
+            S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
+        }
+        S->backend = info[0].backend;
+        S->t_diffuse += hv_now() - t0;
+        t0 = hv_now();
+        /* ||w||, then the trust bounds */
+        hv_cl_args(cl, HV_K_FINE_DOT, "mmlm", k.w, k.w, count, k.part);
+        hv_cl_run(cl, HV_K_FINE_DOT, 1, &gr, &lr);
+        hv_cl_read(cl, k.part, 0, ngroups * sizeof(double), k.hpart);
+        if ((st = hv_cl_check(cl)))
+            goto done;
+        const double wn = sqrt(sum_parts(k.hpart, ngroups, 1, 0));
+        const double lthr = log(RELIABLE * fmax(info[0].relres, 1e-14) * wn * sqrt(o->t_scale));
+        const double lthr2 =
+            log(RELIABLE * fmax(info[1].relres, 1e-14) * wn * sqrt(o->t_scale * T_RATIO));
+        hv_cl_args(cl, HV_K_DIST_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok, lthr, lthr2);
+        hv_cl_run(cl, HV_K_DIST_LOG, 1, g1, l1);
+        for (int a = 0; a < dim; a++) {
+            hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
+                         l2);
+            hv_cl_args(cl, HV_K_DIST_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a], k.cnt);
+            hv_cl_run(cl, HV_K_DIST_ASSIGN, 2, g2, l2);
+        }
+        if ((st = read_counts(cl, k.cnt, cnt)))
+            goto done;
+        left = cnt[0];
+        const size_t got = cnt[1];
+        if (l < 8)
+            S->faces_per_stage[l] = got;
+        S->stages = l + 1;
+        idle = got ? 0 : idle + 1;
+        if (idle == 2) /* two stages without a new face: the rest is out of reach */
+            break;
+        if (left) {
+            /* next_front: the front's level of psi and ln u, then the cell pass */
+            hv_cl_args(cl, HV_K_DIST_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u, k.ok, k.part);
+            hv_cl_run(cl, HV_K_DIST_FRONT_SUMS, 1, &gr, &lr);
+            hv_cl_read(cl, k.part, 0, 3 * ngroups * sizeof(double), k.hpart);
+            if ((st = hv_cl_check(cl)))
+                goto done;
+            const double sw = sum_parts(k.hpart, ngroups, 3, 2);
+            if (!(sw > 0))
+                break;
+            const double psi0 = sum_parts(k.hpart, ngroups, 3, 0) / sw;
+            const double lu0 = sum_parts(k.hpart, ngroups, 3, 1) / sw;
+            const double axis[3] = {1, 0, 0};
+            const double step = (lu0 - lthr - FRONT_MARGIN) / hv_dist_lattice_kappa(axis, dim, tau[0]);
+            if (!(step >= 2))
+                break;
+            hv_cl_args(cl, HV_K_DIST_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside, k.w, psi0, step,
+                       tau[0], tau[1], FRONT_BAND, k.cnt);
+            hv_cl_run(cl, HV_K_DIST_FRONT, 2, gc, lc);
+            if ((st = read_counts(cl, k.cnt, cnt)))
+                goto done;
+            if (!cnt[0])
+                break;
+        }
+        S->t_normalize += hv_now() - t0;
+    }
+    S->dead_faces = left;
+
+    /* Poisson: -Lap phi = -div X (unassigned faces count 0), rhs in u2. */
+    t0 = hv_now();
+    hv_solver_destroy(&k.sv[0]);
+    hv_solver_destroy(&k.sv[1]);
+    hv_cl_args(cl, HV_K_DIST_DIV, "Immmmam", N, k.region, k.X[0], k.X[1], dim == 3 ? k.X[2] : NULL,
+               1.0 / g->h, k.u2);
+    hv_cl_run(cl, HV_K_DIST_DIV, 2, gc, lc);
+    if ((st = hv_cl_finish(cl)) || (st = make_solver(&k.sv[0], g, 0.0, 1.0, o->poisson_tol)))
+        goto done;
+    hv_solve_info pinfo;
+    if ((st = hv_cl_solver_solve_d(k.sv[0], k.u2, k.u, &pinfo)))
+        goto done;
+    S->poisson_iterations = pinfo.iterations;
+    double rel = pinfo.relres;
+    if (rel > o->poisson_tol && (st = poisson_restarts(&k, g, region, o, &rel, S)))
+        goto done;
+    hv_solver_destroy(&k.sv[0]);
+    S->poisson_relres = rel;
+    S->t_poisson = hv_now() - t0;
+
+    /* Offsets: phi at the cells near the sources, fitted per region on the host
+     * in the host path's order, then the output. */
+    size_t m = 0;
+    for (size_t c = 0; c < count; c++)
+        m += ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0;
+    k.hidx = malloc((m ? m : 1) * sizeof *k.hidx);
+    k.hval = malloc((m ? m : 1) * sizeof *k.hval);
+    k.num = calloc(2 * nregions + 1, sizeof *k.num);
+    if (!k.hidx || !k.hval || !k.num) {
+        st = hv_error(HV_ERR_NOMEM, "distance: out of memory");
+        goto done;
+    }
+    m = 0;
+    for (size_t c = 0; c < count; c++)
+        if (ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0)
+            k.hidx[m++] = (uint32_t)c;
+    if (m) {
+        if ((st = hv_cl_alloc(cl, m * sizeof(uint32_t), k.hidx, &k.idx)) ||
+            (st = hv_cl_alloc(cl, m * sizeof(double), NULL, &k.gath)))
+            goto done;
+        size_t gg[1], lg[1];
+        hv_cl_range1(m, gg, lg);
+        hv_cl_args(cl, HV_K_DIST_GATHER, "mmml", k.u, k.idx, k.gath, m);
+        hv_cl_run(cl, HV_K_DIST_GATHER, 1, gg, lg);
+        hv_cl_read(cl, k.gath, 0, m * sizeof(double), k.hval);
+        if ((st = hv_cl_check(cl)))
+            goto done;
+    }
+    for (size_t q = 0; q < m; q++) {
+        const size_t c = k.hidx[q];
+        const double wt = ref[c] >= 1.5 * g->h ? 1.0 : 1e-3;
+        k.num[2 * region[c]] += wt * (k.hval[q] - ref[c]);
+        k.num[2 * region[c] + 1] += wt;
+    }
+    for (size_t r = 0; r < nregions; r++)
+        k.num[r] = k.num[2 * r] / k.num[2 * r + 1];
+    if ((st = hv_cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k.num, &k.off)) ||
+        (st = hv_cl_alloc(cl, count * sizeof(float), NULL, &k.out)))
+        goto done;
+    hv_cl_args(cl, HV_K_DIST_OUTPUT, "lmmmffm", count, k.region, k.u, k.off, (double)o->solid_value,
+               (double)o->unreachable, k.out);
+    hv_cl_run(cl, HV_K_DIST_OUTPUT, 1, g1, l1);
+    hv_cl_read(cl, k.out, 0, count * sizeof(float), g->v);
+    st = hv_cl_check(cl);
+done:
+    work_free(&k);
+    return st;
+}

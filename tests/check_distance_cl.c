@@ -1,0 +1,207 @@
+/*
+ * The heat-method distance with backend opencl (its stages on the device,
+ * src/heat/distance_cl.c) against the host path with the same backend
+ * (HEATVOX_DISTANCE_CL=0): same field to 1e-4 voxel, same stage counts (and
+ * within a voxel of backend mg, whose residuals move the trust bounds), on 2D and 3D grids of odd sizes with
+ * obstacles, several sources and a sealed region without a source; and the
+ * host fallback on devices without fp64. Without an OpenCL platform the suite
+ * only notes it.
+ */
+#include "heatvox/heatvox.h"
+#include "solve/cl_core.h"
+#include "testlib.h"
+
+#include <check.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A grid of n cells with a wall (a gap in it), a block, and a sealed box
+ * (solid shell) without a source; points and one voxel as sources. */
+static int no_mask;
+
+static hv_grid *scene(int dim, const int n[3])
+{
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, dim, n, 1.0 / n[0], NULL));
+    if (no_mask)
+        return g;
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    const int nz = dim == 3 ? n[2] : 1;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                size_t c = i + (size_t)n[0] * (j + (size_t)n[1] * k);
+                int wall = i == n[0] / 2 && !(j > n[1] / 2 && j < n[1] / 2 + 4);
+                int block = i > n[0] / 5 && i < n[0] / 3 && j > 2 * n[1] / 3 && j < 4 * n[1] / 5;
+                int bi = i - 3 * n[0] / 4, bj = j - n[1] / 6; /* sealed box, 5^dim shell */
+                int bk = dim == 3 ? k - nz / 2 : 0;
+                int shell = abs(bi) <= 2 && abs(bj) <= 2 && abs(bk) <= 2 &&
+                            (abs(bi) == 2 || abs(bj) == 2 || (dim == 3 && abs(bk) == 2));
+                g->solid[c] = (uint8_t)(wall || block || shell);
+            }
+    return g;
+}
+
+typedef struct {
+    float *v;
+    hv_distance_stats st;
+} result;
+
+static result run(int dim, const int n[3], hv_backend b)
+{
+    hv_grid *g = scene(dim, n);
+    const double L[3] = {n[0] * g->h, n[1] * g->h, 0};
+    double pts[6] = {0.13 * L[0], 0.21 * L[1], 0.37, 0.31 * L[0], 0.77 * L[1], 0.55};
+    int vox[3] = {n[0] / 4, n[1] - 3, dim == 3 ? 1 : 0};
+    hv_distance_sources src = {0};
+    src.points = pts;
+    src.npoints = 2;
+    src.voxels = vox;
+    src.nvoxels = 1;
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.backend = b;
+    result r;
+    TL_ASSERT_OK(hv_distance_compute(g, &src, &o, &r.st));
+    size_t count = hv_grid_count(g);
+    r.v = malloc(count * sizeof *r.v);
+    memcpy(r.v, g->v, count * sizeof *r.v);
+    hv_grid_destroy(&g);
+    return r;
+}
+
+/* opencl's device path against its host path (HEATVOX_DISTANCE_CL=0): max difference in voxels over finite cells, infinities
+ * in the same places, the same stages and face counts. */
+static void compare(int dim, const int n[3])
+{
+    setenv("HEATVOX_DISTANCE_CL", "0", 1);
+    result m = run(dim, n, HV_BACKEND_OPENCL);
+    unsetenv("HEATVOX_DISTANCE_CL");
+    result c = run(dim, n, HV_BACKEND_OPENCL);
+    size_t count = (size_t)n[0] * n[1] * (dim == 3 ? n[2] : 1), finite = 0, inf = 0;
+    double dmax = 0, vmax = 0;
+    for (size_t i = 0; i < count; i++) {
+        ck_assert_msg(isinf(m.v[i]) == isinf(c.v[i]), "cell %zu: mg %g, opencl %g", i, m.v[i], c.v[i]);
+        if (isinf(m.v[i])) {
+            inf++;
+            continue;
+        }
+        finite++;
+        dmax = fmax(dmax, fabs((double)m.v[i] - c.v[i]) * n[0]);
+        vmax = fmax(vmax, m.v[i] * n[0]);
+    }
+    printf("  %dD %dx%dx%d: %zu finite cells (max %.1f voxels), %zu infinite; max |device - host path| "
+           "%.2e voxel; stages %d/%d, dead faces %zu/%zu, diffusion %d/%d and Poisson %d/%d "
+           "iterations, Poisson restarts %d/%d; %.2f s host, %.2f s device\n",
+           dim, n[0], n[1], dim == 3 ? n[2] : 1, finite, vmax, inf, dmax, m.st.stages, c.st.stages,
+           m.st.dead_faces, c.st.dead_faces, m.st.diffuse_iterations, c.st.diffuse_iterations,
+           m.st.poisson_iterations, c.st.poisson_iterations, m.st.poisson_restarts,
+           c.st.poisson_restarts, m.st.t_total, c.st.t_total);
+    ck_assert(finite > count / 2 && (inf > 0 || no_mask) && vmax > n[0] / 2);
+    ck_assert_int_eq(c.st.backend, HV_BACKEND_OPENCL);
+    ck_assert_int_eq(m.st.stages, c.st.stages);
+    ck_assert_uint_eq(m.st.dead_faces, c.st.dead_faces);
+    ck_assert_uint_eq(m.st.regions, c.st.regions);
+    for (int l = 0; l < 8; l++)
+        ck_assert_uint_eq(m.st.faces_per_stage[l], c.st.faces_per_stage[l]);
+    ck_assert_int_eq(m.st.poisson_restarts, c.st.poisson_restarts);
+    ck_assert_msg(dmax <= 1e-4, "device and host paths differ by %g voxel", dmax);
+    /* mg solves to the same tolerances but its own residuals move the trust
+     * bounds: a fraction of a voxel apart */
+    result g = run(dim, n, HV_BACKEND_MG);
+    double gmax = 0, gmean = 0;
+    for (size_t i = 0; i < count; i++)
+        if (!isinf(g.v[i])) {
+            gmax = fmax(gmax, fabs((double)g.v[i] - c.v[i]) * n[0]);
+            gmean += fabs((double)g.v[i] - c.v[i]) * n[0] / (double)finite;
+        }
+    printf("    against mg: max %.3f, mean %.4f voxel\n", gmax, gmean);
+    ck_assert(gmax < 1.0);
+    free(g.v);
+    free(m.v);
+    free(c.v);
+}
+
+START_TEST(opencl_distance_should_match_mg_in_2d_with_obstacles)
+{
+    const int n[3] = {97, 83, 1};
+    compare(2, n);
+}
+END_TEST
+
+START_TEST(opencl_distance_should_match_mg_in_3d_with_obstacles)
+{
+    const int n[3] = {37, 33, 29};
+    compare(3, n);
+}
+END_TEST
+
+START_TEST(opencl_distance_should_match_mg_over_many_stages)
+{
+    /* a long thin 2D strip: the march needs many stages */
+    const int n[3] = {201, 23, 1};
+    compare(2, n);
+}
+END_TEST
+
+START_TEST(opencl_distance_should_match_on_a_grid_without_mask)
+{
+    const int n[3] = {31, 27, 25};
+    no_mask = 1;
+    compare(3, n);
+    no_mask = 0;
+}
+END_TEST
+
+START_TEST(opencl_distance_without_fp64_should_fall_back_to_the_host)
+{
+    setenv("HEATVOX_OPENCL_FP64", "0", 1);
+    hv_cl *cl = NULL;
+    TL_ASSERT_OK(hv_cl_open(&cl));
+    int fp64 = cl->fp64;
+    hv_cl_close(&cl);
+    ck_assert_int_eq(fp64, 0);
+    const int n[3] = {41, 39, 1};
+    result m = run(2, n, HV_BACKEND_MG), c = run(2, n, HV_BACKEND_OPENCL);
+    unsetenv("HEATVOX_OPENCL_FP64");
+    double dmax = 0;
+    for (size_t i = 0; i < (size_t)n[0] * n[1]; i++)
+        if (!isinf(m.v[i]))
+            dmax = fmax(dmax, fabs((double)m.v[i] - c.v[i]) * n[0]);
+    printf("  float device (host path): max |opencl - mg| %.2e voxel\n", dmax);
+    ck_assert_int_eq(c.st.backend, HV_BACKEND_OPENCL);
+    ck_assert_msg(dmax < 0.25, "differ by %g voxel", dmax);
+    free(m.v);
+    free(c.v);
+}
+END_TEST
+
+int main(int argc, char **argv)
+{
+    (void)argc;
+    if (!getenv("POCL_CACHE_DIR")) {
+        char dir[4096];
+        snprintf(dir, sizeof dir, "%s", argv[0]);
+        char *slash = strrchr(dir, '/');
+        snprintf(slash ? slash + 1 : dir, sizeof dir - (size_t)(slash ? slash + 1 - dir : 0),
+                 "../pocl-cache");
+        setenv("POCL_CACHE_DIR", dir, 1);
+    }
+    Suite *su = suite_create("distance_cl");
+    TCase *tc = tcase_create("distance_cl");
+    tcase_set_timeout(tc, 600);
+    if (hv_opencl_probe(NULL) != HV_OK) {
+        printf("note: no usable OpenCL device (%s); skipping\n", hv_last_error());
+        suite_add_tcase(su, tc);
+        return tl_run(su);
+    }
+    tcase_add_test(tc, opencl_distance_should_match_mg_in_2d_with_obstacles);
+    tcase_add_test(tc, opencl_distance_should_match_mg_in_3d_with_obstacles);
+    tcase_add_test(tc, opencl_distance_should_match_mg_over_many_stages);
+    tcase_add_test(tc, opencl_distance_should_match_on_a_grid_without_mask);
+    tcase_add_test(tc, opencl_distance_without_fp64_should_fall_back_to_the_host);
+    suite_add_tcase(su, tc);
+    return tl_run(su);
+}
