@@ -890,7 +890,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     struct band band;
     memset(&band, 0, sizeof band);
     uint8_t *need = NULL;
+    /* CPU backends only: an explicit fftw or opencl backend gets its own solver. */
     if (!e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
+        (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG) &&
         (need = malloc(e->count))) {
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < e->count; c++)
