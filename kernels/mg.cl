@@ -2,7 +2,8 @@
  * Multigrid level kernels (float storage), the device twins of the CPU code in
  * src/solve/mg.c: operator apply and residual, red-black Gauss-Seidel by
  * colour, the Jacobi/Chebyshev update (fused with its residual), restriction
- * (mean of children, fused with the residual), cell-centred linear
+ * (mean of children, fused with the residual; or P^T for the symmetric cycle
+ * of PCG), cell-centred linear
  * prolongation and a one-work-group CG for the bottom level.
  * Arguments a, w0, w1 and w2 are NULL on plain levels (N.w != 0). The diagonal
  * comes from the stencil itself (the CPU stores its inverse on weighted
@@ -141,6 +142,55 @@ __kernel void mg_restrict(int4 N, __global const float *src, int4 NC, int4 co,
             w1 = 0.25f;                                                                            \
         }                                                                                          \
     }
+
+/* Weight of coarse index I in the prolongation stencil of fine index i along
+ * one axis (mg.c prolong_axis_weight). */
+static float hv_prolong_axis_weight(int coarsen, int nc, int i, int I)
+{
+    HV_PROLONG_AXIS(coarsen, nc, i, I0, I1, w1);
+    return (I0 == I ? 1.0f - w1 : 0.0f) + (I1 == I ? w1 : 0.0f);
+}
+
+/* fc = P^T (pn .* r) / co.w, the restriction of the symmetric cycle (PCG), as
+ * mg.c's mg_restrict_transpose: each coarse cell gathers the fine cells whose
+ * interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes), in the
+ * CPU's order. ac is the coarse cell weights (NULL when the coarse level is
+ * plain; empty coarse cells get 0), pn the fine renormalization (NULL = 1). */
+__kernel void mg_restrict_transpose(int4 N, __global const float *r, __global const float *pn,
+                                    int4 NC, __global const float *ac, int4 co,
+                                    __global float *fc)
+{
+    HV_CELL_OR_RETURN(NC, I, J, K, cc);
+    if (ac) {
+        if (ac[cc] == 0.0f) {
+            fc[cc] = 0.0f;
+            return;
+        }
+    }
+    const int i0 = co.x ? max(2 * I - 1, 0) : I, i1 = co.x ? min(2 * I + 2, N.x - 1) : I;
+    const int j0 = co.y ? max(2 * J - 1, 0) : J, j1 = co.y ? min(2 * J + 2, N.y - 1) : J;
+    const int k0 = co.z ? max(2 * K - 1, 0) : K, k1 = co.z ? min(2 * K + 2, N.z - 1) : K;
+    float s = 0.0f;
+    for (int k = k0; k <= k1; k++) {
+        const float wk = hv_prolong_axis_weight(co.z, NC.z, k, K);
+        if (wk == 0.0f)
+            continue;
+        for (int j = j0; j <= j1; j++) {
+            const float wj = hv_prolong_axis_weight(co.y, NC.y, j, J);
+            if (wj == 0.0f)
+                continue;
+            const size_t row = (size_t)N.x * ((size_t)j + (size_t)N.y * (size_t)k);
+            for (int i = i0; i <= i1; i++) {
+                const float w = wk * wj * hv_prolong_axis_weight(co.x, NC.x, i, I);
+                if (w == 0.0f)
+                    continue;
+                const size_t f = row + (size_t)i;
+                s += w * (pn ? pn[f] : 1.0f) * r[f];
+            }
+        }
+    }
+    fc[cc] = s * (1.0f / (float)co.w);
+}
 
 /* One of the 8 coarse terms: weight W at coarse (I, J, K), left out where the
  * weighted coarse level is empty (the CPU also skips W == 0, which adds 0). */

@@ -106,7 +106,11 @@ static void compare(int dim, const int n[3])
     ck_assert_uint_eq(m.st.regions, c.st.regions);
     for (int l = 0; l < 8; l++)
         ck_assert_uint_eq(m.st.faces_per_stage[l], c.st.faces_per_stage[l]);
-    ck_assert_int_eq(m.st.poisson_restarts, c.st.poisson_restarts);
+    /* the symmetric cycle keeps PCG converging: the Poisson solve needs no
+     * restart of the defect-correction loop (it took one in 2D with
+     * mean-of-children restriction) */
+    ck_assert_int_eq(m.st.poisson_restarts, 0);
+    ck_assert_int_eq(c.st.poisson_restarts, 0);
     ck_assert_msg(dmax <= 1e-4, "device and host paths differ by %g voxel", dmax);
     /* mg solves to the same tolerances but its own residuals move the trust
      * bounds: a fraction of a voxel apart */
@@ -117,7 +121,8 @@ static void compare(int dim, const int n[3])
             gmax = fmax(gmax, fabs((double)g.v[i] - c.v[i]) * n[0]);
             gmean += fabs((double)g.v[i] - c.v[i]) * n[0] / (double)finite;
         }
-    printf("    against mg: max %.3f, mean %.4f voxel\n", gmax, gmean);
+    printf("    against mg: max %.3f, mean %.4f voxel; mg Poisson %d iterations, %d restarts\n", gmax,
+           gmean, g.st.poisson_iterations, g.st.poisson_restarts);
     ck_assert(gmax < 1.0);
     free(g.v);
     free(m.v);

@@ -25,6 +25,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_MG_JACOBI] = "mg_jacobi",
     [HV_K_MG_RESTRICT_RESIDUAL] = "mg_restrict_residual",
     [HV_K_MG_RESTRICT] = "mg_restrict",
+    [HV_K_MG_RESTRICT_TRANSPOSE] = "mg_restrict_transpose",
     [HV_K_MG_PROLONG] = "mg_prolong",
     [HV_K_MG_PROLONG_W] = "mg_prolong_w",
     [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",

@@ -43,6 +43,7 @@ typedef enum hv_cl_kernel {
     HV_K_MG_JACOBI,
     HV_K_MG_RESTRICT_RESIDUAL,
     HV_K_MG_RESTRICT,
+    HV_K_MG_RESTRICT_TRANSPOSE,
     HV_K_MG_PROLONG,
     HV_K_MG_PROLONG_W,
     HV_K_MG_PROLONG_X2,

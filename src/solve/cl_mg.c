@@ -49,6 +49,24 @@ static hv_status upload_level(hv_clmg *m, const mg_hierarchy *H, int l)
     return HV_OK;
 }
 
+/* The symmetric cycle's residual vector and prolongation renormalization on
+ * level l (not the bottom). */
+static hv_status upload_sym(hv_clmg *m, const mg_hierarchy *H, int l)
+{
+    const mg_level *F = &H->lv[l], *C = &H->lv[l + 1];
+    hv_clmg_level *L = &m->lv[l];
+    hv_status st = hv_cl_alloc(m->cl, F->count * sizeof(float), NULL, &L->r);
+    if (st || C->plain)
+        return st;
+    float *pn = hv_malloc(F->count * sizeof(float));
+    if (!pn)
+        return hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for level %d weights", l);
+    mg_prolong_norm(F, C, pn);
+    st = hv_cl_alloc(m->cl, F->count * sizeof(float), pn, &L->pn); /* copies pn */
+    hv_free(pn);
+    return st;
+}
+
 static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
 {
     hv_cl *cl = m->cl;
@@ -87,7 +105,7 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
 }
 
 hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
-                         int pre, int post)
+                         int pre, int post, int sym)
 {
     memset(m, 0, sizeof *m);
     m->cl = cl;
@@ -101,6 +119,9 @@ hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smooth
         m->nlev = l + 1;
         st = upload_level(m, H, l);
     }
+    for (int l = 0; sym && l + 1 < m->nlev && !st; l++)
+        st = upload_sym(m, H, l);
+    m->sym = sym && !st;
     if (!st)
         st = upload_bottom(m, H);
     if (!st)
@@ -121,6 +142,8 @@ void hv_clmg_destroy(hv_clmg *m)
         hv_cl_free(&L->u[1]);
         hv_cl_free(&L->f);
         hv_cl_free(&L->d);
+        hv_cl_free(&L->r);
+        hv_cl_free(&L->pn);
     }
     hv_cl_free(&m->bregion);
     hv_cl_free(&m->brinv);
@@ -217,6 +240,16 @@ void hv_clmg_restrict_residual(hv_clmg *m, int l)
     hv_cl_run(m->cl, HV_K_MG_RESTRICT_RESIDUAL, 2, C->g, C->l);
 }
 
+void hv_clmg_restrict_transpose(hv_clmg *m, int l)
+{
+    hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
+    cl_int co[4];
+    coarsen_flags(F, co);
+    hv_cl_args(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, "ImmImIm", F->N, F->r, F->pn, C->N, C->a, co,
+               C->f);
+    hv_cl_run(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, 2, C->g, C->l);
+}
+
 void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst)
 {
     hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
@@ -271,7 +304,12 @@ void hv_clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
     if (!guess)
         hv_cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
     hv_clmg_smooth(m, l, m->pre, 0);
-    hv_clmg_restrict_residual(m, l);
+    if (sym && m->sym) {
+        hv_clmg_residual(m, l, L->u[L->cur], L->f, L->r);
+        hv_clmg_restrict_transpose(m, l);
+    } else {
+        hv_clmg_restrict_residual(m, l);
+    }
     hv_clmg_vcycle(m, l + 1, 0, sym);
     hv_clmg_prolong(m, l);
     hv_clmg_smooth(m, l, m->post, sym);

@@ -348,6 +348,18 @@ static float prolong_weight_sum(const mg_level *F, const mg_level *C, int i, int
     return ws;
 }
 
+void mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn)
+{
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
+    for (int k = 0; k < F->n[2]; k++)
+        for (int j = 0; j < F->n[1]; j++)
+            for (int i = 0; i < F->n[0]; i++) {
+                size_t fc = (size_t)i + F->sy * j + F->sz * k;
+                float ws = (F->plain || F->a[fc] != 0.0f) ? prolong_weight_sum(F, C, i, j, k) : 0;
+                pn[fc] = ws > 0 ? 1.0f / ws : 0.0f;
+            }
+}
+
 /* Weight of coarse index I in the prolongation stencil of fine index i (one axis). */
 static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
 {
@@ -362,14 +374,12 @@ static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
  * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
  * corridors stalled near 3e-2). Gathers, for each coarse cell, the fine cells
  * whose interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes). */
-static void restrict_transpose(const mg_state *m, int l)
+void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
+                           const float *r, float *fcoarse)
 {
-    const mg_level *F = &m->lv[l];
-    mg_level *C = (mg_level *)&m->lv[l + 1];
     const int *co = F->coarsen;
-    const float *pn = m->pnorm[l];
     int nchild = 1;
-    for (int b = 0; b < m->dim; b++)
+    for (int b = 0; b < dim; b++)
         nchild *= co[b] ? 2 : 1;
     const float scale = 1.0f / (float)nchild;
 #pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
@@ -378,7 +388,7 @@ static void restrict_transpose(const mg_state *m, int l)
             for (int I = 0; I < C->n[0]; I++) {
                 size_t cc = (size_t)I + C->sy * J + C->sz * K;
                 if (!C->plain && C->a[cc] == 0.0f) {
-                    C->f[cc] = 0;
+                    fcoarse[cc] = 0;
                     continue;
                 }
                 int lo[3], hi[3], CI[3] = {I, J, K};
@@ -404,12 +414,18 @@ static void restrict_transpose(const mg_state *m, int l)
                             if (w == 0)
                                 continue;
                             size_t fc = (size_t)i + F->sy * j + F->sz * k;
-                            s += w * (pn ? pn[fc] : 1.0f) * F->r[fc];
+                            s += w * (pn ? pn[fc] : 1.0f) * r[fc];
                         }
                     }
                 }
-                C->f[cc] = s * scale;
+                fcoarse[cc] = s * scale;
             }
+}
+
+static void restrict_transpose(const mg_state *m, int l)
+{
+    mg_restrict_transpose(&m->lv[l], &m->lv[l + 1], m->dim, m->pnorm[l], m->lv[l].r,
+                          m->lv[l + 1].f);
 }
 
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
@@ -695,14 +711,7 @@ static hv_status mg_create(void **state, const hv_setup *s)
             st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
             goto fail;
         }
-#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
-        for (int k = 0; k < F->n[2]; k++)
-            for (int j = 0; j < F->n[1]; j++)
-                for (int i = 0; i < F->n[0]; i++) {
-                    size_t fc = (size_t)i + F->sy * j + F->sz * k;
-                    float ws = (F->plain || F->a[fc] != 0.0f) ? prolong_weight_sum(F, C, i, j, k) : 0;
-                    pn[fc] = ws > 0 ? 1.0f / ws : 0.0f;
-                }
+        mg_prolong_norm(F, C, pn);
     }
     /* Bottom: CG work. */
     mg_level *L = &m->lv[m->nlev - 1];

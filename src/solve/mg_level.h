@@ -67,6 +67,17 @@ double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int
 /* y = A x in double on a level. */
 void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
 
+/* The symmetric restriction of the PCG preconditioner (mg.c; the OpenCL
+ * backend uploads pn and runs the same gather in kernels/mg.cl).
+ * mg_prolong_norm: pn[fine cell] = 1 / (sum of the prolongation weights that
+ * reach non-empty cells of the weighted coarse level C), 0 on solid fine cells
+ * and where no weight reaches.
+ * mg_restrict_transpose: fc = P^T (pn .* r) / 2^(coarsened axes), 0 on empty
+ * coarse cells; pn is NULL when C is plain (weights then sum to one). */
+void mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn);
+void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
+                           const float *r, float *fc);
+
 /* Index of the axis-a face (i,j,k) (the low face of cell (i,j,k)). */
 static inline size_t mg_face_index(const mg_level *L, int a, int i, int j, int k)
 {

@@ -78,7 +78,8 @@ static hv_status ocl_create(void **state, const hv_setup *s)
     hv_cl *cl = o->cl;
     o->dev64 = cl->fp64;
     if ((st = mg_hierarchy_build(&o->H, s, s->o.smoother == HV_SMOOTH_CHEBYSHEV)) ||
-        (st = hv_clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth)))
+        (st = hv_clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth,
+                                 o->use_pcg)))
         goto fail;
     const size_t n = s->count;
     if (o->dev64) {
@@ -398,7 +399,7 @@ static hv_status solve_pcg(ocl_state *o, hv_solve_info *info, double fn)
         if (rel < 0.9 * best) {
             best = rel;
             since_best = 0;
-        } else if (++since_best >= 10) {
+        } else if (++since_best >= 50) { /* as mg.c: the symmetric cycle keeps CG converging */
             info->reason = HV_STOP_STAGNATED;
             break;
         }
