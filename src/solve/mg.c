@@ -283,7 +283,7 @@ static void smooth(const mg_state *m, mg_level *L, int steps, int reverse)
 }
 
 /* f_C = mean of the children of r_F (children beyond an odd edge count as 0). */
-static void restrict_residual(const mg_state *m, const mg_level *F, mg_level *C)
+static void restrict_field(const mg_state *m, const mg_level *F, const float *src, mg_level *C)
 {
     const int *co = F->coarsen;
     int nchild = 1;
@@ -302,9 +302,14 @@ static void restrict_residual(const mg_state *m, const mg_level *F, mg_level *C)
                 for (int k = k0; k <= k1; k++)
                     for (int j = j0; j <= j1; j++)
                         for (int i = i0; i <= i1; i++)
-                            s += F->r[(size_t)i + F->sy * j + F->sz * k];
+                            s += src[(size_t)i + F->sy * j + F->sz * k];
                 C->f[(size_t)I + C->sy * J + C->sz * K] = s * scale;
             }
+}
+
+static void restrict_residual(const mg_state *m, const mg_level *F, mg_level *C)
+{
+    restrict_field(m, F, F->r, C);
 }
 
 /* Per-axis prolongation stencil: fine index i takes 3/4 of coarse I = i/2 and
@@ -611,8 +616,7 @@ static void fmg(const mg_state *m)
 {
     for (int l = 0; l + 1 < m->nlev; l++) {
         mg_level *F = (mg_level *)&m->lv[l];
-        memcpy(F->r, F->f, F->count * sizeof(float));
-        restrict_residual(m, F, (mg_level *)&m->lv[l + 1]);
+        restrict_field(m, F, F->f, (mg_level *)&m->lv[l + 1]);
     }
     bottom_solve(m, (mg_level *)&m->lv[m->nlev - 1]);
     for (int l = m->nlev - 2; l >= 0; l--) {
@@ -767,39 +771,162 @@ static int stagnated(const hv_solve_info *info)
     return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
 }
 
-static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv_solve_info *info,
-                                     double fn)
+/* One row of the fused outer pass: xo = x + e (x == NULL: a zero x), and the
+ * cycle's next float right-hand side fo = f - A xo in double; returns the sum
+ * of squares of the residual. Neighbour values are formed on the fly from x and
+ * e, so xo may not alias x. */
+#define UPDATE_ROW_BODY(HASX)                                                                       \
+    do {                                                                                           \
+        const int nx = L->n[0];                                                                    \
+        const double *f_ = f + R.base;                           \
+        const float *e_ = e + R.base;                                                              \
+        double *xo_ = xo + R.base;                                                                 \
+        float *fo_ = fo + R.base;                                                                  \
+        const double cx = L->c[0], cy = L->c[1], cz = L->c[2];                                     \
+        const double wym = R.wym, wyp = R.wyp, wzm = R.wzm, wzp = R.wzp;                           \
+        const ptrdiff_t ym = R.ym, yp = R.yp, zm = R.zm, zp = R.zp;                                \
+        const double din = R.dyz + 2 * cx;                                                         \
+        double nn = 0;                                                                             \
+        for (int i = 0; i < nx; i++) {                                                             \
+            double v = XE(i);                                                                      \
+            double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                                \
+                       cz * (wzm * XE(i + zm) + wzp * XE(i + zp));                                 \
+            double d;                                                                              \
+            if (i > 0 && i < nx - 1) {                                                             \
+                s += cx * (XE(i - 1) + XE(i + 1));                                                 \
+                d = din;                                                                           \
+            } else {                                                                               \
+                d = R.dyz;                                                                         \
+                if (i > 0) { s += cx * XE(i - 1); d += cx; }                                       \
+                if (i < nx - 1) { s += cx * XE(i + 1); d += cx; }                                  \
+            }                                                                                      \
+            double r = f_[i] - (d * v - s);                                                        \
+            xo_[i] = v;                                                                            \
+            fo_[i] = (float)r;                                                                     \
+            nn += r * r;                                                                           \
+        }                                                                                          \
+        return nn;                                                                                 \
+    } while (0)
+
+static double update_row_x(const mg_level *L, plain_row R, const double *x, const float *e,
+                           const double *f, double *xo, float *fo)
+{
+    const double *x_ = x + R.base;
+#define XE(p) (x_[p] + (double)e_[p])
+    UPDATE_ROW_BODY(1);
+#undef XE
+}
+
+static double update_row_0(const mg_level *L, plain_row R, const double *x, const float *e,
+                           const double *f, double *xo, float *fo)
+{
+#define XE(p) ((double)e_[p])
+    (void)x;
+    UPDATE_ROW_BODY(0);
+#undef XE
+}
+
+/* Plain fine level, one pass: xo = x + e with e the cycle's correction (level
+ * 0's u), and level 0's f = f - A xo (double arithmetic, float storage).
+ * Returns ||f - A xo||. */
+static double update_residual(const mg_state *m, const double *x, const double *f, double *xo)
+{
+    const mg_level *L = &m->lv[0];
+    const float *e = L->u;
+    float *fo = L->f;
+    double nn = 0;
+#pragma omp parallel for collapse(2) reduction(+ : nn) schedule(static) if (L->count > MG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++) {
+            plain_row R = plain_row_at(m, L, j, k);
+            nn += x ? update_row_x(L, R, x, e, f, xo, fo) : update_row_0(L, R, x, e, f, xo, fo);
+        }
+    return sqrt(nn);
+}
+
+/* Level 0's f = (float) f, returning ||f|| (the residual of a zero guess). */
+static double load_rhs(const mg_state *m, const double *f)
+{
+    const mg_level *L = &m->lv[0];
+    double nn = 0;
+#pragma omp parallel for reduction(+ : nn) schedule(static) if (L->count > MG_PAR_MIN)
+    for (size_t c = 0; c < L->count; c++) {
+        L->f[c] = (float)f[c];
+        nn += f[c] * f[c];
+    }
+    return sqrt(nn);
+}
+
+/* Defect correction on a plain fine level. The iterate alternates between u
+ * and the work vector rd (the fused update reads one and writes the other);
+ * Poisson's mean, to which the residual is blind, is removed once at the end. */
+static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv_solve_info *info)
 {
     const hv_setup *s = m->s;
-    mg_level *L0 = &m->lv[0];
-    double rel = fine_residual(m, f, u) / fn;
+    const size_t n = s->count;
+    double *cur = u, *alt = m->rd;
+    int have_x = s->o.nonzero_guess;
+    double fn, rel;
+    hv_status st = HV_OK;
+    if (have_x) {
+        fn = hv_norm2(s, f);
+        rel = fn > 0 ? fine_residual(m, f, u) / fn : 0;
+    } else {
+        fn = load_rhs(m, f);
+        rel = fn > 0 ? 1.0 : 0.0;
+    }
+    if (fn == 0) {
+        memset(u, 0, n * sizeof *u);
+        hv_info_push(info, 0.0);
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
     hv_info_push(info, rel);
+    info->reason = HV_STOP_MAX_ITER;
     for (int it = 0; it < s->o.max_iter; it++) {
-        if (rel <= s->o.tol) {
-            info->reason = HV_STOP_CONVERGED;
-            return HV_OK;
-        }
+        if (rel <= s->o.tol)
+            break;
         if (it == 0 && !s->o.nonzero_guess)
             fmg(m);
         else
             vcycle(m, 0, 0, 0);
-#pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
-        for (size_t c = 0; c < L0->count; c++)
-            u[c] += L0->u[c];
-        if (m->alpha == 0)
-            hv_project_mean(s, u);
-        rel = fine_residual(m, f, u) / fn;
+        rel = update_residual(m, have_x ? cur : NULL, f, alt) / fn;
+        double *t = cur;
+        cur = alt;
+        alt = t;
+        have_x = 1;
         info->iterations = it + 1;
         hv_info_push(info, rel);
-        if (!isfinite(rel))
-            return hv_error(HV_ERR_NUMERIC, "multigrid diverged (residual %g)", rel);
+        if (!isfinite(rel)) {
+            st = hv_error(HV_ERR_NUMERIC, "multigrid diverged (residual %g)", rel);
+            break;
+        }
         if (stagnated(info) && rel > s->o.tol) {
             info->reason = HV_STOP_STAGNATED;
-            return HV_OK;
+            break;
         }
     }
-    info->reason = rel <= s->o.tol ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
-    return HV_OK;
+    if (rel <= s->o.tol && st == HV_OK)
+        info->reason = HV_STOP_CONVERGED;
+    if (!have_x) { /* converged before any cycle: the zero guess */
+        memset(u, 0, n * sizeof *u);
+        return st;
+    }
+    if (m->alpha == 0) {
+        double sum = 0;
+#pragma omp parallel for reduction(+ : sum) schedule(static) if (n > MG_PAR_MIN)
+        for (size_t c = 0; c < n; c++)
+            sum += cur[c];
+        double mean = sum / (double)n;
+#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
+        for (size_t c = 0; c < n; c++)
+            u[c] = cur[c] - mean;
+    } else if (cur != u) {
+#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
+        for (size_t c = 0; c < n; c++)
+            u[c] = cur[c];
+    }
+    return st;
 }
 
 /* z = M r: one symmetric V-cycle from zero on r (float), projected for Poisson. */
@@ -892,6 +1019,8 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
 {
     mg_state *m = state;
     const hv_setup *s = m->s;
+    if (!m->use_pcg)
+        return mg_solve_stationary(m, f, u, info);
     if (!s->o.nonzero_guess)
         memset(u, 0, s->count * sizeof *u);
     double fn = hv_norm2(s, f);
@@ -901,7 +1030,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
         info->reason = HV_STOP_CONVERGED;
         return HV_OK;
     }
-    hv_status st = m->use_pcg ? mg_solve_pcg(m, f, u, info, fn) : mg_solve_stationary(m, f, u, info, fn);
+    hv_status st = mg_solve_pcg(m, f, u, info, fn);
     if (st == HV_OK && s->p.solid)
         for (size_t c = 0; c < s->count; c++)
             if (s->p.solid[c])
