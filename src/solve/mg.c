@@ -34,6 +34,7 @@ typedef struct mg_state {
     int pre, post;
     int use_pcg;
     double *rd, *p, *z, *q; /* fine double work */
+    float *ring; /* two residual planes of the fused restriction (RBGS, plain 3D levels) */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
 } mg_state;
@@ -143,11 +144,11 @@ static inline plain_row plain_row_at(const mg_state *m, const mg_level *L, int j
 
 /* out = f - A u along one plain row, for float or double vectors (T); the
  * interior loop has no branches so that it vectorizes. */
-#define PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUT, NORM)                                              \
+#define PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUTROW, NORM)                                            \
     do {                                                                                              \
         const int nx_ = (L)->n[0];                                                                    \
         const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                           \
-        TO *o_ = (OUT) + (R).base;                                                                    \
+        TO *o_ = (OUTROW);                                                                            \
         const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                           \
         const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;           \
         const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;       \
@@ -180,7 +181,7 @@ static void level_residual(const mg_state *m, mg_level *L)
             for (int j = 0; j < L->n[1]; j++) {
                 plain_row R = plain_row_at(m, L, j, k);
                 float unused = 0;
-                PLAIN_ROW_RESIDUAL(float, float, L, R, u, f, r, unused);
+                PLAIN_ROW_RESIDUAL(float, float, L, R, u, f, r + R.base, unused);
                 (void)unused;
             }
         return;
@@ -417,6 +418,40 @@ static void restrict_transpose(const mg_state *m, int l)
             }
 }
 
+/* Row (j,k) of u_F += P u_C from a plain coarse level: blend the (up to) four
+ * coarse rows in y and z into one line (C->n[0] floats of work), then
+ * interpolate along x: 4 + 2 flops per fine cell instead of 8 products. */
+static void prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line)
+{
+    const int *co = F->coarsen;
+    const float *uc = C->u;
+    int K0, K1, J0, J1;
+    float wk1, wj1;
+    prolong_axis(co[2], C->n[2], k, &K0, &K1, &wk1);
+    prolong_axis(co[1], C->n[1], j, &J0, &J1, &wj1);
+    const float *r00 = uc + C->sy * J0 + C->sz * K0, *r01 = uc + C->sy * J1 + C->sz * K0;
+    const float *r10 = uc + C->sy * J0 + C->sz * K1, *r11 = uc + C->sy * J1 + C->sz * K1;
+    const float a00 = (1 - wk1) * (1 - wj1), a01 = (1 - wk1) * wj1;
+    const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
+    for (int I = 0; I < C->n[0]; I++)
+        line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
+    float *uf = F->u + F->sy * (size_t)j + F->sz * (size_t)k;
+    if (!co[0]) {
+        for (int i = 0; i < F->n[0]; i++)
+            uf[i] += line[i];
+        return;
+    }
+    const int nc = C->n[0], nf = F->n[0];
+    /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
+    uf[0] += line[0];
+    for (int I = 1; I < nc; I++)
+        uf[2 * I] += 0.75f * line[I] + 0.25f * line[I - 1];
+    for (int I = 0; I + 1 < nc && 2 * I + 1 < nf; I++)
+        uf[2 * I + 1] += 0.75f * line[I] + 0.25f * line[I + 1];
+    if (2 * (nc - 1) + 1 < nf)
+        uf[2 * (nc - 1) + 1] += line[nc - 1];
+}
+
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
  * levels empty coarse cells are left out and the weights renormalized. */
 static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
@@ -424,40 +459,13 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
     const int *co = F->coarsen;
     const float *uc = C->u;
     if (C->plain) {
-        /* Blend the (up to) four coarse rows in y and z into one line, then
-         * interpolate along x: 4 + 2 flops per fine cell instead of 8 products. */
 #pragma omp parallel if (F->count > MG_PAR_MIN)
         {
             float *line = hv_malloc((size_t)C->n[0] * sizeof(float));
 #pragma omp for collapse(2) schedule(static)
             for (int k = 0; k < F->n[2]; k++)
-                for (int j = 0; j < F->n[1]; j++) {
-                    int K0, K1, J0, J1;
-                    float wk1, wj1;
-                    prolong_axis(co[2], C->n[2], k, &K0, &K1, &wk1);
-                    prolong_axis(co[1], C->n[1], j, &J0, &J1, &wj1);
-                    const float *r00 = uc + C->sy * J0 + C->sz * K0, *r01 = uc + C->sy * J1 + C->sz * K0;
-                    const float *r10 = uc + C->sy * J0 + C->sz * K1, *r11 = uc + C->sy * J1 + C->sz * K1;
-                    const float a00 = (1 - wk1) * (1 - wj1), a01 = (1 - wk1) * wj1;
-                    const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
-                    for (int I = 0; I < C->n[0]; I++)
-                        line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
-                    float *uf = F->u + F->sy * (size_t)j + F->sz * (size_t)k;
-                    if (!co[0]) {
-                        for (int i = 0; i < F->n[0]; i++)
-                            uf[i] += line[i];
-                        continue;
-                    }
-                    const int nc = C->n[0], nf = F->n[0];
-                    /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
-                    uf[0] += line[0];
-                    for (int I = 1; I < nc; I++)
-                        uf[2 * I] += 0.75f * line[I] + 0.25f * line[I - 1];
-                    for (int I = 0; I + 1 < nc && 2 * I + 1 < nf; I++)
-                        uf[2 * I + 1] += 0.75f * line[I] + 0.25f * line[I + 1];
-                    if (2 * (nc - 1) + 1 < nf)
-                        uf[2 * (nc - 1) + 1] += line[nc - 1];
-                }
+                for (int j = 0; j < F->n[1]; j++)
+                    prolong_row_plain(F, C, j, k, line);
             hv_free(line);
         }
         return;
@@ -574,6 +582,181 @@ static void bottom_solve(const mg_state *m, mg_level *L)
         L->u[c] = (float)x[c];
 }
 
+/* ---------- fused passes on plain 3D levels ---------- */
+
+/* Levels whose red-black sweeps run plane by plane in one pass (rb_sweep_fused). */
+static int level_fusable(const mg_state *m, const mg_level *L)
+{
+    return L->plain && m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8 && L->n[0] <= MG_ROW_BUF;
+}
+
+/* First colour of a sweep from u = 0 along one row: this colour's cells take
+ * f / diag (all their neighbours are zero), the other colour's are set to zero,
+ * so u need not be cleared (nor read) beforehand. */
+static void rb_row_plain_zero(const mg_state *m, const mg_level *L, int j, int k, int col)
+{
+    const int nx = L->n[0];
+    plain_row R = plain_row_at(m, L, j, k);
+    float *ur = L->u + R.base;
+    const float *fr = L->f + R.base;
+    const float inv_in = (float)(1.0 / (R.dyz + 2 * L->c[0]));
+    const int par = (j + k + col) & 1;
+    for (int i = 0; i < nx; i++)
+        ur[i] = (i & 1) == par ? fr[i] * inv_in : 0.0f;
+    if (par == 0) {
+        double d = R.dyz + (nx > 1 ? L->c[0] : 0);
+        ur[0] = d > 0 ? (float)(fr[0] / d) : 0.0f;
+    }
+    if (nx > 1 && ((nx - 1) & 1) == par)
+        ur[nx - 1] = (float)(fr[nx - 1] / (R.dyz + L->c[0]));
+}
+
+/* rb_sweep_fused (first colour 0) from u = 0. */
+static void rb_sweep_fused_zero(const mg_state *m, mg_level *L)
+{
+    const int nz = L->n[2], ny = L->n[1];
+#pragma omp parallel if (L->count > MG_PAR_MIN)
+    for (int k = 0; k <= nz; k++) {
+        if (k < nz) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain_zero(m, L, j, k, 0);
+        }
+        if (k > 0) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k - 1, 1);
+        }
+    }
+}
+
+/* Coarse row (J,K) of C->f: the mean of the children in the fine residual
+ * planes p0 and p1 (p1 NULL when z is not coarsened or beyond an odd edge);
+ * children beyond odd edges count as zero, as in restrict_field. */
+static void restrict_row_planes(const mg_level *F, mg_level *C, int J, int K, const float *p0,
+                                const float *p1, float scale)
+{
+    const int *co = F->coarsen;
+    const int nx = F->n[0];
+    int j0 = co[1] ? 2 * J : J;
+    int j1 = co[1] && j0 + 1 < F->n[1] ? j0 + 1 : -1;
+    const float *rows[4];
+    int nr = 0;
+    rows[nr++] = p0 + F->sy * j0;
+    if (j1 >= 0)
+        rows[nr++] = p0 + F->sy * j1;
+    if (p1) {
+        rows[nr++] = p1 + F->sy * j0;
+        if (j1 >= 0)
+            rows[nr++] = p1 + F->sy * j1;
+    }
+    float line[MG_ROW_BUF];
+    if (nr == 4)
+        for (int i = 0; i < nx; i++)
+            line[i] = (rows[0][i] + rows[1][i]) + (rows[2][i] + rows[3][i]);
+    else if (nr == 2)
+        for (int i = 0; i < nx; i++)
+            line[i] = rows[0][i] + rows[1][i];
+    else
+        for (int i = 0; i < nx; i++)
+            line[i] = rows[0][i];
+    float *out = C->f + C->sy * J + C->sz * K;
+    if (!co[0]) {
+        for (int i = 0; i < nx; i++)
+            out[i] = line[i] * scale;
+        return;
+    }
+    for (int I = 0; I < nx / 2; I++)
+        out[I] = (line[2 * I] + line[2 * I + 1]) * scale;
+    if (nx & 1)
+        out[nx / 2] = line[nx - 1] * scale;
+}
+
+/* The last pre-smoothing sweep, the residual and its restriction in one pass:
+ * colour 0 on plane k, colour 1 on plane k-1, the residual of plane k-2 (whose
+ * neighbours are final by then) into a ring of two planes, and the coarse plane
+ * those complete. The fine residual is never stored. */
+static void rb_sweep_fused_restrict(const mg_state *m, mg_level *L, mg_level *C, float *ring)
+{
+    const int nz = L->n[2], ny = L->n[1], cz = L->coarsen[2];
+    const size_t ps = L->sz;
+    int nchild = 1;
+    for (int b = 0; b < m->dim; b++)
+        nchild *= L->coarsen[b] ? 2 : 1;
+    const float scale = 1.0f / (float)nchild;
+#pragma omp parallel if (L->count > MG_PAR_MIN)
+    for (int k = 0; k <= nz + 1; k++) {
+        if (k < nz) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k, 0);
+        }
+        if (k > 0 && k <= nz) {
+#pragma omp for schedule(static)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k - 1, 1);
+        }
+        int p = k - 2;
+        if (p < 0)
+            continue;
+        float *pl = ring + (size_t)(p & 1) * ps;
+#pragma omp for schedule(static)
+        for (int j = 0; j < ny; j++) {
+            plain_row R = plain_row_at(m, L, j, p);
+            float unused = 0;
+            PLAIN_ROW_RESIDUAL(float, float, L, R, L->u, L->f, pl + L->sy * (size_t)j, unused);
+            (void)unused;
+        }
+        int K = -1;
+        const float *p0 = NULL, *p1 = NULL;
+        if (!cz) {
+            K = p;
+            p0 = pl;
+        } else if (p & 1) {
+            K = p / 2;
+            p0 = ring;
+            p1 = ring + ps;
+        } else if (p == nz - 1) {
+            K = p / 2;
+            p0 = pl;
+        }
+        if (K >= 0) {
+#pragma omp for schedule(static)
+            for (int J = 0; J < C->n[1]; J++)
+                restrict_row_planes(L, C, J, K, p0, p1, scale);
+        }
+    }
+}
+
+/* u += P u_C and the first post-smoothing sweep in one pass: plane k+1 takes
+ * its correction just before colour `first` runs on plane k and the other
+ * colour on plane k-1. C must be plain. */
+static void rb_sweep_fused_prolong(const mg_state *m, mg_level *L, const mg_level *C, int first)
+{
+    const int nz = L->n[2], ny = L->n[1];
+#pragma omp parallel if (L->count > MG_PAR_MIN)
+    {
+        float line[MG_ROW_BUF];
+        for (int k = -1; k <= nz; k++) {
+            if (k + 1 < nz) {
+#pragma omp for schedule(static)
+                for (int j = 0; j < ny; j++)
+                    prolong_row_plain(L, C, j, k + 1, line);
+            }
+            if (k >= 0 && k < nz) {
+#pragma omp for schedule(static)
+                for (int j = 0; j < ny; j++)
+                    rb_row_plain(m, L, L->u, L->f, j, k, first);
+            }
+            if (k >= 1) {
+#pragma omp for schedule(static)
+                for (int j = 0; j < ny; j++)
+                    rb_row_plain(m, L, L->u, L->f, j, k - 1, !first);
+            }
+        }
+    }
+}
+
 /* ---------- cycles ---------- */
 
 static void zero_f(float *v, size_t n)
@@ -590,6 +773,33 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
     mg_level *L = (mg_level *)&m->lv[l];
     if (l == m->nlev - 1) {
         bottom_solve(m, L);
+        return;
+    }
+    mg_level *C = (mg_level *)&m->lv[l + 1];
+    if (m->smoother == HV_SMOOTH_RBGS && !sym && m->pre >= 1 && m->post >= 1 && level_fusable(m, L)) {
+        /* Same arithmetic as below, fewer passes over the level. */
+        int s0 = 0;
+        if (!guess) {
+            if (m->pre >= 2) {
+                rb_sweep_fused_zero(m, L);
+                s0 = 1;
+            } else {
+                zero_f(L->u, L->count);
+            }
+        }
+        for (int s = s0; s < m->pre - 1; s++)
+            rb_sweep_fused(m, L, 0);
+        rb_sweep_fused_restrict(m, L, C, m->ring);
+        vcycle(m, l + 1, 0, sym);
+        int s1 = 0;
+        if (C->plain && C->n[0] <= MG_ROW_BUF) {
+            rb_sweep_fused_prolong(m, L, C, 0);
+            s1 = 1;
+        } else {
+            prolong_add(m, L, C);
+        }
+        for (int s = s1; s < m->post; s++)
+            rb_sweep_fused(m, L, 0);
         return;
     }
     if (!guess)
@@ -649,6 +859,7 @@ static void mg_destroy(void *state)
         free(L->bp);
         free(L->bq);
     }
+    hv_free(m->ring);
     hv_free(m->rd);
     hv_free(m->p);
     hv_free(m->z);
@@ -720,13 +931,14 @@ static hv_status mg_create(void **state, const hv_setup *s)
         goto fail;
     }
     size_t n0 = s->count;
+    m->ring = hv_malloc(2 * m->lv[0].sz * sizeof(float));
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
         m->p = hv_malloc(n0 * sizeof(double));
         m->z = hv_malloc(n0 * sizeof(double));
         m->q = hv_malloc(n0 * sizeof(double));
     }
-    if (!m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
+    if (!m->ring || !m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
         st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
@@ -750,7 +962,7 @@ static double fine_residual(const mg_state *m, const double *f, const double *x)
         for (int k = 0; k < L->n[2]; k++)
             for (int j = 0; j < L->n[1]; j++) {
                 plain_row R = plain_row_at(m, L, j, k);
-                PLAIN_ROW_RESIDUAL(double, float, L, R, x, f, L->f, nn);
+                PLAIN_ROW_RESIDUAL(double, float, L, R, x, f, L->f + R.base, nn);
             }
         return sqrt(nn);
     }
