@@ -182,18 +182,21 @@ static int bench_solve(int argc, char **argv)
         return cli_fail("bench solve", "solving", st);
     hv_solver_stats stats;
     hv_solver_get_stats(s, &stats);
-    double cycle_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW
-                           ? stats.bytes_per_iteration * info.iterations / seconds / 1e9
-                           : 0;
+    /* Each iteration runs one cycle plus its correction; further cycles in an
+     * iteration (mg: info.cycles > iterations) add bytes_per_cycle each. */
+    double traffic = stats.bytes_per_iteration * info.iterations;
+    if (info.cycles > info.iterations && stats.bytes_per_cycle > 0)
+        traffic += stats.bytes_per_cycle * (info.cycles - info.iterations);
+    double cycle_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW ? traffic / seconds / 1e9 : 0;
     hv_solver_destroy(&s);
 
     printf("{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
            "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
-           "\"seconds\":%.5f,\"iterations\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
+           "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
            "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f",
            n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
            smoother == HV_SMOOTH_RBGS ? "rbgs" : smoother == HV_SMOOTH_JACOBI ? "jacobi" : "chebyshev",
-           threads, tol, setup, seconds, info.iterations, info.relres,
+           threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
            hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs);
     if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;

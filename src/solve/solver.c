@@ -145,6 +145,10 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
     if (o.max_iter <= 0 || o.pre_smooth < 0 || o.post_smooth < 0 || o.pre_smooth + o.post_smooth == 0)
         return hv_error(HV_ERR_INVALID_ARG, "solver: max_iter must be positive and smoothing steps non-negative (not both zero)");
 
+    if (o.cycles_per_iteration < 0 || o.cycles_per_iteration > 8)
+        return hv_error(HV_ERR_INVALID_ARG, "solver: cycles_per_iteration must be 0 (auto) to 8, got %d",
+                        o.cycles_per_iteration);
+
     hv_solver *sv = calloc(1, sizeof *sv);
     if (!sv)
         return hv_error(HV_ERR_NOMEM, "solver: out of memory");
