@@ -41,6 +41,13 @@ typedef struct mg_state {
                                     the coarse level is weighted (renormalized) */
 } mg_state;
 
+static void zero_f(float *v, size_t n)
+{
+#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
+    for (size_t i = 0; i < n; i++)
+        v[i] = 0.0f;
+}
+
 /* ---------- stencil kernels ---------- */
 
 /* Plain-level interior row update: the hot loop of the smoother, branch-free. */
@@ -423,7 +430,7 @@ static void restrict_transpose(const mg_state *m, int l)
 /* Row (j,k) of u_F += P u_C from a plain coarse level: blend the (up to) four
  * coarse rows in y and z into one line (C->n[0] floats of work), then
  * interpolate along x: 4 + 2 flops per fine cell instead of 8 products. */
-static void prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line)
+static void prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line, int set)
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
@@ -438,6 +445,8 @@ static void prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, floa
     for (int I = 0; I < C->n[0]; I++)
         line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
     float *uf = F->u + F->sy * (size_t)j + F->sz * (size_t)k;
+    if (set) /* u_F = P u_C: the row is cleared while it is in cache */
+        memset(uf, 0, (size_t)F->n[0] * sizeof(float));
     if (!co[0]) {
         for (int i = 0; i < F->n[0]; i++)
             uf[i] += line[i];
@@ -456,7 +465,7 @@ static void prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, floa
 
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
  * levels empty coarse cells are left out and the weights renormalized. */
-static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
+static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set)
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
@@ -467,11 +476,13 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C)
 #pragma omp for collapse(2) schedule(static)
             for (int k = 0; k < F->n[2]; k++)
                 for (int j = 0; j < F->n[1]; j++)
-                    prolong_row_plain(F, C, j, k, line);
+                    prolong_row_plain(F, C, j, k, line, set);
             hv_free(line);
         }
         return;
     }
+    if (set)
+        zero_f(F->u, F->count);
 #pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
     for (int k = 0; k < F->n[2]; k++)
         for (int j = 0; j < F->n[1]; j++) {
@@ -743,7 +754,7 @@ static void rb_sweep_fused_prolong(const mg_state *m, mg_level *L, const mg_leve
             if (k + 1 < nz) {
 #pragma omp for schedule(static)
                 for (int j = 0; j < ny; j++)
-                    prolong_row_plain(L, C, j, k + 1, line);
+                    prolong_row_plain(L, C, j, k + 1, line, 0);
             }
             if (k >= 0 && k < nz) {
 #pragma omp for schedule(static)
@@ -760,13 +771,6 @@ static void rb_sweep_fused_prolong(const mg_state *m, mg_level *L, const mg_leve
 }
 
 /* ---------- cycles ---------- */
-
-static void zero_f(float *v, size_t n)
-{
-#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
-    for (size_t i = 0; i < n; i++)
-        v[i] = 0.0f;
-}
 
 /* One V-cycle on level l for A u_l = f_l; u_l holds the initial guess when
  * `guess`, else starts from zero. `sym` reverses the post-smoothing order. */
@@ -798,7 +802,7 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
             rb_sweep_fused_prolong(m, L, C, 0);
             s1 = 1;
         } else {
-            prolong_add(m, L, C);
+            prolong_add(m, L, C, 0);
         }
         for (int s = s1; s < m->post; s++)
             rb_sweep_fused(m, L, 0);
@@ -815,7 +819,7 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
     else
         restrict_residual(m, L, (mg_level *)&m->lv[l + 1]);
     vcycle(m, l + 1, 0, sym);
-    prolong_add(m, L, &m->lv[l + 1]);
+    prolong_add(m, L, &m->lv[l + 1], 0);
     if (m->smoother != HV_SMOOTH_RBGS)
         zero_f(L->d, L->count);
     smooth(m, L, m->post, sym);
@@ -833,8 +837,7 @@ static void fmg(const mg_state *m)
     bottom_solve(m, (mg_level *)&m->lv[m->nlev - 1]);
     for (int l = m->nlev - 2; l >= 0; l--) {
         mg_level *L = (mg_level *)&m->lv[l];
-        zero_f(L->u, L->count);
-        prolong_add(m, L, &m->lv[l + 1]);
+        prolong_add(m, L, &m->lv[l + 1], 1);
         vcycle(m, l, 1, 0);
     }
 }

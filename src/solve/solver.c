@@ -258,11 +258,14 @@ hv_status hv_solver_solve(hv_solver *sv, const float *f, float *u, hv_solve_info
     hv_status st = hv_check_finite(f, n, "the right-hand side");
     if (st || (st = ensure_buffers(sv)))
         return st;
+    /* Without a guess every backend sets u itself (clearing it here would be
+     * one more pass over a double array). */
     int guess = sv->setup.o.nonzero_guess;
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < n; c++) {
         sv->fd[c] = f[c];
-        sv->ud[c] = guess ? u[c] : 0.0;
+        if (guess)
+            sv->ud[c] = u[c];
     }
     st = solve_prepared(sv, sv->fd, sv->ud, info);
     if (st)
