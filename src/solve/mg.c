@@ -17,6 +17,9 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* Levels below this many cells run on one thread: fork-join and barrier costs
  * dominate there (measured: 84% of a 2048^2 solve spun in barriers without it). */
@@ -36,7 +39,8 @@ typedef struct mg_state {
     int pre, post;
     int use_pcg;
     double *rd, *p, *z, *q; /* fine double work */
-    float *ring; /* two residual planes of the fused restriction (RBGS, plain 3D levels) */
+    float *ring;      /* fused restriction: four residual planes per thread (plain 3D levels) */
+    int ring_threads; /* threads the ring has room for */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
 } mg_state;
@@ -234,37 +238,19 @@ static void level_jacobi_update(const mg_state *m, mg_level *L, double cd, doubl
             }
 }
 
-/* One full red-black sweep of a plain 3D level in a single pass over memory:
- * the first colour on plane k, then the second colour on plane k-1, whose
- * neighbours on planes k-2..k are all final by then. Same arithmetic as two
- * colour sweeps, half the memory traffic. */
-static void rb_sweep_fused(const mg_state *m, mg_level *L, int first)
-{
-    const int nz = L->n[2], ny = L->n[1];
-#pragma omp parallel if (L->count > MG_PAR_MIN)
-    for (int k = 0; k <= nz; k++) {
-        if (k < nz) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k, first);
-        }
-        if (k > 0) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k - 1, !first);
-        }
-    }
-}
+enum { FS_PLAIN, FS_ZERO, FS_RESTRICT, FS_PROLONG };
+static int level_fusable(const mg_state *m, const mg_level *L);
+static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first);
 
 static void smooth(const mg_state *m, mg_level *L, int steps, int reverse)
 {
     if (steps <= 0)
         return;
     if (m->smoother == HV_SMOOTH_RBGS) {
-        int fused = L->plain && m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
+        int fused = level_fusable(m, L);
         for (int s = 0; s < steps; s++) {
             if (fused) {
-                rb_sweep_fused(m, L, reverse ? 1 : 0);
+                fused_pass(m, L, NULL, FS_PLAIN, reverse ? 1 : 0);
                 continue;
             }
             rb_sweep(m, L, reverse ? 1 : 0);
@@ -624,25 +610,6 @@ static void rb_row_plain_zero(const mg_state *m, const mg_level *L, int j, int k
         ur[nx - 1] = (float)(fr[nx - 1] / (R.dyz + L->c[0]));
 }
 
-/* rb_sweep_fused (first colour 0) from u = 0. */
-static void rb_sweep_fused_zero(const mg_state *m, mg_level *L)
-{
-    const int nz = L->n[2], ny = L->n[1];
-#pragma omp parallel if (L->count > MG_PAR_MIN)
-    for (int k = 0; k <= nz; k++) {
-        if (k < nz) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain_zero(m, L, j, k, 0);
-        }
-        if (k > 0) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k - 1, 1);
-        }
-    }
-}
-
 /* Coarse row (J,K) of C->f: the mean of the children in the fine residual
  * planes p0 and p1 (p1 NULL when z is not coarsened or beyond an odd edge);
  * children beyond odd edges count as zero, as in restrict_field. */
@@ -685,86 +652,160 @@ static void restrict_row_planes(const mg_level *F, mg_level *C, int J, int K, co
         out[nx / 2] = line[nx - 1] * scale;
 }
 
-/* The last pre-smoothing sweep, the residual and its restriction in one pass:
- * colour 0 on plane k, colour 1 on plane k-1, the residual of plane k-2 (whose
- * neighbours are final by then) into a ring of two planes, and the coarse plane
- * those complete. The fine residual is never stored. */
-static void rb_sweep_fused_restrict(const mg_state *m, mg_level *L, mg_level *C, float *ring)
+/* Residual of plane p of L into buf (L->sz floats). */
+static void residual_plane(const mg_state *m, const mg_level *L, int p, float *buf)
 {
-    const int nz = L->n[2], ny = L->n[1], cz = L->coarsen[2];
-    const size_t ps = L->sz;
-    int nchild = 1;
-    for (int b = 0; b < m->dim; b++)
-        nchild *= L->coarsen[b] ? 2 : 1;
-    const float scale = 1.0f / (float)nchild;
-#pragma omp parallel if (L->count > MG_PAR_MIN)
-    for (int k = 0; k <= nz + 1; k++) {
-        if (k < nz) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k, 0);
-        }
-        if (k > 0 && k <= nz) {
-#pragma omp for schedule(static)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k - 1, 1);
-        }
-        int p = k - 2;
-        if (p < 0)
-            continue;
-        float *pl = ring + (size_t)(p & 1) * ps;
-#pragma omp for schedule(static)
-        for (int j = 0; j < ny; j++) {
-            plain_row R = plain_row_at(m, L, j, p);
-            float unused = 0;
-            PLAIN_ROW_RESIDUAL(float, float, L, R, L->u, L->f, pl + L->sy * (size_t)j, unused);
-            (void)unused;
-        }
-        int K = -1;
-        const float *p0 = NULL, *p1 = NULL;
-        if (!cz) {
-            K = p;
-            p0 = pl;
-        } else if (p & 1) {
-            K = p / 2;
-            p0 = ring;
-            p1 = ring + ps;
-        } else if (p == nz - 1) {
-            K = p / 2;
-            p0 = pl;
-        }
-        if (K >= 0) {
-#pragma omp for schedule(static)
-            for (int J = 0; J < C->n[1]; J++)
-                restrict_row_planes(L, C, J, K, p0, p1, scale);
-        }
+    for (int j = 0; j < L->n[1]; j++) {
+        plain_row R = plain_row_at(m, L, j, p);
+        float unused = 0;
+        PLAIN_ROW_RESIDUAL(float, float, L, R, L->u, L->f, buf + L->sy * (size_t)j, unused);
+        (void)unused;
     }
 }
 
-/* u += P u_C and the first post-smoothing sweep in one pass: plane k+1 takes
- * its correction just before colour `first` runs on plane k and the other
- * colour on plane k-1. C must be plain. */
-static void rb_sweep_fused_prolong(const mg_state *m, mg_level *L, const mg_level *C, int first)
+/* Coarse plane K of C->f from residual planes p0 and p1 (p1 NULL: one plane). */
+static void restrict_plane(const mg_level *L, mg_level *C, int K, const float *p0, const float *p1,
+                           float scale)
+{
+    for (int J = 0; J < C->n[1]; J++)
+        restrict_row_planes(L, C, J, K, p0, p1, scale);
+}
+
+/* Residual plane p is in buf and, for odd p with z coarsened, plane p-1 in prev:
+ * writes the coarse plane they complete, if any. */
+static void restrict_ready(const mg_level *L, mg_level *C, int p, const float *buf, const float *prev,
+                           float scale)
+{
+    if (!L->coarsen[2])
+        restrict_plane(L, C, p, buf, NULL, scale);
+    else if (p & 1)
+        restrict_plane(L, C, p / 2, prev, buf, scale);
+    else if (p == L->n[2] - 1)
+        restrict_plane(L, C, p / 2, buf, NULL, scale);
+}
+
+/* One red-black sweep of a plain 3D level in a single pass over memory, with
+ * (mode) the first colour from u = 0 (FS_ZERO), the residual and its
+ * restriction to C->f after the sweep (FS_RESTRICT: the fine residual is never
+ * stored), or u += P u_C before it (FS_PROLONG, C plain).
+ *
+ * Each thread owns a slab of planes [k0,k1) (k0 even) and runs it as a pipeline:
+ * colour `first` on plane k, then the other colour on plane k-1, whose
+ * neighbours are final by then. Across slab edges the order of a two-colour
+ * sweep is kept by doing colour `first` on each slab's first plane before
+ * anything else and the other colour on it after everything else, so a sweep
+ * has 2 to 4 barriers instead of a few per plane. Same arithmetic as two
+ * colour sweeps, half the memory traffic. */
+static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first)
 {
     const int nz = L->n[2], ny = L->n[1];
-#pragma omp parallel if (L->count > MG_PAR_MIN)
+    float scale = 1.0f;
+    if (mode == FS_RESTRICT) {
+        int nchild = 1;
+        for (int b = 0; b < m->dim; b++)
+            nchild *= L->coarsen[b] ? 2 : 1;
+        scale = 1.0f / (float)nchild;
+    }
+    int nt = 1;
+#ifdef _OPENMP
+    if (L->count > MG_PAR_MIN) {
+        nt = omp_get_max_threads();
+        if (nt > m->ring_threads)
+            nt = m->ring_threads;
+        if (nt > nz / 4)
+            nt = nz / 4 > 0 ? nz / 4 : 1;
+    }
+#endif
+    int chunk = (nz + nt - 1) / nt;
+    chunk += chunk & 1;
+#pragma omp parallel num_threads(nt) if (nt > 1)
     {
+        int t = 0;
+#ifdef _OPENMP
+        t = omp_get_thread_num();
+#endif
+        int k0 = t * chunk, k1 = k0 + chunk < nz ? k0 + chunk : nz;
+        if (k0 > nz)
+            k0 = nz;
+        const int own = k1 > k0;
+        float *ring = m->ring + (size_t)4 * t * L->sz; /* pipeline ring: 0,1; edges: 2,3 */
         float line[MG_ROW_BUF];
-        for (int k = -1; k <= nz; k++) {
-            if (k + 1 < nz) {
-#pragma omp for schedule(static)
-                for (int j = 0; j < ny; j++)
-                    prolong_row_plain(L, C, j, k + 1, line, 0);
+        const int A = first, B = !first;
+        if (mode == FS_PROLONG) {
+            if (own) {
+                for (int k = k0; k <= k0 + 1 && k < k1; k++)
+                    for (int j = 0; j < ny; j++)
+                        prolong_row_plain(L, C, j, k, line, 0);
+                if (k1 - 1 > k0 + 1)
+                    for (int j = 0; j < ny; j++)
+                        prolong_row_plain(L, C, j, k1 - 1, line, 0);
             }
-            if (k >= 0 && k < nz) {
-#pragma omp for schedule(static)
-                for (int j = 0; j < ny; j++)
-                    rb_row_plain(m, L, L->u, L->f, j, k, first);
+#pragma omp barrier
+        }
+        /* colour A on the first plane */
+        if (own)
+            for (int j = 0; j < ny; j++) {
+                if (mode == FS_ZERO)
+                    rb_row_plain_zero(m, L, j, k0, A);
+                else
+                    rb_row_plain(m, L, L->u, L->f, j, k0, A);
             }
-            if (k >= 1) {
-#pragma omp for schedule(static)
+#pragma omp barrier
+        if (own) {
+            for (int k = k0 + 1; k < k1; k++) {
+                if (mode == FS_PROLONG && k + 1 >= k0 + 2 && k + 1 <= k1 - 2)
+                    for (int j = 0; j < ny; j++)
+                        prolong_row_plain(L, C, j, k + 1, line, 0);
+                for (int j = 0; j < ny; j++) {
+                    if (mode == FS_ZERO)
+                        rb_row_plain_zero(m, L, j, k, A);
+                    else
+                        rb_row_plain(m, L, L->u, L->f, j, k, A);
+                }
+                if (k - 1 > k0)
+                    for (int j = 0; j < ny; j++)
+                        rb_row_plain(m, L, L->u, L->f, j, k - 1, B);
+                int p = k - 2; /* final neighbours: p-1 >= k0+1 and p+1 = k-1 */
+                if (mode == FS_RESTRICT && p >= k0 + 2) {
+                    residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
+                    restrict_ready(L, C, p, ring + (size_t)(p & 1) * L->sz,
+                                   ring + (size_t)(!(p & 1)) * L->sz, scale);
+                }
+            }
+            if (k1 - 1 > k0) {
                 for (int j = 0; j < ny; j++)
-                    rb_row_plain(m, L, L->u, L->f, j, k - 1, !first);
+                    rb_row_plain(m, L, L->u, L->f, j, k1 - 1, B);
+                int p = k1 - 2;
+                if (mode == FS_RESTRICT && p >= k0 + 2) {
+                    residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
+                    restrict_ready(L, C, p, ring + (size_t)(p & 1) * L->sz,
+                                   ring + (size_t)(!(p & 1)) * L->sz, scale);
+                }
+            }
+        }
+#pragma omp barrier
+        /* colour B on the first plane (its neighbour k0-1 is final now) */
+        if (own)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain(m, L, L->u, L->f, j, k0, B);
+        if (mode == FS_RESTRICT) {
+#pragma omp barrier
+            if (own) {
+                /* planes k0, k0+1 (edge slots) and k1-1 (after k1-2 in the ring) */
+                float *e0 = ring + 2 * L->sz, *e1 = ring + 3 * L->sz;
+                residual_plane(m, L, k0, e0);
+                restrict_ready(L, C, k0, e0, NULL, scale);
+                if (k0 + 1 < k1) {
+                    residual_plane(m, L, k0 + 1, e1);
+                    restrict_ready(L, C, k0 + 1, e1, e0, scale);
+                }
+                int p = k1 - 1;
+                if (p >= k0 + 2) {
+                    float *buf = ring + (size_t)(p & 1) * L->sz;
+                    const float *prev = p - 1 >= k0 + 2 ? ring + (size_t)(!(p & 1)) * L->sz : e1;
+                    residual_plane(m, L, p, buf);
+                    restrict_ready(L, C, p, buf, prev, scale);
+                }
             }
         }
     }
@@ -787,25 +828,25 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
         int s0 = 0;
         if (!guess) {
             if (m->pre >= 2) {
-                rb_sweep_fused_zero(m, L);
+                fused_pass(m, L, NULL, FS_ZERO, 0);
                 s0 = 1;
             } else {
                 zero_f(L->u, L->count);
             }
         }
         for (int s = s0; s < m->pre - 1; s++)
-            rb_sweep_fused(m, L, 0);
-        rb_sweep_fused_restrict(m, L, C, m->ring);
+            fused_pass(m, L, NULL, FS_PLAIN, 0);
+        fused_pass(m, L, C, FS_RESTRICT, 0);
         vcycle(m, l + 1, 0, sym);
         int s1 = 0;
         if (C->plain && C->n[0] <= MG_ROW_BUF) {
-            rb_sweep_fused_prolong(m, L, C, 0);
+            fused_pass(m, L, (mg_level *)C, FS_PROLONG, 0);
             s1 = 1;
         } else {
             prolong_add(m, L, C, 0);
         }
         for (int s = s1; s < m->post; s++)
-            rb_sweep_fused(m, L, 0);
+            fused_pass(m, L, NULL, FS_PLAIN, 0);
         return;
     }
     if (!guess)
@@ -936,7 +977,11 @@ static hv_status mg_create(void **state, const hv_setup *s)
         goto fail;
     }
     size_t n0 = s->count;
-    m->ring = hv_malloc(2 * m->lv[0].sz * sizeof(float));
+    m->ring_threads = 1;
+#ifdef _OPENMP
+    m->ring_threads = omp_get_max_threads();
+#endif
+    m->ring = hv_malloc((size_t)4 * m->ring_threads * m->lv[0].sz * sizeof(float));
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
         m->p = hv_malloc(n0 * sizeof(double));
