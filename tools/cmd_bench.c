@@ -79,8 +79,9 @@ static int usage_solve(FILE *out)
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
-            "relres, copy_gbs (threaded streaming copy in the same process), cycle_gbs (modelled\n"
-            "bytes of one outer iteration / its time), and for mg/opencl ref \"fftw\",\n"
+            "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
+            "streaming copy in the same process), cycle_gbs (modelled bytes of the iterations and\n"
+            "their cycles / time), and for mg/opencl ref \"fftw\",\n"
             "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
