@@ -45,6 +45,7 @@ static double worst_factor(const shape *sh, double t_over_h2, int poisson, hv_sm
     o.backend = HV_BACKEND_MG;
     o.smoother = sm;
     o.tol = 1e-9;
+    o.cycles_per_iteration = 1; /* each history step is then one V-cycle */
     hv_solver *s = NULL;
     TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
     size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
@@ -55,6 +56,7 @@ static double worst_factor(const shape *sh, double t_over_h2, int poisson, hv_sm
     ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
     ck_assert(info.relres <= 1e-9);
     ck_assert_int_eq(info.nhistory, info.iterations + 1);
+    ck_assert_int_eq(info.cycles, info.iterations);
     double worst = 0;
     for (int i = 1; i < info.nhistory; i++)
         if (info.history[i - 1] > 1e-9)
@@ -369,6 +371,70 @@ START_TEST(solve_many_should_match_single_solves)
 }
 END_TEST
 
+/* Several float V-cycles per double correction (the default): fewer corrections
+ * than one cycle each, no more cycles than one extra, every cycle counted, and
+ * the reported residual is the true one of the returned solution. */
+START_TEST(auto_cycles_should_save_corrections_and_report_the_true_residual)
+{
+    const shape cases[] = {{3, {48, 40, 36}, 0}, {2, {128, 96, 1}, 0}};
+    const double tols[] = {1e-6, 1e-10};
+    for (int c = 0; c < 2; c++)
+        for (int poisson = 0; poisson < 2; poisson++)
+            for (int t = 0; t < 2; t++) {
+                const shape *sh = &cases[c];
+                double h = 1.0 / sh->n[0];
+                hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, NULL, poisson ? 0.0 : 1.0,
+                                poisson ? 1.0 : 4 * h * h};
+                size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
+                float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
+                double *fd = malloc(n * sizeof *fd), *ud = malloc(n * sizeof *ud), *au = malloc(n * sizeof *au);
+                tl_fill_random(f, n, 7 + c);
+                double mean = 0;
+                for (size_t i = 0; i < n; i++)
+                    mean += f[i];
+                mean /= (double)n;
+                for (size_t i = 0; i < n; i++)
+                    fd[i] = poisson ? f[i] - mean : f[i];
+                hv_solve_info info[2];
+                for (int one = 0; one < 2; one++) {
+                    hv_solver_opts o;
+                    hv_solver_opts_default(&o);
+                    o.backend = HV_BACKEND_MG;
+                    o.tol = tols[t];
+                    o.cycles_per_iteration = one;
+                    hv_solver *s = NULL;
+                    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+                    TL_ASSERT_OK(hv_solver_solve_d(s, fd, ud, &info[one]));
+                    hv_solver_destroy(&s);
+                    /* the reported residual is the true one of the returned solution */
+                    TL_ASSERT_OK(hv_apply_helmholtz_d(p.dim, p.n, h, NULL, p.alpha, p.beta, ud, au));
+                    double rr = 0, ff = 0;
+                    for (size_t i = 0; i < n; i++) {
+                        rr += (fd[i] - au[i]) * (fd[i] - au[i]);
+                        ff += fd[i] * fd[i];
+                    }
+                    double rel = sqrt(rr / ff);
+                    ck_assert_msg(fabs(rel - info[one].relres) <= 1e-6 * rel + 1e-14,
+                                  "case %d poisson %d tol %g: relres %.9g, true %.9g", c, poisson,
+                                  tols[t], info[one].relres, rel);
+                }
+                hv_solve_info *a = &info[0], *b = &info[1];
+                ck_assert_int_eq(a->reason, HV_STOP_CONVERGED);
+                ck_assert(a->relres <= tols[t]);
+                ck_assert_int_eq(b->cycles, b->iterations);
+                ck_assert_int_ge(a->cycles, a->iterations);
+                ck_assert_msg(a->iterations < b->iterations && a->cycles <= b->cycles + 1,
+                              "case %d poisson %d tol %g: auto %d/%d cycles, one per iteration %d", c,
+                              poisson, tols[t], a->iterations, a->cycles, b->iterations);
+                free(f);
+                free(u);
+                free(fd);
+                free(ud);
+                free(au);
+            }
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("mg");
@@ -377,6 +443,7 @@ int main(void)
     tcase_add_loop_test(tc, vcycle_should_reduce_heat_residual_below_0_12_per_cycle, 0, NSHAPES);
     tcase_add_loop_test(tc, vcycle_should_reduce_poisson_residual_below_0_15_per_cycle, 0, NSHAPES);
     tcase_add_test(tc, gpu_smoothers_should_converge);
+    tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);
     tcase_add_test(tc, multigrid_and_fftw_should_agree);
     tcase_add_test(tc, poisson_solution_should_be_mean_free_in_each_region);

@@ -79,8 +79,9 @@ static int usage_solve(FILE *out)
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
-            "relres, copy_gbs (threaded streaming copy in the same process), cycle_gbs (modelled\n"
-            "bytes of one outer iteration / its time), and for mg/opencl ref \"fftw\",\n"
+            "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
+            "streaming copy in the same process), cycle_gbs (modelled bytes of the iterations and\n"
+            "their cycles / time), and for mg/opencl ref \"fftw\",\n"
             "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
@@ -182,18 +183,21 @@ static int bench_solve(int argc, char **argv)
         return cli_fail("bench solve", "solving", st);
     hv_solver_stats stats;
     hv_solver_get_stats(s, &stats);
-    double cycle_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW
-                           ? stats.bytes_per_iteration * info.iterations / seconds / 1e9
-                           : 0;
+    /* Each iteration runs one cycle plus its correction; further cycles in an
+     * iteration (mg: info.cycles > iterations) add bytes_per_cycle each. */
+    double traffic = stats.bytes_per_iteration * info.iterations;
+    if (info.cycles > info.iterations && stats.bytes_per_cycle > 0)
+        traffic += stats.bytes_per_cycle * (info.cycles - info.iterations);
+    double cycle_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW ? traffic / seconds / 1e9 : 0;
     hv_solver_destroy(&s);
 
     printf("{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
            "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
-           "\"seconds\":%.5f,\"iterations\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
+           "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
            "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f",
            n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
            smoother == HV_SMOOTH_RBGS ? "rbgs" : smoother == HV_SMOOTH_JACOBI ? "jacobi" : "chebyshev",
-           threads, tol, setup, seconds, info.iterations, info.relres,
+           threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
            hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs);
     if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;

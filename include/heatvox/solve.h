@@ -73,6 +73,9 @@ typedef struct hv_solver_opts {
     int fftw_double;        /* FFTW backend: 1 = double transforms, 0 = float; default 1 */
     const char *wisdom_file;/* FFTW wisdom loaded at create and saved after planning; NULL = none */
     int fftw_measure;       /* 1: FFTW_MEASURE planning, 0: FFTW_ESTIMATE; default 0 */
+    int cycles_per_iteration; /* mg, plain grid: V-cycles per double-precision correction;
+                                 0 (default) = as many as the tolerance needs (1..3, RBGS),
+                                 else that many (1..8) */
 } hv_solver_opts;
 
 #define HV_MAX_HISTORY 64
@@ -80,7 +83,8 @@ typedef struct hv_solver_opts {
 typedef struct hv_solve_info {
     hv_backend backend;             /* the backend that ran */
     hv_stop_reason reason;
-    int iterations;                 /* cycles or CG iterations */
+    int iterations;                 /* outer iterations: corrections or CG iterations */
+    int cycles;                     /* V-cycles run (mg: >= iterations); 0 when not counted */
     double relres;                  /* final relative residual (double precision) */
     int nhistory;                   /* entries in history (capped at HV_MAX_HISTORY) */
     double history[HV_MAX_HISTORY]; /* relres after each iteration; history[0] = initial */
@@ -113,7 +117,8 @@ typedef struct hv_solver_stats {
     int levels;                  /* multigrid levels (1 for direct solvers) */
     int n[HV_MAX_LEVELS][3];     /* cells per axis on each level */
     int plain[HV_MAX_LEVELS];    /* 1 where a level needs no coefficient arrays */
-    double bytes_per_iteration;  /* modelled memory traffic of one outer iteration */
+    double bytes_per_iteration;  /* modelled memory traffic of one outer iteration (one cycle) */
+    double bytes_per_cycle;      /* of each further V-cycle in an iteration (0: not modelled) */
     size_t memory_bytes;         /* memory held by the backend's arrays */
 } hv_solver_stats;
 

@@ -61,6 +61,10 @@ void mg_level_free_coeffs(mg_level *L);
  * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
 void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
                     int post, int pcg, hv_solver_stats *st);
+/* The same for the CPU backend (mg.c), whose fused passes move fewer bytes on
+ * plain 3D levels and whose plain fine correction is a single pass. */
+void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                        int post, int pcg, hv_solver_stats *st);
 
 /* Diagonal of the operator at cell (i,j,k) (plain or weighted level). */
 double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);

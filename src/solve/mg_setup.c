@@ -367,9 +367,17 @@ fail:
  * pass. The residual reads u, f and writes r; restriction reads r and writes the
  * coarse f; prolongation reads the coarse u and updates u. The double defect
  * correction reads x and f and writes the float right-hand side, then adds the
- * correction into x. */
-void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
-                    int post, int pcg, hv_solver_stats *st)
+ * correction into x.
+ *
+ * With `fused` (the CPU backend) fusable levels (plain 3D, mg.c: level_fusable)
+ * move less: the first sweep from zero reads f and writes u (no clearing pass),
+ * the last pre-sweep also forms the residual and restricts it (the fine residual
+ * is never stored: only the coarse f is written), the first post-sweep also adds
+ * the prolongation (reads the coarse u), and other levels clear u before the
+ * cycle (a write). The correction of a plain fine level is one pass: reads x,
+ * the correction and f, writes x and the next float right-hand side. */
+static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre, int post,
+                  int pcg, int fused, hv_solver_stats *st)
 {
     st->levels = nlev;
     double bytes = 0;
@@ -379,19 +387,55 @@ void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother,
         memcpy(st->n[l], L->n, sizeof st->n[l]);
         st->plain[l] = L->plain;
         double cells = (double)L->count, coef = L->plain ? 0 : 4.0 * (2 + dim);
-        int fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
-        double sweep = smoother == HV_SMOOTH_RBGS ? (fused ? 1 : 2) * (12 + coef) : 32 + coef;
+        int rb_fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
+        double sweep = smoother == HV_SMOOTH_RBGS ? (rb_fused ? 1 : 2) * (12 + coef) : 32 + coef;
         int steps = smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (pre + post) : pre + post;
-        if (l + 1 < nlev)
-            bytes += cells * (steps * sweep + (12 + coef) + 4 + 8) + cells / 2;
-        else
-            bytes += cells * 8 * 40; /* bottom CG: a few dozen iterations on a tiny level */
         mem += L->count * (3 + (smoother != HV_SMOOTH_RBGS)) * sizeof(float);
         if (!L->plain)
             mem += L->count * (2 + dim) * sizeof(float);
+        if (l + 1 == nlev) {
+            bytes += cells * 8 * 40; /* bottom CG: a few dozen iterations on a tiny level */
+            continue;
+        }
+        double coarse = (double)lv[l + 1].count;
+        if (!fused) {
+            bytes += cells * (steps * sweep + (12 + coef) + 4 + 8) + cells / 2;
+            continue;
+        }
+        int whole = smoother == HV_SMOOTH_RBGS && !pcg && pre >= 1 && post >= 1 && rb_fused &&
+                    L->n[0] <= 4096;
+        if (whole) {
+            int zero_sweep = pre >= 2;
+            bytes += cells * (zero_sweep ? 8 : 4 + 12) + cells * 12 * (pre - 1 - zero_sweep);
+            bytes += cells * 12 + coarse * 4; /* last pre-sweep + residual + restriction */
+            int prolong_fused = lv[l + 1].plain && lv[l + 1].n[0] <= 4096;
+            bytes += prolong_fused ? cells * 12 + coarse * 4 : cells * (8 + 12) + coarse * 4;
+            bytes += cells * 12 * (post - 1);
+        } else {
+            bytes += cells * (4 + steps * sweep + (12 + coef) + 4 + 8) + coarse * 8;
+            if (smoother != HV_SMOOTH_RBGS)
+                bytes += cells * 4 * 2; /* clearing d before each smoothing phase */
+        }
     }
-    bytes += (double)lv[0].count * (8 + 8 + 4 + 8 + 4 + 8);
+    double n0 = (double)lv[0].count;
+    st->bytes_per_cycle = fused && !pcg ? bytes : 0;
+    if (fused && !pcg)
+        bytes += n0 * (8 + 4 + 8 + 8 + 4);
+    else
+        bytes += n0 * (8 + 8 + 4 + 8 + 4 + 8);
     mem += lv[0].count * sizeof(double) * (pcg ? 4 : 1);
     st->bytes_per_iteration = bytes;
     st->memory_bytes = mem;
+}
+
+void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                    int post, int pcg, hv_solver_stats *st)
+{
+    model(lv, nlev, dim, smoother, pre, post, pcg, 0, st);
+}
+
+void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                        int post, int pcg, hv_solver_stats *st)
+{
+    model(lv, nlev, dim, smoother, pre, post, pcg, 1, st);
 }

@@ -145,6 +145,10 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
     if (o.max_iter <= 0 || o.pre_smooth < 0 || o.post_smooth < 0 || o.pre_smooth + o.post_smooth == 0)
         return hv_error(HV_ERR_INVALID_ARG, "solver: max_iter must be positive and smoothing steps non-negative (not both zero)");
 
+    if (o.cycles_per_iteration < 0 || o.cycles_per_iteration > 8)
+        return hv_error(HV_ERR_INVALID_ARG, "solver: cycles_per_iteration must be 0 (auto) to 8, got %d",
+                        o.cycles_per_iteration);
+
     hv_solver *sv = calloc(1, sizeof *sv);
     if (!sv)
         return hv_error(HV_ERR_NOMEM, "solver: out of memory");
@@ -254,11 +258,14 @@ hv_status hv_solver_solve(hv_solver *sv, const float *f, float *u, hv_solve_info
     hv_status st = hv_check_finite(f, n, "the right-hand side");
     if (st || (st = ensure_buffers(sv)))
         return st;
+    /* Without a guess every backend sets u itself (clearing it here would be
+     * one more pass over a double array). */
     int guess = sv->setup.o.nonzero_guess;
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < n; c++) {
         sv->fd[c] = f[c];
-        sv->ud[c] = guess ? u[c] : 0.0;
+        if (guess)
+            sv->ud[c] = u[c];
     }
     st = solve_prepared(sv, sv->fd, sv->ud, info);
     if (st)
