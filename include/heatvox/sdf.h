@@ -97,8 +97,13 @@ typedef struct hv_sdf_opts {
 
     /* Solves. */
     hv_backend backend;   /* default HV_BACKEND_AUTO */
-    double diffuse_tol;   /* relative residual of the heat solves; default 1e-10 */
-    double poisson_tol;   /* relative residual of the Poisson solve; default 1e-8 */
+    double diffuse_tol;   /* relative residual of the heat solves; 0 (default): 1e-5 where the heat
+                             method only decides the sign (HV_SDF_EXACT, signed), else 1e-10 */
+    double poisson_tol;   /* relative residual of the Poisson solve; 0 (default): 1e-5 where the
+                             heat method only decides the sign, else 1e-8 */
+    int heat_coarsen;     /* HV_SDF_EXACT, signed: run the heat method (which then only decides
+                             the sign) on a grid this many times coarser, 1..4; 0 (default):
+                             2 on grids above 2^22 cells (about 160^3), else 1 */
     int threads;          /* > 0: calls hv_set_threads(threads) (process-wide) first;
                              0 (default) leaves the current setting */
 } hv_sdf_opts;
@@ -128,6 +133,7 @@ typedef struct hv_sdf_stats {
     double origin[3];
     double t;                    /* diffusion time of the finest level */
     int levels;                  /* diffusion levels used */
+    int heat_coarsen;            /* the heat method's grid was this many times coarser */
     hv_backend backend;          /* the solver backend that ran */
     size_t surface_samples;      /* quadrature points */
     /* Seconds per stage. */

@@ -130,6 +130,9 @@ hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const u
                       size_t nfaces, const uint8_t *flip);
 /* Winding number at p, leaving out face `skip` (UINT32_MAX: none). */
 double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip);
+/* The same with clusters farther than beta times their radius taken as
+ * dipoles (hv_wn_eval: 2.5; smaller is faster and coarser). */
+double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta);
 void hv_wn_free(hv_wn_tree *W);
 
 /* Angle-weighted pseudonormals of a mesh, with cleanliness of each feature. */

@@ -143,6 +143,11 @@ static double solid_angle(const double p[3], const double *a, const double *b, c
 
 double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
 {
+    return hv_wn_eval_beta(W, p, skip, WN_BETA);
+}
+
+double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta)
+{
     if (!W->nnodes)
         return 0;
     int stack[128], top = 0;
@@ -152,7 +157,7 @@ double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
         const hv_wn_node *nd = &W->nodes[stack[--top]];
         double d[3] = {nd->c[0] - p[0], nd->c[1] - p[1], nd->c[2] - p[2]};
         double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        if (dist > WN_BETA * nd->r) {
+        if (dist > beta * nd->r) {
             w += (nd->N[0] * d[0] + nd->N[1] * d[1] + nd->N[2] * d[2]) / (dist * dist * dist);
             continue;
         }
