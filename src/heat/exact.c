@@ -66,24 +66,49 @@ static inline double tri2(const double q[2], const double P[6])
     double s2 = (P[0] - P[4]) * (q[1] - P[5]) - (P[1] - P[5]) * (q[0] - P[4]);
     if ((s0 >= 0 && s1 >= 0 && s2 >= 0) || (s0 <= 0 && s1 <= 0 && s2 <= 0))
         return 0;
-    return fmin(seg2(q[0], q[1], P[0], P[1], P[2], P[3]),
-                fmin(seg2(q[0], q[1], P[2], P[3], P[4], P[5]), seg2(q[0], q[1], P[4], P[5], P[0], P[1])));
+    double x = seg2(q[0], q[1], P[0], P[1], P[2], P[3]), y = seg2(q[0], q[1], P[2], P[3], P[4], P[5]),
+           z = seg2(q[0], q[1], P[4], P[5], P[0], P[1]);
+    x = y < x ? y : x;
+    return z < x ? z : x;
 }
 
-/* Writes the distance of triangle t into the cells within W of it. Columns
- * along the dominant normal axis whose distance to the projected triangle
- * exceeds W are skipped (projection does not increase distances). */
+static inline int ifloor(double x)
+{
+    int i = (int)x;
+    return i - (x < i);
+}
+
+static inline int iceil(double x)
+{
+    int i = (int)x;
+    return i + (x > i);
+}
+
+static inline double d2_at(const double p[3], const double *a, const double *b, const double *c)
+{
+    double q[3];
+    int region;
+    return hv_closest(p, a, b, c, q, &region);
+}
+
+/* Writes the distance of triangle t into the cells within W of it: along
+ * each column of cells parallel to the triangle's dominant normal axis that
+ * passes within W of the projected triangle (projection does not increase
+ * distances), the cells of the slab |n.(p - a)| <= W whose distance is within
+ * W. The squared distance is convex along a column, and so is the sequence of
+ * its samples: the walk goes downhill from the middle of the slab to a sample
+ * within W, then out both ways until the samples leave it. */
 static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, double W,
                             _Atomic uint64_t *best)
 {
     const uint32_t *v = m->tris + 3 * (size_t)t;
     const double *a = m->verts + 3 * (size_t)v[0], *b = m->verts + 3 * (size_t)v[1],
                  *c = m->verts + 3 * (size_t)v[2];
-    const double h = g->h;
+    const double h = g->h, ih = 1.0 / h;
     int lo[3], hi[3];
     for (int ax = 0; ax < 3; ax++) {
         double mn = fmin(a[ax], fmin(b[ax], c[ax])) - W, mx = fmax(a[ax], fmax(b[ax], c[ax])) + W;
-        double l = ceil((mn - g->origin[ax]) / h - 0.5), u = floor((mx - g->origin[ax]) / h - 0.5);
+        double l = ceil((mn - g->origin[ax]) * ih - 0.5), u = floor((mx - g->origin[ax]) * ih - 0.5);
         if (u < 0 || l > g->n[ax] - 1)
             return;
         lo[ax] = l < 0 ? 0 : (int)l;
@@ -99,39 +124,75 @@ static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, doub
         d = fabs(n[0]) >= fabs(n[1]) ? (fabs(n[0]) >= fabs(n[2]) ? 0 : 2) : (fabs(n[1]) >= fabs(n[2]) ? 1 : 2);
     }
     int e1 = (d + 1) % 3, e2 = (d + 2) % 3;
-    size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
-    const float W2 = (float)(W * W);
+    const size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
+    const double W2 = W * W, od = g->origin[d];
     const double P[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
+    const double ind = nl > 0 ? 1.0 / n[d] : 0;
     for (int j = lo[e1]; j <= hi[e1]; j++)
         for (int k = lo[e2]; k <= hi[e2]; k++) {
             double p[3];
             p[e1] = g->origin[e1] + (j + 0.5) * h;
             p[e2] = g->origin[e2] + (k + 0.5) * h;
             const double q2[2] = {p[e1], p[e2]};
-            if (tri2(q2, P) > W * W)
+            if (tri2(q2, P) > W2)
                 continue;
             int i0 = lo[d], i1 = hi[d];
             if (nl > 0) {
                 /* |n.(p - a)| <= W is linear in p[d]: intersect with the box range. */
                 double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
-                double x0 = a[d] + (-W - rest) / n[d], x1 = a[d] + (W - rest) / n[d];
+                double x0 = a[d] + (-W - rest) * ind, x1 = a[d] + (W - rest) * ind;
                 if (x0 > x1) {
                     double tmp = x0;
                     x0 = x1, x1 = tmp;
                 }
-                double l = ceil((x0 - g->origin[d]) / h - 0.5), hh = floor((x1 - g->origin[d]) / h - 0.5);
-                if (l > i0)
-                    i0 = l > i1 + 1 ? i1 + 1 : (int)l;
-                if (hh < i1)
-                    i1 = hh < i0 - 1 ? i0 - 1 : (int)hh;
+                int l = iceil((x0 - od) * ih - 0.5), hh = ifloor((x1 - od) * ih - 0.5);
+                i0 = l > i0 ? l : i0;
+                i1 = hh < i1 ? hh : i1;
             }
+            if (i0 > i1)
+                continue;
             size_t base = (size_t)j * stride[e1] + (size_t)k * stride[e2];
-            for (int i = i0; i <= i1; i++) {
-                p[d] = g->origin[d] + (i + 0.5) * h;
-                double d2 = hv_point_triangle_d2(p, a, b, c);
-                if (d2 <= W2)
-                    atomic_min_u64(&best[base + (size_t)i * stride[d]], pack((float)sqrt(d2), t));
+            int ic = (i0 + i1) / 2;
+            p[d] = od + (ic + 0.5) * h;
+            double dc = d2_at(p, a, b, c);
+            if (dc > W2) {
+                int dir = 0;
+                double dn = INFINITY;
+                for (int sgn = -1; sgn <= 1; sgn += 2) {
+                    int ii = ic + sgn;
+                    if (ii < i0 || ii > i1)
+                        continue;
+                    p[d] = od + (ii + 0.5) * h;
+                    double vv = d2_at(p, a, b, c);
+                    if (vv < dc && vv < dn)
+                        dn = vv, dir = sgn;
+                }
+                if (!dir)
+                    continue;
+                ic += dir;
+                dc = dn;
+                while (dc > W2) {
+                    int ii = ic + dir;
+                    if (ii < i0 || ii > i1)
+                        break;
+                    p[d] = od + (ii + 0.5) * h;
+                    double vv = d2_at(p, a, b, c);
+                    if (!(vv < dc))
+                        break;
+                    ic = ii, dc = vv;
+                }
+                if (dc > W2)
+                    continue;
             }
+            atomic_min_u64(&best[base + (size_t)ic * stride[d]], pack((float)sqrt(dc), t));
+            for (int sgn = -1; sgn <= 1; sgn += 2)
+                for (int i = ic + sgn; i >= i0 && i <= i1; i += sgn) {
+                    p[d] = od + (i + 0.5) * h;
+                    double d2 = d2_at(p, a, b, c);
+                    if (d2 > W2)
+                        break;
+                    atomic_min_u64(&best[base + (size_t)i * stride[d]], pack((float)sqrt(d2), t));
+                }
         }
 }
 
@@ -525,6 +586,18 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
         hv_grid_cell_center(g, (int)ii, (int)jj, (int)kk, p);
         tri[c] = 0;
         dist[c] = (float)tri_cell_d(m, 0, p);
+    }
+    /* The raster is exact within W: when that covers the cap, done. */
+    if (cap <= W) {
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < count; c++)
+            if (dist[c] > cap) {
+                dist[c] = INFINITY;
+                tri[c] = UINT32_MAX;
+            }
+        if (!tri_out)
+            hv_free(tri);
+        return HV_OK;
     }
     ring r;
     hv_status st = ring_build(m, &r);

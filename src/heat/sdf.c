@@ -28,6 +28,8 @@
 #define SDF_NOISE_FACTOR 4.0
 /* Rasterization radius of the exact distance, in voxels. */
 #define SDF_EXACT_BAND 2.0
+/* Narrow bands up to this many voxels are rasterized whole. */
+#define SDF_RASTER_MAX 4.0
 /* Cells within this many voxels of the mesh get the closest-point zero-set
  * correction (exact magnitude). */
 #define SDF_CORR_BAND 3.0
@@ -854,9 +856,14 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         /* A narrow band needs exact values within band_only voxels only;
          * farther cells get (band_only + 1) h. */
         const double cap = o.band_only > 0 ? o.band_only * h : INFINITY;
-        /* Rasterizing 1 voxel instead of 2 saved 0.2 s of 1.8 at 128^3 but
-         * let 0.12-voxel errors through at 2-3 voxels: kept at 2. */
-        if ((st = hv_exact_distance(M, w.g, SDF_EXACT_BAND, cap, w.dist, w.tri, &S.band_cells)))
+        /* A narrow band up to SDF_RASTER_MAX voxels is rasterized whole
+         * (exact, no dilation): at 3 voxels on the bunny at 256^3 that took
+         * 1.07 CPU s against 1.96 for a 2-voxel raster plus dilation, which
+         * pays a descent for most cells. */
+        const double raster = o.band_only > 0 && o.band_only <= SDF_RASTER_MAX
+                                  ? fmax(SDF_EXACT_BAND, o.band_only)
+                                  : SDF_EXACT_BAND;
+        if ((st = hv_exact_distance(M, w.g, raster, cap, w.dist, w.tri, &S.band_cells)))
             goto done;
         float *res = w.g->v;
         const float *dist = w.dist;
