@@ -374,7 +374,7 @@ START_TEST(open_tube_should_be_capped_at_its_rims)
     ck_assert_double_gt(phi_at(g, beyond), 0.2);
     hv_grid_destroy(&g);
     o.repair &= ~(unsigned)HV_SDF_REPAIR_FILL_HOLES;
-    /* With the default sign-only tolerance (1e-5) the field along the open
+    /* With the default sign-only tolerance (1e-6) the field along the open
      * tube decays into dead faces before the probe, which hides the failure;
      * at tight tolerances it reaches it. */
     o.diffuse_tol = 1e-10;

@@ -91,15 +91,15 @@ typedef struct hv_sdf_opts {
                              convolution, so the zero set follows the mesh (signed only) */
     double band_only;     /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
                              voxels of the mesh, as a narrow-band level set needs; farther cells
-                             get (band_only + 1) h with the heat method's sign. Skips the
-                             closest-triangle sweeps over the whole grid (most of the time).
+                             get (band_only + 1) h with the heat method's sign. Bands up to 4
+                             voxels are rasterized whole; no dilation over the grid.
                              0 (default): exact everywhere */
 
     /* Solves. */
     hv_backend backend;   /* default HV_BACKEND_AUTO */
-    double diffuse_tol;   /* relative residual of the heat solves; 0 (default): 1e-5 where the heat
+    double diffuse_tol;   /* relative residual of the heat solves; 0 (default): 1e-6 where the heat
                              method only decides the sign (HV_SDF_EXACT, signed), else 1e-10 */
-    double poisson_tol;   /* relative residual of the Poisson solve; 0 (default): 1e-5 where the
+    double poisson_tol;   /* relative residual of the Poisson solve; 0 (default): 1e-4 where the
                              heat method only decides the sign, else 1e-8 */
     int heat_coarsen;     /* HV_SDF_EXACT, signed: run the heat method (which then only decides
                              the sign) on a grid this many times coarser, 1..4; 0 (default):

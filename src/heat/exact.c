@@ -204,6 +204,12 @@ typedef struct ring {
     double *sphere;  /* 4 * ntris: centroid and radius of each triangle */
 } ring;
 
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
 static int cmp_u32(const void *a, const void *b)
 {
     uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
@@ -550,9 +556,35 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
     for (size_t c = 0; c < count; c++)
         atomic_init(&best[c], UINT64_MAX);
     double W = band * g->h;
-#pragma omp parallel for schedule(dynamic, 256)
-    for (size_t t = 0; t < m->ntris; t++)
-        raster_triangle(m, g, (uint32_t)t, W, best);
+    /* Triangles in Morton order of their centroids' cells, so that each
+     * thread's consecutive triangles write nearby cells (the raster is bound
+     * by misses on `best`). */
+    uint64_t *order = malloc((m->ntris ? m->ntris : 1) * sizeof *order);
+    if (!order) {
+        hv_free(best);
+        if (!tri_out)
+            hv_free(tri);
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu triangles", m->ntris);
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t t = 0; t < m->ntris; t++) {
+        const uint32_t *v = m->tris + 3 * t;
+        uint64_t code = 0;
+        for (int ax = 0; ax < 3; ax++) {
+            double x = (m->verts[3 * (size_t)v[0] + ax] + m->verts[3 * (size_t)v[1] + ax] +
+                        m->verts[3 * (size_t)v[2] + ax]) / 3.0;
+            double s = (x - g->origin[ax]) / g->h;
+            uint32_t q = s <= 0 ? 0 : s >= 1023 ? 1023 : (uint32_t)s;
+            for (int b = 0; b < 10; b++)
+                code |= (uint64_t)((q >> b) & 1) << (3 * b + ax);
+        }
+        order[t] = code << 32 | t; /* ntris < 2^32 */
+    }
+    qsort(order, m->ntris, sizeof *order, cmp_u64);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t q = 0; q < m->ntris; q++)
+        raster_triangle(m, g, (uint32_t)order[q], W, best);
+    free(order);
     size_t nb = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nb)
     for (size_t c = 0; c < count; c++) {
