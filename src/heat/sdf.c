@@ -432,9 +432,10 @@ static void splat(const hv_grid *g, const hv_quad *q, int ncomp, const double *v
     }
 }
 
-/* Local zero-set correction (on the heat method's grid g). The heat method's phi is not constant on the surface (X is not exactly a
- * gradient: about 0.1-0.4 voxel rms on a torus or the bunny), so one global
- * shift leaves the zero set off by up to a voxel in places. The residual
+/* Local zero-set correction, on the heat method's grid g. The heat method's
+ * phi is not constant on the surface (X is not exactly a gradient: about
+ * 0.1-0.4 voxel rms on a torus or the bunny), so one global shift leaves the
+ * zero set off by up to a voxel in places. The residual
  * phi(x_q) at the surface samples is extended into the volume by normalized
  * convolution with the same heat kernel,
  *     c = K*(a r) / K*(a),   K = (I - t Lap)^-1,
