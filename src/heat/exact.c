@@ -3,16 +3,17 @@
  * of OpenVDB's meshToVolume: every triangle writes its distance into the
  * cells within `band` voxels of it (a slab along its dominant normal axis,
  * columns farther than the band from the projected triangle skipped, so the
- * cost follows its area); then the band is dilated layer by layer, each new
- * cell taking the nearest of its finished neighbours' triangles, up to the
- * distance cap (the whole grid when the cap is infinite). A neighbour's
- * nearest triangle is only near the cell's own when triangles are larger
- * than a voxel, so a candidate whose closest feature is an edge or a vertex
- * is refined by a descent over the triangles sharing a vertex with it (0.1-0.2
- * voxel errors at 3 voxels on a fine icosphere without). Relaxation passes
- * against the neighbours' triangles follow until nothing changes. Until 2025
- * the labels were carried by sweeps along +-x, +-y, +-z over the whole grid,
- * even for a narrow band: 1.2 s of 6 for the bunny at 256^3.
+ * cost follows its area). Up to a finite cap beyond that, the band is
+ * dilated layer by layer, each new cell taking the nearest of its finished
+ * neighbours' triangles; for the whole grid, sweeps along +-x, +-y, +-z carry
+ * the nearest-triangle labels instead (a closest-point transform in the
+ * manner of Danielsson's vector distance transform, re-evaluating the true
+ * triangle distance). A neighbour's nearest triangle is only near the
+ * cell's own when triangles are larger than a voxel, so accepted candidates
+ * are refined by a descent over the triangles sharing a vertex with them
+ * (0.1-0.2 voxel errors at 3 voxels on a fine icosphere without). Passes
+ * repeat until nothing changes. Until 2025 narrow bands also ran the sweeps over the whole
+ * grid: 1.2 s of 6 for the bunny at 256^3.
  */
 #include "sdf_internal.h"
 #include "core/error.h"
@@ -540,6 +541,102 @@ out:
     return st;
 }
 
+/* Compares cell c with its upwind neighbour prev (at p) and takes the
+ * neighbour's triangle if it is nearer. */
+static inline int relax(const hv_mesh *m, const ring *r, float *dist, uint32_t *tri,
+                        uint16_t *stamp, size_t c, size_t prev, const double p[3], int pass,
+                        int period, double cap)
+{
+    uint32_t cand = tri[prev];
+    if (cand == UINT32_MAX || cand == tri[c] || (int)stamp[prev] <= pass - period)
+        return 0;
+    double dd = tri_cell_d(m, cand, p);
+    if (!((float)dd < dist[c]) || dd > cap)
+        return 0;
+    dd = descend(m, r, p, &cand, dd);
+    dist[c] = (float)dd;
+    tri[c] = cand;
+    stamp[c] = (uint16_t)pass;
+    return 1;
+}
+
+/* One pass along axis ax in direction dir; returns updates. stamp[c] is the
+ * number of the last pass that changed cell c: pass `pass` only compares c
+ * with its upwind neighbour when that neighbour changed after the previous
+ * pass of the same direction began (pass - period); otherwise that
+ * comparison was already made. Passes along y and z walk whole x-rows at a
+ * time, so that memory is read contiguously. */
+static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, int dir, float *dist,
+                    uint32_t *tri, uint16_t *stamp, int pass, int period, double cap)
+{
+    const int *n = g->n;
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    const double h = g->h, *o = g->origin;
+    size_t updates = 0;
+    if (ax == 0) {
+#pragma omp parallel for collapse(2) schedule(dynamic, 16) reduction(+ : updates)
+        for (int k = 0; k < n[2]; k++)
+            for (int j = 0; j < n[1]; j++) {
+                double p[3] = {0, o[1] + (j + 0.5) * h, o[2] + (k + 0.5) * h};
+                int start = dir > 0 ? 1 : n[0] - 2, end = dir > 0 ? n[0] : -1;
+                for (int i = start; i != end; i += dir) {
+                    size_t c = (size_t)i + sy * j + sz * k;
+                    p[0] = o[0] + (i + 0.5) * h;
+                    updates += relax(m, r, dist, tri, stamp, c, c - dir, p, pass, period, cap);
+                }
+            }
+        return updates;
+    }
+    /* y: parallel over z-planes, sequential in y; z: parallel over y, sequential in z. */
+    const int outer = ax == 1 ? n[2] : n[1], along = n[ax];
+    const ptrdiff_t step = ax == 1 ? (ptrdiff_t)sy : (ptrdiff_t)sz;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : updates)
+    for (int q = 0; q < outer; q++) {
+        int start = dir > 0 ? 1 : along - 2, end = dir > 0 ? along : -1;
+        for (int s = start; s != end; s += dir) {
+            int j = ax == 1 ? s : q, k = ax == 1 ? q : s;
+            double p[3] = {0, o[1] + (j + 0.5) * h, o[2] + (k + 0.5) * h};
+            size_t base = sy * j + sz * k;
+            for (int i = 0; i < n[0]; i++) {
+                p[0] = o[0] + (i + 0.5) * h;
+                updates += relax(m, r, dist, tri, stamp, base + i, base + i - dir * step, p, pass, period,
+                                 cap);
+            }
+        }
+    }
+    return updates;
+}
+
+/* The whole grid: sweeps along +-x, +-y, +-z until nothing changes (for a
+ * full grid cheaper than the band dilation: 2.7 against 4.6 CPU s on the
+ * bunny at 128^3, since a sweep tests one candidate per cell and skips
+ * unchanged ones). */
+static hv_status sweep_all(const hv_mesh *m, const ring *r, const hv_grid *g, float *dist, uint32_t *tri)
+{
+    const size_t count = hv_grid_count(g);
+    uint16_t *stamp = hv_malloc(count * sizeof *stamp);
+    if (!stamp)
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu cells", count);
+    /* Passes are numbered from `period` on, so that every seed counts as
+     * changed for the first pass of each direction. */
+    const int period = 2 * g->dim;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < count; c++)
+        stamp[c] = (uint16_t)period;
+    int pass = period;
+    for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
+        size_t upd = 0;
+        for (int ax = 0; ax < g->dim; ax++) {
+            upd += sweep(m, r, g, ax, +1, dist, tri, stamp, ++pass, period, INFINITY);
+            upd += sweep(m, r, g, ax, -1, dist, tri, stamp, ++pass, period, INFINITY);
+        }
+        if (!upd)
+            break;
+    }
+    hv_free(stamp);
+    return HV_OK;
+}
+
 hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
                             float *dist, uint32_t *tri_out, size_t *band_cells)
 {
@@ -638,7 +735,7 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
             hv_free(tri);
         return st;
     }
-    st = dilate(m, &r, g, cap, dist, tri);
+    st = isfinite(cap) ? dilate(m, &r, g, cap, dist, tri) : sweep_all(m, &r, g, dist, tri);
     free(r.start);
     free(r.tris);
     free(r.sphere);
