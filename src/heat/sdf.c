@@ -585,7 +585,7 @@ static hv_status upsample(const hv_grid *gh, const float *v, const hv_grid *g, f
             if (nh == 1 || s <= 0)
                 i0 = 0, f = 0;
             else if (i0 >= nh - 1)
-                i0 = nh - 2, f = 1; /* never reached for a covering coarse grid */
+                i0 = nh - 2, f = 1; /* past the last centre: its value, as hv_trilinear clamps */
             base[a][i] = i0;
             frac[a][i] = (float)f;
         }
