@@ -899,7 +899,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
                         if (use_ps && d < dlim && fabsf(sg) < hlim && tri[c] != UINT32_MAX) {
                             double p[3];
                             hv_grid_cell_center(w.g, i, j, k, p);
-                            int s = hv_pseudo_sign(&ps, M, tri[c], p);
+                            int s = hv_pseudo_sign(&ps, M, tri[c], p, sg < 0 ? -1 : 1);
                             if (s) {
                                 used++;
                                 if ((s < 0) != (sg < 0)) {
