@@ -92,7 +92,8 @@ typedef struct hv_sdf_opts {
     double band_only;     /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
                              voxels of the mesh, as a narrow-band level set needs; farther cells
                              get (band_only + 1) h with the heat method's sign. Bands up to 4
-                             voxels are rasterized whole; no dilation over the grid.
+                             voxels are rasterized whole, wider ones dilated from a 2-voxel
+                             raster; no pass over the whole grid.
                              0 (default): exact everywhere */
 
     /* Solves. */
@@ -147,7 +148,8 @@ typedef struct hv_sdf_stats {
     double surface_rms_after;    /* the same after the local correction */
     size_t dead_faces;           /* faces where no level was above solver accuracy (X = 0) */
     size_t band_cells;           /* cells whose exact distance came from rasterization */
-    size_t near_sign_cells;      /* cells signed by a pseudonormal */
+    size_t near_sign_cells;      /* cells signed by a pseudonormal (one that agreed with the heat
+                                    sign counts even where its face's trust was not tested) */
     size_t near_sign_changed;    /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
 } hv_sdf_stats;
