@@ -40,6 +40,8 @@ static void help(void)
         "  --heat             keep the heat method's own |phi| instead of the exact distance\n"
         "                     to the triangles (sign from the heat method either way)\n"
         "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
+        "  --heat-coarsen F   run the heat method (which then only decides the sign) on a\n"
+        "                     grid F = 1..4 times coarser; default: 2 above 2^22 cells, else 1\n"
         "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
         "  --domed-caps       close holes with caps that bulge like the wall around them\n"
         "                     (default: planar caps)\n"
@@ -152,6 +154,10 @@ int cmd_sdf(int argc, char **argv)
             NEED(1);
             if (cli_parse_double(argv[++i], &o.t_scale) || !(o.t_scale > 0))
                 return cli_usage_error("sdf", "--t-scale needs a positive number, got '%s'", argv[i]);
+        } else if (!strcmp(a, "--heat-coarsen")) {
+            NEED(1);
+            if (cli_parse_int(argv[++i], &o.heat_coarsen) || o.heat_coarsen < 1 || o.heat_coarsen > 4)
+                return cli_usage_error("sdf", "--heat-coarsen needs an integer in 1..4, got '%s'", argv[i]);
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--domed-caps")) {
@@ -220,11 +226,11 @@ int cmd_sdf(int argc, char **argv)
     char params[512];
     snprintf(params, sizeof params,
              "grid=%dx%dx%d voxel_size=%.9g origin=%.9g,%.9g,%.9g t_scale=%g mode=%s magnitude=%s "
-             "repair=0x%x backend=%s band=%g%s",
+             "repair=0x%x backend=%s band=%g heat_coarsen=%d%s",
              S.n[0], S.n[1], S.n[2], S.h, S.origin[0], S.origin[1], S.origin[2], o.t_scale,
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
-             band, dense ? " dense" : "");
+             band, S.heat_coarsen, dense ? " dense" : "");
     hv_vdb_writer *w = NULL;
     /* An unsigned distance is no level set (no inside): a plain float grid. */
     if (!(st = hv_vdb_writer_create(&w)) &&

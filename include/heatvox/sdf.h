@@ -93,14 +93,20 @@ typedef struct hv_sdf_opts {
                              convolution, so the zero set follows the mesh (signed only) */
     double band_only;     /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
                              voxels of the mesh, as a narrow-band level set needs; farther cells
-                             get (band_only + 1) h with the heat method's sign. Skips the
-                             closest-triangle sweeps over the whole grid (most of the time).
+                             get (band_only + 1) h with the heat method's sign. Bands up to 4
+                             voxels are rasterized whole, wider ones dilated from a 2-voxel
+                             raster; no pass over the whole grid.
                              0 (default): exact everywhere */
 
     /* Solves. */
     hv_backend backend;   /* default HV_BACKEND_AUTO */
-    double diffuse_tol;   /* relative residual of the heat solves; default 1e-10 */
-    double poisson_tol;   /* relative residual of the Poisson solve; default 1e-8 */
+    double diffuse_tol;   /* relative residual of the heat solves; 0 (default): 1e-6 where the heat
+                             method only decides the sign (HV_SDF_EXACT, signed), else 1e-10 */
+    double poisson_tol;   /* relative residual of the Poisson solve; 0 (default): 1e-4 where the
+                             heat method only decides the sign, else 1e-8 */
+    int heat_coarsen;     /* HV_SDF_EXACT, signed: run the heat method (which then only decides
+                             the sign) on a grid this many times coarser, 1..4; 0 (default):
+                             2 on grids above 2^22 cells (about 160^3), else 1 */
     int threads;          /* > 0: calls hv_set_threads(threads) (process-wide) first;
                              0 (default) leaves the current setting */
 } hv_sdf_opts;
@@ -130,6 +136,7 @@ typedef struct hv_sdf_stats {
     double origin[3];
     double t;                    /* diffusion time of the finest level */
     int levels;                  /* diffusion levels used */
+    int heat_coarsen;            /* the heat method's grid was this many times coarser */
     hv_backend backend;          /* the solver backend that ran */
     size_t surface_samples;      /* quadrature points */
     /* Seconds per stage. */
@@ -143,7 +150,8 @@ typedef struct hv_sdf_stats {
     double surface_rms_after;    /* the same after the local correction */
     size_t dead_faces;           /* faces where no level was above solver accuracy (X = 0) */
     size_t band_cells;           /* cells whose exact distance came from rasterization */
-    size_t near_sign_cells;      /* cells signed by a pseudonormal */
+    size_t near_sign_cells;      /* cells signed by a pseudonormal (one that agreed with the heat
+                                    sign counts even where its face's trust was not tested) */
     size_t near_sign_changed;    /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
 } hv_sdf_stats;

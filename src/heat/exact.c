@@ -1,16 +1,19 @@
 /*
- * Exact unsigned distance from cell centres to a triangle mesh: every
- * triangle writes its distance into the cells within `band` voxels of it
- * (a slab along its dominant normal axis, so the cost follows its area), then
- * the nearest-triangle labels are propagated to the rest of the grid by
- * forward and backward passes along x, y and z, each cell testing the triangle
- * of its upwind neighbour (a closest-point transform in the manner of
- * Danielsson's vector distance transform, but re-evaluating the true
- * triangle distance). A neighbour's nearest triangle is only near the cell's
- * own when triangles are smaller than a voxel (0.1-0.2 voxel errors at 3
- * voxels on a fine icosphere), so every accepted candidate is refined by a
- * descent over the triangles sharing a vertex with it. Passes repeat until
- * nothing changes.
+ * Exact unsigned distance from cell centres to a triangle mesh, in the manner
+ * of OpenVDB's meshToVolume: every triangle writes its distance into the
+ * cells within `band` voxels of it (a slab along its dominant normal axis,
+ * columns farther than the band from the projected triangle skipped, so the
+ * cost follows its area). Up to a finite cap beyond that, the band is
+ * dilated layer by layer, each new cell taking the nearest of its finished
+ * neighbours' triangles; for the whole grid, sweeps along +-x, +-y, +-z carry
+ * the nearest-triangle labels instead (a closest-point transform in the
+ * manner of Danielsson's vector distance transform, re-evaluating the true
+ * triangle distance). A neighbour's nearest triangle is only near the
+ * cell's own when triangles are larger than a voxel, so accepted candidates
+ * are refined by a descent over the triangles sharing a vertex with them
+ * (0.1-0.2 voxel errors at 3 voxels on a fine icosphere without). Passes
+ * repeat until nothing changes. Until 2025 narrow bands also ran the sweeps over the whole
+ * grid: 1.2 s of 6 for the bunny at 256^3.
  */
 #include "sdf_internal.h"
 #include "core/error.h"
@@ -46,18 +49,67 @@ static inline double tri_cell_d(const hv_mesh *m, uint32_t t, const double p[3])
                            m->verts + 3 * (size_t)v[2], q, &region));
 }
 
-/* Writes the distance of triangle t into the cells within W of it. */
+/* Squared distance from (px, py) to segment (ax, ay)-(bx, by). */
+static inline double seg2(double px, double py, double ax, double ay, double bx, double by)
+{
+    double ux = bx - ax, uy = by - ay, wx = px - ax, wy = py - ay;
+    double l = ux * ux + uy * uy, t = l > 0 ? (wx * ux + wy * uy) / l : 0;
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    double dx = wx - t * ux, dy = wy - t * uy;
+    return dx * dx + dy * dy;
+}
+
+/* Squared distance from q to the 2D triangle P (x, y pairs); 0 inside. */
+static inline double tri2(const double q[2], const double P[6])
+{
+    double s0 = (P[2] - P[0]) * (q[1] - P[1]) - (P[3] - P[1]) * (q[0] - P[0]);
+    double s1 = (P[4] - P[2]) * (q[1] - P[3]) - (P[5] - P[3]) * (q[0] - P[2]);
+    double s2 = (P[0] - P[4]) * (q[1] - P[5]) - (P[1] - P[5]) * (q[0] - P[4]);
+    if ((s0 >= 0 && s1 >= 0 && s2 >= 0) || (s0 <= 0 && s1 <= 0 && s2 <= 0))
+        return 0;
+    double x = seg2(q[0], q[1], P[0], P[1], P[2], P[3]), y = seg2(q[0], q[1], P[2], P[3], P[4], P[5]),
+           z = seg2(q[0], q[1], P[4], P[5], P[0], P[1]);
+    x = y < x ? y : x;
+    return z < x ? z : x;
+}
+
+static inline int ifloor(double x)
+{
+    int i = (int)x;
+    return i - (x < i);
+}
+
+static inline int iceil(double x)
+{
+    int i = (int)x;
+    return i + (x > i);
+}
+
+static inline double d2_at(const double p[3], const double *a, const double *b, const double *c)
+{
+    double q[3];
+    int region;
+    return hv_closest(p, a, b, c, q, &region);
+}
+
+/* Writes the distance of triangle t into the cells within W of it: along
+ * each column of cells parallel to the triangle's dominant normal axis that
+ * passes within W of the projected triangle (projection does not increase
+ * distances), the cells of the slab |n.(p - a)| <= W whose distance is within
+ * W. The squared distance is convex along a column, and so is the sequence of
+ * its samples: the walk goes downhill from the middle of the slab to a sample
+ * within W, then out both ways until the samples leave it. */
 static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, double W,
                             _Atomic uint64_t *best)
 {
     const uint32_t *v = m->tris + 3 * (size_t)t;
     const double *a = m->verts + 3 * (size_t)v[0], *b = m->verts + 3 * (size_t)v[1],
                  *c = m->verts + 3 * (size_t)v[2];
-    const double h = g->h;
+    const double h = g->h, ih = 1.0 / h;
     int lo[3], hi[3];
     for (int ax = 0; ax < 3; ax++) {
         double mn = fmin(a[ax], fmin(b[ax], c[ax])) - W, mx = fmax(a[ax], fmax(b[ax], c[ax])) + W;
-        double l = ceil((mn - g->origin[ax]) / h - 0.5), u = floor((mx - g->origin[ax]) / h - 0.5);
+        double l = ceil((mn - g->origin[ax]) * ih - 0.5), u = floor((mx - g->origin[ax]) * ih - 0.5);
         if (u < 0 || l > g->n[ax] - 1)
             return;
         lo[ax] = l < 0 ? 0 : (int)l;
@@ -73,66 +125,172 @@ static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, doub
         d = fabs(n[0]) >= fabs(n[1]) ? (fabs(n[0]) >= fabs(n[2]) ? 0 : 2) : (fabs(n[1]) >= fabs(n[2]) ? 1 : 2);
     }
     int e1 = (d + 1) % 3, e2 = (d + 2) % 3;
-    size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
-    const float W2 = (float)(W * W);
+    const size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
+    const double W2 = W * W, od = g->origin[d];
+    const double P[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
+    const double ind = nl > 0 ? 1.0 / n[d] : 0;
     for (int j = lo[e1]; j <= hi[e1]; j++)
         for (int k = lo[e2]; k <= hi[e2]; k++) {
             double p[3];
             p[e1] = g->origin[e1] + (j + 0.5) * h;
             p[e2] = g->origin[e2] + (k + 0.5) * h;
+            const double q2[2] = {p[e1], p[e2]};
+            if (tri2(q2, P) > W2)
+                continue;
             int i0 = lo[d], i1 = hi[d];
             if (nl > 0) {
                 /* |n.(p - a)| <= W is linear in p[d]: intersect with the box range. */
                 double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
-                double x0 = a[d] + (-W - rest) / n[d], x1 = a[d] + (W - rest) / n[d];
+                double x0 = a[d] + (-W - rest) * ind, x1 = a[d] + (W - rest) * ind;
                 if (x0 > x1) {
                     double tmp = x0;
                     x0 = x1, x1 = tmp;
                 }
-                double l = ceil((x0 - g->origin[d]) / h - 0.5), hh = floor((x1 - g->origin[d]) / h - 0.5);
-                if (l > i0)
-                    i0 = l > i1 + 1 ? i1 + 1 : (int)l;
-                if (hh < i1)
-                    i1 = hh < i0 - 1 ? i0 - 1 : (int)hh;
+                int l = iceil((x0 - od) * ih - 0.5), hh = ifloor((x1 - od) * ih - 0.5);
+                i0 = l > i0 ? l : i0;
+                i1 = hh < i1 ? hh : i1;
             }
+            if (i0 > i1)
+                continue;
             size_t base = (size_t)j * stride[e1] + (size_t)k * stride[e2];
-            for (int i = i0; i <= i1; i++) {
-                p[d] = g->origin[d] + (i + 0.5) * h;
-                double d2 = hv_point_triangle_d2(p, a, b, c);
-                if (d2 <= W2)
-                    atomic_min_u64(&best[base + (size_t)i * stride[d]], pack((float)sqrt(d2), t));
+            int ic = (i0 + i1) / 2;
+            p[d] = od + (ic + 0.5) * h;
+            double dc = d2_at(p, a, b, c);
+            if (dc > W2) {
+                int dir = 0;
+                double dn = INFINITY;
+                for (int sgn = -1; sgn <= 1; sgn += 2) {
+                    int ii = ic + sgn;
+                    if (ii < i0 || ii > i1)
+                        continue;
+                    p[d] = od + (ii + 0.5) * h;
+                    double vv = d2_at(p, a, b, c);
+                    if (vv < dc && vv < dn)
+                        dn = vv, dir = sgn;
+                }
+                if (!dir)
+                    continue;
+                ic += dir;
+                dc = dn;
+                while (dc > W2) {
+                    int ii = ic + dir;
+                    if (ii < i0 || ii > i1)
+                        break;
+                    p[d] = od + (ii + 0.5) * h;
+                    double vv = d2_at(p, a, b, c);
+                    if (!(vv < dc))
+                        break;
+                    ic = ii, dc = vv;
+                }
+                if (dc > W2)
+                    continue;
             }
+            atomic_min_u64(&best[base + (size_t)ic * stride[d]], pack((float)sqrt(dc), t));
+            for (int sgn = -1; sgn <= 1; sgn += 2)
+                for (int i = ic + sgn; i >= i0 && i <= i1; i += sgn) {
+                    p[d] = od + (i + 0.5) * h;
+                    double d2 = d2_at(p, a, b, c);
+                    if (d2 > W2)
+                        break;
+                    atomic_min_u64(&best[base + (size_t)i * stride[d]], pack((float)sqrt(d2), t));
+                }
         }
 }
 
-/* Triangles around each vertex (CSR). */
+/* For each triangle, the other triangles sharing a vertex with it, each once
+ * (CSR): start[t]..start[t+1] in tris. */
 typedef struct ring {
-    uint32_t *start; /* nverts + 1 */
-    uint32_t *tris;  /* 3 * ntris */
+    uint32_t *start; /* ntris + 1 */
+    uint32_t *tris;
+    double *sphere;  /* 4 * ntris: centroid and radius of each triangle */
 } ring;
+
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
 
 static hv_status ring_build(const hv_mesh *m, ring *r)
 {
-    r->start = calloc(m->nverts + 1, sizeof *r->start);
-    r->tris = malloc(3 * m->ntris * sizeof *r->tris);
-    if (!r->start || !r->tris) {
-        free(r->start), free(r->tris);
-        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for vertex rings");
+    const size_t nt = m->ntris, nv = m->nverts;
+    uint32_t *vs = calloc(nv + 1, sizeof *vs), *vt = malloc((3 * nt + 1) * sizeof *vt);
+    r->start = malloc((nt + 1) * sizeof *r->start);
+    r->tris = NULL;
+    r->sphere = malloc((4 * nt + 1) * sizeof *r->sphere);
+    if (!vs || !vt || !r->start || !r->sphere)
+        goto nomem;
+    for (size_t t = 0; t < nt; t++) {
+        const double *a = m->verts + 3 * (size_t)m->tris[3 * t], *b = m->verts + 3 * (size_t)m->tris[3 * t + 1],
+                     *c = m->verts + 3 * (size_t)m->tris[3 * t + 2];
+        double *sp = r->sphere + 4 * t, r2 = 0;
+        for (int k = 0; k < 3; k++)
+            sp[k] = (a[k] + b[k] + c[k]) / 3.0;
+        const double *vv[3] = {a, b, c};
+        for (int q = 0; q < 3; q++) {
+            double d2 = 0;
+            for (int k = 0; k < 3; k++)
+                d2 += (vv[q][k] - sp[k]) * (vv[q][k] - sp[k]);
+            r2 = fmax(r2, d2);
+        }
+        sp[3] = sqrt(r2) * (1 + 1e-12);
     }
-    for (size_t i = 0; i < 3 * m->ntris; i++)
-        r->start[m->tris[i] + 1]++;
-    for (size_t v = 0; v < m->nverts; v++)
-        r->start[v + 1] += r->start[v];
-    uint32_t *fill = malloc(m->nverts * sizeof *fill);
-    if (!fill) {
-        free(r->start), free(r->tris);
-        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for vertex rings");
+    for (size_t i = 0; i < 3 * nt; i++)
+        vs[m->tris[i] + 1]++;
+    for (size_t v = 0; v < nv; v++)
+        vs[v + 1] += vs[v];
+    {
+        uint32_t *fill = malloc((nv + 1) * sizeof *fill);
+        if (!fill)
+            goto nomem;
+        memcpy(fill, vs, (nv + 1) * sizeof *fill);
+        for (size_t i = 0; i < 3 * nt; i++)
+            vt[fill[m->tris[i]]++] = (uint32_t)(i / 3);
+        free(fill);
     }
-    memcpy(fill, r->start, m->nverts * sizeof *fill);
-    for (size_t i = 0; i < 3 * m->ntris; i++)
-        r->tris[fill[m->tris[i]]++] = (uint32_t)(i / 3);
-    free(fill);
+    /* Upper bound, then fill with sorted unique lists. */
+    size_t total = 0;
+    for (size_t t = 0; t < nt; t++)
+        for (int k = 0; k < 3; k++) {
+            uint32_t v = m->tris[3 * t + k];
+            total += vs[v + 1] - vs[v];
+        }
+    if (!(r->tris = malloc((total ? total : 1) * sizeof *r->tris)))
+        goto nomem;
+    size_t at = 0;
+    for (size_t t = 0; t < nt; t++) {
+        r->start[t] = (uint32_t)at;
+        size_t b = at;
+        for (int k = 0; k < 3; k++) {
+            uint32_t v = m->tris[3 * t + k];
+            for (uint32_t q = vs[v]; q < vs[v + 1]; q++)
+                if (vt[q] != t)
+                    r->tris[at++] = vt[q];
+        }
+        qsort(r->tris + b, at - b, sizeof *r->tris, cmp_u32);
+        size_t u = b;
+        for (size_t q = b; q < at; q++)
+            if (q == b || r->tris[q] != r->tris[q - 1])
+                r->tris[u++] = r->tris[q];
+        at = u;
+    }
+    r->start[nt] = (uint32_t)at;
+    free(vs);
+    free(vt);
     return HV_OK;
+nomem:
+    free(vs);
+    free(vt);
+    free(r->start);
+    free(r->tris);
+    free(r->sphere);
+    return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for vertex rings");
 }
 
 /* Greedy descent from triangle *t over vertex-adjacent triangles. */
@@ -140,17 +298,19 @@ static double descend(const hv_mesh *m, const ring *r, const double p[3], uint32
 {
     for (int step = 0; step < 64; step++) {
         uint32_t best = *t;
-        for (int k = 0; k < 3; k++) {
-            uint32_t v = m->tris[3 * (size_t)*t + k];
-            for (uint32_t q = r->start[v]; q < r->start[v + 1]; q++) {
-                uint32_t u = r->tris[q];
-                if (u == *t)
-                    continue;
-                double du = tri_cell_d(m, u, p);
-                if (du < d) {
-                    d = du;
-                    best = u;
-                }
+        for (uint32_t q = r->start[*t]; q < r->start[*t + 1]; q++) {
+            uint32_t u = r->tris[q];
+            /* The triangle lies in its bounding sphere: skip it when the
+             * sphere is no nearer than d. */
+            const double *sp = r->sphere + 4 * (size_t)u;
+            double cx = p[0] - sp[0], cy = p[1] - sp[1], cz = p[2] - sp[2];
+            double lb = sqrt(cx * cx + cy * cy + cz * cz) - sp[3];
+            if (lb >= d)
+                continue;
+            double du = tri_cell_d(m, u, p);
+            if (du < d) {
+                d = du;
+                best = u;
             }
         }
         if (best == *t)
@@ -160,7 +320,227 @@ static double descend(const hv_mesh *m, const ring *r, const double p[3], uint32
     return d;
 }
 
-/* One pass along axis ax in direction dir over every row; returns updates. */
+static inline double tri_cell_region(const hv_mesh *m, uint32_t t, const double p[3], int *region)
+{
+    const uint32_t *v = m->tris + 3 * (size_t)t;
+    double q[3];
+    return sqrt(hv_closest(p, m->verts + 3 * (size_t)v[0], m->verts + 3 * (size_t)v[1],
+                           m->verts + 3 * (size_t)v[2], q, region));
+}
+
+/* Best of the candidate triangles cand[0..nc) at p, refined by descent when
+ * its closest feature is an edge or a vertex (from a face interior the
+ * descent almost never moves; restricting the descent to the triangles on
+ * the closest feature instead let 0.065-voxel errors through on the bunny). */
+static double best_of(const hv_mesh *m, const ring *r, const double p[3], const uint32_t *cand, int nc,
+                      uint32_t *out, int refine)
+{
+    double bd = INFINITY;
+    int breg = 0;
+    uint32_t best = UINT32_MAX;
+    for (int u = 0; u < nc; u++) {
+        int reg;
+        double d = tri_cell_region(m, cand[u], p, &reg);
+        if (d < bd)
+            bd = d, best = cand[u], breg = reg;
+    }
+    if (refine && best != UINT32_MAX && breg != 0)
+        bd = descend(m, r, p, &best, bd);
+    *out = best;
+    return bd;
+}
+
+#define ST_NONE 0
+#define ST_QUEUED 1
+#define ST_SEED 2
+#define ST_DILATED 3
+
+static hv_status grow(size_t **v, size_t *cap, size_t need)
+{
+    if (need <= *cap)
+        return HV_OK;
+    size_t nc = *cap ? *cap : 1024;
+    while (nc < need)
+        nc *= 2;
+    size_t *t = realloc(*v, nc * sizeof **v);
+    if (!t)
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for the band (%zu cells)", need);
+    *v = t, *cap = nc;
+    return HV_OK;
+}
+
+/* Band dilation, OpenVDB's design: from the rasterized cells, layer by layer,
+ * each new 6-neighbour of the front takes the best of its finished
+ * neighbours' nearest triangles (refined by descent) and joins the next front
+ * while within the cap. Then red-black relaxation passes over the dilated
+ * cells against their neighbours' triangles until nothing changes (a cell of
+ * one colour reads only cells of the other, so the result does not depend on
+ * the threads). Only cells up to the cap and their first neighbours beyond
+ * are touched. */
+static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, double cap, float *dist,
+                        uint32_t *tri)
+{
+    const int nx = g->n[0], ny = g->n[1], nz = g->dim == 3 ? g->n[2] : 1;
+    const size_t count = hv_grid_count(g);
+    const ptrdiff_t s[3] = {1, nx, (ptrdiff_t)nx * ny};
+    uint8_t *state = hv_malloc(count);
+    size_t cap_front = 0, nfront = 0, cap_new = 0, nnew = 0;
+    size_t *front = NULL, *fresh = NULL;
+    float *nd = NULL;
+    uint32_t *nt = NULL;
+    hv_status st = HV_OK;
+    if (!state) {
+        st = hv_error(HV_ERR_NOMEM, "exact distance: out of memory for the band");
+        goto out;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < count; c++)
+        state[c] = tri[c] != UINT32_MAX ? ST_SEED : ST_NONE;
+    for (size_t c = 0; c < count; c++) {
+        if (state[c] != ST_SEED)
+            continue;
+        if ((st = grow(&front, &cap_front, nfront + 1)))
+            goto out;
+        front[nfront++] = c;
+    }
+#define NB(c, q) ((c) + ((q) & 1 ? s[(q) >> 1] : -s[(q) >> 1]))
+    while (nfront) {
+        /* Untouched 6-neighbours of the front. */
+        nnew = 0;
+        for (size_t f = 0; f < nfront; f++) {
+            size_t c = front[f];
+            int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny), k = (int)(c / (size_t)s[2]);
+            const int ok[6] = {i > 0, i < nx - 1, j > 0, j < ny - 1, k > 0, k < nz - 1};
+            for (int q = 0; q < 6; q++) {
+                if (!ok[q])
+                    continue;
+                size_t d = NB(c, q);
+                if (state[d] != ST_NONE)
+                    continue;
+                state[d] = ST_QUEUED;
+                if ((st = grow(&fresh, &cap_new, nnew + 1)))
+                    goto out;
+                fresh[nnew++] = d;
+            }
+        }
+        if (!nnew)
+            break;
+        float *nd2 = realloc(nd, nnew * sizeof *nd);
+        if (nd2)
+            nd = nd2;
+        uint32_t *nt2 = nd2 ? realloc(nt, nnew * sizeof *nt) : NULL;
+        if (!nt2) {
+            st = hv_error(HV_ERR_NOMEM, "exact distance: out of memory for the band");
+            goto out;
+        }
+        nt = nt2;
+#pragma omp parallel for schedule(dynamic, 256)
+        for (size_t e = 0; e < nnew; e++) {
+            size_t c = fresh[e];
+            int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny), k = (int)(c / (size_t)s[2]);
+            const int ok[6] = {i > 0, i < nx - 1, j > 0, j < ny - 1, k > 0, k < nz - 1};
+            uint32_t cand[6];
+            int nc = 0;
+            for (int q = 0; q < 6; q++) {
+                if (!ok[q])
+                    continue;
+                size_t d = NB(c, q);
+                uint32_t t = tri[d];
+                if ((state[d] & 3) < ST_SEED || t == UINT32_MAX)
+                    continue;
+                int dup = 0;
+                for (int u = 0; u < nc; u++)
+                    dup |= cand[u] == t;
+                if (!dup)
+                    cand[nc++] = t;
+            }
+            double p[3];
+            hv_grid_cell_center(g, i, j, k, p);
+            nd[e] = (float)best_of(m, r, p, cand, nc, &nt[e], 1);
+        }
+        /* Commit; cells within the cap form the next front. */
+        if ((st = grow(&front, &cap_front, nnew)))
+            goto out;
+        nfront = 0;
+        for (size_t e = 0; e < nnew; e++) {
+            size_t c = fresh[e];
+            state[c] = ST_DILATED;
+            dist[c] = nd[e];
+            tri[c] = nt[e];
+            if (nd[e] <= cap)
+                front[nfront++] = c;
+        }
+    }
+    /* Relaxation. A cell is rechecked only when a neighbour changed after
+     * its last check: the upper bits of state hold the time (2 round +
+     * colour + 1) of a cell's last change. */
+    for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
+        size_t upd = 0;
+        for (int colour = 0; colour < 2; colour++) {
+            const int now = 2 * round + colour + 1, last = now - 2;
+#pragma omp parallel for collapse(2) schedule(dynamic, 16) reduction(+ : upd)
+            for (int k = 0; k < nz; k++)
+                for (int j = 0; j < ny; j++) {
+                    size_t row = (size_t)s[1] * j + (size_t)s[2] * k;
+                    for (int i = (j + k + colour) & 1; i < nx; i += 2) {
+                        size_t c = row + i;
+                        if ((state[c] & 3) != ST_DILATED || tri[c] == UINT32_MAX)
+                            continue;
+                        const int ok[6] = {i > 0, i < nx - 1, j > 0, j < ny - 1, k > 0, k < nz - 1};
+                        uint32_t cand[7];
+                        int nc = 1, fresh_nb = round == 0;
+                        cand[0] = tri[c];
+                        for (int q = 0; q < 6; q++) {
+                            if (!ok[q])
+                                continue;
+                            size_t d = NB(c, q);
+                            uint32_t t = tri[d];
+                            if (t == UINT32_MAX)
+                                continue;
+                            fresh_nb |= (state[d] >> 2) > last;
+                            int dup = 0;
+                            for (int u = 0; u < nc; u++)
+                                dup |= cand[u] == t;
+                            if (!dup)
+                                cand[nc++] = t;
+                        }
+                        if (nc == 1 || !fresh_nb)
+                            continue;
+                        double p[3];
+                        hv_grid_cell_center(g, i, j, k, p);
+                        uint32_t best;
+                        double bd = best_of(m, r, p, cand + 1, nc - 1, &best, 1);
+                        if ((float)bd < dist[c]) {
+                            dist[c] = (float)bd;
+                            tri[c] = best;
+                            state[c] = (uint8_t)(ST_DILATED | now << 2);
+                            upd++;
+                        }
+                    }
+                }
+        }
+        if (!upd)
+            break;
+    }
+#undef NB
+    /* Beyond the cap: nothing. */
+    if (isfinite(cap)) {
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < count; c++)
+            if ((state[c] & 3) == ST_DILATED && dist[c] > cap) {
+                dist[c] = INFINITY;
+                tri[c] = UINT32_MAX;
+            }
+    }
+out:
+    hv_free(state);
+    free(front);
+    free(fresh);
+    free(nd);
+    free(nt);
+    return st;
+}
+
 /* Compares cell c with its upwind neighbour prev (at p) and takes the
  * neighbour's triangle if it is nearer. */
 static inline int relax(const hv_mesh *m, const ring *r, float *dist, uint32_t *tri,
@@ -227,6 +607,36 @@ static size_t sweep(const hv_mesh *m, const ring *r, const hv_grid *g, int ax, i
     return updates;
 }
 
+/* The whole grid: sweeps along +-x, +-y, +-z until nothing changes (for a
+ * full grid cheaper than the band dilation: 2.7 against 4.6 CPU s on the
+ * bunny at 128^3, since a sweep tests one candidate per cell and skips
+ * unchanged ones). */
+static hv_status sweep_all(const hv_mesh *m, const ring *r, const hv_grid *g, float *dist, uint32_t *tri)
+{
+    const size_t count = hv_grid_count(g);
+    uint16_t *stamp = hv_malloc(count * sizeof *stamp);
+    if (!stamp)
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu cells", count);
+    /* Passes are numbered from `period` on, so that every seed counts as
+     * changed for the first pass of each direction. */
+    const int period = 2 * g->dim;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < count; c++)
+        stamp[c] = (uint16_t)period;
+    int pass = period;
+    for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
+        size_t upd = 0;
+        for (int ax = 0; ax < g->dim; ax++) {
+            upd += sweep(m, r, g, ax, +1, dist, tri, stamp, ++pass, period, INFINITY);
+            upd += sweep(m, r, g, ax, -1, dist, tri, stamp, ++pass, period, INFINITY);
+        }
+        if (!upd)
+            break;
+    }
+    hv_free(stamp);
+    return HV_OK;
+}
+
 hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
                             float *dist, uint32_t *tri_out, size_t *band_cells)
 {
@@ -243,9 +653,35 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
     for (size_t c = 0; c < count; c++)
         atomic_init(&best[c], UINT64_MAX);
     double W = band * g->h;
-#pragma omp parallel for schedule(dynamic, 256)
-    for (size_t t = 0; t < m->ntris; t++)
-        raster_triangle(m, g, (uint32_t)t, W, best);
+    /* Triangles in Morton order of their centroids' cells, so that each
+     * thread's consecutive triangles write nearby cells (the raster is bound
+     * by misses on `best`). */
+    uint64_t *order = malloc((m->ntris ? m->ntris : 1) * sizeof *order);
+    if (!order) {
+        hv_free(best);
+        if (!tri_out)
+            hv_free(tri);
+        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu triangles", m->ntris);
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t t = 0; t < m->ntris; t++) {
+        const uint32_t *v = m->tris + 3 * t;
+        uint64_t code = 0;
+        for (int ax = 0; ax < 3; ax++) {
+            double x = (m->verts[3 * (size_t)v[0] + ax] + m->verts[3 * (size_t)v[1] + ax] +
+                        m->verts[3 * (size_t)v[2] + ax]) / 3.0;
+            double s = (x - g->origin[ax]) / g->h;
+            uint32_t q = s <= 0 ? 0 : s >= 1023 ? 1023 : (uint32_t)s;
+            for (int b = 0; b < 10; b++)
+                code |= (uint64_t)((q >> b) & 1) << (3 * b + ax);
+        }
+        order[t] = code << 32 | t; /* ntris < 2^32 */
+    }
+    qsort(order, m->ntris, sizeof *order, cmp_u64);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (size_t q = 0; q < m->ntris; q++)
+        raster_triangle(m, g, (uint32_t)order[q], W, best);
+    free(order);
     size_t nb = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nb)
     for (size_t c = 0; c < count; c++) {
@@ -280,6 +716,18 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
         tri[c] = 0;
         dist[c] = (float)tri_cell_d(m, 0, p);
     }
+    /* The raster is exact within W: when that covers the cap, done. */
+    if (cap <= W) {
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < count; c++)
+            if (dist[c] > cap) {
+                dist[c] = INFINITY;
+                tri[c] = UINT32_MAX;
+            }
+        if (!tri_out)
+            hv_free(tri);
+        return HV_OK;
+    }
     ring r;
     hv_status st = ring_build(m, &r);
     if (st) {
@@ -287,34 +735,11 @@ hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, dou
             hv_free(tri);
         return st;
     }
-    /* Passes are numbered from `period` on, so that every seed counts as
-     * changed for the first pass of each direction. */
-    uint16_t *stamp = hv_malloc(count * sizeof *stamp);
-    if (!stamp) {
-        free(r.start);
-        free(r.tris);
-        if (!tri_out)
-            hv_free(tri);
-        return hv_error(HV_ERR_NOMEM, "exact distance: out of memory for %zu cells", count);
-    }
-    const int period = 2 * g->dim;
-#pragma omp parallel for schedule(static)
-    for (size_t c = 0; c < count; c++)
-        stamp[c] = (uint16_t)period;
-    int pass = period;
-    for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
-        size_t upd = 0;
-        for (int ax = 0; ax < g->dim; ax++) {
-            upd += sweep(m, &r, g, ax, +1, dist, tri, stamp, ++pass, period, cap);
-            upd += sweep(m, &r, g, ax, -1, dist, tri, stamp, ++pass, period, cap);
-        }
-        if (!upd)
-            break;
-    }
-    hv_free(stamp);
+    st = isfinite(cap) ? dilate(m, &r, g, cap, dist, tri) : sweep_all(m, &r, g, dist, tri);
     free(r.start);
     free(r.tris);
+    free(r.sphere);
     if (!tri_out)
         hv_free(tri);
-    return HV_OK;
+    return st;
 }

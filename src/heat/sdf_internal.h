@@ -130,6 +130,9 @@ hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const u
                       size_t nfaces, const uint8_t *flip);
 /* Winding number at p, leaving out face `skip` (UINT32_MAX: none). */
 double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip);
+/* The same with clusters farther than beta times their radius taken as
+ * dipoles (hv_wn_eval: 2.5; smaller is faster and coarser). */
+double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta);
 void hv_wn_free(hv_wn_tree *W);
 
 /* Angle-weighted pseudonormals of a mesh, with cleanliness of each feature. */
@@ -138,12 +141,18 @@ typedef struct hv_pseudo {
     double *vn;      /* 3 * nverts angle-weighted vertex normals */
     uint32_t *other; /* 3 * ntris: face across each edge, UINT32_MAX if the edge is not clean */
     uint8_t *vok;    /* nverts: every edge at the vertex is clean */
-    uint8_t *ftrust; /* ntris: the face's component is closed (all edges clean) */
+    uint8_t *ftrust; /* ntris: 0 not yet known, 1 the face bounds a solid (winding number
+                        about 1/2 on it), 2 not */
+    hv_wn_tree W;    /* over all faces, for ftrust */
+    int have_W;
 } hv_pseudo;
 
 hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps);
 void hv_pseudo_free(hv_pseudo *ps);
-/* +1 outside, -1 inside, 0 when the nearest feature of triangle tri is not clean. */
-int hv_pseudo_sign(const hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3]);
+/* Sign (+1 outside, -1 inside) from the pseudonormal of triangle tri's feature
+ * nearest to p, where that feature is clean; 0 where it is not. Where that
+ * sign differs from `current` it is only given when the feature's faces bound
+ * a solid (tested on demand; thread-safe). */
+int hv_pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current);
 
 #endif

@@ -1,9 +1,15 @@
 /*
- * Surface quadrature and grid transfer for the signed heat method: triangles
- * are split 1-to-4 until every sub-edge is at most h/2 (so that large
- * triangles do not alias on the grid), each sub-triangle contributes its
- * centroid with its vector area, and points are spread to the eight nearest
- * cell centres with trilinear weights.
+ * Surface quadrature and grid transfer for the signed heat method. Each
+ * triangle is cut into k^2 congruent sub-triangles by a k x k barycentric
+ * grid, with k chosen so that every sub-edge is at most h (QUAD_EDGE h); each
+ * sub-triangle contributes its centroid with its vector area, and points are
+ * spread to the eight nearest cell centres with trilinear weights. Centroids
+ * are then at most 0.6 h apart along the surface, closer than the splat
+ * kernel's half width h, so large triangles do not alias. (Until 2025 the
+ * split was 1-to-4 down to h/2: 4-8 times as many points for no measurable
+ * gain, 5 M points for the 70k-triangle bunny at 256^3.) Triangles much
+ * larger than a voxel are first split 1-to-4 with culling against the block,
+ * so that a huge triangle mostly outside it costs little.
  */
 #include "sdf_internal.h"
 #include "core/error.h"
@@ -11,28 +17,34 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #define QUAD_MAX_DEPTH 24
+/* Sub-edges at most this many h. */
+#define QUAD_EDGE 1.0
+/* Triangles with an edge above this many h are split 1-to-4 (with culling) first. */
+#define QUAD_SPLIT 16.0
 
-static hv_status quad_push(hv_quad *q, size_t *cap, const double x[3], const double w[3], double area)
+static hv_status quad_reserve(hv_quad *q, size_t *cap, size_t more)
 {
-    if (q->count == *cap) {
-        size_t nc = *cap ? 2 * *cap : 4096;
-        double *nx = realloc(q->x, 3 * nc * sizeof *nx);
-        if (nx)
-            q->x = nx;
-        double *nw = nx ? realloc(q->w, 3 * nc * sizeof *nw) : NULL;
-        if (nw)
-            q->w = nw;
-        double *na = nw ? realloc(q->area, nc * sizeof *na) : NULL;
-        if (!na)
-            return hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", nc);
-        q->area = na;
-        *cap = nc;
-    }
-    memcpy(q->x + 3 * q->count, x, 3 * sizeof *x);
-    memcpy(q->w + 3 * q->count, w, 3 * sizeof *w);
-    q->area[q->count++] = area;
+    if (q->count + more <= *cap)
+        return HV_OK;
+    size_t nc = *cap ? 2 * *cap : 4096;
+    while (nc < q->count + more)
+        nc *= 2;
+    double *nx = realloc(q->x, 3 * nc * sizeof *nx);
+    if (nx)
+        q->x = nx;
+    double *nw = nx ? realloc(q->w, 3 * nc * sizeof *nw) : NULL;
+    if (nw)
+        q->w = nw;
+    double *na = nw ? realloc(q->area, nc * sizeof *na) : NULL;
+    if (!na)
+        return hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", nc);
+    q->area = na;
+    *cap = nc;
     return HV_OK;
 }
 
@@ -41,14 +53,54 @@ static double dist2(const double *a, const double *b)
     return (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]);
 }
 
-hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3], hv_quad *q)
+/* Centroids of the k x k barycentric subdivision of T (vector area N, area A
+ * of this piece), those inside [lo, hi]. */
+static hv_status leaf_points(hv_quad *q, size_t *cap, const double T[9], const double N[3], double A,
+                             double h, const double lo[3], const double hi[3])
 {
-    memset(q, 0, sizeof *q);
+    double e2 = fmax(dist2(T, T + 3), fmax(dist2(T + 3, T + 6), dist2(T, T + 6)));
+    int k = (int)ceil(sqrt(e2) / (QUAD_EDGE * h) - 1e-9);
+    if (k < 1)
+        k = 1;
+    size_t np = (size_t)k * k;
+    hv_status st = quad_reserve(q, cap, np);
+    if (st)
+        return st;
+    const double inv = 1.0 / k, share = 1.0 / (double)np;
+    double u[3], v[3], w[3] = {N[0] * share, N[1] * share, N[2] * share};
+    for (int a = 0; a < 3; a++) {
+        u[a] = (T[3 + a] - T[a]) * inv;
+        v[a] = (T[6 + a] - T[a]) * inv;
+    }
+    for (int i = 0; i < k; i++)
+        for (int j = 0; i + j < k; j++)
+            for (int down = 0; down < 2; down++) {
+                if (down && i + j > k - 2)
+                    continue;
+                double bi = i + (down ? 2.0 / 3 : 1.0 / 3), bj = j + (down ? 2.0 / 3 : 1.0 / 3);
+                double *x = q->x + 3 * q->count;
+                int in = 1;
+                for (int a = 0; a < 3; a++) {
+                    x[a] = T[a] + bi * u[a] + bj * v[a];
+                    in &= x[a] >= lo[a] && x[a] <= hi[a];
+                }
+                if (!in)
+                    continue;
+                memcpy(q->w + 3 * q->count, w, sizeof w);
+                q->area[q->count++] = A * share;
+            }
+    return HV_OK;
+}
+
+/* The points of triangles [f0, f1) into q. */
+static hv_status quad_range(const hv_mesh *m, double h, const double lo[3], const double hi[3], size_t f0,
+                            size_t f1, hv_quad *q)
+{
     size_t cap = 0;
-    const double lim2 = 0.25 * h * h;
-    /* Depth-first 1-to-4 splitting; sub-triangles outside the block are culled. */
+    const double split2 = QUAD_SPLIT * QUAD_SPLIT * h * h;
     double stack[QUAD_MAX_DEPTH * 3 + 4][9];
-    for (size_t f = 0; f < m->ntris; f++) {
+    int depth[QUAD_MAX_DEPTH * 3 + 4];
+    for (size_t f = f0; f < f1; f++) {
         const uint32_t *t = m->tris + 3 * f;
         const double *a = m->verts + 3 * (size_t)t[0], *b = m->verts + 3 * (size_t)t[1],
                      *c = m->verts + 3 * (size_t)t[2];
@@ -59,12 +111,11 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
         double A = sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);
         if (!(A > 0))
             continue;
-        int top = 0, depth[QUAD_MAX_DEPTH * 3 + 4];
         memcpy(stack[0], a, 3 * sizeof *a);
         memcpy(stack[0] + 3, b, 3 * sizeof *b);
         memcpy(stack[0] + 6, c, 3 * sizeof *c);
         depth[0] = 0;
-        top = 1;
+        int top = 1;
         while (top) {
             top--;
             double T[9];
@@ -79,19 +130,12 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
             if (out)
                 continue;
             double e2 = fmax(dist2(T, T + 3), fmax(dist2(T + 3, T + 6), dist2(T, T + 6)));
-            if (e2 <= lim2 || d >= QUAD_MAX_DEPTH) {
+            if (e2 <= split2 || d >= QUAD_MAX_DEPTH) {
                 double s = ldexp(1.0, -2 * d); /* area share of this sub-triangle */
-                double x[3], w[3] = {N[0] * s, N[1] * s, N[2] * s};
-                for (int ax = 0; ax < 3; ax++)
-                    x[ax] = (T[ax] + T[3 + ax] + T[6 + ax]) / 3.0;
-                if (x[0] < lo[0] || x[0] > hi[0] || x[1] < lo[1] || x[1] > hi[1] || x[2] < lo[2] ||
-                    x[2] > hi[2])
-                    continue;
-                hv_status st = quad_push(q, &cap, x, w, A * s);
-                if (st) {
-                    hv_quad_free(q);
+                double Ns[3] = {N[0] * s, N[1] * s, N[2] * s};
+                hv_status st = leaf_points(q, &cap, T, Ns, A * s, h, lo, hi);
+                if (st)
                     return st;
-                }
                 continue;
             }
             double M[9]; /* midpoints ab, bc, ca */
@@ -110,6 +154,59 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
         }
     }
     return HV_OK;
+}
+
+hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3], hv_quad *q)
+{
+    memset(q, 0, sizeof *q);
+    /* Contiguous triangle ranges per thread, joined in order: the points come
+     * out in triangle order whatever the thread count. */
+    int nth = 1;
+#ifdef _OPENMP
+    nth = omp_get_max_threads();
+#endif
+    if ((size_t)nth > m->ntris / 256 + 1)
+        nth = (int)(m->ntris / 256 + 1);
+    hv_quad *part = calloc((size_t)nth, sizeof *part);
+    if (!part)
+        return hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory");
+    hv_status err = HV_OK;
+#pragma omp parallel for schedule(static, 1) num_threads(nth)
+    for (int p = 0; p < nth; p++) {
+        size_t f0 = m->ntris * (size_t)p / nth, f1 = m->ntris * (size_t)(p + 1) / nth;
+        hv_status st = quad_range(m, h, lo, hi, f0, f1, &part[p]);
+        if (st) {
+#pragma omp critical(hv_quad_err)
+            err = st;
+        }
+    }
+    size_t total = 0;
+    for (int p = 0; p < nth; p++)
+        total += part[p].count;
+    if (err) /* the message was recorded in a worker thread */
+        err = hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for the points of %zu triangles",
+                       m->ntris);
+    if (!err && total) {
+        q->x = malloc(3 * total * sizeof *q->x);
+        q->w = malloc(3 * total * sizeof *q->w);
+        q->area = malloc(total * sizeof *q->area);
+        if (!q->x || !q->w || !q->area) {
+            err = hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", total);
+        } else {
+            for (int p = 0; p < nth; p++) {
+                memcpy(q->x + 3 * q->count, part[p].x, 3 * part[p].count * sizeof *q->x);
+                memcpy(q->w + 3 * q->count, part[p].w, 3 * part[p].count * sizeof *q->w);
+                memcpy(q->area + q->count, part[p].area, part[p].count * sizeof *q->area);
+                q->count += part[p].count;
+            }
+        }
+    }
+    for (int p = 0; p < nth; p++)
+        hv_quad_free(&part[p]);
+    free(part);
+    if (err)
+        hv_quad_free(q);
+    return err;
 }
 
 void hv_quad_free(hv_quad *q)

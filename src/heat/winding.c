@@ -28,7 +28,13 @@ static void face_info(const hv_wn_tree *W, uint32_t f, double c[3], double N[3],
         c[k] = (a[k] + b[k] + d[k]) / 3.0;
 }
 
-static int build(hv_wn_tree *W, size_t first, size_t count)
+/* Centroid, vector area and area of the face at each position of order[],
+ * computed once and permuted along with it. */
+typedef struct finfo {
+    double c[3], N[3], a;
+} finfo;
+
+static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
 {
     int id = W->nnodes++;
     hv_wn_node *nd = &W->nodes[id];
@@ -38,16 +44,15 @@ static int build(hv_wn_tree *W, size_t first, size_t count)
     nd->left = nd->right = -1;
     double asum = 0, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t q = first; q < first + count; q++) {
-        double c[3], N[3], a;
-        face_info(W, W->order[q], c, N, &a);
+        const finfo *f = &F[q];
         double s = W->sign[q];
         for (int k = 0; k < 3; k++) {
-            nd->N[k] += s * N[k];
-            nd->c[k] += a * c[k];
-            lo[k] = fmin(lo[k], c[k]);
-            hi[k] = fmax(hi[k], c[k]);
+            nd->N[k] += s * f->N[k];
+            nd->c[k] += f->a * f->c[k];
+            lo[k] = f->c[k] < lo[k] ? f->c[k] : lo[k];
+            hi[k] = f->c[k] > hi[k] ? f->c[k] : hi[k];
         }
-        asum += a;
+        asum += f->a;
     }
     for (int k = 0; k < 3; k++)
         nd->c[k] = asum > 0 ? nd->c[k] / asum : 0.5 * (lo[k] + hi[k]);
@@ -57,7 +62,7 @@ static int build(hv_wn_tree *W, size_t first, size_t count)
             const double *x = W->V + 3 * (size_t)W->T[3 * (size_t)W->order[q] + v];
             double d2 = (x[0] - nd->c[0]) * (x[0] - nd->c[0]) + (x[1] - nd->c[1]) * (x[1] - nd->c[1]) +
                         (x[2] - nd->c[2]) * (x[2] - nd->c[2]);
-            r2 = fmax(r2, d2);
+            r2 = d2 > r2 ? d2 : r2;
         }
     nd->r = sqrt(r2);
     if (count <= WN_LEAF)
@@ -69,24 +74,25 @@ static int build(hv_wn_tree *W, size_t first, size_t count)
     double mid = 0.5 * (lo[ax] + hi[ax]);
     size_t i = first, j = first + count;
     while (i < j) {
-        double c[3], N[3], a;
-        face_info(W, W->order[i], c, N, &a);
-        if (c[ax] < mid) {
+        if (F[i].c[ax] < mid) {
             i++;
         } else {
             j--;
             uint32_t t = W->order[i];
             W->order[i] = W->order[j];
             W->order[j] = t;
-            signed char s = W->sign[i];
+            signed char sg = W->sign[i];
             W->sign[i] = W->sign[j];
-            W->sign[j] = s;
+            W->sign[j] = sg;
+            finfo ft = F[i];
+            F[i] = F[j];
+            F[j] = ft;
         }
     }
     if (i == first || i == first + count)
         i = first + count / 2;
-    int l = build(W, first, i - first);
-    int r = build(W, i, first + count - i);
+    int l = build(W, F, first, i - first);
+    int r = build(W, F, i, first + count - i);
     W->nodes[id].left = l;
     W->nodes[id].right = r;
     return id;
@@ -101,16 +107,20 @@ hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const u
     W->order = malloc((nfaces ? nfaces : 1) * sizeof *W->order);
     W->sign = malloc(nfaces ? nfaces : 1);
     W->nodes = malloc((2 * nfaces + 1) * sizeof *W->nodes);
-    if (!W->order || !W->sign || !W->nodes) {
+    finfo *F = malloc((nfaces ? nfaces : 1) * sizeof *F);
+    if (!W->order || !W->sign || !W->nodes || !F) {
+        free(F);
         hv_wn_free(W);
         return hv_error(HV_ERR_NOMEM, "winding number: out of memory for %zu faces", nfaces);
     }
     for (size_t q = 0; q < nfaces; q++) {
         W->order[q] = faces[q];
         W->sign[q] = (signed char)(flip && flip[faces[q]] ? -1 : 1);
+        face_info(W, faces[q], F[q].c, F[q].N, &F[q].a);
     }
     if (nfaces)
-        build(W, 0, nfaces);
+        build(W, F, 0, nfaces);
+    free(F);
     return HV_OK;
 }
 
@@ -143,6 +153,11 @@ static double solid_angle(const double p[3], const double *a, const double *b, c
 
 double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
 {
+    return hv_wn_eval_beta(W, p, skip, WN_BETA);
+}
+
+double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta)
+{
     if (!W->nnodes)
         return 0;
     int stack[128], top = 0;
@@ -152,7 +167,7 @@ double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
         const hv_wn_node *nd = &W->nodes[stack[--top]];
         double d[3] = {nd->c[0] - p[0], nd->c[1] - p[1], nd->c[2] - p[2]};
         double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        if (dist > WN_BETA * nd->r) {
+        if (dist > beta * nd->r) {
             w += (nd->N[0] * d[0] + nd->N[1] * d[1] + nd->N[2] * d[2]) / (dist * dist * dist);
             continue;
         }
