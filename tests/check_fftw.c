@@ -540,6 +540,9 @@ static Suite *fftw_suite(void)
 int main(void)
 {
     SRunner *r = srunner_create(fftw_suite());
+    /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
+     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+    srunner_set_fork_status(r, CK_NOFORK);
     srunner_run_all(r, CK_NORMAL);
     int failed = srunner_ntests_failed(r);
     srunner_free(r);

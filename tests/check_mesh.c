@@ -1077,6 +1077,9 @@ static Suite *mesh_suite(void)
 int main(void)
 {
     SRunner *sr = srunner_create(mesh_suite());
+    /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
+     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+    srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);

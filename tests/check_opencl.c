@@ -1388,6 +1388,9 @@ int main(int argc, char **argv)
     }
     suite_add_tcase(su, tc);
     SRunner *sr = srunner_create(su);
+    /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
+     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+    srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);

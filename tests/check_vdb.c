@@ -831,6 +831,9 @@ int main(void)
     tcase_add_test(tc, sdf_to_ext_reference_should_extend_a_surface_field_along_normals);
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
+    /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
+     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+    srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);

@@ -30,6 +30,9 @@ const char *tl_shared_dir(void)
 int tl_run(Suite *s)
 {
     SRunner *sr = srunner_create(s);
+    /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
+     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+    srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);
