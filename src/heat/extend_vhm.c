@@ -40,6 +40,8 @@ struct hv_extender {
                                       side r of cell c at c * nsol + r (a closest point's 8
                                       corners then cost a few cache lines for all fields) */
     int nsol, capsol;
+    float *bf, *bu0, *bu1;         /* band solve: right-hand side and iterates on the whole
+                                      grid, kept zero off the band between calls */
 };
 
 void hv_extend_opts_default(hv_extend_opts *o)
@@ -119,6 +121,9 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->fd);
     hv_free(e->ud);
     hv_free(e->w);
+    hv_free(e->bf);
+    hv_free(e->bu0);
+    hv_free(e->bu1);
     free(e->solid);
     free(e);
     *ep = NULL;
@@ -395,8 +400,10 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
  * cells that are read (closest-point stencils, cells read at themselves) and
  * the weights: (I - t Lap)^-1 decays like e^{-r / sqrt(t)}. On a narrow band
  * that is a small part of the box, so the first level solves on those cells
- * grown by BOX_MARGIN sqrt(t) voxels only (u = 0 beyond: a reflection of
- * e^{-2 BOX_MARGIN} of what reaches there, as for the box's walls), stored as
+ * grown by BOX_MARGIN sqrt(t) voxels, rounded, only (u = 0 beyond: a
+ * reflection of about e^{-2 BOX_MARGIN} of what reaches there, as for the
+ * box's walls; 4 voxels at t = h^2/2, where the band and the box solves agree
+ * to 6e-7 relative on a sphere), stored as
  * x-runs of the grid, by Jacobi-preconditioned Chebyshev iteration. The
  * operator is diagonally dominant there (D^-1 A has its spectrum in
  * [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed count of sweeps
@@ -409,6 +416,8 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
 #define BAND_TOL 1e-5
 /* Smaller bands sweep on one thread (a barrier per sweep costs more). */
 #define BAND_PAR_MIN 131072
+/* Runs fetched ahead in a sweep. */
+#define BAND_AHEAD 8
 
 typedef struct {
     int j, k, x0, x1; /* row (j, k), cells x0 <= x < x1 */
@@ -427,37 +436,69 @@ static void band_free(struct band *b)
 {
     free(b->runs);
     free(b->need);
-    hv_free(b->f);
-    hv_free(b->u0);
-    hv_free(b->u1);
     free(b->zero);
     memset(b, 0, sizeof *b);
 }
 
-/* dst = src grown by m cells along axis a (box dilation, one axis). */
-static void grow_axis(uint8_t *dst, const uint8_t *src, const int n[3], int a, int m)
+/* dst = src grown by m cells along x (box dilation, one axis). */
+static void grow_x(uint8_t *dst, const uint8_t *src, const int n[3], int m)
 {
-    const size_t st[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
-    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
-    const long nl = (long)n[b] * n[c];
+    const long nl = (long)n[1] * n[2];
+    const int nx = n[0];
 #pragma omp parallel for schedule(static)
     for (long l = 0; l < nl; l++) {
-        size_t base = (size_t)(l % n[b]) * st[b] + (size_t)(l / n[b]) * st[c];
-        long last = -(1L << 40);
-        for (int i = 0; i < n[a]; i++) {
-            size_t q = base + (size_t)i * st[a];
-            if (src[q])
+        const uint8_t *s = src + (size_t)l * nx;
+        uint8_t *d = dst + (size_t)l * nx;
+        int last = -(1 << 29);
+        for (int i = 0; i < nx; i++) {
+            if (s[i])
                 last = i;
-            dst[q] = (uint8_t)(i - last <= m);
+            d[i] = (uint8_t)(i - last <= m);
         }
-        last = 1L << 40;
-        for (int i = n[a] - 1; i >= 0; i--) {
-            size_t q = base + (size_t)i * st[a];
-            if (src[q])
+        last = 1 << 29;
+        for (int i = nx - 1; i >= 0; i--) {
+            if (s[i])
                 last = i;
             if (last - i <= m)
-                dst[q] = 1;
+                d[i] = 1;
         }
+    }
+}
+
+/* dst = src grown by m rows: rows r = 0..nrows-1 of len contiguous bytes at
+ * r * stride, in blocks of `outer` such groups `gstride` apart. A running count
+ * of the set rows in the window [r - m, r + m], per byte: contiguous, so it
+ * vectorizes (a strided scan per column would not). */
+static void grow_rows(uint8_t *dst, const uint8_t *src, size_t len, int nrows, size_t stride,
+                      long outer, size_t gstride, int m)
+{
+    const size_t chunk = 4096;
+    const long nchunks = (long)((len + chunk - 1) / chunk);
+#pragma omp parallel
+    {
+        uint8_t cnt[4096];
+#pragma omp for collapse(2) schedule(static)
+        for (long g = 0; g < outer; g++)
+            for (long ch = 0; ch < nchunks; ch++) {
+                const size_t x0 = (size_t)ch * chunk, w = len - x0 < chunk ? len - x0 : chunk;
+                const uint8_t *s = src + (size_t)g * gstride + x0;
+                uint8_t *d = dst + (size_t)g * gstride + x0;
+                memset(cnt, 0, w);
+                for (int r = 0; r < m && r < nrows; r++)
+                    for (size_t x = 0; x < w; x++)
+                        cnt[x] += s[(size_t)r * stride + x];
+                for (int r = 0; r < nrows; r++) {
+                    if (r + m < nrows)
+                        for (size_t x = 0; x < w; x++)
+                            cnt[x] += s[(size_t)(r + m) * stride + x];
+                    if (r - m - 1 >= 0)
+                        for (size_t x = 0; x < w; x++)
+                            cnt[x] -= s[(size_t)(r - m - 1) * stride + x];
+                    uint8_t *dr = d + (size_t)r * stride;
+                    for (size_t x = 0; x < w; x++)
+                        dr[x] = cnt[x] != 0;
+                }
+            }
     }
 }
 
@@ -466,18 +507,21 @@ static void grow_axis(uint8_t *dst, const uint8_t *src, const int n[3], int a, i
  * box_cells), 1 when built, -1 when out of memory. */
 static int band_build(hv_extender *e, struct band *b, size_t box_cells)
 {
-    const int m = (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale));
+    const int m = (int)lround(BOX_MARGIN * sqrt(e->o.t_scale));
     uint8_t *g0 = malloc(e->count), *g1 = malloc(e->count);
     if (!g0 || !g1) {
         free(g0);
         free(g1);
         return -1;
     }
-    grow_axis(g0, b->need, e->n, 0, m);
-    grow_axis(g1, g0, e->n, 1, m);
+    /* x, then y (rows of one plane), then z (planes); src values are 0/1 and
+     * windows hold at most 2m + 1 <= 255 of them. */
+    grow_x(g0, b->need, e->n, m);
+    const size_t nx = (size_t)e->n[0], plane = nx * e->n[1];
+    grow_rows(g1, g0, nx, e->n[1], nx, e->n[2], plane, m);
     uint8_t *dom = g1;
     if (e->dim == 3) {
-        grow_axis(g0, g1, e->n, 2, m);
+        grow_rows(g0, g1, plane, e->n[2], plane, 1, 0, m);
         dom = g0;
     }
     size_t cells = 0, nr = 0;
@@ -525,15 +569,27 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
         b->iters++;
     /* Work arrays on the whole grid (u = 0 off the band, rows of zeros for
      * missing neighbours). */
-    b->f = hv_malloc(e->count * sizeof(float));
-    b->u0 = hv_malloc(e->count * sizeof(float));
-    b->u1 = hv_malloc(e->count * sizeof(float));
+    if (!e->bf) {
+        e->bf = hv_malloc(e->count * sizeof(float));
+        e->bu0 = hv_malloc(e->count * sizeof(float));
+        e->bu1 = hv_malloc(e->count * sizeof(float));
+        if (!e->bf || !e->bu0 || !e->bu1) {
+            hv_free(e->bf);
+            hv_free(e->bu0);
+            hv_free(e->bu1);
+            e->bf = e->bu0 = e->bu1 = NULL;
+            return -1;
+        }
+        memset(e->bu0, 0, e->count * sizeof(float));
+        memset(e->bu1, 0, e->count * sizeof(float));
+        memset(e->bf, 0, e->count * sizeof(float));
+    }
+    b->f = e->bf;
+    b->u0 = e->bu0;
+    b->u1 = e->bu1;
     b->zero = calloc((size_t)e->n[0], sizeof(float));
-    if (!b->f || !b->u0 || !b->u1 || !b->zero)
+    if (!b->zero)
         return -1;
-    memset(b->u0, 0, e->count * sizeof(float));
-    memset(b->u1, 0, e->count * sizeof(float));
-    memset(b->f, 0, e->count * sizeof(float));
     return 1;
 }
 
@@ -578,6 +634,19 @@ static void band_sweep(const hv_extender *e, const struct band *b, const float *
                               *restrict n3 = nb[3];
         float *restrict o = out + row;
         int x = r->x0, xe = r->x1;
+        /* Runs are short (tens of cells), and f, out and the next plane's row
+         * were last touched a sweep ago: fetch a later run's lines ahead, or
+         * every run starts with a wait on memory. */
+        if (q + BAND_AHEAD < b->nruns) {
+            const xrun *p = &b->runs[q + BAND_AHEAD];
+            const size_t prow = (size_t)nx * (p->j + (size_t)e->n[1] * p->k);
+            const size_t up = e->dim == 3 && p->k + 1 < e->n[2] ? (size_t)nx * e->n[1] : 0;
+            for (int y = p->x0; y < p->x1; y += 16) {
+                __builtin_prefetch(b->f + prow + y, 0, 1);
+                __builtin_prefetch(out + prow + y, 1, 1);
+                __builtin_prefetch(cur + prow + up + y, 0, 1); /* first touched as z + 1 */
+            }
+        }
         /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
         for (; x < xe && (x == 0 || x + 1 == nx); x++) {
             int cnt = rc + (x > 0) + (x + 1 < nx);
@@ -688,8 +757,10 @@ static void build_rhs_band(const hv_extender *e, struct band *b, int r, int nfie
 static hv_status solve_band(hv_extender *e, struct band *b, int nrhs, int nfields,
                             const hv_extend_field *f, double *thr, hv_extend_stats *S)
 {
+    /* e->sol is written on the band only: level 0 reads nothing else
+     * (closest-point stencils and cells read at themselves are band cells;
+     * other cells are not sampled at this level). */
     const size_t k = (size_t)e->nsol;
-    memset(e->sol, 0, e->count * k * sizeof(float));
     const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
     double relmax = 0, rinf0 = 0;
     for (int rr = 0; rr < nrhs; rr++) {
@@ -987,11 +1058,13 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         idx[0] = c;
                         wt[0] = 1;
                         m = 1;
-                        sample_all(e, idx, wt, m, val);
-                        W = val[0];
-                        /* Off the cells the band solve was made for: not at this level. */
-                        if (trusted && !trusted[c])
+                        if (trusted && !trusted[c]) {
+                            /* Off the cells the band solve was made for: not at this level. */
                             W = 0;
+                        } else {
+                            sample_all(e, idx, wt, m, val);
+                            W = val[0];
+                        }
                     }
                     if (!(W > thr) && !last) {
                         left++;
