@@ -6,6 +6,7 @@
 #include "core/error.h"
 
 #include <math.h>
+#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -416,6 +417,11 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
 #define BAND_TOL 1e-5
 /* Smaller bands sweep on one thread (a barrier per sweep costs more). */
 #define BAND_PAR_MIN 131072
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__SANITIZE_ADDRESS__)
+#define BAND_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define BAND_KERNEL
+#endif
 /* Runs fetched ahead in a sweep. */
 #define BAND_AHEAD 8
 
@@ -427,6 +433,7 @@ struct band {
     xrun *runs;
     size_t nruns, cells;
     uint8_t *need; /* the cells read (before growing): trusted at level 0 */
+    size_t *kstart; /* runs of plane k: kstart[k] .. kstart[k + 1] - 1 */
     float *f, *u0, *u1, *zero;
     int iters;
     double s;
@@ -436,6 +443,7 @@ static void band_free(struct band *b)
 {
     free(b->runs);
     free(b->need);
+    free(b->kstart);
     free(b->zero);
     memset(b, 0, sizeof *b);
 }
@@ -558,6 +566,13 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
     free(g0);
     free(g1);
     b->nruns = nr;
+    if (!(b->kstart = malloc(((size_t)e->n[2] + 1) * sizeof *b->kstart)))
+        return -1;
+    for (int k = 0, q = 0; k <= e->n[2]; k++) {
+        while ((size_t)q < nr && b->runs[q].k < k)
+            q++;
+        b->kstart[k] = (size_t)q;
+    }
     b->cells = cells;
     b->s = e->o.t_scale;
     /* Sweeps for the error bound 2 c^k / (1 + c^2k) <= tol, c = (sqrt(K) - 1) / (sqrt(K) + 1),
@@ -618,56 +633,119 @@ static int run_rows(const hv_extender *e, const struct band *b, const xrun *r, c
 
 /* One Chebyshev sweep on the band: out = cur + a (cur - out) + c D^-1 (f - A cur)
  * (out holds the previous iterate on entry). */
-static void band_sweep(const hv_extender *e, const struct band *b, const float *cur, float *out,
-                       float a, float c)
+/* One Chebyshev update of run q: out = cur + a (cur - out) + c D^-1 (f - A cur)
+ * (out holds the previous iterate on entry). */
+static inline void band_run(const hv_extender *e, const struct band *b, size_t q, const float *cur,
+                            float *out, float a, float c)
 {
     const float s = (float)b->s;
     const int nx = e->n[0];
-#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
-    for (size_t q = 0; q < b->nruns; q++) {
-        const xrun *r = &b->runs[q];
-        const float *nb[4];
-        const int rc = run_rows(e, b, r, cur, nb);
-        const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
-        const float *restrict u = cur + row, *restrict f = b->f + row;
-        const float *restrict n0 = nb[0], *restrict n1 = nb[1], *restrict n2 = nb[2],
-                              *restrict n3 = nb[3];
-        float *restrict o = out + row;
-        int x = r->x0, xe = r->x1;
-        /* Runs are short (tens of cells), and f, out and the next plane's row
-         * were last touched a sweep ago: fetch a later run's lines ahead, or
-         * every run starts with a wait on memory. */
-        if (q + BAND_AHEAD < b->nruns) {
-            const xrun *p = &b->runs[q + BAND_AHEAD];
-            const size_t prow = (size_t)nx * (p->j + (size_t)e->n[1] * p->k);
-            const size_t up = e->dim == 3 && p->k + 1 < e->n[2] ? (size_t)nx * e->n[1] : 0;
-            for (int y = p->x0; y < p->x1; y += 16) {
-                __builtin_prefetch(b->f + prow + y, 0, 1);
-                __builtin_prefetch(out + prow + y, 1, 1);
-                __builtin_prefetch(cur + prow + up + y, 0, 1); /* first touched as z + 1 */
-            }
+    const xrun *r = &b->runs[q];
+    const float *nb[4];
+    const int rc = run_rows(e, b, r, cur, nb);
+    const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
+    const float *restrict u = cur + row, *restrict f = b->f + row;
+    const float *restrict n0 = nb[0], *restrict n1 = nb[1], *restrict n2 = nb[2],
+                          *restrict n3 = nb[3];
+    float *restrict o = out + row;
+    int x = r->x0, xe = r->x1;
+    /* Runs are short (tens of cells), and f, out and the next plane's row
+     * were last touched a sweep ago: fetch a later run's lines ahead, or
+     * every run starts with a wait on memory. */
+    if (q + BAND_AHEAD < b->nruns) {
+        const xrun *p = &b->runs[q + BAND_AHEAD];
+        const size_t prow = (size_t)nx * (p->j + (size_t)e->n[1] * p->k);
+        const size_t up = e->dim == 3 && p->k + 1 < e->n[2] ? (size_t)nx * e->n[1] : 0;
+        for (int y = p->x0; y < p->x1; y += 16) {
+            __builtin_prefetch(b->f + prow + y, 0, 1);
+            __builtin_prefetch(out + prow + y, 1, 1);
+            __builtin_prefetch(cur + prow + up + y, 0, 1); /* first touched as z + 1 */
         }
-        /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
-        for (; x < xe && (x == 0 || x + 1 == nx); x++) {
-            int cnt = rc + (x > 0) + (x + 1 < nx);
-            float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
-                        (x + 1 < nx ? u[x + 1] : 0);
-            const float d = 1 + s * cnt;
-            o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d * u[x] - s * sum)) / d;
-        }
-        int xi = xe < nx - 1 ? xe : nx - 1;
-        const float d = 1 + s * (rc + 2), cd = c / d;
+    }
+    /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
+    for (; x < xe && (x == 0 || x + 1 == nx); x++) {
+        int cnt = rc + (x > 0) + (x + 1 < nx);
+        float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
+                    (x + 1 < nx ? u[x + 1] : 0);
+        const float d = 1 + s * cnt;
+        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d * u[x] - s * sum)) / d;
+    }
+    int xi = xe < nx - 1 ? xe : nx - 1;
+    const float d = 1 + s * (rc + 2), cd = c / d;
 #pragma omp simd
-        for (int y = x; y < xi; y++) {
-            float sum = n0[y] + n1[y] + n2[y] + n3[y] + u[y - 1] + u[y + 1];
-            o[y] = u[y] + a * (u[y] - o[y]) + cd * (f[y] - (d * u[y] - s * sum));
+    for (int y = x; y < xi; y++) {
+        float sum = n0[y] + n1[y] + n2[y] + n3[y] + u[y - 1] + u[y + 1];
+        o[y] = u[y] + a * (u[y] - o[y]) + cd * (f[y] - (d * u[y] - s * sum));
+    }
+    for (x = xi > x ? xi : x; x < xe; x++) {
+        int cnt = rc + (x > 0) + (x + 1 < nx);
+        float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
+                    (x + 1 < nx ? u[x + 1] : 0);
+        const float dd = 1 + s * cnt;
+        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (dd * u[x] - s * sum)) / dd;
+    }
+}
+
+/* Runs q0 .. q1 - 1 (with an AVX2 clone picked at load time where the CPU has it). */
+BAND_KERNEL static void band_runs(const hv_extender *e, const struct band *b, size_t q0, size_t q1,
+                                  const float *cur, float *out, float a, float c)
+{
+    for (size_t q = q0; q < q1; q++)
+        band_run(e, b, q, cur, out, a, c);
+}
+
+/* One Chebyshev sweep on the band (every run). */
+static void band_sweep(const hv_extender *e, const struct band *b, const float *cur, float *out,
+                       float a, float c)
+{
+#pragma omp parallel if (b->cells >= BAND_PAR_MIN)
+    {
+        const size_t nt = (size_t)omp_get_num_threads(), t = (size_t)omp_get_thread_num();
+        band_runs(e, b, b->nruns * t / nt, b->nruns * (t + 1) / nt, cur, out, a, c);
+    }
+}
+
+static void band_plane(const hv_extender *e, const struct band *b, int p, const float *cur,
+                       float *out, float a, float c)
+{
+    band_runs(e, b, b->kstart[p], b->kstart[p + 1], cur, out, a, c);
+}
+
+/* Two Chebyshev sweeps in one pass over memory (3D): plane p gets the first
+ * (A -> B) and plane p - 1 the second (B -> A) right after, while its
+ * neighbours are still in cache. Plane p - 1's old A values are read by the
+ * first sweep of planes p - 2 .. p only, all done by then. Threads take slabs
+ * of planes; a slab's first and last planes get their second sweep after a
+ * barrier, when the neighbouring slabs' first sweeps are done. */
+static void band_sweep2(const hv_extender *e, const struct band *b, float *A, float *B, float a1,
+                        float c1, float a2, float c2)
+{
+    const int nz = e->n[2];
+#pragma omp parallel if (b->cells >= BAND_PAR_MIN)
+    {
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        /* Slabs of about equal run counts: [k0, k1), each starting at the first
+         * plane whose runs begin at or after its share. */
+        const size_t lo = b->nruns * (size_t)t / nt, hi = b->nruns * (size_t)(t + 1) / nt;
+        int k0 = 0, k1 = nz;
+        if (t > 0)
+            while (k0 < nz && b->kstart[k0] < lo)
+                k0++;
+        if (t < nt - 1) {
+            k1 = 0;
+            while (k1 < nz && b->kstart[k1] < hi)
+                k1++;
         }
-        for (x = xi > x ? xi : x; x < xe; x++) {
-            int cnt = rc + (x > 0) + (x + 1 < nx);
-            float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
-                        (x + 1 < nx ? u[x + 1] : 0);
-            const float dd = 1 + s * cnt;
-            o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (dd * u[x] - s * sum)) / dd;
+        for (int p = k0; p < k1; p++) {
+            band_plane(e, b, p, A, B, a1, c1);
+            if (p - 1 >= k0 + 1)
+                band_plane(e, b, p - 1, B, A, a2, c2);
+        }
+#pragma omp barrier
+        if (k1 > k0) {
+            band_plane(e, b, k0, B, A, a2, c2);
+            if (k1 - 1 > k0)
+                band_plane(e, b, k1 - 1, B, A, a2, c2);
         }
     }
 }
@@ -774,7 +852,15 @@ static hv_status solve_band(hv_extender *e, struct band *b, int nrhs, int nfield
         cur = old;
         old = t;
         double rho = 1 / sigma;
-        for (int it = 1; it < b->iters; it++) {
+        int it = 1;
+        /* Pairs of sweeps in one pass (3D): cur stays the array of the newest iterate. */
+        for (; e->dim == 3 && it + 1 < b->iters; it += 2) {
+            double r1 = 1 / (2 * sigma - rho), r2 = 1 / (2 * sigma - r1);
+            band_sweep2(e, b, cur, old, (float)(r1 * rho), (float)(2 * r1 / delta),
+                        (float)(r2 * r1), (float)(2 * r2 / delta));
+            rho = r2;
+        }
+        for (; it < b->iters; it++) {
             double rn = 1 / (2 * sigma - rho);
             band_sweep(e, b, cur, old, (float)(rn * rho), (float)(2 * rn / delta));
             rho = rn;
