@@ -43,6 +43,7 @@ struct hv_extender {
     int nsol, capsol;
     float *bf, *bu0, *bu1;         /* band solve: right-hand side and iterates on the whole
                                       grid, kept zero off the band between calls */
+    uint8_t *bneed, *bg0, *bg1;    /* band solve: cells read, growing buffers */
 };
 
 void hv_extend_opts_default(hv_extend_opts *o)
@@ -125,6 +126,9 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->bf);
     hv_free(e->bu0);
     hv_free(e->bu1);
+    hv_free(e->bneed);
+    hv_free(e->bg0);
+    hv_free(e->bg1);
     free(e->solid);
     free(e);
     *ep = NULL;
@@ -442,7 +446,6 @@ struct band {
 static void band_free(struct band *b)
 {
     free(b->runs);
-    free(b->need);
     free(b->kstart);
     free(b->zero);
     memset(b, 0, sizeof *b);
@@ -516,12 +519,11 @@ static void grow_rows(uint8_t *dst, const uint8_t *src, size_t len, int nrows, s
 static int band_build(hv_extender *e, struct band *b, size_t box_cells)
 {
     const int m = (int)lround(BOX_MARGIN * sqrt(e->o.t_scale));
-    uint8_t *g0 = malloc(e->count), *g1 = malloc(e->count);
-    if (!g0 || !g1) {
-        free(g0);
-        free(g1);
+    if (!e->bg0 && !(e->bg0 = hv_malloc(e->count)))
         return -1;
-    }
+    if (!e->bg1 && !(e->bg1 = hv_malloc(e->count)))
+        return -1;
+    uint8_t *g0 = e->bg0, *g1 = e->bg1;
     /* x, then y (rows of one plane), then z (planes); src values are 0/1 and
      * windows hold at most 2m + 1 <= 255 of them. */
     grow_x(g0, b->need, e->n, m);
@@ -532,29 +534,39 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
         grow_rows(g0, g1, plane, e->n[2], plane, 1, 0, m);
         dom = g0;
     }
-    size_t cells = 0, nr = 0;
+    /* Runs per row, then their offsets, then the runs, rows in parallel. */
     const size_t rows = (size_t)e->n[1] * e->n[2];
+    size_t *first = malloc((rows + 1) * sizeof *first);
+    if (!first)
+        return -1;
+    size_t cells = 0;
+#pragma omp parallel for reduction(+ : cells) schedule(static)
     for (size_t r = 0; r < rows; r++) {
         const uint8_t *d = dom + r * e->n[0];
+        size_t cr = 0, cc = 0;
         for (int x = 0; x < e->n[0]; x++) {
-            cells += d[x];
-            nr += d[x] && (x == 0 || !d[x - 1]);
+            cc += d[x];
+            cr += d[x] && (x == 0 || !d[x - 1]);
         }
+        first[r + 1] = cr;
+        cells += cc;
     }
+    first[0] = 0;
+    for (size_t r = 0; r < rows; r++)
+        first[r + 1] += first[r];
+    const size_t nr = first[rows];
     if ((double)cells > BAND_MAX_FRACTION * (double)box_cells || !cells) {
-        free(g0);
-        free(g1);
+        free(first);
         return 0;
     }
-    b->runs = malloc(nr * sizeof *b->runs);
-    if (!b->runs) {
-        free(g0);
-        free(g1);
+    if (!(b->runs = malloc(nr * sizeof *b->runs))) {
+        free(first);
         return -1;
     }
-    size_t q = 0;
+#pragma omp parallel for schedule(static)
     for (size_t r = 0; r < rows; r++) {
         const uint8_t *d = dom + r * e->n[0];
+        size_t q = first[r];
         for (int x = 0; x < e->n[0]; x++)
             if (d[x] && (x == 0 || !d[x - 1])) {
                 int x1 = x;
@@ -563,8 +575,7 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
                 b->runs[q++] = (xrun){(int)(r % e->n[1]), (int)(r / e->n[1]), x, x1};
             }
     }
-    free(g0);
-    free(g1);
+    free(first);
     b->nruns = nr;
     if (!(b->kstart = malloc(((size_t)e->n[2] + 1) * sizeof *b->kstart)))
         return -1;
@@ -635,7 +646,8 @@ static int run_rows(const hv_extender *e, const struct band *b, const xrun *r, c
  * (out holds the previous iterate on entry). */
 /* One Chebyshev update of run q: out = cur + a (cur - out) + c D^-1 (f - A cur)
  * (out holds the previous iterate on entry). */
-static inline void band_run(const hv_extender *e, const struct band *b, size_t q, const float *cur,
+static inline __attribute__((always_inline)) void band_run(const hv_extender *e, const struct band *b,
+                                                          size_t q, const float *cur,
                             float *out, float a, float c)
 {
     const float s = (float)b->s;
@@ -1028,20 +1040,32 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     ibox band_box, ratio_box;
     box_empty(&band_box);
     box_empty(&ratio_box);
-    for (int k = 0; k < e->n[2]; k++)
-        for (int j = 0; j < e->n[1]; j++)
-            for (int i = 0; i < e->n[0]; i++) {
-                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
-                if (e->w[c] > 0)
-                    box_add(&band_box, i, j, k);
-                int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
-                pending[c] = (uint8_t)want;
-                npend += want;
-                if (!want)
-                    for (int fi = 0; fi < nfields; fi++)
-                        for (int q = 0; q < f[fi].ncomp; q++)
-                            f[fi].out[q][c] = e->o.background;
-            }
+#pragma omp parallel
+    {
+        ibox lb;
+        box_empty(&lb);
+        size_t ln = 0;
+#pragma omp for collapse(2) schedule(static)
+        for (int k = 0; k < e->n[2]; k++)
+            for (int j = 0; j < e->n[1]; j++)
+                for (int i = 0; i < e->n[0]; i++) {
+                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    if (e->w[c] > 0)
+                        box_add(&lb, i, j, k);
+                    int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
+                    pending[c] = (uint8_t)want;
+                    ln += want;
+                    if (!want)
+                        for (int fi = 0; fi < nfields; fi++)
+                            for (int q = 0; q < f[fi].ncomp; q++)
+                                f[fi].out[q][c] = e->o.background;
+                }
+#pragma omp critical(hv_extend_box)
+        {
+            box_union(&band_box, &lb);
+            npend += ln;
+        }
+    }
     /* The band solve (short times, no obstacles): its cells start from the
      * weights, the closest points' stencils and the cells read at themselves. */
     struct band band;
@@ -1050,33 +1074,38 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     /* CPU backends only: an explicit fftw or opencl backend gets its own solver. */
     if (!e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
         (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG) &&
-        (need = malloc(e->count))) {
+        (e->bneed || (e->bneed = hv_malloc(e->count)))) {
+        need = e->bneed;
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < e->count; c++)
             need[c] = e->w[c] > 0;
     }
-#pragma omp parallel for collapse(2) schedule(static)
-    for (int k = 0; k < e->n[2]; k++)
-        for (int j = 0; j < e->n[1]; j++)
-            for (int i = 0; i < e->n[0]; i++) {
-                size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
-                if (!pending[c])
-                    continue;
-                size_t idx[8];
-                double wt[8];
-                int m;
-                pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
-                if (need)
-                    for (int q = 0; q < m; q++) {
+#pragma omp parallel
+    {
+        ibox lr;
+        box_empty(&lr);
+#pragma omp for collapse(2) schedule(static)
+        for (int k = 0; k < e->n[2]; k++)
+            for (int j = 0; j < e->n[1]; j++)
+                for (int i = 0; i < e->n[0]; i++) {
+                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    if (!pending[c])
+                        continue;
+                    size_t idx[8];
+                    double wt[8];
+                    int m;
+                    pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+                    if (pending[c] == 2)
+                        box_add(&lr, i, j, k);
+                    if (need)
+                        for (int q = 0; q < m; q++) {
 #pragma omp atomic write
-                        need[idx[q]] = 1;
-                    }
-            }
-    for (int k = 0; k < e->n[2]; k++)
-        for (int j = 0; j < e->n[1]; j++)
-            for (int i = 0; i < e->n[0]; i++)
-                if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)] == 2)
-                    box_add(&ratio_box, i, j, k);
+                            need[idx[q]] = 1;
+                        }
+                }
+#pragma omp critical(hv_extend_box)
+        box_union(&ratio_box, &lr);
+    }
     /* Closest points lie within half the band of the zero set, their stencils a
      * voxel further: inside the weights' box grown by 2. */
     band_box.lo[0] -= 2;
