@@ -131,7 +131,7 @@ typedef struct hv_extend_opts {
                               reached reliably (plain-ratio cells only); default 6 */
     hv_backend backend;    /* default AUTO */
     double tol;            /* relative residual of the iterative solves; default 1e-10 (the
-                              band solve below runs in float to max(tol, 1e-5)) */
+                              band solve below runs in float to max(tol, 3e-5)) */
     int box_only;          /* 0 (default): with backend auto or mg, t_scale <= 8 and no
                               solid cells, the first diffusion time is solved only on the
                               cells near the weights and the cells read (grown by 6 sqrt(t)

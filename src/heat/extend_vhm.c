@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <omp.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -415,10 +416,11 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
  * reaches the tolerance: no inner products, no hierarchy, one streaming pass
  * per sweep, and a solve that is linear in its right-hand side (constants
  * come back exactly). Float sweeps: the tolerance is max(tol, BAND_TOL), a
- * hundredth of the extension's own error (1e-3 relative). */
+ * tenth of the extension's own error (3e-4 to 1e-3 relative; on the bunny at
+ * 256^3 its mean error reads the same to 4 digits at 1e-5 and 3e-5). */
 #define BAND_MAX_T_SCALE 8.0  /* longer times: the box solve (more sweeps than a V-cycle) */
 #define BAND_MAX_FRACTION 0.5 /* a band larger than this part of the box: the box solve */
-#define BAND_TOL 1e-5
+#define BAND_TOL 3e-5
 /* Smaller bands sweep on one thread (a barrier per sweep costs more). */
 #define BAND_PAR_MIN 131072
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__SANITIZE_ADDRESS__)
@@ -1019,12 +1021,18 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
                         "zero crossing in the grid, or the band is too thin)", bh);
     for (int i = 0; i < nfields; i++)
-        for (int q = 0; q < f[i].ncomp; q++)
+        for (int q = 0; q < f[i].ncomp; q++) {
+            const float *in = f[i].in[q];
+            size_t bad = SIZE_MAX;
+#pragma omp parallel for reduction(min : bad) schedule(static)
             for (size_t c = 0; c < e->count; c++)
-                if (e->w[c] > 0 && !isfinite(f[i].in[q][c]))
-                    return hv_error(HV_ERR_NUMERIC,
-                                    "extend: field %d component %d is NaN/Inf at cell %zu, inside "
-                                    "the source band", i, q, c);
+                if (e->w[c] > 0 && !isfinite(in[c]) && c < bad)
+                    bad = c;
+            if (bad != SIZE_MAX)
+                return hv_error(HV_ERR_NUMERIC,
+                                "extend: field %d component %d is NaN/Inf at cell %zu, inside "
+                                "the source band", i, q, bad);
+        }
     if ((st = ensure_solutions(e, nrhs)))
         return st;
     S->t_weights = hv_now() - t0;
