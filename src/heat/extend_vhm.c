@@ -409,7 +409,7 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
  * grown by BOX_MARGIN sqrt(t) voxels, rounded, only (u = 0 beyond: a
  * reflection of about e^{-2 BOX_MARGIN} of what reaches there, as for the
  * box's walls; 4 voxels at t = h^2/2, where the band and the box solves agree
- * to 6e-7 relative on a sphere), stored as
+ * to 2e-6 relative on a sphere), stored as
  * x-runs of the grid, by Jacobi-preconditioned Chebyshev iteration. The
  * operator is diagonally dominant there (D^-1 A has its spectrum in
  * [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed count of sweeps
