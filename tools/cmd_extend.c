@@ -26,7 +26,7 @@ static int usage(FILE *out)
             "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
             "direction are diffused separately (vector heat method). All fields are solved\n"
             "together with one solver per diffusion time.\n"
-            "  --t-scale K   diffusion time t = K h^2 (default 0.5)\n"
+            "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
             "  --dense       every voxel of the block (default)\n"
             "  --out-band W  only voxels with |phi| < W voxels; the others get 0\n"
             "  --plain       no closest points: the diffusion ratio at every voxel\n"

@@ -51,7 +51,7 @@ void hv_extend_opts_default(hv_extend_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->band = 1.5;
-    o->t_scale = 0.5;
+    o->t_scale = 0.25;
     o->closest_point = 1;
     o->out_band = 0;
     o->background = 0;
@@ -408,8 +408,8 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
  * that is a small part of the box, so the first level solves on those cells
  * grown by BOX_MARGIN sqrt(t) voxels, rounded, only (u = 0 beyond: a
  * reflection of about e^{-2 BOX_MARGIN} of what reaches there, as for the
- * box's walls; 4 voxels at t = h^2/2, where the band and the box solves agree
- * to 2e-6 relative on a sphere), stored as
+ * box's walls; 3 voxels at t = h^2/4, where the band and the box solves agree
+ * to 6e-7 relative on a sphere), stored as
  * x-runs of the grid, by Jacobi-preconditioned Chebyshev iteration. The
  * operator is diagonally dominant there (D^-1 A has its spectrum in
  * [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed count of sweeps
