@@ -214,7 +214,9 @@ static void errors(const bench_case *b, hv_grid *const out[3], int vec, double *
 int bench_extend(int argc, char **argv)
 {
     int n = 0, threads = 0, repeat = 3, vec = 1;
-    double out_band = -1, band = 1.5, tscale = 0.5;
+    hv_extend_opts dflt;
+    hv_extend_opts_default(&dflt);
+    double out_band = -1, band = dflt.band, tscale = dflt.t_scale;
     const char *shape = "sphere";
     hv_backend backend = HV_BACKEND_AUTO;
     for (int i = 1; i < argc; i++) {
