@@ -151,43 +151,58 @@ static hv_status ensure_solutions(hv_extender *e, int k)
 }
 
 /* Right-hand side r of the layout: 0 = weights; then per field, for a scalar
- * w f, for a vector w |v| followed by w v_c per component. */
-static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_field *f,
-                      const int lo[3], const int bn[3], double *out)
+ * w f, for a vector w |v| followed by w v_c per component. rhs_part finds
+ * which (field -1 for the weights; part 0 = |v|, c + 1 = component c). */
+typedef struct {
+    int field, part;
+} rhs_part;
+
+static rhs_part rhs_locate(int r, int nfields, const hv_extend_field *f)
 {
-    int field = -1, part = 0, base = 1;
-    for (int i = 0; i < nfields && r > 0; i++) {
+    rhs_part p = {-1, 0};
+    for (int i = 0, base = 1; i < nfields && r > 0; i++) {
         int k = f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
         if (r < base + k) {
-            field = i;
-            part = r - base;
+            p.field = i;
+            p.part = r - base;
             break;
         }
         base += k;
     }
-    const float *w = e->w;
+    return p;
+}
+
+/* Right-hand side p at cell c. */
+static inline double rhs_value(const hv_extender *e, const hv_extend_field *f, rhs_part p, size_t c)
+{
+    const double w = e->w[c];
+    if (!(w > 0))
+        return 0;
+    if (p.field < 0)
+        return w;
+    const hv_extend_field *F = &f[p.field];
+    if (F->ncomp == 1)
+        return w * F->in[0][c];
+    if (p.part > 0)
+        return w * F->in[p.part - 1][c];
+    double m = 0;
+    for (int q = 0; q < F->ncomp; q++)
+        m += (double)F->in[q][c] * F->in[q][c];
+    return w * sqrt(m);
+}
+
+/* Right-hand side r on the box [lo, lo + bn). */
+static void build_rhs(const hv_extender *e, int r, int nfields, const hv_extend_field *f,
+                      const int lo[3], const int bn[3], double *out)
+{
+    const rhs_part p = rhs_locate(r, nfields, f);
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
 #pragma omp parallel for schedule(static)
     for (size_t b = 0; b < bcount; b++) {
         size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
         size_t bk = b / ((size_t)bn[0] * bn[1]);
         size_t c = (lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk));
-        double v = 0;
-        if (w[c] > 0) {
-            if (field < 0) {
-                v = w[c];
-            } else if (f[field].ncomp == 1) {
-                v = (double)w[c] * f[field].in[0][c];
-            } else if (part == 0) {
-                double m = 0;
-                for (int q = 0; q < f[field].ncomp; q++)
-                    m += (double)f[field].in[q][c] * f[field].in[q][c];
-                v = w[c] * sqrt(m);
-            } else {
-                v = (double)w[c] * f[field].in[part - 1][c];
-            }
-        }
-        out[b] = v;
+        out[b] = rhs_value(e, f, p, c);
     }
 }
 
@@ -677,13 +692,17 @@ static inline __attribute__((always_inline)) void band_run(const hv_extender *e,
         }
     }
     /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
-    for (; x < xe && (x == 0 || x + 1 == nx); x++) {
-        int cnt = rc + (x > 0) + (x + 1 < nx);
-        float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
-                    (x + 1 < nx ? u[x + 1] : 0);
-        const float d = 1 + s * cnt;
-        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d * u[x] - s * sum)) / d;
-    }
+/* Cell x of a run at the grid's x walls (one neighbour fewer). */
+#define BAND_WALL_CELL(x)                                                                          \
+    do {                                                                                           \
+        const int cnt_ = rc + ((x) > 0) + ((x) + 1 < nx);                                          \
+        const float sum_ = n0[x] + n1[x] + n2[x] + n3[x] + ((x) > 0 ? u[(x) - 1] : 0) +            \
+                           ((x) + 1 < nx ? u[(x) + 1] : 0);                                        \
+        const float d_ = 1 + s * cnt_;                                                             \
+        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d_ * u[x] - s * sum_)) / d_;                \
+    } while (0)
+    for (; x < xe && (x == 0 || x + 1 == nx); x++)
+        BAND_WALL_CELL(x);
     int xi = xe < nx - 1 ? xe : nx - 1;
     const float d = 1 + s * (rc + 2), cd = c / d;
 #pragma omp simd
@@ -691,13 +710,9 @@ static inline __attribute__((always_inline)) void band_run(const hv_extender *e,
         float sum = n0[y] + n1[y] + n2[y] + n3[y] + u[y - 1] + u[y + 1];
         o[y] = u[y] + a * (u[y] - o[y]) + cd * (f[y] - (d * u[y] - s * sum));
     }
-    for (x = xi > x ? xi : x; x < xe; x++) {
-        int cnt = rc + (x > 0) + (x + 1 < nx);
-        float sum = n0[x] + n1[x] + n2[x] + n3[x] + (x > 0 ? u[x - 1] : 0) +
-                    (x + 1 < nx ? u[x + 1] : 0);
-        const float dd = 1 + s * cnt;
-        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (dd * u[x] - s * sum)) / dd;
-    }
+    for (x = xi > x ? xi : x; x < xe; x++)
+        BAND_WALL_CELL(x);
+#undef BAND_WALL_CELL
 }
 
 /* Runs q0 .. q1 - 1 (with an AVX2 clone picked at load time where the CPU has it). */
@@ -801,45 +816,18 @@ static void band_residual(const hv_extender *e, const struct band *b, const floa
     *f2 = sqrt(af);
 }
 
-/* build_rhs on the band's cells, into b->f (float). */
+/* Right-hand side r on the band's cells, into b->f (float). */
 static void build_rhs_band(const hv_extender *e, struct band *b, int r, int nfields,
                            const hv_extend_field *f)
 {
-    int field = -1, part = 0, base = 1;
-    for (int i = 0; i < nfields && r > 0; i++) {
-        int k = f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
-        if (r < base + k) {
-            field = i;
-            part = r - base;
-            break;
-        }
-        base += k;
-    }
-    const float *w = e->w;
+    const rhs_part p = rhs_locate(r, nfields, f);
     const int nx = e->n[0];
 #pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
     for (size_t q = 0; q < b->nruns; q++) {
         const xrun *run = &b->runs[q];
         const size_t row = (size_t)nx * (run->j + (size_t)e->n[1] * run->k);
-        for (int x = run->x0; x < run->x1; x++) {
-            size_t c = row + x;
-            double v = 0;
-            if (w[c] > 0) {
-                if (field < 0) {
-                    v = w[c];
-                } else if (f[field].ncomp == 1) {
-                    v = (double)w[c] * f[field].in[0][c];
-                } else if (part == 0) {
-                    double m = 0;
-                    for (int p = 0; p < f[field].ncomp; p++)
-                        m += (double)f[field].in[p][c] * f[field].in[p][c];
-                    v = w[c] * sqrt(m);
-                } else {
-                    v = (double)w[c] * f[field].in[part - 1][c];
-                }
-            }
-            b->f[c] = (float)v;
-        }
+        for (int x = run->x0; x < run->x1; x++)
+            b->f[row + x] = (float)rhs_value(e, f, p, row + x);
     }
 }
 
@@ -1048,6 +1036,16 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     ibox band_box, ratio_box;
     box_empty(&band_box);
     box_empty(&ratio_box);
+    /* The band solve (short times, no obstacles; CPU backends only: an explicit
+     * fftw or opencl backend gets its own solver): its cells start from the
+     * weights, the closest points' stencils and the cells read at themselves. */
+    struct band band;
+    memset(&band, 0, sizeof band);
+    uint8_t *need = NULL;
+    if (!e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
+        (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG) &&
+        (e->bneed || (e->bneed = hv_malloc(e->count))))
+        need = e->bneed;
 #pragma omp parallel
     {
         ibox lb;
@@ -1060,6 +1058,8 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                     size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
                     if (e->w[c] > 0)
                         box_add(&lb, i, j, k);
+                    if (need)
+                        need[c] = e->w[c] > 0;
                     int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
                     pending[c] = (uint8_t)want;
                     ln += want;
@@ -1073,20 +1073,6 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
             box_union(&band_box, &lb);
             npend += ln;
         }
-    }
-    /* The band solve (short times, no obstacles): its cells start from the
-     * weights, the closest points' stencils and the cells read at themselves. */
-    struct band band;
-    memset(&band, 0, sizeof band);
-    uint8_t *need = NULL;
-    /* CPU backends only: an explicit fftw or opencl backend gets its own solver. */
-    if (!e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
-        (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG) &&
-        (e->bneed || (e->bneed = hv_malloc(e->count)))) {
-        need = e->bneed;
-#pragma omp parallel for schedule(static)
-        for (size_t c = 0; c < e->count; c++)
-            need[c] = e->w[c] > 0;
     }
 #pragma omp parallel
     {

@@ -508,28 +508,30 @@ out:
     return st;
 }
 
-hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+/* The checks shared by hv_cl_solver_solve(_d): *o is the solver's state. */
+static hv_status device_entry(const char *who, hv_solver *sv, cl_mem f, cl_mem u,
+                              hv_solve_info *info, ocl_state **o)
 {
-    hv_solve_info local;
-    if (!info)
-        info = &local;
     memset(info, 0, sizeof *info);
     info->backend = HV_BACKEND_OPENCL;
     if (!sv || !f || !u)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_solver_solve: NULL argument");
+        return hv_error(HV_ERR_INVALID_ARG, "%s: NULL argument", who);
     if (hv_solver_ops(sv) != &hv_backend_opencl_ops)
-        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve: the solver runs on the %s backend, not opencl",
+        return hv_error(HV_ERR_UNSUPPORTED, "%s: the solver runs on the %s backend, not opencl", who,
                         hv_backend_name(hv_solver_backend(sv)));
-    ocl_state *o = hv_solver_state(sv);
+    *o = hv_solver_state(sv);
+    return HV_OK;
+}
+
+/* The solve of hv_cl_solver_solve(_d) once v[VF] holds f (zero on solid
+ * cells) and v[VX] the guess when the options say there is one; the result is
+ * left in v[VX]. As the front end: Poisson right-hand sides projected per
+ * region, then ||f|| over the fluid. */
+static hv_status device_solve(ocl_state *o, hv_solve_info *info)
+{
     const hv_setup *s = o->s;
-    if (!o->dev64 || (s->p.solid && s->p.alpha != 0))
-        return solve_cl_via_host(sv, o, f, u, info);
     hv_cl *cl = o->cl;
-    const size_t n = s->count;
-    double t0 = hv_now(), S[NSLOT];
-    /* As the front end: Poisson right-hand sides projected per region (which
-     * also zeroes solid cells), then ||f|| over the fluid. */
-    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n);
+    double S[NSLOT];
     if (s->p.alpha == 0)
         hv_cl_project_d(cl, &o->reg, o->v[VF]);
     fv_dot(o, VF, VF, S_RR);
@@ -539,19 +541,37 @@ hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *i
     const double fn = sqrt(S[S_RR]);
     if (!isfinite(fn))
         return hv_error(HV_ERR_NUMERIC, "the right-hand side on the device holds NaN or Inf (norm %g)", fn);
+    if (fn == 0 || !s->o.nonzero_guess)
+        hv_cl_zero(cl, o->v[VX], s->count * sizeof(double));
     if (fn == 0) {
-        hv_cl_zero(cl, u, n * sizeof(float));
         hv_info_push(info, 0.0);
         info->reason = HV_STOP_CONVERGED;
-    } else {
-        if (s->o.nonzero_guess)
-            cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
-        else
-            hv_cl_zero(cl, o->v[VX], n * sizeof(double));
-        st = o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
-        if (!st)
-            cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
+        return HV_OK;
     }
+    return o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
+}
+
+hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+{
+    hv_solve_info local;
+    if (!info)
+        info = &local;
+    ocl_state *o = NULL;
+    hv_status st = device_entry("hv_cl_solver_solve", sv, f, u, info, &o);
+    if (st)
+        return st;
+    const hv_setup *s = o->s;
+    if (!o->dev64 || (s->p.solid && s->p.alpha != 0))
+        return solve_cl_via_host(sv, o, f, u, info);
+    hv_cl *cl = o->cl;
+    const size_t n = s->count;
+    double t0 = hv_now();
+    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n); /* Poisson: the projection zeroes solids */
+    if (s->o.nonzero_guess)
+        cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
+    st = device_solve(o, info);
+    if (!st)
+        cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
     hv_status st2 = hv_cl_finish(cl);
     info->seconds = hv_now() - t0;
     info->backend = HV_BACKEND_OPENCL;
@@ -575,47 +595,23 @@ hv_status hv_cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info 
     hv_solve_info local;
     if (!info)
         info = &local;
-    memset(info, 0, sizeof *info);
-    info->backend = HV_BACKEND_OPENCL;
-    if (!sv || !f || !u)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_solver_solve_d: NULL argument");
-    if (hv_solver_ops(sv) != &hv_backend_opencl_ops)
-        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve_d: the solver runs on the %s backend, not opencl",
-                        hv_backend_name(hv_solver_backend(sv)));
-    ocl_state *o = hv_solver_state(sv);
-    if (!o->dev64)
-        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve_d: the OpenCL device has no fp64");
-    const hv_setup *s = o->s;
-    hv_cl *cl = o->cl;
-    const size_t n = s->count, bytes = n * sizeof(double);
-    double t0 = hv_now(), S[NSLOT];
-    /* As the front end: zero on solid cells, Poisson right-hand sides
-     * projected per region, then ||f|| over the fluid. */
-    hv_cl_copy(cl, f, o->v[VF], bytes);
-    fine_mask(o, o->v[VF]);
-    if (s->p.alpha == 0)
-        hv_cl_project_d(cl, &o->reg, o->v[VF]);
-    fv_dot(o, VF, VF, S_RR);
-    hv_status st = fv_sync(o, S);
+    ocl_state *o = NULL;
+    hv_status st = device_entry("hv_cl_solver_solve_d", sv, f, u, info, &o);
     if (st)
         return st;
-    const double fn = sqrt(S[S_RR]);
-    if (!isfinite(fn))
-        return hv_error(HV_ERR_NUMERIC, "the right-hand side on the device holds NaN or Inf (norm %g)", fn);
-    if (fn == 0) {
-        hv_cl_zero(cl, u, bytes);
-        hv_info_push(info, 0.0);
-        info->reason = HV_STOP_CONVERGED;
-    } else {
-        if (s->o.nonzero_guess)
-            hv_cl_copy(cl, u, o->v[VX], bytes);
-        else
-            hv_cl_zero(cl, o->v[VX], bytes);
-        st = o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
-        if (!st) {
-            fine_mask(o, o->v[VX]);
-            hv_cl_copy(cl, o->v[VX], u, bytes);
-        }
+    if (!o->dev64)
+        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve_d: the OpenCL device has no fp64");
+    hv_cl *cl = o->cl;
+    const size_t bytes = o->s->count * sizeof(double);
+    double t0 = hv_now();
+    hv_cl_copy(cl, f, o->v[VF], bytes);
+    fine_mask(o, o->v[VF]);
+    if (o->s->o.nonzero_guess)
+        hv_cl_copy(cl, u, o->v[VX], bytes);
+    st = device_solve(o, info);
+    if (!st) {
+        fine_mask(o, o->v[VX]);
+        hv_cl_copy(cl, o->v[VX], u, bytes);
     }
     hv_status st2 = hv_cl_finish(cl);
     info->seconds = hv_now() - t0;
