@@ -128,43 +128,7 @@ __kernel void fine_mask(__global double *v, __global const float *a, ulong n)
 }
 
 /* Double twins of red_chunk_f and region_sub_f (reduce.cl). */
-__kernel void red_chunk_d(__global const double *v, __global const uint *perm,
-                          __global const uint *cb, __global double *part)
-{
-    __local double red[HV_WG_MAX];
-    const size_t g = get_group_id(0);
-    const uint p0 = cb[g] + get_local_id(0), end = cb[g + 1];
-    double s = 0;
-    if (perm) {
-        for (int q = 0; q < HV_RED_BLOCK; q++) {
-            const uint p = p0 + q * HV_WG;
-            if (p < end)
-                s += v[perm[p]];
-        }
-    } else {
-        for (int q = 0; q < HV_RED_BLOCK; q++) {
-            const uint p = p0 + q * HV_WG;
-            if (p < end)
-                s += v[p];
-        }
-    }
-    s = hv_group_sum(s, red);
-    if (get_local_id(0) == 0)
-        part[g] = s;
-}
-
-__kernel void region_sub_d(__global double *v, __global const int *region,
-                           __global const double *mean, ulong n)
-{
-    const size_t c = get_global_id(0);
-    if (c >= n)
-        return;
-    if (region) {
-        const int r = region[c];
-        v[c] = r >= 0 ? v[c] - mean[max(r, 0)] : 0.0;
-    } else {
-        v[c] -= mean[0];
-    }
-}
+HV_RED_CHUNK(red_chunk_d, double, double)
+HV_REGION_SUB(region_sub_d, double, double)
 
 #endif

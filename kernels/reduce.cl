@@ -50,31 +50,34 @@ __kernel void red_finish(__global const acc_t *part, ulong nparts, __global acc_
 
 /* Chunk g (one work-group) sums v over positions [cb[g], cb[g+1]) of the
  * region-sorted cell list perm (NULL: the cells in order); a chunk holds at
- * most HV_WG * HV_RED_BLOCK positions. */
-__kernel void red_chunk_f(__global const float *v, __global const uint *perm,
-                          __global const uint *cb, __global acc_t *part)
-{
-    __local acc_t red[HV_WG_MAX];
-    const size_t g = get_group_id(0);
-    const uint p0 = cb[g] + get_local_id(0), end = cb[g + 1];
-    acc_t s = 0;
-    if (perm) {
-        for (int q = 0; q < HV_RED_BLOCK; q++) {
-            const uint p = p0 + q * HV_WG;
-            if (p < end)
-                s += v[perm[p]];
-        }
-    } else {
-        for (int q = 0; q < HV_RED_BLOCK; q++) {
-            const uint p = p0 + q * HV_WG;
-            if (p < end)
-                s += v[p];
-        }
+ * most HV_WG * HV_RED_BLOCK positions. Values T, sums ACC; fine.cl makes the
+ * double twin. */
+#define HV_RED_CHUNK(NAME, T, ACC)                                                                 \
+    __kernel void NAME(__global const T *v, __global const uint *perm, __global const uint *cb,    \
+                       __global ACC *part)                                                         \
+    {                                                                                              \
+        __local ACC red[HV_WG_MAX];                                                                \
+        const size_t g = get_group_id(0);                                                          \
+        const uint p0 = cb[g] + get_local_id(0), end = cb[g + 1];                                  \
+        ACC s = 0;                                                                                 \
+        if (perm) {                                                                                \
+            for (int q = 0; q < HV_RED_BLOCK; q++) {                                               \
+                const uint p = p0 + q * HV_WG;                                                     \
+                if (p < end)                                                                       \
+                    s += v[perm[p]];                                                               \
+            }                                                                                      \
+        } else {                                                                                   \
+            for (int q = 0; q < HV_RED_BLOCK; q++) {                                               \
+                const uint p = p0 + q * HV_WG;                                                     \
+                if (p < end)                                                                       \
+                    s += v[p];                                                                     \
+            }                                                                                      \
+        }                                                                                          \
+        s = hv_group_sum(s, red);                                                                  \
+        if (get_local_id(0) == 0)                                                                  \
+            part[g] = s;                                                                           \
     }
-    s = hv_group_sum(s, red);
-    if (get_local_id(0) == 0)
-        part[g] = s;
-}
+HV_RED_CHUNK(red_chunk_f, float, acc_t)
 
 /* out[r] = scale[r] * sum of the partials of region r's chunks
  * [rc[r], rc[r+1]), one work-group per region (scale NULL: the plain sum). */
@@ -97,16 +100,18 @@ __kernel void red_region(__global const acc_t *part, __global const uint *rc,
 
 /* v -= mean of v's region; cells outside every region (solid) become 0.
  * region NULL: one region, the whole grid. */
-__kernel void region_sub_f(__global float *v, __global const int *region,
-                           __global const acc_t *mean, ulong n)
-{
-    const size_t c = get_global_id(0);
-    if (c >= n)
-        return;
-    if (region) {
-        const int r = region[c];
-        v[c] = r >= 0 ? (float)((acc_t)v[c] - mean[max(r, 0)]) : 0.0f;
-    } else {
-        v[c] = (float)((acc_t)v[c] - mean[0]);
+#define HV_REGION_SUB(NAME, T, ACC)                                                                \
+    __kernel void NAME(__global T *v, __global const int *region, __global const ACC *mean,        \
+                       ulong n)                                                                    \
+    {                                                                                              \
+        const size_t c = get_global_id(0);                                                         \
+        if (c >= n)                                                                                \
+            return;                                                                                \
+        if (region) {                                                                              \
+            const int r = region[c];                                                               \
+            v[c] = r >= 0 ? (T)((ACC)v[c] - mean[max(r, 0)]) : (T)0;                               \
+        } else {                                                                                   \
+            v[c] = (T)((ACC)v[c] - mean[0]);                                                       \
+        }                                                                                          \
     }
-}
+HV_REGION_SUB(region_sub_f, float, acc_t)
