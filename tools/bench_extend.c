@@ -337,12 +337,12 @@ int bench_extend(int argc, char **argv)
     printf("{\"bench\":\"extend\",\"n\":%d,\"grid\":[%d,%d,%d],\"shape\":\"%s\",\"field\":\"%s\","
            "\"output\":\"%s\",\"backend\":\"%s\",\"threads\":%d,\"band\":%g,\"t_scale\":%g,"
            "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"solves\":%d,\"levels\":%d,"
-           "\"solve_seconds\":%.4f,\"eval_seconds\":%.4f,\"solve_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
+           "\"weights_seconds\":%.4f,\"solve_seconds\":%.4f,\"eval_seconds\":%.4f,\"solve_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
            "\"ref\":\"openvdb-sdfToExt\",\"ref_seconds\":%.4f,\"ref_wall_seconds\":%.4f,"
            "\"ratio\":%.3f,\"err\":%.3e,\"ref_err\":%.3e,\"err_near\":%.3e,\"ref_err_near\":%.3e",
            n, b.phi->n[0], b.phi->n[1], b.phi->n[2], is_mesh ? shape + 5 : "sphere",
            vec ? "vector" : "scalar", out_band > 0 ? "band" : "dense", hv_backend_name(backend),
-           threads, band, tscale, seconds, setup, es.solves, es.levels, es.t_solve, es.t_eval, es.solve_cells,
+           threads, band, tscale, seconds, setup, es.solves, es.levels, es.t_weights, es.t_solve, es.t_eval, es.solve_cells,
            es.cp_cells, es.ratio_cells, ref_seconds, ref_wall, seconds / ref_seconds, err, rerr,
            err_near, rerr_near);
     if (out_band > 0)

@@ -152,7 +152,10 @@ typedef struct hv_extend_stats {
                               band's cells */
     int solves;            /* right-hand sides solved */
     double relres;         /* worst relative residual */
-    double t_weights, t_solve, t_eval, t_total; /* seconds */
+    double t_weights, t_solve, t_eval, t_total; /* seconds: weights, input checks and the
+                                                   choice of evaluation points; solves (with
+                                                   the band's set-up); background and
+                                                   evaluation */
 } hv_extend_stats;
 
 /* One field to extend: ncomp = 1 (scalar) or 2..3 (vector, per-component

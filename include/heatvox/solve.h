@@ -89,6 +89,12 @@ typedef struct hv_solve_info {
     int nhistory;                   /* entries in history (capped at HV_MAX_HISTORY) */
     double history[HV_MAX_HISTORY]; /* relres after each iteration; history[0] = initial */
     double seconds;                 /* wall time of this solve */
+    /* Timed V-cycles (mg on plain grids: every cycle but the FMG start): their
+     * wall time and modelled memory traffic, so cycle_bytes / cycle_seconds is
+     * the V-cycle's own effective bandwidth; 0 when not timed. */
+    int cycles_timed;
+    double cycle_seconds;
+    double cycle_bytes;
 } hv_solve_info;
 
 typedef struct hv_solver hv_solver;

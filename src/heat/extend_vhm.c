@@ -42,9 +42,10 @@ struct hv_extender {
                                       side r of cell c at c * nsol + r (a closest point's 8
                                       corners then cost a few cache lines for all fields) */
     int nsol, capsol;
-    float *bf, *bu0, *bu1;         /* band solve: right-hand side and iterates on the whole
-                                      grid, kept zero off the band between calls */
+    float *bf, *bu0, *bu1;         /* band solve: right-hand sides and iterates, compact */
+    size_t bcap;                   /* floats each of them holds */
     uint8_t *bneed, *bg0, *bg1;    /* band solve: cells read, growing buffers */
+    uint8_t *pending;              /* per cell: 0 done, 1 read at the closest point, 2 at itself */
 };
 
 void hv_extend_opts_default(hv_extend_opts *o)
@@ -128,6 +129,7 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->bu0);
     hv_free(e->bu1);
     hv_free(e->bneed);
+    hv_free(e->pending);
     hv_free(e->bg0);
     hv_free(e->bg1);
     free(e->solid);
@@ -424,15 +426,26 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
  * grown by BOX_MARGIN sqrt(t) voxels, rounded, only (u = 0 beyond: a
  * reflection of about e^{-2 BOX_MARGIN} of what reaches there, as for the
  * box's walls; 3 voxels at t = h^2/4, where the band and the box solves agree
- * to 6e-7 relative on a sphere), stored as
- * x-runs of the grid, by Jacobi-preconditioned Chebyshev iteration. The
- * operator is diagonally dominant there (D^-1 A has its spectrum in
- * [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed count of sweeps
- * reaches the tolerance: no inner products, no hierarchy, one streaming pass
- * per sweep, and a solve that is linear in its right-hand side (constants
- * come back exactly). Float sweeps: the tolerance is max(tol, BAND_TOL), a
- * tenth of the extension's own error (3e-4 to 1e-3 relative; on the bunny at
- * 256^3 its mean error reads the same to 4 digits at 1e-5 and 3e-5). */
+ * to 6e-7 relative on a sphere), by Jacobi-preconditioned Chebyshev
+ * iteration. The operator is diagonally dominant there (D^-1 A has its
+ * spectrum in [1/(1+2ds), 2 - 1/(1+2ds)], s = t/h^2, d = dim), so a fixed
+ * count of sweeps reaches the tolerance: no inner products, no hierarchy, one
+ * streaming pass per sweep, and a solve that is linear in its right-hand side
+ * (constants come back exactly). Float sweeps: the tolerance is
+ * max(tol, BAND_TOL), a tenth of the extension's own error (3e-4 to 1e-3
+ * relative; on the bunny at 256^3 its mean error reads the same to 4 digits at
+ * 1e-5 and 3e-5).
+ *
+ * The sweep count and coefficients do not depend on the right-hand side, so
+ * every right-hand side is swept at once. The band is stored compactly, x-run
+ * after x-run with a zero ghost cell at each end, the R values of a cell side
+ * by side (the layout of e->sol on that run, so results go out by memcpy).
+ * Runs are cut into segments over which each transverse neighbour row is
+ * wholly in the band or wholly out of it: a segment's cells and each of its
+ * neighbour rows are then contiguous runs of len * R floats, and a sweep is a
+ * flat vector loop per segment, its cost shared by all right-hand sides. One
+ * right-hand side per sweep over x-runs of the whole grid was bound by the
+ * latency of short runs scattered over the grid (3 ns a cell update). */
 #define BAND_MAX_T_SCALE 8.0  /* longer times: the box solve (more sweeps than a V-cycle) */
 #define BAND_MAX_FRACTION 0.5 /* a band larger than this part of the box: the box solve */
 #define BAND_TOL 3e-5
@@ -443,19 +456,33 @@ static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int b
 #else
 #define BAND_KERNEL
 #endif
-/* Runs fetched ahead in a sweep. */
-#define BAND_AHEAD 8
 
 typedef struct {
     int j, k, x0, x1; /* row (j, k), cells x0 <= x < x1 */
 } xrun;
 
+/* Cells x0 .. x0 + len - 1 of one run (at compact cell `at`), whose neighbours
+ * in rows j - 1, j + 1, k - 1, k + 1 start at compact cell nb[0..3] (the zero
+ * block where that row has no band cell there or the grid ends), with one
+ * diagonal d = 1 + s (neighbour count) for all of them. */
+typedef struct {
+    size_t at, nb[4];
+    uint32_t len;
+    float d;
+} bseg;
+
 struct band {
     xrun *runs;
     size_t nruns, cells;
-    uint8_t *need; /* the cells read (before growing): trusted at level 0 */
-    size_t *kstart; /* runs of plane k: kstart[k] .. kstart[k + 1] - 1 */
-    float *f, *u0, *u1, *zero;
+    uint8_t *need;   /* the cells read (before growing): trusted at level 0 */
+    size_t *roff;    /* compact cell of run q's left ghost; its cells follow */
+    bseg *segs;
+    size_t nsegs;
+    size_t *kstart;  /* segments of plane k: kstart[k] .. kstart[k + 1] - 1 */
+    size_t zero;     /* compact cell of the zero block (nx cells) */
+    size_t ncompact; /* compact cells in all */
+    int R;           /* right-hand sides, side by side */
+    float *f, *u0, *u1;
     int iters;
     double s;
 };
@@ -463,8 +490,9 @@ struct band {
 static void band_free(struct band *b)
 {
     free(b->runs);
+    free(b->roff);
+    free(b->segs);
     free(b->kstart);
-    free(b->zero);
     memset(b, 0, sizeof *b);
 }
 
@@ -530,10 +558,100 @@ static void grow_rows(uint8_t *dst, const uint8_t *src, size_t len, int nrows, s
     }
 }
 
-/* Builds the band from b->need: grown, cut into x-runs. Returns 0 (and frees
- * nothing) when the band is not worth it (more than BAND_MAX_FRACTION of
- * box_cells), 1 when built, -1 when out of memory. */
-static int band_build(hv_extender *e, struct band *b, size_t box_cells)
+/* The segments of run q (rfirst: runs of grid row r are rfirst[r] ..
+ * rfirst[r + 1] - 1). Writes them to out when out is non-NULL; returns their
+ * count. */
+static size_t run_segments(const hv_extender *e, const struct band *b, const size_t *rfirst,
+                           size_t q, bseg *out)
+{
+    const xrun *r = &b->runs[q];
+    const int nx = e->n[0], ny = e->n[1], nz = e->n[2];
+    const int dj[4] = {-1, 1, 0, 0}, dk[4] = {0, 0, -1, 1};
+    const int ndir = e->dim == 3 ? 4 : 2;
+    size_t lo[4], hi[4];   /* runs of each neighbour row (lo == hi: none, or no row) */
+    int exists[4], rc = 0; /* neighbour rows inside the grid: Neumann walls elsewhere */
+    for (int d = 0; d < 4; d++) {
+        int j = r->j + dj[d], k = r->k + dk[d];
+        exists[d] = d < ndir && j >= 0 && j < ny && k >= 0 && k < nz;
+        rc += exists[d];
+        lo[d] = hi[d] = 0;
+        if (exists[d]) {
+            size_t row = (size_t)j + (size_t)ny * k;
+            lo[d] = rfirst[row];
+            hi[d] = rfirst[row + 1];
+        }
+    }
+    /* Cut points: the run's ends, the cells next to the x walls (one neighbour
+     * fewer), and the neighbour runs' ends inside the run. */
+    int cut[64];
+    int nc = 0, heap = 0;
+    int *cuts = cut;
+    size_t need = 4;
+    for (int d = 0; d < 4; d++)
+        need += 2 * (hi[d] - lo[d]);
+    if (need > 64) {
+        if (!(cuts = malloc(need * sizeof *cuts)))
+            return (size_t)-1;
+        heap = 1;
+    }
+    cuts[nc++] = r->x0;
+    cuts[nc++] = r->x1;
+    if (r->x0 == 0 && r->x1 > 1)
+        cuts[nc++] = 1;
+    if (r->x1 == nx && nx - 1 > r->x0)
+        cuts[nc++] = nx - 1;
+    for (int d = 0; d < 4; d++)
+        for (size_t p = lo[d]; p < hi[d]; p++) {
+            const xrun *o = &b->runs[p];
+            if (o->x1 <= r->x0 || o->x0 >= r->x1)
+                continue;
+            if (o->x0 > r->x0)
+                cuts[nc++] = o->x0;
+            if (o->x1 < r->x1)
+                cuts[nc++] = o->x1;
+        }
+    /* Sort (insertion: few cuts) and drop repeats. */
+    for (int a = 1; a < nc; a++) {
+        int v = cuts[a], z = a - 1;
+        while (z >= 0 && cuts[z] > v) {
+            cuts[z + 1] = cuts[z];
+            z--;
+        }
+        cuts[z + 1] = v;
+    }
+    size_t ns = 0;
+    size_t p[4];
+    for (int d = 0; d < 4; d++)
+        p[d] = lo[d];
+    for (int a = 0; a + 1 < nc; a++) {
+        const int xa = cuts[a], xb = cuts[a + 1];
+        if (xb <= xa)
+            continue;
+        if (out) {
+            bseg *g = &out[ns];
+            g->at = b->roff[q] + 1 + (size_t)(xa - r->x0);
+            g->len = (uint32_t)(xb - xa);
+            g->d = (float)(1 + b->s * (rc + (xa > 0) + (xb < nx)));
+            for (int d = 0; d < 4; d++) {
+                /* Neighbour runs are sorted by x: advance to the first ending after xa. */
+                while (p[d] < hi[d] && b->runs[p[d]].x1 <= xa)
+                    p[d]++;
+                const xrun *o = p[d] < hi[d] ? &b->runs[p[d]] : NULL;
+                g->nb[d] = o && o->x0 <= xa ? b->roff[p[d]] + 1 + (size_t)(xa - o->x0) : b->zero;
+            }
+        }
+        ns++;
+    }
+    if (heap)
+        free(cuts);
+    return ns;
+}
+
+/* Builds the band from b->need: grown, cut into x-runs and segments, laid out
+ * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
+ * band is not worth it (more than BAND_MAX_FRACTION of box_cells), 1 when
+ * built, -1 when out of memory. */
+static int band_build(hv_extender *e, struct band *b, size_t box_cells, int R)
 {
     const int m = (int)lround(BOX_MARGIN * sqrt(e->o.t_scale));
     if (!e->bg0 && !(e->bg0 = hv_malloc(e->count)))
@@ -576,8 +694,12 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
         free(first);
         return 0;
     }
-    if (!(b->runs = malloc(nr * sizeof *b->runs))) {
+    b->runs = malloc(nr * sizeof *b->runs);
+    b->roff = malloc(nr * sizeof *b->roff);
+    size_t *sfirst = malloc((nr + 1) * sizeof *sfirst);
+    if (!b->runs || !b->roff || !sfirst) {
         free(first);
+        free(sfirst);
         return -1;
     }
 #pragma omp parallel for schedule(static)
@@ -592,17 +714,50 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
                 b->runs[q++] = (xrun){(int)(r % e->n[1]), (int)(r / e->n[1]), x, x1};
             }
     }
-    free(first);
     b->nruns = nr;
-    if (!(b->kstart = malloc(((size_t)e->n[2] + 1) * sizeof *b->kstart)))
+    b->cells = cells;
+    b->s = e->o.t_scale;
+    b->R = R;
+    /* Compact layout: each run between two ghost cells, then the zero block. */
+    size_t at = 0;
+    for (size_t q = 0; q < nr; q++) {
+        b->roff[q] = at;
+        at += (size_t)(b->runs[q].x1 - b->runs[q].x0) + 2;
+    }
+    b->zero = at;
+    b->ncompact = at + nx;
+    /* Segments: counted per run, then written at their offsets. */
+    int oom = 0;
+#pragma omp parallel for reduction(| : oom) schedule(static)
+    for (size_t q = 0; q < nr; q++) {
+        size_t c = run_segments(e, b, first, q, NULL);
+        oom |= c == (size_t)-1;
+        sfirst[q + 1] = c;
+    }
+    sfirst[0] = 0;
+    for (size_t q = 0; q < nr && !oom; q++)
+        sfirst[q + 1] += sfirst[q];
+    if (oom || !(b->segs = malloc((sfirst[nr] ? sfirst[nr] : 1) * sizeof *b->segs))) {
+        free(first);
+        free(sfirst);
         return -1;
+    }
+#pragma omp parallel for reduction(| : oom) schedule(static)
+    for (size_t q = 0; q < nr; q++)
+        oom |= run_segments(e, b, first, q, b->segs + sfirst[q]) == (size_t)-1;
+    b->nsegs = sfirst[nr];
+    if (oom || !(b->kstart = malloc(((size_t)e->n[2] + 1) * sizeof *b->kstart))) {
+        free(first);
+        free(sfirst);
+        return -1;
+    }
     for (int k = 0, q = 0; k <= e->n[2]; k++) {
         while ((size_t)q < nr && b->runs[q].k < k)
             q++;
-        b->kstart[k] = (size_t)q;
+        b->kstart[k] = sfirst[q];
     }
-    b->cells = cells;
-    b->s = e->o.t_scale;
+    free(first);
+    free(sfirst);
     /* Sweeps for the error bound 2 c^k / (1 + c^2k) <= tol, c = (sqrt(K) - 1) / (sqrt(K) + 1),
      * K = 1 + 4 d s the condition number of D^-1 A. */
     const double K = 1 + 4 * e->dim * b->s, c = (sqrt(K) - 1) / (sqrt(K) + 1);
@@ -610,12 +765,16 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
     b->iters = 1;
     while (2 * pow(c, b->iters) / (1 + pow(c, 2 * b->iters)) > tol && b->iters < 1000)
         b->iters++;
-    /* Work arrays on the whole grid (u = 0 off the band, rows of zeros for
-     * missing neighbours). */
-    if (!e->bf) {
-        e->bf = hv_malloc(e->count * sizeof(float));
-        e->bu0 = hv_malloc(e->count * sizeof(float));
-        e->bu1 = hv_malloc(e->count * sizeof(float));
+    /* Work arrays, kept by the extender across calls. */
+    const size_t need = b->ncompact * (size_t)R;
+    if (need > e->bcap) {
+        hv_free(e->bf);
+        hv_free(e->bu0);
+        hv_free(e->bu1);
+        e->bcap = 0;
+        e->bf = hv_malloc(need * sizeof(float));
+        e->bu0 = hv_malloc(need * sizeof(float));
+        e->bu1 = hv_malloc(need * sizeof(float));
         if (!e->bf || !e->bu0 || !e->bu1) {
             hv_free(e->bf);
             hv_free(e->bu0);
@@ -623,121 +782,87 @@ static int band_build(hv_extender *e, struct band *b, size_t box_cells)
             e->bf = e->bu0 = e->bu1 = NULL;
             return -1;
         }
-        memset(e->bu0, 0, e->count * sizeof(float));
-        memset(e->bu1, 0, e->count * sizeof(float));
-        memset(e->bf, 0, e->count * sizeof(float));
+        e->bcap = need;
     }
     b->f = e->bf;
     b->u0 = e->bu0;
     b->u1 = e->bu1;
-    b->zero = calloc((size_t)e->n[0], sizeof(float));
-    if (!b->zero)
-        return -1;
+    /* Sweeps write run cells only: ghosts and the zero block stay 0. */
+    const size_t Rb = (size_t)R * sizeof(float);
+#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
+    for (size_t q = 0; q < nr; q++) {
+        const size_t g0 = b->roff[q] * R, g1 = (b->roff[q] + 1 + (b->runs[q].x1 - b->runs[q].x0)) * R;
+        memset(b->u0 + g0, 0, Rb);
+        memset(b->u1 + g0, 0, Rb);
+        memset(b->u0 + g1, 0, Rb);
+        memset(b->u1 + g1, 0, Rb);
+    }
+    memset(b->u0 + b->zero * R, 0, nx * Rb);
+    memset(b->u1 + b->zero * R, 0, nx * Rb);
     return 1;
 }
 
-/* The neighbour rows of run r in array v (the zero row where the grid ends)
- * and their count. */
-static int run_rows(const hv_extender *e, const struct band *b, const xrun *r, const float *v,
-                    const float *nb[4])
+/* One Chebyshev update of segment g for every right-hand side:
+ * out = cur + a (cur - out) + c D^-1 (f - A cur) (out holds the previous
+ * iterate on entry). */
+static inline __attribute__((always_inline)) void band_seg(const struct band *b, const bseg *g,
+                                                          const float *cur, float *out, float a,
+                                                          float c)
 {
-    const size_t nx = (size_t)e->n[0], row = nx * (r->j + (size_t)e->n[1] * r->k);
-    const size_t plane = nx * e->n[1];
-    int cnt = 0;
-    cnt += r->j > 0;
-    nb[0] = r->j > 0 ? v + row - nx : b->zero;
-    cnt += r->j + 1 < e->n[1];
-    nb[1] = r->j + 1 < e->n[1] ? v + row + nx : b->zero;
-    if (e->dim == 3) {
-        cnt += r->k > 0;
-        nb[2] = r->k > 0 ? v + row - plane : b->zero;
-        cnt += r->k + 1 < e->n[2];
-        nb[3] = r->k + 1 < e->n[2] ? v + row + plane : b->zero;
-    } else {
-        nb[2] = nb[3] = b->zero;
-    }
-    return cnt;
-}
-
-/* One Chebyshev sweep on the band: out = cur + a (cur - out) + c D^-1 (f - A cur)
- * (out holds the previous iterate on entry). */
-/* One Chebyshev update of run q: out = cur + a (cur - out) + c D^-1 (f - A cur)
- * (out holds the previous iterate on entry). */
-static inline __attribute__((always_inline)) void band_run(const hv_extender *e, const struct band *b,
-                                                          size_t q, const float *cur,
-                            float *out, float a, float c)
-{
-    const float s = (float)b->s;
-    const int nx = e->n[0];
-    const xrun *r = &b->runs[q];
-    const float *nb[4];
-    const int rc = run_rows(e, b, r, cur, nb);
-    const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
-    const float *restrict u = cur + row, *restrict f = b->f + row;
-    const float *restrict n0 = nb[0], *restrict n1 = nb[1], *restrict n2 = nb[2],
-                          *restrict n3 = nb[3];
-    float *restrict o = out + row;
-    int x = r->x0, xe = r->x1;
-    /* Runs are short (tens of cells), and f, out and the next plane's row
-     * were last touched a sweep ago: fetch a later run's lines ahead, or
-     * every run starts with a wait on memory. */
-    if (q + BAND_AHEAD < b->nruns) {
-        const xrun *p = &b->runs[q + BAND_AHEAD];
-        const size_t prow = (size_t)nx * (p->j + (size_t)e->n[1] * p->k);
-        const size_t up = e->dim == 3 && p->k + 1 < e->n[2] ? (size_t)nx * e->n[1] : 0;
-        for (int y = p->x0; y < p->x1; y += 16) {
-            __builtin_prefetch(b->f + prow + y, 0, 1);
-            __builtin_prefetch(out + prow + y, 1, 1);
-            __builtin_prefetch(cur + prow + up + y, 0, 1); /* first touched as z + 1 */
-        }
-    }
-    /* The grid's x walls (fewer neighbours), then the run's inside, branch-free. */
-/* Cell x of a run at the grid's x walls (one neighbour fewer). */
-#define BAND_WALL_CELL(x)                                                                          \
-    do {                                                                                           \
-        const int cnt_ = rc + ((x) > 0) + ((x) + 1 < nx);                                          \
-        const float sum_ = n0[x] + n1[x] + n2[x] + n3[x] + ((x) > 0 ? u[(x) - 1] : 0) +            \
-                           ((x) + 1 < nx ? u[(x) + 1] : 0);                                        \
-        const float d_ = 1 + s * cnt_;                                                             \
-        o[x] = u[x] + a * (u[x] - o[x]) + c * (f[x] - (d_ * u[x] - s * sum_)) / d_;                \
-    } while (0)
-    for (; x < xe && (x == 0 || x + 1 == nx); x++)
-        BAND_WALL_CELL(x);
-    int xi = xe < nx - 1 ? xe : nx - 1;
-    const float d = 1 + s * (rc + 2), cd = c / d;
+    const size_t R = (size_t)b->R, n = (size_t)g->len * R;
+    const float s = (float)b->s, d = g->d, cd = c / d;
+    const float *restrict f = b->f + g->at * R;
+    const float *restrict u = cur + g->at * R;
+    const float *restrict n0 = cur + g->nb[0] * R, *restrict n1 = cur + g->nb[1] * R,
+                          *restrict n2 = cur + g->nb[2] * R, *restrict n3 = cur + g->nb[3] * R;
+    const float *restrict um = u - R, *restrict up = u + R;
+    float *restrict o = out + g->at * R;
 #pragma omp simd
-    for (int y = x; y < xi; y++) {
-        float sum = n0[y] + n1[y] + n2[y] + n3[y] + u[y - 1] + u[y + 1];
+    for (size_t y = 0; y < n; y++) {
+        float sum = n0[y] + n1[y] + n2[y] + n3[y] + um[y] + up[y];
         o[y] = u[y] + a * (u[y] - o[y]) + cd * (f[y] - (d * u[y] - s * sum));
     }
-    for (x = xi > x ? xi : x; x < xe; x++)
-        BAND_WALL_CELL(x);
-#undef BAND_WALL_CELL
 }
 
-/* Runs q0 .. q1 - 1 (with an AVX2 clone picked at load time where the CPU has it). */
-BAND_KERNEL static void band_runs(const hv_extender *e, const struct band *b, size_t q0, size_t q1,
-                                  const float *cur, float *out, float a, float c)
+/* Segments q0 .. q1 - 1 (with an AVX2 clone picked at load time where the CPU has it). */
+BAND_KERNEL static void band_segs(const struct band *b, size_t q0, size_t q1, const float *cur,
+                                  float *out, float a, float c)
 {
     for (size_t q = q0; q < q1; q++)
-        band_run(e, b, q, cur, out, a, c);
+        band_seg(b, &b->segs[q], cur, out, a, c);
 }
 
-/* One Chebyshev sweep on the band (every run). */
-static void band_sweep(const hv_extender *e, const struct band *b, const float *cur, float *out,
-                       float a, float c)
+/* One Chebyshev sweep on the band (every segment). */
+static void band_sweep(const struct band *b, const float *cur, float *out, float a, float c)
 {
 #pragma omp parallel if (b->cells >= BAND_PAR_MIN)
     {
         const size_t nt = (size_t)omp_get_num_threads(), t = (size_t)omp_get_thread_num();
-        band_runs(e, b, b->nruns * t / nt, b->nruns * (t + 1) / nt, cur, out, a, c);
+        band_segs(b, b->nsegs * t / nt, b->nsegs * (t + 1) / nt, cur, out, a, c);
     }
 }
 
-static void band_plane(const hv_extender *e, const struct band *b, int p, const float *cur,
-                       float *out, float a, float c)
+/* The first sweep from x0 = 0: x1 = c D^-1 f, and x0 = 0 (the previous
+ * iterate of the second sweep) on the band's cells. */
+static void band_first(const struct band *b, float *x0, float *x1, float c)
 {
-    band_runs(e, b, b->kstart[p], b->kstart[p + 1], cur, out, a, c);
+    const size_t R = (size_t)b->R;
+#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
+    for (size_t q = 0; q < b->nsegs; q++) {
+        const bseg *g = &b->segs[q];
+        const size_t n = (size_t)g->len * R;
+        const float cd = c / g->d, *f = b->f + g->at * R;
+        float *o = x1 + g->at * R, *z = x0 + g->at * R;
+        for (size_t y = 0; y < n; y++) {
+            o[y] = cd * f[y];
+            z[y] = 0;
+        }
+    }
+}
+
+static void band_plane(const struct band *b, int p, const float *cur, float *out, float a, float c)
+{
+    band_segs(b, b->kstart[p], b->kstart[p + 1], cur, out, a, c);
 }
 
 /* Two Chebyshev sweeps in one pass over memory (3D): plane p gets the first
@@ -753,9 +878,9 @@ static void band_sweep2(const hv_extender *e, const struct band *b, float *A, fl
 #pragma omp parallel if (b->cells >= BAND_PAR_MIN)
     {
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
-        /* Slabs of about equal run counts: [k0, k1), each starting at the first
-         * plane whose runs begin at or after its share. */
-        const size_t lo = b->nruns * (size_t)t / nt, hi = b->nruns * (size_t)(t + 1) / nt;
+        /* Slabs of about equal segment counts: [k0, k1), each starting at the
+         * first plane whose segments begin at or after its share. */
+        const size_t lo = b->nsegs * (size_t)t / nt, hi = b->nsegs * (size_t)(t + 1) / nt;
         int k0 = 0, k1 = nz;
         if (t > 0)
             while (k0 < nz && b->kstart[k0] < lo)
@@ -766,129 +891,141 @@ static void band_sweep2(const hv_extender *e, const struct band *b, float *A, fl
                 k1++;
         }
         for (int p = k0; p < k1; p++) {
-            band_plane(e, b, p, A, B, a1, c1);
+            band_plane(b, p, A, B, a1, c1);
             if (p - 1 >= k0 + 1)
-                band_plane(e, b, p - 1, B, A, a2, c2);
+                band_plane(b, p - 1, B, A, a2, c2);
         }
 #pragma omp barrier
         if (k1 > k0) {
-            band_plane(e, b, k0, B, A, a2, c2);
+            band_plane(b, k0, B, A, a2, c2);
             if (k1 - 1 > k0)
-                band_plane(e, b, k1 - 1, B, A, a2, c2);
+                band_plane(b, k1 - 1, B, A, a2, c2);
         }
     }
 }
 
-/* Residual norms of u on the band: 2-norm and max-norm, and the 2-norm of f. */
-static void band_residual(const hv_extender *e, const struct band *b, const float *u, double *r2,
+/* Per right-hand side r: the residual's 2-norm r2[r] and max-norm rinf[r] on
+ * the band, and the 2-norm f2[r] of the right-hand side. acc: 3 R doubles per
+ * thread of scratch. */
+static void band_residual(const struct band *b, const float *u, double *acc, double *r2,
                           double *rinf, double *f2)
 {
+    const int R = b->R;
     const double s = b->s;
-    const int nx = e->n[0];
-    double a2 = 0, am = 0, af = 0;
-#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) reduction(+ : a2, af) reduction(max : am) schedule(static)
-    for (size_t q = 0; q < b->nruns; q++) {
-        const xrun *r = &b->runs[q];
-        const float *nb[4];
-        const int rc = run_rows(e, b, r, u, nb);
-        const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
-        const float *v = u + row, *f = b->f + row;
-        for (int x = r->x0; x < r->x1; x++) {
-            int cnt = rc;
-            double sum = (double)nb[0][x] + nb[1][x] + nb[2][x] + nb[3][x];
-            if (x > 0) {
-                sum += v[x - 1];
-                cnt++;
+    for (int r = 0; r < R; r++)
+        r2[r] = rinf[r] = f2[r] = 0;
+#pragma omp parallel if (b->cells >= BAND_PAR_MIN)
+    {
+        double *a = acc + 3 * (size_t)R * omp_get_thread_num();
+        for (int r = 0; r < 3 * R; r++)
+            a[r] = 0;
+#pragma omp for schedule(static)
+        for (size_t q = 0; q < b->nsegs; q++) {
+            const bseg *g = &b->segs[q];
+            const float *v = u + g->at * R, *f = b->f + g->at * R;
+            const float *nb[4];
+            for (int d = 0; d < 4; d++)
+                nb[d] = u + g->nb[d] * R;
+            for (size_t y = 0; y < (size_t)g->len * R; y++) {
+                double sum = (double)nb[0][y] + nb[1][y] + nb[2][y] + nb[3][y] +
+                             v[(ptrdiff_t)y - R] + v[y + R];
+                double res = f[y] - (g->d * (double)v[y] - s * sum);
+                int r = (int)(y % (size_t)R);
+                a[r] += res * res;
+                if (fabs(res) > a[R + r])
+                    a[R + r] = fabs(res);
+                a[2 * R + r] += (double)f[y] * f[y];
             }
-            if (x + 1 < nx) {
-                sum += v[x + 1];
-                cnt++;
-            }
-            double res = f[x] - ((1 + s * cnt) * v[x] - s * sum);
-            a2 += res * res;
-            af += (double)f[x] * f[x];
-            if (fabs(res) > am)
-                am = fabs(res);
+        }
+#pragma omp critical(hv_band_residual)
+        for (int r = 0; r < R; r++) {
+            r2[r] += a[r];
+            rinf[r] = fmax(rinf[r], a[R + r]);
+            f2[r] += a[2 * R + r];
         }
     }
-    *r2 = sqrt(a2);
-    *rinf = am;
-    *f2 = sqrt(af);
+    for (int r = 0; r < R; r++) {
+        r2[r] = sqrt(r2[r]);
+        f2[r] = sqrt(f2[r]);
+    }
 }
 
-/* Right-hand side r on the band's cells, into b->f (float). */
-static void build_rhs_band(const hv_extender *e, struct band *b, int r, int nfields,
+/* Every right-hand side on the band's cells, side by side, into b->f. */
+static void build_rhs_band(const hv_extender *e, struct band *b, int nfields,
                            const hv_extend_field *f)
 {
-    const rhs_part p = rhs_locate(r, nfields, f);
-    const int nx = e->n[0];
+    const int R = b->R, nx = e->n[0];
+    rhs_part parts[1 + 4 * MAX_FIELDS_PER_CALL];
+    for (int r = 0; r < R; r++)
+        parts[r] = rhs_locate(r, nfields, f);
 #pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
     for (size_t q = 0; q < b->nruns; q++) {
         const xrun *run = &b->runs[q];
         const size_t row = (size_t)nx * (run->j + (size_t)e->n[1] * run->k);
-        for (int x = run->x0; x < run->x1; x++)
-            b->f[row + x] = (float)rhs_value(e, f, p, row + x);
+        float *dst = b->f + (b->roff[q] + 1) * R;
+        for (int x = run->x0; x < run->x1; x++, dst += R) {
+            const size_t c = row + x;
+            if (!(e->w[c] > 0)) {
+                for (int r = 0; r < R; r++)
+                    dst[r] = 0;
+                continue;
+            }
+            for (int r = 0; r < R; r++)
+                dst[r] = (float)rhs_value(e, f, parts[r], c);
+        }
     }
 }
 
-/* Level 0 on the band: every right-hand side by Chebyshev sweeps; solutions
- * stored interleaved, 0 off the band. thr as in solve_level, from the
- * max-norm bound |u - u*| <= |r|_inf (A has unit diagonal excess, ||A^-1||_inf <= 1). */
-static hv_status solve_band(hv_extender *e, struct band *b, int nrhs, int nfields,
-                            const hv_extend_field *f, double *thr, hv_extend_stats *S)
+/* Level 0 on the band: every right-hand side at once by Chebyshev sweeps;
+ * solutions stored interleaved on the band's cells (level 0 reads nothing
+ * else: closest-point stencils and cells read at themselves are band cells).
+ * thr as in solve_level, from the max-norm bound |u - u*| <= |r|_inf (A has
+ * unit diagonal excess, ||A^-1||_inf <= 1). */
+static hv_status solve_band(hv_extender *e, struct band *b, int nfields, const hv_extend_field *f,
+                            double *thr, hv_extend_stats *S)
 {
-    /* e->sol is written on the band only: level 0 reads nothing else
-     * (closest-point stencils and cells read at themselves are band cells;
-     * other cells are not sampled at this level). */
-    const size_t k = (size_t)e->nsol;
+    const int R = b->R;
     const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
-    double relmax = 0, rinf0 = 0;
-    for (int rr = 0; rr < nrhs; rr++) {
-        /* The right-hand side on the band only (build_rhs on the whole grid
-         * would cost a pass over the box per right-hand side). */
-        build_rhs_band(e, b, rr, nfields, f);
-        float *cur = b->u0, *old = b->u1;
-        /* x1 = D^-1 f / theta from x0 = 0 (both zero on the band). */
-        band_sweep(e, b, cur, old, 0.0f, (float)(1 / theta));
+    build_rhs_band(e, b, nfields, f);
+    double *nrm = malloc((3 + 3 * (size_t)omp_get_max_threads()) * R * sizeof *nrm);
+    if (!nrm)
+        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+    float *cur = b->u0, *old = b->u1;
+    /* x1 = D^-1 f / theta from x0 = 0. */
+    band_first(b, old, cur, (float)(1 / theta));
+    double rho = 1 / sigma;
+    int it = 1;
+    /* Pairs of sweeps in one pass (3D): cur stays the array of the newest iterate. */
+    for (; e->dim == 3 && it + 1 < b->iters; it += 2) {
+        double r1 = 1 / (2 * sigma - rho), r2 = 1 / (2 * sigma - r1);
+        band_sweep2(e, b, cur, old, (float)(r1 * rho), (float)(2 * r1 / delta), (float)(r2 * r1),
+                    (float)(2 * r2 / delta));
+        rho = r2;
+    }
+    for (; it < b->iters; it++) {
+        double rn = 1 / (2 * sigma - rho);
+        band_sweep(b, cur, old, (float)(rn * rho), (float)(2 * rn / delta));
+        rho = rn;
         float *t = cur;
         cur = old;
         old = t;
-        double rho = 1 / sigma;
-        int it = 1;
-        /* Pairs of sweeps in one pass (3D): cur stays the array of the newest iterate. */
-        for (; e->dim == 3 && it + 1 < b->iters; it += 2) {
-            double r1 = 1 / (2 * sigma - rho), r2 = 1 / (2 * sigma - r1);
-            band_sweep2(e, b, cur, old, (float)(r1 * rho), (float)(2 * r1 / delta),
-                        (float)(r2 * r1), (float)(2 * r2 / delta));
-            rho = r2;
-        }
-        for (; it < b->iters; it++) {
-            double rn = 1 / (2 * sigma - rho);
-            band_sweep(e, b, cur, old, (float)(rn * rho), (float)(2 * rn / delta));
-            rho = rn;
-            t = cur;
-            cur = old;
-            old = t;
-        }
-        double r2, rinf, f2;
-        band_residual(e, b, cur, &r2, &rinf, &f2);
-        relmax = fmax(relmax, f2 > 0 ? r2 / f2 : 0);
-        if (rr == 0)
-            rinf0 = rinf;
-        float *out = e->sol;
-        const int nx = e->n[0];
-#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
-        for (size_t q = 0; q < b->nruns; q++) {
-            const xrun *r = &b->runs[q];
-            const size_t row = (size_t)nx * (r->j + (size_t)e->n[1] * r->k);
-            for (int x = r->x0; x < r->x1; x++) {
-                out[(row + x) * k + rr] = cur[row + x];
-                cur[row + x] = 0;
-                old[row + x] = 0;
-            }
-        }
-        S->solves++;
     }
+    band_residual(b, cur, nrm + 3 * (size_t)R, nrm, nrm + R, nrm + 2 * R);
+    double relmax = 0;
+    for (int r = 0; r < R; r++)
+        relmax = fmax(relmax, nrm[2 * R + r] > 0 ? nrm[r] / nrm[2 * R + r] : 0);
+    const double rinf0 = nrm[R];
+    free(nrm);
+    /* The compact layout of a run is e->sol's on that run. */
+    const int nx = e->n[0];
+#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
+    for (size_t q = 0; q < b->nruns; q++) {
+        const xrun *r = &b->runs[q];
+        const size_t c0 = (size_t)nx * (r->j + (size_t)e->n[1] * r->k) + r->x0;
+        memcpy(e->sol + c0 * R, cur + (b->roff[q] + 1) * R,
+               (size_t)(r->x1 - r->x0) * R * sizeof(float));
+    }
+    S->solves += R;
     S->relres = fmax(S->relres, relmax);
     S->solve_cells = b->cells;
     *thr = fmax(RELIABLE * rinf0, 1e-30);
@@ -986,56 +1123,8 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                 return hv_error(HV_ERR_INVALID_ARG, "extend: field %d component %d has no array", i, q);
         nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
-    hv_status st = hv_check_finite(phi, e->count, "the level set");
-    if (st)
-        return st;
-
-    /* Weights: a smooth bump of |phi| / (band h) on fluid cells. */
+    hv_status st;
     double t0 = hv_now();
-    const double bh = e->o.band * e->h;
-    size_t nsrc = 0;
-#pragma omp parallel for reduction(+ : nsrc) schedule(static)
-    for (size_t c = 0; c < e->count; c++) {
-        double s = phi[c] / bh, v = 0;
-        if (fabs(s) < 1 && !is_solid(e, c)) {
-            v = (1 - s * s) * (1 - s * s);
-            nsrc++;
-        }
-        e->w[c] = (float)v;
-    }
-    S->source_cells = nsrc;
-    if (!nsrc)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
-                        "zero crossing in the grid, or the band is too thin)", bh);
-    for (int i = 0; i < nfields; i++)
-        for (int q = 0; q < f[i].ncomp; q++) {
-            const float *in = f[i].in[q];
-            size_t bad = SIZE_MAX;
-#pragma omp parallel for reduction(min : bad) schedule(static)
-            for (size_t c = 0; c < e->count; c++)
-                if (e->w[c] > 0 && !isfinite(in[c]) && c < bad)
-                    bad = c;
-            if (bad != SIZE_MAX)
-                return hv_error(HV_ERR_NUMERIC,
-                                "extend: field %d component %d is NaN/Inf at cell %zu, inside "
-                                "the source band", i, q, bad);
-        }
-    if ((st = ensure_solutions(e, nrhs)))
-        return st;
-    S->t_weights = hv_now() - t0;
-
-    /* Output cells: 0 = done (background or written), 1 = read at the closest
-     * point, 2 = read at the cell. The boxes: cells with a weight, and cells to
-     * be read at themselves. */
-    uint8_t *pending = malloc(e->count);
-    if (!pending)
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
-    const double ob = e->o.out_band * e->h;
-    size_t npend = 0;
-    ibox band_box, ratio_box;
-    box_empty(&band_box);
-    box_empty(&ratio_box);
     /* The band solve (short times, no obstacles; CPU backends only: an explicit
      * fftw or opencl backend gets its own solver): its cells start from the
      * weights, the closest points' stencils and the cells read at themselves. */
@@ -1046,49 +1135,67 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG) &&
         (e->bneed || (e->bneed = hv_malloc(e->count))))
         need = e->bneed;
-#pragma omp parallel
+
+    /* One pass over the grid: the weights (a smooth bump of |phi| / (band h) on
+     * fluid cells), phi and the fields where they are read (the weighted
+     * cells) checked for NaN/Inf, and the output cells classified: pending 0 =
+     * background, 1 = read at the closest point, 2 = read at the cell. The
+     * weighted cells and the cells read at themselves are boxed; the band
+     * solve's cells start from the weights and the closest points' stencils
+     * (need is only ever set here, so the stencils' marks from other rows
+     * cannot be lost). Nothing is written to the outputs before the checks
+     * pass: they may alias the inputs. */
+    if (!e->pending && !(e->pending = hv_malloc(e->count)))
+        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+    uint8_t *pending = e->pending;
+    if (need)
+        memset(need, 0, e->count);
+    const double bh = e->o.band * e->h, ob = e->o.out_band * e->h;
+    size_t nsrc = 0, npend = 0, badphi = SIZE_MAX, badf = SIZE_MAX;
+    ibox band_box, ratio_box;
+    box_empty(&band_box);
+    box_empty(&ratio_box);
+#pragma omp parallel reduction(+ : nsrc, npend) reduction(min : badphi, badf)
     {
-        ibox lb;
+        ibox lb, lr;
         box_empty(&lb);
-        size_t ln = 0;
-#pragma omp for collapse(2) schedule(static)
-        for (int k = 0; k < e->n[2]; k++)
-            for (int j = 0; j < e->n[1]; j++)
-                for (int i = 0; i < e->n[0]; i++) {
-                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
-                    if (e->w[c] > 0)
-                        box_add(&lb, i, j, k);
-                    if (need)
-                        need[c] = e->w[c] > 0;
-                    int want = !is_solid(e, c) && (ob == 0 || fabs(phi[c]) < ob);
-                    pending[c] = (uint8_t)want;
-                    ln += want;
-                    if (!want)
-                        for (int fi = 0; fi < nfields; fi++)
-                            for (int q = 0; q < f[fi].ncomp; q++)
-                                f[fi].out[q][c] = e->o.background;
-                }
-#pragma omp critical(hv_extend_box)
-        {
-            box_union(&band_box, &lb);
-            npend += ln;
-        }
-    }
-#pragma omp parallel
-    {
-        ibox lr;
         box_empty(&lr);
 #pragma omp for collapse(2) schedule(static)
         for (int k = 0; k < e->n[2]; k++)
             for (int j = 0; j < e->n[1]; j++)
                 for (int i = 0; i < e->n[0]; i++) {
-                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
-                    if (!pending[c])
+                    const size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    const double s = phi[c] / bh;
+                    const int solid = is_solid(e, c);
+                    double v = 0;
+                    pending[c] = 0;
+                    if (!isfinite(s)) {
+                        if (c < badphi)
+                            badphi = c;
+                        e->w[c] = 0;
+                        continue;
+                    }
+                    if (fabs(s) < 1 && !solid) {
+                        v = (1 - s * s) * (1 - s * s);
+                        nsrc++;
+                        box_add(&lb, i, j, k);
+                        for (int fi = 0; fi < nfields; fi++)
+                            for (int q = 0; q < f[fi].ncomp; q++)
+                                if (!isfinite(f[fi].in[q][c]) && c < badf)
+                                    badf = c;
+                        if (need) {
+#pragma omp atomic write
+                            need[c] = 1;
+                        }
+                    }
+                    e->w[c] = (float)v;
+                    if (solid || (ob > 0 && !(fabs(phi[c]) < ob)))
                         continue;
                     size_t idx[8];
                     double wt[8];
                     int m;
                     pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+                    npend++;
                     if (pending[c] == 2)
                         box_add(&lr, i, j, k);
                     if (need)
@@ -1098,8 +1205,57 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         }
                 }
 #pragma omp critical(hv_extend_box)
-        box_union(&ratio_box, &lr);
+        {
+            box_union(&band_box, &lb);
+            box_union(&ratio_box, &lr);
+        }
     }
+    if (badphi != SIZE_MAX)
+        return hv_error(HV_ERR_NUMERIC, "extend: the level set holds a non-finite value (%g) at cell %zu",
+                        (double)phi[badphi], badphi);
+    for (int i = 0; i < nfields && badf != SIZE_MAX; i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            if (!isfinite(f[i].in[q][badf]))
+                return hv_error(HV_ERR_NUMERIC,
+                                "extend: field %d component %d is NaN/Inf at cell %zu, inside "
+                                "the source band", i, q, badf);
+    S->source_cells = nsrc;
+    if (!nsrc)
+        return hv_error(HV_ERR_INVALID_ARG,
+                        "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
+                        "zero crossing in the grid, or the band is too thin)", bh);
+    if ((st = ensure_solutions(e, nrhs)))
+        return st;
+    S->t_weights = hv_now() - t0;
+
+    /* The background, on the cells no level will write: runs of each row. */
+    t0 = hv_now();
+    if (npend < e->count) {
+        const size_t rows = (size_t)e->n[1] * e->n[2], nx = (size_t)e->n[0];
+        const float bg = e->o.background;
+#pragma omp parallel for schedule(static)
+        for (size_t r = 0; r < rows; r++) {
+            const uint8_t *pr = pending + r * nx;
+            for (size_t x = 0; x < nx;) {
+                if (pr[x]) {
+                    x++;
+                    continue;
+                }
+                size_t x1 = x + 1;
+                while (x1 < nx && !pr[x1])
+                    x1++;
+                for (int fi = 0; fi < nfields; fi++)
+                    for (int q = 0; q < f[fi].ncomp; q++) {
+                        float *o = f[fi].out[q] + r * nx;
+                        for (size_t y = x; y < x1; y++)
+                            o[y] = bg;
+                    }
+                x = x1;
+            }
+        }
+    }
+    S->t_eval = hv_now() - t0;
+    t0 = hv_now();
     /* Closest points lie within half the band of the zero set, their stencils a
      * voxel further: inside the weights' box grown by 2. */
     band_box.lo[0] -= 2;
@@ -1114,15 +1270,15 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         int lo[3], bn[3];
         box_grow(e, &nb, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale)), lo, bn);
         band.need = need;
-        int built = band_build(e, &band, (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1));
+        int built = band_build(e, &band, (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1), nrhs);
         if (built < 0) {
             band_free(&band);
-            free(pending);
             return hv_error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
         }
         if (!built)
             band_free(&band);
     }
+    S->t_solve = hv_now() - t0;
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
         double thr;
@@ -1137,7 +1293,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         }
         t0 = hv_now();
         const uint8_t *trusted = l == 0 && band.runs ? band.need : NULL;
-        if ((st = trusted ? solve_band(e, &band, nrhs, nfields, f, &thr, S)
+        if ((st = trusted ? solve_band(e, &band, nfields, f, &thr, S)
                           : solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
@@ -1204,7 +1360,6 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                         if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)])
                             box_add(&ratio_box, i, j, k);
     }
-    free(pending);
     band_free(&band);
     S->t_total = hv_now() - t_start;
     return st;

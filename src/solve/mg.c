@@ -26,8 +26,11 @@
  * passes are fused (SSE: 52% of a 256^3 solve in the sweep rows). */
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
 #define MG_KERNEL __attribute__((target_clones("avx2", "default")))
+#define MG_AVX512 1
+#include <immintrin.h>
 #else
 #define MG_KERNEL
+#define MG_AVX512 0
 #endif
 
 /* Levels below this many cells run on one thread: fork-join and barrier costs
@@ -52,6 +55,7 @@ typedef struct mg_state {
     int ring_threads; /* threads the ring has room for */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
+    hv_solver_stats model;       /* traffic model (mg_model_stats_cpu) */
 } mg_state;
 
 static void zero_f(float *v, size_t n)
@@ -62,6 +66,55 @@ static void zero_f(float *v, size_t n)
 }
 
 /* ---------- stencil kernels ---------- */
+
+#if MG_AVX512
+/* Interior cells 1..last-1 of one colour (cells of i0's parity) of a row, in
+ * 16-lane chunks aligned to the row start: the row's own values come from one
+ * load per chunk, their x-neighbours by lane shifts (valignd) of the chunks
+ * before and after, instead of two unaligned loads that straddle cache lines;
+ * every lane is computed and a masked store keeps this colour's cells, so the
+ * other colour's (which this row reads) are never written. */
+__attribute__((target("avx512f"))) static void rb_interior_avx512(
+    float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
+    int last, int i0, float cx, float cym, float cyp, float czm, float czp, float inv)
+{
+    const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp), vinv = _mm512_set1_ps(inv);
+    const __mmask16 colour = i0 ? 0xAAAA : 0x5555; /* lane b is cell q + b, q even */
+    const int n = last + 1;                          /* cells in the row */
+#define RB_VALID(q) ((n - (q)) >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - (q))) - 1u))
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(RB_VALID(0), ur));
+    for (int q = 0; q < last; q += 16) {
+        __mmask16 valid = RB_VALID(q);
+        __m512i next = q + 16 < n ? _mm512_castps_si512(_mm512_maskz_loadu_ps(RB_VALID(q + 16), ur + q + 16))
+                                  : _mm512_setzero_si512();
+        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+        __m512 s = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        s = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), s);
+        s = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), s);
+        s = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), s);
+        s = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), s);
+        /* interior only: not cell 0, not cell last (walls, done by the caller) */
+        __mmask16 keep = colour & valid & (__mmask16)(q == 0 ? 0xFFFE : 0xFFFF);
+        if (last - q < 16)
+            keep &= (__mmask16)~(1u << (last - q));
+        _mm512_mask_storeu_ps(ur + q, keep, _mm512_mul_ps(s, vinv));
+        prev = cur;
+        cur = next;
+    }
+#undef RB_VALID
+}
+
+static int mg_avx512(void)
+{
+    static int have = -1;
+    if (have < 0)
+        have = __builtin_cpu_supports("avx512f") && !getenv("HV_NO512") ? 1 : 0;
+    return have;
+}
+#endif
 
 /* Plain-level interior row update: the hot loop of the smoother, branch-free. */
 MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
@@ -88,6 +141,15 @@ MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *
         i = 2;
     }
     int last = nx - 1;
+#if MG_AVX512
+    if (mg_avx512() && last > 1) {
+        /* ur[last] is the other colour when last has the other parity; the tail
+         * mask stops before it either way (the wall cell is done below) */
+        rb_interior_avx512(ur, fr, ym, yp, zm, zp, last, i0, cx, cy * wym, cy * wyp, cz * wzm,
+                           cz * wzp, inv_in);
+        i = (last - i0) & 1 ? last + 1 : last; /* this colour's wall cell, if it is one */
+    } else
+#endif
     if (nx <= MG_ROW_BUF) {
         /* Update every interior cell into a buffer (contiguous, so it vectorizes;
          * the other colour's values are not changed by this colour), then keep
@@ -1024,6 +1086,7 @@ static hv_status mg_create(void **state, const hv_setup *s)
         st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
+    mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, &m->model);
     *state = m;
     return HV_OK;
 fail:
@@ -1211,10 +1274,16 @@ static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv
             nc = !(need > 1) ? 1 : need > mx ? mx : (int)need;
         }
         for (int q = 0; q < nc; q++) {
-            if (q == 0 && it == 0 && !s->o.nonzero_guess)
+            if (q == 0 && it == 0 && !s->o.nonzero_guess) {
                 fmg(m);
-            else
-                vcycle(m, 0, q > 0, 0);
+                continue;
+            }
+            double t0 = hv_now();
+            vcycle(m, 0, q > 0, 0);
+            info->cycle_seconds += hv_now() - t0;
+            info->cycles_timed++;
+            /* a cycle from a guess sweeps u instead of setting it: + 4 B per cell */
+            info->cycle_bytes += m->model.bytes_per_cycle + (q > 0 ? 4.0 * (double)n : 0.0);
         }
         info->cycles += nc;
         double prev = rel;
