@@ -301,6 +301,47 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
     *m = 1;
     if (!e->o.closest_point)
         return 0;
+    const int nx = e->n[0], ny = e->n[1], nz = e->n[2];
+    if (e->dim == 3 && i > 0 && j > 0 && k > 0 && i + 1 < nx && j + 1 < ny && k + 1 < nz) {
+        /* Inside the grid, straight-line: the same central differences and
+         * trilinear stencil as below (this runs once or twice per output cell). */
+        const size_t sy = (size_t)nx, sz = (size_t)nx * ny;
+        const double gx = (double)phi[c + 1] - phi[c - 1], gy = (double)phi[c + sy] - phi[c - sy],
+                     gz = (double)phi[c + sz] - phi[c - sz];
+        const double gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
+        if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+            return 0;
+        const double sc = phi[c] * 0.5 / (gn * e->h * e->h);
+        const double p[3] = {i - sc * gx, j - sc * gy, k - sc * gz};
+        const int nn[3] = {nx, ny, nz};
+        int f[3];
+        double fr[3];
+        for (int a = 0; a < 3; a++) {
+            if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
+                return 0;
+            const double q = fmin(fmax(p[a], 0), nn[a] - 1);
+            f[a] = (int)q;
+            if (f[a] > nn[a] - 2)
+                f[a] = nn[a] - 2;
+            fr[a] = q - f[a];
+        }
+        const size_t b = f[0] + sy * f[1] + sz * f[2];
+        const size_t ci[8] = {b, b + 1, b + sy, b + sy + 1, b + sz, b + sz + 1, b + sy + sz,
+                              b + sy + sz + 1};
+        const double wx[2] = {1 - fr[0], fr[0]}, wy[2] = {1 - fr[1], fr[1]},
+                     wz[2] = {1 - fr[2], fr[2]};
+        double cw[8], v = 0;
+        for (int q = 0; q < 8; q++) {
+            cw[q] = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
+            v += cw[q] * phi[ci[q]];
+        }
+        if (validate && fabs(v) > 0.5 * fmax(e->o.band, 1.0) * e->h)
+            return 0;
+        memcpy(idx, ci, sizeof ci);
+        memcpy(wt, cw, sizeof cw);
+        *m = 8;
+        return 1;
+    }
     double g[3], gn = 0;
     grad_phi(e, phi, i, j, k, g);
     for (int a = 0; a < e->dim; a++)
