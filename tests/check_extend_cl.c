@@ -406,6 +406,59 @@ START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
 }
 END_TEST
 
+/* Without an OpenCL platform `heatvox devices` and an explicit --backend
+ * opencl fail with exit code 1, say why, and leave no output (runs whether or
+ * not this machine has a platform: the ICD loader is pointed at nothing). */
+START_TEST(heatvox_without_a_platform_should_fail_clearly)
+{
+    const char *bin = heatvox_bin();
+    if (!bin) {
+        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
+        return;
+    }
+    char dir[] = "/tmp/hv_noplat_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char in[256], mesh[256], src[256], out[256], cmd[2048], err[4096];
+    snprintf(in, sizeof in, "%s/in.vdb", dir);
+    snprintf(mesh, sizeof mesh, "%s/box.obj", dir);
+    snprintf(src, sizeof src, "%s/sources.txt", dir);
+    snprintf(out, sizeof out, "%s/out.vdb", dir);
+    ext_case c = make_case(SPHERE, 16, 0, 0);
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, c.phi, "surface", 3, 0));
+    TL_ASSERT_OK(hv_vdb_writer_add_float(w, c.in[0], "t"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, in));
+    hv_vdb_writer_destroy(&w);
+    case_free(&c);
+    FILE *f = fopen(mesh, "w");
+    ck_assert_ptr_nonnull(f);
+    fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n", f);
+    fclose(f);
+    ck_assert_ptr_nonnull(f = fopen(src, "w"));
+    fputs("0.5 0.5 0.5\n", f);
+    fclose(f);
+    const char *env = "OCL_ICD_VENDORS=/nonexistent OCL_ICD_FILENAMES=";
+    snprintf(cmd, sizeof cmd, "%s %s devices", env, bin);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "no OpenCL platform"), "devices: %s", err);
+    const char *forms[3] = {"%s %s extend %s --levelset surface --field t -o %s --backend opencl",
+                            "%s %s sdf %s -o %s --res 16 --backend opencl",
+                            "%s %s distance --sources %s --bbox 0 0 0 1 1 1 --res 16 -o %s "
+                            "--backend opencl"};
+    const char *inputs[3] = {in, mesh, src};
+    for (int q = 0; q < 3; q++) {
+        snprintf(cmd, sizeof cmd, forms[q], env, bin, inputs[q], out);
+        ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+        ck_assert_msg(strstr(err, "no OpenCL platform") && strstr(err, inputs[q]), "%s: %s", cmd,
+                      err);
+        ck_assert_msg(access(out, F_OK) != 0, "%s left %s", cmd, out);
+    }
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    ck_assert_int_eq(system(cmd), 0);
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -420,8 +473,10 @@ int main(int argc, char **argv)
     Suite *su = suite_create("extend_cl");
     TCase *tc = tcase_create("extend_cl");
     tcase_set_timeout(tc, 600);
+    tcase_add_test(tc, heatvox_without_a_platform_should_fail_clearly);
     if (hv_opencl_probe(NULL) != HV_OK) {
-        printf("note: no usable OpenCL device (%s); skipping\n", hv_last_error());
+        printf("note: no usable OpenCL device (%s); only the command's failure without one\n",
+               hv_last_error());
         suite_add_tcase(su, tc);
         return tl_run(su);
     }
