@@ -39,6 +39,10 @@ fi
 for n in 128 256; do
   "$hv" bench extend --n $n --shape sphere
 done
+# the same on the OpenCL device (weights, solves and evaluation there)
+case " $backends " in
+  *" opencl "*) "$hv" bench extend --n 128 --shape sphere --backend opencl ;;
+esac
 if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
   for n in 128 256; do
     "$hv" bench extend --n $n --shape "mesh:$shared/meshes/stanford-bunny.obj"

@@ -4,28 +4,13 @@
  * closest point where phi is a distance. */
 #include "heatvox/heat.h"
 #include "core/error.h"
+#include "extend_cl.h"
 
 #include <math.h>
 #include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-
-#define MAX_LEVELS 8
-/* Fields per hv_extend_many call (each takes up to 4 right-hand sides). */
-#define MAX_FIELDS_PER_CALL 64
-#define LEVEL_FACTOR 16.0
-/* A level's solve covers the cells it must answer for plus BOX_MARGIN sqrt(t)
- * on every side: Neumann walls there reflect e^{-2 BOX_MARGIN} (6e-6) of what
- * reaches them. */
-#define BOX_MARGIN 6.0
-/* Ratios are trusted where the diffused weight is RELIABLE times the solve's
- * pointwise error bound (relres * ||rhs||_2; the heat operator's inverse has
- * norm <= 1). */
-#define RELIABLE 1e3
-/* |grad phi| must lie in this range for phi to be taken as a distance. */
-#define GRAD_MIN 0.5
-#define GRAD_MAX 1.5
 
 struct hv_extender {
     int dim, n[3];
@@ -46,6 +31,7 @@ struct hv_extender {
     size_t bcap;                   /* floats each of them holds */
     uint8_t *bneed, *bg0, *bg1;    /* band solve: cells read, growing buffers */
     uint8_t *pending;              /* per cell: 0 done, 1 read at the closest point, 2 at itself */
+    hv_extend_cl *cl;              /* backend opencl: the device path's state */
 };
 
 void hv_extend_opts_default(hv_extend_opts *o)
@@ -132,6 +118,7 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->pending);
     hv_free(e->bg0);
     hv_free(e->bg1);
+    hv_extend_cl_destroy(&e->cl);
     free(e->solid);
     free(e);
     *ep = NULL;
@@ -1165,6 +1152,14 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
     hv_status st;
+    if (e->o.backend == HV_BACKEND_OPENCL) {
+        if ((st = hv_check_finite(phi, e->count, "the level set")))
+            return st;
+        const hv_extend_grid g = {e, e->dim, {e->n[0], e->n[1], e->n[2]}, e->h, e->count, e->solid, &e->o};
+        st = hv_extend_cl_run(&e->cl, &g, phi, nfields, f, nrhs, S);
+        S->t_total = hv_now() - t_start;
+        return st;
+    }
     double t0 = hv_now();
     /* The band solve (short times, no obstacles; CPU backends only: an explicit
      * fftw or opencl backend gets its own solver): its cells start from the
@@ -1456,4 +1451,23 @@ hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *cons
         f.out[q] = out[q]->v;
     }
     return hv_extend_many(e, phi->v, 1, &f, stats);
+}
+
+void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3],
+                         const int rlo[3], const int rhi[3], int l, int lo[3], int bn[3])
+{
+    ibox need, r;
+    for (int a = 0; a < 3; a++) {
+        need.lo[a] = wlo[a] - 2;
+        need.hi[a] = whi[a] + 2;
+        r.lo[a] = rlo[a];
+        r.hi[a] = rhi[a];
+    }
+    box_union(&need, &r);
+    box_grow(e, &need, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale) * pow(sqrt(LEVEL_FACTOR), l)), lo,
+             bn);
+    if (e->dim == 2) {
+        lo[2] = 0;
+        bn[2] = 1;
+    }
 }

@@ -44,6 +44,11 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_HEAT_SDF_RHS] = "heat_sdf_rhs",
     [HV_K_HEAT_SAMPLE] = "heat_sample",
     [HV_K_HEAT_SHIFT] = "heat_shift",
+    [HV_K_EXT_SETUP] = "ext_setup",
+    [HV_K_EXT_CHECK] = "ext_check",
+    [HV_K_EXT_RHS] = "ext_rhs",
+    [HV_K_EXT_SCATTER] = "ext_scatter",
+    [HV_K_EXT_EVAL] = "ext_eval",
     [HV_K_FINE_RESIDUAL] = "fine_residual",
     [HV_K_FINE_APPLY] = "fine_apply",
     [HV_K_FINE_ADD] = "fine_add",
@@ -325,9 +330,10 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
                         hv_cl_strerror(e));
     }
+    /* extend.cl last: it turns floating-point contraction off for itself */
     const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,   hv_kernel_fine,
                          hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat,
-                         hv_kernel_distance};
+                         hv_kernel_distance, hv_kernel_extend};
     char opts[128];
     snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
              HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");

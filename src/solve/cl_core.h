@@ -28,6 +28,7 @@ extern const char hv_kernel_faces[];
 extern const char hv_kernel_pointwise[];
 extern const char hv_kernel_heat[];
 extern const char hv_kernel_distance[];
+extern const char hv_kernel_extend[];
 
 /* Work-group size of every kernel but the single-group ones (x-major), and
  * the elements a work-item takes in a reduction (HV_WG, HV_RED_BLOCK in
@@ -62,6 +63,11 @@ typedef enum hv_cl_kernel {
     HV_K_HEAT_SDF_RHS,
     HV_K_HEAT_SAMPLE,
     HV_K_HEAT_SHIFT,
+    HV_K_EXT_SETUP,
+    HV_K_EXT_CHECK,
+    HV_K_EXT_RHS,
+    HV_K_EXT_SCATTER,
+    HV_K_EXT_EVAL,
     /* built only with fp64 */
     HV_K_FINE_RESIDUAL,
     HV_K_FINE_APPLY,

@@ -2,6 +2,7 @@
 #include "cl_mg.h"
 #include "core/error.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -104,6 +105,62 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
     return HV_OK;
 }
 
+/* Devices without fp64: the bottom level's coefficients and regions copied
+ * for the host solve. A float CG on the bottom (up to MG_BOTTOM_CELLS cells,
+ * long and thin or singular) stalls near 1e-5 relative in its true residual,
+ * where mg.c's double CG reaches 1e-12: the inexact coarse solve cost the
+ * PCG of a 2D serpentine 174 iterations instead of mg's 97 and stalled the
+ * defect correction on a 1000x2x2 Poisson grid. */
+static hv_status copy_bottom(hv_clmg *m, const mg_hierarchy *H)
+{
+    const mg_level *S = &H->lv[H->nlev - 1];
+    mg_level *B = &m->hb;
+    memset(B, 0, sizeof *B);
+    memcpy(B->n, S->n, sizeof B->n);
+    B->count = S->count;
+    B->sy = S->sy;
+    B->sz = S->sz;
+    memcpy(B->c, S->c, sizeof B->c);
+    B->plain = S->plain;
+    m->host_bottom = 1;
+    const size_t n = S->count;
+    int bad = !(m->hf = malloc(n * sizeof *m->hf)) || !(m->hw = malloc(5 * n * sizeof *m->hw));
+    if (!S->plain) {
+        bad |= !(B->a = malloc(n * sizeof(float)));
+        if (B->a)
+            memcpy(B->a, S->a, n * sizeof(float));
+        for (int b = 0; b < H->dim; b++) {
+            const size_t nf = (n / S->n[b]) * (size_t)(S->n[b] + 1);
+            bad |= !(B->w[b] = malloc(nf * sizeof(float)));
+            if (B->w[b])
+                memcpy(B->w[b], S->w[b], nf * sizeof(float));
+        }
+    }
+    if (H->alpha == 0 && S->region && S->nregion > 0) {
+        B->nregion = S->nregion;
+        bad |= !(B->region = malloc(n * sizeof(int32_t)));
+        if (B->region)
+            memcpy(B->region, S->region, n * sizeof(int32_t));
+    }
+    return bad ? hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for the bottom level") : HV_OK;
+}
+
+static void free_bottom(hv_clmg *m)
+{
+    if (!m->host_bottom)
+        return;
+    free(m->hb.a);
+    for (int b = 0; b < 3; b++)
+        free(m->hb.w[b]);
+    free(m->hb.region);
+    free(m->hf);
+    free(m->hw);
+    memset(&m->hb, 0, sizeof m->hb);
+    m->hf = NULL;
+    m->hw = NULL;
+    m->host_bottom = 0;
+}
+
 hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
                          int pre, int post, int sym)
 {
@@ -123,7 +180,7 @@ hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smooth
         st = upload_sym(m, H, l);
     m->sym = sym && !st;
     if (!st)
-        st = upload_bottom(m, H);
+        st = cl->fp64 ? upload_bottom(m, H) : copy_bottom(m, H);
     if (!st)
         st = hv_cl_finish(cl);
     if (st)
@@ -148,6 +205,7 @@ void hv_clmg_destroy(hv_clmg *m)
     hv_cl_free(&m->bregion);
     hv_cl_free(&m->brinv);
     hv_cl_free(&m->bscr);
+    free_bottom(m);
     m->nlev = 0;
 }
 
@@ -283,8 +341,84 @@ void hv_clmg_prolong(hv_clmg *m, int l)
     }
 }
 
+/* v -= its region's mean (bottom_project in mg.c). */
+static void host_project(const mg_level *B, double *v)
+{
+    if (B->nregion <= 0)
+        return;
+    double *S = calloc(2 * (size_t)B->nregion, sizeof *S);
+    if (!S)
+        return;
+    double *N = S + B->nregion;
+    for (size_t c = 0; c < B->count; c++)
+        if (B->region[c] >= 0) {
+            S[B->region[c]] += v[c];
+            N[B->region[c]] += 1;
+        }
+    for (size_t c = 0; c < B->count; c++)
+        if (B->region[c] >= 0)
+            v[c] -= S[B->region[c]] / N[B->region[c]];
+    free(S);
+}
+
+static double host_dot(const double *a, const double *b, size_t n)
+{
+    double s = 0;
+    for (size_t i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+/* mg.c's bottom_solve: CG to 1e-12 relative in double, on the host. */
+static void bottom_host(hv_clmg *m)
+{
+    hv_clmg_level *L = &m->lv[m->nlev - 1];
+    const mg_level *B = &m->hb;
+    const size_t n = B->count;
+    double *x = m->hw, *b = x + n, *r = b + n, *p = r + n, *q = p + n;
+    hv_cl_read(m->cl, L->f, 0, n * sizeof(float), m->hf);
+    if (m->cl->err)
+        return;
+    for (size_t c = 0; c < n; c++) {
+        x[c] = 0;
+        b[c] = m->hf[c];
+    }
+    if (m->alpha == 0)
+        host_project(B, b);
+    const double bn = sqrt(host_dot(b, b, n));
+    if (bn > 0) {
+        memcpy(r, b, n * sizeof *r);
+        memcpy(p, r, n * sizeof *p);
+        double rr = host_dot(r, r, n);
+        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
+            mg_level_apply_d(B, m->dim, m->alpha, p, q);
+            const double pq = host_dot(p, q, n);
+            if (!(pq > 0))
+                break;
+            const double al = rr / pq;
+            for (size_t c = 0; c < n; c++) {
+                x[c] += al * p[c];
+                r[c] -= al * q[c];
+            }
+            const double rr2 = host_dot(r, r, n), be = rr2 / rr;
+            rr = rr2;
+            for (size_t c = 0; c < n; c++)
+                p[c] = r[c] + be * p[c];
+        }
+        if (m->alpha == 0)
+            host_project(B, x);
+    }
+    for (size_t c = 0; c < n; c++)
+        m->hf[c] = (float)x[c];
+    hv_cl_write(m->cl, L->u[L->cur], 0, n * sizeof(float), m->hf);
+}
+
 void hv_clmg_bottom(hv_clmg *m)
 {
+    if (m->host_bottom) {
+        bottom_host(m);
+        return;
+    }
     hv_clmg_level *L = &m->lv[m->nlev - 1];
     double C[4] = {L->c[0], L->c[1], L->c[2], m->alpha};
     hv_cl_args(m->cl, HV_K_MG_BOTTOM_CG, "IAmmmmmmmmim", L->N, C, L->a, L->w[0], L->w[1], L->w[2],

@@ -3,7 +3,7 @@
  * host hierarchy (mg_setup.c) so that it coarsens exactly like the CPU backend,
  * and the float V-cycle run entirely on the device's in-order queue (no host
  * synchronization inside a cycle; the bottom level is solved by a one-work-
- * group CG kernel). The launchers are separate so that tests can compare each
+ * group CG kernel, or on the host where the device lacks fp64). The launchers are separate so that tests can compare each
  * kernel with the CPU code.
  */
 #ifndef HV_SOLVE_CL_MG_H
@@ -44,6 +44,13 @@ typedef struct hv_clmg {
     int bnregion;
     cl_mem bregion, brinv, bscr;
     size_t bl;
+    /* devices without fp64: the bottom level solved on the host in double
+     * (hb: a copy of the host hierarchy's bottom level; hf, hw: its float
+     * right-hand side and solution, and CG vectors) */
+    int host_bottom;
+    mg_level hb;
+    float *hf;
+    double *hw;
 } hv_clmg;
 
 /* Uploads H's coefficients and allocates the level vectors; with sym also
@@ -68,7 +75,9 @@ void hv_clmg_restrict_transpose(hv_clmg *m, int l);
 void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst);
 /* lv[l].u[cur] += P lv[l+1].u[cur] */
 void hv_clmg_prolong(hv_clmg *m, int l);
-/* lv[nlev-1].u[cur] = CG solution for lv[nlev-1].f */
+/* lv[nlev-1].u[cur] = CG solution for lv[nlev-1].f: on the device in one
+ * work-group, or on devices without fp64 on the host in double (a host
+ * synchronization inside the cycle). */
 void hv_clmg_bottom(hv_clmg *m);
 
 /* One V-cycle on level l (u from zero unless guess; sym, for use as a CG
