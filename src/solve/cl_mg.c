@@ -124,7 +124,7 @@ static hv_status copy_bottom(hv_clmg *m, const mg_hierarchy *H)
     B->plain = S->plain;
     m->host_bottom = 1;
     const size_t n = S->count;
-    int bad = !(m->hf = malloc(n * sizeof *m->hf)) || !(m->hw = malloc(5 * n * sizeof *m->hw));
+    int bad = !(m->hf = malloc(n * sizeof *m->hf)) || !(m->hw = malloc(MG_BOTTOM_WORK * n * sizeof *m->hw));
     if (!S->plain) {
         bad |= !(B->a = malloc(n * sizeof(float)));
         if (B->a)
@@ -341,75 +341,17 @@ void hv_clmg_prolong(hv_clmg *m, int l)
     }
 }
 
-/* v -= its region's mean (bottom_project in mg.c). */
-static void host_project(const mg_level *B, double *v)
-{
-    if (B->nregion <= 0)
-        return;
-    double *S = calloc(2 * (size_t)B->nregion, sizeof *S);
-    if (!S)
-        return;
-    double *N = S + B->nregion;
-    for (size_t c = 0; c < B->count; c++)
-        if (B->region[c] >= 0) {
-            S[B->region[c]] += v[c];
-            N[B->region[c]] += 1;
-        }
-    for (size_t c = 0; c < B->count; c++)
-        if (B->region[c] >= 0)
-            v[c] -= S[B->region[c]] / N[B->region[c]];
-    free(S);
-}
-
-static double host_dot(const double *a, const double *b, size_t n)
-{
-    double s = 0;
-    for (size_t i = 0; i < n; i++)
-        s += a[i] * b[i];
-    return s;
-}
-
-/* mg.c's bottom_solve: CG to 1e-12 relative in double, on the host. */
+/* Devices without fp64: the bottom level on the host in double (a float CG
+ * stalls near 1e-5 there, and the coarse correction's error then caps the
+ * cycle). */
 static void bottom_host(hv_clmg *m)
 {
     hv_clmg_level *L = &m->lv[m->nlev - 1];
-    const mg_level *B = &m->hb;
-    const size_t n = B->count;
-    double *x = m->hw, *b = x + n, *r = b + n, *p = r + n, *q = p + n;
+    const size_t n = m->hb.count;
     hv_cl_read(m->cl, L->f, 0, n * sizeof(float), m->hf);
     if (m->cl->err)
         return;
-    for (size_t c = 0; c < n; c++) {
-        x[c] = 0;
-        b[c] = m->hf[c];
-    }
-    if (m->alpha == 0)
-        host_project(B, b);
-    const double bn = sqrt(host_dot(b, b, n));
-    if (bn > 0) {
-        memcpy(r, b, n * sizeof *r);
-        memcpy(p, r, n * sizeof *p);
-        double rr = host_dot(r, r, n);
-        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
-            mg_level_apply_d(B, m->dim, m->alpha, p, q);
-            const double pq = host_dot(p, q, n);
-            if (!(pq > 0))
-                break;
-            const double al = rr / pq;
-            for (size_t c = 0; c < n; c++) {
-                x[c] += al * p[c];
-                r[c] -= al * q[c];
-            }
-            const double rr2 = host_dot(r, r, n), be = rr2 / rr;
-            rr = rr2;
-            for (size_t c = 0; c < n; c++)
-                p[c] = r[c] + be * p[c];
-        }
-        if (m->alpha == 0)
-            host_project(B, x);
-    }
-    for (size_t c = 0; c < n; c++)
-        m->hf[c] = (float)x[c];
+    mg_bottom_cg(&m->hb, m->dim, m->alpha, m->hf, m->hf, m->hw);
     hv_cl_write(m->cl, L->u[L->cur], 0, n * sizeof(float), m->hf);
 }
 

@@ -600,72 +600,9 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int s
 
 /* ---------- bottom solve ---------- */
 
-static void bottom_project(const mg_level *L, double *v)
-{
-    if (L->nregion <= 0)
-        return;
-    double sum[64] = {0}, cnt[64] = {0};
-    double *S = L->nregion <= 64 ? sum : calloc((size_t)L->nregion * 2, sizeof(double));
-    double *N = L->nregion <= 64 ? cnt : S + L->nregion;
-    if (!S)
-        return;
-    for (size_t c = 0; c < L->count; c++)
-        if (L->region[c] >= 0) {
-            S[L->region[c]] += v[c];
-            N[L->region[c]] += 1;
-        }
-    for (size_t c = 0; c < L->count; c++)
-        if (L->region[c] >= 0)
-            v[c] -= S[L->region[c]] / N[L->region[c]];
-    if (S != sum)
-        free(S);
-}
-
-static double dot_d(const double *a, const double *b, size_t n)
-{
-    double s = 0;
-    for (size_t i = 0; i < n; i++)
-        s += a[i] * b[i];
-    return s;
-}
-
-/* CG to 1e-12 relative on the (small) bottom level, in double. */
 static void bottom_solve(const mg_state *m, mg_level *L)
 {
-    size_t n = L->count;
-    double *x = L->bx, *b = L->bb, *r = L->br, *p = L->bp, *q = L->bq;
-    for (size_t c = 0; c < n; c++) {
-        x[c] = 0;
-        b[c] = L->f[c];
-    }
-    if (m->alpha == 0)
-        bottom_project(L, b);
-    double bn = sqrt(dot_d(b, b, n));
-    if (bn > 0) {
-        memcpy(r, b, n * sizeof *r);
-        memcpy(p, r, n * sizeof *p);
-        double rr = dot_d(r, r, n);
-        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
-            level_apply_d(m, L, p, q);
-            double pq = dot_d(p, q, n);
-            if (!(pq > 0))
-                break;
-            double al = rr / pq;
-            for (size_t c = 0; c < n; c++) {
-                x[c] += al * p[c];
-                r[c] -= al * q[c];
-            }
-            double rr2 = dot_d(r, r, n);
-            double be = rr2 / rr;
-            rr = rr2;
-            for (size_t c = 0; c < n; c++)
-                p[c] = r[c] + be * p[c];
-        }
-        if (m->alpha == 0)
-            bottom_project(L, x);
-    }
-    for (size_t c = 0; c < n; c++)
-        L->u[c] = (float)x[c];
+    mg_bottom_cg(L, m->dim, m->alpha, L->f, L->u, L->bwork);
 }
 
 /* ---------- fused passes on plain 3D levels ---------- */
@@ -1000,11 +937,7 @@ static void mg_destroy(void *state)
         hv_free(L->r);
         hv_free(L->d);
         free(L->region);
-        free(L->bx);
-        free(L->bb);
-        free(L->br);
-        free(L->bp);
-        free(L->bq);
+        free(L->bwork);
     }
     hv_free(m->ring);
     hv_free(m->rd);
@@ -1061,12 +994,7 @@ static hv_status mg_create(void **state, const hv_setup *s)
     }
     /* Bottom: CG work. */
     mg_level *L = &m->lv[m->nlev - 1];
-    L->bx = malloc(L->count * sizeof(double));
-    L->bb = malloc(L->count * sizeof(double));
-    L->br = malloc(L->count * sizeof(double));
-    L->bp = malloc(L->count * sizeof(double));
-    L->bq = malloc(L->count * sizeof(double));
-    if (!L->bx || !L->bb || !L->br || !L->bp || !L->bq) {
+    if (!(L->bwork = malloc(MG_BOTTOM_WORK * L->count * sizeof(double)))) {
         st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
         goto fail;
     }

@@ -36,7 +36,7 @@ typedef struct mg_level {
     /* bottom level only: connected regions (Poisson) and CG work */
     int nregion;
     int32_t *region;
-    double *bx, *bb, *br, *bp, *bq;
+    double *bwork;        /* MG_BOTTOM_WORK doubles per cell for mg_bottom_cg (CPU backend) */
 } mg_level;
 
 /* The host-side hierarchy that every multigrid backend (CPU, OpenCL) builds the
@@ -70,6 +70,14 @@ void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoot
 double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
 /* y = A x in double on a level. */
 void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
+
+/* Doubles per bottom cell that mg_bottom_cg needs as work. */
+#define MG_BOTTOM_WORK 5
+/* The bottom level's solve, shared by the backends: u = A^-1 f by CG to 1e-12
+ * relative in double (Neumann Poisson: f and u projected mean-free per
+ * connected region). work: MG_BOTTOM_WORK * L->count doubles. */
+void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u,
+                  double *work);
 
 /* The symmetric restriction of the PCG preconditioner (mg.c; the OpenCL
  * backend uploads pn and runs the same gather in kernels/mg.cl).

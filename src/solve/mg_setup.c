@@ -74,6 +74,74 @@ static hv_status level_alloc_coeffs(mg_level *L, int dim)
     return HV_OK;
 }
 
+/* v -= its region's mean, per connected region of the bottom level. */
+static void bottom_project(const mg_level *L, double *v)
+{
+    if (L->nregion <= 0)
+        return;
+    double sum[64] = {0}, cnt[64] = {0};
+    double *S = L->nregion <= 64 ? sum : calloc((size_t)L->nregion * 2, sizeof(double));
+    double *N = L->nregion <= 64 ? cnt : S + L->nregion;
+    if (!S)
+        return;
+    for (size_t c = 0; c < L->count; c++)
+        if (L->region[c] >= 0) {
+            S[L->region[c]] += v[c];
+            N[L->region[c]] += 1;
+        }
+    for (size_t c = 0; c < L->count; c++)
+        if (L->region[c] >= 0)
+            v[c] -= S[L->region[c]] / N[L->region[c]];
+    if (S != sum)
+        free(S);
+}
+
+static double dot_d(const double *a, const double *b, size_t n)
+{
+    double s = 0;
+    for (size_t i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u, double *work)
+{
+    const size_t n = L->count;
+    double *x = work, *b = x + n, *r = b + n, *p = r + n, *q = p + n;
+    for (size_t c = 0; c < n; c++) {
+        x[c] = 0;
+        b[c] = f[c];
+    }
+    if (alpha == 0)
+        bottom_project(L, b);
+    double bn = sqrt(dot_d(b, b, n));
+    if (bn > 0) {
+        memcpy(r, b, n * sizeof *r);
+        memcpy(p, r, n * sizeof *p);
+        double rr = dot_d(r, r, n);
+        for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
+            mg_level_apply_d(L, dim, alpha, p, q);
+            double pq = dot_d(p, q, n);
+            if (!(pq > 0))
+                break;
+            double al = rr / pq;
+            for (size_t c = 0; c < n; c++) {
+                x[c] += al * p[c];
+                r[c] -= al * q[c];
+            }
+            double rr2 = dot_d(r, r, n);
+            double be = rr2 / rr;
+            rr = rr2;
+            for (size_t c = 0; c < n; c++)
+                p[c] = r[c] + be * p[c];
+        }
+        if (alpha == 0)
+            bottom_project(L, x);
+    }
+    for (size_t c = 0; c < n; c++)
+        u[c] = (float)x[c];
+}
+
 void mg_level_free_coeffs(mg_level *L)
 {
     hv_free(L->a);
