@@ -8,9 +8,9 @@
  * out as on the host. N = (nx, ny, nz, dim), nz = 1 in 2D; solutions and
  * fields are planes of count floats.
  *
- * Contraction off: this file is the last of the program (cl_core.c), and
- * fused multiply-adds would round the closest points differently from the
- * host's.
+ * Contraction off in this file (fused multiply-adds would round the closest
+ * points differently from the host's), back on at its end for whatever
+ * follows it in the program.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -330,3 +330,5 @@ __kernel void ext_eval(int4 N, acc4_t P, __global const float *phi, __global uch
     ext_group_fold(red, weak, 0, K + EXT_WEAK);
     ext_group_box(red, left, i, j, k, K, EXT_RBOX);
 }
+
+#pragma OPENCL FP_CONTRACT ON

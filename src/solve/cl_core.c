@@ -330,7 +330,6 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
                         hv_cl_strerror(e));
     }
-    /* extend.cl last: it turns floating-point contraction off for itself */
     const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,   hv_kernel_fine,
                          hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat,
                          hv_kernel_distance, hv_kernel_extend};
