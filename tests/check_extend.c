@@ -419,6 +419,43 @@ START_TEST(bad_input_should_fail_clearly)
     ck_assert(strstr(hv_last_error(), "band") != NULL);
     phi->v[5] = NAN;
     ck_assert_int_eq(hv_extend_scalar(e, phi, f, o, NULL), HV_ERR_NUMERIC);
+    ck_assert(strstr(hv_last_error(), "level set") != NULL);
+
+    /* A sphere: the field is read only in the source band. A NaN there fails
+     * and leaves the output as it was (outputs may alias inputs); a NaN
+     * elsewhere is never read. */
+    size_t inside = SIZE_MAX, far = SIZE_MAX;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = i + (size_t)n * (j + (size_t)n * k);
+                double x[3];
+                hv_grid_cell_center(phi, i, j, k, x);
+                phi->v[c] = (float)(sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - 0.5);
+                f->v[c] = 1;
+                o->v[c] = -7;
+                if (fabs(phi->v[c]) < 0.5 * phi->h && inside == SIZE_MAX)
+                    inside = c;
+                if (phi->v[c] > 0.3)
+                    far = c;
+            }
+    ck_assert(inside != SIZE_MAX && far != SIZE_MAX);
+    f->v[inside] = NAN;
+    hv_extend_opts ob;
+    hv_extend_opts_default(&ob);
+    ob.out_band = 2; /* cells beyond would get the background */
+    hv_extender *eb = NULL;
+    TL_ASSERT_OK(hv_extender_create(&eb, 3, phi->n, phi->h, NULL, &ob));
+    ck_assert_int_eq(hv_extend_scalar(eb, phi, f, o, NULL), HV_ERR_NUMERIC);
+    ck_assert_msg(strstr(hv_last_error(), "field 0") != NULL, "message: %s", hv_last_error());
+    for (size_t c = 0; c < hv_grid_count(o); c++)
+        ck_assert_msg(o->v[c] == -7, "cell %zu written before the error", c);
+    hv_extender_destroy(&eb);
+    f->v[inside] = 1;
+    f->v[far] = NAN;
+    TL_ASSERT_OK(hv_extend_scalar(e, phi, f, o, NULL));
+    for (size_t c = 0; c < hv_grid_count(o); c++)
+        ck_assert_msg(fabsf(o->v[c] - 1) < 1e-6f, "cell %zu: %g", c, o->v[c]);
     hv_grid *small = make_grid(3, 8);
     ck_assert_int_eq(hv_extend_scalar(e, small, small, small, NULL), HV_ERR_INVALID_ARG);
     hv_extender *bad = NULL;
