@@ -454,6 +454,13 @@ START_TEST(heatvox_without_a_platform_should_fail_clearly)
                       err);
         ck_assert_msg(access(out, F_OK) != 0, "%s left %s", cmd, out);
     }
+    /* backend auto: the CPU, with one warning however many solvers the run makes */
+    snprintf(cmd, sizeof cmd, "%s %s sdf %s -o %s --res 16", env, bin, mesh, out);
+    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 0);
+    const char *warn = strstr(err, "warning: backend auto");
+    ck_assert_msg(warn && strstr(err, "no OpenCL platform") && !strstr(warn + 1, "warning: backend auto"),
+                  "stderr: %s", err);
+    ck_assert(access(out, F_OK) == 0);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
     ck_assert_int_eq(system(cmd), 0);
 }

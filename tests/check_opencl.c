@@ -1268,6 +1268,60 @@ START_TEST(kernel_build_failure_should_report_the_build_log)
 }
 END_TEST
 
+/* AUTO: the CPU unless a GPU (or HEATVOX_AUTO_OPENCL=1 any device) is there;
+ * once resolved to opencl, the solver and the pipelines run on the device. */
+START_TEST(auto_should_take_a_gpu_or_the_device_it_is_allowed)
+{
+    const size_t big = (size_t)1 << 24, small = 4096;
+    setenv("HEATVOX_AUTO_OPENCL", "0", 1);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_AUTO, big, 0), HV_BACKEND_FFTW);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_AUTO, big, 1), HV_BACKEND_MG);
+    unsetenv("HEATVOX_AUTO_OPENCL");
+    hv_opencl_device d;
+    ck_assert_int_eq(hv_opencl_probe(&d), HV_OK);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_AUTO, big, 0),
+                     d.gpu ? HV_BACKEND_OPENCL : HV_BACKEND_FFTW);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_AUTO, small, 1), HV_BACKEND_MG);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_MG, big, 0), HV_BACKEND_MG);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_FFTW, big, 0), HV_BACKEND_FFTW);
+    printf("  auto on '%s' (%s): %s for 2^24 cells, %s for 4096\n", d.name, d.gpu ? "GPU" : "CPU",
+           hv_backend_name(hv_backend_resolve(HV_BACKEND_AUTO, big, 0)),
+           hv_backend_name(hv_backend_resolve(HV_BACKEND_AUTO, small, 0)));
+
+    setenv("HEATVOX_AUTO_OPENCL", "1", 1);
+    ck_assert_int_eq(hv_backend_resolve(HV_BACKEND_AUTO, small, 1), HV_BACKEND_OPENCL);
+    hv_problem p;
+    memset(&p, 0, sizeof p);
+    p.dim = 2;
+    p.n[0] = p.n[1] = 32;
+    p.h = 1.0 / 32;
+    p.alpha = 1;
+    p.beta = 4 * p.h * p.h;
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    hv_solver *s = NULL;
+    ck_assert_int_eq(hv_solver_create(&s, &p, &o), HV_OK);
+    ck_assert_int_eq(hv_solver_backend(s), HV_BACKEND_OPENCL);
+    hv_solver_destroy(&s);
+    /* The distance pipeline takes its device path (fp64 devices) */
+    if (CL->fp64) {
+        hv_grid *g = NULL;
+        const int n[3] = {32, 32, 1};
+        const double org[3] = {0, 0, 0};
+        ck_assert_int_eq(hv_grid_create(&g, 2, n, 1.0 / 32, org), HV_OK);
+        const int vox[3] = {5, 7, 0};
+        hv_distance_sources src = {0};
+        src.voxels = vox;
+        src.nvoxels = 1;
+        hv_distance_stats st;
+        ck_assert_int_eq(hv_distance_compute(g, &src, NULL, &st), HV_OK);
+        ck_assert_int_eq(st.backend, HV_BACKEND_OPENCL);
+        hv_grid_destroy(&g);
+    }
+    unsetenv("HEATVOX_AUTO_OPENCL");
+}
+END_TEST
+
 /* Run in a child whose ICD loader finds no platform (OCL_ICD_VENDORS). */
 static int child_without_platform(void)
 {
@@ -1293,7 +1347,8 @@ static int child_without_platform(void)
         return 3;
     if (hv_opencl_list_devices(NULL, 0, &count) != HV_ERR_UNSUPPORTED || count != 0)
         return 4;
-    /* AUTO never picks OpenCL (with a mask it picks mg) */
+    /* AUTO falls back to the CPU (with a mask, mg), even when asked to take any device */
+    setenv("HEATVOX_AUTO_OPENCL", "1", 1);
     o.backend = HV_BACKEND_AUTO;
     if (hv_solver_create(&s, &p, &o) != HV_OK || hv_solver_backend(s) == HV_BACKEND_OPENCL)
         return 5;
@@ -1385,6 +1440,7 @@ int main(int argc, char **argv)
         tcase_add_test(tc, device_list_should_describe_and_mark_the_selected_device);
         tcase_add_test(tc, kernel_build_failure_should_report_the_build_log);
         tcase_add_test(tc, no_platform_should_make_the_backend_unsupported);
+        tcase_add_test(tc, auto_should_take_a_gpu_or_the_device_it_is_allowed);
     }
     suite_add_tcase(su, tc);
     SRunner *sr = srunner_create(su);

@@ -137,7 +137,8 @@ typedef struct hv_extend_opts {
                               solid cells, the first diffusion time is solved only on the
                               cells near the weights and the cells read (grown by 6 sqrt(t)
                               voxels) when those are under half the box, by Chebyshev
-                              sweeps; 1: always the box */
+                              sweeps; 1: always the box. Backends fftw and opencl always
+                              solve on boxes (opencl: on the device, extend_cl.c) */
 } hv_extend_opts;
 
 typedef struct hv_extend_stats {

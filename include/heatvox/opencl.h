@@ -43,12 +43,8 @@ hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count);
  * HV_ERR_UNSUPPORTED when there is no OpenCL platform or device,
  * HV_ERR_INVALID_ARG when HEATVOX_OPENCL_DEVICE names no device; the message
  * (hv_last_error) says which and lists the devices. Cheap (no context is
- * created). For "OpenCL if available, else the CPU", call it once:
- *     if (hv_opencl_probe(NULL) != HV_OK) {
- *         fprintf(stderr, "warning: %s; using the CPU multigrid\n", hv_last_error());
- *         opts.backend = HV_BACKEND_MG;
- *     }
- * (HV_BACKEND_AUTO never picks OpenCL, so it needs no such check.) */
+ * created). HV_BACKEND_AUTO uses it to take a GPU when there is one
+ * (hv_backend_resolve in solve.h). */
 hv_status hv_opencl_probe(hv_opencl_device *out);
 
 #ifdef __cplusplus

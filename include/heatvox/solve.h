@@ -53,6 +53,22 @@ const char *hv_backend_name(hv_backend b);
 hv_status hv_backend_parse(const char *s, hv_backend *out);
 const char *hv_stop_reason_str(hv_stop_reason r);
 
+/* Grids below this many cells keep AUTO on the CPU even with a GPU (kernel
+ * launches and device set-up cost more than the solve there). */
+#define HV_AUTO_DEVICE_MIN_CELLS ((size_t)1 << 20)
+
+/* The backend that b stands for on a grid of `cells` cells (`solid`: it has
+ * solid cells). Every backend but AUTO comes back unchanged. AUTO becomes
+ * OPENCL when the device the opencl backend would use (opencl.h) is a GPU and
+ * the grid has at least HV_AUTO_DEVICE_MIN_CELLS cells, else FFTW for a plain
+ * box and MG with solid cells. A CPU OpenCL device (PoCL) is not taken: the
+ * CPU multigrid is several times faster on the same cores. The devices are
+ * probed once per process (no context is created); when no OpenCL platform
+ * is installed that probe logs one warning (HV_LOG_WARN) and AUTO stays on
+ * the CPU. HEATVOX_AUTO_OPENCL=0 keeps AUTO on the CPU; =1 lets it take any
+ * OpenCL device, a CPU one too, whatever the size. */
+hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid);
+
 typedef struct hv_problem {
     int dim;                /* 2 or 3 */
     int n[3];               /* n[2] ignored in 2D */

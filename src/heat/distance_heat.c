@@ -344,6 +344,9 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     memcpy(d.n, g->n, sizeof d.n);
     d.h = g->h;
     d.count = hv_grid_count(g);
+    /* AUTO on a GPU: the pipeline on the device, as for an explicit opencl. */
+    if (hv_backend_resolve(o.backend, d.count, g->solid != NULL) == HV_BACKEND_OPENCL)
+        o.backend = HV_BACKEND_OPENCL;
     d.cs[0] = 1;
     d.cs[1] = (size_t)d.n[0];
     d.cs[2] = (size_t)d.n[0] * d.n[1];

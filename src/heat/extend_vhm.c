@@ -82,6 +82,9 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
     e->n[2] = dim == 3 ? n[2] : 1;
     e->h = h;
     e->count = (size_t)e->n[0] * e->n[1] * e->n[2];
+    /* AUTO on a GPU: the whole extension on the device (extend_cl.c). */
+    if (hv_backend_resolve(o.backend, e->count, solid != NULL) == HV_BACKEND_OPENCL)
+        o.backend = HV_BACKEND_OPENCL;
     e->o = o;
     e->fd = hv_malloc(e->count * sizeof(double));
     e->ud = hv_malloc(e->count * sizeof(double));

@@ -687,6 +687,9 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     }
     const hv_grid *gh = w.gh ? w.gh : w.g;
     const size_t hcount = hv_grid_count(gh);
+    /* AUTO on a GPU: stages 2-6 on the device, as for an explicit opencl. */
+    if (need_heat && hv_backend_resolve(o.backend, hcount, 0) == HV_BACKEND_OPENCL)
+        o.backend = HV_BACKEND_OPENCL;
     const int nlev = need_heat ? levels_for(&o, nh) : 0;
     S.levels = nlev;
     S.t = (o.t_scale * hh) * (o.t_scale * hh);

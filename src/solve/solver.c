@@ -5,8 +5,10 @@
  */
 #include "backend.h"
 #include "core/error.h"
+#include "heatvox/opencl.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -19,6 +21,36 @@ struct hv_solver {
     int32_t *region;  /* owned region labels */
     double *fd, *ud;  /* double buffers for the float interface */
 };
+
+/* What the one probe of the OpenCL devices found: -1 none usable by AUTO,
+ * 0 a CPU device, 1 a GPU. */
+static int auto_device = -1;
+static pthread_once_t auto_once = PTHREAD_ONCE_INIT;
+
+static void auto_probe(void)
+{
+    hv_opencl_device d;
+    if (hv_opencl_probe(&d) == HV_OK)
+        auto_device = d.gpu;
+    else
+        hv_log(HV_LOG_WARN, "backend auto: %s; solving on the CPU", hv_last_error());
+    hv_clear_error();
+}
+
+hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid)
+{
+    if (b != HV_BACKEND_AUTO)
+        return b;
+    const hv_backend cpu = solid ? HV_BACKEND_MG : HV_BACKEND_FFTW;
+    const char *env = getenv("HEATVOX_AUTO_OPENCL");
+    const int mode = env && *env ? atoi(env) : -1; /* -1: GPUs on large grids */
+    if (mode == 0)
+        return cpu;
+    pthread_once(&auto_once, auto_probe);
+    if (mode > 0)
+        return auto_device >= 0 ? HV_BACKEND_OPENCL : cpu;
+    return auto_device == 1 && cells >= HV_AUTO_DEVICE_MIN_CELLS ? HV_BACKEND_OPENCL : cpu;
+}
 
 const char *hv_backend_name(hv_backend b)
 {
@@ -182,9 +214,7 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
             }
         }
     }
-    hv_backend b = o.backend;
-    if (b == HV_BACKEND_AUTO)
-        b = s->p.solid ? HV_BACKEND_MG : HV_BACKEND_FFTW;
+    hv_backend b = hv_backend_resolve(o.backend, s->count, s->p.solid != NULL);
     if (b == HV_BACKEND_FFTW && s->p.solid) {
         hv_solver_destroy(&sv);
         return hv_error(HV_ERR_UNSUPPORTED, "the FFTW backend solves plain boxes only; this grid has solid cells (use mg)");
