@@ -1340,64 +1340,67 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
         t0 = hv_now();
         const int last = l + 1 == e->o.max_levels;
         size_t left = 0, cp = 0, ratio = 0, weak = 0;
-#pragma omp parallel for collapse(2) reduction(+ : left, cp, ratio, weak) schedule(static)
-        for (int k = 0; k < e->n[2]; k++)
-            for (int j = 0; j < e->n[1]; j++)
-                for (int i = 0; i < e->n[0]; i++) {
-                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
-                    if (!pending[c])
-                        continue;
-                    size_t idx[8] = {c};
-                    double wt[8] = {1};
-                    int m = 1, at_cp = 0;
-                    if (pending[c] == 1)
-                        at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
-                    double val[1 + 4 * MAX_FIELDS_PER_CALL];
-                    sample_all(e, idx, wt, m, val);
-                    double W = val[0];
-                    if (!(W > thr) && at_cp) {
-                        /* Closest point but no weight there: read at the cell from now on. */
-                        at_cp = 0;
-                        pending[c] = 2;
-                        idx[0] = c;
-                        wt[0] = 1;
-                        m = 1;
-                        if (trusted && !trusted[c]) {
-                            /* Off the cells the band solve was made for: not at this level. */
-                            W = 0;
-                        } else {
-                            sample_all(e, idx, wt, m, val);
-                            W = val[0];
+        /* The cells left for the next level are boxed as they are met. */
+        box_empty(&ratio_box);
+#pragma omp parallel reduction(+ : left, cp, ratio, weak)
+        {
+            ibox lr;
+            box_empty(&lr);
+#pragma omp for collapse(2) schedule(static)
+            for (int k = 0; k < e->n[2]; k++)
+                for (int j = 0; j < e->n[1]; j++)
+                    for (int i = 0; i < e->n[0]; i++) {
+                        size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                        if (!pending[c])
+                            continue;
+                        size_t idx[8] = {c};
+                        double wt[8] = {1};
+                        int m = 1, at_cp = 0;
+                        if (pending[c] == 1)
+                            at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
+                        double val[1 + 4 * MAX_FIELDS_PER_CALL];
+                        sample_all(e, idx, wt, m, val);
+                        double W = val[0];
+                        if (!(W > thr) && at_cp) {
+                            /* Closest point but no weight there: read at the cell from now on. */
+                            at_cp = 0;
+                            pending[c] = 2;
+                            idx[0] = c;
+                            wt[0] = 1;
+                            m = 1;
+                            if (trusted && !trusted[c]) {
+                                /* Off the cells the band solve was made for: not at this level. */
+                                W = 0;
+                            } else {
+                                sample_all(e, idx, wt, m, val);
+                                W = val[0];
+                            }
                         }
+                        if (!(W > thr) && !last) {
+                            left++;
+                            box_add(&lr, i, j, k);
+                            continue;
+                        }
+                        if (!(W > 0)) {
+                            for (int fi = 0; fi < nfields; fi++)
+                                for (int q = 0; q < f[fi].ncomp; q++)
+                                    f[fi].out[q][c] = e->o.background;
+                        } else {
+                            write_cell(e, nfields, f, c, val);
+                        }
+                        weak += !(W > thr);
+                        cp += at_cp;
+                        ratio += !at_cp;
+                        pending[c] = 0;
                     }
-                    if (!(W > thr) && !last) {
-                        left++;
-                        continue;
-                    }
-                    if (!(W > 0)) {
-                        for (int fi = 0; fi < nfields; fi++)
-                            for (int q = 0; q < f[fi].ncomp; q++)
-                                f[fi].out[q][c] = e->o.background;
-                    } else {
-                        write_cell(e, nfields, f, c, val);
-                    }
-                    weak += !(W > thr);
-                    cp += at_cp;
-                    ratio += !at_cp;
-                    pending[c] = 0;
-                }
+#pragma omp critical(hv_extend_box)
+            box_union(&ratio_box, &lr);
+        }
         S->cp_cells += cp;
         S->ratio_cells += ratio;
         S->weak_cells += weak;
         npend = left;
         S->t_eval += hv_now() - t0;
-        box_empty(&ratio_box);
-        if (npend)
-            for (int k = 0; k < e->n[2]; k++)
-                for (int j = 0; j < e->n[1]; j++)
-                    for (int i = 0; i < e->n[0]; i++)
-                        if (pending[i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k)])
-                            box_add(&ratio_box, i, j, k);
     }
     band_free(&band);
     S->t_total = hv_now() - t_start;
