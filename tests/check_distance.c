@@ -463,33 +463,9 @@ END_TEST
 
 /* ---- heatvox distance ------------------------------------------------------ */
 
-static const char *heatvox_bin(void)
-{
-    const char *b = getenv("HEATVOX_BIN");
-    if (!b || !*b)
-        b = "build/heatvox";
-    return access(b, X_OK) == 0 ? b : NULL;
-}
-
-static int run(const char *cmd, const char *dir, char *err, size_t errsize)
-{
-    char full[4096], errfile[1024];
-    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
-    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
-    int rc = system(full);
-    err[0] = 0;
-    FILE *f = fopen(errfile, "r");
-    if (f) {
-        size_t n = fread(err, 1, errsize - 1, f);
-        err[n] = 0;
-        fclose(f);
-    }
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
 START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
 {
-    const char *bin = heatvox_bin();
+    const char *bin = tl_heatvox_bin();
     if (!bin) {
         printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
         return;
@@ -524,7 +500,7 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     snprintf(cmd, sizeof cmd,
              "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0 0 0 1 1 1 "
              "-o %s/d.vdb -q", bin, dir, dir, dir);
-    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
+    ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
 
     snprintf(path, sizeof path, "%s/d.vdb", dir);
     hv_grid *d = NULL;
@@ -562,7 +538,7 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     snprintf(cmd, sizeof cmd,
              "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0.25 0 0 1 1 1 "
              "-o %s/d2.vdb -q", bin, dir, dir, dir);
-    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
+    ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
     hv_vdb_grid_info gi[2];
     size_t gcount = 0;
     snprintf(path, sizeof path, "%s/d2.vdb", dir);
@@ -581,15 +557,15 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     fprintf(f, "0.5 0.5 0.5\nvoxel 1 2\n");
     fclose(f);
     snprintf(cmd, sizeof cmd, "%s distance --sources %s --bbox 0 0 0 1 1 1 -o %s/e.vdb", bin, path, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "bad.txt:2") != NULL, "message: %s", err);
     snprintf(cmd, sizeof cmd,
              "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --obstacle-grid nope -o %s/e.vdb",
              bin, dir, dir, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nope") && strstr(err, "walls"), "message: %s", err);
     snprintf(cmd, sizeof cmd, "%s distance --sources %s/src.txt -o %s/e.vdb --res 2", bin, dir, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 2);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 2);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
     ck_assert_int_eq(system(cmd), 0);
 }

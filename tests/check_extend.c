@@ -474,34 +474,6 @@ END_TEST
 
 /* ---- heatvox extend, VDB in and out ---------------------------------------- */
 
-/* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (skip) if absent. */
-static const char *heatvox_bin(void)
-{
-    const char *b = getenv("HEATVOX_BIN");
-    if (!b || !*b)
-        b = "build/heatvox";
-    return access(b, X_OK) == 0 ? b : NULL;
-}
-
-/* Runs a shell command; returns its exit code, stderr in err (may be NULL). */
-static int run(const char *cmd, const char *dir, char *err, size_t errsize)
-{
-    char full[4096], errfile[1024];
-    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
-    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
-    int rc = system(full);
-    if (err) {
-        err[0] = 0;
-        FILE *f = fopen(errfile, "r");
-        if (f) {
-            size_t n = fread(err, 1, errsize - 1, f);
-            err[n] = 0;
-            fclose(f);
-        }
-    }
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
 /* Where write_input puts its block in index space (not at 0, not leaf-aligned,
  * as in a file another tool made). */
 static const int IN_OFF[3] = {-7, 2, 5};
@@ -554,7 +526,7 @@ static void write_input(const char *path, int n, double temp_h)
 
 START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
 {
-    const char *bin = heatvox_bin();
+    const char *bin = tl_heatvox_bin();
     if (!bin) {
         printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
         return;
@@ -568,7 +540,7 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     write_input(in, n, 0);
     snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s -q", bin,
              in, out);
-    ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
+    ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
 
     /* Names, value types, classes, and the input's index space. */
     hv_vdb_grid_info info[8], info_in;
@@ -658,18 +630,18 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     /* Missing grids and mismatched transforms fail with the names. */
     snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field nothere -o %s/x.vdb", bin, in,
              dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nothere") && strstr(err, "'v'"), "message: %s", err);
     snprintf(cmd, sizeof cmd, "%s extend %s --levelset nosurface --field v -o %s/x.vdb", bin, in, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nosurface") != NULL, "message: %s", err);
     write_input(in, n, 1.5 * 2.0 / n);
     snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s/x.vdb",
              bin, in, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "temp") != NULL, "message: %s", err);
     snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface -o %s/x.vdb", bin, in, dir);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 2);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 2);
     ck_assert(access(dir, F_OK) == 0);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
     ck_assert_int_eq(system(cmd), 0);

@@ -297,35 +297,9 @@ END_TEST
 
 /* ---- heatvox extend --backend opencl ----------------------------------------- */
 
-static const char *heatvox_bin(void)
-{
-    const char *b = getenv("HEATVOX_BIN");
-    if (!b || !*b)
-        b = "build/heatvox";
-    return access(b, X_OK) == 0 ? b : NULL;
-}
-
-static int run(const char *cmd, const char *dir, char *err, size_t errsize)
-{
-    char full[4096], errfile[1024];
-    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
-    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
-    int rc = system(full);
-    if (err) {
-        err[0] = 0;
-        FILE *f = fopen(errfile, "r");
-        if (f) {
-            size_t n = fread(err, 1, errsize - 1, f);
-            err[n] = 0;
-            fclose(f);
-        }
-    }
-    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
 START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
 {
-    const char *bin = heatvox_bin();
+    const char *bin = tl_heatvox_bin();
     if (!bin) {
         printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
         return;
@@ -347,7 +321,7 @@ START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
         snprintf(out[b], sizeof out[b], "%s/out%d.vdb", dir, b);
         snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v -o %s --backend %s -q",
                  bin, in, out[b], be[b]);
-        ck_assert_msg(run(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
+        ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
         TL_ASSERT_OK(hv_vdb_read_vec3(out[b], "v", NULL, &v[b][0], &v[b][1], &v[b][2]));
     }
     const size_t count = hv_grid_count(c.phi);
@@ -411,7 +385,7 @@ END_TEST
  * not this machine has a platform: the ICD loader is pointed at nothing). */
 START_TEST(heatvox_without_a_platform_should_fail_clearly)
 {
-    const char *bin = heatvox_bin();
+    const char *bin = tl_heatvox_bin();
     if (!bin) {
         printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
         return;
@@ -440,7 +414,7 @@ START_TEST(heatvox_without_a_platform_should_fail_clearly)
     fclose(f);
     const char *env = "OCL_ICD_VENDORS=/nonexistent OCL_ICD_FILENAMES=";
     snprintf(cmd, sizeof cmd, "%s %s devices", env, bin);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "no OpenCL platform"), "devices: %s", err);
     const char *forms[3] = {"%s %s extend %s --levelset surface --field t -o %s --backend opencl",
                             "%s %s sdf %s -o %s --res 16 --backend opencl",
@@ -449,14 +423,14 @@ START_TEST(heatvox_without_a_platform_should_fail_clearly)
     const char *inputs[3] = {in, mesh, src};
     for (int q = 0; q < 3; q++) {
         snprintf(cmd, sizeof cmd, forms[q], env, bin, inputs[q], out);
-        ck_assert_int_eq(run(cmd, dir, err, sizeof err), 1);
+        ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
         ck_assert_msg(strstr(err, "no OpenCL platform") && strstr(err, inputs[q]), "%s: %s", cmd,
                       err);
         ck_assert_msg(access(out, F_OK) != 0, "%s left %s", cmd, out);
     }
     /* backend auto: the CPU, with one warning however many solvers the run makes */
     snprintf(cmd, sizeof cmd, "%s %s sdf %s -o %s --res 16", env, bin, mesh, out);
-    ck_assert_int_eq(run(cmd, dir, err, sizeof err), 0);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 0);
     const char *warn = strstr(err, "warning: backend auto");
     ck_assert_msg(warn && strstr(err, "no OpenCL platform") && !strstr(warn + 1, "warning: backend auto"),
                   "stderr: %s", err);

@@ -3,6 +3,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 double tl_rand(uint64_t *s)
 {
@@ -37,4 +39,30 @@ int tl_run(Suite *s)
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);
     return failed ? EXIT_FAILURE : EXIT_SUCCESS;
+}
+
+const char *tl_heatvox_bin(void)
+{
+    const char *b = getenv("HEATVOX_BIN");
+    if (!b || !*b)
+        b = "build/heatvox";
+    return access(b, X_OK) == 0 ? b : NULL;
+}
+
+int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize)
+{
+    char full[4096], errfile[1024];
+    snprintf(errfile, sizeof errfile, "%s/stderr.txt", dir);
+    snprintf(full, sizeof full, "%s > /dev/null 2> %s", cmd, errfile);
+    int rc = system(full);
+    if (err && errsize > 0) {
+        err[0] = 0;
+        FILE *f = fopen(errfile, "r");
+        if (f) {
+            size_t n = fread(err, 1, errsize - 1, f);
+            err[n] = 0;
+            fclose(f);
+        }
+    }
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }

@@ -15,6 +15,12 @@ void tl_fill_random(float *v, size_t n, uint64_t seed);
 const char *tl_shared_dir(void);
 /* Runs the suite and returns the process exit code. */
 int tl_run(Suite *s);
+/* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (the caller
+ * skips) when it is not there. */
+const char *tl_heatvox_bin(void);
+/* Runs a shell command with stdout discarded and stderr in dir/stderr.txt,
+ * copied into err (may be NULL); returns its exit code (-1: no exit). */
+int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize);
 
 #define TL_ASSERT_OK(expr)                                                                         \
     do {                                                                                           \
