@@ -148,37 +148,11 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
                              double *thr, hv_extend_stats *S)
 {
     hv_cl *cl = x->cl;
-    hv_status st;
-    if (x->sv[l] && (memcmp(x->bn[l], bn, sizeof x->bn[l]) ||
-                     (g->solid && memcmp(x->blo[l], lo, sizeof x->blo[l]))))
-        hv_solver_destroy(&x->sv[l]);
+    hv_status st = hv_extend_level_solver(g->dim, g->n, g->h, g->solid, g->o, HV_BACKEND_OPENCL, l,
+                                          lo, bn, &x->sv[l], x->blo[l], x->bn[l]);
+    if (st)
+        return st;
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
-    if (!x->sv[l]) {
-        uint8_t *sub = NULL;
-        if (g->solid) {
-            if (!(sub = malloc(bcount)))
-                return hv_error(HV_ERR_NOMEM, "extend: out of memory");
-            for (size_t b = 0; b < bcount; b++) {
-                size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
-                size_t bk = b / ((size_t)bn[0] * bn[1]);
-                sub[b] = g->solid[(lo[0] + bi) +
-                                  (size_t)g->n[0] * ((lo[1] + bj) + (size_t)g->n[1] * (lo[2] + bk))];
-            }
-        }
-        hv_problem p = {g->dim, {bn[0], bn[1], bn[2]}, g->h, sub, 1.0,
-                        g->o->t_scale * g->h * g->h * pow(LEVEL_FACTOR, l)};
-        hv_solver_opts so;
-        hv_solver_opts_default(&so);
-        so.backend = HV_BACKEND_OPENCL;
-        so.tol = g->o->tol;
-        so.max_iter = 200;
-        st = hv_solver_create(&x->sv[l], &p, &so);
-        free(sub);
-        if (st)
-            return st;
-        memcpy(x->blo[l], lo, sizeof x->blo[l]);
-        memcpy(x->bn[l], bn, sizeof x->bn[l]);
-    }
     if ((st = ensure(cl, &x->f, &x->cap_f, bcount, cl->acc)) ||
         (st = ensure(cl, &x->u, &x->cap_u, bcount, cl->acc)))
         return st;

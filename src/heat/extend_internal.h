@@ -29,4 +29,13 @@
 void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3],
                          const int rlo[3], const int rhi[3], int l, int lo[3], int bn[3]);
 
+/* The solver of diffusion level l (t_scale h^2 16^l) on the box [lo, lo + bn)
+ * (Neumann walls at its faces), for `backend`: *sv is kept while the box keeps
+ * its size and, with solid cells, its place (blo, bnk: the box it was made
+ * for), and rebuilt otherwise. Shared by the host and device paths. */
+hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
+                                 const hv_extend_opts *o, hv_backend backend, int l,
+                                 const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
+                                 int bnk[3]);
+
 #endif

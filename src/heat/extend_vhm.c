@@ -381,43 +381,53 @@ static void write_cell(const hv_extender *e, int nfields, const hv_extend_field 
     }
 }
 
+hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
+                                 const hv_extend_opts *o, hv_backend backend, int l,
+                                 const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
+                                 int bnk[3])
+{
+    if (*sv && (memcmp(bnk, bn, 3 * sizeof *bn) || (solid && memcmp(blo, lo, 3 * sizeof *lo))))
+        hv_solver_destroy(sv);
+    if (*sv)
+        return HV_OK;
+    const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
+    uint8_t *sub = NULL;
+    if (solid) {
+        if (!(sub = malloc(bcount)))
+            return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+        for (size_t b = 0; b < bcount; b++) {
+            size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
+            size_t bk = b / ((size_t)bn[0] * bn[1]);
+            sub[b] = solid[(lo[0] + bi) + (size_t)n[0] * ((lo[1] + bj) + (size_t)n[1] * (lo[2] + bk))];
+        }
+    }
+    hv_problem p = {dim, {bn[0], bn[1], bn[2]}, h, sub, 1.0, o->t_scale * h * h * pow(LEVEL_FACTOR, l)};
+    hv_solver_opts so;
+    hv_solver_opts_default(&so);
+    so.backend = backend;
+    so.tol = o->tol;
+    so.max_iter = 200;
+    hv_status st = hv_solver_create(sv, &p, &so);
+    free(sub);
+    if (st)
+        return st;
+    memcpy(blo, lo, 3 * sizeof *lo);
+    memcpy(bnk, bn, 3 * sizeof *bn);
+    return HV_OK;
+}
+
 /* Solves every right-hand side for level l on the box [lo, lo + bn) (Neumann
  * walls at its faces) and stores the solutions on the full grid, 0 outside. */
 static hv_status solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
                              int nfields, const hv_extend_field *f, double *thr,
                              hv_extend_stats *S)
 {
-    hv_status st;
-    if (e->sv[l] && (memcmp(e->bn[l], bn, sizeof e->bn[l]) ||
-                     (e->solid && memcmp(e->blo[l], lo, sizeof e->blo[l]))))
-        hv_solver_destroy(&e->sv[l]);
+    hv_status st = hv_extend_level_solver(e->dim, e->n, e->h, e->solid, &e->o, e->o.backend, l, lo,
+                                          bn, &e->sv[l], e->blo[l], e->bn[l]);
+    if (st)
+        return st;
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
     const int full = bcount == e->count;
-    if (!e->sv[l]) {
-        uint8_t *sub = NULL;
-        if (e->solid) {
-            if (!(sub = malloc(bcount)))
-                return hv_error(HV_ERR_NOMEM, "extend: out of memory");
-            for (size_t b = 0; b < bcount; b++) {
-                size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
-                size_t bk = b / ((size_t)bn[0] * bn[1]);
-                sub[b] = e->solid[(lo[0] + bi) + (size_t)e->n[0] * ((lo[1] + bj) + (size_t)e->n[1] * (lo[2] + bk))];
-            }
-        }
-        hv_problem p = {e->dim, {bn[0], bn[1], bn[2]}, e->h, sub, 1.0,
-                        e->o.t_scale * e->h * e->h * pow(LEVEL_FACTOR, l)};
-        hv_solver_opts so;
-        hv_solver_opts_default(&so);
-        so.backend = e->o.backend;
-        so.tol = e->o.tol;
-        so.max_iter = 200;
-        st = hv_solver_create(&e->sv[l], &p, &so);
-        free(sub);
-        if (st)
-            return st;
-        memcpy(e->blo[l], lo, sizeof e->blo[l]);
-        memcpy(e->bn[l], bn, sizeof e->bn[l]);
-    }
     double relmax = 0, wn = 0;
     for (int r = 0; r < nrhs; r++) {
         build_rhs(e, r, nfields, f, lo, bn, e->fd);
