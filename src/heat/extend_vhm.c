@@ -309,7 +309,9 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
         for (int a = 0; a < 3; a++) {
             if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
                 return 0;
-            const double q = fmin(fmax(p[a], 0), nn[a] - 1);
+            double q = p[a] < 0 ? 0 : p[a]; /* comparisons: fmin/fmax are libm calls here */
+            if (q > nn[a] - 1)
+                q = nn[a] - 1;
             f[a] = (int)q;
             if (f[a] > nn[a] - 2)
                 f[a] = nn[a] - 2;
