@@ -443,14 +443,7 @@ END_TEST
 int main(int argc, char **argv)
 {
     (void)argc;
-    if (!getenv("POCL_CACHE_DIR")) {
-        char dir[4096];
-        snprintf(dir, sizeof dir, "%s", argv[0]);
-        char *slash = strrchr(dir, '/');
-        snprintf(slash ? slash + 1 : dir, sizeof dir - (size_t)(slash ? slash + 1 - dir : 0),
-                 "../pocl-cache");
-        setenv("POCL_CACHE_DIR", dir, 1);
-    }
+    tl_pocl_cache(argv[0]);
     Suite *su = suite_create("extend_cl");
     TCase *tc = tcase_create("extend_cl");
     tcase_set_timeout(tc, 600);

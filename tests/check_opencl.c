@@ -8,6 +8,7 @@
 #include "heatvox/heatvox.h"
 #include "solve/cl_mg.h"
 #include "solve/cl_ops.h"
+#include "testlib.h"
 
 #include <check.h>
 #include <fcntl.h>
@@ -1389,15 +1390,7 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "--child-no-platform"))
         return child_without_platform();
     SELF = argv[0];
-    /* PoCL compiles each kernel on first use; keep its cache with the build. */
-    if (!getenv("POCL_CACHE_DIR")) {
-        char dir[4096];
-        snprintf(dir, sizeof dir, "%s", argv[0]);
-        char *slash = strrchr(dir, '/');
-        snprintf(slash ? slash + 1 : dir, sizeof dir - (size_t)(slash ? slash + 1 - dir : 0),
-                 "../pocl-cache");
-        setenv("POCL_CACHE_DIR", dir, 1);
-    }
+    tl_pocl_cache(argv[0]);
     /* The CPU references run on one thread: libgomp's spinning workers and
      * PoCL's worker threads interleaved on a busy 2-core machine took minutes. */
     hv_set_threads(1);

@@ -2,6 +2,7 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -65,4 +66,16 @@ int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize)
         }
     }
     return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+void tl_pocl_cache(const char *argv0)
+{
+    if (getenv("POCL_CACHE_DIR"))
+        return;
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", argv0);
+    char *slash = strrchr(dir, '/');
+    snprintf(slash ? slash + 1 : dir, sizeof dir - (size_t)(slash ? slash + 1 - dir : 0),
+             "../pocl-cache");
+    setenv("POCL_CACHE_DIR", dir, 1);
 }

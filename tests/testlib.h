@@ -15,6 +15,9 @@ void tl_fill_random(float *v, size_t n, uint64_t seed);
 const char *tl_shared_dir(void);
 /* Runs the suite and returns the process exit code. */
 int tl_run(Suite *s);
+/* PoCL compiles each kernel on first use: unless POCL_CACHE_DIR is set, keep
+ * its cache with the build (../pocl-cache beside the test binary argv0). */
+void tl_pocl_cache(const char *argv0);
 /* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (the caller
  * skips) when it is not there. */
 const char *tl_heatvox_bin(void);
