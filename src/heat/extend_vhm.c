@@ -1307,19 +1307,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
     }
     S->t_eval = hv_now() - t0;
     t0 = hv_now();
-    /* Closest points lie within half the band of the zero set, their stencils a
-     * voxel further: inside the weights' box grown by 2. */
-    band_box.lo[0] -= 2;
-    band_box.lo[1] -= 2;
-    band_box.lo[2] -= 2;
-    band_box.hi[0] += 2;
-    band_box.hi[1] += 2;
-    band_box.hi[2] += 2;
     if (need) {
-        ibox nb = band_box;
-        box_union(&nb, &ratio_box);
         int lo[3], bn[3];
-        box_grow(e, &nb, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale)), lo, bn);
+        hv_extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
         band.need = need;
         int built = band_build(e, &band, (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1), nrhs);
         if (built < 0) {
@@ -1333,15 +1323,8 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
         double thr;
-        ibox need = band_box;
-        box_union(&need, &ratio_box);
         int lo[3], bn[3];
-        box_grow(e, &need, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale) * pow(sqrt(LEVEL_FACTOR), l)),
-                 lo, bn);
-        if (e->dim == 2) {
-            lo[2] = 0;
-            bn[2] = 1;
-        }
+        hv_extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
         t0 = hv_now();
         const uint8_t *trusted = l == 0 && band.runs ? band.need : NULL;
         if ((st = trusted ? solve_band(e, &band, nfields, f, &thr, S)
