@@ -107,6 +107,32 @@ __attribute__((target("avx512f"))) static void rb_interior_avx512(
 #undef RB_VALID
 }
 
+/* Fine cells 2I and 2I+1 for coarse I in [1, nc-1) of u_F += P u_C along x:
+ * 3/4 line[I] plus 1/4 of the neighbour on each one's side, the two results
+ * interleaved by permutes so that the fine row is read and written in whole
+ * vectors (the scalar loops stride by two). The caller does I = 0 and nc-1. */
+__attribute__((target("avx512f"))) static void prolong_x_avx512(float *uf, const float *line, int nc)
+{
+    const __m512 q3 = _mm512_set1_ps(0.75f), q1 = _mm512_set1_ps(0.25f);
+    const __m512i lo = _mm512_set_epi32(23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+    const __m512i hi = _mm512_set_epi32(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8);
+    for (int I = 1; I < nc - 1; I += 16) {
+        int c = nc - 1 - I < 16 ? nc - 1 - I : 16; /* coarse cells in this chunk */
+        __mmask16 mc = (__mmask16)((1u << c) - 1u);
+        __m512 l = _mm512_maskz_loadu_ps(mc, line + I);
+        __m512 t = _mm512_mul_ps(q3, l);
+        __m512 e = _mm512_fmadd_ps(q1, _mm512_maskz_loadu_ps(mc, line + I - 1), t);
+        __m512 o = _mm512_fmadd_ps(q1, _mm512_maskz_loadu_ps(mc, line + I + 1), t);
+        __mmask16 m0 = (__mmask16)(c >= 8 ? 0xFFFFu : (1u << (2 * c)) - 1u);
+        __mmask16 m1 = (__mmask16)(c >= 16 ? 0xFFFFu : c > 8 ? (1u << (2 * (c - 8))) - 1u : 0u);
+        float *d = uf + 2 * I;
+        _mm512_mask_storeu_ps(d, m0, _mm512_add_ps(_mm512_maskz_loadu_ps(m0, d), _mm512_permutex2var_ps(e, lo, o)));
+        if (m1)
+            _mm512_mask_storeu_ps(d + 16, m1,
+                                  _mm512_add_ps(_mm512_maskz_loadu_ps(m1, d + 16), _mm512_permutex2var_ps(e, hi, o)));
+    }
+}
+
 static int mg_avx512(void)
 {
     static int have = -1;
@@ -527,6 +553,17 @@ MG_KERNEL static void prolong_row_plain(mg_level *F, const mg_level *C, int j, i
     }
     const int nc = C->n[0], nf = F->n[0];
     /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
+#if MG_AVX512
+    if (mg_avx512() && nc > 2) {
+        prolong_x_avx512(uf, line, nc); /* I in [1, nc-1) */
+        uf[0] += line[0];
+        uf[1] += 0.75f * line[0] + 0.25f * line[1];
+        uf[2 * (nc - 1)] += 0.75f * line[nc - 1] + 0.25f * line[nc - 2];
+        if (2 * (nc - 1) + 1 < nf)
+            uf[2 * (nc - 1) + 1] += line[nc - 1];
+        return;
+    }
+#endif
     uf[0] += line[0];
     for (int I = 1; I < nc; I++)
         uf[2 * I] += 0.75f * line[I] + 0.25f * line[I - 1];
