@@ -201,6 +201,75 @@ MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *
     }
 }
 
+#if MG_AVX512
+/* One colour of plane k of a plain 3D level, walls included: the rows of
+ * rb_interior_avx512 without a call, pointer set-up and scalar wall cells per
+ * row. A wall cell's lane takes its own diagonal (one x-face less); its missing
+ * x-neighbour is a zero lane already. */
+__attribute__((target("avx512f"))) static void rb_plane_avx512(const mg_state *m, const mg_level *L, int k,
+                                                               int col)
+{
+    const int nx = L->n[0], ny = L->n[1], last = nx - 1;
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const float wzm = k > 0, wzp = k < L->n[2] - 1;
+    const __m512 vcx = _mm512_set1_ps(cx);
+    const __m512 vczm = _mm512_set1_ps(cz * wzm), vczp = _mm512_set1_ps(cz * wzp);
+    const ptrdiff_t zmo = wzm ? -(ptrdiff_t)L->sz : 0, zpo = wzp ? (ptrdiff_t)L->sz : 0;
+    const int nq = (nx + 15) / 16;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    for (int j = 0; j < ny; j++) {
+        float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
+        const float *fr = L->f + (ur - L->u);
+        const float wym = j > 0, wyp = j < ny - 1;
+        const float *ym = wym ? ur - L->sy : ur, *yp = wyp ? ur + L->sy : ur;
+        const float *zm = ur + zmo, *zp = ur + zpo;
+        const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+        const float in = dyz + 2 * cx, wall = dyz + cx;
+        const __m512 vcym = _mm512_set1_ps(cy * wym), vcyp = _mm512_set1_ps(cy * wyp);
+        const __m512 vinv = _mm512_set1_ps(1.0f / in);
+        const float inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
+        const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f; /* nx == 1: no x-face */
+        const __mmask16 colour = (j + k + col) & 1 ? 0xAAAA : 0x5555;
+        __m512i prev = _mm512_setzero_si512();
+        __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
+        for (int c = 0, q = 0; c < nq; c++, q += 16) {
+            __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+            __m512i next = c + 1 < nq
+                               ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                               : _mm512_setzero_si512();
+            __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+            __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+            __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+            sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
+            sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
+            sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
+            sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+            __m512 inv = vinv;
+            if (c == 0)
+                inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
+            if (c + 1 == nq && last > 0)
+                inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
+            _mm512_mask_storeu_ps(ur + q, colour & valid, _mm512_mul_ps(sm, inv));
+            prev = cur;
+            cur = next;
+        }
+    }
+}
+#endif
+
+/* Colour col of plane k of a plain level. */
+static void rb_plane_plain(const mg_state *m, const mg_level *L, int k, int col)
+{
+#if MG_AVX512
+    if (mg_avx512()) {
+        rb_plane_avx512(m, L, k, col);
+        return;
+    }
+#endif
+    for (int j = 0; j < L->n[1]; j++)
+        rb_row_plain(m, L, L->u, L->f, j, k, col);
+}
+
 static void rb_sweep(const mg_state *m, mg_level *L, int col)
 {
     float *u = L->u;
@@ -818,28 +887,24 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
 #pragma omp barrier
         }
         /* colour A on the first plane */
-        if (own)
-            for (int j = 0; j < ny; j++) {
-                if (mode == FS_ZERO)
-                    rb_row_plain_zero(m, L, j, k0, A);
-                else
-                    rb_row_plain(m, L, L->u, L->f, j, k0, A);
-            }
+        if (own && mode == FS_ZERO)
+            for (int j = 0; j < ny; j++)
+                rb_row_plain_zero(m, L, j, k0, A);
+        else if (own)
+            rb_plane_plain(m, L, k0, A);
 #pragma omp barrier
         if (own) {
             for (int k = k0 + 1; k < k1; k++) {
                 if (mode == FS_PROLONG && k + 1 >= k0 + 2 && k + 1 <= k1 - 2)
                     for (int j = 0; j < ny; j++)
                         prolong_row_plain(L, C, j, k + 1, line, 0);
-                for (int j = 0; j < ny; j++) {
-                    if (mode == FS_ZERO)
-                        rb_row_plain_zero(m, L, j, k, A);
-                    else
-                        rb_row_plain(m, L, L->u, L->f, j, k, A);
-                }
-                if (k - 1 > k0)
+                if (mode == FS_ZERO)
                     for (int j = 0; j < ny; j++)
-                        rb_row_plain(m, L, L->u, L->f, j, k - 1, B);
+                        rb_row_plain_zero(m, L, j, k, A);
+                else
+                    rb_plane_plain(m, L, k, A);
+                if (k - 1 > k0)
+                    rb_plane_plain(m, L, k - 1, B);
                 int p = k - 2; /* final neighbours: p-1 >= k0+1 and p+1 = k-1 */
                 if (mode == FS_RESTRICT && p >= k0 + 2) {
                     residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
@@ -848,8 +913,7 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
                 }
             }
             if (k1 - 1 > k0) {
-                for (int j = 0; j < ny; j++)
-                    rb_row_plain(m, L, L->u, L->f, j, k1 - 1, B);
+                rb_plane_plain(m, L, k1 - 1, B);
                 int p = k1 - 2;
                 if (mode == FS_RESTRICT && p >= k0 + 2) {
                     residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
@@ -861,8 +925,7 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
 #pragma omp barrier
         /* colour B on the first plane (its neighbour k0-1 is final now) */
         if (own)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain(m, L, L->u, L->f, j, k0, B);
+            rb_plane_plain(m, L, k0, B);
         if (mode == FS_RESTRICT) {
 #pragma omp barrier
             if (own) {
