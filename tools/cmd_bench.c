@@ -19,13 +19,15 @@
 typedef struct copy_ref {
     float *a, *b;
     size_t n;
-    double gbs; /* best so far */
+    double gbs;  /* best so far, all threads */
+    double gbs1; /* best so far, one thread: a copy on 2 threads runs at 1.2x this where
+                    both cores share one path to memory, 2x where they do not */
 } copy_ref;
 
 static int copy_ref_init(copy_ref *c, size_t bytes)
 {
     c->n = bytes / sizeof(float);
-    c->gbs = 0;
+    c->gbs = c->gbs1 = 0;
     c->a = hv_malloc(c->n * sizeof(float));
     c->b = hv_malloc(c->n * sizeof(float));
     if (!c->a || !c->b)
@@ -44,15 +46,17 @@ static void copy_ref_trial(copy_ref *c, int passes)
     const float *a = c->a;
     float *b = c->b;
     const size_t n = c->n;
-    for (int r = 0; r < passes; r++) {
+    for (int r = 0; r < passes + 1; r++) {
+        int one = r == passes; /* the last pass on one thread */
         double t0 = hv_now();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (!one)
         for (size_t i = 0; i < n; i++)
             b[i] = a[i];
         double t = hv_now() - t0;
         double gbs = t > 0 ? 2.0 * (double)n * sizeof(float) / t / 1e9 : 0;
-        if (gbs > c->gbs)
-            c->gbs = gbs;
+        double *best = one ? &c->gbs1 : &c->gbs;
+        if (gbs > *best)
+            *best = gbs;
     }
     volatile float sink = b[n / 2];
     (void)sink;
@@ -117,9 +121,10 @@ static int usage_solve(FILE *out)
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
             "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
-            "streaming copy in the same process, best of trials run between the timed solves),\n"
-            "cycle_gbs (modelled bytes of the timed V-cycles / their wall time, best of the timed\n"
-            "solves; mg times every cycle but the FMG start, cycles_timed of them),\n"
+            "streaming copy in the same process, best of trials run between the timed solves;\n"
+            "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
+            "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
+            "cycles_timed of them),\n"
             "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref \"fftw\",\n"
             "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
@@ -227,7 +232,7 @@ static int bench_solve(int argc, char **argv)
     double best_cycle_gbs;
     if ((st = time_solve(s, f, u, repeat, &ref, &seconds, &info, &best_cycle_gbs)))
         return cli_fail("bench solve", "solving", st);
-    double copy_gbs = ref.gbs;
+    double copy_gbs = ref.gbs, copy1_gbs = ref.gbs1;
     copy_ref_free(&ref);
     hv_solver_stats stats;
     hv_solver_get_stats(s, &stats);
@@ -261,6 +266,7 @@ static int bench_solve(int argc, char **argv)
                    ref_seconds, rinfo.relres, seconds / ref_seconds);
         hv_solver_destroy(&s);
     }
+    printf(",\"copy1_gbs\":%.2f", copy1_gbs);
     if (copy_gbs > 0 && cycle_gbs > 0)
         printf(",\"cycle_vs_copy\":%.3f,\"solve_vs_copy\":%.3f", cycle_gbs / copy_gbs,
                solve_gbs / copy_gbs);
