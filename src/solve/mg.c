@@ -68,43 +68,50 @@ static void zero_f(float *v, size_t n)
 /* ---------- stencil kernels ---------- */
 
 #if MG_AVX512
-/* Interior cells 1..last-1 of one colour (cells of i0's parity) of a row, in
- * 16-lane chunks aligned to the row start: the row's own values come from one
- * load per chunk, their x-neighbours by lane shifts (valignd) of the chunks
+/* One colour (cells of parity i0) of a plain row of nx cells, walls included,
+ * in 16-lane chunks aligned to the row start: the row's own values come from
+ * one load per chunk, their x-neighbours by lane shifts (valignd) of the chunks
  * before and after, instead of two unaligned loads that straddle cache lines;
- * every lane is computed and a masked store keeps this colour's cells, so the
- * other colour's (which this row reads) are never written. */
-__attribute__((target("avx512f"))) static void rb_interior_avx512(
+ * a wall cell's missing x-neighbour is a zero lane and its lane takes its own
+ * diagonal (dyz + cx, or dyz alone when nx = 1). Every lane is computed and a
+ * masked store keeps this colour's cells, so the other colour's (which this
+ * row reads) are never written. cym..czp are the face coefficients, 0 at a
+ * y or z wall; dyz = alpha + the open y and z faces. */
+__attribute__((target("avx512f"))) static void rb_row_avx512(
     float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
-    int last, int i0, float cx, float cym, float cyp, float czm, float czp, float inv)
+    int nx, int i0, float cx, float cym, float cyp, float czm, float czp, float dyz)
 {
     const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
-                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp), vinv = _mm512_set1_ps(inv);
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp),
+                 vinv = _mm512_set1_ps(1.0f / (dyz + 2 * cx));
+    const float wall = dyz + cx, inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
+    const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f;
     const __mmask16 colour = i0 ? 0xAAAA : 0x5555; /* lane b is cell q + b, q even */
-    const int n = last + 1;                          /* cells in the row */
-#define RB_VALID(q) ((n - (q)) >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (n - (q))) - 1u))
+    const int nq = (nx + 15) / 16, last = nx - 1;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
     __m512i prev = _mm512_setzero_si512();
-    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(RB_VALID(0), ur));
-    for (int q = 0; q < last; q += 16) {
-        __mmask16 valid = RB_VALID(q);
-        __m512i next = q + 16 < n ? _mm512_castps_si512(_mm512_maskz_loadu_ps(RB_VALID(q + 16), ur + q + 16))
-                                  : _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
+    for (int c = 0, q = 0; c < nq; c++, q += 16) {
+        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+        __m512i next = c + 1 < nq
+                           ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                           : _mm512_setzero_si512();
         __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
         __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
-        __m512 s = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
-        s = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), s);
-        s = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), s);
-        s = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), s);
-        s = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), s);
-        /* interior only: not cell 0, not cell last (walls, done by the caller) */
-        __mmask16 keep = colour & valid & (__mmask16)(q == 0 ? 0xFFFE : 0xFFFF);
-        if (last - q < 16)
-            keep &= (__mmask16)~(1u << (last - q));
-        _mm512_mask_storeu_ps(ur + q, keep, _mm512_mul_ps(s, vinv));
+        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
+        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
+        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
+        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+        __m512 inv = vinv;
+        if (c == 0)
+            inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
+        if (c + 1 == nq && last > 0)
+            inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
+        _mm512_mask_storeu_ps(ur + q, colour & valid, _mm512_mul_ps(sm, inv));
         prev = cur;
         cur = next;
     }
-#undef RB_VALID
 }
 
 /* Fine cells 2I and 2I+1 for coarse I in [1, nc-1) of u_F += P u_C along x:
@@ -158,6 +165,12 @@ MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *
     const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
     const float inv_in = 1.0f / (dyz + 2 * cx);
     int i0 = (j + k + col) & 1;
+#if MG_AVX512
+    if (mg_avx512()) {
+        rb_row_avx512(ur, fr, ym, yp, zm, zp, nx, i0, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
+        return;
+    }
+#endif
     int i = i0;
     if (i == 0) {
         float d = dyz + (nx > 1 ? cx : 0);
@@ -167,15 +180,6 @@ MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *
         i = 2;
     }
     int last = nx - 1;
-#if MG_AVX512
-    if (mg_avx512() && last > 1) {
-        /* ur[last] is the other colour when last has the other parity; the tail
-         * mask stops before it either way (the wall cell is done below) */
-        rb_interior_avx512(ur, fr, ym, yp, zm, zp, last, i0, cx, cy * wym, cy * wyp, cz * wzm,
-                           cz * wzp, inv_in);
-        i = (last - i0) & 1 ? last + 1 : last; /* this colour's wall cell, if it is one */
-    } else
-#endif
     if (nx <= MG_ROW_BUF) {
         /* Update every interior cell into a buffer (contiguous, so it vectorizes;
          * the other colour's values are not changed by this colour), then keep
@@ -202,57 +206,22 @@ MG_KERNEL static void rb_row_plain(const mg_state *m, const mg_level *L, float *
 }
 
 #if MG_AVX512
-/* One colour of plane k of a plain 3D level, walls included: the rows of
- * rb_interior_avx512 without a call, pointer set-up and scalar wall cells per
- * row. A wall cell's lane takes its own diagonal (one x-face less); its missing
- * x-neighbour is a zero lane already. */
+/* One colour of plane k of a plain level: rb_row_avx512 over its rows, inlined
+ * here, without rb_row_plain's call and set-up per row. */
 __attribute__((target("avx512f"))) static void rb_plane_avx512(const mg_state *m, const mg_level *L, int k,
                                                                int col)
 {
-    const int nx = L->n[0], ny = L->n[1], last = nx - 1;
+    const int nx = L->n[0], ny = L->n[1];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
-    const float wzm = k > 0, wzp = k < L->n[2] - 1;
-    const __m512 vcx = _mm512_set1_ps(cx);
-    const __m512 vczm = _mm512_set1_ps(cz * wzm), vczp = _mm512_set1_ps(cz * wzp);
+    const float wzm = m->dim == 3 && k > 0, wzp = m->dim == 3 && k < L->n[2] - 1;
     const ptrdiff_t zmo = wzm ? -(ptrdiff_t)L->sz : 0, zpo = wzp ? (ptrdiff_t)L->sz : 0;
-    const int nq = (nx + 15) / 16;
-    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
     for (int j = 0; j < ny; j++) {
         float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
         const float *fr = L->f + (ur - L->u);
         const float wym = j > 0, wyp = j < ny - 1;
-        const float *ym = wym ? ur - L->sy : ur, *yp = wyp ? ur + L->sy : ur;
-        const float *zm = ur + zmo, *zp = ur + zpo;
         const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
-        const float in = dyz + 2 * cx, wall = dyz + cx;
-        const __m512 vcym = _mm512_set1_ps(cy * wym), vcyp = _mm512_set1_ps(cy * wyp);
-        const __m512 vinv = _mm512_set1_ps(1.0f / in);
-        const float inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
-        const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f; /* nx == 1: no x-face */
-        const __mmask16 colour = (j + k + col) & 1 ? 0xAAAA : 0x5555;
-        __m512i prev = _mm512_setzero_si512();
-        __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
-        for (int c = 0, q = 0; c < nq; c++, q += 16) {
-            __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-            __m512i next = c + 1 < nq
-                               ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                               : _mm512_setzero_si512();
-            __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
-            __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
-            __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
-            sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
-            sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
-            sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
-            sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
-            __m512 inv = vinv;
-            if (c == 0)
-                inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
-            if (c + 1 == nq && last > 0)
-                inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
-            _mm512_mask_storeu_ps(ur + q, colour & valid, _mm512_mul_ps(sm, inv));
-            prev = cur;
-            cur = next;
-        }
+        rb_row_avx512(ur, fr, wym ? ur - L->sy : ur, wyp ? ur + L->sy : ur, ur + zmo, ur + zpo, nx,
+                      (j + k + col) & 1, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
     }
 }
 #endif
