@@ -51,8 +51,6 @@ typedef struct mg_state {
     int pre, post;
     int use_pcg;
     double *rd, *p, *z, *q; /* fine double work */
-    float *ring;      /* fused restriction: four residual planes per thread (plain 3D levels) */
-    int ring_threads; /* threads the ring has room for */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
     hv_solver_stats model;       /* traffic model (mg_model_stats_cpu) */
@@ -709,38 +707,82 @@ MG_KERNEL static void rb_row_plain_zero(const mg_state *m, const mg_level *L, in
         ur[nx - 1] = (float)(fr[nx - 1] / (R.dyz + L->c[0]));
 }
 
-/* Coarse row (J,K) of C->f: the mean of the children in the fine residual
- * planes p0 and p1 (p1 NULL when z is not coarsened or beyond an odd edge);
- * children beyond odd edges count as zero, as in restrict_field. */
-MG_KERNEL static void restrict_row_planes(const mg_level *F, mg_level *C, int J, int K, const float *p0,
-                                const float *p1, float scale)
+#if MG_AVX512
+/* rb_row_plain_zero for a whole plane: this colour's cells take f times the
+ * inverse diagonal (walls in-vector, as in rb_row_avx512), the other colour's
+ * are stored as zero, in whole vectors. */
+__attribute__((target("avx512f"))) static void rb_plane_zero_avx512(const mg_state *m, const mg_level *L,
+                                                                    int k, int col)
 {
-    const int *co = F->coarsen;
-    const int nx = F->n[0];
-    int j0 = co[1] ? 2 * J : J;
-    int j1 = co[1] && j0 + 1 < F->n[1] ? j0 + 1 : -1;
-    const float *rows[4];
-    int nr = 0;
-    rows[nr++] = p0 + F->sy * j0;
-    if (j1 >= 0)
-        rows[nr++] = p0 + F->sy * j1;
-    if (p1) {
-        rows[nr++] = p1 + F->sy * j0;
-        if (j1 >= 0)
-            rows[nr++] = p1 + F->sy * j1;
+    const int nx = L->n[0], ny = L->n[1];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const float wzm = m->dim == 3 && k > 0, wzp = m->dim == 3 && k < L->n[2] - 1;
+    const int nq = (nx + 15) / 16, last = nx - 1;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    for (int j = 0; j < ny; j++) {
+        float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
+        const float *fr = L->f + (ur - L->u);
+        const float wym = j > 0, wyp = j < ny - 1;
+        const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+        const float wall = dyz + cx, inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
+        const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f;
+        const __m512 vinv = _mm512_set1_ps(1.0f / (dyz + 2 * cx));
+        const __mmask16 colour = (j + k + col) & 1 ? 0xAAAA : 0x5555;
+        for (int c = 0, q = 0; c < nq; c++, q += 16) {
+            __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+            __m512 inv = vinv;
+            if (c == 0)
+                inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
+            if (c + 1 == nq && last > 0)
+                inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
+            _mm512_mask_storeu_ps(ur + q, valid,
+                                  _mm512_maskz_mul_ps(colour, _mm512_maskz_loadu_ps(valid, fr + q), inv));
+        }
     }
-    float line[MG_ROW_BUF];
-    if (nr == 4)
-        for (int i = 0; i < nx; i++)
-            line[i] = (rows[0][i] + rows[1][i]) + (rows[2][i] + rows[3][i]);
-    else if (nr == 2)
-        for (int i = 0; i < nx; i++)
-            line[i] = rows[0][i] + rows[1][i];
-    else
-        for (int i = 0; i < nx; i++)
-            line[i] = rows[0][i];
-    float *out = C->f + C->sy * J + C->sz * K;
-    if (!co[0]) {
+}
+#endif
+
+/* rb_row_plain_zero over plane k. */
+static void rb_plane_zero(const mg_state *m, const mg_level *L, int k, int col)
+{
+#if MG_AVX512
+    if (mg_avx512()) {
+        rb_plane_zero_avx512(m, L, k, col);
+        return;
+    }
+#endif
+    for (int j = 0; j < L->n[1]; j++)
+        rb_row_plain_zero(m, L, j, k, col);
+}
+
+/* line[i] += (f - A u)[i] along row (j,p) of a plain level. */
+MG_KERNEL static void residual_row_add(const mg_state *m, const mg_level *L, int j, int p, float *line)
+{
+    const int nx = L->n[0];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    plain_row R = plain_row_at(m, L, j, p);
+    const float *u = L->u + R.base, *f = L->f + R.base;
+    const float *ym = u + R.ym, *yp = u + R.yp, *zm = u + R.zm, *zp = u + R.zp;
+    const float wym = (float)R.wym, wyp = (float)R.wyp, wzm = (float)R.wzm, wzp = (float)R.wzp;
+    const float din = (float)(R.dyz + 2 * L->c[0]);
+    for (int i = 1; i < nx - 1; i++) /* branch-free: vectorizes */
+        line[i] += f[i] - (din * u[i] - (cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]) +
+                                         cx * (u[i - 1] + u[i + 1])));
+    for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {
+        float s = cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]);
+        float d = (float)R.dyz;
+        if (i > 0) { s += cx * u[i - 1]; d += cx; }
+        if (i < nx - 1) { s += cx * u[i + 1]; d += cx; }
+        line[i] += f[i] - (d * u[i] - s);
+    }
+}
+
+/* out[I] = scale * (line[2I] + line[2I+1]) for the nc = ceil(nx/2) coarse
+ * cells of a row (line[nx] counts as zero), or scale * line[I] when x is not
+ * coarsened. */
+MG_KERNEL static void restrict_x(const float *line, int nx, int coarsen, float scale, float *out)
+{
+    if (!coarsen) {
         for (int i = 0; i < nx; i++)
             out[i] = line[i] * scale;
         return;
@@ -751,50 +793,120 @@ MG_KERNEL static void restrict_row_planes(const mg_level *F, mg_level *C, int J,
         out[nx / 2] = line[nx - 1] * scale;
 }
 
-/* Residual of plane p of L into buf (L->sz floats). */
-MG_KERNEL static void residual_plane(const mg_state *m, const mg_level *L, int p, float *buf)
+#if MG_AVX512
+/* residual_row_add in 16-lane chunks, walls in-vector, as rb_row_avx512. */
+__attribute__((target("avx512f"))) static void residual_row_avx512(
+    const float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
+    int nx, float cx, float cym, float cyp, float czm, float czp, float dyz, float *line)
 {
-    const int nx = L->n[0];
-    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
-    for (int j = 0; j < L->n[1]; j++) {
-        plain_row R = plain_row_at(m, L, j, p);
-        const float *u = L->u + R.base, *f = L->f + R.base;
-        const float *ym = u + R.ym, *yp = u + R.yp, *zm = u + R.zm, *zp = u + R.zp;
-        const float wym = (float)R.wym, wyp = (float)R.wyp, wzm = (float)R.wzm, wzp = (float)R.wzp;
-        const float din = (float)(R.dyz + 2 * L->c[0]);
-        float *o = buf + L->sy * (size_t)j;
-        for (int i = 1; i < nx - 1; i++) /* branch-free: vectorizes */
-            o[i] = f[i] - (din * u[i] - (cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]) +
-                                         cx * (u[i - 1] + u[i + 1])));
-        for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {
-            float s = cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]);
-            float d = (float)R.dyz;
-            if (i > 0) { s += cx * u[i - 1]; d += cx; }
-            if (i < nx - 1) { s += cx * u[i + 1]; d += cx; }
-            o[i] = f[i] - (d * u[i] - s);
-        }
+    const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp), vdin = _mm512_set1_ps(dyz + 2 * cx);
+    const int nq = (nx + 15) / 16, last = nx - 1;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
+    for (int c = 0, q = 0; c < nq; c++, q += 16) {
+        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+        __m512i next = c + 1 < nq
+                           ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                           : _mm512_setzero_si512();
+        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
+        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
+        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
+        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+        __m512 d = vdin;
+        if (c == 0)
+            d = _mm512_mask_mov_ps(d, 1, _mm512_set1_ps(nx > 1 ? dyz + cx : dyz));
+        if (c + 1 == nq && last > 0)
+            d = _mm512_mask_mov_ps(d, (__mmask16)(1u << (last - q)), _mm512_set1_ps(dyz + cx));
+        __m512 r = _mm512_fnmadd_ps(d, _mm512_castsi512_ps(cur), sm);
+        __m512 l = _mm512_loadu_ps(line + q);
+        _mm512_storeu_ps(line + q, _mm512_mask_add_ps(l, valid, l, r)); /* line stays zero beyond nx */
+        prev = cur;
+        cur = next;
     }
 }
 
-/* Coarse plane K of C->f from residual planes p0 and p1 (p1 NULL: one plane). */
-static void restrict_plane(const mg_level *L, mg_level *C, int K, const float *p0, const float *p1,
-                           float scale)
+/* restrict_x with x coarsened: even and odd cells of 32 split by permutes. */
+__attribute__((target("avx512f"))) static void restrict_x_avx512(const float *line, int nx, float scale,
+                                                                 float *out)
 {
-    for (int J = 0; J < C->n[1]; J++)
-        restrict_row_planes(L, C, J, K, p0, p1, scale);
+    const __m512i ev = _mm512_set_epi32(30, 28, 26, 24, 22, 20, 18, 16, 14, 12, 10, 8, 6, 4, 2, 0);
+    const __m512i od = _mm512_set_epi32(31, 29, 27, 25, 23, 21, 19, 17, 15, 13, 11, 9, 7, 5, 3, 1);
+    const __m512 vs = _mm512_set1_ps(scale);
+    const int nc = (nx + 1) / 2;
+    for (int I = 0; I < nc; I += 16) {
+        int c = nc - I < 16 ? nc - I : 16;
+        __m512 a = _mm512_loadu_ps(line + 2 * I), b = _mm512_loadu_ps(line + 2 * I + 16);
+        __m512 s = _mm512_add_ps(_mm512_permutex2var_ps(a, ev, b), _mm512_permutex2var_ps(a, od, b));
+        _mm512_mask_storeu_ps(out + I, (__mmask16)(c == 16 ? 0xFFFFu : (1u << c) - 1u), _mm512_mul_ps(s, vs));
+    }
+}
+#endif
+
+/* Coarse row (J,K) of C->f: the mean of its children's fine residuals f - A u
+ * (planes 2K, 2K+1 or K, rows 2J, 2J+1 or J, x pairs), computed from u here, so
+ * the fine residual is never stored; children beyond odd edges count as zero,
+ * as in restrict_field. u must be final on the children's planes and the
+ * planes beside them. */
+static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level *C, int J, int K, float scale)
+{
+    const int *co = L->coarsen;
+    const int nx = L->n[0];
+    int js[2], ks[2], nj = 0, nk = 0;
+    js[nj++] = co[1] ? 2 * J : J;
+    if (co[1] && 2 * J + 1 < L->n[1])
+        js[nj++] = 2 * J + 1;
+    ks[nk++] = co[2] ? 2 * K : K;
+    if (co[2] && 2 * K + 1 < L->n[2])
+        ks[nk++] = 2 * K + 1;
+    float line[MG_ROW_BUF + 32]; /* zero beyond nx: restrict_x_avx512 reads whole pairs of vectors */
+    memset(line, 0, (size_t)(nx + 32) * sizeof(float));
+    float *out = C->f + C->sy * (size_t)J + C->sz * (size_t)K;
+#if MG_AVX512
+    if (mg_avx512()) {
+        const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+        for (int b = 0; b < nk; b++)
+            for (int a = 0; a < nj; a++) {
+                const int j = js[a], k = ks[b];
+                const float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
+                const float wym = j > 0, wyp = j < L->n[1] - 1, wzm = k > 0, wzp = k < L->n[2] - 1;
+                const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+                residual_row_avx512(ur, L->f + (ur - L->u), wym ? ur - L->sy : ur, wyp ? ur + L->sy : ur,
+                                    wzm ? ur - L->sz : ur, wzp ? ur + L->sz : ur, nx, cx, cy * wym, cy * wyp,
+                                    cz * wzm, cz * wzp, dyz, line);
+            }
+        if (co[0])
+            restrict_x_avx512(line, nx, scale, out);
+        else
+            restrict_x(line, nx, 0, scale, out);
+        return;
+    }
+#endif
+    for (int b = 0; b < nk; b++)
+        for (int a = 0; a < nj; a++)
+            residual_row_add(m, L, js[a], ks[b], line);
+    restrict_x(line, nx, co[0], scale, out);
 }
 
-/* Residual plane p is in buf and, for odd p with z coarsened, plane p-1 in prev:
- * writes the coarse plane they complete, if any. */
-static void restrict_ready(const mg_level *L, mg_level *C, int p, const float *buf, const float *prev,
-                           float scale)
+/* The fine planes of coarse plane K: [first, last]. */
+static int coarse_first(const mg_level *L, int K)
 {
-    if (!L->coarsen[2])
-        restrict_plane(L, C, p, buf, NULL, scale);
-    else if (p & 1)
-        restrict_plane(L, C, p / 2, prev, buf, scale);
-    else if (p == L->n[2] - 1)
-        restrict_plane(L, C, p / 2, buf, NULL, scale);
+    return L->coarsen[2] ? 2 * K : K;
+}
+
+static int coarse_last(const mg_level *L, int K)
+{
+    return L->coarsen[2] && 2 * K + 1 < L->n[2] ? 2 * K + 1 : coarse_first(L, K);
+}
+
+static void restrict_residual_plane(const mg_state *m, const mg_level *L, mg_level *C, int K, float scale)
+{
+    for (int J = 0; J < C->n[1]; J++)
+        restrict_residual_row(m, L, C, J, K, scale);
 }
 
 /* One red-black sweep of a plain 3D level in a single pass over memory, with
@@ -823,8 +935,6 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
 #ifdef _OPENMP
     if (L->count > MG_PAR_MIN) {
         nt = omp_get_max_threads();
-        if (nt > m->ring_threads)
-            nt = m->ring_threads;
         if (nt > nz / 4)
             nt = nz / 4 > 0 ? nz / 4 : 1;
     }
@@ -841,9 +951,15 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
         if (k0 > nz)
             k0 = nz;
         const int own = k1 > k0;
-        float *ring = m->ring + (size_t)4 * t * L->sz; /* pipeline ring: 0,1; edges: 2,3 */
         float line[MG_ROW_BUF];
         const int A = first, B = !first;
+        /* FS_RESTRICT: coarse planes whose fine planes are in [k0+2, k1-2] are
+         * written in the pipeline from Kin on, once their last fine plane's
+         * neighbours are final; those that touch k0, k0+1 or k1-1 (whose
+         * neighbours are final only after the slab edges) at the end. */
+        const int Kfirst = L->coarsen[2] ? k0 / 2 : k0;
+        const int Kin = L->coarsen[2] ? k0 / 2 + 1 : k0 + 2;
+        int Knext = Kin;
         if (mode == FS_PROLONG) {
             if (own) {
                 for (int k = k0; k <= k0 + 1 && k < k1; k++)
@@ -857,8 +973,7 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
         }
         /* colour A on the first plane */
         if (own && mode == FS_ZERO)
-            for (int j = 0; j < ny; j++)
-                rb_row_plain_zero(m, L, j, k0, A);
+            rb_plane_zero(m, L, k0, A);
         else if (own)
             rb_plane_plain(m, L, k0, A);
 #pragma omp barrier
@@ -868,28 +983,20 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
                     for (int j = 0; j < ny; j++)
                         prolong_row_plain(L, C, j, k + 1, line, 0);
                 if (mode == FS_ZERO)
-                    for (int j = 0; j < ny; j++)
-                        rb_row_plain_zero(m, L, j, k, A);
+                    rb_plane_zero(m, L, k, A);
                 else
                     rb_plane_plain(m, L, k, A);
                 if (k - 1 > k0)
                     rb_plane_plain(m, L, k - 1, B);
-                int p = k - 2; /* final neighbours: p-1 >= k0+1 and p+1 = k-1 */
-                if (mode == FS_RESTRICT && p >= k0 + 2) {
-                    residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
-                    restrict_ready(L, C, p, ring + (size_t)(p & 1) * L->sz,
-                                   ring + (size_t)(!(p & 1)) * L->sz, scale);
-                }
+                /* u is final on planes < k: residuals of planes <= k-2 */
+                while (mode == FS_RESTRICT && coarse_first(L, Knext) < k1 &&
+                       coarse_last(L, Knext) <= (k - 2 < k1 - 2 ? k - 2 : k1 - 2))
+                    restrict_residual_plane(m, L, C, Knext++, scale);
             }
-            if (k1 - 1 > k0) {
+            if (k1 - 1 > k0)
                 rb_plane_plain(m, L, k1 - 1, B);
-                int p = k1 - 2;
-                if (mode == FS_RESTRICT && p >= k0 + 2) {
-                    residual_plane(m, L, p, ring + (size_t)(p & 1) * L->sz);
-                    restrict_ready(L, C, p, ring + (size_t)(p & 1) * L->sz,
-                                   ring + (size_t)(!(p & 1)) * L->sz, scale);
-                }
-            }
+            while (mode == FS_RESTRICT && coarse_first(L, Knext) < k1 && coarse_last(L, Knext) <= k1 - 2)
+                restrict_residual_plane(m, L, C, Knext++, scale);
         }
 #pragma omp barrier
         /* colour B on the first plane (its neighbour k0-1 is final now) */
@@ -898,21 +1005,10 @@ static void fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
         if (mode == FS_RESTRICT) {
 #pragma omp barrier
             if (own) {
-                /* planes k0, k0+1 (edge slots) and k1-1 (after k1-2 in the ring) */
-                float *e0 = ring + 2 * L->sz, *e1 = ring + 3 * L->sz;
-                residual_plane(m, L, k0, e0);
-                restrict_ready(L, C, k0, e0, NULL, scale);
-                if (k0 + 1 < k1) {
-                    residual_plane(m, L, k0 + 1, e1);
-                    restrict_ready(L, C, k0 + 1, e1, e0, scale);
-                }
-                int p = k1 - 1;
-                if (p >= k0 + 2) {
-                    float *buf = ring + (size_t)(p & 1) * L->sz;
-                    const float *prev = p - 1 >= k0 + 2 ? ring + (size_t)(!(p & 1)) * L->sz : e1;
-                    residual_plane(m, L, p, buf);
-                    restrict_ready(L, C, p, buf, prev, scale);
-                }
+                for (int K = Kfirst; K < Kin && coarse_first(L, K) < k1; K++)
+                    restrict_residual_plane(m, L, C, K, scale);
+                while (coarse_first(L, Knext) < k1)
+                    restrict_residual_plane(m, L, C, Knext++, scale);
             }
         }
     }
@@ -1008,7 +1104,6 @@ static void mg_destroy(void *state)
         free(L->region);
         free(L->bwork);
     }
-    hv_free(m->ring);
     hv_free(m->rd);
     hv_free(m->p);
     hv_free(m->z);
@@ -1068,18 +1163,13 @@ static hv_status mg_create(void **state, const hv_setup *s)
         goto fail;
     }
     size_t n0 = s->count;
-    m->ring_threads = 1;
-#ifdef _OPENMP
-    m->ring_threads = omp_get_max_threads();
-#endif
-    m->ring = hv_malloc((size_t)4 * m->ring_threads * m->lv[0].sz * sizeof(float));
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
         m->p = hv_malloc(n0 * sizeof(double));
         m->z = hv_malloc(n0 * sizeof(double));
         m->q = hv_malloc(n0 * sizeof(double));
     }
-    if (!m->ring || !m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
+    if (!m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
         st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
