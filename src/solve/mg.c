@@ -112,30 +112,60 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(
     }
 }
 
-/* Fine cells 2I and 2I+1 for coarse I in [1, nc-1) of u_F += P u_C along x:
- * 3/4 line[I] plus 1/4 of the neighbour on each one's side, the two results
- * interleaved by permutes so that the fine row is read and written in whole
- * vectors (the scalar loops stride by two). The caller does I = 0 and nc-1. */
-__attribute__((target("avx512f"))) static void prolong_x_avx512(float *uf, const float *line, int nc)
+/* Fine row uf (nf cells) += P u_C (= P u_C when `set`) with x coarsened: the
+ * coarse line a00 r00 + a01 r01 + a10 r10 + a11 r11 (the y and z weights) is
+ * formed in registers, 16 coarse cells at a time; fine cell 2I takes 3/4
+ * line[I] + 1/4 line[I-1], 2I+1 takes 3/4 line[I] + 1/4 line[I+1] (line[I]
+ * alone at the walls), their neighbours come by lane shifts of the chunks
+ * beside, and the two results are interleaved by permutes so that the fine
+ * row is read and written in whole vectors. */
+__attribute__((target("avx512f"))) static void prolong_row_avx512(float *uf, int nf, const float *r00,
+                                                                  const float *r01, const float *r10,
+                                                                  const float *r11, float a00, float a01,
+                                                                  float a10, float a11, int nc, int set)
 {
     const __m512 q3 = _mm512_set1_ps(0.75f), q1 = _mm512_set1_ps(0.25f);
+    const __m512 w00 = _mm512_set1_ps(a00), w01 = _mm512_set1_ps(a01), w10 = _mm512_set1_ps(a10),
+                 w11 = _mm512_set1_ps(a11);
     const __m512i lo = _mm512_set_epi32(23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
     const __m512i hi = _mm512_set_epi32(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8);
-    for (int I = 1; I < nc - 1; I += 16) {
-        int c = nc - 1 - I < 16 ? nc - 1 - I : 16; /* coarse cells in this chunk */
-        __mmask16 mc = (__mmask16)((1u << c) - 1u);
-        __m512 l = _mm512_maskz_loadu_ps(mc, line + I);
+    const int nq = (nc + 15) / 16;
+#define PROLONG_LINE(I_, M_)                                                                          \
+    _mm512_castps_si512(_mm512_fmadd_ps(                                                              \
+        w11, _mm512_maskz_loadu_ps(M_, r11 + (I_)),                                                   \
+        _mm512_fmadd_ps(w10, _mm512_maskz_loadu_ps(M_, r10 + (I_)),                                   \
+                        _mm512_fmadd_ps(w01, _mm512_maskz_loadu_ps(M_, r01 + (I_)),                   \
+                                        _mm512_mul_ps(w00, _mm512_maskz_loadu_ps(M_, r00 + (I_)))))))
+    const __mmask16 tail = (__mmask16)(nc % 16 ? (1u << (nc % 16)) - 1u : 0xFFFFu);
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = PROLONG_LINE(0, nq > 1 ? (__mmask16)0xFFFF : tail);
+    for (int c = 0, I = 0; c < nq; c++, I += 16) {
+        __m512i next = c + 1 < nq ? PROLONG_LINE(I + 16, c + 2 < nq ? (__mmask16)0xFFFF : tail)
+                                  : _mm512_setzero_si512();
+        __m512 l = _mm512_castsi512_ps(cur);
         __m512 t = _mm512_mul_ps(q3, l);
-        __m512 e = _mm512_fmadd_ps(q1, _mm512_maskz_loadu_ps(mc, line + I - 1), t);
-        __m512 o = _mm512_fmadd_ps(q1, _mm512_maskz_loadu_ps(mc, line + I + 1), t);
-        __mmask16 m0 = (__mmask16)(c >= 8 ? 0xFFFFu : (1u << (2 * c)) - 1u);
-        __mmask16 m1 = (__mmask16)(c >= 16 ? 0xFFFFu : c > 8 ? (1u << (2 * (c - 8))) - 1u : 0u);
+        __m512 e = _mm512_fmadd_ps(q1, _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15)), t);
+        __m512 o = _mm512_fmadd_ps(q1, _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1)), t);
+        if (c == 0)
+            e = _mm512_mask_mov_ps(e, 1, l);
+        if (c + 1 == nq)
+            o = _mm512_mask_mov_ps(o, (__mmask16)(1u << (nc - 1 - I)), l);
+        int nfc = nf - 2 * I; /* fine cells left from 2I */
+        __mmask16 m0 = (__mmask16)(nfc >= 16 ? 0xFFFFu : (1u << nfc) - 1u);
+        __mmask16 m1 = (__mmask16)(nfc >= 32 ? 0xFFFFu : nfc > 16 ? (1u << (nfc - 16)) - 1u : 0u);
         float *d = uf + 2 * I;
-        _mm512_mask_storeu_ps(d, m0, _mm512_add_ps(_mm512_maskz_loadu_ps(m0, d), _mm512_permutex2var_ps(e, lo, o)));
+        __m512 v0 = _mm512_permutex2var_ps(e, lo, o), v1 = _mm512_permutex2var_ps(e, hi, o);
+        if (!set) {
+            v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, d), v0);
+            v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, d + 16), v1);
+        }
+        _mm512_mask_storeu_ps(d, m0, v0);
         if (m1)
-            _mm512_mask_storeu_ps(d + 16, m1,
-                                  _mm512_add_ps(_mm512_maskz_loadu_ps(m1, d + 16), _mm512_permutex2var_ps(e, hi, o)));
+            _mm512_mask_storeu_ps(d + 16, m1, v1);
+        prev = cur;
+        cur = next;
     }
+#undef PROLONG_LINE
 }
 
 static int mg_avx512(void)
@@ -577,29 +607,24 @@ MG_KERNEL static void prolong_row_plain(mg_level *F, const mg_level *C, int j, i
     const float *r10 = uc + C->sy * J0 + C->sz * K1, *r11 = uc + C->sy * J1 + C->sz * K1;
     const float a00 = (1 - wk1) * (1 - wj1), a01 = (1 - wk1) * wj1;
     const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
-    for (int I = 0; I < C->n[0]; I++)
-        line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
     float *uf = F->u + F->sy * (size_t)j + F->sz * (size_t)k;
-    if (set) /* u_F = P u_C: the row is cleared while it is in cache */
-        memset(uf, 0, (size_t)F->n[0] * sizeof(float));
-    if (!co[0]) {
-        for (int i = 0; i < F->n[0]; i++)
-            uf[i] += line[i];
-        return;
-    }
     const int nc = C->n[0], nf = F->n[0];
-    /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
 #if MG_AVX512
-    if (mg_avx512() && nc > 2) {
-        prolong_x_avx512(uf, line, nc); /* I in [1, nc-1) */
-        uf[0] += line[0];
-        uf[1] += 0.75f * line[0] + 0.25f * line[1];
-        uf[2 * (nc - 1)] += 0.75f * line[nc - 1] + 0.25f * line[nc - 2];
-        if (2 * (nc - 1) + 1 < nf)
-            uf[2 * (nc - 1) + 1] += line[nc - 1];
+    if (mg_avx512() && co[0]) {
+        prolong_row_avx512(uf, nf, r00, r01, r10, r11, a00, a01, a10, a11, nc, set);
         return;
     }
 #endif
+    for (int I = 0; I < nc; I++)
+        line[I] = a00 * r00[I] + a01 * r01[I] + a10 * r10[I] + a11 * r11[I];
+    if (set) /* u_F = P u_C: the row is cleared while it is in cache */
+        memset(uf, 0, (size_t)nf * sizeof(float));
+    if (!co[0]) {
+        for (int i = 0; i < nf; i++)
+            uf[i] += line[i];
+        return;
+    }
+    /* i = 2I takes 3/4 line[I] + 1/4 line[I-1]; i = 2I+1 takes 3/4 line[I] + 1/4 line[I+1]. */
     uf[0] += line[0];
     for (int I = 1; I < nc; I++)
         uf[2 * I] += 0.75f * line[I] + 0.25f * line[I - 1];
