@@ -105,15 +105,17 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
 # (log4cplus/TBB threads) and OpenCL contexts hang forked children (NOTES §5).
 # `timeout` stands in for Check's. The OpenCL solver suite runs a second time
 # as on a device without fp64 (float kernels, double correction on the host):
-# the run named fp32:SUITE.
-CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS)))
+# the run named fp32:SUITE; the multigrid suite a second time without its
+# AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
+CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS))) \
+              $(patsubst %,no512:%,$(filter %/check_mg,$(TESTS)))
 check: all $(TESTS)
 	@pass=0; fail=0; bad=""; \
 	for run in $(CHECK_RUNS); do \
-	  t=$${run#fp32:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; \
-	  if [ "$$run" != "$$t" ]; then log=$$t.fp32.log; fp64=0; fi; \
+	  t=$${run#*:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
+	  case $$run in fp32:*) log=$$t.fp32.log; fp64=0;; no512:*) log=$$t.no512.log; no512=1;; esac; \
 	  echo "== $$run"; \
-	  HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$log 2>&1; rc=$$?; cat $$log; \
+	  HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$log 2>&1; rc=$$?; cat $$log; \
 	  line=$$(grep -E '^[0-9]+%: Checks: ' $$log | tail -n 1); \
 	  c=$$(echo "$$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/'); \
 	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \
