@@ -1,5 +1,7 @@
 /* Multigrid and the solver interface: convergence factors, exactness against
  * analytic solutions and the FFTW oracle, null spaces, and bad input. */
+#include "solve/backend.h"
+#include "solve/mg_level.h"
 #include "testlib.h"
 
 #include <math.h>
@@ -487,6 +489,94 @@ START_TEST(cycles_should_not_depend_on_the_thread_count)
 }
 END_TEST
 
+/* One axis of the cell-centred prolongation, written out independently of
+ * mg.c: weight of coarse index I for fine index i among nc coarse cells. */
+static double p_axis(int coarsen, int nc, int i, int I)
+{
+    if (!coarsen)
+        return i == I;
+    int I0 = i / 2, nb = (i & 1) ? I0 + 1 : I0 - 1;
+    if (nb < 0 || nb >= nc)
+        return I == I0;
+    return I == I0 ? 0.75 : I == nb ? 0.25 : 0.0;
+}
+
+/* The PCG restriction must be the transpose of the renormalized prolongation
+ * (else CG loses conjugacy): <R r, v>_C 2^d = <r, P v>_F for random r and v, on
+ * odd and even sizes with solid cells, 2D and 3D, on 1 and 3 threads. */
+START_TEST(restriction_should_be_the_transpose_of_prolongation)
+{
+    const shape shapes[] = {{3, {13, 10, 7}, 1}, {3, {16, 9, 12}, 2}, {3, {21, 18, 16}, 1},
+                            {2, {45, 38, 1}, 1}, {2, {60, 61, 1}, 2}, {3, {12, 12, 12}, 0}};
+    for (size_t q = 0; q < sizeof shapes / sizeof shapes[0]; q++) {
+        const shape *sh = &shapes[q];
+        uint8_t *solid = make_mask(sh);
+        hv_setup st;
+        memset(&st, 0, sizeof st);
+        st.p = (hv_problem){sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, 1.0, solid, 1.0, 2.0};
+        hv_solver_opts_default(&st.o);
+        st.count = (size_t)sh->n[0] * sh->n[1] * sh->n[2];
+        st.nregion = 1;
+        mg_hierarchy H;
+        ck_assert_int_eq(mg_hierarchy_build(&H, &st, 0), HV_OK);
+        ck_assert_msg(H.nlev >= 2, "shape %zu: one level", q);
+        for (int l = 0; l + 1 < H.nlev; l++) {
+            const mg_level *F = &H.lv[l], *C = &H.lv[l + 1];
+            float *r = malloc(F->count * sizeof(float)), *pn = malloc(F->count * sizeof(float));
+            float *fc = malloc(C->count * sizeof(float)), *v = malloc(C->count * sizeof(float));
+            const int nt = 3;
+            float *work = malloc((size_t)nt * mg_restrict_transpose_work(F, C) * sizeof(float));
+            ck_assert(r && pn && fc && v && work);
+            tl_fill_random(r, F->count, 1000 + 77 * q + l);
+            tl_fill_random(v, C->count, 2000 + 77 * q + l);
+            const float *pnp = NULL;
+            if (!C->plain) {
+                mg_prolong_norm(F, C, pn);
+                pnp = pn;
+            }
+            int nchild = 1;
+            for (int b = 0; b < sh->dim; b++)
+                nchild *= F->coarsen[b] ? 2 : 1;
+            double rhs = 0, mag = 0;
+            for (int k = 0; k < F->n[2]; k++)
+                for (int j = 0; j < F->n[1]; j++)
+                    for (int i = 0; i < F->n[0]; i++) {
+                        size_t fcell = i + F->sy * j + F->sz * k;
+                        double pv = 0, ws = 0;
+                        for (int K = 0; K < C->n[2]; K++)
+                            for (int J = 0; J < C->n[1]; J++)
+                                for (int I = 0; I < C->n[0]; I++) {
+                                    double w = p_axis(F->coarsen[0], C->n[0], i, I) *
+                                               p_axis(F->coarsen[1], C->n[1], j, J) *
+                                               p_axis(F->coarsen[2], C->n[2], k, K);
+                                    size_t cc = I + C->sy * J + C->sz * K;
+                                    if (w == 0 || (!C->plain && C->a[cc] == 0))
+                                        continue;
+                                    pv += w * v[cc];
+                                    ws += w;
+                                }
+                        if (!C->plain)
+                            pv = (F->plain || F->a[fcell] != 0) && ws > 0 ? pv / ws : 0;
+                        rhs += (double)r[fcell] * pv;
+                        mag += fabs((double)r[fcell] * pv);
+                    }
+            for (int threads = 1; threads <= nt; threads += nt - 1) {
+                mg_restrict_transpose(F, C, sh->dim, pnp, r, fc, work, threads);
+                double lhs = 0;
+                for (size_t c = 0; c < C->count; c++)
+                    lhs += (double)fc[c] * v[c] * nchild;
+                ck_assert_msg(fabs(lhs - rhs) <= 1e-5 * mag,
+                              "shape %zu level %d, %d threads: <Rr,v> 2^d = %.9g, <r,Pv> = %.9g", q, l,
+                              threads, lhs, rhs);
+            }
+            free(r), free(pn), free(fc), free(v), free(work);
+        }
+        mg_hierarchy_free(&H);
+        free(solid);
+    }
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("mg");
@@ -495,6 +585,7 @@ int main(void)
     tcase_add_loop_test(tc, vcycle_should_reduce_heat_residual_below_0_12_per_cycle, 0, NSHAPES);
     tcase_add_loop_test(tc, vcycle_should_reduce_poisson_residual_below_0_15_per_cycle, 0, NSHAPES);
     tcase_add_test(tc, cycles_should_not_depend_on_the_thread_count);
+    tcase_add_test(tc, restriction_should_be_the_transpose_of_prolongation);
     tcase_add_test(tc, gpu_smoothers_should_converge);
     tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);

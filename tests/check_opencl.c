@@ -429,7 +429,10 @@ START_TEST(transpose_restriction_should_match_cpu_and_be_the_adjoint_of_prolonga
             upload(h.m.lv[l].r, r, F->count);
             hv_clmg_restrict_transpose(&h.m, l);
             download(h.m.lv[l + 1].f, got, C->count);
-            mg_restrict_transpose(F, C, h.H.dim, pn, r, ref);
+            float *work = malloc(mg_restrict_transpose_work(F, C) * sizeof(float));
+            ck_assert(work != NULL);
+            mg_restrict_transpose(F, C, h.H.dim, pn, r, ref, work, 1);
+            free(work);
             ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5, "restrict transpose, %s level %d: %g",
                           CFGS[ci].name, l, rel_diff_f(got, ref, C->count));
             /* adjoint of the device prolongation: <R r, uc> 2^d = <r, P uc>

@@ -79,6 +79,28 @@ static void fill_rhs(float *f, size_t n)
     }
 }
 
+/* Solid cells of an n^dim box for --obstacle (dim 2: one layer). */
+static uint8_t *make_obstacle(const char *kind, int dim, int n)
+{
+    const int nz = dim == 3 ? n : 1;
+    uint8_t *solid = calloc((size_t)n * n * nz, 1);
+    if (!solid)
+        return NULL;
+    const int w1 = n / 3, w2 = 2 * n / 3, gap = n / 8 > 1 ? n / 8 : 1;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                size_t c = (size_t)i + (size_t)n * ((size_t)j + (size_t)n * k);
+                if (!strcmp(kind, "ball")) {
+                    double x = i + 0.5 - 0.5 * n, y = j + 0.5 - 0.5 * n, z = dim == 3 ? k + 0.5 - 0.5 * n : 0;
+                    solid[c] = x * x + y * y + z * z < 0.0625 * n * n;
+                } else { /* baffles: wall at w1 open at high y, wall at w2 open at low y */
+                    solid[c] = (i == w1 && j < n - gap) || (i == w2 && j >= gap);
+                }
+            }
+    return solid;
+}
+
 /* Times `repeat` solves after one warm-up; returns the best time and its info,
  * and in *cycle_gbs the best V-cycle bandwidth of any timed solve (cycle_bytes /
  * cycle_seconds; 0 where the backend does not time its cycles). With `ref`, a
@@ -117,6 +139,7 @@ static int usage_solve(FILE *out)
             "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
             "                           [--backend mg|fftw|opencl] [--smoother rbgs|jacobi|chebyshev]\n"
             "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
+            "                           [--obstacle none|ball|baffles]\n"
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
@@ -126,7 +149,11 @@ static int usage_solve(FILE *out)
             "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
             "cycles_timed of them),\n"
             "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref \"fftw\",\n"
-            "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n");
+            "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
+            "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
+            "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
+            "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
+            "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -137,7 +164,7 @@ static int bench_solve(int argc, char **argv)
     hv_backend backend = HV_BACKEND_MG;
     hv_smoother smoother = HV_SMOOTH_RBGS;
     int smoother_set = 0;
-    const char *wisdom = NULL;
+    const char *wisdom = NULL, *obstacle = "none";
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -185,6 +212,10 @@ static int bench_solve(int argc, char **argv)
                 return cli_usage_error("bench solve", "unknown smoother '%s'", v);
         } else if (!strcmp(a, "--wisdom")) {
             wisdom = v;
+        } else if (!strcmp(a, "--obstacle")) {
+            if (strcmp(v, "none") && strcmp(v, "ball") && strcmp(v, "baffles"))
+                return cli_usage_error("bench solve", "--obstacle must be none, ball or baffles, got '%s'", v);
+            obstacle = v;
         } else {
             return cli_usage_error("bench solve", "unknown option '%s'", a);
         }
@@ -207,9 +238,19 @@ static int bench_solve(int argc, char **argv)
     if (!f || !u)
         return cli_fail("bench solve", "allocating the problem", HV_ERR_NOMEM);
     fill_rhs(f, count);
+    uint8_t *solid = NULL;
+    if (strcmp(obstacle, "none")) {
+        if (!(solid = make_obstacle(obstacle, dim, n))) {
+            hv_free(f);
+            hv_free(u);
+            return cli_fail("bench solve", "allocating the obstacle", HV_ERR_NOMEM);
+        }
+        p.solid = solid;
+    }
     copy_ref ref;
     if (copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float) : (256u << 20))) {
         copy_ref_free(&ref);
+        free(solid);
         hv_free(f);
         hv_free(u);
         return cli_fail("bench solve", "allocating the copy reference", HV_ERR_NOMEM);
@@ -250,20 +291,22 @@ static int bench_solve(int argc, char **argv)
     printf("{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
            "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
            "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
-           "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f",
+           "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
+           "\"obstacle\":\"%s\"",
            n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
            smoother == HV_SMOOTH_RBGS ? "rbgs" : smoother == HV_SMOOTH_JACOBI ? "jacobi" : "chebyshev",
            threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
            hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
-           solve_gbs);
+           solve_gbs, obstacle);
     if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;
+        p.solid = NULL; /* FFTW solves plain boxes: the reference is the box without it */
         double ref_seconds = 0, unused;
         hv_solve_info rinfo;
         if (hv_solver_create(&s, &p, &o) == HV_OK &&
             time_solve(s, f, u, repeat, NULL, &ref_seconds, &rinfo, &unused) == HV_OK)
-            printf(",\"ref\":\"fftw\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
-                   ref_seconds, rinfo.relres, seconds / ref_seconds);
+            printf(",\"ref\":\"%s\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
+                   solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres, seconds / ref_seconds);
         hv_solver_destroy(&s);
     }
     printf(",\"copy1_gbs\":%.2f", copy1_gbs);
@@ -272,6 +315,7 @@ static int bench_solve(int argc, char **argv)
                solve_gbs / copy_gbs);
     printf("}\n");
     fflush(stdout);
+    free(solid);
     hv_free(f);
     hv_free(u);
     return HV_EXIT_OK;

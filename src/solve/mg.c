@@ -53,6 +53,8 @@ typedef struct mg_state {
     double *rd, *p, *z, *q; /* fine double work */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
+    float *rt_work;              /* PCG: mg_restrict_transpose's work, rt_threads slices */
+    int rt_threads;
     hv_solver_stats model;       /* traffic model (mg_model_stats_cpu) */
 } mg_state;
 
@@ -271,6 +273,72 @@ static void rb_plane_plain(const mg_state *m, const mg_level *L, int k, int col)
         rb_row_plain(m, L, L->u, L->f, j, k, col);
 }
 
+/* Off-diagonal sum at cell q of a weighted row (float; walls and solid faces
+ * have weight 0 and read a finite value). */
+#define WROW_SUM(R, u, q, cx, cy, cz)                                                              \
+    ((cx) * ((R).wx[q] * (u)[(q) - 1] + (R).wx[(q) + 1] * (u)[(q) + 1]) +                          \
+     (cy) * ((R).wyl[q] * (u)[(R).ym + (q)] + (R).wyh[q] * (u)[(R).yp + (q)]) +                     \
+     ((R).wzl ? (cz) * ((R).wzl[q] * (u)[(R).zm + (q)] + (R).wzh[q] * (u)[(R).zp + (q)]) : 0.0f))
+
+/* Diagonal at cell q of a weighted row. */
+#define WROW_DIAG(R, L, alpha, q, cx, cy, cz)                                                      \
+    ((alpha) * (L)->a[(R).base + (q)] + (cx) * ((R).wx[q] + (R).wx[(q) + 1]) +                     \
+     (cy) * ((R).wyl[q] + (R).wyh[q]) + ((R).wzl ? (cz) * ((R).wzl[q] + (R).wzh[q]) : 0.0f))
+
+/* WROW_SUM at the first or last cell q of a row of nx, without the missing x neighbour. */
+static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int nx, float cx, float cy,
+                                  float cz)
+{
+    float s = cy * (R->wyl[q] * u[R->ym + q] + R->wyh[q] * u[R->yp + q]);
+    if (R->wzl)
+        s += cz * (R->wzl[q] * u[R->zm + q] + R->wzh[q] * u[R->zp + q]);
+    if (q > 0)
+        s += cx * R->wx[q] * u[q - 1];
+    if (q < nx - 1)
+        s += cx * R->wx[q + 1] * u[q + 1];
+    return s;
+}
+
+/* One colour of row (j,k) of a weighted level: u = (f + S) / D, 0 where the row
+ * of A is empty (dinv = 0). The first and last cells are done apart (their
+ * missing x neighbour lies outside the row); the interior is computed for both
+ * colours into a buffer, a loop without branches, and this colour kept. */
+static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, int col)
+{
+    const int nx = L->n[0];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+    float *u = L->u + R.base;
+    const float *f = L->f + R.base, *dinv = L->dinv + R.base;
+    int i = (j + k + col) & 1;
+    if (i == 0)
+        u[0] = (f[0] + wrow_edge_sum(&R, u, 0, nx, cx, cy, cz)) * dinv[0];
+    if (nx > 1 && ((nx - 1) & 1) == i)
+        u[nx - 1] = (f[nx - 1] + wrow_edge_sum(&R, u, nx - 1, nx, cx, cy, cz)) * dinv[nx - 1];
+    if (i == 0)
+        i = 2;
+    if (nx <= MG_ROW_BUF) {
+        float buf[MG_ROW_BUF];
+        if (R.wzl) {
+            for (int q = 1; q < nx - 1; q++)
+                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
+                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q]) +
+                          cz * (R.wzl[q] * u[R.zm + q] + R.wzh[q] * u[R.zp + q])) *
+                         dinv[q];
+        } else {
+            for (int q = 1; q < nx - 1; q++)
+                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
+                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q])) *
+                         dinv[q];
+        }
+        for (; i < nx - 1; i += 2)
+            u[i] = buf[i];
+    } else {
+        for (; i < nx - 1; i += 2)
+            u[i] = (f[i] + WROW_SUM(R, u, i, cx, cy, cz)) * dinv[i];
+    }
+}
+
 static void rb_sweep(const mg_state *m, mg_level *L, int col)
 {
     float *u = L->u;
@@ -285,17 +353,7 @@ static void rb_sweep(const mg_state *m, mg_level *L, int col)
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
     for (int k = 0; k < L->n[2]; k++)
         for (int j = 0; j < L->n[1]; j++)
-            for (int i = (j + k + col) & 1; i < L->n[0]; i += 2) {
-                size_t c = (size_t)i + L->sy * j + L->sz * k;
-                if (L->dinv[c] == 0) {
-                    u[c] = 0;
-                    continue;
-                }
-                double S, D;
-                MG_STENCIL(L, m, u, i, j, k, c, S, D);
-                (void)D;
-                u[c] = (float)((f[c] + S) * L->dinv[c]);
-            }
+            rb_row_weighted(m, L, j, k, col);
 }
 
 /* Neighbour rows and diagonal of a plain-level row (walls drop their faces). */
@@ -543,57 +601,102 @@ static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
  * corridors stalled near 3e-2). Gathers, for each coarse cell, the fine cells
  * whose interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes). */
 void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
-                           const float *r, float *fcoarse)
+                           const float *r, float *fcoarse, float *work, int nthreads)
 {
     const int *co = F->coarsen;
     int nchild = 1;
     for (int b = 0; b < dim; b++)
         nchild *= co[b] ? 2 : 1;
     const float scale = 1.0f / (float)nchild;
-#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
-    for (int K = 0; K < C->n[2]; K++)
-        for (int J = 0; J < C->n[1]; J++)
-            for (int I = 0; I < C->n[0]; I++) {
-                size_t cc = (size_t)I + C->sy * J + C->sz * K;
-                if (!C->plain && C->a[cc] == 0.0f) {
-                    fcoarse[cc] = 0;
+    const int nfx = F->n[0], nfy = F->n[1], ncx = C->n[0], ncy = C->n[1];
+    /* Separable: P's weights are products of one weight per axis, so P^T is
+     * applied along x to each fine row, then scattered along y and z into the
+     * coarse plane (the transpose of prolong_axis, axis by axis). */
+    int nt = 1;
+#ifdef _OPENMP
+    if (F->count > MG_PAR_MIN)
+        nt = omp_get_max_threads() < nthreads ? omp_get_max_threads() : nthreads;
+#else
+    (void)nthreads;
+#endif
+#pragma omp parallel num_threads(nt) if (nt > 1)
+    {
+        int t = 0;
+#ifdef _OPENMP
+        t = omp_get_thread_num();
+#endif
+        float *g = work + (size_t)t * mg_restrict_transpose_work(F, C);
+        float *xl = g + nfx, *acc = xl + ncx;
+#pragma omp for schedule(static)
+        for (int K = 0; K < C->n[2]; K++) {
+            memset(acc, 0, (size_t)ncx * ncy * sizeof(float));
+            const int klo = co[2] ? 2 * K - 1 : K, khi = co[2] ? 2 * K + 2 : K;
+            for (int k = klo < 0 ? 0 : klo; k <= khi && k < F->n[2]; k++) {
+                const float wk = prolong_axis_weight(co[2], C->n[2], k, K);
+                if (wk == 0)
                     continue;
-                }
-                int lo[3], hi[3], CI[3] = {I, J, K};
-                for (int b = 0; b < 3; b++) {
-                    lo[b] = co[b] ? 2 * CI[b] - 1 : CI[b];
-                    hi[b] = co[b] ? 2 * CI[b] + 2 : CI[b];
-                    if (lo[b] < 0)
-                        lo[b] = 0;
-                    if (hi[b] > F->n[b] - 1)
-                        hi[b] = F->n[b] - 1;
-                }
-                float s = 0;
-                for (int k = lo[2]; k <= hi[2]; k++) {
-                    float wk = prolong_axis_weight(co[2], C->n[2], k, K);
-                    if (wk == 0)
-                        continue;
-                    for (int j = lo[1]; j <= hi[1]; j++) {
-                        float wj = prolong_axis_weight(co[1], C->n[1], j, J);
-                        if (wj == 0)
-                            continue;
-                        for (int i = lo[0]; i <= hi[0]; i++) {
-                            float w = wk * wj * prolong_axis_weight(co[0], C->n[0], i, I);
-                            if (w == 0)
-                                continue;
-                            size_t fc = (size_t)i + F->sy * j + F->sz * k;
-                            s += w * (pn ? pn[fc] : 1.0f) * r[fc];
-                        }
+                for (int j = 0; j < nfy; j++) {
+                    const size_t fb = F->sy * (size_t)j + F->sz * (size_t)k;
+                    const float *rr = r + fb;
+                    if (pn) {
+                        const float *pr = pn + fb;
+                        for (int i = 0; i < nfx; i++)
+                            g[i] = pr[i] * rr[i];
+                    } else {
+                        memcpy(g, rr, (size_t)nfx * sizeof(float));
                     }
+                    /* along x: coarse I takes 3/4 of fine 2I and 2I+1, 1/4 of 2I-1
+                     * and 2I+2; a fine cell at a wall gives all its weight to I */
+                    if (co[0]) {
+                        for (int I = 0; I < ncx; I++) {
+                            const int i0 = 2 * I;
+                            float v = 0.75f * g[i0];
+                            if (i0 + 1 < nfx)
+                                v += 0.75f * g[i0 + 1];
+                            if (i0 > 0)
+                                v += 0.25f * g[i0 - 1];
+                            if (i0 + 2 < nfx)
+                                v += 0.25f * g[i0 + 2];
+                            xl[I] = v;
+                        }
+                        xl[0] += 0.25f * g[0];
+                        if ((nfx & 1) == 0)
+                            xl[ncx - 1] += 0.25f * g[nfx - 1];
+                    } else {
+                        memcpy(xl, g, (size_t)ncx * sizeof(float));
+                    }
+                    /* along y: fine row j goes to its two coarse rows */
+                    int J0, J1;
+                    float wj1;
+                    prolong_axis(co[1], ncy, j, &J0, &J1, &wj1);
+                    float *a0 = acc + (size_t)ncx * J0, *a1 = acc + (size_t)ncx * J1;
+                    const float w0 = wk * (1.0f - wj1), w1 = wk * wj1;
+                    for (int I = 0; I < ncx; I++)
+                        a0[I] += w0 * xl[I];
+                    if (w1 != 0)
+                        for (int I = 0; I < ncx; I++)
+                            a1[I] += w1 * xl[I];
                 }
-                fcoarse[cc] = s * scale;
             }
+            for (int J = 0; J < ncy; J++) {
+                const size_t cb = C->sy * (size_t)J + C->sz * (size_t)K;
+                const float *ar = acc + (size_t)ncx * J;
+                float *out = fcoarse + cb;
+                if (C->plain)
+                    for (int I = 0; I < ncx; I++)
+                        out[I] = ar[I] * scale;
+                else
+                    for (int I = 0; I < ncx; I++)
+                        out[I] = C->a[cb + I] != 0.0f ? ar[I] * scale : 0.0f;
+            }
+        }
+    }
 }
 
 static void restrict_transpose(const mg_state *m, int l)
 {
     mg_restrict_transpose(&m->lv[l], &m->lv[l + 1], m->dim, m->pnorm[l], m->lv[l].r,
-                          m->lv[l + 1].f);
+                          m->lv[l + 1].f, m->rt_work, m->rt_threads);
 }
 
 /* Row (j,k) of u_F += P u_C from a plain coarse level: blend the (up to) four
@@ -1163,6 +1266,7 @@ static void mg_destroy(void *state)
         free(L->region);
         free(L->bwork);
     }
+    hv_free(m->rt_work);
     hv_free(m->rd);
     hv_free(m->p);
     hv_free(m->z);
@@ -1214,6 +1318,21 @@ static hv_status mg_create(void **state, const hv_setup *s)
             goto fail;
         }
         mg_prolong_norm(F, C, pn);
+    }
+    if (m->use_pcg && m->nlev > 1) {
+        size_t per = 0;
+        for (int l = 0; l + 1 < m->nlev; l++) {
+            size_t w = mg_restrict_transpose_work(&m->lv[l], &m->lv[l + 1]);
+            per = w > per ? w : per;
+        }
+        m->rt_threads = 1;
+#ifdef _OPENMP
+        m->rt_threads = omp_get_max_threads();
+#endif
+        if (!(m->rt_work = hv_malloc((size_t)m->rt_threads * per * sizeof(float)))) {
+            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the restriction's work");
+            goto fail;
+        }
     }
     /* Bottom: CG work. */
     mg_level *L = &m->lv[m->nlev - 1];

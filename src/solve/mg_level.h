@@ -88,13 +88,52 @@ void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, floa
  * coarse cells; pn is NULL when C is plain (weights then sum to one). */
 void mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn);
 void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
-                           const float *r, float *fc);
+                           const float *r, float *fc, float *work, int nthreads);
+/* Floats of work per thread that mg_restrict_transpose needs for F -> C (it
+ * runs on at most nthreads threads, each with its own slice of work). */
+static inline size_t mg_restrict_transpose_work(const mg_level *F, const mg_level *C)
+{
+    size_t n = (size_t)F->n[0] + (size_t)C->n[0] + (size_t)C->n[0] * (size_t)C->n[1];
+    return (n + 15) & ~(size_t)15;
+}
 
 /* Index of the axis-a face (i,j,k) (the low face of cell (i,j,k)). */
 static inline size_t mg_face_index(const mg_level *L, int a, int i, int j, int k)
 {
     size_t m0 = (size_t)L->n[0] + (a == 0), m1 = (size_t)L->n[1] + (a == 1);
     return (size_t)i + m0 * ((size_t)j + m1 * (size_t)k);
+}
+
+/* Row (j,k) of a weighted level as flat arrays, for loops without branches:
+ * cell i of the row has x faces wx[i] (low) and wx[i+1] (high), y faces wyl[i]
+ * and wyh[i], z faces wzl[i] and wzh[i] (3D; NULL in 2D), and neighbour rows
+ * ym/yp/zm/zp as offsets from the row (0, the row itself, where the face is a
+ * wall: its weight is 0 there and the value read is finite). */
+typedef struct mg_wrow {
+    size_t base;
+    const float *wx, *wyl, *wyh, *wzl, *wzh;
+    ptrdiff_t ym, yp, zm, zp;
+} mg_wrow;
+
+static inline mg_wrow mg_wrow_at(const mg_level *L, int dim, int j, int k)
+{
+    const size_t nx = (size_t)L->n[0], ny = (size_t)L->n[1];
+    mg_wrow R;
+    R.base = L->sy * (size_t)j + L->sz * (size_t)k;
+    R.wx = L->w[0] + (nx + 1) * ((size_t)j + ny * (size_t)k);
+    R.wyl = L->w[1] + nx * ((size_t)j + (ny + 1) * (size_t)k);
+    R.wyh = R.wyl + nx;
+    R.ym = j > 0 ? -(ptrdiff_t)L->sy : 0;
+    R.yp = j < L->n[1] - 1 ? (ptrdiff_t)L->sy : 0;
+    R.wzl = R.wzh = NULL;
+    R.zm = R.zp = 0;
+    if (dim == 3) {
+        R.wzl = L->w[2] + nx * ((size_t)j + ny * (size_t)k);
+        R.wzh = R.wzl + nx * ny;
+        R.zm = k > 0 ? -(ptrdiff_t)L->sz : 0;
+        R.zp = k < L->n[2] - 1 ? (ptrdiff_t)L->sz : 0;
+    }
+    return R;
 }
 
 /* Off-diagonal sum  sum_faces c_b w_f u_nb  and diagonal at cell (i,j,k).
