@@ -424,15 +424,20 @@ static void level_residual(const mg_state *m, mg_level *L)
             }
         return;
     }
+    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const int nx = L->n[0];
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
     for (int k = 0; k < L->n[2]; k++)
-        for (int j = 0; j < L->n[1]; j++)
-            for (int i = 0; i < L->n[0]; i++) {
-                size_t c = (size_t)i + L->sy * j + L->sz * k;
-                double S, D;
-                MG_STENCIL(L, m, u, i, j, k, c, S, D);
-                r[c] = (float)(f[c] - (D * u[c] - S));
-            }
+        for (int j = 0; j < L->n[1]; j++) {
+            const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+            const float *ur = u + R.base, *fr = f + R.base;
+            float *rr = r + R.base;
+            for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
+                rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] -
+                                 wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
+            for (int q = 1; q < nx - 1; q++)
+                rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
+        }
 }
 
 /* y = A x in double on a level (fine residuals, bottom CG). */
@@ -741,6 +746,56 @@ MG_KERNEL static void prolong_row_plain(mg_level *F, const mg_level *C, int j, i
         uf[2 * (nc - 1) + 1] += line[nc - 1];
 }
 
+/* Row (j,k) of u_F += P u_C from a weighted coarse level of at most MG_ROW_BUF
+ * cells per row: the four coarse rows blended in y and z into a line of values
+ * and a line of weights (empty coarse cells left out), then interpolated along
+ * x and divided, on fluid fine cells where some weight reaches. */
+static void prolong_row_weighted(mg_level *F, const mg_level *C, int j, int k)
+{
+    const int *co = F->coarsen;
+    int K0, K1, J0, J1;
+    float wk1, wj1;
+    prolong_axis(co[2], C->n[2], k, &K0, &K1, &wk1);
+    prolong_axis(co[1], C->n[1], j, &J0, &J1, &wj1);
+    const size_t o00 = C->sy * J0 + C->sz * K0, o01 = C->sy * J1 + C->sz * K0;
+    const size_t o10 = C->sy * J0 + C->sz * K1, o11 = C->sy * J1 + C->sz * K1;
+    const float a00 = (1 - wk1) * (1 - wj1), a01 = (1 - wk1) * wj1;
+    const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
+    const float *uc = C->u, *ac = C->a;
+    const int nc = C->n[0], nf = F->n[0];
+    float line[MG_ROW_BUF], lw[MG_ROW_BUF];
+    for (int I = 0; I < nc; I++) {
+        const float m00 = ac[o00 + I] != 0.0f ? a00 : 0.0f, m01 = ac[o01 + I] != 0.0f ? a01 : 0.0f;
+        const float m10 = ac[o10 + I] != 0.0f ? a10 : 0.0f, m11 = ac[o11 + I] != 0.0f ? a11 : 0.0f;
+        line[I] = m00 * uc[o00 + I] + m01 * uc[o01 + I] + m10 * uc[o10 + I] + m11 * uc[o11 + I];
+        lw[I] = m00 + m01 + m10 + m11;
+    }
+    const size_t fb = F->sy * (size_t)j + F->sz * (size_t)k;
+    float *uf = F->u + fb;
+    const float *af = F->plain ? NULL : F->a + fb;
+    if (!co[0]) {
+        for (int i = 0; i < nf; i++)
+            if ((!af || af[i] != 0.0f) && lw[i] > 0)
+                uf[i] += line[i] / lw[i];
+        return;
+    }
+    /* i = 2I takes 3/4 of I and 1/4 of I-1, i = 2I+1 3/4 of I and 1/4 of I+1;
+     * all of I where that neighbour is beyond a wall */
+    for (int i = 0; i < nf; i++) {
+        const int I = i >> 1, nb = (i & 1) ? I + 1 : I - 1;
+        float s, w;
+        if (nb < 0 || nb >= nc) {
+            s = line[I];
+            w = lw[I];
+        } else {
+            s = 0.75f * line[I] + 0.25f * line[nb];
+            w = 0.75f * lw[I] + 0.25f * lw[nb];
+        }
+        if ((!af || af[i] != 0.0f) && w > 0)
+            uf[i] += s / w;
+    }
+}
+
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
  * levels empty coarse cells are left out and the weights renormalized. */
 static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set)
@@ -761,6 +816,13 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int s
     }
     if (set)
         zero_f(F->u, F->count);
+    if (C->n[0] <= MG_ROW_BUF) {
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
+        for (int k = 0; k < F->n[2]; k++)
+            for (int j = 0; j < F->n[1]; j++)
+                prolong_row_weighted(F, C, j, k);
+        return;
+    }
 #pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
     for (int k = 0; k < F->n[2]; k++)
         for (int j = 0; j < F->n[1]; j++) {
