@@ -317,7 +317,18 @@ static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, 
         u[nx - 1] = (f[nx - 1] + wrow_edge_sum(&R, u, nx - 1, nx, cx, cy, cz)) * dinv[nx - 1];
     if (i == 0)
         i = 2;
-    if (nx <= MG_ROW_BUF) {
+    if (L->binary && nx <= MG_ROW_BUF) {
+        /* solid neighbours hold u = 0: the plain stencil, with this cell's dinv */
+        const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
+        const float *ym = u + R.ym, *yp = u + R.yp, *zm = u + R.zm, *zp = u + R.zp;
+        float buf[MG_ROW_BUF];
+        for (int q = 1; q < nx - 1; q++)
+            buf[q] = (f[q] + cx * (u[q - 1] + u[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                      cz * (wzm * zm[q] + wzp * zp[q])) *
+                     dinv[q];
+        for (; i < nx - 1; i += 2)
+            u[i] = buf[i];
+    } else if (nx <= MG_ROW_BUF) {
         float buf[MG_ROW_BUF];
         if (R.wzl) {
             for (int q = 1; q < nx - 1; q++)
@@ -435,6 +446,17 @@ static void level_residual(const mg_state *m, mg_level *L)
             for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
                 rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] -
                                  wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
+            if (L->binary) { /* solid neighbours hold u = 0; D = 1 / dinv, 0 on empty rows */
+                const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
+                const float *ym = ur + R.ym, *yp = ur + R.yp, *zm = ur + R.zm, *zp = ur + R.zp;
+                const float *dv = L->dinv + R.base;
+                for (int q = 1; q < nx - 1; q++) {
+                    float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                               cz * (wzm * zm[q] + wzp * zp[q]);
+                    rr[q] = dv[q] > 0 ? fr[q] - (ur[q] / dv[q] - sn) : fr[q];
+                }
+                continue;
+            }
             for (int q = 1; q < nx - 1; q++)
                 rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
         }

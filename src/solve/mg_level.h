@@ -28,6 +28,9 @@ typedef struct mg_level {
     double c[3];          /* beta / h_b^2 (0 for axes beyond dim) */
     int coarsen[3];       /* the next level halves this axis */
     int plain;
+    int binary;           /* weighted, with a = 0/1 and w_f = a_c a_nb inside (the fine
+                             level of a mask): where u stays 0 on empty cells, as the
+                             CPU cycle keeps it, A u needs no weights but dinv */
     float *a;             /* cell weights (NULL when plain) */
     float *w[3];          /* face weights, n[b]+1 along b (NULL when plain) */
     float *dinv;          /* 1/diag (NULL when plain); 0 where the row is empty */

@@ -230,6 +230,7 @@ static hv_status level_from_mask(const mg_hierarchy *H, mg_level *L, const uint8
                 }
     }
     level_fill_dinv(H, L);
+    L->binary = 1;
     return HV_OK;
 }
 
@@ -484,7 +485,8 @@ fail:
  * the last pre-sweep also forms the residual and restricts it (the fine residual
  * is never stored: only the coarse f is written), the first post-sweep also adds
  * the prolongation (reads the coarse u), and other levels clear u before the
- * cycle (a write). The correction of a plain fine level is one pass: reads x,
+ * cycle (a write). A binary level (the fine level of a mask) reads only 1/diag
+ * there, the smoother and residual taking the plain stencil (mg.c). The correction of a plain fine level is one pass: reads x,
  * the correction and f, writes x and the next float right-hand side. */
 static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre, int post,
                   int pcg, int fused, hv_solver_stats *st)
@@ -496,7 +498,8 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
         const mg_level *L = &lv[l];
         memcpy(st->n[l], L->n, sizeof st->n[l]);
         st->plain[l] = L->plain;
-        double cells = (double)L->count, coef = L->plain ? 0 : 4.0 * (2 + dim);
+        double cells = (double)L->count;
+        double coef = L->plain ? 0 : fused && L->binary ? 4.0 : 4.0 * (2 + dim);
         int rb_fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
         double sweep = smoother == HV_SMOOTH_RBGS ? (rb_fused ? 1 : 2) * (12 + coef) : 32 + coef;
         int steps = smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (pre + post) : pre + post;
