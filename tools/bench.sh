@@ -23,6 +23,13 @@ for b in $backends; do
   "$hv" bench solve --n 2048 --dim 2 --t-scale 4 --backend $b --wisdom "$wisdom"
   "$hv" bench solve --n 2048 --dim 2 --poisson --backend $b --wisdom "$wisdom"
 done
+# With solid cells (PCG with the V-cycle inside); the reference is FFTW on the
+# same box without them.
+for o in ball baffles; do
+  "$hv" bench solve --n 128 --t-scale 4 --obstacle $o --wisdom "$wisdom"
+  "$hv" bench solve --n 128 --poisson --obstacle $o --wisdom "$wisdom"
+done
+"$hv" bench solve --n 256 --t-scale 4 --obstacle ball --wisdom "$wisdom"
 
 bunny="$shared/meshes/stanford-bunny.obj"
 if [ -f "$bunny" ]; then
