@@ -503,11 +503,13 @@ static double p_axis(int coarsen, int nc, int i, int I)
 
 /* The PCG restriction must be the transpose of the renormalized prolongation
  * (else CG loses conjugacy): <R r, v>_C 2^d = <r, P v>_F for random r and v, on
- * odd and even sizes with solid cells, 2D and 3D, on 1 and 3 threads. */
+ * odd and even sizes with solid cells, 2D and 3D, on 1 and 3 threads (grids
+ * above MG_PAR_MIN cells run threaded). */
 START_TEST(restriction_should_be_the_transpose_of_prolongation)
 {
     const shape shapes[] = {{3, {13, 10, 7}, 1}, {3, {16, 9, 12}, 2}, {3, {21, 18, 16}, 1},
-                            {2, {45, 38, 1}, 1}, {2, {60, 61, 1}, 2}, {3, {12, 12, 12}, 0}};
+                            {2, {45, 38, 1}, 1}, {2, {60, 61, 1}, 2}, {3, {12, 12, 12}, 0},
+                            {3, {40, 33, 27}, 1}, {2, {250, 141, 1}, 2}}; /* the last two run threaded */
     for (size_t q = 0; q < sizeof shapes / sizeof shapes[0]; q++) {
         const shape *sh = &shapes[q];
         uint8_t *solid = make_mask(sh);
@@ -543,9 +545,17 @@ START_TEST(restriction_should_be_the_transpose_of_prolongation)
                     for (int i = 0; i < F->n[0]; i++) {
                         size_t fcell = i + F->sy * j + F->sz * k;
                         double pv = 0, ws = 0;
-                        for (int K = 0; K < C->n[2]; K++)
-                            for (int J = 0; J < C->n[1]; J++)
-                                for (int I = 0; I < C->n[0]; I++) {
+                        /* coarse cells within one of i/2 (p_axis is 0 further out) */
+                        int lo[3], hi[3], fi[3] = {i, j, k};
+                        for (int b = 0; b < 3; b++) {
+                            lo[b] = F->coarsen[b] ? fi[b] / 2 - 1 : fi[b];
+                            hi[b] = F->coarsen[b] ? fi[b] / 2 + 1 : fi[b];
+                            lo[b] = lo[b] < 0 ? 0 : lo[b];
+                            hi[b] = hi[b] > C->n[b] - 1 ? C->n[b] - 1 : hi[b];
+                        }
+                        for (int K = lo[2]; K <= hi[2]; K++)
+                            for (int J = lo[1]; J <= hi[1]; J++)
+                                for (int I = lo[0]; I <= hi[0]; I++) {
                                     double w = p_axis(F->coarsen[0], C->n[0], i, I) *
                                                p_axis(F->coarsen[1], C->n[1], j, J) *
                                                p_axis(F->coarsen[2], C->n[2], k, K);

@@ -625,8 +625,8 @@ static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
 /* f_C = P^T r_F / 2^d: the restriction that makes the V-cycle a symmetric
  * operator, for use as a CG preconditioner (mean-of-children restriction is not
  * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
- * corridors stalled near 3e-2). Gathers, for each coarse cell, the fine cells
- * whose interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes). */
+ * corridors stalled near 3e-2). Coarse cell I takes fine cells 2I-1 .. 2I+2
+ * along each coarsened axis, weighted as prolong_axis weights them. */
 void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
                            const float *r, float *fcoarse, float *work, int nthreads)
 {
