@@ -164,8 +164,10 @@ END_TEST
 
 START_TEST(multigrid_and_fftw_should_agree)
 {
-    const shape plain[] = {{3, {48, 48, 48}, 0}, {3, {37, 64, 80}, 0}, {2, {101, 77, 1}, 0}};
-    for (int q = 0; q < 3; q++)
+    /* 4500 x 7: rows wider than the kernels' row buffers (MG_ROW_BUF) */
+    const shape plain[] = {{3, {48, 48, 48}, 0}, {3, {37, 64, 80}, 0}, {2, {101, 77, 1}, 0},
+                           {2, {4500, 7, 1}, 0}};
+    for (int q = 0; q < (int)(sizeof plain / sizeof plain[0]); q++)
         for (int poisson = 0; poisson <= 1; poisson++) {
             const shape *sh = &plain[q];
             double h = 1.0 / sh->n[0];
@@ -200,6 +202,36 @@ START_TEST(multigrid_and_fftw_should_agree)
             hv_solver_destroy(&mg);
             hv_solver_destroy(&ff);
         }
+}
+END_TEST
+
+/* Rows wider than the kernels' row buffers, with solid cells: the weighted
+ * levels' fallbacks (fine rows of 8300, coarse rows of 4150). */
+START_TEST(wide_rows_with_solid_cells_should_converge)
+{
+    shape sh = {2, {8300, 5, 1}, 2};
+    uint8_t *mask = make_mask(&sh);
+    size_t n = (size_t)sh.n[0] * sh.n[1];
+    double h = 1.0 / 64;
+    hv_problem p = {2, {sh.n[0], sh.n[1], 1}, h, mask, 1, 4 * h * h};
+    float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
+    tl_fill_random(f, n, 5);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    o.tol = 1e-8;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
+    ck_assert_msg(info.reason == HV_STOP_CONVERGED && info.iterations <= 20,
+                  "reason %d after %d iterations at %g", (int)info.reason, info.iterations, info.relres);
+    for (size_t c = 0; c < n; c++)
+        ck_assert(isfinite(u[c]) && (!mask[c] || u[c] == 0));
+    hv_solver_destroy(&s);
+    free(f);
+    free(u);
+    free(mask);
 }
 END_TEST
 
@@ -596,6 +628,7 @@ int main(void)
     tcase_add_loop_test(tc, vcycle_should_reduce_poisson_residual_below_0_15_per_cycle, 0, NSHAPES);
     tcase_add_test(tc, cycles_should_not_depend_on_the_thread_count);
     tcase_add_test(tc, restriction_should_be_the_transpose_of_prolongation);
+    tcase_add_test(tc, wide_rows_with_solid_cells_should_converge);
     tcase_add_test(tc, gpu_smoothers_should_converge);
     tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);

@@ -824,16 +824,13 @@ static void prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int s
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
-    if (C->plain) {
-#pragma omp parallel if (F->count > MG_PAR_MIN)
-        {
-            float *line = hv_malloc((size_t)C->n[0] * sizeof(float));
-#pragma omp for collapse(2) schedule(static)
-            for (int k = 0; k < F->n[2]; k++)
-                for (int j = 0; j < F->n[1]; j++)
-                    prolong_row_plain(F, C, j, k, line, set);
-            hv_free(line);
-        }
+    if (C->n[0] <= MG_ROW_BUF && C->plain) {
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
+        for (int k = 0; k < F->n[2]; k++)
+            for (int j = 0; j < F->n[1]; j++) {
+                float line[MG_ROW_BUF];
+                prolong_row_plain(F, C, j, k, line, set);
+            }
         return;
     }
     if (set)
@@ -1493,15 +1490,26 @@ static int stagnated(const hv_solve_info *info)
         const ptrdiff_t ym = R.ym, yp = R.yp, zm = R.zm, zp = R.zp;                               \
         const double din = R.dyz + 2 * cx;                                                        \
         double rb[MG_ROW_BUF];                                                                    \
-        /* the residual per cell into rb: branch-free interior (vectorizes), then the edges */    \
-        for (int i = 1; i < nx - 1; i++) {                                                        \
-            double v = XE(i);                                                                     \
-            double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                               \
-                       cz * (wzm * XE(i + zm) + wzp * XE(i + zp)) + cx * (XE(i - 1) + XE(i + 1)); \
-            double r = f_[i] - (din * v - s);                                                     \
-            xo_[i] = v;                                                                           \
-            fo_[i] = (float)r;                                                                    \
-            rb[i] = r;                                                                            \
+        double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};                                                 \
+        /* the interior in chunks of MG_ROW_BUF: the residual per cell into rb without            \
+         * branches (vectorizes), then its squares in 8 partial sums (a serial sum does not) */   \
+        for (int c0 = 1; c0 < nx - 1; c0 += MG_ROW_BUF) {                                         \
+            const int c1 = nx - 1 - c0 < MG_ROW_BUF ? nx - 1 : c0 + MG_ROW_BUF;                   \
+            for (int i = c0; i < c1; i++) {                                                       \
+                double v = XE(i);                                                                 \
+                double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                           \
+                           cz * (wzm * XE(i + zm) + wzp * XE(i + zp)) + cx * (XE(i - 1) + XE(i + 1)); \
+                double r = f_[i] - (din * v - s);                                                 \
+                xo_[i] = v;                                                                       \
+                fo_[i] = (float)r;                                                                \
+                rb[i - c0] = r;                                                                   \
+            }                                                                                     \
+            int q0 = 0;                                                                           \
+            for (; q0 + 8 <= c1 - c0; q0 += 8)                                                    \
+                for (int q = 0; q < 8; q++)                                                       \
+                    acc[q] += rb[q0 + q] * rb[q0 + q];                                            \
+            for (; q0 < c1 - c0; q0++)                                                            \
+                acc[0] += rb[q0] * rb[q0];                                                        \
         }                                                                                         \
         for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {                                     \
             double v = XE(i);                                                                     \
@@ -1513,16 +1521,8 @@ static int stagnated(const hv_solve_info *info)
             double r = f_[i] - (d * v - s);                                                       \
             xo_[i] = v;                                                                           \
             fo_[i] = (float)r;                                                                    \
-            rb[i] = r;                                                                            \
+            acc[1] += r * r;                                                                      \
         }                                                                                         \
-        /* sum of squares in 8 partial sums (a serial sum does not vectorize) */                  \
-        double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};                                                 \
-        int i = 0;                                                                                \
-        for (; i + 8 <= nx; i += 8)                                                               \
-            for (int q = 0; q < 8; q++)                                                           \
-                acc[q] += rb[i + q] * rb[i + q];                                                  \
-        for (; i < nx; i++)                                                                       \
-            acc[0] += rb[i] * rb[i];                                                              \
         return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])); \
     } while (0)
 
