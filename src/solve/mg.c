@@ -21,15 +21,11 @@
 #include <omp.h>
 #endif
 
-/* The row kernels are built twice, for AVX2 and the baseline, and picked at
- * load time (GCC function multiversioning): they are arithmetic-bound once the
- * passes are fused (SSE: 52% of a 256^3 solve in the sweep rows). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
-#define MG_KERNEL __attribute__((target_clones("avx2", "default")))
+/* MG_KERNEL (mg_level.h): row kernels built for AVX2 and the baseline. */
+#if MG_MULTIVERSION
 #define MG_AVX512 1
 #include <immintrin.h>
 #else
-#define MG_KERNEL
 #define MG_AVX512 0
 #endif
 
@@ -303,7 +299,7 @@ static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int n
  * of A is empty (dinv = 0). The first and last cells are done apart (their
  * missing x neighbour lies outside the row); the interior is computed for both
  * colours into a buffer, a loop without branches, and this colour kept. */
-static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, int col)
+MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, int col)
 {
     const int nx = L->n[0];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
@@ -419,6 +415,30 @@ static inline plain_row plain_row_at(const mg_state *m, const mg_level *L, int j
         }                                                                                             \
     } while (0)
 
+/* Row (j,k) of r = f - A u on a weighted level. */
+MG_KERNEL static void residual_row_weighted(const mg_state *m, const mg_level *L, int j, int k)
+{
+    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const int nx = L->n[0];
+    const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+    const float *ur = L->u + R.base, *fr = L->f + R.base;
+    float *rr = L->r + R.base;
+    for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
+        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
+    if (L->binary) { /* solid neighbours hold u = 0; D = 1 / dinv, 0 on empty rows */
+        const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
+        const float *ym = ur + R.ym, *yp = ur + R.yp, *zm = ur + R.zm, *zp = ur + R.zp;
+        const float *dv = L->dinv + R.base;
+        for (int q = 1; q < nx - 1; q++) {
+            float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) + cz * (wzm * zm[q] + wzp * zp[q]);
+            rr[q] = dv[q] > 0 ? fr[q] - (ur[q] / dv[q] - sn) : fr[q];
+        }
+        return;
+    }
+    for (int q = 1; q < nx - 1; q++)
+        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
+}
+
 /* r = f - A u on a level (float). */
 static void level_residual(const mg_state *m, mg_level *L)
 {
@@ -435,31 +455,10 @@ static void level_residual(const mg_state *m, mg_level *L)
             }
         return;
     }
-    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
-    const int nx = L->n[0];
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
     for (int k = 0; k < L->n[2]; k++)
-        for (int j = 0; j < L->n[1]; j++) {
-            const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
-            const float *ur = u + R.base, *fr = f + R.base;
-            float *rr = r + R.base;
-            for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
-                rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] -
-                                 wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
-            if (L->binary) { /* solid neighbours hold u = 0; D = 1 / dinv, 0 on empty rows */
-                const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
-                const float *ym = ur + R.ym, *yp = ur + R.yp, *zm = ur + R.zm, *zp = ur + R.zp;
-                const float *dv = L->dinv + R.base;
-                for (int q = 1; q < nx - 1; q++) {
-                    float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
-                               cz * (wzm * zm[q] + wzp * zp[q]);
-                    rr[q] = dv[q] > 0 ? fr[q] - (ur[q] / dv[q] - sn) : fr[q];
-                }
-                continue;
-            }
-            for (int q = 1; q < nx - 1; q++)
-                rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
-        }
+        for (int j = 0; j < L->n[1]; j++)
+            residual_row_weighted(m, L, j, k);
 }
 
 /* y = A x in double on a level (fine residuals, bottom CG). */
@@ -772,7 +771,7 @@ MG_KERNEL static void prolong_row_plain(mg_level *F, const mg_level *C, int j, i
  * cells per row: the four coarse rows blended in y and z into a line of values
  * and a line of weights (empty coarse cells left out), then interpolated along
  * x and divided, on fluid fine cells where some weight reaches. */
-static void prolong_row_weighted(mg_level *F, const mg_level *C, int j, int k)
+MG_KERNEL static void prolong_row_weighted(mg_level *F, const mg_level *C, int j, int k)
 {
     const int *co = F->coarsen;
     int K0, K1, J0, J1;
