@@ -190,16 +190,14 @@ int main(int argc, char **argv)
     Suite *su = suite_create("distance_cl");
     TCase *tc = tcase_create("distance_cl");
     tcase_set_timeout(tc, 600);
-    if (hv_opencl_probe(NULL) != HV_OK) {
-        printf("note: no usable OpenCL device (%s); skipping\n", hv_last_error());
-        suite_add_tcase(su, tc);
-        return tl_run(su);
-    }
-    tcase_add_test(tc, opencl_distance_should_match_mg_in_2d_with_obstacles);
-    tcase_add_test(tc, opencl_distance_should_match_mg_in_3d_with_obstacles);
-    tcase_add_test(tc, opencl_distance_should_match_mg_over_many_stages);
-    tcase_add_test(tc, opencl_distance_should_match_on_a_grid_without_mask);
-    tcase_add_test(tc, opencl_distance_without_fp64_should_fall_back_to_the_host);
+    int have_cl = hv_opencl_probe(NULL) == HV_OK;
+    char why[512];
+    snprintf(why, sizeof why, "no usable OpenCL device (%s)", hv_last_error());
+    TL_ADD_IF(tc, opencl_distance_should_match_mg_in_2d_with_obstacles, have_cl, why);
+    TL_ADD_IF(tc, opencl_distance_should_match_mg_in_3d_with_obstacles, have_cl, why);
+    TL_ADD_IF(tc, opencl_distance_should_match_mg_over_many_stages, have_cl, why);
+    TL_ADD_IF(tc, opencl_distance_should_match_on_a_grid_without_mask, have_cl, why);
+    TL_ADD_IF(tc, opencl_distance_without_fp64_should_fall_back_to_the_host, have_cl, why);
     suite_add_tcase(su, tc);
     return tl_run(su);
 }

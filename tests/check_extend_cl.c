@@ -448,19 +448,16 @@ int main(int argc, char **argv)
     TCase *tc = tcase_create("extend_cl");
     tcase_set_timeout(tc, 600);
     tcase_add_test(tc, heatvox_without_a_platform_should_fail_clearly);
-    if (hv_opencl_probe(NULL) != HV_OK) {
-        printf("note: no usable OpenCL device (%s); only the command's failure without one\n",
-               hv_last_error());
-        suite_add_tcase(su, tc);
-        return tl_run(su);
-    }
-    tcase_add_test(tc, opencl_extension_should_match_mg_on_a_sphere);
-    tcase_add_test(tc, opencl_extension_should_match_mg_on_a_torus);
-    tcase_add_test(tc, opencl_extension_should_match_mg_with_obstacles_and_in_2d);
-    tcase_add_test(tc, opencl_extension_should_reproduce_constant_fields);
-    tcase_add_test(tc, opencl_extension_without_fp64_should_match_mg);
-    tcase_add_test(tc, opencl_extension_should_reject_nan_in_the_band_and_no_surface);
-    tcase_add_test(tc, heatvox_extend_with_backend_opencl_should_give_the_library_s_fields);
+    int have_cl = hv_opencl_probe(NULL) == HV_OK;
+    char why[512];
+    snprintf(why, sizeof why, "no usable OpenCL device (%s)", hv_last_error());
+    TL_ADD_IF(tc, opencl_extension_should_match_mg_on_a_sphere, have_cl, why);
+    TL_ADD_IF(tc, opencl_extension_should_match_mg_on_a_torus, have_cl, why);
+    TL_ADD_IF(tc, opencl_extension_should_match_mg_with_obstacles_and_in_2d, have_cl, why);
+    TL_ADD_IF(tc, opencl_extension_should_reproduce_constant_fields, have_cl, why);
+    TL_ADD_IF(tc, opencl_extension_without_fp64_should_match_mg, have_cl, why);
+    TL_ADD_IF(tc, opencl_extension_should_reject_nan_in_the_band_and_no_surface, have_cl, why);
+    TL_ADD_IF(tc, heatvox_extend_with_backend_opencl_should_give_the_library_s_fields, have_cl, why);
     suite_add_tcase(su, tc);
     return tl_run(su);
 }

@@ -5,6 +5,7 @@
 
 #include <OpenEXR/openexr.h>
 #include <check.h>
+#include <zlib.h>
 #include <dirent.h>
 #include <math.h>
 #include <stdio.h>
@@ -141,6 +142,189 @@ START_TEST(exr_2d_round_trip_should_return_every_value_bit_for_bit)
     ck_assert_int_eq(st, HV_ERR_PARSE);
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "distance")); /* lists what there is */
     ck_assert_ptr_null(r);
+    hv_grid_destroy(&g);
+    remove_tmpdir();
+}
+END_TEST
+
+/* The zlib level OpenEXR uses for ZIP parts by default. */
+static int exr_zip_level(void)
+{
+    exr_context_t ctx = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    const char *p = tmp_path("level.exr");
+    ck_assert_int_eq(exr_start_write(&ctx, p, EXR_WRITE_FILE_DIRECTLY, &init), EXR_ERR_SUCCESS);
+    int part = -1, level = -1;
+    ck_assert_int_eq(exr_add_part(ctx, "p", EXR_STORAGE_SCANLINE, &part), EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_initialize_required_attr_simple(ctx, part, 4, 4, EXR_COMPRESSION_ZIP),
+                     EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_get_zip_compression_level(ctx, part, &level), EXR_ERR_SUCCESS);
+    exr_finish(&ctx);
+    unlink(p);
+    return level;
+}
+
+/* OpenEXR's ZIP of a chunk of raw bytes: bytes split into even and odd halves,
+ * then differences (+128) of successive bytes, then deflate (the predictor of
+ * the OpenEXR file format's ZIP compression). Returns the deflated size; the
+ * bytes go to z when it is not NULL (compressBound(n) bytes). */
+static size_t exr_zip(const unsigned char *raw, size_t n, int level, unsigned char *z)
+{
+    unsigned char *t = malloc(n), *zz = z ? z : malloc(compressBound(n));
+    ck_assert_ptr_nonnull(t);
+    ck_assert_ptr_nonnull(zz);
+    size_t h = (n + 1) / 2;
+    for (size_t i = 0; i < n; i++)
+        t[(i & 1) ? h + i / 2 : i / 2] = raw[i];
+    for (size_t i = n - 1; i > 0; i--)
+        t[i] = (unsigned char)(t[i] - t[i - 1] + 128);
+    uLongf zn = compressBound(n);
+    ck_assert_int_eq(compress2(zz, &zn, t, n, level), Z_OK);
+    free(t);
+    if (!z)
+        free(zz);
+    return zn;
+}
+
+/* Fills a 16-row image (one ZIP chunk) of nx floats whose deflated chunk is
+ * exactly as long as the raw chunk: a random prefix, zeros after it, the prefix
+ * length searched. Returns 0 when no such prefix was found. */
+static int equal_size_chunk(unsigned char *raw, int nx, int level)
+{
+    size_t n = (size_t)16 * nx * sizeof(float);
+    for (uint64_t seed = 1; seed < 64; seed++) {
+        uint64_t s = seed;
+        for (size_t i = 0; i < n; i++)
+            raw[i] = (unsigned char)((tl_rand(&s) + 0.5) * 256.0);
+        for (size_t b = n > 600 ? n - 600 : 0; b < n; b++) {
+            unsigned char *keep = malloc(n);
+            memcpy(keep, raw, n);
+            memset(keep + b, 0, n - b);
+            size_t zs = exr_zip(keep, n, level, NULL);
+            if (zs == n) {
+                memcpy(raw, keep, n);
+                free(keep);
+                return 1;
+            }
+            free(keep);
+            if (zs > n + 64)
+                break;
+        }
+    }
+    return 0;
+}
+
+/* Decodes p with OpenEXR's C++ library (tests/exr_values.cpp) and compares
+ * each part with the grid's slice, rows flipped (image row 0 is the grid's
+ * last). */
+static void assert_cxx_reader_gives(const char *p, const char *channel, const hv_grid *g)
+{
+    char exe[4096], cmd[9000];
+    ssize_t len = readlink("/proc/self/exe", exe, sizeof exe - 32);
+    ck_assert_int_gt(len, 0);
+    exe[len] = 0;
+    strcpy(strrchr(exe, '/') + 1, "exr_values");
+    const char *raw = tmp_path("values.raw");
+    snprintf(cmd, sizeof cmd, "'%s' '%s' '%s' '%s'", exe, p, channel, raw);
+    ck_assert_int_eq(system(cmd), 0);
+    size_t n = hv_grid_count(g), nx = (size_t)g->n[0], ny = (size_t)g->n[1];
+    ck_assert_int_eq(file_size(raw), (long)(n * sizeof(float)));
+    float *v = malloc(n * sizeof(float));
+    FILE *f = fopen(raw, "rb");
+    ck_assert_int_eq(fread(v, sizeof(float), n, f), n);
+    fclose(f);
+    size_t bad = 0;
+    for (size_t k = 0; k < n / (nx * ny); k++)
+        for (size_t y = 0; y < ny; y++)
+            bad += memcmp(v + (k * ny + y) * nx, g->v + (k * ny + ny - 1 - y) * nx,
+                          nx * sizeof(float)) != 0;
+    ck_assert_msg(bad == 0, "%s: %zu rows differ as OpenEXR's C++ reader decodes them", p, bad);
+    free(v);
+    unlink(raw);
+}
+
+START_TEST(exr_chunk_deflating_to_its_raw_size_should_read_back_exactly)
+{
+    /* OpenEXR 3.1's Core ZIP encoder kept such a chunk deflated while readers
+     * take it as raw: the chunk decoded as garbage. */
+    make_tmpdir();
+    const int nx = 40, level = exr_zip_level();
+    unsigned char *raw = malloc((size_t)16 * nx * sizeof(float));
+    ck_assert_msg(equal_size_chunk(raw, nx, level), "no chunk deflates to its raw size");
+    hv_grid *g = make_grid(3, nx, 16, 5, 0.5);
+    tl_fill_random(g->v, hv_grid_count(g), 11);
+    for (int r = 0; r < 16; r++) /* slice 2 holds the chunk, image row r = grid row 15-r */
+        memcpy(g->v + (size_t)nx * 16 * 2 + (size_t)(15 - r) * nx, raw + (size_t)r * nx * 4,
+               (size_t)nx * 4);
+    const char *p = tmp_path("equal.exr");
+    TL_ASSERT_OK(hv_exr_write(p, g, "sdf"));
+    hv_grid *r = NULL;
+    TL_ASSERT_OK(hv_exr_read(p, "sdf", &r));
+    assert_same_grid(g, r);
+    hv_grid_destroy(&r);
+    assert_cxx_reader_gives(p, "sdf", g);
+    /* The same chunk as a 2D image. */
+    hv_grid *g2 = make_grid(2, nx, 16, 1, 0.5);
+    memcpy(g2->v, g->v + (size_t)nx * 16 * 2, (size_t)nx * 16 * 4);
+    p = tmp_path("equal2d.exr");
+    TL_ASSERT_OK(hv_exr_write(p, g2, NULL));
+    TL_ASSERT_OK(hv_exr_read(p, NULL, &r));
+    assert_same_grid(g2, r);
+    hv_grid_destroy(&r);
+    assert_cxx_reader_gives(p, "Y", g2);
+    hv_grid_destroy(&g2);
+    hv_grid_destroy(&g);
+    free(raw);
+    remove_tmpdir();
+}
+END_TEST
+
+START_TEST(exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading)
+{
+    /* The file OpenEXR 3.1's Core encoder wrote without the guard: the deflated
+     * chunk, as long as the raw one, stored as it is. */
+    make_tmpdir();
+    const int nx = 40, level = exr_zip_level();
+    size_t n = (size_t)16 * nx * sizeof(float);
+    unsigned char *raw = malloc(n), *z = malloc(compressBound(n));
+    ck_assert_msg(equal_size_chunk(raw, nx, level), "no chunk deflates to its raw size");
+    ck_assert_int_eq(exr_zip(raw, n, level, z), n);
+    const char *p = tmp_path("old.exr");
+    exr_context_t ctx = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    int part = -1;
+    ck_assert_int_eq(exr_start_write(&ctx, p, EXR_WRITE_FILE_DIRECTLY, &init), EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_add_part(ctx, "heatvox", EXR_STORAGE_SCANLINE, &part), EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_initialize_required_attr_simple(ctx, part, nx, 16, EXR_COMPRESSION_ZIP),
+                     EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_add_channel(ctx, part, "Y", EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1),
+                     EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_write_header(ctx), EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_write_scanline_chunk(ctx, part, 0, z, n), EXR_ERR_SUCCESS);
+    ck_assert_int_eq(exr_finish(&ctx), EXR_ERR_SUCCESS);
+    hv_grid *r = NULL;
+    TL_ASSERT_OK(hv_exr_read(p, NULL, &r));
+    ck_assert_int_eq(r->n[0], nx);
+    ck_assert_int_eq(r->n[1], 16);
+    for (int y = 0; y < 16; y++) /* image row y is grid row 15-y */
+        ck_assert_int_eq(memcmp(r->v + (size_t)(15 - y) * nx, raw + (size_t)y * nx * 4,
+                                (size_t)nx * 4), 0);
+    hv_grid_destroy(&r);
+    free(raw);
+    free(z);
+    remove_tmpdir();
+}
+END_TEST
+
+START_TEST(exr_files_should_decode_alike_in_openexrs_cxx_reader)
+{
+    make_tmpdir();
+    hv_grid *g = make_grid(3, 33, 21, 4, 0.25);
+    const double c[3] = {1.0, 3.0, 3.5};
+    fill_sphere(g, c, 1.5);
+    const char *p = tmp_path("sphere.exr");
+    TL_ASSERT_OK(hv_exr_write(p, g, "sdf"));
+    assert_cxx_reader_gives(p, "sdf", g);
     hv_grid_destroy(&g);
     remove_tmpdir();
 }
@@ -473,6 +657,9 @@ int main(void)
     tcase_set_timeout(tc, 30);
     tcase_add_test(tc, exr_2d_round_trip_should_return_every_value_bit_for_bit);
     tcase_add_test(tc, exr_2d_image_should_show_the_second_axis_up);
+    tcase_add_test(tc, exr_chunk_deflating_to_its_raw_size_should_read_back_exactly);
+    tcase_add_test(tc, exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading);
+    tcase_add_test(tc, exr_files_should_decode_alike_in_openexrs_cxx_reader);
     tcase_add_test(tc, exr_3d_round_trip_should_use_one_named_part_per_z_slice);
     tcase_add_test(tc, truncated_exr_should_fail_to_decode_naming_the_file);
     tcase_add_test(tc, missing_and_foreign_files_should_fail_with_the_path);

@@ -42,8 +42,7 @@ START_TEST(mg_and_opencl_should_give_the_same_sdf)
 {
     hv_opencl_device dev;
     if (hv_opencl_probe(&dev) != HV_OK) {
-        printf("check_sdf_backends: no OpenCL device (%s): skipped\n", hv_last_error());
-        return;
+        TL_SKIP("no OpenCL device (%s)", hv_last_error());
     }
     const double c[3] = {0.02, -0.03, 0.01};
     hv_mesh *m = NULL;

@@ -10,29 +10,31 @@
 
 #include "heatvox/heatvox.h"
 #include "heatvox/sdf.h"
+#include "testlib.h"
 
+#include <check.h>
 #include <math.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-static const char *tu_shared_dir(void)
-{
-    const char *d = getenv("HEATVOX_SHARED");
-    return d && *d ? d : "../shared";
-}
-
-/* Reads $HEATVOX_SHARED/meshes/<name>, or returns NULL (the test then skips). */
+/* Reads <test data>/<name> (tl_test_data: $HEATVOX_TEST_DATA, default
+ * ../shared/meshes). A mesh that is not there skips the test (NULL); one that
+ * is there and does not read fails it. */
 static hv_mesh *tu_load_shared(const char *name)
 {
+    const char *dir = tl_test_data();
     char path[4096];
-    snprintf(path, sizeof path, "%s/meshes/%s", tu_shared_dir(), name);
-    hv_mesh *m = NULL;
-    hv_status st = hv_mesh_read(path, &m);
-    if (st) {
-        printf("SKIP: %s: %s (set HEATVOX_SHARED)\n", path, hv_last_error());
+    snprintf(path, sizeof path, "%s/%s", dir ? dir : "(no test data directory)", name);
+    struct stat sb;
+    if (!dir || stat(path, &sb) != 0) {
+        tl_skip("%s not found (set HEATVOX_TEST_DATA)", path);
         return NULL;
     }
+    hv_mesh *m = NULL;
+    hv_status st = hv_mesh_read(path, &m);
+    ck_assert_msg(st == HV_OK, "%s: %s", path, hv_last_error());
     return m;
 }
 

@@ -1,5 +1,6 @@
 #include "testlib.h"
 
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,6 +29,38 @@ const char *tl_shared_dir(void)
     if (stat(d, &st) != 0 || !S_ISDIR(st.st_mode))
         return NULL;
     return d;
+}
+
+const char *tl_test_data(void)
+{
+    static char buf[4096];
+    const char *d = getenv("HEATVOX_TEST_DATA");
+    if (!d || !*d) {
+        const char *s = getenv("HEATVOX_SHARED");
+        snprintf(buf, sizeof buf, "%s/meshes", s && *s ? s : "../shared");
+        d = buf;
+    }
+    struct stat st;
+    if (stat(d, &st) != 0 || !S_ISDIR(st.st_mode))
+        return NULL;
+    return d;
+}
+
+void tl_skip(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    printf("SKIP: ");
+    vprintf(fmt, ap);
+    printf("\n");
+    va_end(ap);
+    fflush(stdout);
+}
+
+void tl_not_run(const char *test, const char *why)
+{
+    printf("NOT RUN: %s: %s\n", test, why);
+    fflush(stdout);
 }
 
 int tl_run(Suite *s)

@@ -13,6 +13,30 @@ void tl_fill_random(float *v, size_t n, uint64_t seed);
 /* Directory with the shared meshes ($HEATVOX_SHARED or ../shared), or NULL
  * when absent (the caller skips and says so). */
 const char *tl_shared_dir(void);
+/* Directory of test meshes: $HEATVOX_TEST_DATA, else $HEATVOX_SHARED/meshes,
+ * else ../shared/meshes; NULL when it does not exist (the caller skips). */
+const char *tl_test_data(void);
+
+/* Skips: `make check` counts the lines these print and ends with
+ * "check: N passed, M failed, K skipped". A test that cannot run here calls
+ * TL_SKIP (it prints "SKIP: ..." and returns, so Check's pass is taken back);
+ * a suite that does not register a test prints "NOT RUN: ..." for it through
+ * TL_ADD_IF. Only absent data or hardware may skip: a reader that fails on a
+ * file that exists is a failure. */
+void tl_skip(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+#define TL_SKIP(...)                                                                               \
+    do {                                                                                           \
+        tl_skip(__VA_ARGS__);                                                                      \
+        return;                                                                                    \
+    } while (0)
+void tl_not_run(const char *test, const char *why);
+#define TL_ADD_IF(tc, test, ok, why)                                                               \
+    do {                                                                                           \
+        if (ok)                                                                                    \
+            tcase_add_test(tc, test);                                                              \
+        else                                                                                       \
+            tl_not_run(#test, why);                                                                \
+    } while (0)
 /* Runs the suite and returns the process exit code. */
 int tl_run(Suite *s);
 /* PoCL compiles each kernel on first use: unless POCL_CACHE_DIR is set, keep

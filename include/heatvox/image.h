@@ -65,7 +65,9 @@ hv_status hv_grid_slice(const hv_grid *g, int axis, int index, hv_grid **out);
 /* ---- OpenEXR ---- */
 
 /* Writes g (2D or 3D, layout above) to path through a temporary file and a
- * rename. channel may be NULL ("Y"); it must be 1..31 characters. */
+ * rename. channel may be NULL ("Y"); it must be 1..31 characters. The file is
+ * decoded in full before the rename: unless it gives back every value bit for
+ * bit, it is removed and the call fails with HV_ERR_IO. */
 hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel);
 
 /* Reads an EXR file into a new grid, decoding every pixel (a truncated or

@@ -5,6 +5,7 @@
 
 /* The quoted includes inside openexr.h resolve next to it, so no -I is needed. */
 #include <OpenEXR/openexr.h>
+#include <zlib.h>
 
 #include <errno.h>
 #include <math.h>
@@ -38,9 +39,36 @@ static exr_context_initializer_t exr_init(void)
     return init;
 }
 
+static hv_status verify_written(const char *tmp, const char *path, const hv_grid *g,
+                                const char *channel);
+
 static void part_name(char *buf, size_t size, int k) { snprintf(buf, size, "slice_%04d", k); }
 
 /* ---- writing ---- */
+
+/* OpenEXR's reader takes a chunk whose stored size equals its raw size as
+ * stored raw, whatever the part's compression. OpenEXR 3.1's Core ZIP encoder
+ * keeps a deflated chunk whose size happens to equal the raw size (it falls
+ * back to raw only when the deflated chunk is larger: upstream #2306), and every
+ * reader then decodes that chunk as garbage. This wrapper around whichever
+ * compressor the library chose stores such a chunk raw, which every version
+ * reads back right. */
+typedef struct {
+    exr_result_t (*compress)(exr_encode_pipeline_t *enc);
+} exr_guard;
+
+static exr_result_t compress_guarded(exr_encode_pipeline_t *enc)
+{
+    const exr_guard *gd = enc->encoding_user_data;
+    exr_result_t rv = gd->compress(enc);
+    if (rv != EXR_ERR_SUCCESS || enc->compressed_bytes < enc->packed_bytes)
+        return rv;
+    if (!enc->compressed_buffer || enc->compressed_alloc_size < enc->packed_bytes)
+        return EXR_ERR_OUT_OF_MEMORY;
+    memcpy(enc->compressed_buffer, enc->packed_buffer, enc->packed_bytes);
+    enc->compressed_bytes = enc->packed_bytes;
+    return EXR_ERR_SUCCESS;
+}
 
 static hv_status write_part(exr_context_t ctx, int part, const float *slice, int nx, int ny,
                             float *buf, const char *tmp, const char *path)
@@ -50,6 +78,7 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
     if (rv != EXR_ERR_SUCCESS || lpc < 1)
         return hv_error(HV_ERR_BACKEND, "%s: OpenEXR: lines per chunk: %s", path, exr_reason(rv));
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+    exr_guard guard = {NULL};
     int started = 0;
     hv_status st = HV_OK;
     for (int y = 0; y < ny && st == HV_OK; y += lpc) {
@@ -76,6 +105,11 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
         if (!started) {
             rv = exr_encoding_choose_default_routines(ctx, part, &enc);
             started = 1;
+            if (rv == EXR_ERR_SUCCESS && enc.compress_fn) {
+                guard.compress = enc.compress_fn;
+                enc.encoding_user_data = &guard;
+                enc.compress_fn = compress_guarded;
+            }
         }
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_encoding_run(ctx, part, &enc);
@@ -158,6 +192,8 @@ done:
         if (st == HV_OK && rv != EXR_ERR_SUCCESS)
             st = hv_error(HV_ERR_IO, "%s: finishing %s: %s", path, tmp, exr_reason(rv));
     }
+    if (st == HV_OK)
+        st = verify_written(tmp, path, g, channel);
     if (st != HV_OK) {
         hv_tmp_discard(tmp);
         return st;
@@ -166,6 +202,52 @@ done:
 }
 
 /* ---- reading ---- */
+
+/* Files written by OpenEXR 3.1's Core ZIP encoder (heatvox before its guard,
+ * and other programs) can hold a deflated chunk flagged as raw: stored size
+ * equal to the raw size (see compress_guarded). Raw float data that also forms
+ * a whole zlib stream, with its Adler-32, inflating to exactly the chunk's raw
+ * size does not happen by chance, so such a chunk is inflated and its ZIP
+ * predictor undone here; the rows land in dst. Only parts of one FLOAT channel
+ * (heatvox's own layout) are recovered. Returns 1 when the chunk was
+ * recovered, 0 when it is to be decoded as usual. */
+static int recover_misflagged(exr_context_t ctx, int part, const exr_chunk_info_t *ci,
+                              float *dst, int nx, const char *path)
+{
+    exr_compression_t comp;
+    const exr_attr_chlist_t *chl = NULL;
+    if (ci->packed_size != ci->unpacked_size || ci->packed_size < 16 ||
+        exr_get_compression(ctx, part, &comp) != EXR_ERR_SUCCESS ||
+        (comp != EXR_COMPRESSION_ZIP && comp != EXR_COMPRESSION_ZIPS) ||
+        exr_get_channels(ctx, part, &chl) != EXR_ERR_SUCCESS || !chl || chl->num_channels != 1 ||
+        chl->entries[0].pixel_type != EXR_PIXEL_FLOAT || ci->width != nx ||
+        ci->unpacked_size != (uint64_t)ci->width * ci->height * sizeof(float))
+        return 0;
+    size_t n = (size_t)ci->packed_size;
+    unsigned char *z = malloc(n), *t = malloc(n);
+    int ok = z && t && exr_read_chunk(ctx, part, ci, z) == EXR_ERR_SUCCESS && (z[0] & 0x0f) == 8;
+    uLongf out = (uLongf)n;
+    ok = ok && uncompress(t, &out, z, (uLong)n) == Z_OK && out == n;
+    if (ok) {
+        for (size_t i = 1; i < n; i++)
+            t[i] = (unsigned char)(t[i - 1] + t[i] - 128);
+        size_t half = (n + 1) / 2;
+        for (size_t i = 0; i < n; i++)
+            z[i] = t[(i & 1) ? half + i / 2 : i / 2];
+        for (size_t k = 0; k < n / 4; k++) {
+            uint32_t b = (uint32_t)z[4 * k] | (uint32_t)z[4 * k + 1] << 8 |
+                         (uint32_t)z[4 * k + 2] << 16 | (uint32_t)z[4 * k + 3] << 24;
+            memcpy(dst + k, &b, sizeof b);
+        }
+        hv_log(HV_LOG_WARN,
+               "%s: part %d, lines %d..%d: a deflated chunk flagged as raw (OpenEXR 3.1's ZIP "
+               "encoder) was inflated",
+               path, part, ci->start_y, ci->start_y + ci->height - 1);
+    }
+    free(z);
+    free(t);
+    return ok;
+}
 
 static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *dw,
                            const char *channel, float *rows, int nx, const char *path,
@@ -182,6 +264,10 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
     for (int y = dw->min.y; y <= dw->max.y && st == HV_OK; y += lpc) {
         exr_chunk_info_t ci;
         rv = exr_read_scanline_chunk_info(ctx, part, y, &ci);
+        if (rv == EXR_ERR_SUCCESS &&
+            recover_misflagged(ctx, part, &ci, rows + (size_t)(ci.start_y - dw->min.y) * nx, nx,
+                               path))
+            continue;
         if (rv == EXR_ERR_SUCCESS)
             rv = started ? exr_decoding_update(ctx, part, &ci, &dec)
                          : exr_decoding_initialize(ctx, part, &ci, &dec);
@@ -369,4 +455,40 @@ done:
     }
     *out = g;
     return HV_OK;
+}
+
+/* A library can write garbage without reporting an error (see compress_guarded):
+ * every file is decoded in full before it takes its name, and anything but the
+ * exact values given is an error. */
+static hv_status verify_written(const char *tmp, const char *path, const hv_grid *g,
+                                const char *channel)
+{
+    hv_grid *back = NULL;
+    if (hv_exr_read(tmp, channel, &back) != HV_OK) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", hv_last_error());
+        return hv_error(HV_ERR_IO, "%s: the EXR file just written does not decode (%s); not kept",
+                        path, why);
+    }
+    hv_status st = HV_OK;
+    size_t n = hv_grid_count(g);
+    if (back->dim != g->dim || back->n[0] != g->n[0] || back->n[1] != g->n[1] ||
+        (g->dim == 3 && back->n[2] != g->n[2]) || hv_grid_count(back) != n) {
+        st = hv_error(HV_ERR_IO, "%s: the EXR file just written decodes to another shape; not kept",
+                      path);
+    } else if (memcmp(back->v, g->v, sizeof(float) * n) != 0) {
+        size_t i = 0, bad = 0;
+        for (size_t k = 0; k < n; k++)
+            if (memcmp(&back->v[k], &g->v[k], sizeof(float)) != 0) {
+                if (!bad)
+                    i = k;
+                bad++;
+            }
+        st = hv_error(HV_ERR_IO,
+                      "%s: the EXR file just written decodes to other values in %zu of %zu voxels "
+                      "(first at index %zu: %g instead of %g); not kept",
+                      path, bad, n, i, (double)back->v[i], (double)g->v[i]);
+    }
+    hv_grid_destroy(&back);
+    return st;
 }
