@@ -117,7 +117,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
 CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS))) \
               $(patsubst %,no512:%,$(filter %/check_mg,$(TESTS)))
 check: all $(TESTS) $(TEST_HELPERS)
-	@pass=0; fail=0; skip=0; bad=""; \
+	@pass=0; fail=0; skip=0; bad=""; skips=$(BUILD)/tests/skipped.txt; : > $$skips; \
 	for run in $(CHECK_RUNS); do \
 	  t=$${run#*:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
 	  case $$run in fp32:*) log=$$t.fp32.log; fp64=0;; no512:*) log=$$t.no512.log; no512=1;; esac; \
@@ -128,10 +128,12 @@ check: all $(TESTS) $(TEST_HELPERS)
 	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \
 	  if [ -z "$$line" ]; then fail=$$((fail+1)); bad="$$bad $$run(rc=$$rc)"; continue; fi; \
 	  s=$$(grep -c '^SKIP: ' $$log); n=$$(grep -c '^NOT RUN: ' $$log); \
+	  grep -E '^(SKIP|NOT RUN): ' $$log | sed "s|^|  $$run: |" >> $$skips; \
 	  f=$$(($$f)); pass=$$((pass + c - f - s)); fail=$$((fail + f)); skip=$$((skip + s + n)); \
 	  if [ $$rc -ne 0 ] || [ $$f -ne 0 ]; then bad="$$bad $$run"; fi; \
 	done; \
-	echo; [ -z "$$bad" ] || echo "failing suites:$$bad"; \
+	echo; [ ! -s $$skips ] || { echo "skipped:"; cat $$skips; }; \
+	[ -z "$$bad" ] || echo "failing suites:$$bad"; \
 	echo "check: $$pass passed, $$fail failed, $$skip skipped"; \
 	[ -z "$$bad" ]
 

@@ -166,8 +166,9 @@ int batch_opts_parse(int argc, char **argv, batch_opts *o, char *err, size_t err
                 return bad(err, errsize, "%s must be in [1e-12, 1), got '%s'", a, v[0]);
             *(a[2] == 'd' ? &o->sdf.diffuse_tol : &o->sdf.poisson_tol) = dv;
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v[0], &iv) || iv < 0)
-                return bad(err, errsize, "--threads must be an integer >= 0, got '%s'", v[0]);
+            if (cli_parse_threads(v[0], 0, &iv))
+                return bad(err, errsize, "--threads must be an integer in [0, %d], got '%s'",
+                           HV_MAX_THREADS, v[0]);
             o->sdf.threads = iv;
         } else if (!strcmp(a, "--band")) {
             if (cli_parse_double(v[0], &dv) || !(dv > 0))

@@ -250,8 +250,9 @@ int bench_extend(int argc, char **argv)
             if (cli_parse_double(v, &tscale) || tscale <= 0)
                 return cli_usage_error("bench extend", "--t-scale must be positive, got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v, &threads) || threads < 1)
-                return cli_usage_error("bench extend", "--threads must be >= 1, got '%s'", v);
+            if (cli_parse_threads(v, 1, &threads))
+                return cli_usage_error("bench extend", "--threads must be 1..%d, got '%s'",
+                                       HV_MAX_THREADS, v);
         } else if (!strcmp(a, "--repeat")) {
             if (cli_parse_int(v, &repeat) || repeat < 1)
                 return cli_usage_error("bench extend", "--repeat must be >= 1, got '%s'", v);

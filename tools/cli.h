@@ -17,6 +17,30 @@ int cli_fail(const char *cmd, const char *what, hv_status st);
 int cli_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* Parses numbers strictly (whole string, finite); 0 on success. */
 int cli_parse_int(const char *s, int *out);
+/* Checks the outputs of a command before it computes anything: an output that
+ * exists and is not a regular file (a device, a FIFO, a directory) is never
+ * replaced, and no output may be one of the inputs or another output. NULL
+ * entries are skipped. Prints the reason and returns HV_EXIT_FAIL, else 0. */
+int cli_check_outputs(const char *cmd, const char *const *outs, int nout, const char *const *ins,
+                      int nin);
+/* Outputs of one command that land together or not at all: each is written
+ * under the temporary name cli_stage gives (registered for the SIGINT/SIGTERM
+ * cleanup), and cli_commit renames them all into place once every one is
+ * complete; cli_discard removes them. A failed second output then never
+ * leaves the first one replaced. */
+#define CLI_MAX_OUTPUTS 4
+typedef struct cli_outputs {
+    int n;
+    const char *final[CLI_MAX_OUTPUTS];
+    char tmp[CLI_MAX_OUTPUTS][4096];
+} cli_outputs;
+/* The name to write `final` under, or NULL (the error is printed). */
+const char *cli_stage(const char *cmd, cli_outputs *o, const char *final);
+/* Renames every staged output into place; HV_EXIT_FAIL (printed) or 0. */
+int cli_commit(const char *cmd, cli_outputs *o);
+void cli_discard(cli_outputs *o);
+/* Parses a --threads value: an integer in [lo, HV_MAX_THREADS]; 0 on success. */
+int cli_parse_threads(const char *s, int lo, int *out);
 int cli_parse_double(const char *s, double *out);
 /* True when argv[i] is `name`, and a value follows (else reports a usage error via *err). */
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));

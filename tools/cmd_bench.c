@@ -192,8 +192,9 @@ static int bench_solve(int argc, char **argv)
             if (cli_parse_double(v, &tol) || tol < 1e-12 || tol >= 1)
                 return cli_usage_error("bench solve", "--tol must be in [1e-12, 1), got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v, &threads) || threads < 1)
-                return cli_usage_error("bench solve", "--threads must be >= 1, got '%s'", v);
+            if (cli_parse_threads(v, 1, &threads))
+                return cli_usage_error("bench solve", "--threads must be 1..%d, got '%s'",
+                                       HV_MAX_THREADS, v);
         } else if (!strcmp(a, "--repeat")) {
             if (cli_parse_int(v, &repeat) || repeat < 1)
                 return cli_usage_error("bench solve", "--repeat must be >= 1, got '%s'", v);

@@ -48,8 +48,9 @@ int cmd_bench_sdf(int argc, char **argv)
             if (cli_parse_int(v, &repeat) || repeat < 1)
                 return cli_usage_error("bench sdf", "--repeat must be >= 1, got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v, &threads) || threads < 1)
-                return cli_usage_error("bench sdf", "--threads must be >= 1, got '%s'", v);
+            if (cli_parse_threads(v, 1, &threads))
+                return cli_usage_error("bench sdf", "--threads must be 1..%d, got '%s'",
+                                       HV_MAX_THREADS, v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &backend))
                 return cli_usage_error("bench sdf", "%s", hv_last_error());

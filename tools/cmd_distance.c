@@ -404,8 +404,8 @@ int cmd_distance(int argc, char **argv)
                 return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);
             o.solid_value = o.unreachable;
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v, &threads) || threads < 1)
-                return cli_usage_error(CMD, "--threads must be >= 1, got '%s'", v);
+            if (cli_parse_threads(v, 1, &threads))
+                return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
         } else {
             return cli_usage_error(CMD, "unknown option '%s'", a);
         }
@@ -426,10 +426,14 @@ int cmd_distance(int argc, char **argv)
         return cli_usage_error(CMD, "--bbox takes %d numbers for a %dD grid", dim == 2 ? 4 : 6, dim);
     if (res && vsize)
         return cli_usage_error(CMD, "give --res or --voxel-size, not both");
+    const char *outs[] = {out, npy}, *ins[] = {sources, mask, obst_mesh};
+    if (cli_check_outputs(CMD, outs, 2, ins, 3))
+        return HV_EXIT_FAIL;
     hv_set_threads(threads);
 
     double t_start = hv_now();
     source_list src = {0};
+    cli_outputs co = {0};
     hv_mesh *om = NULL;
     hv_grid *g = NULL;
     int rc = read_sources(sources, dim, &src);
@@ -511,7 +515,13 @@ int cmd_distance(int argc, char **argv)
     if (st_d.unreachable_cells && cli_verbose >= 0)
         fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
                 st_d.unreachable_cells, (double)o.unreachable);
-    if (npy && (st = hv_write_npy(npy, g))) {
+    const char *t_npy = npy ? cli_stage(CMD, &co, npy) : NULL;
+    const char *t_out = out && (!npy || t_npy) ? cli_stage(CMD, &co, out) : NULL;
+    if ((npy && !t_npy) || (out && !t_out)) {
+        rc = HV_EXIT_FAIL;
+        goto done;
+    }
+    if (npy && (st = hv_write_npy(t_npy, g))) {
         rc = cli_fail(CMD, npy, st);
         goto done;
     }
@@ -534,13 +544,15 @@ int cmd_distance(int argc, char **argv)
         if (!st)
             st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_unreachable_cells", buf);
         if (!st)
-            st = hv_vdb_writer_write(w, out);
+            st = hv_vdb_writer_write(w, t_out);
         hv_vdb_writer_destroy(&w);
         if (st) {
             rc = cli_fail(CMD, out, st);
             goto done;
         }
     }
+    if ((rc = cli_commit(CMD, &co)) != 0)
+        goto done;
     if (cli_verbose >= 0)
         printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
                "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
@@ -551,6 +563,7 @@ int cmd_distance(int argc, char **argv)
                st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
                hv_now() - t_start);
 done:
+    cli_discard(&co);
     free_sources(&src);
     hv_mesh_destroy(&om);
     hv_grid_destroy(&g);

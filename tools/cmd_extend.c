@@ -125,8 +125,8 @@ int cmd_extend(int argc, char **argv)
             if (hv_backend_parse(v, &o.backend))
                 return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_int(v, &threads) || threads < 1)
-                return cli_usage_error(CMD, "--threads must be >= 1, got '%s'", v);
+            if (cli_parse_threads(v, 1, &threads))
+                return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
         } else {
             return cli_usage_error(CMD, "unknown option '%s'", a);
         }
@@ -144,6 +144,8 @@ int cmd_extend(int argc, char **argv)
     for (int q = 0; q < nfields; q++)
         if (!strcmp(fields[q], ls))
             return cli_usage_error(CMD, "--field '%s' is the level set", ls);
+    if (cli_check_outputs(CMD, &out, 1, &in, 1))
+        return HV_EXIT_FAIL;
     hv_set_threads(threads);
     double t_start = hv_now();
 

@@ -83,18 +83,27 @@ static int meshes(const char *dir)
     rc |= write_mesh(dir, "torus_soup.obj", m);
     hv_mesh_destroy(&m);
     /* a malformed file: the last face is cut off */
-    char path[1024];
+    char path[1024], tmp[4096];
     snprintf(path, sizeof path, "%s/meshes/truncated.obj", dir);
-    FILE *f = fopen(path, "w");
-    if (!f || fputs("# cut off while writing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
-                    "f 1 2 3\nf 1 3 4\nf 1 4",
-                    f) < 0) {
-        if (f)
-            fclose(f);
-        fprintf(stderr, "heatvox make-scenes: %s: cannot write\n", path);
+    if ((st = hv_tmp_name(path, tmp, sizeof tmp)))
+        return cli_fail("make-scenes", path, st);
+    FILE *f = fopen(tmp, "w");
+    int ok = f && fputs("# cut off while writing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                        "f 1 2 3\nf 1 3 4\nf 1 4",
+                        f) >= 0;
+    int e = errno;
+    /* A full disk shows only when the buffer is flushed. */
+    if (f && fclose(f) != 0 && ok) {
+        ok = 0;
+        e = errno;
+    }
+    if (!ok) {
+        hv_tmp_discard(tmp);
+        fprintf(stderr, "heatvox make-scenes: %s: cannot write: %s\n", path, strerror(e));
         return 1;
     }
-    fclose(f);
+    if ((st = hv_tmp_commit(tmp, path)))
+        return cli_fail("make-scenes", path, st);
     if (cli_verbose >= 0)
         printf("%-40s malformed on purpose\n", path);
     return rc;

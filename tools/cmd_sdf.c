@@ -168,8 +168,9 @@ int cmd_sdf(int argc, char **argv)
                 return cli_usage_error("sdf", "%s", hv_last_error());
         } else if (!strcmp(a, "--threads")) {
             NEED(1);
-            if (cli_parse_int(argv[++i], &threads) || threads < 1)
-                return cli_usage_error("sdf", "--threads needs a positive integer, got '%s'", argv[i]);
+            if (cli_parse_threads(argv[++i], 1, &threads))
+                return cli_usage_error("sdf", "--threads must be 1..%d, got '%s'", HV_MAX_THREADS,
+                                       argv[i]);
         } else if (a[0] == '-' && a[1]) {
             return cli_usage_error("sdf", "unknown option '%s'", a);
         } else if (!mesh_path) {
@@ -193,6 +194,9 @@ int cmd_sdf(int argc, char **argv)
      * rest is the background with the heat method's sign): skip the sweeps. */
     if (!dense && !npy && !preview && !o.unsigned_distance && o.magnitude == HV_SDF_EXACT)
         o.band_only = band;
+    const char *outs[] = {out, npy, preview};
+    if (cli_check_outputs("sdf", outs, 3, &mesh_path, 1))
+        return HV_EXIT_FAIL;
     if (check_writable(out) || (npy && check_writable(npy)) || (preview && check_writable(preview)))
         return HV_EXIT_FAIL;
     static int tty;
@@ -231,6 +235,15 @@ int cmd_sdf(int argc, char **argv)
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
              band, S.heat_coarsen, dense ? " dense" : "");
+    cli_outputs co = {0};
+    const char *t_out = cli_stage("sdf", &co, out);
+    const char *t_npy = npy && t_out ? cli_stage("sdf", &co, npy) : NULL;
+    const char *t_prev = preview && t_out && (!npy || t_npy) ? cli_stage("sdf", &co, preview) : NULL;
+    if (!t_out || (npy && !t_npy) || (preview && !t_prev)) {
+        cli_discard(&co);
+        hv_grid_destroy(&g);
+        return HV_EXIT_FAIL;
+    }
     hv_vdb_writer *w = NULL;
     /* An unsigned distance is no level set (no inside): a plain float grid. */
     if (!(st = hv_vdb_writer_create(&w)) &&
@@ -240,22 +253,21 @@ int cmd_sdf(int argc, char **argv)
         !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
         !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&
         !(st = hv_vdb_writer_set_meta(w, "parameters", params)))
-        st = hv_vdb_writer_write(w, out);
+        st = hv_vdb_writer_write(w, t_out);
     hv_vdb_writer_destroy(&w);
-    if (st) {
-        hv_grid_destroy(&g);
-        return cli_fail("sdf", out, st);
-    }
-    if (npy && (st = hv_write_npy(npy, g))) {
-        hv_grid_destroy(&g);
-        return cli_fail("sdf", npy, st);
-    }
-    if (preview && (st = hv_png_write_preview(preview, g, 0))) {
-        hv_grid_destroy(&g);
-        return cli_fail("sdf", preview, st);
-    }
-    tw = hv_now() - tw;
+    const char *failed = st ? out : NULL;
+    if (!st && npy && (st = hv_write_npy(t_npy, g)))
+        failed = npy;
+    if (!st && preview && (st = hv_png_write_preview(t_prev, g, 0)))
+        failed = preview;
     hv_grid_destroy(&g);
+    if (st) {
+        cli_discard(&co);
+        return cli_fail("sdf", failed, st);
+    }
+    if (cli_commit("sdf", &co))
+        return HV_EXIT_FAIL;
+    tw = hv_now() - tw;
 
     const hv_sdf_repair_report *R = &S.repair;
     if (cli_verbose >= 1)

@@ -99,6 +99,9 @@ int cmd_sdf2d(int argc, char **argv)
         return cli_usage_error("sdf2d", "no curves file given");
     if (!out && !png)
         return cli_usage_error("sdf2d", "no output: give -o OUT.exr and/or --png FILE");
+    const char *outs[] = {out, png};
+    if (cli_check_outputs("sdf2d", outs, 2, &in, 1))
+        return HV_EXIT_FAIL;
     hv_curves *c = NULL;
     hv_status st = hv_curves_read(in, &c);
     if (st)
@@ -110,16 +113,27 @@ int cmd_sdf2d(int argc, char **argv)
     if (st)
         return cli_fail("sdf2d", in, st);
     double t0 = hv_now();
-    if (out && (st = hv_exr_write(out, g, channel)) != HV_OK) {
+    cli_outputs co = {0};
+    const char *t_out = out ? cli_stage("sdf2d", &co, out) : NULL;
+    const char *t_png = png && (!out || t_out) ? cli_stage("sdf2d", &co, png) : NULL;
+    if ((out && !t_out) || (png && !t_png)) {
+        cli_discard(&co);
         hv_grid_destroy(&g);
-        return cli_fail("sdf2d", out, st);
+        return HV_EXIT_FAIL;
     }
-    if (png && (st = hv_png_write(png, g, range)) != HV_OK) {
-        hv_grid_destroy(&g);
-        return cli_fail("sdf2d", png, st);
-    }
-    double t_write = hv_now() - t0;
+    const char *failed = NULL;
+    if (out && (st = hv_exr_write(t_out, g, channel)) != HV_OK)
+        failed = out;
+    if (!failed && png && (st = hv_png_write(t_png, g, range)) != HV_OK)
+        failed = png;
     hv_grid_destroy(&g);
+    if (failed) {
+        cli_discard(&co);
+        return cli_fail("sdf2d", failed, st);
+    }
+    if (cli_commit("sdf2d", &co))
+        return HV_EXIT_FAIL;
+    double t_write = hv_now() - t0;
     if (cli_verbose >= 0) {
         printf("%s: %d x %d cells, h %g, origin (%g, %g)\n", in, S.n[0], S.n[1], S.h,
                S.origin[0], S.origin[1]);

@@ -117,6 +117,8 @@ int cmd_slice(int argc, char **argv)
     int png = ends_with(out, ".png");
     if (!png && !ends_with(out, ".exr"))
         return cli_usage_error("slice", "output '%s' must end in .exr or .png", out);
+    if (cli_check_outputs("slice", &out, 1, &in, 1))
+        return HV_EXIT_FAIL;
     hv_grid *g = NULL;
     hv_status st = read_volume(in, grid, &g);
     if (st)

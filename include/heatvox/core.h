@@ -61,7 +61,13 @@ double hv_now(void);
 /* Peak resident memory of this process in bytes (0 if unknown). */
 size_t hv_peak_rss(void);
 
-/* Number of worker threads the CPU kernels use; 0 restores the default (all cores). */
+/* Most worker threads the library runs: thread counts above it are refused by
+ * the options that take one, and hv_set_threads clamps to it (libgomp crashes
+ * when it cannot create the threads it was asked for). */
+#define HV_MAX_THREADS 1024
+
+/* Number of worker threads the CPU kernels use; 0 restores the default (all
+ * cores); at most HV_MAX_THREADS. */
 void hv_set_threads(int n);
 int hv_get_threads(void);
 

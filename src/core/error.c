@@ -97,7 +97,7 @@ size_t hv_peak_rss(void)
 void hv_set_threads(int n)
 {
 #ifdef _OPENMP
-    omp_set_num_threads(n > 0 ? n : omp_get_num_procs());
+    omp_set_num_threads(n > HV_MAX_THREADS ? HV_MAX_THREADS : n > 0 ? n : omp_get_num_procs());
 #else
     (void)n;
 #endif

@@ -122,8 +122,9 @@ static hv_status check_opts(const hv_sdf_opts *o)
         return hv_error(HV_ERR_INVALID_ARG, "sdf: heat coarsening must be in [0, 4], got %d", o->heat_coarsen);
     if (!(o->near_sign >= 0) || o->near_sign > 16)
         return hv_error(HV_ERR_INVALID_ARG, "sdf: near-sign width must be in [0, 16] voxels, got %g", o->near_sign);
-    if (o->threads < 0)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: thread count must be >= 0, got %d", o->threads);
+    if (o->threads < 0 || o->threads > HV_MAX_THREADS)
+        return hv_error(HV_ERR_INVALID_ARG, "sdf: thread count must be in [0, %d], got %d",
+                        HV_MAX_THREADS, o->threads);
     if (o->use_bbox) {
         for (int a = 0; a < 6; a++)
             if (!isfinite(o->bbox[a]))

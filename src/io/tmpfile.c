@@ -1,11 +1,14 @@
 #include "heatvox/io.h"
 #include "core/error.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <signal.h>
+#include <stdlib.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 /* A fixed table of pending temporaries, so that a signal handler can unlink them
@@ -37,6 +40,33 @@ static void tmp_unregister(const char *name)
         }
 }
 
+/* A process killed by SIGKILL (or a crash, or a power cut) leaves its
+ * "<dir>/.<base>.tmp-<pid>-<n>" behind. The next write of the same name removes
+ * those whose process is gone; a live pid's temporaries are left alone. */
+static void remove_stale(const char *dir, const char *base)
+{
+    DIR *d = opendir(*dir ? dir : ".");
+    if (!d)
+        return;
+    size_t blen = strlen(base);
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        const char *n = e->d_name;
+        if (n[0] != '.' || strncmp(n + 1, base, blen) != 0 || strncmp(n + 1 + blen, ".tmp-", 5))
+            continue;
+        char *end = NULL;
+        long pid = strtol(n + blen + 6, &end, 10);
+        if (pid <= 0 || !end || *end != '-' || pid == (long)getpid())
+            continue;
+        if (kill((pid_t)pid, 0) == 0 || errno != ESRCH)
+            continue;
+        char path[HV_TMP_LEN];
+        if (snprintf(path, sizeof path, "%s%s", dir, n) < (int)sizeof path)
+            unlink(path);
+    }
+    closedir(d);
+}
+
 hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
 {
     if (!target || !*target)
@@ -46,6 +76,17 @@ hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
     const char *base = slash ? slash + 1 : target;
     if (!*base)
         return hv_error(HV_ERR_INVALID_ARG, "output path '%s' names a directory", target);
+    /* Renaming onto a device or FIFO would replace it (as root, /dev/null). */
+    struct stat sb;
+    if (stat(target, &sb) == 0 && !S_ISREG(sb.st_mode))
+        return hv_error(HV_ERR_IO, "%s: exists and is not a regular file; it is not replaced",
+                        target);
+    char dir[HV_TMP_LEN];
+    if (dirlen >= (int)sizeof dir)
+        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
+    memcpy(dir, target, (size_t)dirlen);
+    dir[dirlen] = '\0';
+    remove_stale(dir, base);
     int n = snprintf(tmp, tmpsize, "%.*s.%s.tmp-%ld-%u", dirlen, target, base, (long)getpid(),
                      atomic_fetch_add(&tmp_counter, 1u));
     if (n < 0 || (size_t)n >= tmpsize || n >= HV_TMP_LEN)

@@ -1,0 +1,441 @@
+/* Faults around the command's outputs, run as a user would meet them: outputs
+ * onto special files and onto inputs, thread counts libgomp cannot start,
+ * temporaries left by killed processes, SIGKILL and SIGINT while writing each
+ * kind of output, and a full disk (a small tmpfs, when run as root). The rule
+ * in every case: a clear error naming the file, the documented exit code, and
+ * nothing partial under any requested name. */
+#include "heatvox/heatvox.h"
+#include "testlib.h"
+
+#include <check.h>
+#include <dirent.h>
+#include <errno.h>
+#include <limits.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mount.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+extern char **environ;
+
+static char dir[256];
+static char bin[PATH_MAX];
+
+static const char *at(const char *name)
+{
+    static char p[8][600];
+    static int which;
+    which = (which + 1) % 8;
+    snprintf(p[which], sizeof p[which], "%s/%s", dir, name);
+    return p[which];
+}
+
+static void rm_rf(const char *p)
+{
+    struct stat sb;
+    if (lstat(p, &sb) != 0)
+        return;
+    if (S_ISDIR(sb.st_mode)) {
+        DIR *d = opendir(p);
+        struct dirent *e;
+        while (d && (e = readdir(d)))
+            if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
+                char sub[1200];
+                snprintf(sub, sizeof sub, "%s/%s", p, e->d_name);
+                rm_rf(sub);
+            }
+        if (d)
+            closedir(d);
+        rmdir(p);
+    } else
+        unlink(p);
+}
+
+/* A scratch directory with the generated scenes in it. */
+static void setup(void)
+{
+    const char *b = tl_heatvox_bin();
+    ck_assert_msg(b != NULL, "build/heatvox not found (set HEATVOX_BIN)");
+    ck_assert_ptr_nonnull(realpath(b, bin));
+    snprintf(dir, sizeof dir, "/tmp/hv_check_faults_XXXXXX");
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char cmd[5000];
+    snprintf(cmd, sizeof cmd, "'%s' make-scenes '%s/sc' -q", bin, dir);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
+}
+
+static void teardown(void) { rm_rf(dir); }
+
+/* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
+static int hv(char *err, size_t errsize, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static int hv(char *err, size_t errsize, const char *fmt, ...)
+{
+    char args[3000], cmd[8000];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
+    return tl_run_cmd(cmd, dir, err, errsize);
+}
+
+/* Names in dir (not recursive) that start with `.` and hold ".tmp-". */
+static int temporaries_in(const char *d)
+{
+    DIR *dd = opendir(d);
+    int n = 0;
+    struct dirent *e;
+    while (dd && (e = readdir(dd)))
+        n += e->d_name[0] == '.' && strstr(e->d_name, ".tmp-") != NULL;
+    if (dd)
+        closedir(dd);
+    return n;
+}
+
+static int is_regular(const char *p)
+{
+    struct stat sb;
+    return lstat(p, &sb) == 0 && S_ISREG(sb.st_mode);
+}
+
+/* ---- special files and inputs as outputs ---- */
+
+START_TEST(outputs_onto_special_files_should_be_refused_and_left_alone)
+{
+    setup();
+    ck_assert_int_eq(mkfifo(at("fifo.vdb"), 0600), 0);
+    ck_assert_int_eq(symlink("/dev/null", at("null.npy")), 0);
+    ck_assert_int_eq(mkdir(at("dir.png"), 0700), 0);
+    ck_assert_int_eq(mkfifo(at("fifo.exr"), 0600), 0);
+    struct {
+        const char *args, *victim;
+    } cases[] = {
+        {"sdf sc/meshes/torus_holes.obj -o fifo.vdb --res 24", "fifo.vdb"},
+        {"sdf sc/meshes/torus_holes.obj -o a.vdb --npy null.npy --res 24", "null.npy"},
+        {"sdf sc/meshes/torus_holes.obj -o a.vdb --preview dir.png --res 24", "dir.png"},
+        {"extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o fifo.vdb",
+         "fifo.vdb"},
+        {"slice sc/levelset/sphere_velocity.vdb --grid sdf -o fifo.exr", "fifo.exr"},
+        {"distance --sources src.txt --obstacles none --res 16 -o fifo.vdb", "fifo.vdb"},
+        {"distance --sources src.txt --obstacles none --res 16 --npy null.npy", "null.npy"},
+    };
+    FILE *f = fopen(at("src.txt"), "w");
+    fputs("0 0 0\n", f);
+    fclose(f);
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char err[2048];
+        int rc = hv(err, sizeof err, "%s", cases[c].args);
+        ck_assert_msg(rc == 1, "%s: exit %d (%s)", cases[c].args, rc, err);
+        ck_assert_msg(strstr(err, cases[c].victim) && strstr(err, "not replaced"),
+                      "%s: message does not name %s: %s", cases[c].args, cases[c].victim, err);
+        ck_assert_msg(!is_regular(at(cases[c].victim)), "%s replaced by a file", cases[c].victim);
+        ck_assert_msg(!is_regular(at("a.vdb")), "%s: a.vdb written", cases[c].args);
+    }
+    struct stat sb;
+    ck_assert_int_eq(stat(at("null.npy"), &sb), 0);
+    ck_assert(S_ISCHR(sb.st_mode)); /* still /dev/null */
+    ck_assert_int_eq(temporaries_in(dir), 0);
+    /* The library refuses too (a program that skips the command's check). */
+    hv_grid *g = NULL;
+    int n[3] = {4, 4, 4};
+    double o[3] = {0, 0, 0};
+    TL_ASSERT_OK(hv_grid_create(&g, 3, n, 1.0, o));
+    ck_assert_int_eq(hv_write_npy(at("fifo.vdb"), g), HV_ERR_IO);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "not a regular file"));
+    ck_assert_int_eq(hv_exr_write(at("dir.png"), g, NULL), HV_ERR_IO);
+    hv_grid_destroy(&g);
+    teardown();
+}
+END_TEST
+
+START_TEST(an_output_that_is_an_input_should_be_refused)
+{
+    setup();
+    const char *ls = at("sc/levelset/sphere_velocity.vdb");
+    struct stat before, after;
+    ck_assert_int_eq(stat(ls, &before), 0);
+    char err[2048];
+    int rc = hv(err, sizeof err,
+                "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v "
+                "-o sc/levelset/../levelset/sphere_velocity.vdb");
+    ck_assert_msg(rc == 1, "exit %d: %s", rc, err);
+    ck_assert_ptr_nonnull(strstr(err, "is the input"));
+    rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o sc/meshes/torus_holes.obj --res 16");
+    ck_assert_msg(rc == 1, "exit %d: %s", rc, err);
+    rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o a.vdb --npy a.vdb --res 16");
+    ck_assert_msg(rc == 1, "exit %d: %s", rc, err);
+    ck_assert_ptr_nonnull(strstr(err, "two outputs"));
+    ck_assert_int_eq(stat(ls, &after), 0);
+    ck_assert_int_eq(before.st_ino, after.st_ino);
+    ck_assert_int_eq(before.st_mtime, after.st_mtime);
+    ck_assert_int_eq(before.st_size, after.st_size);
+    ck_assert(!is_regular(at("a.vdb")));
+    teardown();
+}
+END_TEST
+
+/* ---- thread counts ---- */
+
+START_TEST(thread_counts_libgomp_cannot_start_should_be_usage_errors)
+{
+    setup();
+    FILE *f = fopen(at("src.txt"), "w");
+    fputs("0 0 0\n", f);
+    fclose(f);
+    const char *cmds[] = {
+        "sdf sc/meshes/torus_holes.obj -o a.vdb --res 16 --threads 100000",
+        "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o a.vdb --threads 100000",
+        "distance --sources src.txt --obstacles none --res 16 -o a.vdb --threads 100000",
+        "batch sc/meshes -o out --res 16 --threads 100000",
+        "bench solve --n 16 --threads 100000",
+    };
+    for (size_t c = 0; c < sizeof cmds / sizeof cmds[0]; c++) {
+        char err[2048];
+        int rc = hv(err, sizeof err, "%s", cmds[c]);
+        ck_assert_msg(rc == 2, "%s: exit %d (%s)", cmds[c], rc, err);
+        ck_assert_msg(strstr(err, "--threads") && strstr(err, "1024"), "%s: %s", cmds[c], err);
+    }
+    ck_assert(!is_regular(at("a.vdb")));
+    /* The largest count allowed runs. */
+    char err[2048];
+    int rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o a.vdb --res 16 --threads %d",
+                HV_MAX_THREADS);
+    ck_assert_msg(rc == 0, "exit %d: %s", rc, err);
+    teardown();
+}
+END_TEST
+
+/* ---- temporaries of killed processes ---- */
+
+static pid_t dead_pid(void)
+{
+    pid_t p = fork();
+    ck_assert_int_ge(p, 0);
+    if (p == 0)
+        _exit(0);
+    waitpid(p, NULL, 0);
+    return p;
+}
+
+START_TEST(temporaries_of_dead_processes_should_be_removed_by_the_next_write)
+{
+    setup();
+    char stale[600], live[600], other[600];
+    snprintf(stale, sizeof stale, "%s/.a.vdb.tmp-%ld-3", dir, (long)dead_pid());
+    snprintf(live, sizeof live, "%s/.a.vdb.tmp-%ld-0", dir, (long)getpid());
+    snprintf(other, sizeof other, "%s/.b.vdb.tmp-%ld-0", dir, (long)dead_pid());
+    const char *names[] = {stale, live, other};
+    for (int i = 0; i < 3; i++) {
+        FILE *f = fopen(names[i], "w");
+        fputs("partial", f);
+        fclose(f);
+    }
+    char err[2048];
+    int rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o a.vdb --res 16 -q");
+    ck_assert_msg(rc == 0, "exit %d: %s", rc, err);
+    ck_assert_msg(access(stale, F_OK) != 0, "%s left", stale);
+    ck_assert_msg(access(live, F_OK) == 0, "a live process's temporary was removed");
+    ck_assert_msg(access(other, F_OK) == 0, "another output's temporary was removed");
+    unlink(live);
+    unlink(other);
+    teardown();
+}
+END_TEST
+
+/* ---- signals while writing ---- */
+
+static pid_t spawn(const char *args)
+{
+    char cmd[8000];
+    snprintf(cmd, sizeof cmd, "cd '%s' && exec '%s' %s >/dev/null 2>&1", dir, bin, args);
+    char *argv[] = {"sh", "-c", cmd, NULL};
+    pid_t pid;
+    ck_assert_int_eq(posix_spawn(&pid, "/bin/sh", NULL, NULL, argv, environ), 0);
+    return pid;
+}
+
+static void sleep_ms(int ms)
+{
+    struct timespec t = {ms / 1000, (long)(ms % 1000) * 1000000L};
+    nanosleep(&t, NULL);
+}
+
+/* An output under its requested name must be whole: each reads back. */
+static void assert_whole_or_absent(const char *const *outs, int n, const char *when)
+{
+    for (int i = 0; i < n; i++) {
+        const char *p = at(outs[i]);
+        if (access(p, F_OK) != 0)
+            continue;
+        const char *ext = strrchr(p, '.');
+        hv_status st = HV_OK;
+        hv_grid *g = NULL;
+        if (!strcmp(ext, ".vdb")) {
+            hv_vdb_grid_info info[8];
+            size_t count = 0;
+            st = hv_vdb_list(p, info, 8, &count);
+            for (size_t k = 0; k < count && k < 8 && st == HV_OK; k++) {
+                hv_grid *c[3] = {NULL, NULL, NULL};
+                if (!strcmp(info[k].value_type, "float"))
+                    st = hv_vdb_read_float(p, info[k].name, NULL, &c[0], NULL);
+                else if (!strcmp(info[k].value_type, "vec3s"))
+                    st = hv_vdb_read_vec3(p, info[k].name, NULL, &c[0], &c[1], &c[2]);
+                for (int a = 0; a < 3; a++)
+                    hv_grid_destroy(&c[a]);
+            }
+        } else if (!strcmp(ext, ".npy")) {
+            st = hv_read_npy(p, &g);
+        } else if (!strcmp(ext, ".exr")) {
+            st = hv_exr_read(p, NULL, &g);
+        } else if (!strcmp(ext, ".png")) {
+            uint8_t *rgb = NULL;
+            int w, h;
+            st = hv_png_read_rgb(p, &rgb, &w, &h);
+            free(rgb);
+        } else if (!strcmp(ext, ".obj")) {
+            hv_mesh *m = NULL;
+            st = hv_mesh_read(p, &m);
+            hv_mesh_destroy(&m);
+        }
+        hv_grid_destroy(&g);
+        ck_assert_msg(st == HV_OK, "%s: %s is partial: %s", when, outs[i], hv_last_error());
+    }
+}
+
+static void kill_during_writes(const char *args, const char *const *outs, int n, int sig)
+{
+    /* Delays spread over the run, so that some signals land while writing. */
+    const int delays[] = {30, 80, 150, 250, 400, 600, 900};
+    for (size_t k = 0; k < sizeof delays / sizeof delays[0]; k++) {
+        for (int i = 0; i < n; i++)
+            unlink(at(outs[i]));
+        pid_t pid = spawn(args);
+        sleep_ms(delays[k]);
+        kill(pid, sig);
+        int status = 0;
+        ck_assert_int_eq(waitpid(pid, &status, 0), pid);
+        char when[256];
+        snprintf(when, sizeof when, "%s after %d ms, signal %d", args, delays[k], sig);
+        /* All of a command's outputs land together, or none does. */
+        int present = 0;
+        for (int i = 0; i < n; i++)
+            present += access(at(outs[i]), F_OK) == 0;
+        ck_assert_msg(present == 0 || present == n, "%s: %d of %d outputs", when, present, n);
+        assert_whole_or_absent(outs, n, when);
+        if (sig == SIGINT && WIFSIGNALED(status))
+            ck_assert_msg(temporaries_in(dir) == 0, "%s: temporaries left", when);
+    }
+}
+
+START_TEST(sigkill_and_sigint_while_writing_should_leave_nothing_partial)
+{
+    setup();
+    const char *sdf_outs[] = {"o.vdb", "o.npy", "o.png"};
+    const char *sdf_args = "sdf sc/meshes/torus_holes.obj -o o.vdb --npy o.npy --preview o.png "
+                           "--res 112 --dense -q";
+    kill_during_writes(sdf_args, sdf_outs, 3, SIGKILL);
+    kill_during_writes(sdf_args, sdf_outs, 3, SIGINT);
+    const char *ext_outs[] = {"e.vdb"};
+    const char *ext_args =
+        "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o e.vdb --dense -q";
+    kill_during_writes(ext_args, ext_outs, 1, SIGKILL);
+    kill_during_writes(ext_args, ext_outs, 1, SIGINT);
+    const char *sl_outs[] = {"s.exr"};
+    kill_during_writes("slice sc/levelset/sphere_velocity.vdb --grid sdf --axis z -o s.exr -q",
+                       sl_outs, 1, SIGKILL);
+    const char *sc_outs[] = {"sc2/meshes/torus_holes.obj"};
+    kill_during_writes("make-scenes sc2 -q", sc_outs, 1, SIGKILL);
+    /* The next run into the same place clears what SIGKILL left. */
+    char err[2048];
+    ck_assert_int_eq(hv(err, sizeof err, "%s", sdf_args), 0);
+    ck_assert_int_eq(hv(err, sizeof err, "%s", ext_args), 0);
+    ck_assert_int_eq(temporaries_in(dir), 0);
+    teardown();
+}
+END_TEST
+
+/* ---- a full disk ---- */
+
+START_TEST(a_full_disk_should_fail_clearly_and_leave_nothing)
+{
+    if (geteuid() != 0)
+        TL_SKIP("mounting a small tmpfs needs root");
+    setup();
+    const char *mnt = at("full");
+    ck_assert_int_eq(mkdir(mnt, 0700), 0);
+    if (mount("tmpfs", mnt, "tmpfs", 0, "size=96k") != 0) {
+        int e = errno;
+        teardown();
+        TL_SKIP("cannot mount a tmpfs: %s", strerror(e));
+    }
+    char err[2048];
+    /* Each kind of output alone, then a small .vdb with a dense .npy that does
+     * not fit: neither lands. */
+    const char *cmds[] = {
+        "sdf sc/meshes/torus_holes.obj -o full/a.vdb --res 64 --dense",
+        "sdf sc/meshes/torus_holes.obj -o a.vdb --npy full/a.npy --res 64",
+        "sdf sc/meshes/torus_holes.obj -o a.vdb --preview full/a.png --res 400 --band 1",
+        "slice sc/levelset/sphere_velocity.vdb --grid sdf -o full/a.exr",
+        "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o full/e.vdb --dense",
+        "make-scenes full/sc",
+    };
+    for (size_t c = 0; c < sizeof cmds / sizeof cmds[0]; c++) {
+        /* Fill the disk but for 4 kB, so that even small files fail. */
+        static char block[92 * 1024];
+        FILE *f = fopen(at("full/filler"), "w");
+        fwrite(block, 1, 92 * 1024, f);
+        fclose(f);
+        int rc = hv(err, sizeof err, "%s", cmds[c]);
+        ck_assert_msg(rc == 1, "%s: exit %d (%s)", cmds[c], rc, err);
+        ck_assert_msg(strstr(err, "full/") || strstr(err, "space"), "%s: %s", cmds[c], err);
+        ck_assert_msg(!is_regular(at("a.vdb")), "%s: a.vdb landed without its .npy", cmds[c]);
+        unlink(at("full/filler"));
+        DIR *d = opendir(mnt);
+        struct dirent *e;
+        int left = 0;
+        char names[512] = "";
+        while (d && (e = readdir(d)))
+            if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
+                char sub[700];
+                snprintf(sub, sizeof sub, "%s/%s", mnt, e->d_name);
+                struct stat sb;
+                /* make-scenes makes its directories before it writes */
+                if (stat(sub, &sb) == 0 && S_ISDIR(sb.st_mode)) {
+                    rm_rf(sub);
+                    continue;
+                }
+                left++;
+                strncat(names, e->d_name, sizeof names - strlen(names) - 2);
+                strcat(names, " ");
+            }
+        if (d)
+            closedir(d);
+        ck_assert_msg(left == 0, "%s: left on the full disk: %s", cmds[c], names);
+    }
+    umount(mnt);
+    teardown();
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("faults");
+    TCase *tc = tcase_create("outputs");
+    tcase_set_timeout(tc, 300);
+    tcase_add_test(tc, outputs_onto_special_files_should_be_refused_and_left_alone);
+    tcase_add_test(tc, an_output_that_is_an_input_should_be_refused);
+    tcase_add_test(tc, thread_counts_libgomp_cannot_start_should_be_usage_errors);
+    tcase_add_test(tc, temporaries_of_dead_processes_should_be_removed_by_the_next_write);
+    tcase_add_test(tc, sigkill_and_sigint_while_writing_should_leave_nothing_partial);
+    tcase_add_test(tc, a_full_disk_should_fail_clearly_and_leave_nothing);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}
