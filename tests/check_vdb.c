@@ -5,13 +5,20 @@
  * Links OpenVDB: run with CK_FORK=no (NOTES §5). */
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
+#include "testlib.h"
 
 #include <check.h>
 #include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static char dir[64];
@@ -198,9 +205,12 @@ START_TEST(dense_levelset_should_keep_every_value_and_activate_every_voxel)
 }
 END_TEST
 
-static int have_pyopenvdb(void)
+/* OpenVDB's own Python module (python3-openvdb, which make installs): the
+ * independent reader these tests compare against, so its absence fails them. */
+static void require_pyopenvdb(void)
 {
-    return system("/usr/bin/python3 -c 'import pyopenvdb' >/dev/null 2>&1") == 0;
+    ck_assert_msg(system("/usr/bin/python3 -c 'import pyopenvdb' >/dev/null 2>&1") == 0,
+                  "pyopenvdb does not import in /usr/bin/python3 (package python3-openvdb)");
 }
 
 START_TEST(openvdb_own_reader_should_see_the_level_set_we_wrote)
@@ -220,19 +230,10 @@ START_TEST(openvdb_own_reader_should_see_the_level_set_we_wrote)
         saw_name |= strstr(line, "sphere") != NULL;
     }
     int rc = pclose(pp);
-    if (rc != 0 && !saw_name) {
-        printf("check_vdb: vdb_print unavailable (rc %d); its check skipped\n", rc);
-    } else {
-        ck_assert_int_eq(rc, 0);
-        ck_assert(saw_name);
-    }
+    /* vdb_print comes with libopenvdb-tools, which make installs. */
+    ck_assert_msg(rc == 0 && saw_name, "vdb_print -l -m %s: exit %d", p, rc);
 
-    if (!have_pyopenvdb()) {
-        printf("check_vdb: pyopenvdb not importable from /usr/bin/python3; round trip through "
-               "OpenVDB's reader skipped\n");
-        hv_grid_destroy(&g);
-        return;
-    }
+    require_pyopenvdb();
     /* voxels: deep inside, in the band, far outside */
     const int pts[3][3] = {{17, 22, 16}, {28, 22, 16}, {1, 1, 1}};
     snprintf(cmd, sizeof cmd,
@@ -282,10 +283,7 @@ END_TEST
 
 START_TEST(files_made_by_openvdb_should_read_on_their_active_box_and_refuse_nonuniform_voxels)
 {
-    if (!have_pyopenvdb()) {
-        printf("check_vdb: pyopenvdb not importable; reading OpenVDB-made files skipped\n");
-        return;
-    }
+    require_pyopenvdb();
     char p[256], cmd[2048];
     path_in_dir(p, sizeof p, "foreign.vdb");
     /* a level set sphere (radius 1, centre c, voxel 0.1, half width 3), a grid
@@ -806,8 +804,310 @@ START_TEST(sdf_to_ext_reference_should_extend_a_surface_field_along_normals)
 }
 END_TEST
 
-int main(void)
+/* ---- damaged files ------------------------------------------------------------
+ * OpenVDB trusts the lengths and counts it reads: a cut or damaged file made it
+ * allocate gigabytes. Each damaged file is read by the heatvox command in a
+ * child process whose address space is capped, so that a regression fails the
+ * test instead of taking the machine down. */
+
+#define CHILD_AS_BYTES (1536ull << 20)
+#define CHILD_RSS_MAX_KB (300L * 1024)
+#define CHILD_SECONDS 60
+
+extern char **environ;
+
+typedef struct child_result {
+    int status;     /* from wait4 */
+    long maxrss_kb; /* the child's peak resident size */
+    char err[4096]; /* its stderr */
+} child_result;
+
+/* The environment for the children: ours, with few threads and malloc arenas
+ * so that the address-space cap only bites on real allocations. */
+static char **child_env(void)
 {
+    static char *env[512];
+    static char arenas[] = "MALLOC_ARENA_MAX=2", omp[] = "OMP_NUM_THREADS=2";
+    size_t n = 0;
+    for (char **e = environ; *e && n < 500; e++)
+        if (strncmp(*e, "MALLOC_ARENA_MAX=", 17) && strncmp(*e, "OMP_NUM_THREADS=", 16))
+            env[n++] = *e;
+    env[n++] = arenas;
+    env[n++] = omp;
+    env[n] = NULL;
+    return env;
+}
+
+/* Runs argv (argv[0] a path) with stdout discarded, stderr in errfile,
+ * CHILD_SECONDS to live and, when capped, its address space capped at
+ * CHILD_AS_BYTES. */
+static void run_child(char *const argv[], const char *errfile, int capped, child_result *r)
+{
+    char **env = child_env();
+    pid_t pid = fork();
+    ck_assert_int_ge(pid, 0);
+    if (pid == 0) {
+        /* Only async-signal-safe calls until exec: the parent has OpenVDB's threads. */
+        struct rlimit rl = {CHILD_AS_BYTES, CHILD_AS_BYTES};
+        int out = open("/dev/null", O_WRONLY | O_CLOEXEC);
+        int err = open(errfile, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if ((capped && setrlimit(RLIMIT_AS, &rl) != 0) || out < 0 || err < 0 ||
+            dup2(out, 1) < 0 || dup2(err, 2) < 0)
+            _exit(126);
+        alarm(CHILD_SECONDS);
+        execve(argv[0], argv, env);
+        _exit(127);
+    }
+    struct rusage ru;
+    pid_t w;
+    while ((w = wait4(pid, &r->status, 0, &ru)) < 0 && errno == EINTR)
+        ;
+    ck_assert_int_eq(w, pid);
+    r->maxrss_kb = ru.ru_maxrss;
+    r->err[0] = '\0';
+    FILE *f = fopen(errfile, "r");
+    if (f) {
+        size_t n = fread(r->err, 1, sizeof r->err - 1, f);
+        r->err[n] = '\0';
+        fclose(f);
+    }
+}
+
+/* A file with three grids the commands read: level set 'sdf' (narrow band:
+ * mask-compressed leaves), Vec3s 'v' and bool 'm'. */
+static void write_three_grids(const char *path)
+{
+    hv_grid *g = sphere_sdf();
+    hv_grid *c[3] = {NULL, NULL, NULL};
+    for (int a = 0; a < 3; a++) {
+        ck_assert_int_eq(hv_grid_create(&c[a], 3, SN, SH, SO), HV_OK);
+        for (int k = 0; k < SN[2]; k++)
+            for (int j = 0; j < SN[1]; j++)
+                for (int i = 0; i < SN[0]; i++) {
+                    double x[3];
+                    hv_grid_cell_center(g, i, j, k, x);
+                    c[a]->v[idx(g, i, j, k)] = (float)x[(a + 1) % 3];
+                }
+    }
+    ck_assert_int_eq(hv_grid_add_mask(g), HV_OK);
+    for (size_t i = 0; i < hv_grid_count(g); i++)
+        g->solid[i] = g->v[i] < 0;
+    hv_vdb_writer *w = NULL;
+    ck_assert_int_eq(hv_vdb_writer_create(&w), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_levelset(w, g, "sdf", 3.0, 0), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_vec3(w, c[0], c[1], c[2], "v"), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_add_mask(w, g, "m"), HV_OK);
+    ck_assert_int_eq(hv_vdb_writer_write(w, path), HV_OK);
+    hv_vdb_writer_destroy(&w);
+    for (int a = 0; a < 3; a++)
+        hv_grid_destroy(&c[a]);
+    hv_grid_destroy(&g);
+}
+
+static unsigned char *slurp(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    ck_assert_ptr_nonnull(f);
+    ck_assert_int_eq(fseek(f, 0, SEEK_END), 0);
+    long n = ftell(f);
+    ck_assert_int_gt(n, 0);
+    rewind(f);
+    unsigned char *b = malloc((size_t)n);
+    ck_assert_ptr_nonnull(b);
+    ck_assert_uint_eq(fread(b, 1, (size_t)n, f), (size_t)n);
+    fclose(f);
+    *size = (size_t)n;
+    return b;
+}
+
+static void spill(const char *path, const unsigned char *b, size_t n)
+{
+    FILE *f = fopen(path, "wb");
+    ck_assert_ptr_nonnull(f);
+    ck_assert_uint_eq(fwrite(b, 1, n, f), n);
+    ck_assert_int_eq(fclose(f), 0);
+}
+
+/* Offset of the first occurrence of the n bytes s in b at or after from. */
+static size_t find_bytes(const unsigned char *b, size_t size, size_t from, const void *s, size_t n)
+{
+    for (size_t i = from; i + n <= size; i++)
+        if (!memcmp(b + i, s, n))
+            return i;
+    ck_abort_msg("byte pattern not found in the test file");
+    return 0;
+}
+
+/* A length field, and what to put there: each is a size or count that OpenVDB
+ * used to allocate (and fill) before finding that the file cannot back it. */
+typedef struct length_patch {
+    const char *what;
+    size_t at;
+    unsigned width; /* 4 or 8 bytes */
+    uint64_t value;
+} length_patch;
+
+static size_t find_length_patches(const unsigned char *b, size_t size, length_patch *p)
+{
+    size_t n = 0;
+    /* file metadata: the length of the first name, "creator" */
+    size_t at = find_bytes(b, size, 0, "\x07\0\0\0creator", 11);
+    p[n++] = (length_patch){"file metadata name length", at, 4, 0x40000000u};
+    /* the grid count, just before the first descriptor's name "sdf" */
+    size_t sdf = find_bytes(b, size, at, "\x03\0\0\0sdf", 7);
+    p[n++] = (length_patch){"grid count", sdf - 4, 4, 0x7fffffffu};
+    /* descriptor of 'sdf': its type's length, then its end position */
+    size_t type = find_bytes(b, size, sdf, "\x10\0\0\0Tree_float_5_4_3", 20);
+    p[n++] = (length_patch){"grid type length", type, 4, 0x50000000u};
+    p[n++] = (length_patch){"grid end position", type + 20 + 4 + 16, 8, 1ull << 40};
+    /* the grid's own metadata: the size of its 'class' string value */
+    size_t cls = find_bytes(b, size, type, "\x05\0\0\0class\x06\0\0\0string", 19);
+    p[n++] = (length_patch){"metadata value size", cls + 19, 4, 0x40000000u};
+    /* OpenVDB's delayed-load metadata: its size, and its leaf count */
+    size_t dl = find_bytes(b, size, cls, "__delayedload", 13);
+    p[n++] = (length_patch){"delayed-load metadata size", dl + 13, 4, 0x40000000u};
+    p[n++] = (length_patch){"delayed-load leaf count", dl + 17, 4, 0x7fffffffu};
+    /* the root's child count: after the transform (map type, 144 bytes of
+     * ScaleTranslateMap) come the buffer count, background and tile count */
+    size_t map = find_bytes(b, size, dl, "\x18\0\0\0UniformScaleTranslateMap", 28);
+    p[n++] = (length_patch){"root child count", map + 28 + 144 + 12, 4, 0x00ffffffu};
+    /* the second descriptor's type length (grid 'v') */
+    size_t vt = find_bytes(b, size, dl, "\x10\0\0\0Tree_vec3s_5_4_3", 20);
+    p[n++] = (length_patch){"second grid type length", vt, 4, 0xffffffffu};
+    return n;
+}
+
+START_TEST(damaged_files_should_fail_with_small_memory_naming_the_file)
+{
+    const char *bin = tl_heatvox_bin();
+    ck_assert_msg(bin != NULL, "no heatvox command (make builds it; or set HEATVOX_BIN)");
+    char good[256], bad[256], src[256], errf[256], out_vdb[256], out_exr[256];
+    path_in_dir(good, sizeof good, "good.vdb");
+    path_in_dir(bad, sizeof bad, "bad.vdb");
+    path_in_dir(src, sizeof src, "sources.txt");
+    path_in_dir(errf, sizeof errf, "stderr.txt");
+    path_in_dir(out_vdb, sizeof out_vdb, "out.vdb");
+    path_in_dir(out_exr, sizeof out_exr, "out.exr");
+    write_three_grids(good);
+    FILE *f = fopen(src, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "point %g %g %g\n", SO[0] + 0.1, SO[1] + 0.1, SO[2] + 0.1); /* outside the sphere */
+    fclose(f);
+    size_t size = 0;
+    unsigned char *data = slurp(good, &size);
+    char exe[1024];
+    snprintf(exe, sizeof exe, "%s", bin);
+
+    /* Three readers: extend (level set + vec3 through hv_vdb_list, common box,
+     * read_float, read_vec3), slice (read_float), distance (list, meta, mask). */
+    char *cmds[3][16] = {
+        {exe, "extend", bad, "--levelset", "sdf", "--field", "v", "-o", out_vdb, "--backend", "mg",
+         "--threads", "2", "-q", NULL},
+        {exe, "slice", bad, "--grid", "sdf", "-o", out_exr, NULL},
+        {exe, "distance", "--sources", src, "--obstacles", bad, "--obstacle-grid", "m", "-o",
+         out_vdb, "--backend", "mg", "--threads", "2", "-q", NULL},
+    };
+    child_result r;
+    /* The intact file reads under the same limits: a failure below is the
+     * damage. A binary that cannot start under the cap at all (a sanitizer
+     * build reserves terabytes of address space) skips the test. */
+    spill(bad, data, size);
+    for (int c = 0; c < 3; c++) {
+        run_child(cmds[c], errf, 1, &r);
+        if (!WIFEXITED(r.status) || WEXITSTATUS(r.status) != 0) {
+            child_result u;
+            run_child(cmds[c], errf, 0, &u);
+            ck_assert_msg(WIFEXITED(u.status) && WEXITSTATUS(u.status) == 0,
+                          "%s on the intact file: status 0x%x: %s", cmds[c][1], u.status, u.err);
+            r.err[strcspn(r.err, "\n")] = '\0';
+            free(data);
+            TL_SKIP("%s does not run under a %llu MB address-space cap (%s)", bin,
+                    CHILD_AS_BYTES >> 20, r.err);
+        }
+        unlink(out_vdb);
+        unlink(out_exr);
+    }
+    const int files_before = count_entries(dir);
+
+    /* Cuts: the first bytes only, every length at a stride, all but the last byte. */
+    size_t cuts[64];
+    size_t ncut = 0;
+    const size_t fixed[] = {0, 1, 100, 4000, size - 1};
+    for (size_t i = 0; i < sizeof fixed / sizeof *fixed; i++)
+        cuts[ncut++] = fixed[i];
+    for (size_t k = 1; k < 40; k++)
+        cuts[ncut++] = size * k / 40;
+    length_patch patches[16];
+    const size_t npatch = find_length_patches(data, size, patches);
+
+    /* Every case runs; the failures are listed together at the end. */
+    unsigned char *copy = malloc(size);
+    ck_assert_ptr_nonnull(copy);
+    char report[8192];
+    size_t used = 0;
+    int failed = 0;
+    long worst_kb = 0;
+    const size_t ncase = ncut + npatch;
+    for (size_t q = 0; q < ncase; q++) {
+        char what[128];
+        if (q < ncut) {
+            spill(bad, data, cuts[q]);
+            snprintf(what, sizeof what, "cut to %zu of %zu bytes", cuts[q], size);
+        } else {
+            const length_patch *p = &patches[q - ncut];
+            memcpy(copy, data, size);
+            memcpy(copy + p->at, &p->value, p->width); /* little-endian, as OpenVDB writes */
+            spill(bad, copy, size);
+            snprintf(what, sizeof what, "%s at byte %zu set to %llu", p->what, p->at,
+                     (unsigned long long)p->value);
+        }
+        char *const *argv = cmds[q % 3];
+        run_child(argv, errf, 1, &r);
+        const char *wrong = NULL;
+        if (!WIFEXITED(r.status) || WEXITSTATUS(r.status) != 1)
+            wrong = WIFSIGNALED(r.status) ? "killed by a signal" : "exit status not 1";
+        else if (r.maxrss_kb >= CHILD_RSS_MAX_KB)
+            wrong = "too much memory";
+        else if (!strstr(r.err, bad))
+            wrong = "the message does not name the file";
+        else if (access(out_vdb, F_OK) == 0 || access(out_exr, F_OK) == 0 ||
+                 count_entries(dir) != files_before)
+            wrong = "an output was written";
+        if (r.maxrss_kb > worst_kb)
+            worst_kb = r.maxrss_kb;
+        unlink(out_vdb);
+        unlink(out_exr);
+        if (wrong) {
+            failed++;
+            r.err[strcspn(r.err, "\n")] = '\0';
+            int k = snprintf(report + used, sizeof report - used,
+                             "\n  %s, %s: %s (status 0x%x, peak %ld kB): %.160s", argv[1], what,
+                             wrong, r.status, r.maxrss_kb, r.err);
+            if (k > 0 && (size_t)k < sizeof report - used)
+                used += (size_t)k;
+        }
+    }
+    printf("check_vdb: %zu damaged files read by heatvox, peak resident size at most %ld kB\n",
+           ncase, worst_kb);
+    ck_assert_msg(failed == 0, "%d of %zu damaged files were not refused quickly and cheaply:%s",
+                  failed, ncase, report);
+    free(copy);
+    free(data);
+}
+END_TEST
+
+int main(int argc, char **argv)
+{
+    /* The heatvox command of this build (BUILD/tests/check_vdb -> BUILD/heatvox)
+     * unless HEATVOX_BIN names one. */
+    char bin[4096];
+    snprintf(bin, sizeof bin, "%s", argc > 0 ? argv[0] : "");
+    char *slash = strrchr(bin, '/');
+    if (!getenv("HEATVOX_BIN") && slash) {
+        snprintf(slash + 1, sizeof bin - (size_t)(slash + 1 - bin), "../heatvox");
+        if (access(bin, X_OK) == 0)
+            setenv("HEATVOX_BIN", bin, 0);
+    }
     Suite *s = suite_create("vdb");
     TCase *tc = tcase_create("vdb");
     /* a scratch directory per test, removed even when the test fails */
@@ -829,6 +1129,7 @@ int main(void)
     tcase_add_test(tc, masks_should_round_trip_and_level_sets_should_read_as_their_inside);
     tcase_add_test(tc, mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface);
     tcase_add_test(tc, sdf_to_ext_reference_should_extend_a_surface_field_along_normals);
+    tcase_add_test(tc, damaged_files_should_fail_with_small_memory_naming_the_file);
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,

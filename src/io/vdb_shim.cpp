@@ -7,6 +7,7 @@
 extern "C" {
 #include "core/error.h"
 }
+#include "io/vdb_check.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/Archive.h>
@@ -260,13 +261,22 @@ void check_readable(const char *path)
 
 // Opens without delayed loading: the file is read completely by readGrid, so
 // nothing stays mapped and truncated data is found now rather than later.
+// OpenVDB trusts the lengths and counts it reads, so the file's layout is
+// checked against its size first (vdb_check.h): the header, metadata,
+// descriptors and transforms on open, each tree before readGrid reads it.
 struct OpenFile {
     openvdb::io::File file;
     std::string path;
+    std::unique_ptr<hv_vdb_check::FileCheck> layout;
     explicit OpenFile(const char *p) : file(p), path(p)
     {
         init_vdb();
         check_readable(p);
+        try {
+            layout.reset(new hv_vdb_check::FileCheck(path));
+        } catch (const hv_vdb_check::Rejected &e) {
+            fail(e.st, e.msg);
+        }
         try {
             file.open(false);
         } catch (const openvdb::Exception &e) {
@@ -302,6 +312,11 @@ struct OpenFile {
     openvdb::GridBase::Ptr read(const char *name)
     {
         require(name);
+        try {
+            layout->check_tree(name);
+        } catch (const hv_vdb_check::Rejected &e) {
+            fail(e.st, e.msg);
+        }
         try {
             return file.readGrid(name);
         } catch (const openvdb::Exception &e) {
