@@ -2,6 +2,7 @@
  * with gaps, flipped segments, duplicates and the wrong winding, against their
  * analytic distances; the text and SVG readers. */
 #include "heatvox/heatvox.h"
+#include "heat/sdf2d_internal.h"
 #include "testlib.h"
 
 #include <check.h>
@@ -484,6 +485,257 @@ START_TEST(grid_should_follow_res_and_pad_around_the_curves)
 }
 END_TEST
 
+/* ---- nesting through the spatial index ---- */
+
+static void add_loop(cset *c, const double *v, int m, int ccw)
+{
+    double *w = malloc(2 * (size_t)m * sizeof *w);
+    for (int k = 0; k < m; k++) {
+        int s = ccw ? k : m - 1 - k;
+        w[2 * k] = v[2 * s];
+        w[2 * k + 1] = v[2 * s + 1];
+    }
+    cs_line(c, w, (size_t)m, 1);
+    free(w);
+}
+
+/* n hexagons of radius 1 on a lattice of pitch 3, every other one clockwise;
+ * the clockwise segments counted in *cw. */
+static hv_curves *hexagon_lattice(int n, size_t *cw)
+{
+    int side = (int)ceil(sqrt(n));
+    cset cs = {0};
+    *cw = 0;
+    for (int k = 0; k < n; k++) {
+        double *v = circle_pts(3.0 * (k % side), 3.0 * (k / side), 1.0, 6, 1);
+        add_loop(&cs, v, 6, k % 2 == 0);
+        *cw += k % 2 ? 6 : 0;
+        free(v);
+    }
+    return cs_finish(&cs);
+}
+
+/* Runs c with the index and with every pair tested; the grids must be equal
+ * bit for bit, and so must the repair's counts. */
+static void expect_index_agrees(hv_curves *c, const hv_sdf2d_opts *o, const char *what,
+                                hv_sdf2d_stats *out)
+{
+    hv_grid *g = NULL, *ref = NULL;
+    hv_sdf2d_stats st, rs;
+    TL_ASSERT_OK(hv_curves_sdf(c, o, &g, &st));
+    hv_sdf2d_all_pairs = 1;
+    hv_status s = hv_curves_sdf(c, o, &ref, &rs);
+    hv_sdf2d_all_pairs = 0;
+    TL_ASSERT_OK(s);
+    printf("%-44s nesting tests %zu (all pairs %zu), flipped %zu, chains %zu, cycles %zu\n",
+           what, st.nesting_tests, rs.nesting_tests, st.segments_flipped, st.chains, st.cycles);
+    ck_assert_int_eq(g->n[0], ref->n[0]);
+    ck_assert_int_eq(g->n[1], ref->n[1]);
+    ck_assert_msg(memcmp(g->v, ref->v, hv_grid_count(g) * sizeof *g->v) == 0,
+                  "%s: the index changed the result", what);
+    ck_assert_int_eq(st.segments_flipped, rs.segments_flipped);
+    ck_assert_int_eq(st.segments_out, rs.segments_out);
+    ck_assert_int_eq(st.chains, rs.chains);
+    ck_assert_int_eq(st.cycles, rs.cycles);
+    ck_assert(st.nesting_tests <= rs.nesting_tests);
+    if (out)
+        *out = st;
+    hv_grid_destroy(&g);
+    hv_grid_destroy(&ref);
+}
+
+START_TEST(nesting_tests_should_grow_linearly_with_disjoint_loops)
+{
+    /* Every pair is N (N - 1) tests; the index should try none of them, since
+     * no hexagon's box holds another's point. */
+    const int n = 20000;
+    size_t cw;
+    hv_curves *c = hexagon_lattice(n, &cw);
+    hv_sdf2d_opts o;
+    hv_sdf2d_opts_default(&o);
+    o.res = 64;
+    hv_grid *g = NULL;
+    hv_sdf2d_stats st;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &g, &st));
+    printf("%-44s nesting tests %zu for %d loops, flipped %zu, repair %.3f s\n",
+           "lattice of hexagons", st.nesting_tests, n, st.segments_flipped, st.t_repair);
+    ck_assert_int_eq(st.cycles, n);
+    ck_assert_msg(st.nesting_tests < 50 * (size_t)n, "%zu nesting tests for %d loops",
+                  st.nesting_tests, n);
+    ck_assert_int_eq(st.segments_flipped, cw); /* all counter-clockwise: depth 0 */
+    hv_grid_destroy(&g);
+    hv_curves_destroy(&c);
+    /* the count is that of every pair without the index */
+    c = hexagon_lattice(300, &cw);
+    hv_sdf2d_stats all;
+    expect_index_agrees(c, &o, "lattice of 300 hexagons", &st);
+    hv_sdf2d_all_pairs = 1;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &g, &all));
+    hv_sdf2d_all_pairs = 0;
+    ck_assert_int_eq(all.nesting_tests, 300 * 299);
+    ck_assert_int_eq(st.nesting_tests, 0);
+    hv_grid_destroy(&g);
+    hv_curves_destroy(&c);
+}
+END_TEST
+
+/* Four nests of 5 concentric circles at (+-30, +-30), radii 25 - 6k, drawn
+ * in random directions. */
+static const double nest_r[5] = {25, 19, 13, 7, 2.5};
+
+static double nests_sdf(double x, double y, const double *p)
+{
+    (void)p;
+    double d = INFINITY;
+    int depth = 0;
+    for (int q = 0; q < 4; q++)
+        for (int k = 0; k < 5; k++) {
+            double r = hypot(x - (q & 1 ? 30 : -30), y - (q & 2 ? 30 : -30));
+            depth += r < nest_r[k];
+            d = fmin(d, fabs(r - nest_r[k]));
+        }
+    return depth % 2 ? -d : d;
+}
+
+static void add_nests(cset *cs, uint64_t *seed)
+{
+    for (int q = 0; q < 4; q++)
+        for (int k = 0; k < 5; k++) {
+            int m = 24 + 40 * (4 - k);
+            double *v = circle_pts(q & 1 ? 30 : -30, q & 2 ? 30 : -30, nest_r[k], m, 1);
+            add_loop(cs, v, m, tl_rand(seed) < 0);
+            free(v);
+        }
+}
+
+START_TEST(loops_inside_loops_should_alternate_sides_with_depth)
+{
+    uint64_t seed = 99;
+    cset cs = {0};
+    add_nests(&cs, &seed);
+    hv_curves *c = cs_finish(&cs);
+    hv_sdf2d_stats st;
+    measure m = run_case(c, nests_sdf, NULL, "four nests of 5 loops, random directions", &st);
+    ck_assert_int_eq(m.wrong, 0);
+    ck_assert(m.band_mean < 0.1);
+    ck_assert_int_eq(st.cycles, 20);
+    /* each point lies in the boxes of its own nest only */
+    ck_assert_int_le(st.nesting_tests, 4 * 5 * 4);
+    hv_sdf2d_opts o;
+    opts_px(&o);
+    expect_index_agrees(c, &o, "four nests against all pairs", NULL);
+    hv_curves_destroy(&c);
+}
+END_TEST
+
+START_TEST(index_should_agree_with_all_pairs_on_awkward_loops)
+{
+    hv_sdf2d_opts o;
+    opts_px(&o);
+    uint64_t seed = 7;
+    cset cs = {0};
+    /* identical boxes: a diamond crossing a skewed square, a square with the
+     * circle inscribed in it (touching at four points), a square twice and a
+     * square once more reversed */
+    double diamond[] = {-40, 30, -30, 40, -40, 50, -50, 40};
+    double skew[] = {-30, 45, -45, 50, -50, 35, -35, 30};
+    cs_line(&cs, diamond, 4, 1);
+    cs_line(&cs, skew, 4, 1);
+    double sq[] = {0, 30, 20, 30, 20, 50, 0, 50};
+    double *circ = circle_pts(10, 40, 10, 32, 0);
+    cs_line(&cs, sq, 4, 1);
+    cs_line(&cs, circ, 32, 1);
+    double dup[] = {30, 30, 50, 30, 50, 50, 30, 50};
+    add_loop(&cs, dup, 4, 0);
+    add_loop(&cs, dup, 4, 0);
+    add_loop(&cs, dup, 4, 1);
+    /* loops sharing edges: a 3 x 3 block of squares, each drawn whole */
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double x = -55 + 10 * i, y = -55 + 10 * j;
+            double s[] = {x, y, x + 10, y, x + 10, y + 10, x, y + 10};
+            add_loop(&cs, s, 4, tl_rand(&seed) < 0);
+        }
+    /* overlapping circles */
+    for (int k = 0; k < 6; k++) {
+        double *v = circle_pts(10 + 4 * k, -40 + 3 * k, 8, 20 + k, 1);
+        add_loop(&cs, v, 20 + k, tl_rand(&seed) < 0);
+        free(v);
+    }
+    hv_curves *c = cs_finish(&cs);
+    expect_index_agrees(c, &o, "identical boxes, duplicates, shared edges", NULL);
+    hv_curves_destroy(&c);
+
+    /* broken loops (groups of open chains) nested, with small loops inside,
+     * just outside and between them */
+    double *outer = circle_pts(-20, 0, 40, 200, 1), *inner = circle_pts(-20, 0, 20, 120, 0);
+    add_broken_polygon(&cs, outer, 200, 5, 2, 0.1, 0.3, 3);
+    add_broken_polygon(&cs, inner, 120, 3, 2, 0.2, 0.3, 4);
+    for (int k = 0; k < 300; k++) {
+        double x = -62 + 124 * (tl_rand(&seed) + 0.5), y = -62 + 124 * (tl_rand(&seed) + 0.5);
+        double *v = circle_pts(x, y, 1.2, 5, 1);
+        add_loop(&cs, v, 5, tl_rand(&seed) < 0);
+        free(v);
+    }
+    c = cs_finish(&cs);
+    hv_sdf2d_stats st;
+    expect_index_agrees(c, &o, "broken nested loops among 300 small ones", &st);
+    ck_assert_int_ge(st.chains, 300 + 8);
+    hv_curves_destroy(&c);
+    free(outer);
+    free(inner);
+    free(circ);
+}
+END_TEST
+
+START_TEST(squares_with_t_junctions_and_overlaps_should_split_each_edge_once)
+{
+    /* Axis-aligned squares share x and y values by the thousand (a sweep over
+     * x meets every pair of a column); every 7th has a small square standing on
+     * its right side (a T-junction), every 11th a piece of its bottom drawn
+     * backwards. Each such edge splits once and each extra piece duplicates a
+     * part of it. */
+    const int n = 3000, side = 55;
+    cset cs = {0};
+    size_t nt = 0, no = 0;
+    for (int k = 0; k < n; k++) {
+        double x = 3.0 * (k % side), y = 3.0 * (k / side);
+        double sq[] = {x, y, x + 2, y, x + 2, y + 2, x, y + 2};
+        add_loop(&cs, sq, 4, k % 3 != 0);
+        if (k % 7 == 0) {
+            double t[] = {x + 2, y + 1, x + 2.8, y + 1, x + 2.8, y + 1.8, x + 2, y + 1.8};
+            add_loop(&cs, t, 4, k % 2);
+            nt++;
+        }
+        if (k % 11 == 0) {
+            double piece[] = {x + 1.5, y, x + 0.25, y};
+            cs_line(&cs, piece, 2, 0);
+            no++;
+        }
+    }
+    hv_curves *c = cs_finish(&cs);
+    hv_sdf2d_opts o;
+    hv_sdf2d_opts_default(&o);
+    o.voxel_size = 0.25; /* 4 cells across the gaps */
+    hv_sdf2d_stats st;
+    expect_index_agrees(c, &o, "3000 squares, T-junctions, overlaps", &st);
+    ck_assert_int_eq(st.points_welded, 0);
+    ck_assert_int_eq(st.segments_split, nt + no);
+    ck_assert_int_eq(st.duplicates_removed, nt + no);
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &g, NULL));
+    for (int k = 0; k < n; k++) {
+        if (k % 7 == 0 || k % 11 == 0)
+            continue;
+        double x = 3.0 * (k % side) + 1, y = 3.0 * (k / side) + 1;
+        int i = (int)floor((x - g->origin[0]) / g->h), j = (int)floor((y - g->origin[1]) / g->h);
+        ck_assert_msg(g->v[i + (size_t)g->n[0] * j] < 0, "square %d: centre outside", k);
+    }
+    hv_grid_destroy(&g);
+    hv_curves_destroy(&c);
+}
+END_TEST
+
 /* ---- readers ---- */
 
 START_TEST(text_format_should_read_commands_and_number_lines)
@@ -678,6 +930,13 @@ int main(void)
     tcase_add_test(tc, without_repair_a_duplicate_drawn_backwards_should_break_the_sign);
     tcase_add_test(tc, heat_magnitude_should_approximate_the_distance);
     tcase_add_test(tc, grid_should_follow_res_and_pad_around_the_curves);
+    suite_add_tcase(s, tc);
+    tc = tcase_create("nesting index");
+    tcase_set_timeout(tc, 60);
+    tcase_add_test(tc, nesting_tests_should_grow_linearly_with_disjoint_loops);
+    tcase_add_test(tc, loops_inside_loops_should_alternate_sides_with_depth);
+    tcase_add_test(tc, index_should_agree_with_all_pairs_on_awkward_loops);
+    tcase_add_test(tc, squares_with_t_junctions_and_overlaps_should_split_each_edge_once);
     suite_add_tcase(s, tc);
     tc = tcase_create("readers");
     tcase_add_test(tc, text_format_should_read_commands_and_number_lines);

@@ -40,6 +40,10 @@ else
   echo "bench: $bunny not found, sdf rows skipped" >&2
 fi
 
+# 2D curves: 1M small closed paths (some nested), the repair against
+# --no-repair on the same SVG.
+"$hv" bench sdf2d --n 1000000
+
 # Extension off a level set against OpenVDB tools::sdfToExt in the same run
 # (velocity field; dense sphere, narrow-band stanford-bunny when the shared
 # meshes are there).

@@ -47,6 +47,7 @@ int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
 int cmd_bench(int argc, char **argv);
 int cmd_bench_sdf(int argc, char **argv);
+int cmd_bench_sdf2d(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
 int cmd_devices(int argc, char **argv);

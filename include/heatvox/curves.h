@@ -107,6 +107,8 @@ typedef struct hv_sdf2d_stats {
     size_t segments_split;   /* segments cut at points lying on them (overlaps) */
     size_t segments_flipped; /* by the repair */
     size_t chains, cycles;
+    size_t nesting_tests;    /* windings of one loop evaluated at a point of another: only
+                                loops whose bounding box holds the point are tried */
     size_t dead_faces;
     hv_backend backend;
     double t_repair, t_splat, t_diffuse, t_normalize, t_poisson, t_distance, t_total;

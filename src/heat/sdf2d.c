@@ -14,6 +14,7 @@
  */
 #include "heatvox/curves.h"
 #include "core/error.h"
+#include "heat/sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -25,6 +26,10 @@
 /* Rasterization radius of the exact distance, in cells. */
 #define SDF2_BAND 2.0
 #define SDF2_MAX_LEVELS 9
+/* Most units per leaf of the nesting index. */
+#define SDF2_BVH_LEAF 8
+
+int hv_sdf2d_all_pairs = 0;
 
 void hv_sdf2d_opts_default(hv_sdf2d_opts *o)
 {
@@ -84,18 +89,17 @@ static uint32_t uf_find(uint32_t *p, uint32_t x)
     return x;
 }
 
-static int by_x(const void *a, const void *b, void *pts)
-{
-    const double *P = pts;
-    double xa = P[2 * *(const uint32_t *)a], xb = P[2 * *(const uint32_t *)b];
-    return (xa > xb) - (xa < xb);
-}
-
 static int by_key(const void *a, const void *b)
 {
     const uint64_t *x = a, *y = b;
     return (x[0] > y[0]) - (x[0] < y[0]) ? (x[0] > y[0]) - (x[0] < y[0])
                                          : (x[1] > y[1]) - (x[1] < y[1]);
+}
+
+static int by_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
 }
 
 static double seg_len(const double *P, seg2 s)
@@ -155,6 +159,174 @@ static double winding(const double *P, const seg2 *S, const uint32_t *ids, size_
         w += atan2(ax * by - ay * bx, ax * bx + ay * by);
     }
     return sgn * w / (2 * M_PI);
+}
+
+/*
+ * Nesting of units through a bounding-volume hierarchy of their boxes: the
+ * winding of unit v at the point of unit u is summed only where v's box, grown
+ * as below, holds the point. The windings skipped are ones that cannot pass
+ * |w| > 1/2, so the depths are those of testing every pair:
+ *  - one chain (path or cycle): seen from outside its box it lies in an open
+ *    half-plane, so its angles add up to the angle between its ends, below pi.
+ *    Growing the box by 1e-3 of its size keeps |w| < 1/2 - 2e-4, far beyond
+ *    the rounding of the sum;
+ *  - a group of open chains: closed by gaps from each chain's end to the next
+ *    one's start (total length G), it has winding 0 outside the box, so |w| is
+ *    that of the gaps, at most G / (2 pi d) at distance d. Growing by G/3 as
+ *    well keeps |w| < 3 / (2 pi) < 0.48.
+ */
+typedef struct bvh_node {
+    double lo[2], hi[2];
+    uint32_t first, count; /* leaf: items first .. first+count-1; 0 for inner nodes */
+    uint32_t skip;         /* the node after this subtree */
+} bvh_node;
+
+static uint32_t spread16(uint32_t x)
+{
+    x &= 0xffff;
+    x = (x | x << 8) & 0x00ff00ff;
+    x = (x | x << 4) & 0x0f0f0f0f;
+    x = (x | x << 2) & 0x33333333;
+    return (x | x << 1) & 0x55555555;
+}
+
+/* Median split of items lo .. hi-1 (in Morton order), nodes in preorder. */
+static void bvh_build(bvh_node *nd, uint32_t *nn, const double *box, const uint32_t *ids,
+                      uint32_t lo, uint32_t hi)
+{
+    uint32_t i = (*nn)++;
+    if (hi - lo <= SDF2_BVH_LEAF) {
+        nd[i].first = lo;
+        nd[i].count = hi - lo;
+        nd[i].lo[0] = nd[i].lo[1] = INFINITY;
+        nd[i].hi[0] = nd[i].hi[1] = -INFINITY;
+        for (uint32_t k = lo; k < hi; k++)
+            for (int a = 0; a < 2; a++) {
+                nd[i].lo[a] = fmin(nd[i].lo[a], box[4 * ids[k] + a]);
+                nd[i].hi[a] = fmax(nd[i].hi[a], box[4 * ids[k] + 2 + a]);
+            }
+    } else {
+        uint32_t mid = lo + (hi - lo) / 2;
+        bvh_build(nd, nn, box, ids, lo, mid);
+        uint32_t r = *nn;
+        bvh_build(nd, nn, box, ids, mid, hi);
+        nd[i].first = nd[i].count = 0;
+        for (int a = 0; a < 2; a++) {
+            nd[i].lo[a] = fmin(nd[i + 1].lo[a], nd[r].lo[a]);
+            nd[i].hi[a] = fmax(nd[i + 1].hi[a], nd[r].hi[a]);
+        }
+    }
+    nd[i].skip = *nn;
+}
+
+/* Winding of unit v, as oriented by segturn, at (x, y). */
+static double unit_winding(const double *P, const seg2 *S, const uint32_t *ustart,
+                           const uint32_t *useg, const uint8_t *segturn, uint32_t v, double x,
+                           double y)
+{
+    double w = 0;
+    for (uint32_t k = ustart[v]; k < ustart[v + 1]; k++)
+        w += winding(P, S, &useg[k], 1, segturn[useg[k]] ? -1 : 1, x, y);
+    return w;
+}
+
+/* uturn[u] = 1 where unit u runs against its nesting (see orient_chains). */
+static hv_status nesting_turns(const double *P, const seg2 *S, uint32_t nu,
+                               const uint32_t *ustart, const uint32_t *useg,
+                               const uint8_t *segturn, const double *upt, const double *uarea,
+                               const double *utot, const double *ugap, uint8_t *uturn,
+                               size_t *tests)
+{
+    uint32_t nv = 0; /* units that can hold others: two segments or more */
+    for (uint32_t v = 0; v < nu; v++)
+        nv += ustart[v + 1] - ustart[v] >= 2;
+    double *box = malloc(4 * (nu ? nu : 1) * sizeof *box);
+    uint64_t *key = malloc((nv ? nv : 1) * sizeof *key);
+    uint32_t *ids = malloc((nv ? nv : 1) * sizeof *ids);
+    bvh_node *nd = malloc((2 * (size_t)nv / (SDF2_BVH_LEAF / 2) + 2) * sizeof *nd);
+    if (!box || !key || !ids || !nd) {
+        free(box);
+        free(key);
+        free(ids);
+        free(nd);
+        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    }
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (uint32_t v = 0; v < nu; v++) {
+        if (ustart[v + 1] - ustart[v] < 2)
+            continue;
+        double *b = box + 4 * v;
+        b[0] = b[1] = INFINITY;
+        b[2] = b[3] = -INFINITY;
+        for (uint32_t k = ustart[v]; k < ustart[v + 1]; k++)
+            for (int a = 0; a < 2; a++) {
+                double p = P[2 * S[useg[k]].a + a], q = P[2 * S[useg[k]].b + a];
+                b[a] = fmin(b[a], fmin(p, q));
+                b[2 + a] = fmax(b[2 + a], fmax(p, q));
+            }
+        double grow = 1e-3 * fmax(b[2] - b[0], b[3] - b[1]);
+        if (ugap[v] >= 0)
+            grow = fmax(grow, ugap[v] / 3);
+        for (int a = 0; a < 2; a++) {
+            b[a] -= grow;
+            b[2 + a] += grow;
+            lo[a] = fmin(lo[a], 0.5 * (b[a] + b[2 + a]));
+            hi[a] = fmax(hi[a], 0.5 * (b[a] + b[2 + a]));
+        }
+    }
+    /* Morton order of the box centres (ties by unit), then a median split. */
+    uint32_t n = 0;
+    for (uint32_t v = 0; v < nu; v++) {
+        if (ustart[v + 1] - ustart[v] < 2)
+            continue;
+        uint32_t q[2];
+        for (int a = 0; a < 2; a++) {
+            double t = hi[a] > lo[a] ? (0.5 * (box[4 * v + a] + box[4 * v + 2 + a]) - lo[a]) /
+                                           (hi[a] - lo[a])
+                                     : 0;
+            q[a] = (uint32_t)(fmin(fmax(t, 0), 1) * 65535.0);
+        }
+        key[n++] = (uint64_t)(spread16(q[0]) | spread16(q[1]) << 1) << 32 | v;
+    }
+    qsort(key, n, sizeof *key, by_u64);
+    for (uint32_t k = 0; k < n; k++)
+        ids[k] = (uint32_t)key[k];
+    uint32_t nn = 0;
+    if (n)
+        bvh_build(nd, &nn, box, ids, 0, n);
+    size_t count = 0;
+    for (uint32_t u = 0; u < nu; u++) {
+        /* a straight or nearly straight unit has no side to prefer */
+        if (!(fabs(uarea[u]) > 1e-6 * utot[u] * utot[u]))
+            continue;
+        double x = upt[2 * u], y = upt[2 * u + 1];
+        int depth = 0;
+        for (uint32_t k = 0; k < nn;) {
+            const bvh_node *b = &nd[k];
+            if (!hv_sdf2d_all_pairs &&
+                (x < b->lo[0] || x > b->hi[0] || y < b->lo[1] || y > b->hi[1])) {
+                k = b->skip;
+                continue;
+            }
+            for (uint32_t j = b->first; j < b->first + b->count; j++) {
+                uint32_t v = ids[j];
+                const double *vb = box + 4 * v;
+                if (v == u || (!hv_sdf2d_all_pairs &&
+                               (x < vb[0] || x > vb[2] || y < vb[1] || y > vb[3])))
+                    continue;
+                depth += fabs(unit_winding(P, S, ustart, useg, segturn, v, x, y)) > 0.5;
+                count++;
+            }
+            k = b->count ? b->skip : k + 1;
+        }
+        uturn[u] = (uint8_t)((uarea[u] > 0) != (depth % 2 == 0));
+    }
+    *tests += count;
+    free(box);
+    free(key);
+    free(ids);
+    free(nd);
+    return HV_OK;
 }
 
 static hv_status orient_chains(const double *P, seg2 *S, const uint32_t *deg, uint32_t nc,
@@ -273,8 +445,10 @@ static hv_status orient_chains(const double *P, seg2 *S, const uint32_t *deg, ui
                 G[(size_t)h * ng + worst] = -G[(size_t)h * ng + worst];
             }
             for (uint32_t i = 0; i < m; i++)
-                if (gid[i] == worst)
+                if (gid[i] == worst) {
                     turn[open[i]] ^= 1;
+                    reverse_end(&ce[open[i]]);
+                }
         }
     }
     /* Units: each cycle, each group of open chains, each other chain alone. */
@@ -294,6 +468,8 @@ static hv_status orient_chains(const double *P, seg2 *S, const uint32_t *deg, ui
     double *ulen = calloc(nu ? nu : 1, sizeof *ulen), *uarea = calloc(nu ? nu : 1, sizeof *uarea);
     double *utot = calloc(nu ? nu : 1, sizeof *utot);
     uint8_t *uturn = calloc(nu ? nu : 1, 1);
+    double *ugap = NULL;
+    uint32_t *ufirst = NULL, *ulast = NULL;
     if (!ustart || !useg || !upt || !ulen || !uarea || !utot || !uturn) {
         status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto units_out;
@@ -343,25 +519,44 @@ static hv_status orient_chains(const double *P, seg2 *S, const uint32_t *deg, ui
             }
         }
     }
-    for (uint32_t u = 0; u < nu; u++) {
-        int depth = 0;
-        for (uint32_t v = 0; v < nu; v++) {
-            if (v == u || ustart[v + 1] - ustart[v] < 2)
-                continue;
-            /* winding of v with its current orientation (per-segment signs) */
-            double w = 0;
-            for (uint32_t k = ustart[v]; k < ustart[v + 1]; k++)
-                w += winding(P, S, &useg[k], 1, segturn[useg[k]] ? -1 : 1, upt[2 * u],
-                             upt[2 * u + 1]);
-            depth += fabs(w) > 0.5;
-        }
-        /* a straight or nearly straight unit has no side to prefer */
-        uturn[u] = (uint8_t)((uarea[u] > 0) != (depth % 2 == 0)) &&
-                   fabs(uarea[u]) > 1e-6 * utot[u] * utot[u];
+    /* Gaps closing each group of open chains, end of one to start of the next
+     * (ce follows the turns); ugap < 0 marks units of a single chain. */
+    ugap = malloc((nu ? nu : 1) * sizeof *ugap);
+    ufirst = malloc((nu ? nu : 1) * sizeof *ufirst);
+    ulast = malloc((nu ? nu : 1) * sizeof *ulast);
+    if (!ugap || !ufirst || !ulast) {
+        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        goto units_out;
     }
+    for (uint32_t u = 0; u < nu; u++) {
+        ugap[u] = -1;
+        ufirst[u] = UINT32_MAX;
+    }
+    for (uint32_t i = 0; i < m; i++) {
+        uint32_t c = open[i], u = unit[c];
+        if (ufirst[u] == UINT32_MAX) {
+            ufirst[u] = c;
+        } else {
+            const double *e = ce[ulast[u]].e;
+            ugap[u] = fmax(ugap[u], 0) + hypot(ce[c].s[0] - e[0], ce[c].s[1] - e[1]);
+        }
+        ulast[u] = c;
+    }
+    for (uint32_t u = 0; u < nu; u++)
+        if (ugap[u] >= 0) {
+            const double *e = ce[ulast[u]].e, *s0 = ce[ufirst[u]].s;
+            ugap[u] += hypot(s0[0] - e[0], s0[1] - e[1]);
+        }
+    status = nesting_turns(P, S, nu, ustart, useg, segturn, upt, uarea, utot, ugap, uturn,
+                           &st->nesting_tests);
+    if (status != HV_OK)
+        goto units_out;
     for (uint32_t c = 0; c < nc; c++)
         turn[c] ^= uturn[unit[c]];
 units_out:
+    free(ugap);
+    free(ufirst);
+    free(ulast);
     free(segturn);
     free(ustart);
     free(useg);
@@ -382,14 +577,89 @@ out:
     return status;
 }
 
+/* Points on a dense grid of square cells over their bounds, listed by cell (a
+ * counting sort). */
+typedef struct point_grid {
+    double lo[2], side;
+    int64_t n[2];
+    uint32_t *start; /* n[0] * n[1] + 1 offsets into ids, x fastest */
+    uint32_t *ids;
+} point_grid;
+
+static int64_t pg_index(const point_grid *g, double v, int a)
+{
+    return (int64_t)floor((v - g->lo[a]) / g->side);
+}
+
+static size_t pg_cell(const point_grid *g, const double *p)
+{
+    return (size_t)pg_index(g, p[0], 0) + (size_t)g->n[0] * (size_t)pg_index(g, p[1], 1);
+}
+
+static void pg_free(point_grid *g)
+{
+    free(g->start);
+    free(g->ids);
+    g->start = g->ids = NULL;
+}
+
+/* The points i with used[i] (all when used is NULL), in cells of side `side`
+ * (> 0), or larger where that would make more than about 3 (2n + 4096) cells:
+ * memory stays linear in the points. */
+static hv_status pg_build(point_grid *g, const double *P, size_t np, const uint8_t *used,
+                          double side)
+{
+    size_t n = 0;
+    double hi[2] = {0, 0};
+    g->lo[0] = g->lo[1] = 0;
+    for (size_t i = 0; i < np; i++)
+        if (!used || used[i]) {
+            for (int a = 0; a < 2; a++) {
+                g->lo[a] = n ? fmin(g->lo[a], P[2 * i + a]) : P[2 * i + a];
+                hi[a] = n ? fmax(hi[a], P[2 * i + a]) : P[2 * i + a];
+            }
+            n++;
+        }
+    double W = hi[0] - g->lo[0], H = hi[1] - g->lo[1], cap = 2.0 * n + 4096;
+    g->side = fmax(side, fmax(sqrt(W * H / cap), fmax(W, H) / cap));
+    g->n[0] = (int64_t)floor(W / g->side) + 1;
+    g->n[1] = (int64_t)floor(H / g->side) + 1;
+    size_t cells = (size_t)g->n[0] * (size_t)g->n[1];
+    g->start = calloc(cells + 1, sizeof *g->start);
+    g->ids = malloc((n ? n : 1) * sizeof *g->ids);
+    if (!g->start || !g->ids) {
+        pg_free(g);
+        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    }
+    for (size_t i = 0; i < np; i++)
+        if (!used || used[i])
+            g->start[pg_cell(g, P + 2 * i) + 1]++;
+    for (size_t c = 0; c < cells; c++)
+        g->start[c + 1] += g->start[c];
+    for (size_t i = 0; i < np; i++)
+        if (!used || used[i])
+            g->ids[g->start[pg_cell(g, P + 2 * i)]++] = (uint32_t)i;
+    for (size_t c = cells; c > 0; c--)
+        g->start[c] = g->start[c - 1];
+    g->start[0] = 0;
+    return HV_OK;
+}
+
 /* Overlaps: splits every segment at the points that lie on it (within tol,
  * away from its ends), so that collinear overlaps become exact duplicates and
- * T-junctions become shared points. Points are bucketed on a grid of cell
- * `cell` (>= tol); each segment visits the buckets around samples cell/2 apart.
- * *S is replaced by a new array. */
+ * T-junctions become shared points. *S is replaced by a new array.
+ *
+ * The split points of a segment, and the order they are sorted from, are those
+ * of a walk over buckets of side `cell` (>= tol): samples cell/2 apart along the
+ * segment, the 3 x 3 buckets around each, the points of a bucket in the order
+ * of a sort by bucket. The points themselves are found on a point_grid of
+ * cells of about the mean segment length (at least 2 tol), since buckets of
+ * side h hold thousands of points where many small curves share one; each
+ * point found is then placed where that walk would first have met it. */
 typedef struct tp {
     double t;
     uint32_t p;
+    uint32_t step, around, rank; /* where the walk over buckets of side cell meets p */
 } tp;
 
 static int by_t(const void *a, const void *b)
@@ -398,15 +668,106 @@ static int by_t(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-static int by_u64(const void *a, const void *b)
-{
-    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
-    return (x > y) - (x < y);
-}
-
 static uint64_t bucket_key(int64_t bx, int64_t by)
 {
     return ((uint64_t)(bx + (1ll << 31)) << 32) | (uint64_t)(by + (1ll << 31));
+}
+
+/* rank[p]: the place of point p in the walk's buckets, sorted by bucket. */
+static hv_status walk_ranks(const double *P, size_t np, const uint8_t *used, size_t nu,
+                            double cell, uint32_t **rank)
+{
+    uint64_t *keys = malloc(2 * (nu ? nu : 1) * sizeof *keys);
+    *rank = malloc((np ? np : 1) * sizeof **rank);
+    if (!keys || !*rank) {
+        free(keys);
+        free(*rank);
+        *rank = NULL;
+        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    }
+    size_t n = 0;
+    for (size_t i = 0; i < np; i++)
+        if (used[i]) {
+            keys[2 * n] = bucket_key((int64_t)floor(P[2 * i] / cell), (int64_t)floor(P[2 * i + 1] / cell));
+            keys[2 * n + 1] = i;
+            n++;
+        }
+    qsort(keys, n, 2 * sizeof *keys, by_u64);
+    for (size_t q = 0; q < n; q++)
+        (*rank)[keys[2 * q + 1]] = (uint32_t)q;
+    free(keys);
+    return HV_OK;
+}
+
+/* The first step of the walk along a -> b whose 3 x 3 buckets hold point p, and
+ * which of the nine; 0 when none does (the walk misses p). */
+static int walk_meets(const double *P, const double *a, double dx, double dy, int steps,
+                      double cell, uint32_t p, tp *h)
+{
+    int64_t px = (int64_t)floor(P[2 * p] / cell), py = (int64_t)floor(P[2 * p + 1] / cell);
+    for (int m = 0; m <= steps; m++) {
+        double t = steps ? (double)m / steps : 0;
+        int64_t bx = (int64_t)floor((a[0] + t * dx) / cell), by = (int64_t)floor((a[1] + t * dy) / cell);
+        if (px - bx >= -1 && px - bx <= 1 && py - by >= -1 && py - by <= 1) {
+            h->step = (uint32_t)m;
+            h->around = (uint32_t)(3 * (px - bx + 1) + (py - by + 1));
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static int walk_before(const tp *x, const tp *y)
+{
+    if (x->step != y->step)
+        return x->step < y->step;
+    if (x->around != y->around)
+        return x->around < y->around;
+    return x->rank < y->rank;
+}
+
+/* The points of grid cells x0..x1 by y0..y1 that lie on segment s (length L)
+ * and that the walk meets, appended to *hits once each. */
+static hv_status cells_hits(const point_grid *g, int64_t x0, int64_t x1, int64_t y0, int64_t y1,
+                            const double *P, seg2 s, double L, double tol, double cell,
+                            tp **hits, size_t *nh, size_t *cap)
+{
+    const double *a = P + 2 * s.a;
+    double dx = P[2 * s.b] - a[0], dy = P[2 * s.b + 1] - a[1];
+    x0 = x0 < 0 ? 0 : x0;
+    y0 = y0 < 0 ? 0 : y0;
+    x1 = x1 >= g->n[0] ? g->n[0] - 1 : x1;
+    y1 = y1 >= g->n[1] ? g->n[1] - 1 : y1;
+    for (int64_t cy = y0; cy <= y1; cy++)
+        for (int64_t cx = x0; cx <= x1; cx++) {
+            size_t c = (size_t)cx + (size_t)g->n[0] * (size_t)cy;
+            for (uint32_t q = g->start[c]; q < g->start[c + 1]; q++) {
+                uint32_t p = g->ids[q];
+                if (p == s.a || p == s.b)
+                    continue;
+                double px = P[2 * p] - a[0], py = P[2 * p + 1] - a[1];
+                double along = (px * dx + py * dy) / L;
+                double off = fabs(px * dy - py * dx) / L;
+                if (off > tol || along <= tol || along >= L - tol)
+                    continue;
+                int seen = 0;
+                for (size_t e = 0; e < *nh && !seen; e++)
+                    seen = (*hits)[e].p == p;
+                if (seen)
+                    continue;
+                if (*nh == *cap) {
+                    *cap = *cap ? 2 * *cap : 16;
+                    tp *more = realloc(*hits, *cap * sizeof **hits);
+                    if (!more)
+                        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                    *hits = more;
+                }
+                (*hits)[*nh] = (tp){along, p, 0, 0, 0};
+                *nh += (size_t)walk_meets(P, a, dx, dy, (int)ceil(L / (0.5 * cell)), cell, p,
+                                          &(*hits)[*nh]);
+            }
+        }
+    return HV_OK;
 }
 
 static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *ns, double tol,
@@ -414,7 +775,8 @@ static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *n
 {
     seg2 *S = *Sp;
     uint8_t *used = calloc(np ? np : 1, 1);
-    uint64_t *keys = NULL; /* (bucket key, point) pairs sorted by key */
+    uint32_t *rank = NULL; /* made at the first split point */
+    point_grid g = {{0, 0}, 0, {0, 0}, NULL, NULL};
     seg2 *out = NULL;
     tp *hits = NULL;
     size_t nu = 0, nout = 0, capout = 0, caphits = 0;
@@ -425,65 +787,53 @@ static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *n
         used[S[k].a] = used[S[k].b] = 1;
     for (size_t i = 0; i < np; i++)
         nu += used[i];
-    keys = malloc(2 * (nu ? nu : 1) * sizeof *keys);
-    if (!keys) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    double total = 0;
+    for (size_t k = 0; k < *ns; k++)
+        total += seg_len(P, S[k]);
+    /* side >= 2 tol: a point within tol of a segment lies within 0.56 side of
+     * a sample side/2 apart, so in the 3 x 3 cells around it */
+    double side = fmax(2 * tol, fmin(cell, total / (double)(*ns ? *ns : 1)));
+    if ((status = pg_build(&g, P, np, used, side)) != HV_OK)
         goto done;
-    }
-    nu = 0;
-    for (size_t i = 0; i < np; i++)
-        if (used[i]) {
-            keys[2 * nu] = bucket_key((int64_t)floor(P[2 * i] / cell), (int64_t)floor(P[2 * i + 1] / cell));
-            keys[2 * nu + 1] = i;
-            nu++;
-        }
-    qsort(keys, nu, 2 * sizeof *keys, by_u64);
     for (size_t k = 0; k < *ns; k++) {
         const double *a = P + 2 * S[k].a, *b = P + 2 * S[k].b;
         double dx = b[0] - a[0], dy = b[1] - a[1], L = hypot(dx, dy);
         size_t nh = 0;
-        int steps = (int)ceil(L / (0.5 * cell));
-        for (int m = 0; m <= steps; m++) {
-            double t = steps ? (double)m / steps : 0;
-            int64_t bx = (int64_t)floor((a[0] + t * dx) / cell), by = (int64_t)floor((a[1] + t * dy) / cell);
-            for (int64_t ox = -1; ox <= 1; ox++)
-                for (int64_t oy = -1; oy <= 1; oy++) {
-                    uint64_t key = bucket_key(bx + ox, by + oy);
-                    size_t lo = 0, hi = nu;
-                    while (lo < hi) {
-                        size_t mid = (lo + hi) / 2;
-                        if (keys[2 * mid] < key)
-                            lo = mid + 1;
-                        else
-                            hi = mid;
-                    }
-                    for (size_t q = lo; q < nu && keys[2 * q] == key; q++) {
-                        uint32_t p = (uint32_t)keys[2 * q + 1];
-                        if (p == S[k].a || p == S[k].b)
-                            continue;
-                        double px = P[2 * p] - a[0], py = P[2 * p + 1] - a[1];
-                        double along = (px * dx + py * dy) / L;
-                        double off = fabs(px * dy - py * dx) / L;
-                        if (off > tol || along <= tol || along >= L - tol)
-                            continue;
-                        int seen = 0;
-                        for (size_t e = 0; e < nh && !seen; e++)
-                            seen = hits[e].p == p;
-                        if (seen)
-                            continue;
-                        if (nh == caphits) {
-                            caphits = caphits ? 2 * caphits : 16;
-                            tp *nhits = realloc(hits, caphits * sizeof *hits);
-                            if (!nhits) {
-                                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-                                goto done;
-                            }
-                            hits = nhits;
-                        }
-                        hits[nh++] = (tp){along, p};
-                    }
-                }
+        /* the cells of the segment's box (grown by 2 tol) when they are few,
+         * else 3 x 3 cells around samples g.side/2 apart */
+        int64_t x0 = pg_index(&g, fmin(a[0], b[0]) - 2 * tol, 0);
+        int64_t x1 = pg_index(&g, fmax(a[0], b[0]) + 2 * tol, 0);
+        int64_t y0 = pg_index(&g, fmin(a[1], b[1]) - 2 * tol, 1);
+        int64_t y1 = pg_index(&g, fmax(a[1], b[1]) + 2 * tol, 1);
+        if ((x1 - x0 + 1) * (y1 - y0 + 1) <= 16) {
+            status = cells_hits(&g, x0, x1, y0, y1, P, S[k], L, tol, cell, &hits, &nh, &caphits);
+        } else {
+            int steps = (int)ceil(L / (0.5 * g.side));
+            int64_t pbx = 0, pby = 0;
+            for (int m = 0; m <= steps && status == HV_OK; m++) {
+                double t = steps ? (double)m / steps : 0;
+                int64_t bx = pg_index(&g, a[0] + t * dx, 0), by = pg_index(&g, a[1] + t * dy, 1);
+                if (m > 0 && bx == pbx && by == pby)
+                    continue;
+                pbx = bx;
+                pby = by;
+                status = cells_hits(&g, bx - 1, bx + 1, by - 1, by + 1, P, S[k], L, tol, cell,
+                                    &hits, &nh, &caphits);
+            }
         }
+        if (status != HV_OK)
+            goto done;
+        if (nh && !rank && (status = walk_ranks(P, np, used, nu, cell, &rank)) != HV_OK)
+            goto done;
+        /* the order the walk over buckets of side cell met them in */
+        for (size_t e = 0; e < nh; e++)
+            hits[e].rank = rank[hits[e].p];
+        for (size_t e = 1; e < nh; e++)
+            for (size_t f = e; f > 0 && walk_before(&hits[f], &hits[f - 1]); f--) {
+                tp x = hits[f];
+                hits[f] = hits[f - 1];
+                hits[f - 1] = x;
+            }
         if (nout + nh + 1 > capout) {
             capout = 2 * (nout + nh + 1) + *ns;
             seg2 *no = realloc(out, capout * sizeof *out);
@@ -508,11 +858,38 @@ static hv_status split_overlaps(const double *P, size_t np, seg2 **Sp, size_t *n
     *ns = nout;
     out = NULL;
 done:
+    pg_free(&g);
     free(used);
-    free(keys);
+    free(rank);
     free(hits);
     free(out);
     return status;
+}
+
+/* Joins point i with the points j > i within tol in the 3 x 3 cells around
+ * cell (cx, cy). */
+static void weld_near(const double *P, const point_grid *g, int64_t cx, int64_t cy, uint32_t i,
+                      double tol, uint32_t *par, size_t *welded)
+{
+    const double *p = P + 2 * i;
+    for (int64_t y = cy - 1; y <= cy + 1; y++)
+        for (int64_t x = cx - 1; x <= cx + 1; x++) {
+            if (x < 0 || x >= g->n[0] || y < 0 || y >= g->n[1])
+                continue;
+            size_t c = (size_t)(x + g->n[0] * y);
+            for (uint32_t f = g->start[c]; f < g->start[c + 1]; f++) {
+                uint32_t j = g->ids[f];
+                const double *q = P + 2 * j;
+                if (j <= i || fabs(q[0] - p[0]) > tol || fabs(q[1] - p[1]) > tol ||
+                    hypot(q[0] - p[0], q[1] - p[1]) > tol)
+                    continue;
+                uint32_t ra = uf_find(par, i), rb = uf_find(par, j);
+                if (ra != rb) {
+                    par[ra > rb ? ra : rb] = ra < rb ? ra : rb;
+                    (*welded)++;
+                }
+            }
+        }
 }
 
 /* Welds, drops zero-length and duplicate segments, orients chains. S and ns are
@@ -522,30 +899,25 @@ static hv_status repair(const double *P, size_t np, seg2 **Sp, size_t *ns, doubl
 {
     seg2 *S = *Sp;
     hv_status status = HV_OK;
-    uint32_t *par = malloc(np * sizeof *par), *order = malloc(np * sizeof *order);
-    if (!par || !order) {
-        free(par);
-        free(order);
+    uint32_t *par = malloc(np * sizeof *par);
+    if (!par)
         return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-    }
     for (uint32_t i = 0; i < np; i++)
-        par[i] = order[i] = i;
-    /* 1. Weld: points within tol, found by a sweep over x. */
+        par[i] = i;
+    /* 1. Weld: points within tol, pairs found on a grid of cells >= 2 tol. The
+     * roots (the lowest index of each cluster) and the count do not depend on
+     * the order the pairs are met in. */
     if (tol > 0) {
-        qsort_r(order, np, sizeof *order, by_x, (void *)P);
-        for (size_t i = 0; i < np; i++) {
-            const double *p = P + 2 * order[i];
-            for (size_t j = i + 1; j < np && P[2 * order[j]] - p[0] <= tol; j++) {
-                const double *q = P + 2 * order[j];
-                if (fabs(q[1] - p[1]) <= tol && hypot(q[0] - p[0], q[1] - p[1]) <= tol) {
-                    uint32_t ra = uf_find(par, order[i]), rb = uf_find(par, order[j]);
-                    if (ra != rb) {
-                        par[ra > rb ? ra : rb] = ra < rb ? ra : rb;
-                        st->points_welded++;
-                    }
-                }
+        point_grid g = {{0, 0}, 0, {0, 0}, NULL, NULL};
+        if ((status = pg_build(&g, P, np, NULL, 2 * tol)) != HV_OK)
+            goto out;
+        for (int64_t cy = 0; cy < g.n[1]; cy++)
+            for (int64_t cx = 0; cx < g.n[0]; cx++) {
+                size_t c = (size_t)(cx + g.n[0] * cy);
+                for (uint32_t e = g.start[c]; e < g.start[c + 1]; e++)
+                    weld_near(P, &g, cx, cy, g.ids[e], tol, par, &st->points_welded);
             }
-        }
+        pg_free(&g);
     }
     size_t n = 0;
     for (size_t k = 0; k < *ns; k++) {
@@ -725,7 +1097,6 @@ static hv_status repair(const double *P, size_t np, seg2 **Sp, size_t *ns, doubl
     }
 out:
     free(par);
-    free(order);
     return status;
 }
 
