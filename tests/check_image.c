@@ -316,6 +316,26 @@ START_TEST(exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading)
 }
 END_TEST
 
+START_TEST(exr_header_asking_for_gigabytes_should_fail_before_allocating)
+{
+    /* Fuzzer finds: headers of a few hundred bytes whose data window asks for
+     * 5 to 19 GB; the grid used to be allocated (and touched) first. */
+    const char *files[] = {"tests/fuzz/regress/exr/data_window_67109377x46_in_550_bytes.exr",
+                           "tests/fuzz/regress/exr/grid_allocated_before_chunk_table_check.exr",
+                           "tests/fuzz/regress/exr/grid_of_19GB_in_1126_bytes.exr"};
+    for (int i = 0; i < 3; i++) {
+        ck_assert_msg(access(files[i], R_OK) == 0, "%s missing (run from the repository root)",
+                      files[i]);
+        hv_grid *g = NULL;
+        ck_assert_int_eq(hv_exr_read(files[i], NULL, &g), HV_ERR_PARSE);
+        ck_assert_ptr_null(g);
+        ck_assert_ptr_nonnull(strstr(hv_last_error(), files[i]));
+        ck_assert_ptr_nonnull(strstr(hv_last_error(), "data window"));
+    }
+    ck_assert_msg(hv_peak_rss() < 512u << 20, "peak RSS %zu MB", hv_peak_rss() >> 20);
+}
+END_TEST
+
 START_TEST(exr_files_should_decode_alike_in_openexrs_cxx_reader)
 {
     make_tmpdir();
@@ -660,6 +680,7 @@ int main(void)
     tcase_add_test(tc, exr_chunk_deflating_to_its_raw_size_should_read_back_exactly);
     tcase_add_test(tc, exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading);
     tcase_add_test(tc, exr_files_should_decode_alike_in_openexrs_cxx_reader);
+    tcase_add_test(tc, exr_header_asking_for_gigabytes_should_fail_before_allocating);
     tcase_add_test(tc, exr_3d_round_trip_should_use_one_named_part_per_z_slice);
     tcase_add_test(tc, truncated_exr_should_fail_to_decode_naming_the_file);
     tcase_add_test(tc, missing_and_foreign_files_should_fail_with_the_path);

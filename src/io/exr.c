@@ -12,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 /* The Core library reports through a callback whose default prints to stderr;
  * ours keeps the last message for this thread so the error names it. */
@@ -41,6 +42,12 @@ static exr_context_initializer_t exr_init(void)
 
 static hv_status verify_written(const char *tmp, const char *path, const hv_grid *g,
                                 const char *channel);
+
+/* Reading: the most float bytes one file byte can decode to (ZIP's deflate
+ * tops out near 1032:1; PIZ's Huffman-coded runs near 4096:1 are the limit
+ * taken), and the grid size always allowed. */
+#define EXR_MAX_RATIO 4096.0
+#define EXR_SMALL_GRID (64.0 * 1024 * 1024)
 
 static void part_name(char *buf, size_t size, int k) { snprintf(buf, size, "slice_%04d", k); }
 
@@ -347,10 +354,11 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
     *out = NULL;
     if (!path)
         return hv_error(HV_ERR_INVALID_ARG, "hv_exr_read: path is NULL");
-    FILE *probe = fopen(path, "rb");
-    if (!probe)
+    struct stat sb;
+    if (stat(path, &sb) != 0)
         return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
-    fclose(probe);
+    if (!S_ISREG(sb.st_mode))
+        return hv_error(HV_ERR_IO, "%s: not a regular file", path);
     exr_context_initializer_t init = exr_init();
     exr_context_t ctx = NULL;
     exr_result_t rv = exr_start_read(&ctx, path, &init);
@@ -415,6 +423,18 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
         org.x = org.y = org.z = 0;
     exr_msg[0] = '\0';
     double origin[3] = {org.x, org.y, org.z};
+    /* The header's data window sets the allocation, so a few hundred bytes
+     * could ask for gigabytes before a chunk is read: no lossless EXR codec
+     * packs floats tighter than EXR_MAX_RATIO to one, so a larger grid than
+     * that from this file is a damaged header. */
+    double want = 4.0 * n[0] * (double)n[1] * nparts;
+    if (n[0] < 1 || n[1] < 1 || want > EXR_MAX_RATIO * (double)sb.st_size + EXR_SMALL_GRID) {
+        st = hv_error(HV_ERR_PARSE,
+                      "%s: data window %d x %d in %d part(s) needs %.3g bytes, more than a file "
+                      "of %lld bytes can hold",
+                      path, n[0], n[1], nparts, want, (long long)sb.st_size);
+        goto done;
+    }
     if ((st = hv_grid_create(&g, dim, n, h, origin)) != HV_OK)
         goto done;
     size_t plane = (size_t)n[0] * n[1];
