@@ -163,4 +163,94 @@ format:
 clean:
 	rm -rf build build-san out
 
+# ---- fuzz (tests/fuzz/): libFuzzer targets with ASan and UBSan, clang 14 ----
+# make fuzz FUZZ_SECONDS=N builds the library with clang into build-fz/ (the
+# build rules above, run with BUILD=build-fz and clang's flags), links one
+# target per parser, generates seed corpora and runs each target for N seconds.
+# It fails when a target finds a crash (also one that -ignore_crashes let
+# pass: any new file under build-fz/crashes/NAME/); the input is kept in
+# build-fz/crashes/NAME/ (copy small ones into tests/fuzz/regress/NAME/, which
+# check_fuzz_regress replays). FUZZ_TARGETS picks targets, FUZZ_FLAGS adds
+# libFuzzer options (e.g. -fork=1 -ignore_ooms=1 to go on past an OOM);
+# FUZZ_MAX_LEN bounds inputs (the make-scenes seeds are larger: they are cut,
+# which keeps the text readers near 10^4 runs per second instead of 10^3).
+# OpenVDB and OpenEXR themselves are not instrumented.
+FZ           := build-fz
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS ?= obj ply stl off mesh svg curves npy exr vdb
+FUZZ_FLAGS   ?=
+FUZZ_MAX_LEN ?= 65536
+FUZZ_PKGS    := clang-14 libclang-rt-14-dev libomp-14-dev
+FZ_CC        := clang-14
+FZ_CXX       := clang++-14
+FZ_SAN       := -fsanitize=address,undefined -fno-sanitize-recover=undefined
+FZ_OPT       := -O1 -g -fno-omit-frame-pointer
+FZ_SUBMAKE    = $(MAKE) BUILD=$(FZ) CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='$(FZ_OPT)' \
+                SANFLAGS='$(FZ_SAN) -fsanitize=fuzzer-no-link' DEB_PKGS='$(DEB_PKGS) $(FUZZ_PKGS)'
+FZ_BINS      := $(patsubst %,$(FZ)/fuzz/fuzz_%,$(FUZZ_TARGETS))
+FZ_RUNENV    := ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
+                UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
+                LSAN_OPTIONS=suppressions=$(CURDIR)/tests/fuzz/lsan.supp
+
+# Header code of OpenVDB and TBB compiled into the shim trips two UBSan checks
+# on its own: TBB's concurrent_hash_map casts sentinel pointers such as 0x3
+# (alignment), and OpenVDB 10's RootNode::readTopology reads a tile's
+# "active" flag straight from the file into a bool (bool; a corrupt byte is
+# UB there). Neither is heatvox's code.
+$(FZ)/obj/src/io/vdb_shim.o: CXXFLAGS += -fno-sanitize=alignment,bool
+
+.PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
+fuzz-build:
+	+@$(FZ_SUBMAKE) $(FZ)/libheatvox.a $(FZ)/heatvox
+	+@$(MAKE) --no-print-directory $(FZ_BINS) $(FZ)/fuzz/make_seeds
+
+$(FZ)/fuzz/%.o: tests/fuzz/%.c $(wildcard tests/fuzz/*.h)
+	@mkdir -p $(dir $@)
+	$(FZ_CC) -Iinclude -D_GNU_SOURCE -std=c11 $(FZ_OPT) $(WARN) $(FZ_SAN) -fsanitize=fuzzer-no-link -c $< -o $@
+
+$(FZ)/fuzz/fuzz_%: $(FZ)/fuzz/fuzz_%.o $(FZ)/libheatvox.a
+	$(FZ_CXX) -o $@ $^ -fopenmp $(FZ_SAN) -fsanitize=fuzzer $(LDLIBS)
+
+$(FZ)/fuzz/make_seeds: $(FZ)/fuzz/make_seeds.o $(FZ)/libheatvox.a
+	$(FZ_CXX) -o $@ $^ -fopenmp $(FZ_SAN) $(LDLIBS)
+
+# Seeds: `heatvox make-scenes`, the repository's curve scenes, and make_seeds
+# (small files in every format, .npy/.exr/.vdb written by the library).
+fuzz-seeds: fuzz-build
+	+@$(MAKE) --no-print-directory $(FZ)/corpus/.seeded
+$(FZ)/corpus/.seeded: $(FZ)/heatvox $(FZ)/fuzz/make_seeds $(wildcard scenes/curves/*)
+	@rm -rf $(FZ)/scenes && mkdir -p $(FZ)/corpus
+	ASAN_OPTIONS=detect_leaks=0 $(FZ)/heatvox make-scenes -q $(FZ)/scenes
+	ASAN_OPTIONS=detect_leaks=0 $(FZ)/fuzz/make_seeds $(FZ)/corpus
+	cp $(FZ)/scenes/meshes/*.obj $(FZ)/corpus/obj/
+	cp $(FZ)/scenes/levelset/*.vdb $(FZ)/corpus/vdb/
+	mkdir -p $(FZ)/corpus/mesh && for t in obj ply stl off; do cp $(FZ)/corpus/$$t/* $(FZ)/corpus/mesh/; done
+	cp scenes/curves/*.txt $(FZ)/corpus/curves/
+	cp scenes/curves/*.svg $(FZ)/corpus/svg/
+	@touch $@
+
+fuzz: fuzz-seeds
+	@mkdir -p $(FZ)/logs; bad=""; \
+	for t in $(FUZZ_TARGETS); do \
+	  mkdir -p $(FZ)/crashes/$$t; reg=tests/fuzz/regress/$$t; [ -d $$reg ] || reg=; \
+	  before=$$(ls $(FZ)/crashes/$$t | wc -l); \
+	  echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
+	  $(FZ_RUNENV) $(FZ)/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 \
+	    -malloc_limit_mb=2048 -timeout=10 -max_len=$(FUZZ_MAX_LEN) -print_final_stats=1 \
+	    -artifact_prefix=$(FZ)/crashes/$$t/ $(FUZZ_FLAGS) $(FZ)/corpus/$$t $$reg \
+	    > $(FZ)/logs/$$t.log 2>&1; rc=$$?; \
+	  grep -E '^#[0-9]+' $(FZ)/logs/$$t.log | tail -n 1; \
+	  [ $$(ls $(FZ)/crashes/$$t | wc -l) -eq $$before ] || rc=1; \
+	  if [ $$rc -ne 0 ]; then \
+	    bad="$$bad $$t"; grep -E '^==[0-9]+==ERROR|runtime error|^SUMMARY|Test unit written' \
+	      $(FZ)/logs/$$t.log | head -n 5; \
+	  fi; \
+	done; \
+	echo; if [ -n "$$bad" ]; then echo "fuzz: crashes in:$$bad (logs in $(FZ)/logs/)"; exit 1; fi; \
+	echo "fuzz: no crash in $(FUZZ_SECONDS) s per target"
+
+fuzz-clean:
+	rm -rf $(FZ)
+# ---- end of fuzz ----
+
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -1,10 +1,15 @@
 /* Mesh input: readers on every shared file and on hand-written cubes in each
  * format, the defect report on generated meshes with known defects, writers. */
 #include "heatvox/heatvox.h"
+#include "testlib.h"
 
 #include <check.h>
 #include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <float.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,17 +19,14 @@
 
 /* ---- helpers ---- */
 
+/* The test meshes ($HEATVOX_TEST_DATA); NULL, with the test counted as
+ * skipped, when the directory is absent. The caller returns at once. */
 static const char *shared_meshes(void)
 {
-    static char path[1024];
-    const char *s = getenv("HEATVOX_SHARED");
-    snprintf(path, sizeof path, "%s/meshes", s && *s ? s : "../shared");
-    struct stat sb;
-    if (stat(path, &sb) != 0 || !S_ISDIR(sb.st_mode)) {
-        printf("note: %s not found; skipping tests on shared meshes\n", path);
-        return NULL;
-    }
-    return path;
+    const char *d = tl_test_data();
+    if (!d)
+        tl_skip("no test meshes directory (set HEATVOX_TEST_DATA)");
+    return d;
 }
 
 static char tmpdir[256];
@@ -773,6 +775,192 @@ START_TEST(tristrips_should_alternate_winding_and_restart_at_minus_one)
 }
 END_TEST
 
+/* ---- input limits ---- */
+
+static const char *ply_with_lines(const char *name, const char *vertices, const char *face)
+{
+    char text[512];
+    snprintf(text, sizeof text,
+             "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+             "property double z\nelement face 1\nproperty list uchar int vertex_indices\n"
+             "end_header\n%s%s\n",
+             vertices, face);
+    return tmp_write_str(name, text);
+}
+
+static const char *ply_face_line(const char *name, const char *face)
+{
+    return ply_with_lines(name, "0 0 0\n1 0 0\n0 1 0\n", face);
+}
+
+START_TEST(ply_integers_beyond_int64_should_fail_naming_the_file_and_line)
+{
+    /* Integral values written as reals ("3.0") are accepted; one outside the
+     * range of int64 used to be converted anyway (undefined behaviour). */
+    make_tmpdir();
+    hv_mesh *m = NULL;
+    ck_assert_int_eq(hv_mesh_read(ply_face_line("real.ply", "3.0 0 1 2.0"), &m), HV_OK);
+    ck_assert_uint_eq(m->ntris, 1);
+    hv_mesh_destroy(&m);
+    assert_fails(ply_face_line("count.ply", "1e300 0 1 2"),
+                 "line 13: list count '1e300' is out of range");
+    assert_fails(ply_face_line("index.ply", "3 0 1 -1e300"),
+                 "line 13: a vertex index '-1e300' is out of range");
+    assert_fails(ply_face_line("edge.ply", "3 0 1 9223372036854775808.0"), "out of range");
+    assert_fails(ply_face_line("inf.ply", "inf 0 1 2"), "out of range");
+    assert_fails(ply_face_line("nan.ply", "3 0 1 nan"), "line 13");
+    remove_tmpdir();
+}
+END_TEST
+
+/* Expects HV_ERR_NUMERIC with a message naming the file, the bound and `part`. */
+static void assert_absurd(const char *path, const char *part)
+{
+    hv_mesh *m = NULL;
+    hv_status st = hv_mesh_read(path, &m);
+    ck_assert_msg(st == HV_ERR_NUMERIC, "%s: status %s (%s)", path, hv_status_str(st),
+                  hv_last_error());
+    ck_assert_ptr_null(m);
+    ck_assert_msg(strstr(hv_last_error(), path) && strstr(hv_last_error(), part) &&
+                      strstr(hv_last_error(), "+-1e+100"),
+                  "message '%s' should name %s, '%s' and the bound", hv_last_error(), path, part);
+}
+
+START_TEST(coordinates_beyond_1e100_should_fail_naming_the_file_and_the_bound)
+{
+    /* 1e308 used to load and fail much later ("voxel size inf gives -nan
+     * cells"): the bounding box's extent overflows to inf. */
+    make_tmpdir();
+    assert_absurd(tmp_write_str("big.obj", "v 0 0 0\nv 1e308 0 0\nv -1e308 1 0\nf 1 2 3\n"),
+                  "line 2: vertex 2: coordinate x = 1e+308");
+    assert_absurd(tmp_write_str("big.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 -2e100 0\n3 0 1 2\n"),
+                  "line 5: vertex 3: coordinate y = -2e+100");
+    assert_absurd(tmp_write_str("big.stl", "solid s\nfacet normal 0 0 1\nouter loop\n"
+                                           "vertex 0 0 0\nvertex 1 0 0\nvertex 0 1 1e101\n"
+                                           "endloop\nendfacet\nendsolid s\n"),
+                  "line 6: vertex 3: coordinate z = 1e+101");
+    assert_absurd(ply_with_lines("big.ply", "0 0 0\n1e300 0 0\n0 1 0\n", "3 0 1 2"),
+                  "line 11: vertex 2: coordinate x = 1e+300");
+    {
+        /* binary: no line, the vertex number */
+        bytes o = {.n = 0};
+        put_text(&o, "ply\nformat binary_little_endian 1.0\nelement vertex 3\n"
+                     "property double x\nproperty double y\nproperty double z\n"
+                     "element face 1\nproperty list uchar int vertex_indices\nend_header\n");
+        double v[9] = {0, 0, 0, 1, 0, 0, 0, 1, -DBL_MAX};
+        put(&o, v, sizeof v, 0);
+        unsigned char three = 3;
+        int idx[3] = {0, 1, 2};
+        put(&o, &three, 1, 0);
+        put(&o, idx, sizeof idx, 0);
+        assert_absurd(tmp_write("big_binary.ply", o.b, o.n), ": vertex 3: coordinate z");
+    }
+    /* the bound itself is accepted, and the extent stays finite */
+    hv_mesh *m = NULL;
+    ck_assert_int_eq(hv_mesh_read(tmp_write_str("edge.obj", "v -1e100 0 0\nv 1e100 0 0\n"
+                                                            "v 0 1e100 -1e100\nf 1 2 3\n"),
+                                  &m),
+                     HV_OK);
+    double lo[3], hi[3];
+    ck_assert_int_eq(hv_mesh_bounds(m, lo, hi), HV_OK);
+    for (int a = 0; a < 3; a++)
+        ck_assert(isfinite(hi[a] - lo[a]));
+    hv_mesh_destroy(&m);
+    /* arrays are held to the same bound */
+    const double v[9] = {0, 0, 0, 1, 0, 0, 0, 1e200, 0};
+    const uint32_t t[3] = {0, 1, 2};
+    ck_assert_int_eq(hv_mesh_from_arrays(&m, v, 3, t, 1), HV_ERR_NUMERIC);
+    ck_assert_ptr_null(m);
+    ck_assert_msg(strstr(hv_last_error(), "vertex 2: coordinate y"), "%s", hv_last_error());
+    remove_tmpdir();
+}
+END_TEST
+
+/* Writes text into a FIFO once a reader opens it; gives up after ~5 s. */
+typedef struct fifo_job {
+    const char *path, *text;
+    int ok;
+} fifo_job;
+
+static void *fifo_writer(void *arg)
+{
+    fifo_job *j = arg;
+    for (int tries = 0; tries < 500; tries++) {
+        int fd = open(j->path, O_WRONLY | O_NONBLOCK);
+        if (fd >= 0) {
+            size_t n = strlen(j->text);
+            j->ok = write(fd, j->text, n) == (ssize_t)n;
+            close(fd);
+            return NULL;
+        }
+        if (errno != ENXIO)
+            return NULL;
+        struct timespec ts = {0, 10 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    return NULL;
+}
+
+START_TEST(non_regular_inputs_should_be_refused_naming_the_file)
+{
+    /* /dev/zero used to be read until memory ran out. */
+    make_tmpdir();
+    hv_mesh *m = NULL;
+    double t0 = hv_now();
+    ck_assert_int_eq(hv_mesh_read("/dev/zero", &m), HV_ERR_IO);
+    ck_assert_msg(hv_now() - t0 < 1, "took %.2f s", hv_now() - t0);
+    ck_assert_ptr_null(m);
+    ck_assert_msg(strstr(hv_last_error(), "/dev/zero") &&
+                      strstr(hv_last_error(), "character device"),
+                  "%s", hv_last_error());
+    ck_assert_int_eq(hv_mesh_read(tmpdir, &m), HV_ERR_IO);
+    ck_assert_msg(strstr(hv_last_error(), tmpdir) && strstr(hv_last_error(), "directory"), "%s",
+                  hv_last_error());
+
+    hv_curves *c = NULL;
+    ck_assert_int_eq(hv_curves_read("/dev/zero", &c), HV_ERR_IO);
+    ck_assert_ptr_null(c);
+    ck_assert_msg(strstr(hv_last_error(), "/dev/zero") &&
+                      strstr(hv_last_error(), "character device"),
+                  "%s", hv_last_error());
+    ck_assert_int_eq(hv_curves_read(tmpdir, &c), HV_ERR_IO);
+    ck_assert_msg(strstr(hv_last_error(), "directory"), "%s", hv_last_error());
+
+    /* a pipe (a shell's <(...)) is still read, by content */
+    const char *fifo = tmp_path("pipe");
+    ck_assert_int_eq(mkfifo(fifo, 0600), 0);
+    fifo_job job = {fifo, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", 0};
+    pthread_t th;
+    ck_assert_int_eq(pthread_create(&th, NULL, fifo_writer, &job), 0);
+    hv_status st = hv_mesh_read(fifo, &m);
+    pthread_join(th, NULL);
+    ck_assert_msg(job.ok && st == HV_OK, "%s: %s", hv_status_str(st), hv_last_error());
+    ck_assert_uint_eq(m->ntris, 1);
+    hv_mesh_destroy(&m);
+    remove_tmpdir();
+}
+END_TEST
+
+START_TEST(curve_coordinates_beyond_1e100_should_fail_naming_the_line_or_byte)
+{
+    hv_curves *c = NULL;
+    const char *text = "M 0 0\nL 1 0\nL 0 1e300\n";
+    ck_assert_int_eq(hv_curves_parse(text, strlen(text), 0, "t.txt", &c), HV_ERR_NUMERIC);
+    ck_assert_msg(strstr(hv_last_error(), "t.txt: line 3") && strstr(hv_last_error(), "1e+100"),
+                  "%s", hv_last_error());
+    /* relative SVG commands add up past the bound (and then to inf) */
+    const char *svg = "<svg><path d=\"M 0 0 l 1e100 0 l 1e100 0 l 1e308 0 l 1e308 0\"/></svg>";
+    ck_assert_int_eq(hv_curves_parse(svg, strlen(svg), 1, "s.svg", &c), HV_ERR_NUMERIC);
+    char at[64];
+    snprintf(at, sizeof at, "s.svg: byte %ld:", (long)(strstr(svg, "1e100 0 l 1e308") - svg));
+    ck_assert_msg(strstr(hv_last_error(), at), "'%s' lacks '%s'", hv_last_error(), at);
+    ck_assert_ptr_null(c);
+    const char *ok = "<svg><path d=\"M 0 0 l 1e100 0 L 0 -1e100 z\"/></svg>";
+    ck_assert_int_eq(hv_curves_parse(ok, strlen(ok), 1, "ok.svg", &c), HV_OK);
+    hv_curves_destroy(&c);
+}
+END_TEST
+
 /* ---- arrays, welding ---- */
 
 START_TEST(from_arrays_should_weld_exact_positions_only)
@@ -1046,6 +1234,10 @@ static Suite *mesh_suite(void)
     tcase_add_test(tc, malformed_files_should_fail_with_the_line_or_byte);
     tcase_add_test(tc, nonfinite_coordinates_should_be_loaded_and_counted);
     tcase_add_test(tc, tristrips_should_alternate_winding_and_restart_at_minus_one);
+    tcase_add_test(tc, ply_integers_beyond_int64_should_fail_naming_the_file_and_line);
+    tcase_add_test(tc, coordinates_beyond_1e100_should_fail_naming_the_file_and_the_bound);
+    tcase_add_test(tc, non_regular_inputs_should_be_refused_naming_the_file);
+    tcase_add_test(tc, curve_coordinates_beyond_1e100_should_fail_naming_the_line_or_byte);
     tcase_add_test(tc, from_arrays_should_weld_exact_positions_only);
     tcase_add_test(tc, degenerate_and_duplicate_faces_should_be_kept_and_counted);
     tcase_add_test(tc, written_obj_should_read_back_bit_for_bit);

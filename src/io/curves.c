@@ -8,6 +8,17 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/stat.h>
+
+/* Largest coordinate magnitude accepted: squares and cross products of
+ * coordinate differences (distances, winding numbers) must stay finite in
+ * double, and so must the extent of the bounds. */
+#define CURVE_MAX_COORD 1e100
+
+/* Pipes (FIFOs, such as a shell's <(...)) are read up to this many bytes. */
+#define CURVE_MAX_PIPE_BYTES ((size_t)1 << 30)
+
+static int coord_ok(double v) { return fabs(v) <= CURVE_MAX_COORD; }
 
 /* ---- building ---- */
 
@@ -160,6 +171,13 @@ static const char *skip_sep(const char *p, const char *end)
 
 /* ---- text format ---- */
 
+static hv_status text_coord_error(const char *name, int line, double v)
+{
+    return hv_error(HV_ERR_NUMERIC, "%s: line %d: coordinate %g is beyond the bound +-%g heatvox "
+                                    "accepts",
+                    name, line, v, CURVE_MAX_COORD);
+}
+
 static hv_status parse_text(const char *text, size_t len, const char *name, hv_curves **out)
 {
     builder b = {0};
@@ -184,6 +202,10 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                         b_free(&b);
                         return hv_error(HV_ERR_PARSE, "%s: line %d: '%c' needs two numbers", name,
                                         line, cmd);
+                    }
+                    if (!coord_ok(v[k])) {
+                        b_free(&b);
+                        return text_coord_error(name, line, v[k]);
                     }
                     q = r;
                 }
@@ -227,6 +249,10 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                         return hv_error(HV_ERR_PARSE,
                                         "%s: line %d: expected M, L, Z or numbers, found '%.*s'",
                                         name, line, (int)(stop - q > 12 ? 12 : stop - q), q);
+                    }
+                    if (!coord_ok(v[0])) {
+                        b_free(&b);
+                        return text_coord_error(name, line, v[0]);
                     }
                     q = r;
                     if (count++ % 2)
@@ -291,6 +317,13 @@ static void svg_bezier(svg_state *s, const double *c, int cubic)
     }
 }
 
+static hv_status svg_coord_error(const svg_state *s, const char *at, double v)
+{
+    return hv_error(HV_ERR_NUMERIC,
+                    "%s: byte %ld: coordinate %g is beyond the bound +-%g heatvox accepts",
+                    s->name, (long)(at - s->base), v, CURVE_MAX_COORD);
+}
+
 static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
 {
     char cmd = 0;
@@ -329,6 +362,7 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
         int rel = cmd != up;
         int want = up == 'H' || up == 'V' ? 1 : up == 'C' ? 6 : up == 'S' || up == 'Q' ? 4 : 2;
         double v[6];
+        const char *at = skip_sep(p, end); /* for messages */
         for (int k = 0; k < want; k++) {
             p = skip_sep(p, end);
             const char *r = scan_number(p, end, &v[k]);
@@ -376,6 +410,10 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
                 c[k++] = v[i] + ox;
                 c[k++] = v[i + 1] + oy;
             }
+            /* the flattened points are convex combinations of these */
+            for (int i = 0; i < k; i++)
+                if (!coord_ok(c[i]))
+                    return svg_coord_error(s, at, c[i]);
             /* the control point next to the end, for a following S or T */
             s->qx = cubic ? c[2] : c[0];
             s->qy = cubic ? c[3] : c[1];
@@ -383,6 +421,8 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
             break;
         }
         }
+        if (!coord_ok(s->cx) || !coord_ok(s->cy))
+            return svg_coord_error(s, at, coord_ok(s->cx) ? s->cy : s->cx);
         s->last = up == 'M' ? 'L' : up;
     }
     b_end(s->b, 0);
@@ -400,6 +440,8 @@ static hv_status parse_points(svg_state *s, const char *p, const char *end, int 
         if (!r)
             return hv_error(HV_ERR_PARSE, "%s: byte %ld: expected a number in points", s->name,
                             (long)(p - s->base));
+        if (!coord_ok(v))
+            return svg_coord_error(s, p, v);
         p = r;
         if (count++ % 2)
             b_point(s->b, x, -v);
@@ -530,9 +572,23 @@ hv_status hv_curves_read(const char *path, hv_curves **out)
     *out = NULL;
     if (!path)
         return hv_error(HV_ERR_INVALID_ARG, "hv_curves_read: path is NULL");
+    /* Regular files and pipes only: a device such as /dev/zero never ends. */
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))
+        return hv_error(HV_ERR_IO, "%s: is %s; curves are read from regular files or pipes", path,
+                        S_ISDIR(sb.st_mode)   ? "a directory"
+                        : S_ISCHR(sb.st_mode) ? "a character device"
+                        : S_ISBLK(sb.st_mode) ? "a block device"
+                                              : "not a regular file");
     FILE *f = fopen(path, "rb");
     if (!f)
         return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (fstat(fileno(f), &sb) != 0 || (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))) {
+        fclose(f);
+        return hv_error(HV_ERR_IO, "%s: not a regular file or pipe", path);
+    }
     size_t cap = 1 << 16, len = 0;
     char *text = malloc(cap);
     for (;;) {
@@ -543,6 +599,13 @@ hv_status hv_curves_read(const char *path, hv_curves **out)
         len += fread(text + len, 1, cap - len, f);
         if (len < cap)
             break;
+        if (len > CURVE_MAX_PIPE_BYTES) {
+            free(text);
+            fclose(f);
+            return hv_error(HV_ERR_IO, "%s: more than %zu MiB of curves; heatvox reads at most "
+                                       "that",
+                            path, CURVE_MAX_PIPE_BYTES >> 20);
+        }
         cap *= 2;
         char *t = realloc(text, cap);
         if (!t)

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #define NPY_MAGIC "\x93NUMPY"
 #define NPY_MAGIC_LEN 6
@@ -134,9 +135,24 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
     *out = NULL;
     if (!path || !*path)
         return hv_error(HV_ERR_INVALID_ARG, "hv_read_npy: input path is empty");
+    /* The data's size is checked against the file's: only a regular file has
+     * one (a pipe or a device such as /dev/zero is refused before opening). */
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (!S_ISREG(sb.st_mode))
+        return hv_error(HV_ERR_IO, "%s: is %s; .npy arrays are read from regular files", path,
+                        S_ISDIR(sb.st_mode)   ? "a directory"
+                        : S_ISCHR(sb.st_mode) ? "a character device"
+                        : S_ISFIFO(sb.st_mode) ? "a pipe"
+                                               : "not a regular file");
     FILE *f = fopen(path, "rb");
     if (!f)
         return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (fstat(fileno(f), &sb) != 0 || !S_ISREG(sb.st_mode)) {
+        fclose(f);
+        return hv_error(HV_ERR_IO, "%s: not a regular file", path);
+    }
 
     hv_status st = HV_OK;
     char *hdr = NULL;
@@ -288,7 +304,7 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         st = hv_error(HV_ERR_PARSE,
                       "%s: truncated .npy data: shape needs %zu bytes from byte %zu, the file has "
                       "%zu",
-                      path, need, data_off, (size_t)fsize - data_off);
+                      path, need, data_off, (size_t)fsize > data_off ? (size_t)fsize - data_off : 0);
         goto done;
     }
     if ((size_t)fsize > data_off + need) {

@@ -3,6 +3,7 @@
 #include "mesh_internal.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -71,8 +72,29 @@ hv_status mb_reserve_verts(mesh_builder *b, size_t n)
     return HV_OK;
 }
 
+/* The index of the first coordinate of p[0..2] that is finite but beyond
+ * MESH_MAX_COORD, or -1. */
+static int absurd_coord(const double *p)
+{
+    for (int a = 0; a < 3; a++)
+        if (isfinite(p[a]) && fabs(p[a]) > MESH_MAX_COORD)
+            return a;
+    return -1;
+}
+
 hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z)
 {
+    const double c[3] = {x, y, z};
+    int a = absurd_coord(c);
+    if (a >= 0) {
+        char at[48] = "";
+        if (b->line)
+            snprintf(at, sizeof at, "line %zu: ", b->line);
+        return hv_error(HV_ERR_NUMERIC,
+                        "%s: %svertex %zu: coordinate %c = %g is beyond the bound +-%g heatvox "
+                        "accepts (volumes and bounding boxes of such a mesh overflow)",
+                        b->path, at, b->nv + 1, "xyz"[a], c[a], MESH_MAX_COORD);
+    }
     if (b->nv == b->vcap) {
         if (b->nv >= MESH_MAX_COUNT)
             return hv_error(HV_ERR_PARSE, "%s: more than %zu vertices", b->path, MESH_MAX_COUNT);
@@ -286,6 +308,14 @@ hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
                             "hv_mesh_from_arrays: triangle %zu uses vertex %u, but there are "
                             "only %zu vertices",
                             i / 3, tris[i], nverts);
+    for (size_t i = 0; i < nverts; i++) {
+        int a = absurd_coord(verts + 3 * i);
+        if (a >= 0)
+            return hv_error(HV_ERR_NUMERIC,
+                            "hv_mesh_from_arrays: vertex %zu: coordinate %c = %g is beyond the "
+                            "bound +-%g heatvox accepts",
+                            i, "xyz"[a], verts[3 * i + a], MESH_MAX_COORD);
+    }
     hv_mesh *m = calloc(1, sizeof *m);
     uint32_t *t = malloc(ntris * 3 * sizeof *t);
     if (!m || !t) {

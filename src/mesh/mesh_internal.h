@@ -11,9 +11,17 @@
 /* Largest vertex or triangle count a mesh may hold (indices are uint32_t). */
 #define MESH_MAX_COUNT ((size_t)UINT32_MAX - 1u)
 
+/* Largest coordinate magnitude a mesh may hold: cubes of coordinate
+ * differences (signed volumes, the determinants of winding numbers) must stay
+ * finite in double, and so must every bounding box extent. NaN and Inf are
+ * let through: the defect report counts them, bounds skip them and the
+ * distance methods refuse them. */
+#define MESH_MAX_COORD 1e100
+
 /* Raw vertices and triangles as read, before welding. */
 typedef struct mesh_builder {
     const char *path; /* for messages */
+    size_t line;      /* input line of the next vertex, for messages; 0: not a text line */
     double *v;
     size_t nv, vcap;
     uint32_t *t;
@@ -25,6 +33,8 @@ void mb_init(mesh_builder *b, const char *path);
 void mb_free(mesh_builder *b);
 /* Makes room for n more vertices (n already checked against the file size). */
 hv_status mb_reserve_verts(mesh_builder *b, size_t n);
+/* Refuses finite coordinates beyond MESH_MAX_COORD, naming the vertex (and
+ * b->line when set). */
 hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z);
 hv_status mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2);
 /* Fans a polygon of k >= 3 corners (v0, vi, vi+1); counts it when k > 3. */

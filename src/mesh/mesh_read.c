@@ -70,35 +70,63 @@ const char *mesh_token_preview(const char *s, const char *end)
 
 /* ---- files ---- */
 
+/* Pipes (FIFOs, such as a shell's <(...)) are read up to this many bytes. */
+#define MESH_MAX_PIPE_BYTES ((size_t)1 << 30)
+
+static const char *file_kind(mode_t m)
+{
+    return S_ISDIR(m) ? "a directory" : S_ISCHR(m) ? "a character device"
+                                      : S_ISBLK(m) ? "a block device"
+                                      : S_ISSOCK(m) ? "a socket" : "not a regular file";
+}
+
+/* Regular files are read whole; FIFOs up to MESH_MAX_PIPE_BYTES; anything else
+ * (directories, devices such as /dev/zero, sockets) is refused before it is
+ * opened, and checked again on the open descriptor. */
 static hv_status read_whole_file(const char *path, char **out, size_t *len)
 {
     *out = NULL;
     *len = 0;
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))
+        return hv_error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
+                        file_kind(sb.st_mode));
     FILE *f = fopen(path, "rb");
     if (!f)
         return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
-    struct stat sb;
     if (fstat(fileno(f), &sb) != 0) {
         int e = errno;
         fclose(f);
         return hv_error(HV_ERR_IO, "%s: cannot stat: %s", path, strerror(e));
     }
-    if (S_ISDIR(sb.st_mode)) {
+    int regular = S_ISREG(sb.st_mode);
+    if (!regular && !S_ISFIFO(sb.st_mode)) {
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: is a directory", path);
+        return hv_error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
+                        file_kind(sb.st_mode));
     }
-    /* A regular file's size sizes the buffer; anything else (a pipe) grows it. */
-    size_t cap = S_ISREG(sb.st_mode) ? (size_t)sb.st_size + 1 : 1 << 16, n = 0;
-    if (S_ISREG(sb.st_mode) && (uint64_t)sb.st_size >= SIZE_MAX / 2) {
+    if (regular && (uint64_t)sb.st_size >= SIZE_MAX / 2) {
         fclose(f);
         return hv_error(HV_ERR_NOMEM, "%s: file too large", path);
     }
+    /* A regular file's size sizes the buffer (it may still grow while read); a
+     * pipe's buffer grows up to the bound. */
+    size_t cap = regular ? (size_t)sb.st_size + 1 : 1 << 16, n = 0;
+    const size_t limit = MESH_MAX_PIPE_BYTES;
     char *buf = malloc(cap);
     if (!buf) {
         fclose(f);
         return hv_error(HV_ERR_NOMEM, "%s: out of memory for %zu bytes", path, cap);
     }
     for (;;) {
+        if (!regular && n > limit) {
+            free(buf);
+            fclose(f);
+            return hv_error(HV_ERR_IO, "%s: more than %zu MiB from a pipe; save it to a file",
+                            path, limit >> 20);
+        }
         if (n + 1 >= cap) {
             char *q = cap < SIZE_MAX / 4 ? realloc(buf, cap * 2) : NULL;
             if (!q) {
@@ -109,7 +137,10 @@ static hv_status read_whole_file(const char *path, char **out, size_t *len)
             buf = q;
             cap *= 2;
         }
-        size_t got = fread(buf + n, 1, cap - 1 - n, f);
+        size_t want = cap - 1 - n;
+        if (!regular && want > limit + 1 - n)
+            want = limit + 1 - n; /* one byte past the bound tells that there is more */
+        size_t got = fread(buf + n, 1, want, f);
         n += got;
         if (got == 0)
             break;

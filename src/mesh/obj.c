@@ -70,6 +70,7 @@ hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh *
                 }
                 q = e;
             }
+            b.line = line;
             if (!st)
                 st = mb_add_vertex(&b, x[0], x[1], x[2]);
         } else if (word_is(kw, kwlen, "f") || word_is(kw, kwlen, "fo")) {

@@ -125,6 +125,7 @@ hv_status mesh_read_off(const char *path, const char *buf, size_t len, hv_mesh *
                               path, c.line, (long long)i, q < e ? mesh_token_preview(q, e) : "");
             s = t;
         }
+        b.line = c.line;
         if (!st)
             st = mb_add_vertex(&b, x[0], x[1], x[2]);
     }

@@ -158,11 +158,18 @@ static hv_status ascii_value(ply_reader *r, ply_type t, double *d, int64_t *i, c
         ok = mesh_parse_i64(s, &e, i) == 0 && mesh_is_delim(*e);
         if (!ok) { /* some writers put integral values as "3.0" */
             double x;
-            ok = mesh_parse_double(s, &e, &x) == 0 && mesh_is_delim(*e) && x == (double)(int64_t)x;
+            ok = mesh_parse_double(s, &e, &x) == 0 && mesh_is_delim(*e);
+            /* converting a double outside int64's range is undefined behaviour */
+            if (ok && !(x >= -0x1p63 && x < 0x1p63))
+                return hv_error(HV_ERR_PARSE, "%s: line %zu: %s '%s' is out of range for an "
+                                              "integer property",
+                                r->path, r->line, what, mesh_token_preview(s, r->end));
+            ok = ok && x == (double)(int64_t)x;
             if (ok)
                 *i = (int64_t)x;
         }
-        *d = (double)*i;
+        if (ok)
+            *d = (double)*i;
     } else {
         ok = mesh_parse_double(s, &e, d) == 0 && mesh_is_delim(*e);
         *i = 0;
@@ -305,6 +312,7 @@ static hv_status read_vertices(ply_reader *r, ply_state *s, const ply_elem *e)
                 st = skip_prop(r, pr);
             }
         }
+        s->b.line = r->format == PLY_ASCII ? r->line : 0;
         if (!st)
             st = mb_add_vertex(&s->b, x[0], x[1], x[2]);
     }

@@ -140,6 +140,7 @@ static hv_status read_ascii(const char *path, const char *buf, size_t len, hv_me
                                   path, c.line, w ? mesh_token_preview(w, c.end) : "end of file");
                     break;
                 }
+                b.line = c.line;
                 if (!(st = read_numbers(&c, path, x, 3, "vertex")) &&
                     !(st = mb_add_vertex(&b, x[0], x[1], x[2])))
                     st = u32vec_push(&loop, (uint32_t)(b.nv - 1));

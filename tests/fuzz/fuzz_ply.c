@@ -1,0 +1,3 @@
+/* libFuzzer target: hv_mesh_read on .ply files. */
+#define FUZZ_EXT ".ply"
+#include "fuzz_mesh.h"

@@ -1,0 +1,3 @@
+/* libFuzzer target: hv_mesh_read on .stl files. */
+#define FUZZ_EXT ".stl"
+#include "fuzz_mesh.h"
