@@ -45,7 +45,9 @@ typedef struct hv_curves {
 
 /* Reads curves, choosing the format by extension (.svg, else the text format).
  * Errors name the file and the line (text) or byte offset (SVG). A file without
- * any segment is an error. The caller owns *out (hv_curves_destroy). */
+ * any segment is an error. Only regular files and pipes (up to 1 GiB) are read;
+ * coordinates beyond +-1e100 give HV_ERR_NUMERIC. The caller owns *out
+ * (hv_curves_destroy). */
 hv_status hv_curves_read(const char *path, hv_curves **out);
 
 /* Parses curves from memory; `name` is used in messages. svg selects the format. */

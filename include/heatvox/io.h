@@ -31,7 +31,7 @@ void hv_tmp_cleanup_all(void);
 hv_status hv_write_npy(const char *path, const hv_grid *g);
 
 /* Reads a .npy float32 (or float64, converted) array of 2 or 3 dimensions into a
- * new grid with h = 1 and origin 0. The caller owns *out. */
+ * new grid with h = 1 and origin 0; regular files only. The caller owns *out. */
 hv_status hv_read_npy(const char *path, hv_grid **out);
 
 #ifdef __cplusplus

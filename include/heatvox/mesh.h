@@ -54,7 +54,9 @@ typedef struct hv_mesh_report {
  * Vertices that no face uses are dropped (counted in unreferenced_vertices).
  * A PLY `tristrips` element (lists with -1 restarts) is converted to triangles
  * with alternating winding; strip triangles repeating a vertex (the stitching
- * between strips) are dropped. Faces with fewer than 3 corners are an error. */
+ * between strips) are dropped. Faces with fewer than 3 corners are an error.
+ * Only regular files and pipes (up to 1 GiB) are read; finite coordinates
+ * beyond +-1e100 give HV_ERR_NUMERIC (NaN and inf load and are counted). */
 hv_status hv_mesh_read(const char *path, hv_mesh **out);
 
 /* Builds a mesh from arrays (copied); vertices are welded by exact position
