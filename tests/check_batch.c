@@ -77,27 +77,6 @@ static char *read_text(const char *p)
     return s;
 }
 
-static void rm_rf(const char *p)
-{
-    struct stat sb;
-    if (lstat(p, &sb) != 0)
-        return;
-    if (S_ISDIR(sb.st_mode)) {
-        DIR *d = opendir(p);
-        struct dirent *e;
-        while (d && (e = readdir(d)))
-            if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
-                char sub[1200];
-                snprintf(sub, sizeof sub, "%s/%s", p, e->d_name);
-                rm_rf(sub);
-            }
-        if (d)
-            closedir(d);
-        rmdir(p);
-    } else
-        unlink(p);
-}
-
 /* Runs heatvox with the arguments; stdout and stderr go to files in dir.
  * Returns the exit code (or 128 + signal). */
 static int run(const char *args)
@@ -203,7 +182,7 @@ static void make_inputs(void)
                                  "'in/sub/torus.obj' --no-such-option\n");
 }
 
-static void remove_inputs(void) { rm_rf(dir); }
+static void remove_inputs(void) { tl_rm_rf(dir); }
 
 static void check_sdf_exr(const char *p, int res, int inside_at_centre)
 {
@@ -576,7 +555,7 @@ START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
     }
     ck_assert_int_ge(volumes, nm * 2);
     printf("check_batch: %d EXR volumes of %d meshes match their .npy bit for bit\n", volumes, nm);
-    rm_rf(dir);
+    tl_rm_rf(dir);
 }
 END_TEST
 

@@ -38,27 +38,6 @@ static const char *at(const char *name)
     return p[which];
 }
 
-static void rm_rf(const char *p)
-{
-    struct stat sb;
-    if (lstat(p, &sb) != 0)
-        return;
-    if (S_ISDIR(sb.st_mode)) {
-        DIR *d = opendir(p);
-        struct dirent *e;
-        while (d && (e = readdir(d)))
-            if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
-                char sub[1200];
-                snprintf(sub, sizeof sub, "%s/%s", p, e->d_name);
-                rm_rf(sub);
-            }
-        if (d)
-            closedir(d);
-        rmdir(p);
-    } else
-        unlink(p);
-}
-
 /* A scratch directory with the generated scenes in it. */
 static void setup(void)
 {
@@ -72,7 +51,7 @@ static void setup(void)
     ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
 }
 
-static void teardown(void) { rm_rf(dir); }
+static void teardown(void) { tl_rm_rf(dir); }
 
 /* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
 static int hv(char *err, size_t errsize, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
@@ -409,7 +388,7 @@ START_TEST(a_full_disk_should_fail_clearly_and_leave_nothing)
                 struct stat sb;
                 /* make-scenes makes its directories before it writes */
                 if (stat(sub, &sb) == 0 && S_ISDIR(sb.st_mode)) {
-                    rm_rf(sub);
+                    tl_rm_rf(sub);
                     continue;
                 }
                 left++;

@@ -1,5 +1,6 @@
 #include "testlib.h"
 
+#include <dirent.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -81,6 +82,27 @@ const char *tl_heatvox_bin(void)
     if (!b || !*b)
         b = "build/heatvox";
     return access(b, X_OK) == 0 ? b : NULL;
+}
+
+void tl_rm_rf(const char *p)
+{
+    struct stat sb;
+    if (lstat(p, &sb) != 0)
+        return;
+    if (S_ISDIR(sb.st_mode)) {
+        DIR *d = opendir(p);
+        struct dirent *e;
+        while (d && (e = readdir(d)))
+            if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
+                char sub[4096];
+                snprintf(sub, sizeof sub, "%s/%s", p, e->d_name);
+                tl_rm_rf(sub);
+            }
+        if (d)
+            closedir(d);
+        rmdir(p);
+    } else
+        unlink(p);
 }
 
 int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize)

@@ -45,6 +45,8 @@ void tl_pocl_cache(const char *argv0);
 /* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (the caller
  * skips) when it is not there. */
 const char *tl_heatvox_bin(void);
+/* Removes a file or a directory tree (no error when absent). */
+void tl_rm_rf(const char *path);
 /* Runs a shell command with stdout discarded and stderr in dir/stderr.txt,
  * copied into err (may be NULL); returns its exit code (-1: no exit). */
 int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize);
