@@ -1096,6 +1096,124 @@ START_TEST(damaged_files_should_fail_with_small_memory_naming_the_file)
 }
 END_TEST
 
+/* A patched copy of the file at src must be refused by every read of grid
+ * `name`: no OK status, no crash, a message naming the copy and holding
+ * `expect`. */
+static void expect_refused(const char *bad, const unsigned char *b, size_t size, const char *name,
+                           int vec3, const hv_vdb_read_opts *opts, const char *expect)
+{
+    spill(bad, b, size);
+    hv_grid *g[3] = {NULL, NULL, NULL};
+    hv_status st = vec3 ? hv_vdb_read_vec3(bad, name, opts, &g[0], &g[1], &g[2])
+                        : hv_vdb_read_float(bad, name, opts, &g[0], NULL);
+    ck_assert_msg(st == HV_ERR_IO, "grid '%s': status %d: %s", name, (int)st, hv_last_error());
+    ck_assert_msg(strstr(hv_last_error(), bad) && strstr(hv_last_error(), expect),
+                  "grid '%s': %s (expected to name the file and hold '%s')", name, hv_last_error(),
+                  expect);
+    for (int a = 0; a < 3; a++)
+        ck_assert_ptr_null(g[a]);
+}
+
+/* OpenVDB reads a tree as half floats when the grid's own metadata says so
+ * (is_saved_as_half_float, which replaces the descriptor's "_HalfFloat" flag),
+ * and takes every root tile for 4096^3 voxels from its origin. */
+START_TEST(half_float_grids_and_root_tiles_should_read_and_their_damage_be_refused)
+{
+    require_pyopenvdb();
+    char p[256], bad[256], cmd[2048];
+    path_in_dir(p, sizeof p, "half.vdb");
+    path_in_dir(bad, sizeof bad, "bad.vdb");
+    /* values exact in half precision; 't' is one active root tile */
+    snprintf(cmd, sizeof cmd,
+             "/usr/bin/python3 -c 'import sys, pyopenvdb as vdb\n"
+             "v = vdb.Vec3SGrid(); v.name = \"v\"; v.saveFloatAsHalf = True; a = v.getAccessor()\n"
+             "f = vdb.FloatGrid(); f.name = \"f\"; f.saveFloatAsHalf = True; b = f.getAccessor()\n"
+             "for i in range(6):\n"
+             " for j in range(5):\n"
+             "  for k in range(4):\n"
+             "   a.setValueOn((i, j, k), (i + 0.5, j * 0.25, -k))\n"
+             "   b.setValueOn((i, j, k), i * 8 + j - k * 0.125)\n"
+             "t = vdb.FloatGrid(); t.name = \"t\"\n"
+             "t.fill((4096, 8192, 12288), (8191, 12287, 16383), 2.5, True)\n"
+             "vdb.write(sys.argv[1], grids=[v, f, t])\n"
+             "' %s",
+             p);
+    ck_assert_int_eq(system(cmd), 0);
+
+    hv_grid *g[3] = {NULL, NULL, NULL};
+    ck_assert_int_eq(hv_vdb_read_vec3(p, "v", NULL, &g[0], &g[1], &g[2]), HV_OK);
+    ck_assert_int_eq(g[0]->n[0], 6);
+    ck_assert_int_eq(g[0]->n[1], 5);
+    ck_assert_int_eq(g[0]->n[2], 4);
+    for (int k = 0; k < 4; k++)
+        for (int j = 0; j < 5; j++)
+            for (int i = 0; i < 6; i++) {
+                const size_t q = idx(g[0], i, j, k);
+                ck_assert_float_eq(g[0]->v[q], i + 0.5f);
+                ck_assert_float_eq(g[1]->v[q], j * 0.25f);
+                ck_assert_float_eq(g[2]->v[q], (float)-k);
+            }
+    for (int a = 0; a < 3; a++)
+        hv_grid_destroy(&g[a]);
+    ck_assert_int_eq(hv_vdb_read_float(p, "f", NULL, &g[0], NULL), HV_OK);
+    for (int k = 0; k < 4; k++)
+        for (int j = 0; j < 5; j++)
+            for (int i = 0; i < 6; i++)
+                ck_assert_float_eq(g[0]->v[idx(g[0], i, j, k)], i * 8 + j - k * 0.125f);
+    hv_grid_destroy(&g[0]);
+    const hv_vdb_read_opts in_tile = {1, {5000, 9000, 13000}, {5001, 9001, 13001}};
+    ck_assert_int_eq(hv_vdb_read_float(p, "t", &in_tile, &g[0], NULL), HV_OK);
+    for (size_t q = 0; q < hv_grid_count(g[0]); q++)
+        ck_assert_float_eq(g[0]->v[q], 2.5f);
+    hv_grid_destroy(&g[0]);
+
+    size_t size = 0;
+    unsigned char *data = slurp(p, &size);
+    unsigned char *copy = malloc(size);
+    ck_assert_ptr_nonnull(copy);
+    /* 'v' (the first grid) with its half-float flag false: OpenVDB would read
+     * its half-float blocks as full floats */
+    static const char flag[] = "\x16\0\0\0is_saved_as_half_float\x04\0\0\0bool\x01\0\0\0";
+    const size_t fv = find_bytes(data, size, 0, flag, sizeof flag - 1) + sizeof flag - 1;
+    ck_assert_int_eq(data[fv], 1);
+    memcpy(copy, data, size);
+    copy[fv] = 0;
+    expect_refused(bad, copy, size, "v", 1, NULL, "grid 'v'");
+    /* the root tile of 't' (origin, value, active; file_bbox_min holds the
+     * same origin) moved to y = 2^31 - 256: its extent ends past INT_MAX */
+    unsigned char tile[17];
+    const int32_t origin[3] = {4096, 8192, 12288};
+    const float tile_value = 2.5f;
+    memcpy(tile, origin, 12);
+    memcpy(tile + 12, &tile_value, 4);
+    tile[16] = 1;
+    const size_t to = find_bytes(data, size, 0, tile, sizeof tile);
+    memcpy(copy, data, size);
+    const int32_t y = 2147483392;
+    memcpy(copy + to + 4, &y, 4);
+    expect_refused(bad, copy, size, "t", 0, &in_tile, "int32 coordinate range");
+    /* ... or off the 4096-voxel lattice */
+    memcpy(copy, data, size);
+    const int32_t x = 4096 + 64;
+    memcpy(copy + to, &x, 4);
+    expect_refused(bad, copy, size, "t", 0, &in_tile, "4096-voxel lattice");
+    free(copy);
+    free(data);
+
+    /* A full-float file (heatvox's) whose 'v' half-float flag has an unknown
+     * type: OpenVDB keeps the raw byte, and a non-empty unknown value reads as
+     * true, so it would read 'v' as half floats (the fuzzer's input). */
+    write_three_grids(p);
+    data = slurp(p, &size);
+    const size_t vt = find_bytes(data, size, 0, "\x10\0\0\0Tree_vec3s_5_4_3", 20);
+    const size_t fb = find_bytes(data, size, vt, flag, sizeof flag - 1) + sizeof flag - 1 - 8;
+    ck_assert_int_eq(memcmp(data + fb, "bool", 4), 0);
+    data[fb + 1] = 'O';
+    expect_refused(bad, data, size, "v", 1, NULL, "values saved as half floats");
+    free(data);
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     /* The heatvox command of this build (BUILD/tests/check_vdb -> BUILD/heatvox)
@@ -1130,6 +1248,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface);
     tcase_add_test(tc, sdf_to_ext_reference_should_extend_a_surface_field_along_normals);
     tcase_add_test(tc, damaged_files_should_fail_with_small_memory_naming_the_file);
+    tcase_add_test(tc, half_float_grids_and_root_tiles_should_read_and_their_damage_be_refused);
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <sstream>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
@@ -50,6 +51,13 @@ const uint64_t BLOSC_PAD_BYTES = 128; // points/StreamCompression.h: small buffe
 const uint64_t LEAF_MASK_BYTES = 64;  // an 8^3 leaf's mask; every leaf has one in the topology
 const uint32_t LEAF_VALUES = 512;
 const int32_t ROOT_CHILD_DIM = 4096; // 2^(5+4+3): root children sit on this lattice
+
+// GridBase::META_SAVE_HALF_FLOAT. Archive::readGrid sets it from the
+// descriptor's "_HalfFloat" suffix, then GridBase::readMeta clears the map and
+// reads the file's: the trees are read as half floats when the grid's own
+// metadata says so (Metadata::asBool() of the entry of this name), whatever
+// the suffix says.
+const char *const HALF_FLOAT_META = "is_saved_as_half_float";
 
 std::string num(uint64_t v) { return std::to_string(v); }
 
@@ -276,7 +284,7 @@ struct Grid {
     std::string label;  // for messages
     std::string type;   // without "_HalfFloat"
     std::string parent; // unique name of the instance parent, or empty
-    bool half = false;
+    bool half = false;  // values saved as half floats: HALF_FLOAT_META, not the type's suffix
     uint64_t grid_pos = 0, block_pos = 0, end_pos = 0; // with grid offsets only
     uint64_t tree_pos = 0; // where the topology starts (after the transform)
     uint32_t compression = 0;
@@ -340,10 +348,14 @@ struct FileCheck::Impl {
     }
 
     // MetaMap::readMeta. leaf_bound caps the leaf count of delayed-load
-    // metadata (one 64-byte mask per leaf must fit in the grid).
-    void metamap(uint64_t leaf_bound)
+    // metadata (one 64-byte mask per leaf must fit in the grid). half (grid
+    // metadata only): set to what GridBase::saveFloatAsHalf() will return
+    // once OpenVDB has read this map, see HALF_FLOAT_META.
+    void metamap(uint64_t leaf_bound, bool *half = nullptr)
     {
         const std::string base = r.ctx;
+        if (half)
+            *half = false; // MetaMap::readMeta clears the map first
         const uint32_t count = r.u32("metadata count");
         for (uint32_t i = 0; i < count; i++) {
             r.ctx = base + "entry " + num(i + 1) + " of " + num(count) + ": ";
@@ -352,18 +364,42 @@ struct FileCheck::Impl {
             const std::string type = r.str("type name");
             const uint32_t nbytes = r.u32("value size");
             r.need(nbytes, "value", true);
+            const bool half_flag = half && name == HALF_FLOAT_META;
             if (type == "__delayedload") {
+                if (half_flag)
+                    r.corrupt("the half-float flag stored as " + shown(type) + " metadata");
                 delayed_load(nbytes, leaf_bound);
             } else if (type != "string" && openvdb::Metadata::isRegisteredType(type)) {
                 // TypedMetadata::readValue reads sizeof(T) whatever the
                 // stored size says; a different size puts OpenVDB off track.
-                const uint32_t want = openvdb::Metadata::createMetadata(type)->size();
+                openvdb::Metadata::Ptr meta = openvdb::Metadata::createMetadata(type);
+                const uint32_t want = meta->size();
                 if (nbytes != want)
                     r.corrupt("a " + shown(type) + " value of " + num(nbytes) + " bytes (it has " +
                               num(want) + ")");
-                r.skip(nbytes, "value", true);
+                if (half_flag) {
+                    // Metadata::asBool() of the value as OpenVDB reads it.
+                    const uint8_t *v = r.take(nbytes, "value");
+                    if (type == "bool") {
+                        *half = v[0] != 0;
+                    } else {
+                        std::string bytes(4 + (size_t)nbytes, '\0');
+                        memcpy(&bytes[0], &nbytes, 4);
+                        memcpy(&bytes[4], v, nbytes);
+                        std::istringstream in(bytes);
+                        meta->read(in);
+                        *half = meta->asBool();
+                    }
+                } else {
+                    r.skip(nbytes, "value", true);
+                }
             } else {
-                r.skip(nbytes, "value", true); // a string, or kept as raw bytes
+                // A string (asBool: not empty), or kept as raw bytes by
+                // UnknownMetadata (asBool: not empty) unless its type name
+                // starts with "__" (dropped by readMeta).
+                if (half_flag && (type == "string" || type.compare(0, 2, "__") != 0))
+                    *half = nbytes > 0;
+                r.skip(nbytes, "value", true);
             }
         }
         r.ctx = base;
@@ -451,7 +487,7 @@ struct FileCheck::Impl {
                 return std::string(b);
             }());
         r.ctx = "grid '" + g.label + "' metadata: ";
-        metamap((r.end - r.pos) / LEAF_MASK_BYTES);
+        metamap((r.end - r.pos) / LEAF_MASK_BYTES, &g.half);
         r.ctx = "grid '" + g.label + "' transform: ";
         map(r.str("map type"), false);
         g.tree_pos = r.pos;
@@ -480,12 +516,12 @@ struct FileCheck::Impl {
             g.label = grid_label(g.unique);
             r.ctx = "grid '" + g.label + "' descriptor: ";
             g.type = r.str("grid type");
+            // The "_HalfFloat" suffix only sets the flag that the grid's
+            // metadata then replaces (g.half, from grid_head).
             const std::string half = "_HalfFloat";
             if (g.type.size() >= half.size() &&
-                !g.type.compare(g.type.size() - half.size(), half.size(), half)) {
-                g.half = true;
+                !g.type.compare(g.type.size() - half.size(), half.size(), half))
                 g.type.erase(g.type.size() - half.size());
-            }
             g.parent = r.str("instance parent name");
             if (!by_unique.emplace(g.unique, grids.size()).second)
                 r.corrupt("a second grid named '" + g.label + "'");
@@ -566,6 +602,8 @@ struct FileCheck::Impl {
                           num(raw) + " bytes where " + num(bytes) + " are expected");
             r.skip(raw, "value block", true);
         } else if (t.compression & COMP_BLOSC) {
+            // The header's uncompressed size must be what OpenVDB decompresses
+            // into: count values of 2 bytes per component when half.
             blosc_block((uint64_t)n, bytes, false, "value block");
         } else {
             r.skip((uint64_t)n, "value block", true);
@@ -594,6 +632,35 @@ struct FileCheck::Impl {
             }
     }
 
+    // Root tiles and children (RootNode::readTopology keys its table by the
+    // origins as stored). OpenVDB takes each for a node of 4096^3 voxels from
+    // its origin: the bounding boxes (CoordBBox::expand(origin, DIM) in
+    // evalActiveBoundingBox, createCube) and the voxel loops compute its last
+    // voxel as origin + 4095 in int, which must not overflow. It writes them
+    // on the 4096-voxel lattice (RootNode::coordToKey), where none can.
+    static std::string root_node(const char *what, uint32_t i, uint32_t n, const int32_t o[3])
+    {
+        return std::string(what) + " " + num(i + 1) + " of " + num(n) + " at (" +
+               std::to_string(o[0]) + ", " + std::to_string(o[1]) + ", " + std::to_string(o[2]) +
+               ")";
+    }
+    static bool on_root_lattice(const int32_t o[3])
+    {
+        return !((o[0] | o[1] | o[2]) & (ROOT_CHILD_DIM - 1));
+    }
+    void root_node_extent(const char *what, uint32_t i, uint32_t n, const int32_t o[3]) const
+    {
+        // The extent starts at the origin, an int32: only its end can overflow.
+        for (int a = 0; a < 3; a++) {
+            const int64_t hi = (int64_t)o[a] + ROOT_CHILD_DIM - 1;
+            if (hi > INT32_MAX)
+                r.corrupt(root_node(what, i, n, o) +
+                          " reaches past the int32 coordinate range: its 4096-voxel extent along " +
+                          std::string(1, "xyz"[a]) + " ends at " + std::to_string(hi) +
+                          " (at most " + std::to_string(INT32_MAX) + ")");
+        }
+    }
+
     // Grid::readTopology then readBuffers (RootNode, InternalNode, LeafNode).
     void tree(Grid &g)
     {
@@ -610,19 +677,37 @@ struct FileCheck::Impl {
             set_region(g.block_pos, "grid '" + g.label + "' topology");
         else
             set_region(r.size(), "");
-        r.ctx = "grid '" + g.label + "' topology: ";
+        const std::string as_half = g.half && kind->half ? " (values saved as half floats)" : "";
+        r.ctx = "grid '" + g.label + "' topology" + as_half + ": ";
         r.i32("buffer count");
         r.skip(kind->size, "background value", false);
         const uint32_t ntiles = r.u32("root tile count"), nchildren = r.u32("root child count");
-        r.skip((uint64_t)ntiles * (12 + kind->size + 1), "root tiles", true);
+        const uint64_t tile_bytes = 12 + kind->size + 1; // origin, value, active flag
+        r.need((uint64_t)ntiles * tile_bytes, "root tiles", true);
+        // Every tile's extent first (the overflow is the worse damage), then
+        // the first one off the lattice.
+        uint32_t off_lattice = ntiles;
+        int32_t off_origin[3] = {0, 0, 0};
+        for (uint32_t i = 0; i < ntiles; i++) {
+            int32_t o[3];
+            memcpy(o, r.take(tile_bytes, "root tile"), 12);
+            root_node_extent("root tile", i, ntiles, o);
+            if (off_lattice == ntiles && !on_root_lattice(o)) {
+                off_lattice = i;
+                memcpy(off_origin, o, sizeof o);
+            }
+        }
+        if (off_lattice < ntiles)
+            r.corrupt(root_node("root tile", off_lattice, ntiles, off_origin) +
+                      " is not on the 4096-voxel lattice");
         int32_t prev[3] = {0, 0, 0};
         for (uint32_t c = 0; c < nchildren; c++) {
             int32_t o[3];
             memcpy(o, r.take(12, "root child origin"), 12);
-            if ((o[0] | o[1] | o[2]) & (ROOT_CHILD_DIM - 1))
-                r.corrupt("root child " + num(c + 1) + " of " + num(nchildren) + " at (" +
-                          std::to_string(o[0]) + ", " + std::to_string(o[1]) + ", " +
-                          std::to_string(o[2]) + ") is not on the 4096-voxel lattice");
+            root_node_extent("root child", c, nchildren, o);
+            if (!on_root_lattice(o))
+                r.corrupt(root_node("root child", c, nchildren, o) +
+                          " is not on the 4096-voxel lattice");
             // RootNode reads its buffers in the order of its std::map, and
             // OpenVDB writes the children in that order: anything else is damage.
             if (c > 0 && !std::lexicographical_compare(prev, prev + 3, o, o + 3))
@@ -636,7 +721,7 @@ struct FileCheck::Impl {
 
         if (offsets)
             set_region(g.end_pos, "grid '" + g.label + "'");
-        r.ctx = "grid '" + g.label + "' data: ";
+        r.ctx = "grid '" + g.label + "' data" + as_half + ": ";
         switch (kind->leaf) {
         case LEAF_PLAIN:
             // LeafNode::readBuffers on a seekable stream: skip the mask, read
