@@ -17,6 +17,10 @@ WARN     := -Wall -Wextra -Wno-unused-parameter
 CPPFLAGS += -Iinclude -Isrc -I$(BUILD)/gen -D_GNU_SOURCE -DCL_TARGET_OPENCL_VERSION=120
 CFLAGS   += -std=c11 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS)
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS) -I/usr/include/OpenEXR
+# The library exports only what the public headers mark HV_API.
+LIBFLAGS := -fvisibility=hidden
+# The command uses the public API alone: include/ only, no src/.
+TOOL_CPPFLAGS := -Iinclude -D_GNU_SOURCE
 LDLIBS   += -lopenvdb -ltbb -lImath-3_1 -lOpenEXRCore-3_1 -lpng \
             -lfftw3_threads -lfftw3f_threads -lfftw3 -lfftw3f -lOpenCL -lz -lm -lpthread
 LDFLAGS  += -fopenmp $(SANFLAGS)
@@ -34,8 +38,11 @@ TESTS   := $(patsubst tests/%.c,$(BUILD)/tests/%,$(sort $(wildcard tests/check_*
 TESTLIB := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/testlib.c))
 STAMP   := $(BUILD)/.deps-ok
 
+VERSION := $(shell sed -n 's/^\#define HV_VERSION_STRING "\(.*\)"/\1/p' include/heatvox/core.h)
+SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 LIB_A   := $(BUILD)/libheatvox.a
 LIB_SO  := $(BUILD)/libheatvox.so
+LIB_SOV := $(BUILD)/libheatvox.so.$(VERSION)
 BIN     := $(BUILD)/heatvox
 
 .PHONY: all deps check sanitize bench demo install format clean
@@ -77,7 +84,19 @@ $(BUILD)/gen/kernels.c: $(CL_SRC) Makefile | $(STAMP)
 
 $(BUILD)/obj/gen/kernels.o: $(BUILD)/gen/kernels.c
 	@mkdir -p $(dir $@)
-	$(CC) $(CFLAGS) -c $< -o $@
+	$(CC) $(CFLAGS) $(LIBFLAGS) -c $< -o $@
+
+$(BUILD)/obj/src/%.o: src/%.c | $(STAMP)
+	@mkdir -p $(dir $@)
+	$(CC) $(CPPFLAGS) $(CFLAGS) $(LIBFLAGS) -MMD -MP -c $< -o $@
+
+$(BUILD)/obj/src/%.o: src/%.cpp | $(STAMP)
+	@mkdir -p $(dir $@)
+	$(CXX) $(CPPFLAGS) $(CXXFLAGS) $(LIBFLAGS) -fvisibility-inlines-hidden -MMD -MP -c $< -o $@
+
+$(BUILD)/obj/tools/%.o: tools/%.c | $(STAMP)
+	@mkdir -p $(dir $@)
+	$(CC) $(TOOL_CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
 
 $(BUILD)/obj/%.o: %.c | $(STAMP)
 	@mkdir -p $(dir $@)
@@ -91,8 +110,14 @@ $(LIB_A): $(OBJ)
 	@rm -f $@
 	ar rcs $@ $^
 
-$(LIB_SO): $(OBJ)
-	$(CXX) -shared -o $@ $^ $(LDFLAGS) $(LDLIBS)
+# libheatvox.so.X.Y.Z with soname libheatvox.so.X, and the two links to it.
+$(LIB_SOV): $(OBJ) src/heatvox.map
+	$(CXX) -shared -Wl,-soname,libheatvox.so.$(SOMAJOR) -Wl,--no-undefined -Wl,--version-script,src/heatvox.map \
+	  -o $@ $(OBJ) $(LDFLAGS) $(LDLIBS)
+
+$(LIB_SO): $(LIB_SOV)
+	ln -sf $(notdir $<) $(BUILD)/libheatvox.so.$(SOMAJOR)
+	ln -sf $(notdir $<) $@
 
 $(BIN): $(BUILD)/obj/tools/heatvox.o $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tools/heatvox.c,$(wildcard tools/*.c))) $(LIB_A)
 	$(CXX) -o $@ $^ $(LDFLAGS) $(LDLIBS)
@@ -109,14 +134,25 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
 	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
 
 # Each suite sets Check's no-fork mode itself (whatever CK_FORK says): OpenVDB
-# (log4cplus/TBB threads) and OpenCL contexts hang forked children (NOTES §5).
+# (log4cplus/TBB threads) and OpenCL contexts hang forked children
+# (docs/METHOD.md, "Testing notes").
 # `timeout` stands in for Check's. The OpenCL solver suite runs a second time
 # as on a device without fp64 (float kernels, double correction on the host):
 # the run named fp32:SUITE; the multigrid suite a second time without its
 # AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
 CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS))) \
               $(patsubst %,no512:%,$(filter %/check_mg,$(TESTS)))
-check: all $(TESTS) $(TEST_HELPERS)
+# tests/check_readme builds the README's C example and tests/check_api a
+# program linked shared and static against an installed copy: make check
+# stages `make install` into $(BUILD)/stage first.
+STAGE := $(BUILD)/stage
+$(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) heatvox.pc.in Makefile
+	@mkdir -p $(STAGE)
+	+@$(MAKE) --no-print-directory install PREFIX=$(CURDIR)/$(STAGE) DESTDIR= > $(STAGE)/install.log 2>&1 \
+	  || { cat $(STAGE)/install.log; exit 1; }
+	@touch $@
+
+check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
 	@pass=0; fail=0; skip=0; bad=""; skips=$(BUILD)/tests/skipped.txt; : > $$skips; \
 	for run in $(CHECK_RUNS); do \
 	  t=$${run#*:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
@@ -151,11 +187,20 @@ demo: all
 install: all
 	install -d $(DESTDIR)$(PREFIX)/lib $(DESTDIR)$(PREFIX)/include/heatvox $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig
 	install -m 644 $(LIB_A) $(DESTDIR)$(PREFIX)/lib/
-	install -m 755 $(LIB_SO) $(DESTDIR)$(PREFIX)/lib/
+	install -m 755 $(LIB_SOV) $(DESTDIR)$(PREFIX)/lib/
+	ln -sf libheatvox.so.$(VERSION) $(DESTDIR)$(PREFIX)/lib/libheatvox.so.$(SOMAJOR)
+	ln -sf libheatvox.so.$(VERSION) $(DESTDIR)$(PREFIX)/lib/libheatvox.so
 	install -m 644 include/heatvox/*.h $(DESTDIR)$(PREFIX)/include/heatvox/
 	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/
-	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|'$$(sed -n 's/#define HV_VERSION_STRING "\(.*\)"/\1/p' include/heatvox/core.h)'|' \
+	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' \
 	  heatvox.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc
+	@echo "heatvox $(VERSION) installed in $(DESTDIR)$(PREFIX):"
+	@echo "  library  $(DESTDIR)$(PREFIX)/lib/libheatvox.so.$(VERSION) (soname libheatvox.so.$(SOMAJOR)) and libheatvox.a"
+	@echo "  headers  $(DESTDIR)$(PREFIX)/include/heatvox/"
+	@echo "  command  $(DESTDIR)$(PREFIX)/bin/heatvox"
+	@echo "  pkg-config file $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc"
+	@case "$(PREFIX)" in /usr|/usr/local) echo "Run ldconfig (as root) once so that programs find the shared library.";; \
+	  *) echo "Build with PKG_CONFIG_PATH=$(PREFIX)/lib/pkgconfig and link with -Wl,-rpath,$(PREFIX)/lib (or add $(PREFIX)/lib to /etc/ld.so.conf.d/ and run ldconfig).";; esac
 
 format:
 	clang-format -i $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h tools/*.c tests/*.c)

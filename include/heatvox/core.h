@@ -20,6 +20,14 @@ extern "C" {
 #define HV_VERSION_PATCH 0
 #define HV_VERSION_STRING "0.1.0"
 
+/* Marks the library's public functions: the shared library is built with
+ * -fvisibility=hidden and exports these alone. */
+#if defined(__GNUC__) || defined(__clang__)
+#define HV_API __attribute__((visibility("default")))
+#else
+#define HV_API
+#endif
+
 typedef enum hv_status {
     HV_OK = 0,
     HV_ERR_INVALID_ARG,   /* an argument is out of range or inconsistent */
@@ -34,32 +42,34 @@ typedef enum hv_status {
 } hv_status;
 
 /* Static name of a status ("invalid argument", ...). Never NULL. */
-const char *hv_status_str(hv_status s);
+HV_API const char *hv_status_str(hv_status s);
 
 /* Detailed message of the last error on this thread ("" when none).
  * The pointer stays valid until the next heatvox call on this thread. */
-const char *hv_last_error(void);
+HV_API const char *hv_last_error(void);
 
 /* Clears this thread's error message. */
-void hv_clear_error(void);
+HV_API void hv_clear_error(void);
 
 /* Log levels and a process-wide log callback (default: no output). */
 typedef enum hv_log_level { HV_LOG_ERROR = 0, HV_LOG_WARN, HV_LOG_INFO, HV_LOG_DEBUG } hv_log_level;
 typedef void (*hv_log_fn)(hv_log_level level, const char *msg, void *user);
-void hv_set_log(hv_log_fn fn, void *user);
+HV_API void hv_set_log(hv_log_fn fn, void *user);
 
 /* Progress callback: fraction in [0,1] and a stage name; return non-zero to cancel
  * (the running call then returns HV_ERR_CANCELLED). */
 typedef int (*hv_progress_fn)(double fraction, const char *stage, void *user);
-void hv_set_progress(hv_progress_fn fn, void *user);
+HV_API void hv_set_progress(hv_progress_fn fn, void *user);
 
-const char *hv_version(void);
+/* HV_VERSION_STRING of the library that is running (which may be newer than
+ * the headers a program was built with). */
+HV_API const char *hv_version(void);
 
 /* Wall-clock seconds from a monotonic clock. */
-double hv_now(void);
+HV_API double hv_now(void);
 
 /* Peak resident memory of this process in bytes (0 if unknown). */
-size_t hv_peak_rss(void);
+HV_API size_t hv_peak_rss(void);
 
 /* Most worker threads the library runs: thread counts above it are refused by
  * the options that take one, and hv_set_threads clamps to it (libgomp crashes
@@ -68,8 +78,8 @@ size_t hv_peak_rss(void);
 
 /* Number of worker threads the CPU kernels use; 0 restores the default (all
  * cores); at most HV_MAX_THREADS. */
-void hv_set_threads(int n);
-int hv_get_threads(void);
+HV_API void hv_set_threads(int n);
+HV_API int hv_get_threads(void);
 
 #ifdef __cplusplus
 }

@@ -48,23 +48,23 @@ typedef struct hv_curves {
  * any segment is an error. Only regular files and pipes (up to 1 GiB) are read;
  * coordinates beyond +-1e100 give HV_ERR_NUMERIC. The caller owns *out
  * (hv_curves_destroy). */
-hv_status hv_curves_read(const char *path, hv_curves **out);
+HV_API hv_status hv_curves_read(const char *path, hv_curves **out);
 
 /* Parses curves from memory; `name` is used in messages. svg selects the format. */
-hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *name,
-                          hv_curves **out);
+HV_API hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *name,
+                                 hv_curves **out);
 
 /* Builds curves from arrays (copied): npoints points, nlines polylines. */
-hv_status hv_curves_from_arrays(hv_curves **out, const double *pts, size_t npoints,
-                                const size_t *start, size_t nlines, const uint8_t *closed);
+HV_API hv_status hv_curves_from_arrays(hv_curves **out, const double *pts, size_t npoints,
+                                       const size_t *start, size_t nlines, const uint8_t *closed);
 
-void hv_curves_destroy(hv_curves **c);
+HV_API void hv_curves_destroy(hv_curves **c);
 
 /* Number of segments (zero-length ones included). */
-size_t hv_curves_segments(const hv_curves *c);
+HV_API size_t hv_curves_segments(const hv_curves *c);
 
 /* Bounds of the points; HV_ERR_INVALID_ARG when there are none. */
-hv_status hv_curves_bounds(const hv_curves *c, double lo[2], double hi[2]);
+HV_API hv_status hv_curves_bounds(const hv_curves *c, double lo[2], double hi[2]);
 
 typedef struct hv_sdf2d_opts {
     int res;            /* cells along the longest axis of the padded box; default 256 */
@@ -116,12 +116,12 @@ typedef struct hv_sdf2d_stats {
     double t_repair, t_splat, t_diffuse, t_normalize, t_poisson, t_distance, t_total;
 } hv_sdf2d_stats;
 
-void hv_sdf2d_opts_default(hv_sdf2d_opts *o);
+HV_API void hv_sdf2d_opts_default(hv_sdf2d_opts *o);
 
 /* Signed distance of curves c on a new 2D grid (dim 2, origin[2] = 0). opts and
  * stats may be NULL. The caller owns *out. */
-hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid **out,
-                        hv_sdf2d_stats *stats);
+HV_API hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid **out,
+                               hv_sdf2d_stats *stats);
 
 #ifdef __cplusplus
 }

@@ -29,32 +29,32 @@ typedef struct hv_grid {
  * origin may be NULL (zero). Fails with HV_ERR_INVALID_ARG for sizes <= 0 or
  * h <= 0, HV_ERR_NOMEM when the grid would not fit in memory.
  * The caller owns *out and frees it with hv_grid_destroy(). */
-hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const double origin[3]);
+HV_API hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const double origin[3]);
 
 /* Frees the grid and sets *g to NULL. Accepts NULL and *g == NULL. */
-void hv_grid_destroy(hv_grid **g);
+HV_API void hv_grid_destroy(hv_grid **g);
 
 /* Allocates (zeroed) the solid mask if the grid has none. */
-hv_status hv_grid_add_mask(hv_grid *g);
+HV_API hv_status hv_grid_add_mask(hv_grid *g);
 
 /* Number of cells n[0]*n[1]*n[2]. */
-size_t hv_grid_count(const hv_grid *g);
+HV_API size_t hv_grid_count(const hv_grid *g);
 
 /* World position of the centre of cell (i,j,k). */
-void hv_grid_cell_center(const hv_grid *g, int i, int j, int k, double x[3]);
+HV_API void hv_grid_cell_center(const hv_grid *g, int i, int j, int k, double x[3]);
 
 /* Checks sizes and voxel size; with bytes_per_cell, also that count*bytes
  * fits in memory and size_t. Used before any allocation sized by user input. */
-hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell);
+HV_API hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell);
 
 /* HV_ERR_NUMERIC naming `what` and the first bad index if any value is NaN/Inf. */
-hv_status hv_check_finite(const float *v, size_t count, const char *what);
-hv_status hv_check_finite_d(const double *v, size_t count, const char *what);
+HV_API hv_status hv_check_finite(const float *v, size_t count, const char *what);
+HV_API hv_status hv_check_finite_d(const double *v, size_t count, const char *what);
 
 /* Aligned allocation helpers (64 bytes); hv_free accepts NULL. */
-void *hv_malloc(size_t bytes);
-void *hv_calloc(size_t count, size_t size);
-void hv_free(void *p);
+HV_API void *hv_malloc(size_t bytes);
+HV_API void *hv_calloc(size_t count, size_t size);
+HV_API void hv_free(void *p);
 
 #ifdef __cplusplus
 }

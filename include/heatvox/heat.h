@@ -14,12 +14,13 @@
  *                 and the difference of two times cancels the amplitude that
  *                 tilts directions behind corners; only where both solves are
  *                 well above their error bound
- *   3. march      e^{-r/sqrt t} leaves the far field below that bound (NOTES §3),
- *                 and a larger t bends directions near walls and corners. So
- *                 the diffusion is repeated from a front: a wavefront of the
- *                 distance inside the trusted zone (placed with the lattice's
- *                 own decay rate per direction, so fronts stay round), whose
- *                 own heat flow continues the directions outward (Huygens).
+ *   3. march      e^{-r/sqrt t} leaves the far field below that bound
+ *                 (docs/METHOD.md, "Heat method"), and a larger t bends
+ *                 directions near walls and corners. So the diffusion is
+ *                 repeated from a front: a wavefront of the distance inside
+ *                 the trusted zone (placed with the lattice's own decay rate
+ *                 per direction, so fronts stay round), whose own heat flow
+ *                 continues the directions outward (Huygens).
  *                 Stages repeat until every open face has a direction.
  *   4. poisson    Lap(phi) = div X with Neumann walls and solid faces closed
  *   5. shift      per connected fluid region, fitted on the cells 1.5-3 voxels
@@ -95,7 +96,7 @@ typedef struct hv_distance_stats {
     double t_splat, t_diffuse, t_normalize, t_poisson, t_total; /* seconds */
 } hv_distance_stats;
 
-void hv_distance_opts_default(hv_distance_opts *o);
+HV_API void hv_distance_opts_default(hv_distance_opts *o);
 
 /* Fills dist->v with the geodesic distance (world units) from the sources,
  * through the fluid cells of dist (dist->solid marks obstacles; NULL = none).
@@ -104,15 +105,15 @@ void hv_distance_opts_default(hv_distance_opts *o);
  * solid cells o->solid_value. opts and stats may be NULL.
  * Fails with HV_ERR_INVALID_ARG when no source lands on a fluid cell, a voxel
  * index is out of range or a mesh source is given for a 2D grid. */
-hv_status hv_distance_compute(hv_grid *dist, const hv_distance_sources *src,
-                              const hv_distance_opts *opts, hv_distance_stats *stats);
+HV_API hv_status hv_distance_compute(hv_grid *dist, const hv_distance_sources *src,
+                                     const hv_distance_opts *opts, hv_distance_stats *stats);
 
 /* Marks as solid (adding a mask if needed) every cell of g whose closed box
  * meets a triangle of m: a watertight shell that blocks heat. Cells enclosed by
  * a closed mesh stay fluid and form their own region (unreachable unless a
  * source lies inside). g must be 3D. *nsolid (may be NULL) receives the number
  * of cells marked. */
-hv_status hv_mask_from_mesh(hv_grid *g, const hv_mesh *m, size_t *nsolid);
+HV_API hv_status hv_mask_from_mesh(hv_grid *g, const hv_mesh *m, size_t *nsolid);
 
 /* ---- Extension ----------------------------------------------------------- */
 
@@ -169,32 +170,32 @@ typedef struct hv_extend_field {
 
 typedef struct hv_extender hv_extender;
 
-void hv_extend_opts_default(hv_extend_opts *o);
+HV_API void hv_extend_opts_default(hv_extend_opts *o);
 
 /* Creates an extender for grids of this shape (solid may be NULL; copied).
  * Solvers are built on first use and kept while the box they solve on keeps
  * its size (a box around the band plus 6 sqrt(t) on each side, grown to hold
  * the cells read at themselves), so repeated calls (a simulation's time steps)
  * mostly pay only for the solves. Not thread-safe. The caller owns *out. */
-hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double h,
-                             const uint8_t *solid, const hv_extend_opts *opts);
+HV_API hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double h,
+                                    const uint8_t *solid, const hv_extend_opts *opts);
 
-void hv_extender_destroy(hv_extender **e);
+HV_API void hv_extender_destroy(hv_extender **e);
 
 /* Extends nfields fields off the zero set of phi (one value per cell, the
  * extender's shape). All right-hand sides (the weights, and per field its
  * components, plus the magnitude of vectors) are solved with the same solver.
  * Constant fields come back unchanged to float rounding. stats may be NULL.
  * Fails with HV_ERR_INVALID_ARG when no cell has |phi| < band*h. */
-hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
-                         const hv_extend_field *fields, hv_extend_stats *stats);
+HV_API hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
+                                const hv_extend_field *fields, hv_extend_stats *stats);
 
 /* Grid wrappers: phi, field(s) and out(s) must have the extender's shape and
  * voxel size, and share their origin. */
-hv_status hv_extend_scalar(hv_extender *e, const hv_grid *phi, const hv_grid *field,
-                           hv_grid *out, hv_extend_stats *stats);
-hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *const in[3],
-                         hv_grid *const out[3], hv_extend_stats *stats);
+HV_API hv_status hv_extend_scalar(hv_extender *e, const hv_grid *phi, const hv_grid *field,
+                                  hv_grid *out, hv_extend_stats *stats);
+HV_API hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *const in[3],
+                                hv_grid *const out[3], hv_extend_stats *stats);
 
 #ifdef __cplusplus
 }

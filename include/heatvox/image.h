@@ -60,7 +60,7 @@ extern "C" {
  * remaining axes' lower corner in [0], [1] and the slice plane (cell centre)
  * in [2]. A 2D input is accepted with axis 2 and index 0 (a copy). The solid
  * mask is sliced too. The caller owns *out. */
-hv_status hv_grid_slice(const hv_grid *g, int axis, int index, hv_grid **out);
+HV_API hv_status hv_grid_slice(const hv_grid *g, int axis, int index, hv_grid **out);
 
 /* ---- OpenEXR ---- */
 
@@ -68,7 +68,7 @@ hv_status hv_grid_slice(const hv_grid *g, int axis, int index, hv_grid **out);
  * rename. channel may be NULL ("Y"); it must be 1..31 characters. The file is
  * decoded in full before the rename: unless it gives back every value bit for
  * bit, it is removed and the call fails with HV_ERR_IO. */
-hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel);
+HV_API hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel);
 
 /* Reads an EXR file into a new grid, decoding every pixel (a truncated or
  * corrupt file fails with HV_ERR_PARSE naming it and the part and line).
@@ -77,34 +77,34 @@ hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel);
  * order. channel selects the channel by name; NULL takes the only channel, or
  * "Y" when there are several. HALF and UINT channels are converted to float.
  * Images must be scanline or tiled, not deep. The caller owns *out. */
-hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out);
+HV_API hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out);
 
 /* ---- PNG previews ---- */
 
 /* Fills rgb (3 * n[0] * n[1] bytes, rows top to bottom) with the colour map
  * above for a 2D grid. range <= 0 (or not finite) picks max |v| over the finite
  * values (1 if all are zero). */
-hv_status hv_image_colormap(const hv_grid *g, double range, uint8_t *rgb);
+HV_API hv_status hv_image_colormap(const hv_grid *g, double range, uint8_t *rgb);
 
 /* Writes an 8-bit RGB PNG of a 2D grid through a temporary file and a rename.
  * range as in hv_image_colormap. */
-hv_status hv_png_write(const char *path, const hv_grid *g, double range);
+HV_API hv_status hv_png_write(const char *path, const hv_grid *g, double range);
 
 /* Writes `count` 2D grids side by side (bottom-aligned, HV_PNG_GAP white pixels
  * between them), sharing one symmetric range (range <= 0: max |v| over all). */
-hv_status hv_png_write_slices(const char *path, const hv_grid *const *slices, int count,
-                              double range);
+HV_API hv_status hv_png_write_slices(const char *path, const hv_grid *const *slices, int count,
+                                     double range);
 
 /* Writes the three middle slices of a 3D grid (x, then y, then z; see
  * hv_grid_slice) side by side, as hv_png_write_slices. */
-hv_status hv_png_write_preview(const char *path, const hv_grid *g, double range);
+HV_API hv_status hv_png_write_preview(const char *path, const hv_grid *g, double range);
 
 /* Writes raw 8-bit RGB (rows top to bottom) as PNG, temporary file + rename. */
-hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int height);
+HV_API hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int height);
 
 /* Reads a PNG of any colour type and bit depth as 8-bit RGB (alpha dropped,
  * grey expanded). *rgb is allocated with malloc; the caller frees it. */
-hv_status hv_png_read_rgb(const char *path, uint8_t **rgb, int *width, int *height);
+HV_API hv_status hv_png_read_rgb(const char *path, uint8_t **rgb, int *width, int *height);
 
 #ifdef __cplusplus
 }

@@ -57,44 +57,44 @@ typedef struct hv_mesh_report {
  * between strips) are dropped. Faces with fewer than 3 corners are an error.
  * Only regular files and pipes (up to 1 GiB) are read; finite coordinates
  * beyond +-1e100 give HV_ERR_NUMERIC (NaN and inf load and are counted). */
-hv_status hv_mesh_read(const char *path, hv_mesh **out);
+HV_API hv_status hv_mesh_read(const char *path, hv_mesh **out);
 
 /* Builds a mesh from arrays (copied); vertices are welded by exact position
  * (-0 equals +0; vertices with a NaN coordinate are never merged) and vertices
  * no triangle uses are dropped. Indices must be < nverts; ntris must be > 0. */
-hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
-                              const uint32_t *tris, size_t ntris);
+HV_API hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
+                                     const uint32_t *tris, size_t ntris);
 
 /* Deep copy. The caller owns *out. */
-hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out);
+HV_API hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out);
 
 /* Frees *m and sets it to NULL; accepts NULL and *m == NULL. */
-void hv_mesh_destroy(hv_mesh **m);
+HV_API void hv_mesh_destroy(hv_mesh **m);
 
 /* Axis-aligned bounds of the finite vertices (HV_ERR_NUMERIC when none is finite). */
-hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3]);
+HV_API hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3]);
 
 /* Fills the defect report. O(n log n) in the number of triangles. Triangles that
  * repeat a vertex index are counted as degenerate and left out of the edge,
  * orientation and component counts (their "edges" are not edges). */
-hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r);
+HV_API hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r);
 
 /* Writes the mesh as OBJ (temporary file then rename). Coordinates are written
  * with 17 significant digits, so reading the file back gives the same doubles. */
-hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path);
+HV_API hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path);
 
 /* ---- Generators (pure functions; the caller owns *out) ---- */
 
 /* Icosphere: the icosahedron subdivided `subdiv` times (0..9), 20·4^subdiv
  * triangles, vertices on the sphere of centre c and radius r, counter-clockwise
  * seen from outside (outward normals, positive signed volume). */
-hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int subdiv);
+HV_API hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int subdiv);
 
 /* Torus around the z axis through c: major radius R, tube radius r (0 < r < R),
  * nu segments around z and nv around the tube (each >= 3); 2·nu·nv triangles,
  * oriented outward. */
-hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double r, int nu,
-                             int nv);
+HV_API hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double r, int nu,
+                                    int nv);
 
 /* ---- Defect makers for tests (modify m in place; deterministic for a seed) ---- */
 
@@ -102,23 +102,23 @@ hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double 
  * with a corner within radius_frac × (bounding-box diagonal) of it (at least the
  * triangles around that vertex). Unused vertices are dropped. Fails with
  * HV_ERR_INVALID_ARG if no triangle would remain. */
-hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsigned seed);
+HV_API hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsigned seed);
 
 /* Reverses round(fraction × ntris) triangles chosen at random (fraction in [0,1]). */
-hv_status hv_mesh_defect_flip(hv_mesh *m, double fraction, unsigned seed);
+HV_API hv_status hv_mesh_defect_flip(hv_mesh *m, double fraction, unsigned seed);
 
 /* Reverses every triangle whose centroid lies on the + side (along axis 0,1,2) of
  * the mean of the triangle centroids. */
-hv_status hv_mesh_defect_flip_half(hv_mesh *m, int axis);
+HV_API hv_status hv_mesh_defect_flip_half(hv_mesh *m, int axis);
 
 /* Appends copies of round(fraction × ntris) distinct random triangles (fraction in
  * [0,1]); the first half of the copies (k/2 rounded down) have reversed orientation. */
-hv_status hv_mesh_defect_duplicate(hv_mesh *m, double fraction, unsigned seed);
+HV_API hv_status hv_mesh_defect_duplicate(hv_mesh *m, double fraction, unsigned seed);
 
 /* Unwelds: every triangle gets its own 3 vertices (nverts = 3·ntris). With
  * jitter_rel > 0 each coordinate moves by a uniform random amount of at most
  * jitter_rel × (bounding-box diagonal). */
-hv_status hv_mesh_defect_soup(hv_mesh *m, double jitter_rel, unsigned seed);
+HV_API hv_status hv_mesh_defect_soup(hv_mesh *m, double jitter_rel, unsigned seed);
 
 #ifdef __cplusplus
 }

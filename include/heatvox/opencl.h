@@ -37,7 +37,7 @@ typedef struct hv_opencl_device {
  * NULL when max is 0) and sets *count to the number found, which may exceed
  * max. Marks the selected device (none when HEATVOX_OPENCL_DEVICE names no
  * device). HV_ERR_UNSUPPORTED when no OpenCL platform is installed. */
-hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count);
+HV_API hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count);
 
 /* The device the opencl backend would use, into *out (may be NULL).
  * HV_ERR_UNSUPPORTED when there is no OpenCL platform or device,
@@ -45,7 +45,7 @@ hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count);
  * (hv_last_error) says which and lists the devices. Cheap (no context is
  * created). HV_BACKEND_AUTO uses it to take a GPU when there is one
  * (hv_backend_resolve in solve.h). */
-hv_status hv_opencl_probe(hv_opencl_device *out);
+HV_API hv_status hv_opencl_probe(hv_opencl_device *out);
 
 #ifdef __cplusplus
 }

@@ -156,25 +156,25 @@ typedef struct hv_sdf_stats {
     hv_sdf_repair_report repair;
 } hv_sdf_stats;
 
-void hv_sdf_opts_default(hv_sdf_opts *o);
+HV_API void hv_sdf_opts_default(hv_sdf_opts *o);
 
 /* The grid hv_sdf_compute would use for mesh m: cell counts, voxel size and
  * block origin. Fails on empty meshes, NaN/Inf coordinates, inconsistent
  * options and grids too large for this machine. */
-hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *o, int n[3], double *h,
-                               double origin[3]);
+HV_API hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *o, int n[3], double *h,
+                                      double origin[3]);
 
 /* Repairs a copy of `in` with the steps in `flags` (max_hole as in hv_sdf_opts);
  * *out is a new mesh that the caller frees with hv_mesh_destroy. report may be
  * NULL. Fails on NaN/Inf coordinates, out-of-range indices and empty meshes. */
-hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
-                        hv_sdf_repair_report *report);
+HV_API hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
+                               hv_sdf_repair_report *report);
 
 /* Computes the distance volume of m. opts may be NULL (defaults); stats may be
  * NULL. The caller owns *out (hv_grid_destroy). Reports progress through
  * hv_set_progress between stages; a cancel returns HV_ERR_CANCELLED. */
-hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
-                         hv_sdf_stats *stats);
+HV_API hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
+                                hv_sdf_stats *stats);
 
 #ifdef __cplusplus
 }

@@ -48,10 +48,10 @@ typedef enum hv_stop_reason {
     HV_STOP_EXACT          /* direct solve (FFTW) */
 } hv_stop_reason;
 
-const char *hv_backend_name(hv_backend b);
+HV_API const char *hv_backend_name(hv_backend b);
 /* Parses "auto", "mg", "fftw", "opencl"; HV_ERR_INVALID_ARG otherwise. */
-hv_status hv_backend_parse(const char *s, hv_backend *out);
-const char *hv_stop_reason_str(hv_stop_reason r);
+HV_API hv_status hv_backend_parse(const char *s, hv_backend *out);
+HV_API const char *hv_stop_reason_str(hv_stop_reason r);
 
 /* Grids below this many cells keep AUTO on the CPU even with a GPU (kernel
  * launches and device set-up cost more than the solve there). */
@@ -67,7 +67,7 @@ const char *hv_stop_reason_str(hv_stop_reason r);
  * is installed that probe logs one warning (HV_LOG_WARN) and AUTO stays on
  * the CPU. HEATVOX_AUTO_OPENCL=0 keeps AUTO on the CPU; =1 lets it take any
  * OpenCL device, a CPU one too, whatever the size. */
-hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid);
+HV_API hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid);
 
 typedef struct hv_problem {
     int dim;                /* 2 or 3 */
@@ -115,23 +115,23 @@ typedef struct hv_solve_info {
 
 typedef struct hv_solver hv_solver;
 
-void hv_solver_opts_default(hv_solver_opts *o);
+HV_API void hv_solver_opts_default(hv_solver_opts *o);
 
 /* Builds the solver for problem p (copies p->solid). opts may be NULL (defaults).
  * AUTO picks FFTW when there is no mask and MG otherwise; an explicit FFTW with a
  * mask fails with HV_ERR_UNSUPPORTED. The caller owns *out. */
-hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts);
+HV_API hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts);
 
 /* Solves A u = f. f and u are arrays of the grid's cell count; values on solid
  * cells of f are ignored and u is 0 there. info may be NULL.
  * Fails with HV_ERR_NUMERIC if f holds NaN/Inf. */
-hv_status hv_solver_solve(hv_solver *s, const float *f, float *u, hv_solve_info *info);
-hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_info *info);
+HV_API hv_status hv_solver_solve(hv_solver *s, const float *f, float *u, hv_solve_info *info);
+HV_API hv_status hv_solver_solve_d(hv_solver *s, const double *f, double *u, hv_solve_info *info);
 
 /* Solves k right-hand sides that share the operator (same hierarchy / plans).
  * info is NULL or an array of k entries. */
-hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
-                               hv_solve_info *info);
+HV_API hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f, float *const *u,
+                                      hv_solve_info *info);
 
 #define HV_MAX_LEVELS 40
 
@@ -145,12 +145,12 @@ typedef struct hv_solver_stats {
 } hv_solver_stats;
 
 /* Describes the backend's data structures (for benchmarks and tests). */
-hv_status hv_solver_get_stats(const hv_solver *s, hv_solver_stats *st);
+HV_API hv_status hv_solver_get_stats(const hv_solver *s, hv_solver_stats *st);
 
-hv_backend hv_solver_backend(const hv_solver *s);
-const hv_problem *hv_solver_problem(const hv_solver *s);
+HV_API hv_backend hv_solver_backend(const hv_solver *s);
+HV_API const hv_problem *hv_solver_problem(const hv_solver *s);
 
-void hv_solver_destroy(hv_solver **s);
+HV_API void hv_solver_destroy(hv_solver **s);
 
 #ifdef __cplusplus
 }

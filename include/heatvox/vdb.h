@@ -40,10 +40,10 @@ typedef enum hv_vdb_class {
 typedef struct hv_vdb_writer hv_vdb_writer;
 
 /* Creates an empty writer. The caller owns *out (hv_vdb_writer_destroy). */
-hv_status hv_vdb_writer_create(hv_vdb_writer **out);
+HV_API hv_status hv_vdb_writer_create(hv_vdb_writer **out);
 
 /* Frees the writer and its grids, sets *w to NULL. Accepts NULL and *w == NULL. */
-void hv_vdb_writer_destroy(hv_vdb_writer **w);
+HV_API void hv_vdb_writer_destroy(hv_vdb_writer **w);
 
 /* Adds a signed distance field as a float grid of class level set.
  * background = band_voxels * h (must be > 0). With dense == 0 only voxels with
@@ -51,23 +51,23 @@ void hv_vdb_writer_destroy(hv_vdb_writer **w);
  * -background where phi < 0 and +background elsewhere. With dense != 0 every
  * voxel of the block is active with its own value. Names must be unique and
  * non-empty. The grid is copied: g may be freed after the call. */
-hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const char *name,
-                                     double band_voxels, int dense);
+HV_API hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const char *name,
+                                            double band_voxels, int dense);
 
 /* Adds a scalar float grid of class unknown, every voxel active, background 0. */
-hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
+HV_API hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
 
 /* Adds a Vec3s grid (e.g. a velocity or gradient field) from three component
  * grids of equal size, voxel size and origin; every voxel active, background 0.
  * Vector type VEC_CONTRAVARIANT_RELATIVE: values are in world units and scale
  * with the transform but do not translate (right for velocities/displacements;
  * with heatvox's axis-aligned uniform transforms no value ever changes). */
-hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
-                                 const hv_grid *gz, const char *name);
+HV_API hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
+                                        const hv_grid *gz, const char *name);
 
 /* Adds a bool grid active (and true) where g->solid is non-zero (g->v is
  * ignored); an all-fluid grid, or one without a mask, gives an empty grid. */
-hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name);
+HV_API hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name);
 
 /* Makes every grid added afterwards share one index space whose index (0,0,0)
  * sits at world position index0_world (a voxel centre), e.g. the
@@ -76,22 +76,22 @@ hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char 
  * grid is then written at index offset round((origin + h/2 - index0_world)/h),
  * which must be whole voxels (within 1e-4) or the add fails naming the grid.
  * Without this call, index (0,0,0) is each grid's first voxel. */
-hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_world[3]);
+HV_API hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_world[3]);
 
 /* Sets a string metadata entry of the file (e.g. "source", "parameters").
  * The writer adds "creator" = "heatvox <version>" by itself. */
-hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value);
+HV_API hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value);
 
 /* Sets a string metadata entry on a grid already added under grid_name. */
-hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name, const char *key,
-                                      const char *value);
+HV_API hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name, const char *key,
+                                             const char *value);
 
 /* Writes every grid added so far to path (Blosc compression with active-mask
  * compression, floats stored as 32 bit), through a temporary file in the same
  * directory that is renamed into place only when complete. The writer stays
  * usable (it can write again). Fails with HV_ERR_INVALID_ARG when no grid was
  * added, HV_ERR_IO when the file cannot be written (no temporary is left). */
-hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path);
+HV_API hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path);
 
 /* ---- Reading ------------------------------------------------------------ */
 
@@ -111,7 +111,7 @@ typedef struct hv_vdb_grid_info {
 /* Lists the grids of a file. Fills up to cap entries of info (info may be NULL
  * when cap is 0) and sets *count to the number of grids in the file.
  * Missing or unreadable file: HV_ERR_IO naming the file. */
-hv_status hv_vdb_list(const char *path, hv_vdb_grid_info *info, size_t cap, size_t *count);
+HV_API hv_status hv_vdb_list(const char *path, hv_vdb_grid_info *info, size_t cap, size_t *count);
 
 /* Which index box a read copies into a dense grid. Pass NULL for the default:
  * the block recorded by heatvox's writer (grid metadata heatvox_block_min and
@@ -131,31 +131,31 @@ typedef struct hv_vdb_read_opts {
  * axis-aligned and uniform. grid_class may be NULL; it receives hv_vdb_class.
  * Missing grid: HV_ERR_INVALID_ARG naming the grid and file and listing the
  * grids present. Wrong value type: HV_ERR_INVALID_ARG. The caller owns *out. */
-hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_read_opts *opts,
-                            hv_grid **out, int *grid_class);
+HV_API hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                                   hv_grid **out, int *grid_class);
 
 /* Reads a vec3s or vec3d grid into three new dense component grids. */
-hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read_opts *opts,
-                           hv_grid **gx, hv_grid **gy, hv_grid **gz);
+HV_API hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                                  hv_grid **gx, hv_grid **gy, hv_grid **gz);
 
 /* Reads an obstacle mask into a new grid with a solid mask: v = 1 and solid = 1
  * where solid, 0 elsewhere. Bool and mask grids: solid where the voxel is
  * active or true. Float/double level sets: solid where the value is < 0.
  * Other float/double grids: solid where the value is non-zero. */
-hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_vdb_read_opts *opts,
-                           hv_grid **out);
+HV_API hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_vdb_read_opts *opts,
+                                  hv_grid **out);
 
 /* Computes one index box for reading several grids of a file onto the same
  * dense block: the union of their default boxes (see hv_vdb_read_opts).
  * Fails with HV_ERR_INVALID_ARG naming both grids when their transforms differ
  * (voxel size or translation), or naming a missing grid. */
-hv_status hv_vdb_common_box(const char *path, const char *const *names, size_t count, int lo[3],
-                            int hi[3]);
+HV_API hv_status hv_vdb_common_box(const char *path, const char *const *names, size_t count, int lo[3],
+                                   int hi[3]);
 
 /* Copies a metadata entry (file metadata when grid_name is NULL, else the
  * grid's) as text into buf. Missing key: HV_ERR_INVALID_ARG naming it. */
-hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key, char *buf,
-                           size_t bufsize);
+HV_API hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key, char *buf,
+                                  size_t bufsize);
 
 /* ---- OpenVDB reference tools (for comparisons and benchmarks) ----------- */
 
@@ -165,8 +165,8 @@ hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *
  * origin define the samples). Voxels outside the band take -/+ band_voxels*h by
  * sign. verts: 3*nv world coordinates; tris: 3*nt indices < nv. seconds, if
  * not NULL, receives the time spent inside OpenVDB (without the dense copy). */
-hv_status hv_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
-                                  double band_voxels, hv_grid *out, double *seconds);
+HV_API hv_status hv_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                         double band_voxels, hv_grid *out, double *seconds);
 
 /* Extends a scalar field off the zero level set of phi by
  * openvdb::tools::sdfToExt (fast sweeping): on the surface the value is field
@@ -178,14 +178,14 @@ hv_status hv_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t
  * Note: OpenVDB 10.0.1 hands the boundary callback index-space coordinates
  * (upstream bug #1640); this function runs OpenVDB in index space so that the
  * result is right with either behaviour. */
-hv_status hv_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
-                            int n_iter, float background, hv_grid *out, double *seconds);
+HV_API hv_status hv_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
+                                   int n_iter, float background, hv_grid *out, double *seconds);
 
 /* The same for a vector field (three components), extended as a Vec3s grid. */
-hv_status hv_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
-                                 const hv_grid *fz, double band_voxels, int n_iter,
-                                 float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
-                                 double *seconds);
+HV_API hv_status hv_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
+                                        const hv_grid *fz, double band_voxels, int n_iter,
+                                        float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
+                                        double *seconds);
 
 #ifdef __cplusplus
 }
