@@ -1,8 +1,9 @@
 /*
  * Face operators on cell-centred grids, the device twins of src/ops/faces.c
- * (NOTES §1), and the face normalization of the heat methods. Axis-a faces
- * form an array with n[a]+1 entries along a; face i along x lies between
- * cells i-1 and i. Wall faces and faces touching a solid cell carry nothing.
+ * (docs/METHOD.md, "Discretization"), and the face normalization of the heat
+ * methods. Axis-a faces form an array with n[a]+1 entries along a; face i
+ * along x lies between cells i-1 and i. Wall faces and faces touching a solid
+ * cell carry nothing.
  * N = (nx, ny, nz, dim); solid is NULL or one byte per cell.
  */
 

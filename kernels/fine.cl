@@ -1,8 +1,8 @@
 /*
  * Fine-level double-precision kernels for the defect-correction loop and PCG
- * (NOTES §2: float V-cycles reach 1e-6 and below only inside a double outer
- * iteration). Built only when the device has cl_khr_fp64; otherwise the
- * backend does this part on the host.
+ * (float V-cycles reach 1e-6 and below only inside a double outer iteration:
+ * docs/METHOD.md, "Multigrid"). Built only when the device has cl_khr_fp64;
+ * otherwise the backend does this part on the host.
  */
 #ifdef HV_FP64
 

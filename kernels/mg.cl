@@ -60,8 +60,8 @@ __kernel void mg_rbgs(HV_LEVEL_ARGS, __global float *u, __global const float *f,
     u[c] = D > 0.0f ? (f[c] + S) / D : 0.0f;
 }
 
-/* One Jacobi/Chebyshev step on D^-1 A (NOTES §2), reading uin and writing
- * uout (ping-pong buffers, so that the residual is fused in):
+/* One Jacobi/Chebyshev step on D^-1 A (docs/METHOD.md, "Multigrid"), reading
+ * uin and writing uout (ping-pong buffers, so that the residual is fused in):
  *     d <- cd d + cr D^-1 (f - A uin),   uout = uin + d.
  * mg_jacobi is the step with cd = 0 (it does not read d): Jacobi sweeps and the
  * first Chebyshev step. (Reading d under a condition kept PoCL from vectorizing.) */

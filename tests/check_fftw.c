@@ -541,7 +541,8 @@ int main(void)
 {
     SRunner *r = srunner_create(fftw_suite());
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
-     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+     * whose worker threads do not survive fork: a forked test hangs
+     * (docs/METHOD.md, "Testing notes"). */
     srunner_set_fork_status(r, CK_NOFORK);
     srunner_run_all(r, CK_NORMAL);
     int failed = srunner_ntests_failed(r);

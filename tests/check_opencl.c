@@ -963,7 +963,8 @@ END_TEST
 
 /* A serpentine: one-voxel walls across x every 6 rows, open at alternate ends,
  * so the fluid is one corridor many times the box long (walls off the coarse
- * grid lines: the case where plain geometric MG stalls, NOTES §2). */
+ * grid lines: the case where plain geometric MG stalls; docs/METHOD.md,
+ * "Multigrid"). */
 static uint8_t *make_serpentine(const cfg *c)
 {
     const int nz = c->dim == 3 ? c->n[2] : 1;
@@ -1444,7 +1445,8 @@ int main(int argc, char **argv)
     suite_add_tcase(su, tc);
     SRunner *sr = srunner_create(su);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
-     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+     * whose worker threads do not survive fork: a forked test hangs
+     * (docs/METHOD.md, "Testing notes"). */
     srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);

@@ -6,7 +6,7 @@
  * the polyhedron's SDF differs from the smooth one by less than 0.005 voxel
  * everywhere (icosphere level 5: sagitta 1.8e-4 R; torus 256 x 96 segments:
  * 1.1e-4 r), so the analytic SDF stands in for the polyhedron's. Errors are
- * measured in voxels (NOTES §7).
+ * measured in voxels (docs/METHOD.md, "Measuring accuracy").
  */
 #include "heatvox/heatvox.h"
 
@@ -547,7 +547,8 @@ int main(void)
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
-     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+     * whose worker threads do not survive fork: a forked test hangs
+     * (docs/METHOD.md, "Testing notes"). */
     srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);

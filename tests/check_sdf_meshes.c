@@ -132,7 +132,8 @@ START_TEST(spot_defects_should_keep_iou_099)
 END_TEST
 
 /* What repair buys: a coherently flipped half turns half the solid inside
- * out for the plain heat method (NOTES §3); orientation repair fixes it. */
+ * out for the plain heat method (docs/METHOD.md, "Signed heat method");
+ * orientation repair fixes it. */
 START_TEST(repair_should_be_what_fixes_a_coherently_flipped_half)
 {
     hv_mesh *clean = tu_load_shared("spot.obj");
@@ -265,7 +266,8 @@ int main(void)
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
-     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+     * whose worker threads do not survive fork: a forked test hangs
+     * (docs/METHOD.md, "Testing notes"). */
     srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);

@@ -2,7 +2,7 @@
  * masks, metadata, common boxes, errors; OpenVDB's own reader (pyopenvdb,
  * vdb_print) as the judge of the files; and the OpenVDB reference tools
  * (meshToLevelSet, sdfToExt) against analytic answers.
- * Links OpenVDB: run with CK_FORK=no (NOTES §5). */
+ * Links OpenVDB: run with CK_FORK=no (docs/METHOD.md, "Testing notes"). */
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
 #include "testlib.h"
@@ -1252,7 +1252,8 @@ int main(int argc, char **argv)
     suite_add_tcase(s, tc);
     SRunner *sr = srunner_create(s);
     /* No fork, whatever CK_FORK says: the library links PoCL and OpenVDB/TBB,
-     * whose worker threads do not survive fork (NOTES §5: a forked test hangs). */
+     * whose worker threads do not survive fork: a forked test hangs
+     * (docs/METHOD.md, "Testing notes"). */
     srunner_set_fork_status(sr, CK_NOFORK);
     srunner_run_all(sr, CK_NORMAL);
     int failed = srunner_ntests_failed(sr);

@@ -2,7 +2,7 @@
  * processes. Each mesh runs in its own process (`heatvox batch --job ...`,
  * exec'd from /proc/self/exe), so a crash, a hang killed by the user or a bad
  * file costs only that file, and no process forks after OpenVDB or OpenCL has
- * started threads (NOTES §5). */
+ * started threads (docs/METHOD.md, "Testing notes"). */
 #include "batch.h"
 
 #include <dirent.h>

@@ -1,9 +1,10 @@
 /* Unsigned geodesic distance by the heat method on grids with obstacles
- * (heat.h). NOTES §3: one backward-Euler step decays like e^{-r/sqrt t}, so a
- * double solve is trusted only ~30 sqrt(t) out; a larger t reaches further
- * but bends directions near walls (Neumann reflections) and corners (6 voxels
- * mean error at 128^2 with t = 512 h^2). Instead the diffusion marches: each
- * stage starts from a wavefront of the previous one, with t kept small. */
+ * (heat.h). One backward-Euler step decays like e^{-r/sqrt t} (docs/METHOD.md,
+ * "Heat method"), so a double solve is trusted only ~30 sqrt(t) out; a larger
+ * t reaches further but bends directions near walls (Neumann reflections) and
+ * corners (6 voxels mean error at 128^2 with t = 512 h^2). Instead the
+ * diffusion marches: each stage starts from a wavefront of the previous one,
+ * with t kept small. */
 #include "distance_internal.h"
 #include "distance_cl.h"
 #include "core/error.h"

@@ -1,11 +1,11 @@
 /*
- * Mesh-side repair before the signed heat method (NOTES §3): diffusing raw
- * normals survives ~30% random flips but not coherent flips or duplicated
- * sheets of opposite orientation, which cancel. Where connectivity exists we
- * can do better: weld, drop degenerate and duplicate faces, propagate one
- * orientation across manifold edges, then orient each component outward by
- * its generalized winding number (inward for shells nested inside an odd
- * number of others, e.g. the inner wall of a hollow ball).
+ * Mesh-side repair before the signed heat method (docs/METHOD.md, "Signed heat
+ * method"): diffusing raw normals survives ~30% random flips but not coherent
+ * flips or duplicated sheets of opposite orientation, which cancel. Where
+ * connectivity exists we can do better: weld, drop degenerate and duplicate
+ * faces, propagate one orientation across manifold edges, then orient each
+ * component outward by its generalized winding number (inward for shells
+ * nested inside an odd number of others, e.g. the inner wall of a hollow ball).
  */
 #include "sdf_internal.h"
 #include "core/error.h"

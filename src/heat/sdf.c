@@ -1,6 +1,7 @@
 /*
  * The signed heat method on a cell-centred grid (Feng & Crane 2024), with the
- * grid-specific choices of NOTES §1/§3:
+ * grid-specific choices described in docs/METHOD.md ("Discretization",
+ * "Signed heat method"):
  *   - t tied to the grid, t = (t_scale h)^2, not to the mesh's edge lengths;
  *   - the normalized field lives on cell faces (MAC) and the Poisson operator
  *     is exactly div(grad), which keeps the zero set in place;

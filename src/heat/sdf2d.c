@@ -1,6 +1,7 @@
 /*
  * The signed heat method for 2D curves on a cell-centred grid (Feng & Crane
- * 2024), the 2D sibling of sdf.c with the same grid choices (NOTES §1/§3):
+ * 2024), the 2D sibling of sdf.c with the same grid choices (docs/METHOD.md,
+ * "Discretization", "Signed heat method"):
  * segment normals splatted bilinearly onto cell centres, one backward-Euler
  * diffusion per level (t = (t_scale h)^2, x16 per level until the field reaches
  * across the block), the diffused vectors averaged and normalized on cell faces

@@ -1,5 +1,6 @@
 /* Generated meshes with known geometry, and defect makers that break them in
- * controlled ways, so that tests know the truth (NOTES §7). */
+ * controlled ways, so that tests know the truth (docs/METHOD.md, "Measuring
+ * accuracy"). */
 #include "mesh_internal.h"
 
 #include <math.h>

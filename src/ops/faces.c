@@ -1,5 +1,6 @@
-/* Face-based operators on cell-centred grids (NOTES §1): gradient on faces,
- * divergence of face fluxes and the Laplacian as exactly div(grad). */
+/* Face-based operators on cell-centred grids (docs/METHOD.md, "Discretization"):
+ * gradient on faces, divergence of face fluxes and the Laplacian as exactly
+ * div(grad). */
 #include "heatvox/ops.h"
 #include "core/error.h"
 

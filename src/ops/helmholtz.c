@@ -2,7 +2,8 @@
 #include "core/error.h"
 
 /*
- * A u = alpha*u - beta*Lap(u) with the cell-centred 5/7-point Laplacian (NOTES §1).
+ * A u = alpha*u - beta*Lap(u) with the cell-centred 5/7-point Laplacian
+ * (docs/METHOD.md, "Discretization").
  * A Neumann wall is a mirror ghost u[-1] = u[0]: pointing the missing neighbour
  * row at the cell's own row makes its difference exactly zero, so the unmasked
  * path needs no per-cell tests and vectorizes along x.

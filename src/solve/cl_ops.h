@@ -1,10 +1,11 @@
 /*
  * Private: grid operations on an OpenCL device for the heat methods and the
  * solver: per-region sums and mean projections (one constant per connected
- * fluid region, NOTES §2), face gradient and divergence (as src/ops/faces.c),
- * the heat methods' face normalization, ratio and axpy. Arrays are cl_mem of
- * float unless named _d (double, fp64 devices only). Everything is enqueued on
- * cl's queue; errors surface at hv_cl_check / hv_cl_finish.
+ * fluid region, docs/METHOD.md, "Multigrid"), face gradient and divergence
+ * (as src/ops/faces.c), the heat methods' face normalization, ratio and axpy.
+ * Arrays are cl_mem of float unless named _d (double, fp64 devices only).
+ * Everything is enqueued on cl's queue; errors surface at hv_cl_check /
+ * hv_cl_finish.
  */
 #ifndef HV_SOLVE_CL_OPS_H
 #define HV_SOLVE_CL_OPS_H

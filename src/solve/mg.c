@@ -1,6 +1,7 @@
 /*
  * Matrix-free geometric multigrid for (alpha I - beta Laplacian) u = f on
- * cell-centred grids with Neumann walls and solid cells (NOTES §2).
+ * cell-centred grids with Neumann walls and solid cells (docs/METHOD.md,
+ * "Multigrid").
  *
  * Float V-cycles (red-black Gauss-Seidel, weighted Jacobi or Chebyshev
  * smoothing; mean-of-children restriction; cell-centred linear prolongation;
@@ -473,7 +474,8 @@ static double level_diag_at(const mg_state *m, const mg_level *L, size_t c, int 
 }
 
 /* u += omega_k D^-1 r, the Jacobi-type update; with cheb != NULL the Chebyshev
- * recurrence d = rho*rho_old*d + 2 rho/delta D^-1 r (NOTES §2: Chebyshev on D^-1 A). */
+ * recurrence d = rho*rho_old*d + 2 rho/delta D^-1 r (Chebyshev on D^-1 A,
+ * docs/METHOD.md, "Multigrid"). */
 static void level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr)
 {
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
@@ -1312,8 +1314,8 @@ static void vcycle(const mg_state *m, int l, int guess, int sym)
 }
 
 /* Full multigrid: restrict f down, solve the bottom, then interpolate and
- * V-cycle on each finer level (NOTES §2 suggests it for Poisson; measured, it
- * also takes the heat step's first factor from 0.014 to 0.009). */
+ * V-cycle on each finer level (docs/METHOD.md, "Multigrid": meant for Poisson;
+ * measured, it also takes the heat step's first factor from 0.014 to 0.009). */
 static void fmg(const mg_state *m)
 {
     for (int l = 0; l + 1 < m->nlev; l++) {

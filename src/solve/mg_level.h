@@ -6,9 +6,10 @@
  * with c_b = beta / h_b^2. On the fine level a_i = 1 on fluid and 0 on solid
  * cells, w_f = 1 on faces between two fluid cells and 0 on walls and faces
  * touching solid. Coarse levels take a = mean of the 2^d children and w = mean
- * of the fine faces covering the coarse face (NOTES §2); a child beyond an odd
- * edge counts as solid, so odd sizes coarsen like any masked grid. A level whose
- * weights are all one inside is "plain" and stores no coefficient arrays.
+ * of the fine faces covering the coarse face (docs/METHOD.md, "Multigrid"); a
+ * child beyond an odd edge counts as solid, so odd sizes coarsen like any
+ * masked grid. A level whose weights are all one inside is "plain" and stores
+ * no coefficient arrays.
  */
 #ifndef HV_SOLVE_MG_LEVEL_H
 #define HV_SOLVE_MG_LEVEL_H

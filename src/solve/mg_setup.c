@@ -1,8 +1,8 @@
 /*
  * The multigrid hierarchy on the host, shared by the CPU (mg.c) and OpenCL
  * (opencl.c) backends so that both coarsen the same way: level sizes by
- * semi-coarsening, coefficients by averaging (NOTES §2), Chebyshev bounds by
- * power iteration and the bottom level's connected regions.
+ * semi-coarsening, coefficients by averaging (docs/METHOD.md, "Multigrid"),
+ * Chebyshev bounds by power iteration and the bottom level's connected regions.
  */
 #include "mg_level.h"
 #include "core/error.h"
@@ -237,8 +237,8 @@ static hv_status level_from_mask(const mg_hierarchy *H, mg_level *L, const uint8
     return HV_OK;
 }
 
-/* Coarse coefficients from fine ones (NOTES §2): a = mean of children, face
- * weight = mean of the fine faces that tile the coarse face. */
+/* Coarse coefficients from fine ones (docs/METHOD.md, "Multigrid"): a = mean
+ * of children, face weight = mean of the fine faces that tile the coarse face. */
 static hv_status level_coarsen(const mg_hierarchy *H, const mg_level *F, mg_level *C)
 {
     int even = F->plain;

@@ -5,11 +5,11 @@
  * (mg_setup.c) and uploaded once. Each solve runs on one in-order queue: float
  * V-cycles (Chebyshev by default, RBGS and Jacobi too) inside a double-
  * precision defect-correction loop, or, with solid cells, inside preconditioned
- * CG with a symmetric cycle (NOTES §2). CG coefficients live in a small device
- * buffer that later kernels read, so the only host synchronization per cycle
- * or CG iteration is reading back the residual norm. On devices without fp64
- * the double part (residuals, CG vectors) runs on the host and each cycle
- * moves the fine residual and correction across.
+ * CG with a symmetric cycle (docs/METHOD.md, "Multigrid"). CG coefficients live
+ * in a small device buffer that later kernels read, so the only host
+ * synchronization per cycle or CG iteration is reading back the residual
+ * norm. On devices without fp64 the double part (residuals, CG vectors) runs
+ * on the host and each cycle moves the fine residual and correction across.
  */
 #include "backend.h"
 #include "cl_mg.h"
