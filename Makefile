@@ -17,7 +17,11 @@ WARN     := -Wall -Wextra -Wno-unused-parameter
 CPPFLAGS += -Iinclude -Isrc -I$(BUILD)/gen -D_GNU_SOURCE -DCL_TARGET_OPENCL_VERSION=120
 CFLAGS   += -std=c11 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS)
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS) -I/usr/include/OpenEXR
-# The library exports only what the public headers mark HV_API.
+# The library exports only what the public headers mark HV_API: its C code is
+# compiled with hidden visibility, and the shared library's version script
+# (src/heatvox.map) keeps the rest local. The OpenVDB shim (C++) keeps default
+# visibility: OpenVDB's header templates hidden in a program crash
+# openvdb::initialize() when the grid types are registered.
 LIBFLAGS := -fvisibility=hidden
 # The command uses the public API alone: include/ only, no src/.
 TOOL_CPPFLAGS := -Iinclude -D_GNU_SOURCE
@@ -90,9 +94,6 @@ $(BUILD)/obj/src/%.o: src/%.c | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $(LIBFLAGS) -MMD -MP -c $< -o $@
 
-$(BUILD)/obj/src/%.o: src/%.cpp | $(STAMP)
-	@mkdir -p $(dir $@)
-	$(CXX) $(CPPFLAGS) $(CXXFLAGS) $(LIBFLAGS) -fvisibility-inlines-hidden -MMD -MP -c $< -o $@
 
 $(BUILD)/obj/tools/%.o: tools/%.c | $(STAMP)
 	@mkdir -p $(dir $@)

@@ -1,5 +1,5 @@
-/* Shared pieces of the heatvox command: each command lives in tools/cmd_<name>.c
- * and uses only the public headers. */
+/* Helpers shared by the commands of heatvox (tools/cli.c): each command lives
+ * in tools/cmd_<name>.c and uses only the public headers. */
 #ifndef HV_TOOLS_CLI_H
 #define HV_TOOLS_CLI_H
 
@@ -42,23 +42,7 @@ void cli_discard(cli_outputs *o);
 /* Parses a --threads value: an integer in [lo, HV_MAX_THREADS]; 0 on success. */
 int cli_parse_threads(const char *s, int lo, int *out);
 int cli_parse_double(const char *s, double *out);
-/* True when argv[i] is `name`, and a value follows (else reports a usage error via *err). */
+/* With -v: prints the message on stderr (no newline added). Returns 0. */
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-
-int cmd_bench(int argc, char **argv);
-int cmd_bench_sdf(int argc, char **argv);
-int cmd_bench_sdf2d(int argc, char **argv);
-int cmd_sdf(int argc, char **argv);
-int cmd_info(int argc, char **argv);
-int cmd_devices(int argc, char **argv);
-int cmd_batch(int argc, char **argv);
-int cmd_sdf2d(int argc, char **argv);
-int cmd_slice(int argc, char **argv);
-int cmd_make_scenes(int argc, char **argv);
-int cmd_distance(int argc, char **argv);
-int cmd_extend(int argc, char **argv);
-
-/* heatvox bench extend (tools/bench_extend.c). */
-int bench_extend(int argc, char **argv);
 
 #endif

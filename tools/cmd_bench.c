@@ -2,6 +2,7 @@
  * taken against references measured in the same process (a plain memory copy,
  * FFTW), because absolute times drift on shared machines. */
 #include "cli.h"
+#include "commands.h"
 
 #include <stdio.h>
 #include <stdlib.h>

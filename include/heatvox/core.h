@@ -65,6 +65,24 @@ HV_API void hv_set_progress(hv_progress_fn fn, void *user);
  * the headers a program was built with). */
 HV_API const char *hv_version(void);
 
+/* Output files written safely: every writer creates a temporary file beside the
+ * target and renames it into place only when complete, so a failed or
+ * interrupted run never leaves a partial file under the requested name. */
+
+/* Fills tmp (size tmpsize) with a unique temporary name in target's directory
+ * ("<dir>/.<base>.tmp-<pid>-<n>"). The temporary is registered so that
+ * hv_tmp_cleanup_all() (async-signal-safe, for a SIGINT handler) can unlink it. */
+HV_API hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize);
+
+/* Renames tmp onto target and unregisters it; on failure unlinks tmp. */
+HV_API hv_status hv_tmp_commit(const char *tmp, const char *target);
+
+/* Unlinks tmp and unregisters it (for error paths). */
+HV_API void hv_tmp_discard(const char *tmp);
+
+/* Unlinks every registered temporary; async-signal-safe. */
+HV_API void hv_tmp_cleanup_all(void);
+
 /* Wall-clock seconds from a monotonic clock. */
 HV_API double hv_now(void);
 

@@ -1,4 +1,4 @@
-#include "heatvox/io.h"
+#include "heatvox/core.h"
 #include "core/error.h"
 
 #include <dirent.h>

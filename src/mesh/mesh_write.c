@@ -1,6 +1,5 @@
 /* Writing a mesh as OBJ through a temporary file renamed into place. */
 #include "mesh_internal.h"
-#include "heatvox/io.h"
 
 #include <errno.h>
 #include <limits.h>

@@ -1,9 +1,10 @@
 /*
  * The FFTW backend: an exact solve of (alpha*I - beta*Lap) u = f on a plain box
  * with Neumann walls. The cell-centred Neumann Laplacian is diagonalized by the
- * DCT-II (NOTES §1): per axis of N cells its eigenvalues are
- * -(4/h^2) sin^2(pi k / (2N)), k = 0..N-1. FFTW's REDFT10 (forward) and REDFT01
- * (inverse) are unnormalized, their product is prod_d 2N_d times identity.
+ * DCT-II (docs/METHOD.md, "Discretization"): per axis of N cells its
+ * eigenvalues are -(4/h^2) sin^2(pi k / (2N)), k = 0..N-1. FFTW's REDFT10
+ * (forward) and REDFT01 (inverse) are unnormalized, their product is
+ * prod_d 2N_d times identity.
  *
  * Plans are made once at create on a buffer the state owns and reused by every
  * solve: only fftw_execute is thread-safe, so planning, plan destruction and
@@ -11,7 +12,6 @@
  */
 #include "solve/backend.h"
 #include "core/error.h"
-#include "heatvox/io.h"
 #include "heatvox/ops.h"
 
 #include <errno.h>

@@ -1,0 +1,158 @@
+/* Helpers shared by the commands of tools/cmd_*.c (declared in cli.h):
+ * messages and exit codes, strict number parsing, and outputs that are
+ * checked before anything runs and land together. */
+#include "cli.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+int cli_verbose = 0;
+
+int cli_fail(const char *cmd, const char *what, hv_status st)
+{
+    const char *detail = hv_last_error();
+    fprintf(stderr, "heatvox %s: %s: %s%s%s\n", cmd, what, hv_status_str(st), *detail ? ": " : "",
+            detail);
+    return HV_EXIT_FAIL;
+}
+
+int cli_usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    fprintf(stderr, "heatvox %s: ", cmd);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "\n(see heatvox %s --help)\n", cmd);
+    return HV_EXIT_USAGE;
+}
+
+int cli_info(const char *fmt, ...)
+{
+    if (cli_verbose < 1)
+        return 0;
+    va_list ap;
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    return 0;
+}
+
+int cli_parse_int(const char *s, int *out)
+{
+    char *end;
+    long v = strtol(s, &end, 10);
+    if (!*s || *end || v < -2147483647L || v > 2147483647L)
+        return -1;
+    *out = (int)v;
+    return 0;
+}
+
+static const char *file_kind(mode_t m)
+{
+    return S_ISDIR(m)    ? "a directory"
+           : S_ISCHR(m)  ? "a character device"
+           : S_ISBLK(m)  ? "a block device"
+           : S_ISFIFO(m) ? "a FIFO"
+           : S_ISSOCK(m) ? "a socket"
+                         : "not a regular file";
+}
+
+int cli_check_outputs(const char *cmd, const char *const *outs, int nout, const char *const *ins,
+                      int nin)
+{
+    for (int i = 0; i < nout; i++) {
+        if (!outs[i])
+            continue;
+        struct stat so;
+        if (stat(outs[i], &so) != 0)
+            continue; /* a new file; the writer reports a missing directory */
+        if (!S_ISREG(so.st_mode)) {
+            fprintf(stderr, "heatvox %s: %s: output exists and is %s; it is not replaced\n", cmd,
+                    outs[i], file_kind(so.st_mode));
+            return HV_EXIT_FAIL;
+        }
+        for (int j = 0; j < nin; j++) {
+            struct stat si;
+            if (ins[j] && stat(ins[j], &si) == 0 && si.st_dev == so.st_dev &&
+                si.st_ino == so.st_ino) {
+                fprintf(stderr, "heatvox %s: %s: output is the input %s; choose another name\n",
+                        cmd, outs[i], ins[j]);
+                return HV_EXIT_FAIL;
+            }
+        }
+        for (int j = 0; j < i; j++) {
+            struct stat sj;
+            if (outs[j] && stat(outs[j], &sj) == 0 && sj.st_dev == so.st_dev &&
+                sj.st_ino == so.st_ino) {
+                fprintf(stderr, "heatvox %s: %s and %s are the same file\n", cmd, outs[j],
+                        outs[i]);
+                return HV_EXIT_FAIL;
+            }
+        }
+    }
+    for (int i = 0; i < nout; i++)
+        for (int j = 0; j < i; j++)
+            if (outs[i] && outs[j] && !strcmp(outs[i], outs[j])) {
+                fprintf(stderr, "heatvox %s: %s is named as two outputs\n", cmd, outs[i]);
+                return HV_EXIT_FAIL;
+            }
+    return 0;
+}
+
+const char *cli_stage(const char *cmd, cli_outputs *o, const char *final)
+{
+    if (o->n >= CLI_MAX_OUTPUTS) {
+        fprintf(stderr, "heatvox %s: too many outputs\n", cmd);
+        return NULL;
+    }
+    hv_status st = hv_tmp_name(final, o->tmp[o->n], sizeof o->tmp[0]);
+    if (st) {
+        cli_fail(cmd, final, st);
+        return NULL;
+    }
+    o->final[o->n] = final;
+    return o->tmp[o->n++];
+}
+
+int cli_commit(const char *cmd, cli_outputs *o)
+{
+    for (int i = 0; i < o->n; i++) {
+        hv_status st = hv_tmp_commit(o->tmp[i], o->final[i]);
+        if (st) {
+            for (int j = i + 1; j < o->n; j++)
+                hv_tmp_discard(o->tmp[j]);
+            o->n = 0;
+            return cli_fail(cmd, "output", st);
+        }
+    }
+    o->n = 0;
+    return 0;
+}
+
+void cli_discard(cli_outputs *o)
+{
+    for (int i = 0; i < o->n; i++)
+        hv_tmp_discard(o->tmp[i]);
+    o->n = 0;
+}
+
+int cli_parse_threads(const char *s, int lo, int *out)
+{
+    return cli_parse_int(s, out) || *out < lo || *out > HV_MAX_THREADS;
+}
+
+int cli_parse_double(const char *s, double *out)
+{
+    char *end;
+    double v = strtod(s, &end);
+    if (!*s || *end || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
