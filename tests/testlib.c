@@ -79,10 +79,28 @@ int tl_run(Suite *s)
 
 const char *tl_heatvox_bin(void)
 {
+    /* $HEATVOX_BIN, else the command of the build this suite belongs to
+     * (BUILD/tests/check_x -> BUILD/heatvox: make sanitize tests its own);
+     * absolute, since suites change directories. */
+    static char path[4096];
     const char *b = getenv("HEATVOX_BIN");
-    if (!b || !*b)
-        b = "build/heatvox";
-    return access(b, X_OK) == 0 ? b : NULL;
+    char self[4096];
+    if (!b || !*b) {
+        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 16);
+        if (n <= 0)
+            return NULL;
+        self[n] = '\0';
+        for (int up = 0; up < 2; up++) {
+            char *slash = strrchr(self, '/');
+            if (slash)
+                *slash = '\0';
+        }
+        strcat(self, "/heatvox");
+        b = self;
+    }
+    if (!realpath(b, path) || access(path, X_OK) != 0)
+        return NULL;
+    return path;
 }
 
 void tl_rm_rf(const char *p)

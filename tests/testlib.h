@@ -42,8 +42,9 @@ int tl_run(Suite *s);
 /* PoCL compiles each kernel on first use: unless POCL_CACHE_DIR is set, keep
  * its cache with the build (../pocl-cache beside the test binary argv0). */
 void tl_pocl_cache(const char *argv0);
-/* The heatvox command: $HEATVOX_BIN, else build/heatvox; NULL (the caller
- * skips) when it is not there. */
+/* The heatvox command, as an absolute path: $HEATVOX_BIN, else the one of the
+ * build this suite belongs to (BUILD/heatvox); NULL (the caller fails or
+ * skips, saying so) when it is not there. */
 const char *tl_heatvox_bin(void);
 /* Removes a file or a directory tree (no error when absent). */
 void tl_rm_rf(const char *path);

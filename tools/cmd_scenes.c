@@ -1,11 +1,13 @@
 /* heatvox make-scenes: writes the generated demo inputs (broken meshes, a level
- * set with a velocity field) into a directory. Deterministic: the same files
- * every run. The hand-written inputs (curves, the batch manifest) and the
- * READMEs live in the repository's scenes/ directory. */
+ * set with a velocity field, sources and obstacles for geodesic distance) into
+ * a directory. Deterministic: the same files every run. The hand-written
+ * inputs (curves, the batch manifest) and the READMEs live in the repository's
+ * scenes/ directory. */
 #include "cli.h"
 
 #include <errno.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -24,6 +26,13 @@ static void help(void)
            "  DIR/meshes/truncated.obj            a file cut off mid-face (malformed)\n"
            "  DIR/levelset/sphere_velocity.vdb    sphere level set (radius 1, 64^3) and a\n"
            "                                      rotation about z (grids \"sdf\", \"v\")\n"
+           "  DIR/distance/sources.txt            one source point (heatvox distance)\n"
+           "  DIR/distance/sources_2d.txt         the same point for --dim 2\n"
+           "  DIR/distance/walls.vdb              bool grid \"walls\", 64 x 48 x 16: two walls,\n"
+           "                                      each with a gap at the opposite end\n"
+           "  DIR/distance/building.obj           a one-room-deep building of boxes: floor,\n"
+           "                                      roof, outer walls with a door, a partition\n"
+           "                                      with a doorway, a sealed closet\n"
            "\n"
            "exit: 0 written, 1 failure, 2 usage error\n");
 }
@@ -34,6 +43,31 @@ static int make_dir(const char *path)
         fprintf(stderr, "heatvox make-scenes: %s: cannot create: %s\n", path, strerror(errno));
         return -1;
     }
+    return 0;
+}
+
+/* Writes a text file under a temporary name, renamed when complete. */
+static int write_text(const char *path, const char *text)
+{
+    char tmp[4096];
+    hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
+    if (st)
+        return cli_fail("make-scenes", path, st);
+    FILE *f = fopen(tmp, "w");
+    int ok = f && fputs(text, f) >= 0;
+    int e = errno;
+    /* A full disk shows only when the buffer is flushed. */
+    if (f && fclose(f) != 0 && ok) {
+        ok = 0;
+        e = errno;
+    }
+    if (!ok) {
+        hv_tmp_discard(tmp);
+        fprintf(stderr, "heatvox make-scenes: %s: cannot write: %s\n", path, strerror(e));
+        return 1;
+    }
+    if ((st = hv_tmp_commit(tmp, path)))
+        return cli_fail("make-scenes", path, st);
     return 0;
 }
 
@@ -83,27 +117,11 @@ static int meshes(const char *dir)
     rc |= write_mesh(dir, "torus_soup.obj", m);
     hv_mesh_destroy(&m);
     /* a malformed file: the last face is cut off */
-    char path[1024], tmp[4096];
+    char path[1024];
     snprintf(path, sizeof path, "%s/meshes/truncated.obj", dir);
-    if ((st = hv_tmp_name(path, tmp, sizeof tmp)))
-        return cli_fail("make-scenes", path, st);
-    FILE *f = fopen(tmp, "w");
-    int ok = f && fputs("# cut off while writing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
-                        "f 1 2 3\nf 1 3 4\nf 1 4",
-                        f) >= 0;
-    int e = errno;
-    /* A full disk shows only when the buffer is flushed. */
-    if (f && fclose(f) != 0 && ok) {
-        ok = 0;
-        e = errno;
-    }
-    if (!ok) {
-        hv_tmp_discard(tmp);
-        fprintf(stderr, "heatvox make-scenes: %s: cannot write: %s\n", path, strerror(e));
+    if (write_text(path, "# cut off while writing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                         "f 1 2 3\nf 1 3 4\nf 1 4"))
         return 1;
-    }
-    if ((st = hv_tmp_commit(tmp, path)))
-        return cli_fail("make-scenes", path, st);
     if (cli_verbose >= 0)
         printf("%-40s malformed on purpose\n", path);
     return rc;
@@ -154,6 +172,119 @@ static int levelset(const char *dir)
     return 0;
 }
 
+/* Appends the axis-aligned box [lo, hi] as 12 triangles, outward facing. */
+static void add_box(double *verts, uint32_t *tris, size_t *nv, size_t *nt, const double lo[3],
+                    const double hi[3])
+{
+    /* corner c = (c & 1 ? hi : lo) in x, (c & 2) in y, (c & 4) in z */
+    static const int quads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4},
+                                    {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
+    uint32_t v0 = (uint32_t)*nv;
+    for (int c = 0; c < 8; c++) {
+        verts[3 * *nv + 0] = c & 1 ? hi[0] : lo[0];
+        verts[3 * *nv + 1] = c & 2 ? hi[1] : lo[1];
+        verts[3 * *nv + 2] = c & 4 ? hi[2] : lo[2];
+        (*nv)++;
+    }
+    for (int q = 0; q < 6; q++) {
+        const int *c = quads[q];
+        uint32_t t[6] = {c[0], c[1], c[2], c[0], c[2], c[3]};
+        for (int k = 0; k < 6; k++)
+            tris[3 * *nt + k] = v0 + t[k];
+        *nt += 2;
+    }
+}
+
+/* Inputs for heatvox distance. Both obstacle sets fill the box [0,4] x [0,3] x
+ * [0,1], and the source point (0.5, 1.5, 0.5) lies in free space in each. */
+static int distance_inputs(const char *dir)
+{
+    char path[1024];
+    snprintf(path, sizeof path, "%s/distance/sources.txt", dir);
+    if (write_text(path, "# heatvox distance sources: one per line, \"x y z\" (a world point),\n"
+                         "# \"voxel i j k\" or \"mesh PATH\"; '#' starts a comment.\n"
+                         "0.5 1.5 0.5\n"))
+        return 1;
+    if (cli_verbose >= 0)
+        printf("%-40s one source point (0.5, 1.5, 0.5)\n", path);
+    snprintf(path, sizeof path, "%s/distance/sources_2d.txt", dir);
+    if (write_text(path, "# heatvox distance --dim 2 sources: \"x y\" per line.\n0.5 1.5\n"))
+        return 1;
+    if (cli_verbose >= 0)
+        printf("%-40s the same point for --dim 2\n", path);
+
+    /* walls.vdb: voxels of 1/16 over [0,4] x [0,3] x [0,1]; a wall across
+     * x = 1.25..1.375 open for y > 2.25, another across x = 2.625..2.75 open
+     * for y < 0.75, so the way from the left room to the right snakes. */
+    int n[3] = {64, 48, 16};
+    double org[3] = {0, 0, 0};
+    hv_grid *g = NULL;
+    hv_status st = hv_grid_create(&g, 3, n, 1.0 / 16, org);
+    if (!st)
+        st = hv_grid_add_mask(g);
+    if (st) {
+        hv_grid_destroy(&g);
+        return cli_fail("make-scenes", "walls", st);
+    }
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                int solid = ((i == 20 || i == 21) && j < 36) || ((i == 42 || i == 43) && j >= 12);
+                g->solid[(size_t)i + (size_t)n[0] * (j + (size_t)n[1] * k)] = (uint8_t)solid;
+            }
+    snprintf(path, sizeof path, "%s/distance/walls.vdb", dir);
+    hv_vdb_writer *w = NULL;
+    st = hv_vdb_writer_create(&w);
+    if (!st)
+        st = hv_vdb_writer_add_mask(w, g, "walls");
+    if (!st)
+        st = hv_vdb_writer_set_meta(w, "source",
+                                    "heatvox make-scenes: two walls with gaps at "
+                                    "opposite ends, voxel 1/16 over [0,4]x[0,3]x[0,1]");
+    if (!st)
+        st = hv_vdb_writer_write(w, path);
+    hv_vdb_writer_destroy(&w);
+    hv_grid_destroy(&g);
+    if (st)
+        return cli_fail("make-scenes", path, st);
+    if (cli_verbose >= 0)
+        printf("%-40s bool grid \"walls\" 64 x 48 x 16, two walls with gaps\n", path);
+
+    /* building.obj: walls 0.1 thick around the room [0,4] x [0,3] x [0,1], a
+     * door in the south wall (x = 2.6..3.4, up to z = 0.8), a partition at
+     * x = 2 with a doorway at y = 2.2..2.8, and a closed box (a sealed closet:
+     * its inside is unreachable). */
+    static const double boxes[][6] = {
+        {-0.1, -0.1, -0.1, 4.1, 3.1, 0.0}, /* floor */
+        {-0.1, -0.1, 1.0, 4.1, 3.1, 1.1},  /* roof */
+        {-0.1, -0.1, 0.0, 0.0, 3.1, 1.0},  /* west wall */
+        {4.0, -0.1, 0.0, 4.1, 3.1, 1.0},   /* east wall */
+        {0.0, 3.0, 0.0, 4.0, 3.1, 1.0},    /* north wall */
+        {0.0, -0.1, 0.0, 2.6, 0.0, 1.0},   /* south wall, left of the door */
+        {3.4, -0.1, 0.0, 4.0, 0.0, 1.0},   /* south wall, right of the door */
+        {2.6, -0.1, 0.8, 3.4, 0.0, 1.0},   /* above the door */
+        {1.95, 0.0, 0.0, 2.05, 2.2, 1.0},  /* partition, below the doorway */
+        {1.95, 2.8, 0.0, 2.05, 3.0, 1.0},  /* partition, above the doorway */
+        {3.2, 2.2, 0.0, 3.8, 2.8, 1.0},    /* sealed closet */
+    };
+    enum { NBOX = sizeof boxes / sizeof boxes[0] };
+    double verts[NBOX * 8 * 3];
+    uint32_t tris[NBOX * 12 * 3];
+    size_t nv = 0, nt = 0;
+    for (int b = 0; b < NBOX; b++)
+        add_box(verts, tris, &nv, &nt, boxes[b], boxes[b] + 3);
+    hv_mesh *m = NULL;
+    snprintf(path, sizeof path, "%s/distance/building.obj", dir);
+    if ((st = hv_mesh_from_arrays(&m, verts, nv, tris, nt)) || (st = hv_mesh_write_obj(m, path))) {
+        hv_mesh_destroy(&m);
+        return cli_fail("make-scenes", path, st);
+    }
+    hv_mesh_destroy(&m);
+    if (cli_verbose >= 0)
+        printf("%-40s %d boxes: walls, a door, a doorway, a closet\n", path, (int)NBOX);
+    return 0;
+}
+
 int cmd_make_scenes(int argc, char **argv)
 {
     const char *dir = NULL;
@@ -181,6 +312,9 @@ int cmd_make_scenes(int argc, char **argv)
         return HV_EXIT_FAIL;
     snprintf(sub, sizeof sub, "%s/levelset", dir);
     if (make_dir(sub) || levelset(dir))
+        return HV_EXIT_FAIL;
+    snprintf(sub, sizeof sub, "%s/distance", dir);
+    if (make_dir(sub) || distance_inputs(dir))
         return HV_EXIT_FAIL;
     return HV_EXIT_OK;
 }

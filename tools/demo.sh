@@ -1,14 +1,14 @@
 #!/bin/sh
 # make demo: generates the scenes, then runs the main jobs on them into out/:
 # a batch of broken meshes to VDB level sets with previews, 2D signed distances
-# from broken curves to EXR and PNG, slices, and a velocity extension when
-# `heatvox extend` is built. Usage: tools/demo.sh path/to/heatvox
+# from broken curves to EXR and PNG, slices, geodesic distance around walls and
+# through a building, and a velocity extension. Usage: tools/demo.sh path/to/heatvox
 set -e
 hv=${1:-build/heatvox}
 out=out
 t0=$(date +%s)
 
-echo "== scenes: broken meshes and a level set (heatvox make-scenes)"
+echo "== scenes: broken meshes, a level set, distance sources and obstacles (heatvox make-scenes)"
 "$hv" make-scenes scenes
 
 echo
@@ -34,15 +34,19 @@ echo "== slices of the volumes (heatvox slice)"
 "$hv" slice "$out/batch/sphere_holes_flips.vdb" --axis x -o "$out/batch/sphere_holes_flips_x.exr"
 
 echo
-echo "== extension of a velocity off a level set"
-if "$hv" extend --help >/dev/null 2>&1; then
-    mkdir -p "$out/extend"
-    "$hv" extend scenes/levelset/sphere_velocity.vdb --levelset sdf --field v \
-        -o "$out/extend/sphere_velocity_ext.vdb" ||
-        echo "(heatvox extend failed with these options; see heatvox extend --help)"
-else
-    echo "heatvox extend is not in this build: skipped"
-fi
+echo "== geodesic distance around obstacles (heatvox distance)"
+mkdir -p "$out/distance"
+"$hv" distance --sources scenes/distance/sources.txt --obstacles scenes/distance/walls.vdb \
+    -o "$out/distance/walls.vdb"
+"$hv" distance --sources scenes/distance/sources.txt --obstacle-mesh scenes/distance/building.obj \
+    --res 64 -o "$out/distance/building.vdb"
+"$hv" slice "$out/distance/walls.vdb" --grid distance --axis z -o "$out/distance/walls_z.png"
+
+echo
+echo "== extension of a velocity off a level set (heatvox extend)"
+mkdir -p "$out/extend"
+"$hv" extend scenes/levelset/sphere_velocity.vdb --levelset sdf --field v \
+    -o "$out/extend/sphere_velocity_ext.vdb"
 
 echo
 echo "done in $(($(date +%s) - t0)) s; results:"
@@ -50,4 +54,5 @@ echo "  $out/batch/*.vdb          level sets (grid \"sdf\"), *.png previews (x, 
 echo "  $out/batch/report.jsonl   one JSON line per input: status, errors, grid, seconds per stage"
 echo "  $out/2d/*.exr, *.png      2D signed distances from scenes/curves/"
 echo "  $out/batch/*_z.png, *_x.exr   slices cut by heatvox slice"
-[ -d "$out/extend" ] && echo "  $out/extend/              extended velocity" || true
+echo "  $out/distance/*.vdb       geodesic distance (grid \"distance\"), walls_z.png a slice"
+echo "  $out/extend/              extended velocity"

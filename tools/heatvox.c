@@ -22,7 +22,7 @@ static const struct command commands[] = {
     {"batch", cmd_batch, "signed distance volumes for many meshes, in parallel, resumable"},
     {"sdf2d", cmd_sdf2d, "2D signed distance from (broken) curves, SVG or text, to EXR/PNG"},
     {"slice", cmd_slice, "one slice of a volume as EXR data or a PNG preview"},
-    {"make-scenes", cmd_make_scenes, "write the generated demo inputs (broken meshes, a level set)"},
+    {"make-scenes", cmd_make_scenes, "write the generated inputs (broken meshes, a level set, distance scenes)"},
     {"info", cmd_info, "read a mesh and print its defect report"},
     {"distance", cmd_distance, "geodesic distance around obstacles (heat method)"},
     {"extend", cmd_extend, "extend fields off a level set (VDB in, VDB out)"},
