@@ -6,6 +6,7 @@
  * 2D and 3D, odd sizes, masks where the step has them. Without an OpenCL
  * platform the suite only notes it.
  */
+#include "heat/sdf_cl.h"
 #include "heat/sdf_internal.h"
 #include "heatvox/heatvox.h"
 #include "solve/cl_ops.h"

@@ -6,7 +6,9 @@
  * the host path (distance_internal.h); the host reads back per stage the
  * solves' residual norms, two face counts, the front's weighted sums (one
  * double triple per work-group) and the front cell count, then phi at the
- * cells near the sources (for the offsets) and the distance once.
+ * cells near the sources (for the offsets) and the distance once. Its
+ * kernels (kernels/distance.cl, fp64 only) are registered and built here
+ * (hv_cl_module, src/solve/cl_core.h).
  */
 #include "distance_cl.h"
 #include "core/error.h"
@@ -16,6 +18,15 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+extern const char hv_kernel_distance[]; /* kernels/distance.cl, embedded by the Makefile */
+
+static const char *const dist_sources[] = {hv_kernel_distance, NULL};
+enum { DK_FACES, DK_LOG, DK_ASSIGN, DK_FRONT_SUMS, DK_FRONT, DK_DIV, DK_GATHER, DK_OUTPUT };
+static const char *const dist_kernels[] = {"dist_faces",      "dist_log",    "dist_assign",
+                                           "dist_front_sums", "dist_front",  "dist_div",
+                                           "dist_gather",     "dist_output", NULL};
+static const hv_cl_module dist_module = {"distance", dist_sources, dist_kernels, 1};
 
 typedef struct dist_cl_work {
     hv_cl *cl;
@@ -30,9 +41,8 @@ static void work_free(dist_cl_work *k)
 {
     hv_solver_destroy(&k->sv[0]);
     hv_solver_destroy(&k->sv[1]);
-    cl_mem *m[] = {&k->region, &k->X[0], &k->X[1], &k->X[2], &k->w,    &k->u,    &k->u2,
-                   &k->ok,     &k->inside, &k->cnt, &k->part, &k->idx, &k->gath, &k->off,
-                   &k->out};
+    cl_mem *m[] = {&k->region, &k->X[0], &k->X[1], &k->X[2], &k->w,    &k->u,   &k->u2, &k->ok,
+                   &k->inside, &k->cnt,  &k->part, &k->idx,  &k->gath, &k->off, &k->out};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
         hv_cl_free(m[i]);
     free(k->hpart);
@@ -42,8 +52,7 @@ static void work_free(dist_cl_work *k)
     hv_cl_close(&k->cl);
 }
 
-static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, double beta,
-                             double tol)
+static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, double beta, double tol)
 {
     /* as make_solver in distance_heat.c, on the opencl backend */
     hv_problem p = {g->dim, {g->n[0], g->n[1], g->n[2]}, g->h, g->solid, alpha, beta};
@@ -140,6 +149,10 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
         return HV_OK;
     }
     *handled = 1;
+    if ((st = hv_cl_module_open(cl, &dist_module))) {
+        hv_cl_close(&k.cl);
+        return st;
+    }
     const int dim = g->dim;
     const cl_int N[4] = {g->n[0], g->n[1], dim == 3 ? g->n[2] : 1, dim};
     const size_t count = hv_grid_count(g), dbytes = count * sizeof(double);
@@ -171,9 +184,10 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     hv_cl_zero(cl, k.inside, count);
     hv_cl_zero(cl, k.cnt, 2 * sizeof(uint32_t));
     for (int a = 0; a < dim; a++) {
-        hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2, l2);
-        hv_cl_args(cl, HV_K_DIST_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
-        hv_cl_run(cl, HV_K_DIST_FACES, 2, g2, l2);
+        hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
+                     l2);
+        hv_cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
+        hv_cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
     }
     if ((st = read_counts(cl, k.cnt, cnt)))
         goto done;
@@ -207,16 +221,17 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
         if ((st = hv_cl_check(cl)))
             goto done;
         const double wn = sqrt(sum_parts(k.hpart, ngroups, 1, 0));
-        const double lthr = log(RELIABLE * fmax(info[0].relres, 1e-14) * wn * sqrt(o->t_scale));
-        const double lthr2 =
-            log(RELIABLE * fmax(info[1].relres, 1e-14) * wn * sqrt(o->t_scale * T_RATIO));
-        hv_cl_args(cl, HV_K_DIST_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok, lthr, lthr2);
-        hv_cl_run(cl, HV_K_DIST_LOG, 1, g1, l1);
+        const double lthr = hv_dist_trust_log(info[0].relres, wn, o->t_scale);
+        const double lthr2 = hv_dist_trust_log(info[1].relres, wn, o->t_scale * T_RATIO);
+        hv_cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok,
+                          lthr, lthr2);
+        hv_cl_module_run(cl, &dist_module, DK_LOG, 1, g1, l1);
         for (int a = 0; a < dim; a++) {
             hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
                          l2);
-            hv_cl_args(cl, HV_K_DIST_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a], k.cnt);
-            hv_cl_run(cl, HV_K_DIST_ASSIGN, 2, g2, l2);
+            hv_cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a],
+                              k.cnt);
+            hv_cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
         }
         if ((st = read_counts(cl, k.cnt, cnt)))
             goto done;
@@ -230,8 +245,9 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
             break;
         if (left) {
             /* next_front: the front's level of psi and ln u, then the cell pass */
-            hv_cl_args(cl, HV_K_DIST_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u, k.ok, k.part);
-            hv_cl_run(cl, HV_K_DIST_FRONT_SUMS, 1, &gr, &lr);
+            hv_cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u,
+                              k.ok, k.part);
+            hv_cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &gr, &lr);
             hv_cl_read(cl, k.part, 0, 3 * ngroups * sizeof(double), k.hpart);
             if ((st = hv_cl_check(cl)))
                 goto done;
@@ -240,13 +256,12 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
                 break;
             const double psi0 = sum_parts(k.hpart, ngroups, 3, 0) / sw;
             const double lu0 = sum_parts(k.hpart, ngroups, 3, 1) / sw;
-            const double axis[3] = {1, 0, 0};
-            const double step = (lu0 - lthr - FRONT_MARGIN) / hv_dist_lattice_kappa(axis, dim, tau[0]);
+            const double step = hv_dist_front_step(lu0, lthr, dim, tau[0]);
             if (!(step >= 2))
                 break;
-            hv_cl_args(cl, HV_K_DIST_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside, k.w, psi0, step,
-                       tau[0], tau[1], FRONT_BAND, k.cnt);
-            hv_cl_run(cl, HV_K_DIST_FRONT, 2, gc, lc);
+            hv_cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside,
+                              k.w, psi0, step, tau[0], tau[1], FRONT_BAND, k.cnt);
+            hv_cl_module_run(cl, &dist_module, DK_FRONT, 2, gc, lc);
             if ((st = read_counts(cl, k.cnt, cnt)))
                 goto done;
             if (!cnt[0])
@@ -260,9 +275,9 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     t0 = hv_now();
     hv_solver_destroy(&k.sv[0]);
     hv_solver_destroy(&k.sv[1]);
-    hv_cl_args(cl, HV_K_DIST_DIV, "Immmmam", N, k.region, k.X[0], k.X[1], dim == 3 ? k.X[2] : NULL,
-               1.0 / g->h, k.u2);
-    hv_cl_run(cl, HV_K_DIST_DIV, 2, gc, lc);
+    hv_cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", N, k.region, k.X[0], k.X[1],
+                      dim == 3 ? k.X[2] : NULL, 1.0 / g->h, k.u2);
+    hv_cl_module_run(cl, &dist_module, DK_DIV, 2, gc, lc);
     if ((st = hv_cl_finish(cl)) || (st = make_solver(&k.sv[0], g, 0.0, 1.0, o->poisson_tol)))
         goto done;
     hv_solve_info pinfo;
@@ -298,8 +313,8 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
             goto done;
         size_t gg[1], lg[1];
         hv_cl_range1(m, gg, lg);
-        hv_cl_args(cl, HV_K_DIST_GATHER, "mmml", k.u, k.idx, k.gath, m);
-        hv_cl_run(cl, HV_K_DIST_GATHER, 1, gg, lg);
+        hv_cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k.u, k.idx, k.gath, m);
+        hv_cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
         hv_cl_read(cl, k.gath, 0, m * sizeof(double), k.hval);
         if ((st = hv_cl_check(cl)))
             goto done;
@@ -315,9 +330,9 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     if ((st = hv_cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k.num, &k.off)) ||
         (st = hv_cl_alloc(cl, count * sizeof(float), NULL, &k.out)))
         goto done;
-    hv_cl_args(cl, HV_K_DIST_OUTPUT, "lmmmffm", count, k.region, k.u, k.off, (double)o->solid_value,
-               (double)o->unreachable, k.out);
-    hv_cl_run(cl, HV_K_DIST_OUTPUT, 1, g1, l1);
+    hv_cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", count, k.region, k.u, k.off,
+                      (double)o->solid_value, (double)o->unreachable, k.out);
+    hv_cl_module_run(cl, &dist_module, DK_OUTPUT, 1, g1, l1);
     hv_cl_read(cl, k.out, 0, count * sizeof(float), g->v);
     st = hv_cl_check(cl);
 done:

@@ -4,7 +4,8 @@
  * t reaches further but bends directions near walls (Neumann reflections) and
  * corners (6 voxels mean error at 128^2 with t = 512 h^2). Instead the
  * diffusion marches: each stage starts from a wavefront of the previous one,
- * with t kept small. */
+ * with t kept small. The lattice and front rules are in distance_front.c; on
+ * an fp64 OpenCL device the stages run in distance_cl.c. */
 #include "distance_internal.h"
 #include "distance_cl.h"
 #include "core/error.h"
@@ -31,9 +32,9 @@ typedef struct dist_ctx {
     size_t count, cs[3]; /* cells, cell strides */
     double h;
     const uint8_t *solid;
-    double tau[2];       /* h^2 / t of the two diffusion times */
-    int32_t *region;     /* >= 0: region with a source; -1 solid; -2 fluid without source */
-    float *X[3];         /* face directions; NaN = not assigned yet */
+    double tau[2];   /* h^2 / t of the two diffusion times */
+    int32_t *region; /* >= 0: region with a source; -1 solid; -2 fluid without source */
+    float *X[3];     /* face directions; NaN = not assigned yet */
     size_t nface[3];
 } dist_ctx;
 
@@ -106,7 +107,8 @@ static size_t init_faces(dist_ctx *d)
                     size_t f = face_index(d, a, i, j, k);
                     float v = 0;
                     if (ijk[a] > 0 && ijk[a] < na) {
-                        size_t R = i + (size_t)d->n[0] * (j + (size_t)d->n[1] * k), L = R - d->cs[a];
+                        size_t R = i + (size_t)d->n[0] * (j + (size_t)d->n[1] * k),
+                               L = R - d->cs[a];
                         if (d->region[L] >= 0 && d->region[R] >= 0) {
                             v = NAN;
                             open++;
@@ -211,27 +213,6 @@ static void divergence(const dist_ctx *d, double *f)
             }
 }
 
-/* kappa h of the lattice plane wave travelling normal to direction nu (unit):
- * sum_b 2 (cosh(kappa h nu_b) - 1) = tau (Newton from the continuum value). */
-double hv_dist_lattice_kappa(const double nu[3], int dim, double tau)
-{
-    double k = sqrt(tau);
-    for (int it = 0; it < 8; it++) {
-        double g = -tau, dg = 0;
-        for (int b = 0; b < dim; b++) {
-            g += 2 * (cosh(k * nu[b]) - 1);
-            dg += 2 * nu[b] * sinh(k * nu[b]);
-        }
-        if (!(dg > 0))
-            break;
-        double step = g / dg;
-        k -= step;
-        if (fabs(step) < 1e-12 * k)
-            break;
-    }
-    return k;
-}
-
 /* Builds the next front. psi = ln u(t) - ln u(4t) on trusted cells (ok) falls
  * by kappa(t) - kappa(4t) per voxel travelled away from the current front, with
  * the amplitude cancelled; on the lattice kappa depends on the direction nu of
@@ -256,8 +237,7 @@ static size_t next_front(const dist_ctx *d, const double *psi, const double *lu,
     if (!(sw > 0))
         return 0;
     const double psi0 = s0 / sw, lu0 = s1 / sw;
-    const double axis[3] = {1, 0, 0};
-    const double step = (lu0 - lthr - FRONT_MARGIN) / hv_dist_lattice_kappa(axis, d->dim, d->tau[0]);
+    const double step = hv_dist_front_step(lu0, lthr, d->dim, d->tau[0]);
     if (!(step >= 2))
         return 0;
     size_t nf = 0;
@@ -330,7 +310,8 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     else
         hv_distance_opts_default(&o);
     if (!(o.t_scale > 0) || !isfinite(o.t_scale))
-        return hv_error(HV_ERR_INVALID_ARG, "distance: t_scale must be positive, got %g", o.t_scale);
+        return hv_error(HV_ERR_INVALID_ARG, "distance: t_scale must be positive, got %g",
+                        o.t_scale);
     if (o.max_stages < 1)
         return hv_error(HV_ERR_INVALID_ARG, "distance: max_stages must be >= 1, got %d",
                         o.max_stages);
@@ -383,8 +364,10 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     for (size_t c = 0; c < d.count; c++)
         S->source_cells += w[c] > 0;
     if (!S->source_cells) {
-        st = hv_error(HV_ERR_INVALID_ARG, "distance: no source lands on a fluid cell (%zu in solid "
-                      "cells)", S->sources_in_solid);
+        st = hv_error(HV_ERR_INVALID_ARG,
+                      "distance: no source lands on a fluid cell (%zu in solid "
+                      "cells)",
+                      S->sources_in_solid);
         goto done;
     }
     if ((st = label_regions(&d, w, &S->regions, &S->unreachable_cells)))
@@ -424,8 +407,8 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
         S->t_diffuse += hv_now() - t0;
         t0 = hv_now();
         double wn = norm2(w, d.count);
-        double lthr = log(RELIABLE * fmax(info[0].relres, 1e-14) * wn * sqrt(o.t_scale));
-        double lthr2 = log(RELIABLE * fmax(info[1].relres, 1e-14) * wn * sqrt(o.t_scale * T_RATIO));
+        double lthr = hv_dist_trust_log(info[0].relres, wn, o.t_scale);
+        double lthr2 = hv_dist_trust_log(info[1].relres, wn, o.t_scale * T_RATIO);
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < d.count; c++) {
             double l1 = u[c] > 0 ? log(u[c]) : -INFINITY, l2 = u2[c] > 0 ? log(u2[c]) : -INFINITY;

@@ -1,4 +1,6 @@
-/* Private: pieces of the heat-method distance shared between its files. */
+/* Private: pieces of the heat-method distance shared between its files: the
+ * pipeline (distance_heat.c), the sources (distance_sources.c), the device
+ * path (distance_cl.c) and the lattice and front rules (distance_front.c). */
 #ifndef HV_HEAT_DISTANCE_INTERNAL_H
 #define HV_HEAT_DISTANCE_INTERNAL_H
 
@@ -29,6 +31,17 @@
 /* kappa h of the lattice plane wave travelling normal to direction nu (unit):
  * sum_b 2 (cosh(kappa h nu_b) - 1) = tau (Newton from the continuum value). */
 double hv_dist_lattice_kappa(const double nu[3], int dim, double tau);
+
+/* The trust bound on ln u of a diffusion for t_scale h^2 (t_scale itself, or
+ * times T_RATIO): ln(RELIABLE * relres * ||w||_2 * sqrt(t_scale)), relres
+ * floored at 1e-14, for the solve's relative residual relres and the norm wn
+ * of the front weights w. */
+double hv_dist_trust_log(double relres, double wn, double t_scale);
+
+/* Voxels from the current front to the next: where ln u(t) (lu0 on the
+ * current front) falls to FRONT_MARGIN above the trust bound lthr, at the
+ * axis-aligned lattice decay rate for tau = h^2 / t. Below 2: no progress. */
+double hv_dist_front_step(double lu0, double lthr, int dim, double tau);
 
 /* Adds the source weights of src onto w (one double per cell of g, zeroed by
  * the caller): voxels weigh 1, points 1 spread trilinearly over the fluid cells

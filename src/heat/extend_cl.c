@@ -7,7 +7,8 @@
  * box solve, so both give the same fields to the solves' tolerance. The host
  * reads back the counters once per call (source cells, boxes, NaN checks),
  * per level the weights' norm, the residual norms and the level's counts, and
- * the outputs once.
+ * the outputs once. Its kernels are registered and built here (hv_cl_module,
+ * src/solve/cl_core.h).
  */
 #include "extend_cl.h"
 #include "core/error.h"
@@ -16,6 +17,14 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+extern const char hv_kernel_extend[]; /* kernels/extend.cl, embedded by the Makefile */
+
+static const char *const extend_sources[] = {hv_kernel_extend, NULL};
+enum { EK_SETUP, EK_CHECK, EK_RHS, EK_SCATTER, EK_EVAL };
+static const char *const extend_kernels[] = {"ext_setup",   "ext_check", "ext_rhs",
+                                             "ext_scatter", "ext_eval",  NULL};
+static const hv_cl_module extend_module = {"extend", extend_sources, extend_kernels, 0};
 
 /* Counters on the device (int32), as EXT_* in kernels/extend.cl. */
 enum {
@@ -50,7 +59,7 @@ void hv_extend_cl_destroy(hv_extend_cl **state)
     hv_extend_cl *x = *state;
     for (int l = 0; l < MAX_LEVELS; l++)
         hv_solver_destroy(&x->sv[l]);
-    cl_mem *m[] = {&x->solid, &x->phi, &x->w,   &x->pending, &x->ncomp, &x->K, &x->S,
+    cl_mem *m[] = {&x->solid, &x->phi, &x->w,   &x->pending, &x->ncomp, &x->K,   &x->S,
                    &x->in,    &x->out, &x->sol, &x->f,       &x->u,     &x->part};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
         hv_cl_free(m[i]);
@@ -81,7 +90,8 @@ static hv_status state_create(hv_extend_cl **out, const hv_extend_grid *g)
         return hv_error(HV_ERR_NOMEM, "extend: out of memory");
     hv_status st = hv_cl_open(&x->cl);
     hv_cl *cl = x->cl;
-    if (st || (st = hv_cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
+    if (st || (st = hv_cl_module_open(cl, &extend_module)) ||
+        (st = hv_cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
         (st = hv_cl_alloc(cl, g->count * sizeof(float), NULL, &x->w)) ||
         (st = hv_cl_alloc(cl, g->count, NULL, &x->pending)) ||
         (st = hv_cl_alloc(cl, MAX_FIELDS_PER_CALL * sizeof(cl_int), NULL, &x->ncomp)) ||
@@ -95,9 +105,9 @@ static hv_status state_create(hv_extend_cl **out, const hv_extend_grid *g)
     return HV_OK;
 }
 
-/* The right-hand side r of the layout of extend_vhm.c (0: the weights; per
- * field a scalar's values, or a vector's magnitude then its components) as
- * ext_rhs's mode, first input plane and component count. */
+/* The right-hand side r of the layout of extend_internal.h (0: the weights;
+ * per field a scalar's values, or a vector's magnitude then its components)
+ * as ext_rhs's mode, first input plane and component count. */
 static void rhs_source(int r, int nfields, const hv_extend_field *f, int *mode, size_t *plane,
                        int *ncomp)
 {
@@ -140,9 +150,9 @@ static hv_status norm2sq(hv_extend_cl *x, cl_mem v, size_t n, double *out)
     return hv_cl_check(cl);
 }
 
-/* solve_level of extend_vhm.c on the device: every right-hand side of level
- * l solved on the box [lo, lo + bn) and stored in the solution planes, 0
- * outside the box; *thr the level's trust bound. */
+/* hv_extend_solve_level (extend_levels.c) on the device: every right-hand
+ * side of level l solved on the box [lo, lo + bn) and stored in the solution
+ * planes, 0 outside the box; *thr the level's trust bound. */
 static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, const int lo[3],
                              const int bn[3], int nrhs, int nfields, const hv_extend_field *f,
                              double *thr, hv_extend_stats *S)
@@ -168,9 +178,9 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
         int mode, ncomp;
         size_t plane;
         rhs_source(r, nfields, f, &mode, &plane, &ncomp);
-        hv_cl_args(cl, HV_K_EXT_RHS, "IIImmililm", N, B, L, x->w, x->in, mode, plane * count, ncomp,
-                   count, x->f);
-        hv_cl_run(cl, HV_K_EXT_RHS, 2, g2, l2);
+        hv_cl_module_args(cl, &extend_module, EK_RHS, "IIImmililm", N, B, L, x->w, x->in, mode,
+                          plane * count, ncomp, count, x->f);
+        hv_cl_module_run(cl, &extend_module, EK_RHS, 2, g2, l2);
         if (r == 0 && (st = norm2sq(x, x->f, bcount, &wn2)))
             return st;
         /* the solver has its own queue: f must be complete */
@@ -182,8 +192,9 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
         if (st)
             return st;
         relmax = fmax(relmax, info.relres);
-        hv_cl_args(cl, HV_K_EXT_SCATTER, "IIImml", N, B, L, x->u, x->sol, (size_t)r * count);
-        hv_cl_run(cl, HV_K_EXT_SCATTER, 2, g2, l2);
+        hv_cl_module_args(cl, &extend_module, EK_SCATTER, "IIImml", N, B, L, x->u, x->sol,
+                          (size_t)r * count);
+        hv_cl_module_run(cl, &extend_module, EK_SCATTER, 2, g2, l2);
         S->solves++;
     }
     S->relres = fmax(S->relres, relmax);
@@ -238,12 +249,14 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
     size_t gc[2], lc[2], g1[1], l1[1];
     hv_cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
     hv_cl_range1(count, g1, l1);
-    hv_cl_args(cl, HV_K_EXT_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point, x->phi, x->solid,
-               x->w, x->pending, x->out, nout, count, (double)o->background, x->K);
-    hv_cl_run(cl, HV_K_EXT_SETUP, 2, gc, lc);
+    hv_cl_module_args(cl, &extend_module, EK_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point,
+                      x->phi, x->solid, x->w, x->pending, x->out, nout, count,
+                      (double)o->background, x->K);
+    hv_cl_module_run(cl, &extend_module, EK_SETUP, 2, gc, lc);
     for (int q = 0; q < nout; q++) {
-        hv_cl_args(cl, HV_K_EXT_CHECK, "mmllmi", x->w, x->in, (size_t)q * count, count, x->K, q);
-        hv_cl_run(cl, HV_K_EXT_CHECK, 1, g1, l1);
+        hv_cl_module_args(cl, &extend_module, EK_CHECK, "mmllmi", x->w, x->in, (size_t)q * count,
+                          count, x->K, q);
+        hv_cl_module_run(cl, &extend_module, EK_CHECK, 1, g1, l1);
     }
     hv_cl_read(cl, x->K, 0, sizeof K, K);
     if ((st = hv_cl_check(cl)))
@@ -252,13 +265,15 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
     if (!K[K_NSRC])
         return hv_error(HV_ERR_INVALID_ARG,
                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
-                        "zero crossing in the grid, or the band is too thin)", o->band * g->h);
+                        "zero crossing in the grid, or the band is too thin)",
+                        o->band * g->h);
     for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
         for (int q = 0; q < f[i].ncomp; q++)
             if (K[K_BAD + q0 + q] != K_NONE)
                 return hv_error(HV_ERR_NUMERIC,
                                 "extend: field %d component %d is NaN/Inf at cell %d, inside "
-                                "the source band", i, q, K[K_BAD + q0 + q]);
+                                "the source band",
+                                i, q, K[K_BAD + q0 + q]);
     size_t npend = (size_t)K[K_NPEND];
     int wlo[3], whi[3], rlo[3], rhi[3];
     for (int a = 0; a < 3; a++) {
@@ -288,10 +303,10 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
         for (int q = K_LEFT; q <= K_WEAK; q++)
             K[q] = 0;
         hv_cl_write(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
-        hv_cl_args(cl, HV_K_EXT_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending, x->sol, count,
-                   x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels, (double)o->background,
-                   x->K);
-        hv_cl_run(cl, HV_K_EXT_EVAL, 2, gc, lc);
+        hv_cl_module_args(cl, &extend_module, EK_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending,
+                          x->sol, count, x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels,
+                          (double)o->background, x->K);
+        hv_cl_module_run(cl, &extend_module, EK_EVAL, 2, gc, lc);
         hv_cl_read(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
         if ((st = hv_cl_check(cl)))
             break;

@@ -1,9 +1,17 @@
-/* Private pieces of the extension off a level set shared by the host path
- * (extend_vhm.c) and the OpenCL path (extend_cl.c). */
+/* Private: the extender and the pieces of the extension off a level set that
+ * its files share: the pipeline (extend_vhm.c), the per-cell passes
+ * (extend_eval.c), the levels' boxes, solvers and box solves
+ * (extend_levels.c), the band solve (extend_band.c) and the OpenCL path
+ * (extend_cl.c). Helpers called per cell from more than one file are static
+ * inline here so that they stay inlined where they run. */
 #ifndef HV_HEAT_EXTEND_INTERNAL_H
 #define HV_HEAT_EXTEND_INTERNAL_H
 
 #include "heatvox/heat.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
 
 #define MAX_LEVELS 8
 /* Fields per hv_extend_many call (each takes up to 4 right-hand sides). */
@@ -21,13 +29,149 @@
 #define GRAD_MIN 0.5
 #define GRAD_MAX 1.5
 
+struct hv_extender {
+    int dim, n[3];
+    double h;
+    size_t count;
+    uint8_t *solid; /* owned copy or NULL */
+    hv_extend_opts o;
+    hv_solver *sv[MAX_LEVELS]; /* level l: t * 16^l, built on first use */
+    int blo[MAX_LEVELS][3];    /* the box level l's solver was built for */
+    int bn[MAX_LEVELS][3];
+    double *fd, *ud; /* one right-hand side and solution (double) */
+    float *w;        /* weights */
+    /* Solutions of the current level, interleaved: right-hand side r of cell c
+     * at c * nsol + r (a closest point's 8 corners then cost a few cache lines
+     * for all fields). */
+    float *sol;
+    int nsol, capsol;
+    float *bf, *bu0, *bu1;      /* band solve: right-hand sides and iterates, compact */
+    size_t bcap;                /* floats each of them holds */
+    uint8_t *bneed, *bg0, *bg1; /* band solve: cells read, growing buffers */
+    uint8_t *pending;           /* per cell: 0 done, 1 read at the closest point, 2 at itself */
+    struct hv_extend_cl *cl;    /* backend opencl: the device path's state (extend_cl.h) */
+};
+
+/* ---- right-hand sides ----------------------------------------------------- */
+
+/* Right-hand side r of the layout: 0 = weights; then per field, for a scalar
+ * w f, for a vector w |v| followed by w v_c per component. rhs_part finds
+ * which (field -1 for the weights; part 0 = |v|, c + 1 = component c). */
+typedef struct {
+    int field, part;
+} rhs_part;
+
+static inline rhs_part rhs_locate(int r, int nfields, const hv_extend_field *f)
+{
+    rhs_part p = {-1, 0};
+    for (int i = 0, base = 1; i < nfields && r > 0; i++) {
+        int k = f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+        if (r < base + k) {
+            p.field = i;
+            p.part = r - base;
+            break;
+        }
+        base += k;
+    }
+    return p;
+}
+
+/* Right-hand side p at cell c. */
+static inline double rhs_value(const hv_extender *e, const hv_extend_field *f, rhs_part p, size_t c)
+{
+    const double w = e->w[c];
+    if (!(w > 0))
+        return 0;
+    if (p.field < 0)
+        return w;
+    const hv_extend_field *F = &f[p.field];
+    if (F->ncomp == 1)
+        return w * F->in[0][c];
+    if (p.part > 0)
+        return w * F->in[p.part - 1][c];
+    double m = 0;
+    for (int q = 0; q < F->ncomp; q++)
+        m += (double)F->in[q][c] * F->in[q][c];
+    return w * sqrt(m);
+}
+
+/* ---- boxes of cells --------------------------------------------------------- */
+
+typedef struct {
+    int lo[3], hi[3]; /* inclusive; lo > hi when empty */
+} ibox;
+
+static inline void box_empty(ibox *b)
+{
+    for (int a = 0; a < 3; a++) {
+        b->lo[a] = 1 << 30;
+        b->hi[a] = -(1 << 30);
+    }
+}
+
+static inline void box_add(ibox *b, int i, int j, int k)
+{
+    const int p[3] = {i, j, k};
+    for (int a = 0; a < 3; a++) {
+        if (p[a] < b->lo[a])
+            b->lo[a] = p[a];
+        if (p[a] > b->hi[a])
+            b->hi[a] = p[a];
+    }
+}
+
+static inline void box_union(ibox *b, const ibox *o)
+{
+    for (int a = 0; a < 3; a++) {
+        if (o->lo[a] < b->lo[a])
+            b->lo[a] = o->lo[a];
+        if (o->hi[a] > b->hi[a])
+            b->hi[a] = o->hi[a];
+    }
+}
+
+/* ---- the per-cell passes (extend_eval.c) ------------------------------------ */
+
+/* The first pass over the grid: the weights e->w (a smooth bump of
+ * |phi| / (band h) on fluid cells), phi and the fields where they are read
+ * (the weighted cells) checked for NaN/Inf, and the output cells classified in
+ * e->pending: 0 = background, 1 = read at the closest point, 2 = read at the
+ * cell. *wbox boxes the weighted cells, *rbox the cells read at themselves.
+ * need (NULL: none) receives the band solve's cells: the weights and the
+ * closest points' stencils. Counts the weighted cells (*nsrc) and the output
+ * cells (*npend). HV_ERR_NUMERIC for a non-finite phi or field value where it
+ * is read; nothing is written to the outputs (they may alias the inputs). */
+hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
+                             const hv_extend_field *f, uint8_t *need, size_t *nsrc, size_t *npend,
+                             ibox *wbox, ibox *rbox);
+
+/* The background on the output cells that no level will write (pending 0). */
+void hv_extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f);
+
+/* Counts of one level's evaluation pass. */
+typedef struct {
+    size_t left, cp, ratio, weak;
+} hv_extend_counts;
+
+/* Reads the current level's solutions (e->sol) for every pending cell: at its
+ * closest point, or at the cell where the closest point has no weight (or
+ * phi is not a distance there), writing the outputs where the weight is above
+ * thr (or, on the last level, anywhere: the background where it is 0).
+ * trusted (NULL: every cell) marks the cells the level's solve answers for.
+ * *rbox receives the box of the cells left for the next level. */
+void hv_extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
+                          double thr, int last, const uint8_t *trusted, ibox *rbox,
+                          hv_extend_counts *n);
+
+/* ---- the levels (extend_levels.c) ------------------------------------------- */
+
 /* The box of level l as the level loop of hv_extend_many forms it: the box of
  * the cells with a weight (wlo..whi, inclusive) grown by 2 (the closest
  * points' stencils), joined with the box of the cells read at themselves
  * (rlo..rhi; lo > hi when empty), grown by BOX_MARGIN sqrt(t_l) voxels and
  * then to a size the solvers like, within the grid: corner lo, size bn. */
-void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3],
-                         const int rlo[3], const int rhi[3], int l, int lo[3], int bn[3]);
+void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3], const int rlo[3],
+                         const int rhi[3], int l, int lo[3], int bn[3]);
 
 /* The solver of diffusion level l (t_scale h^2 16^l) on the box [lo, lo + bn)
  * (Neumann walls at its faces), for `backend`: *sv is kept while the box keeps
@@ -37,5 +181,53 @@ hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_
                                  const hv_extend_opts *o, hv_backend backend, int l,
                                  const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
                                  int bnk[3]);
+
+/* Solves every right-hand side (nrhs = e->nsol) for level l on the box
+ * [lo, lo + bn) and stores the solutions in e->sol, 0 outside the box; *thr
+ * is the level's trust bound for the weight. */
+hv_status hv_extend_solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
+                                int nfields, const hv_extend_field *f, double *thr,
+                                hv_extend_stats *S);
+
+/* ---- the band solve (extend_band.c) ----------------------------------------- */
+
+/* The first level's cells near what is read, for the Chebyshev band solve;
+ * built by hv_extend_band_build, on the stack of hv_extend_many. */
+typedef struct hv_extend_band hv_extend_band;
+typedef struct xrun xrun; /* x-runs of band cells and their segments (extend_band.c) */
+typedef struct bseg bseg;
+
+struct hv_extend_band {
+    xrun *runs;
+    size_t nruns, cells;
+    uint8_t *need; /* the cells read (before growing): trusted at level 0 */
+    size_t *roff;  /* compact cell of run q's left ghost; its cells follow */
+    bseg *segs;
+    size_t nsegs;
+    size_t *kstart;  /* segments of plane k: kstart[k] .. kstart[k + 1] - 1 */
+    size_t zero;     /* compact cell of the zero block (nx cells) */
+    size_t ncompact; /* compact cells in all */
+    int R;           /* right-hand sides, side by side */
+    float *f, *u0, *u1;
+    int iters;
+    double s;
+};
+
+/* Whether hv_extend_many may solve the first level on a band: short times,
+ * no obstacles, CPU backends only (an explicit fftw or opencl backend gets its
+ * own solver), box_only off. */
+int hv_extend_band_allowed(const hv_extender *e);
+
+/* Builds the band from b->need: grown, cut into x-runs and segments, laid out
+ * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
+ * band is not worth it (more than half of box_cells), 1 when built, -1 when
+ * out of memory. */
+int hv_extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R);
+void hv_extend_band_free(hv_extend_band *b);
+
+/* Level 0 on the band: every right-hand side at once; solutions stored in
+ * e->sol on the band's cells; *thr as hv_extend_solve_level's. */
+hv_status hv_extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
+                               const hv_extend_field *f, double *thr, hv_extend_stats *S);
 
 #endif

@@ -4,7 +4,9 @@
  * zero-set shift. Same quadrature, weights, noise bounds, face rule and
  * correction as the host path; the host reads back residual norms, the
  * dead-face count, phi at the surface samples (for the area-weighted sums)
- * and phi once.
+ * and phi once. The steps of its own (the splat, the right-hand side, the
+ * shift) come first, with their kernels (kernels/heat.cl), which this file
+ * registers and builds (hv_cl_module, src/solve/cl_core.h).
  */
 #include "sdf_cl.h"
 #include "core/error.h"
@@ -13,6 +15,154 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+/* ---------- the device steps and their kernels ---------- */
+
+extern const char hv_kernel_heat[]; /* kernels/heat.cl, embedded by the Makefile */
+
+static const char *const heat_sources[] = {hv_kernel_heat, NULL};
+enum { K_SPLAT, K_SDF_RHS, K_SAMPLE, K_SHIFT };
+static const char *const heat_kernels[] = {"heat_splat", "heat_sdf_rhs", "heat_sample",
+                                           "heat_shift", NULL};
+static const hv_cl_module heat_module = {"heat", heat_sources, heat_kernels, 0};
+
+void hv_cl_splat_destroy(hv_cl_splat *S)
+{
+    free(S->order);
+    free(S->stage);
+    hv_cl_free(&S->base);
+    hv_cl_free(&S->start);
+    hv_cl_free(&S->frac);
+    hv_cl_free(&S->val);
+    memset(S, 0, sizeof *S);
+}
+
+hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3], double h,
+                             const double origin[3], size_t npts, const double *x)
+{
+    memset(S, 0, sizeof *S);
+    if ((dim != 2 && dim != 3) || !(h > 0) || !n || !origin || (npts && !x))
+        return hv_error(HV_ERR_INVALID_ARG,
+                        "OpenCL splat: bad grid (dim %d, h %g) or NULL argument", dim, h);
+    const int nn[3] = {n[0], n[1], dim == 3 ? n[2] : 1};
+    const size_t count = (size_t)nn[0] * nn[1] * nn[2];
+    if (nn[0] < 1 || nn[1] < 1 || nn[2] < 1 || count >= UINT32_MAX || npts >= UINT32_MAX)
+        return hv_error(HV_ERR_INVALID_ARG, "OpenCL splat: %zu samples on %d x %d x %d cells", npts,
+                        nn[0], nn[1], nn[2]);
+    hv_status st = hv_cl_module_open(cl, &heat_module);
+    if (st)
+        return st;
+    for (int a = 0; a < 3; a++)
+        S->N[a] = nn[a];
+    S->N[3] = dim;
+    S->count = count;
+    S->npts = npts;
+    uint32_t *start = calloc(count + 1, sizeof *start), *base = malloc((npts + 1) * sizeof *base);
+    uint32_t *sbase = malloc((npts + 1) * sizeof *sbase);
+    float *frac = malloc((npts + 1) * 4 * sizeof *frac), *f = malloc((npts + 1) * 4 * sizeof *f);
+    S->order = malloc((npts + 1) * sizeof *S->order);
+    S->stage = malloc((npts + 1) * sizeof *S->stage);
+    if (!start || !base || !sbase || !frac || !f || !S->order || !S->stage) {
+        st = hv_error(HV_ERR_NOMEM, "OpenCL splat: out of memory for %zu samples", npts);
+        goto done;
+    }
+    const size_t stride[3] = {1, (size_t)nn[0], (size_t)nn[0] * nn[1]};
+    /* base cell and fractions exactly as hv_trilinear (src/heat/surface.c) */
+    for (size_t p = 0; p < npts; p++) {
+        size_t b = 0;
+        for (int a = 0; a < 3; a++) {
+            double s = a < dim ? (x[3 * p + a] - origin[a]) / h - 0.5 : 0.0, fa = 0.0;
+            int i0 = 0;
+            if (nn[a] == 1 || !(s > 0)) {
+                i0 = 0;
+            } else if (s >= nn[a] - 1) {
+                i0 = nn[a] - 1;
+            } else {
+                i0 = (int)floor(s);
+                fa = s - i0;
+            }
+            f[4 * p + a] = (float)fa;
+            b += (size_t)i0 * stride[a];
+        }
+        f[4 * p + 3] = 0.0f;
+        base[p] = (uint32_t)b;
+        start[b + 1]++;
+    }
+    for (size_t c = 0; c < count; c++)
+        start[c + 1] += start[c];
+    /* stable counting sort: within a cell, samples keep their order */
+    for (size_t p = 0; p < npts; p++) {
+        uint32_t q = start[base[p]]++;
+        S->order[q] = (uint32_t)p;
+        sbase[q] = base[p];
+        memcpy(frac + 4 * (size_t)q, f + 4 * p, 4 * sizeof *f);
+    }
+    for (size_t c = count; c > 0; c--)
+        start[c] = start[c - 1];
+    start[0] = 0;
+    if ((st = hv_cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
+        (st = hv_cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
+        (st = hv_cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
+        (st = hv_cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
+        goto done;
+done:
+    free(start);
+    free(base);
+    free(sbase);
+    free(frac);
+    free(f);
+    if (st)
+        hv_cl_splat_destroy(S);
+    return st;
+}
+
+hv_status hv_cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t stride, double scale,
+                          cl_mem out)
+{
+    if (!S->start || !out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_splat_run: no binned samples or no output");
+    for (size_t q = 0; q < S->npts; q++)
+        S->stage[q] = (float)(val ? scale * val[(size_t)S->order[q] * stride] : scale);
+    hv_cl_write(cl, S->val, 0, S->npts * sizeof(float), S->stage);
+    size_t g[2], l[2];
+    hv_cl_range2((size_t)S->N[0], (size_t)S->N[1] * S->N[2], g, l);
+    hv_cl_module_args(cl, &heat_module, K_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
+    hv_cl_module_run(cl, &heat_module, K_SPLAT, 2, g, l);
+    return hv_cl_check(cl);
+}
+
+void hv_cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int ncomp, cl_mem tau,
+                   cl_mem rhs, cl_mem dead)
+{
+    const cl_int N[4] = {n[0], n[1], n[2], 3};
+    const size_t count = (size_t)n[0] * n[1] * n[2];
+    size_t g[2], l[2];
+    hv_cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
+    hv_cl_module_args(cl, &heat_module, K_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau,
+                      1.0 / h, rhs, dead);
+    hv_cl_module_run(cl, &heat_module, K_SDF_RHS, 2, g, l);
+}
+
+void hv_cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
+{
+    size_t g[1], l[1];
+    hv_cl_range1(S->npts, g, l);
+    hv_cl_module_args(cl, &heat_module, K_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out,
+                      S->npts);
+    hv_cl_module_run(cl, &heat_module, K_SAMPLE, 1, g, l);
+}
+
+void hv_cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
+                     double tau, int local_shift)
+{
+    size_t g[1], l[1];
+    hv_cl_range1(n, g, l);
+    hv_cl_module_args(cl, &heat_module, K_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift,
+                      n);
+    hv_cl_module_run(cl, &heat_module, K_SHIFT, 1, g, l);
+}
+
+/* ---------- the stages ---------- */
 
 /* As sdf.c. */
 #define SDF_NOISE_FACTOR 4.0
@@ -58,7 +208,8 @@ static hv_status opencl_solver(hv_solver **s, const hv_grid *g, double alpha, do
 }
 
 /* phi at the samples (w->vals, sorted order) and its area-weighted sums. */
-static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, double *den, double *rms)
+static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, double *den,
+                             double *rms)
 {
     const size_t np = q->count;
     hv_status st;
@@ -137,8 +288,9 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
                 goto done;
             S->diffuse_iterations += info.iterations;
             S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
-            hv_cl_fail(cl, clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
-                                               bytes, 0, NULL, NULL),
+            hv_cl_fail(cl,
+                       clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
+                                           bytes, 0, NULL, NULL),
                        "clEnqueueCopyBuffer");
             if ((st = hv_cl_finish(cl)))
                 goto done;
@@ -161,8 +313,10 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
     for (int k = 0; k < nlev; k++)
         tauf[k] = (float)tau[k];
     const uint32_t zero = 0;
-    if ((st = hv_cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf, &w.tau)) ||
-        (st = hv_cl_alloc(cl, sizeof zero, &zero, &w.dead)) || (st = hv_cl_alloc(cl, bytes, NULL, &w.rhs)))
+    if ((st = hv_cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf,
+                          &w.tau)) ||
+        (st = hv_cl_alloc(cl, sizeof zero, &zero, &w.dead)) ||
+        (st = hv_cl_alloc(cl, bytes, NULL, &w.rhs)))
         goto done;
     hv_cl_sdf_rhs(cl, n, h, w.Y, nlev, ncomp, w.tau, w.rhs, w.dead);
     uint32_t dead = 0;
@@ -209,7 +363,8 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
             goto done;
         for (size_t k = 0; k < q->count; k++)
             w.res[w.sp.order[k]] = q->area[w.sp.order[k]] * w.vals[k];
-        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[0])) || (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
+        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[0])) ||
+            (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
             (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
             (st = hv_cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
             (st = hv_cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
@@ -217,7 +372,8 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
         hv_cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
         double f1sq = 0;
         hv_cl_read_acc(cl, w.sums, 0, 1, &f1sq);
-        if ((st = hv_cl_finish(cl)) || (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
+        if ((st = hv_cl_finish(cl)) ||
+            (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
             goto done;
         hv_solve_info info;
         if ((st = hv_cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))

@@ -1,4 +1,5 @@
-/* OpenCL devices, the shared context and program, and launch helpers (cl_core.h). */
+/* OpenCL devices, the shared context, the solver program and the modules'
+ * programs, and launch helpers (cl_core.h). */
 #include "cl_core.h"
 #include "core/error.h"
 
@@ -40,15 +41,6 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_FACE_NORMALIZE] = "face_normalize",
     [HV_K_PW_RATIO] = "pw_ratio",
     [HV_K_PW_AXPY] = "pw_axpy",
-    [HV_K_HEAT_SPLAT] = "heat_splat",
-    [HV_K_HEAT_SDF_RHS] = "heat_sdf_rhs",
-    [HV_K_HEAT_SAMPLE] = "heat_sample",
-    [HV_K_HEAT_SHIFT] = "heat_shift",
-    [HV_K_EXT_SETUP] = "ext_setup",
-    [HV_K_EXT_CHECK] = "ext_check",
-    [HV_K_EXT_RHS] = "ext_rhs",
-    [HV_K_EXT_SCATTER] = "ext_scatter",
-    [HV_K_EXT_EVAL] = "ext_eval",
     [HV_K_FINE_RESIDUAL] = "fine_residual",
     [HV_K_FINE_APPLY] = "fine_apply",
     [HV_K_FINE_ADD] = "fine_add",
@@ -60,14 +52,6 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_REGION_SUB_D] = "region_sub_d",
     [HV_K_FINE_D2F] = "fine_d2f",
     [HV_K_FINE_MASK] = "fine_mask",
-    [HV_K_DIST_FACES] = "dist_faces",
-    [HV_K_DIST_LOG] = "dist_log",
-    [HV_K_DIST_ASSIGN] = "dist_assign",
-    [HV_K_DIST_FRONT_SUMS] = "dist_front_sums",
-    [HV_K_DIST_FRONT] = "dist_front",
-    [HV_K_DIST_DIV] = "dist_div",
-    [HV_K_DIST_GATHER] = "dist_gather",
-    [HV_K_DIST_OUTPUT] = "dist_output",
 };
 
 const char *hv_cl_strerror(cl_int e)
@@ -155,10 +139,12 @@ static hv_status enumerate(devlist *L)
     L->n = 0;
     cl_int e = clGetPlatformIDs(MAX_PLATFORMS, p, &np);
     if (e == CL_PLATFORM_NOT_FOUND_KHR || (e == CL_SUCCESS && np == 0))
-        return hv_error(HV_ERR_UNSUPPORTED, "no OpenCL platform is installed (an ICD such as "
-                                            "Debian's pocl-opencl-icd or a GPU driver provides one)");
+        return hv_error(HV_ERR_UNSUPPORTED,
+                        "no OpenCL platform is installed (an ICD such as "
+                        "Debian's pocl-opencl-icd or a GPU driver provides one)");
     if (e != CL_SUCCESS)
-        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL: clGetPlatformIDs failed: %s", hv_cl_strerror(e));
+        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL: clGetPlatformIDs failed: %s",
+                        hv_cl_strerror(e));
     if (np > MAX_PLATFORMS)
         np = MAX_PLATFORMS;
     for (cl_uint pi = 0; pi < np; pi++) {
@@ -263,7 +249,14 @@ hv_status hv_opencl_probe(hv_opencl_device *out)
     return st;
 }
 
-/* ---------- the shared context and program ---------- */
+/* ---------- the shared context and programs ---------- */
+
+/* A module's program on one context (hv_cl_program). */
+typedef struct modprog {
+    struct modprog *next;
+    const hv_cl_module *m;
+    cl_program prog;
+} modprog;
 
 struct hv_cl_shared {
     hv_cl_shared *next;
@@ -271,7 +264,8 @@ struct hv_cl_shared {
     cl_device_id dev;
     int fp64;
     cl_context ctx;
-    cl_program prog;
+    cl_program prog; /* the solver's kernels */
+    modprog *mods;   /* modules' programs, built on first use */
 };
 
 static pthread_mutex_t shared_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -294,7 +288,8 @@ static hv_status build_program(cl_context ctx, cl_device_id dev, const char *dev
     size_t got = 0;
     clGetProgramBuildInfo(*prog, dev, CL_PROGRAM_BUILD_LOG, 0, NULL, &got);
     char *full = got ? malloc(got + 1) : NULL;
-    if (full && clGetProgramBuildInfo(*prog, dev, CL_PROGRAM_BUILD_LOG, got, full, NULL) == CL_SUCCESS) {
+    if (full &&
+        clGetProgramBuildInfo(*prog, dev, CL_PROGRAM_BUILD_LOG, got, full, NULL) == CL_SUCCESS) {
         full[got] = 0;
         const char *s = full;
         while (*s && isspace((unsigned char)*s))
@@ -308,6 +303,14 @@ static hv_status build_program(cl_context ctx, cl_device_id dev, const char *dev
     *prog = NULL;
     return hv_error(HV_ERR_BACKEND, "OpenCL kernels failed to build on '%s' (%s): %s", devname,
                     hv_cl_strerror(e), *log ? log : "(no build log)");
+}
+
+/* The options of every program on a context: the solver's and the modules'
+ * kernels see the same HV_WG, HV_RED_BLOCK and precision. */
+static void build_options(int fp64, char *opts, size_t size)
+{
+    snprintf(opts, size, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG, HV_CL_RED_BLOCK,
+             fp64 ? " -DHV_FP64=1" : "");
 }
 
 static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, const char *devname,
@@ -330,14 +333,12 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
                         hv_cl_strerror(e));
     }
-    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,   hv_kernel_fine,
-                         hv_kernel_faces,  hv_kernel_pointwise, hv_kernel_heat,
-                         hv_kernel_distance, hv_kernel_extend};
+    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
+                         hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
     char opts[128];
-    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -DHV_WG=%d -DHV_RED_BLOCK=%d%s", HV_CL_WG,
-             HV_CL_RED_BLOCK, fp64 ? " -DHV_FP64=1" : "");
-    hv_status st = build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]),
-                                 opts, &s->prog);
+    build_options(fp64, opts, sizeof opts);
+    hv_status st =
+        build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]), opts, &s->prog);
     if (st) {
         clReleaseContext(s->ctx);
         free(s);
@@ -361,6 +362,12 @@ static void shared_put(hv_cl_shared *s)
                 *pp = s->next;
                 break;
             }
+        while (s->mods) {
+            modprog *mp = s->mods;
+            s->mods = mp->next;
+            clReleaseProgram(mp->prog);
+            free(mp);
+        }
         clReleaseProgram(s->prog);
         clReleaseContext(s->ctx);
         free(s);
@@ -377,6 +384,12 @@ void hv_cl_close(hv_cl **pcl)
     for (int k = 0; k < HV_K_COUNT; k++)
         if (cl->k[k])
             clReleaseKernel(cl->k[k]);
+    for (int i = 0; i < cl->nmod; i++) {
+        for (int k = 0; cl->mod[i].m->kernels[k]; k++)
+            if (cl->mod[i].k[k])
+                clReleaseKernel(cl->mod[i].k[k]);
+        free(cl->mod[i].k);
+    }
     if (cl->q)
         clReleaseCommandQueue(cl->q);
     if (cl->sh)
@@ -420,7 +433,8 @@ hv_status hv_cl_open(hv_cl **out)
     cl->q = clCreateCommandQueue(cl->ctx, cl->dev, 0, &e);
     if (e != CL_SUCCESS) {
         hv_cl_close(&cl);
-        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s", hv_cl_strerror(e));
+        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
+                        hv_cl_strerror(e));
     }
     for (int k = 0; k < HV_K_COUNT; k++) {
         if (k >= HV_K_FIRST_FP64 && !cl->fp64)
@@ -437,8 +451,10 @@ hv_status hv_cl_open(hv_cl **out)
     cl->max_wg = wg;
     if (wg < HV_CL_WG) {
         hv_cl_close(&cl);
-        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL device '%s' allows work-groups of %zu items; "
-                        "heatvox needs %d", cl->info.name, wg, HV_CL_WG);
+        return hv_error(HV_ERR_UNSUPPORTED,
+                        "OpenCL device '%s' allows work-groups of %zu items; "
+                        "heatvox needs %d",
+                        cl->info.name, wg, HV_CL_WG);
     }
     *out = cl;
     return HV_OK;
@@ -448,6 +464,112 @@ hv_status hv_cl_build(hv_cl *cl, const char *const *sources, int nsrc, const cha
                       cl_program *prog)
 {
     return build_program(cl->ctx, cl->dev, cl->info.name, sources, nsrc, options, prog);
+}
+
+/* ---------- modules' programs and kernels ---------- */
+
+hv_status hv_cl_program(hv_cl *cl, const hv_cl_module *m, cl_program *prog)
+{
+    *prog = NULL;
+    hv_status st = HV_OK;
+    pthread_mutex_lock(&shared_lock);
+    modprog *mp = cl->sh->mods;
+    while (mp && mp->m != m)
+        mp = mp->next;
+    if (!mp) {
+        int nsrc = 0;
+        while (m->sources[nsrc])
+            nsrc++;
+        const char **src = malloc(((size_t)nsrc + 1) * sizeof *src);
+        if (!src || !(mp = calloc(1, sizeof *mp))) {
+            free(src);
+            pthread_mutex_unlock(&shared_lock);
+            return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+        }
+        src[0] = hv_kernel_common;
+        for (int i = 0; i < nsrc; i++)
+            src[i + 1] = m->sources[i];
+        char opts[128];
+        build_options(cl->sh->fp64, opts, sizeof opts);
+        st = build_program(cl->ctx, cl->dev, cl->info.name, src, nsrc + 1, opts, &mp->prog);
+        free(src);
+        if (st) {
+            free(mp);
+            mp = NULL;
+        } else {
+            mp->m = m;
+            mp->next = cl->sh->mods;
+            cl->sh->mods = mp;
+        }
+    }
+    if (mp)
+        *prog = mp->prog;
+    pthread_mutex_unlock(&shared_lock);
+    return st;
+}
+
+/* m's kernels on cl, NULL when not opened there. */
+static cl_kernel *module_kernels(const hv_cl *cl, const hv_cl_module *m)
+{
+    for (int i = 0; i < cl->nmod; i++)
+        if (cl->mod[i].m == m)
+            return cl->mod[i].k;
+    return NULL;
+}
+
+hv_status hv_cl_module_open(hv_cl *cl, const hv_cl_module *m)
+{
+    if (module_kernels(cl, m))
+        return HV_OK;
+    if (m->fp64 && !cl->fp64)
+        return hv_error(HV_ERR_UNSUPPORTED,
+                        "OpenCL: the %s kernels need fp64, which '%s' lacks "
+                        "(or HEATVOX_OPENCL_FP64=0)",
+                        m->name, cl->info.name);
+    if (cl->nmod == HV_CL_MODULES)
+        return hv_error(HV_ERR_BACKEND, "OpenCL: more than %d kernel modules on one handle",
+                        HV_CL_MODULES);
+    cl_program prog;
+    hv_status st = hv_cl_program(cl, m, &prog);
+    if (st)
+        return st;
+    int nk = 0;
+    while (m->kernels[nk])
+        nk++;
+    cl_kernel *k = calloc((size_t)nk + 1, sizeof *k);
+    if (!k)
+        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+    for (int i = 0; i < nk; i++) {
+        cl_int e;
+        k[i] = clCreateKernel(prog, m->kernels[i], &e);
+        if (e != CL_SUCCESS) {
+            for (int j = 0; j < i; j++)
+                clReleaseKernel(k[j]);
+            free(k);
+            return hv_error(HV_ERR_BACKEND, "OpenCL: kernel '%s' of the %s kernels is missing: %s",
+                            m->kernels[i], m->name, hv_cl_strerror(e));
+        }
+    }
+    cl->mod[cl->nmod].m = m;
+    cl->mod[cl->nmod].k = k;
+    cl->nmod++;
+    return HV_OK;
+}
+
+/* Kernel k of module m on cl, opening the module on first use; NULL (the
+ * failure recorded in cl) when it cannot be had. */
+static cl_kernel module_kernel(hv_cl *cl, const hv_cl_module *m, int k)
+{
+    cl_kernel *ks = module_kernels(cl, m);
+    if (!ks && cl->err == CL_SUCCESS && hv_cl_module_open(cl, m) == HV_OK)
+        ks = module_kernels(cl, m);
+    if (!ks) {
+        char where[96];
+        snprintf(where, sizeof where, "building the %s kernels", m->name);
+        hv_cl_fail(cl, CL_BUILD_PROGRAM_FAILURE, where);
+        return NULL;
+    }
+    return ks[k];
 }
 
 /* ---------- errors, buffers, launches ---------- */
@@ -537,15 +659,13 @@ void hv_cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
                    "clEnqueueCopyBuffer");
 }
 
-void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
+/* Sets the arguments of kernel kk (named name, for messages). */
+static void set_args(hv_cl *cl, cl_kernel kk, const char *name, const char *fmt, va_list ap)
 {
-    cl_kernel kk = cl->k[k];
     if (!kk) {
-        hv_cl_fail(cl, CL_INVALID_KERNEL, kernel_names[k]);
+        hv_cl_fail(cl, CL_INVALID_KERNEL, name);
         return;
     }
-    va_list ap;
-    va_start(ap, fmt);
     for (cl_uint i = 0; fmt[i]; i++) {
         cl_int e = CL_INVALID_VALUE;
         switch (fmt[i]) {
@@ -572,7 +692,8 @@ void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
         case 'a': {
             double v = va_arg(ap, double);
             cl_float f = (cl_float)v;
-            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof v, &v) : clSetKernelArg(kk, i, sizeof f, &f);
+            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof v, &v)
+                         : clSetKernelArg(kk, i, sizeof f, &f);
             break;
         }
         case 'I': {
@@ -591,35 +712,72 @@ void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
             const double *v = va_arg(ap, const double *);
             cl_double4 d = {{v[0], v[1], v[2], v[3]}};
             cl_float4 f = {{(cl_float)v[0], (cl_float)v[1], (cl_float)v[2], (cl_float)v[3]}};
-            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof d, &d) : clSetKernelArg(kk, i, sizeof f, &f);
+            e = cl->fp64 ? clSetKernelArg(kk, i, sizeof d, &d)
+                         : clSetKernelArg(kk, i, sizeof f, &f);
             break;
         }
         }
         if (e != CL_SUCCESS) {
             char where[96];
-            snprintf(where, sizeof where, "argument %u of kernel %s", i, kernel_names[k]);
+            snprintf(where, sizeof where, "argument %u of kernel %s", i, name);
             hv_cl_fail(cl, e, where);
             break;
         }
     }
+}
+
+/* Enqueues kernel kk (named name) on a 1D or 2D range. */
+static void enqueue(hv_cl *cl, cl_kernel kk, const char *name, int dims, const size_t *global,
+                    const size_t *local)
+{
+    for (int d = 0; d < dims; d++)
+        if (global[d] == 0)
+            return;
+    if (!kk) {
+        hv_cl_fail(cl, CL_INVALID_KERNEL, name);
+        return;
+    }
+    cl_int e = clEnqueueNDRangeKernel(cl->q, kk, (cl_uint)dims, NULL, global, local, 0, NULL, NULL);
+    if (e != CL_SUCCESS) {
+        char where[96];
+        snprintf(where, sizeof where, "kernel %s", name);
+        hv_cl_fail(cl, e, where);
+    }
+}
+
+void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    set_args(cl, cl->k[k], kernel_names[k], fmt, ap);
     va_end(ap);
 }
 
 void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const size_t *local)
 {
+    enqueue(cl, cl->k[k], kernel_names[k], dims, global, local);
+}
+
+void hv_cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt, ...)
+{
+    cl_kernel kk = module_kernel(cl, m, k);
+    if (!kk)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    set_args(cl, kk, m->kernels[k], fmt, ap);
+    va_end(ap);
+}
+
+void hv_cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const size_t *global,
+                      const size_t *local)
+{
     for (int d = 0; d < dims; d++)
         if (global[d] == 0)
             return;
-    if (!cl->k[k]) {
-        hv_cl_fail(cl, CL_INVALID_KERNEL, kernel_names[k]);
-        return;
-    }
-    cl_int e = clEnqueueNDRangeKernel(cl->q, cl->k[k], (cl_uint)dims, NULL, global, local, 0, NULL, NULL);
-    if (e != CL_SUCCESS) {
-        char where[96];
-        snprintf(where, sizeof where, "kernel %s", kernel_names[k]);
-        hv_cl_fail(cl, e, where);
-    }
+    cl_kernel kk = module_kernel(cl, m, k);
+    if (kk)
+        enqueue(cl, kk, m->kernels[k], dims, global, local);
 }
 
 size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)

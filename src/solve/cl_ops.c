@@ -2,7 +2,6 @@
 #include "cl_ops.h"
 #include "core/error.h"
 
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -27,7 +26,8 @@ hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const 
     if (!region)
         nregion = 1;
     if (nregion <= 0 || count == 0 || count > UINT32_MAX)
-        return hv_error(HV_ERR_INVALID_ARG, "OpenCL regions: %d regions over %zu cells", nregion, count);
+        return hv_error(HV_ERR_INVALID_ARG, "OpenCL regions: %d regions over %zu cells", nregion,
+                        count);
     R->count = count;
     R->nregion = nregion;
     size_t *cells = calloc((size_t)nregion + 1, sizeof *cells);
@@ -159,7 +159,8 @@ void hv_cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem so
     for (int a = 0; a < dim; a++) {
         size_t gs[2], ls[2];
         face_range(a, N, gs, ls);
-        hv_cl_args(cl, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u, g[a]);
+        hv_cl_args(cl, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u,
+                   g[a]);
         hv_cl_run(cl, HV_K_FACE_GRADIENT, 2, gs, ls);
     }
 }
@@ -204,136 +205,4 @@ void hv_cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y)
     hv_cl_range1(n, g, l);
     hv_cl_args(cl, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
     hv_cl_run(cl, HV_K_PW_AXPY, 1, g, l);
-}
-
-/* ---------- splat and the signed heat method's right-hand side ---------- */
-
-void hv_cl_splat_destroy(hv_cl_splat *S)
-{
-    free(S->order);
-    free(S->stage);
-    hv_cl_free(&S->base);
-    hv_cl_free(&S->start);
-    hv_cl_free(&S->frac);
-    hv_cl_free(&S->val);
-    memset(S, 0, sizeof *S);
-}
-
-hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3], double h,
-                             const double origin[3], size_t npts, const double *x)
-{
-    memset(S, 0, sizeof *S);
-    if ((dim != 2 && dim != 3) || !(h > 0) || !n || !origin || (npts && !x))
-        return hv_error(HV_ERR_INVALID_ARG, "OpenCL splat: bad grid (dim %d, h %g) or NULL argument", dim, h);
-    const int nn[3] = {n[0], n[1], dim == 3 ? n[2] : 1};
-    const size_t count = (size_t)nn[0] * nn[1] * nn[2];
-    if (nn[0] < 1 || nn[1] < 1 || nn[2] < 1 || count >= UINT32_MAX || npts >= UINT32_MAX)
-        return hv_error(HV_ERR_INVALID_ARG, "OpenCL splat: %zu samples on %d x %d x %d cells", npts,
-                        nn[0], nn[1], nn[2]);
-    for (int a = 0; a < 3; a++)
-        S->N[a] = nn[a];
-    S->N[3] = dim;
-    S->count = count;
-    S->npts = npts;
-    uint32_t *start = calloc(count + 1, sizeof *start), *base = malloc((npts + 1) * sizeof *base);
-    uint32_t *sbase = malloc((npts + 1) * sizeof *sbase);
-    float *frac = malloc((npts + 1) * 4 * sizeof *frac), *f = malloc((npts + 1) * 4 * sizeof *f);
-    S->order = malloc((npts + 1) * sizeof *S->order);
-    S->stage = malloc((npts + 1) * sizeof *S->stage);
-    hv_status st = HV_OK;
-    if (!start || !base || !sbase || !frac || !f || !S->order || !S->stage) {
-        st = hv_error(HV_ERR_NOMEM, "OpenCL splat: out of memory for %zu samples", npts);
-        goto done;
-    }
-    const size_t stride[3] = {1, (size_t)nn[0], (size_t)nn[0] * nn[1]};
-    /* base cell and fractions exactly as hv_trilinear (src/heat/surface.c) */
-    for (size_t p = 0; p < npts; p++) {
-        size_t b = 0;
-        for (int a = 0; a < 3; a++) {
-            double s = a < dim ? (x[3 * p + a] - origin[a]) / h - 0.5 : 0.0, fa = 0.0;
-            int i0 = 0;
-            if (nn[a] == 1 || !(s > 0)) {
-                i0 = 0;
-            } else if (s >= nn[a] - 1) {
-                i0 = nn[a] - 1;
-            } else {
-                i0 = (int)floor(s);
-                fa = s - i0;
-            }
-            f[4 * p + a] = (float)fa;
-            b += (size_t)i0 * stride[a];
-        }
-        f[4 * p + 3] = 0.0f;
-        base[p] = (uint32_t)b;
-        start[b + 1]++;
-    }
-    for (size_t c = 0; c < count; c++)
-        start[c + 1] += start[c];
-    /* stable counting sort: within a cell, samples keep their order */
-    for (size_t p = 0; p < npts; p++) {
-        uint32_t q = start[base[p]]++;
-        S->order[q] = (uint32_t)p;
-        sbase[q] = base[p];
-        memcpy(frac + 4 * (size_t)q, f + 4 * p, 4 * sizeof *f);
-    }
-    for (size_t c = count; c > 0; c--)
-        start[c] = start[c - 1];
-    start[0] = 0;
-    if ((st = hv_cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
-        (st = hv_cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
-        (st = hv_cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
-        (st = hv_cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
-        goto done;
-done:
-    free(start);
-    free(base);
-    free(sbase);
-    free(frac);
-    free(f);
-    if (st)
-        hv_cl_splat_destroy(S);
-    return st;
-}
-
-hv_status hv_cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t stride, double scale,
-                          cl_mem out)
-{
-    if (!S->start || !out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_splat_run: no binned samples or no output");
-    for (size_t q = 0; q < S->npts; q++)
-        S->stage[q] = (float)(val ? scale * val[(size_t)S->order[q] * stride] : scale);
-    hv_cl_write(cl, S->val, 0, S->npts * sizeof(float), S->stage);
-    size_t g[2], l[2];
-    hv_cl_range2((size_t)S->N[0], (size_t)S->N[1] * S->N[2], g, l);
-    hv_cl_args(cl, HV_K_HEAT_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
-    hv_cl_run(cl, HV_K_HEAT_SPLAT, 2, g, l);
-    return hv_cl_check(cl);
-}
-
-void hv_cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int ncomp, cl_mem tau,
-                   cl_mem rhs, cl_mem dead)
-{
-    const cl_int N[4] = {n[0], n[1], n[2], 3};
-    const size_t count = (size_t)n[0] * n[1] * n[2];
-    size_t g[2], l[2];
-    hv_cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
-    hv_cl_args(cl, HV_K_HEAT_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau, 1.0 / h, rhs, dead);
-    hv_cl_run(cl, HV_K_HEAT_SDF_RHS, 2, g, l);
-}
-
-void hv_cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
-{
-    size_t g[1], l[1];
-    hv_cl_range1(S->npts, g, l);
-    hv_cl_args(cl, HV_K_HEAT_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out, S->npts);
-    hv_cl_run(cl, HV_K_HEAT_SAMPLE, 1, g, l);
-}
-
-void hv_cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
-                     double tau, int local_shift)
-{
-    size_t g[1], l[1];
-    hv_cl_range1(n, g, l);
-    hv_cl_args(cl, HV_K_HEAT_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift, n);
-    hv_cl_run(cl, HV_K_HEAT_SHIFT, 1, g, l);
 }

@@ -1,0 +1,373 @@
+/* The per-cell passes of the extension off a level set (extend_internal.h):
+ * where each output cell is read (its closest point on the zero set, or the
+ * cell itself: stencils, evaluation points), the first pass's weights and
+ * checks, the background, and the reading of a level's ratios into the
+ * outputs (write_cell). */
+#include "extend_internal.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int is_solid(const hv_extender *e, size_t c) { return e->solid && e->solid[c]; }
+
+/* Trilinear (bilinear in 2D) stencil at index-space point p (cell centres at
+ * integers), clamped to the grid. Returns the number of corners. */
+static int stencil(const hv_extender *e, const double p[3], size_t idx[8], double wt[8])
+{
+    int i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0};
+    double fr[3] = {0, 0, 0};
+    for (int a = 0; a < e->dim; a++) {
+        double q = p[a];
+        if (q < 0)
+            q = 0;
+        if (q > e->n[a] - 1)
+            q = e->n[a] - 1;
+        int f = (int)floor(q);
+        if (f > e->n[a] - 2)
+            f = e->n[a] - 2;
+        if (f < 0)
+            f = 0;
+        i0[a] = f;
+        i1[a] = e->n[a] > 1 ? f + 1 : f;
+        fr[a] = e->n[a] > 1 ? q - f : 0;
+    }
+    int m = e->dim == 3 ? 8 : 4;
+    for (int q = 0; q < m; q++) {
+        int ii = (q & 1) ? i1[0] : i0[0], jj = (q & 2) ? i1[1] : i0[1],
+            kk = (q & 4) ? i1[2] : i0[2];
+        idx[q] = ii + (size_t)e->n[0] * (jj + (size_t)e->n[1] * kk);
+        wt[q] = ((q & 1) ? fr[0] : 1 - fr[0]) * ((q & 2) ? fr[1] : 1 - fr[1]) *
+                (e->dim == 3 ? ((q & 4) ? fr[2] : 1 - fr[2]) : 1.0);
+    }
+    return m;
+}
+
+static double sample(const float *v, const size_t idx[8], const double wt[8], int m)
+{
+    double s = 0;
+    for (int q = 0; q < m; q++)
+        s += wt[q] * v[idx[q]];
+    return s;
+}
+
+/* All nsol solutions at once from the interleaved array. */
+static void sample_all(const hv_extender *e, const size_t idx[8], const double wt[8], int m,
+                       double *out)
+{
+    const int k = e->nsol;
+    out[0] = 0;
+    for (int r = 1; r < k; r++)
+        out[r] = 0;
+    for (int q = 0; q < m; q++) {
+        const float *v = e->sol + idx[q] * (size_t)k;
+        for (int r = 0; r < k; r++)
+            out[r] += wt[q] * v[r];
+    }
+}
+
+/* Central-difference gradient of phi at cell (i,j,k), one-sided at walls, in
+ * world units. */
+static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k, double g[3])
+{
+    const int ijk[3] = {i, j, k};
+    const size_t st[3] = {1, (size_t)e->n[0], (size_t)e->n[0] * e->n[1]};
+    size_t c = i + st[1] * j + st[2] * k;
+    g[0] = g[1] = g[2] = 0;
+    for (int a = 0; a < e->dim; a++) {
+        int lo = ijk[a] > 0, hi = ijk[a] + 1 < e->n[a];
+        if (!lo && !hi)
+            continue;
+        double vp = hi ? phi[c + st[a]] : phi[c], vm = lo ? phi[c - st[a]] : phi[c];
+        g[a] = (vp - vm) / ((lo + hi) * e->h);
+    }
+}
+
+/* Where the extension of cell c is read: its closest point on the zero set
+ * when phi is a distance there (|grad phi| near 1, and phi interpolated at the
+ * point is within half the band of 0), else the cell itself. Fills the
+ * interpolation stencil and returns 1 for a closest point. */
+static int evaluation_point(const hv_extender *e, const float *phi, int i, int j, int k,
+                            int validate, size_t idx[8], double wt[8], int *m)
+{
+    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+    idx[0] = c;
+    wt[0] = 1;
+    *m = 1;
+    if (!e->o.closest_point)
+        return 0;
+    const int nx = e->n[0], ny = e->n[1], nz = e->n[2];
+    if (e->dim == 3 && i > 0 && j > 0 && k > 0 && i + 1 < nx && j + 1 < ny && k + 1 < nz) {
+        /* Inside the grid, straight-line: the same central differences and
+         * trilinear stencil as below (this runs once or twice per output cell). */
+        const size_t sy = (size_t)nx, sz = (size_t)nx * ny;
+        const double gx = (double)phi[c + 1] - phi[c - 1], gy = (double)phi[c + sy] - phi[c - sy],
+                     gz = (double)phi[c + sz] - phi[c - sz];
+        const double gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
+        if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+            return 0;
+        const double sc = phi[c] * 0.5 / (gn * e->h * e->h);
+        const double p[3] = {i - sc * gx, j - sc * gy, k - sc * gz};
+        const int nn[3] = {nx, ny, nz};
+        int f[3];
+        double fr[3];
+        for (int a = 0; a < 3; a++) {
+            if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
+                return 0;
+            double q = p[a] < 0 ? 0 : p[a]; /* comparisons: fmin/fmax are libm calls here */
+            if (q > nn[a] - 1)
+                q = nn[a] - 1;
+            f[a] = (int)q;
+            if (f[a] > nn[a] - 2)
+                f[a] = nn[a] - 2;
+            fr[a] = q - f[a];
+        }
+        const size_t b = f[0] + sy * f[1] + sz * f[2];
+        const size_t ci[8] = {b,      b + 1,      b + sy,      b + sy + 1,
+                              b + sz, b + sz + 1, b + sy + sz, b + sy + sz + 1};
+        const double wx[2] = {1 - fr[0], fr[0]}, wy[2] = {1 - fr[1], fr[1]},
+                     wz[2] = {1 - fr[2], fr[2]};
+        double cw[8], v = 0;
+        for (int q = 0; q < 8; q++) {
+            cw[q] = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
+            v += cw[q] * phi[ci[q]];
+        }
+        if (validate && fabs(v) > 0.5 * fmax(e->o.band, 1.0) * e->h)
+            return 0;
+        memcpy(idx, ci, sizeof ci);
+        memcpy(wt, cw, sizeof cw);
+        *m = 8;
+        return 1;
+    }
+    double g[3], gn = 0;
+    grad_phi(e, phi, i, j, k, g);
+    for (int a = 0; a < e->dim; a++)
+        gn += g[a] * g[a];
+    gn = sqrt(gn);
+    if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+        return 0;
+    double s = phi[c] / (gn * e->h), p[3] = {i, j, k};
+    for (int a = 0; a < e->dim; a++) {
+        p[a] -= s * g[a];
+        if (p[a] < -0.5 || p[a] > e->n[a] - 0.5)
+            return 0;
+    }
+    size_t ci[8];
+    double cw[8];
+    int cm = stencil(e, p, ci, cw);
+    if (validate && fabs(sample(phi, ci, cw, cm)) > 0.5 * fmax(e->o.band, 1.0) * e->h)
+        return 0;
+    memcpy(idx, ci, sizeof ci);
+    memcpy(wt, cw, sizeof cw);
+    *m = cm;
+    return 1;
+}
+
+/* Writes the extension of every field at cell c from the current level's
+ * solutions sampled at p. */
+static void write_cell(const hv_extender *e, int nfields, const hv_extend_field *f, size_t c,
+                       const double *val)
+{
+    const double W = val[0];
+    int r = 1;
+    for (int i = 0; i < nfields; i++) {
+        if (f[i].ncomp == 1) {
+            f[i].out[0][c] = (float)(val[r] / W);
+            r++;
+            continue;
+        }
+        double mag = val[r] / W, v[3] = {0, 0, 0}, vn = 0;
+        for (int q = 0; q < f[i].ncomp; q++) {
+            v[q] = val[r + 1 + q];
+            vn += v[q] * v[q];
+        }
+        vn = sqrt(vn);
+        for (int q = 0; q < f[i].ncomp; q++)
+            f[i].out[q][c] = vn > 0 ? (float)(mag * v[q] / vn) : 0.0f;
+        r += f[i].ncomp + 1;
+    }
+}
+
+hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
+                             const hv_extend_field *f, uint8_t *need, size_t *nsrc_out,
+                             size_t *npend_out, ibox *wbox, ibox *rbox)
+{
+    uint8_t *pending = e->pending;
+    /* need is only ever set in this pass, so that the stencils' marks from
+     * other rows cannot be lost. */
+    if (need)
+        memset(need, 0, e->count);
+    const double bh = e->o.band * e->h, ob = e->o.out_band * e->h;
+    size_t nsrc = 0, npend = 0, badphi = SIZE_MAX, badf = SIZE_MAX;
+    ibox band_box, ratio_box;
+    box_empty(&band_box);
+    box_empty(&ratio_box);
+#pragma omp parallel reduction(+ : nsrc, npend) reduction(min : badphi, badf)
+    {
+        ibox lb, lr;
+        box_empty(&lb);
+        box_empty(&lr);
+#pragma omp for collapse(2) schedule(static)
+        for (int k = 0; k < e->n[2]; k++)
+            for (int j = 0; j < e->n[1]; j++)
+                for (int i = 0; i < e->n[0]; i++) {
+                    const size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    const double s = phi[c] / bh;
+                    const int solid = is_solid(e, c);
+                    double v = 0;
+                    pending[c] = 0;
+                    if (!isfinite(s)) {
+                        if (c < badphi)
+                            badphi = c;
+                        e->w[c] = 0;
+                        continue;
+                    }
+                    if (fabs(s) < 1 && !solid) {
+                        v = (1 - s * s) * (1 - s * s);
+                        nsrc++;
+                        box_add(&lb, i, j, k);
+                        for (int fi = 0; fi < nfields; fi++)
+                            for (int q = 0; q < f[fi].ncomp; q++)
+                                if (!isfinite(f[fi].in[q][c]) && c < badf)
+                                    badf = c;
+                        if (need) {
+#pragma omp atomic write
+                            need[c] = 1;
+                        }
+                    }
+                    e->w[c] = (float)v;
+                    if (solid || (ob > 0 && !(fabs(phi[c]) < ob)))
+                        continue;
+                    size_t idx[8];
+                    double wt[8];
+                    int m;
+                    pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+                    npend++;
+                    if (pending[c] == 2)
+                        box_add(&lr, i, j, k);
+                    if (need)
+                        for (int q = 0; q < m; q++) {
+#pragma omp atomic write
+                            need[idx[q]] = 1;
+                        }
+                }
+#pragma omp critical(hv_extend_box)
+        {
+            box_union(&band_box, &lb);
+            box_union(&ratio_box, &lr);
+        }
+    }
+    if (badphi != SIZE_MAX)
+        return hv_error(HV_ERR_NUMERIC,
+                        "extend: the level set holds a non-finite value (%g) at cell %zu",
+                        (double)phi[badphi], badphi);
+    for (int i = 0; i < nfields && badf != SIZE_MAX; i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            if (!isfinite(f[i].in[q][badf]))
+                return hv_error(HV_ERR_NUMERIC,
+                                "extend: field %d component %d is NaN/Inf at cell %zu, inside "
+                                "the source band",
+                                i, q, badf);
+    *nsrc_out = nsrc;
+    *npend_out = npend;
+    *wbox = band_box;
+    *rbox = ratio_box;
+    return HV_OK;
+}
+
+void hv_extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f)
+{
+    const uint8_t *pending = e->pending;
+    const size_t rows = (size_t)e->n[1] * e->n[2], nx = (size_t)e->n[0];
+    const float bg = e->o.background;
+#pragma omp parallel for schedule(static)
+    for (size_t r = 0; r < rows; r++) {
+        const uint8_t *pr = pending + r * nx;
+        for (size_t x = 0; x < nx;) {
+            if (pr[x]) {
+                x++;
+                continue;
+            }
+            size_t x1 = x + 1;
+            while (x1 < nx && !pr[x1])
+                x1++;
+            for (int fi = 0; fi < nfields; fi++)
+                for (int q = 0; q < f[fi].ncomp; q++) {
+                    float *o = f[fi].out[q] + r * nx;
+                    for (size_t y = x; y < x1; y++)
+                        o[y] = bg;
+                }
+            x = x1;
+        }
+    }
+}
+
+void hv_extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
+                          double thr, int last, const uint8_t *trusted, ibox *rbox,
+                          hv_extend_counts *n)
+{
+    uint8_t *pending = e->pending;
+    size_t left = 0, cp = 0, ratio = 0, weak = 0;
+    /* The cells left for the next level are boxed as they are met. */
+    box_empty(rbox);
+#pragma omp parallel reduction(+ : left, cp, ratio, weak)
+    {
+        ibox lr;
+        box_empty(&lr);
+#pragma omp for collapse(2) schedule(static)
+        for (int k = 0; k < e->n[2]; k++)
+            for (int j = 0; j < e->n[1]; j++)
+                for (int i = 0; i < e->n[0]; i++) {
+                    size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+                    if (!pending[c])
+                        continue;
+                    size_t idx[8] = {c};
+                    double wt[8] = {1};
+                    int m = 1, at_cp = 0;
+                    if (pending[c] == 1)
+                        at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
+                    double val[1 + 4 * MAX_FIELDS_PER_CALL];
+                    sample_all(e, idx, wt, m, val);
+                    double W = val[0];
+                    if (!(W > thr) && at_cp) {
+                        /* Closest point but no weight there: read at the cell from now on. */
+                        at_cp = 0;
+                        pending[c] = 2;
+                        idx[0] = c;
+                        wt[0] = 1;
+                        m = 1;
+                        if (trusted && !trusted[c]) {
+                            /* Off the cells the band solve was made for: not at this level. */
+                            W = 0;
+                        } else {
+                            sample_all(e, idx, wt, m, val);
+                            W = val[0];
+                        }
+                    }
+                    if (!(W > thr) && !last) {
+                        left++;
+                        box_add(&lr, i, j, k);
+                        continue;
+                    }
+                    if (!(W > 0)) {
+                        for (int fi = 0; fi < nfields; fi++)
+                            for (int q = 0; q < f[fi].ncomp; q++)
+                                f[fi].out[q][c] = e->o.background;
+                    } else {
+                        write_cell(e, nfields, f, c, val);
+                    }
+                    weak += !(W > thr);
+                    cp += at_cp;
+                    ratio += !at_cp;
+                    pending[c] = 0;
+                }
+#pragma omp critical(hv_extend_box)
+        box_union(rbox, &lr);
+    }
+    n->left = left;
+    n->cp = cp;
+    n->ratio = ratio;
+    n->weak = weak;
+}
