@@ -1,10 +1,12 @@
 /* OpenVDB files through the C shim: level sets (narrow band and dense), vec3,
  * masks, metadata, common boxes, errors; OpenVDB's own reader (pyopenvdb,
- * vdb_print) as the judge of the files; and the OpenVDB reference tools
- * (meshToLevelSet, sdfToExt) against analytic answers.
+ * vdb_print) as the judge of the files; and the OpenVDB reference tools of the
+ * benchmarks (meshToLevelSet, sdfToExt: tools/bench_ref_vdb.cpp, linked in)
+ * against analytic answers.
  * Links OpenVDB: run with CK_FORK=no (docs/METHOD.md, "Testing notes"). */
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
+#include "../tools/bench_ref.h"
 #include "testlib.h"
 
 #include <check.h>
@@ -670,7 +672,7 @@ START_TEST(mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface)
     hv_grid *g = NULL;
     ck_assert_int_eq(hv_grid_create(&g, 3, n, h, o), HV_OK);
     double secs = -1;
-    ck_assert_int_eq(hv_vdb_mesh_to_levelset(&v[0][0], 8, &t[0][0], 12, 3.0, g, &secs), HV_OK);
+    ck_assert_int_eq(ref_vdb_mesh_to_levelset(&v[0][0], 8, &t[0][0], 12, 3.0, g, &secs), HV_OK);
     ck_assert_double_ge(secs, 0);
     double max_err1 = 0, max_err2 = 0;
     size_t band = 0, wrong_sign = 0;
@@ -706,7 +708,7 @@ START_TEST(mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface)
            n[0], n[1], n[2], max_err1 / h, max_err2 / h, secs);
 
     uint32_t bad[3] = {0, 1, 8};
-    ck_assert_int_eq(hv_vdb_mesh_to_levelset(&v[0][0], 8, bad, 1, 3.0, g, NULL),
+    ck_assert_int_eq(ref_vdb_mesh_to_levelset(&v[0][0], 8, bad, 1, 3.0, g, NULL),
                      HV_ERR_INVALID_ARG);
     hv_grid_destroy(&g);
 }
@@ -734,7 +736,7 @@ START_TEST(sdf_to_ext_reference_should_extend_a_surface_field_along_normals)
             }
     const float NOVAL = -1000.0f;
     double secs = -1;
-    ck_assert_int_eq(hv_vdb_sdf_to_ext(phi, fx, 4.0, 1, NOVAL, ox, &secs), HV_OK);
+    ck_assert_int_eq(ref_vdb_sdf_to_ext(phi, fx, 4.0, 1, NOVAL, ox, &secs), HV_OK);
     double max_err = 0, sum_err = 0;
     size_t cnt = 0;
     for (int k = 0; k < SN[2]; k++)
@@ -763,7 +765,7 @@ START_TEST(sdf_to_ext_reference_should_extend_a_surface_field_along_normals)
     ck_assert_double_lt(max_err, 0.75 * SH);
 
     /* the vector variant, computed everywhere (band <= 0) */
-    ck_assert_int_eq(hv_vdb_sdf_to_ext_vec3(phi, fx, fy, fz, 0.0, 2, NOVAL, ox, oy, oz, NULL),
+    ck_assert_int_eq(ref_vdb_sdf_to_ext_vec3(phi, fx, fy, fz, 0.0, 2, NOVAL, ox, oy, oz, NULL),
                      HV_OK);
     double vmax = 0, vsum = 0;
     size_t vcnt = 0, unset = 0;
@@ -793,7 +795,7 @@ START_TEST(sdf_to_ext_reference_should_extend_a_surface_field_along_normals)
     /* a field without a zero crossing is refused */
     for (size_t q = 0; q < hv_grid_count(phi); q++)
         fx->v[q] = 1.0f;
-    ck_assert_int_eq(hv_vdb_sdf_to_ext(fx, fy, 3.0, 1, 0.0f, ox, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_int_eq(ref_vdb_sdf_to_ext(fx, fy, 3.0, 1, 0.0f, ox, NULL), HV_ERR_INVALID_ARG);
     hv_grid_destroy(&phi);
     hv_grid_destroy(&fx);
     hv_grid_destroy(&fy);

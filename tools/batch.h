@@ -1,11 +1,14 @@
-/* heatvox batch: pieces shared by the batch driver (cmd_batch.c) and the job
- * that each worker process runs (batch_job.c). */
+/* heatvox batch: pieces shared by the files of the batch command: the driver
+ * (cmd_batch.c: options and top-level flow), the inputs (batch_inputs.c), the
+ * plan (batch_plan.c), the worker pool (batch_pool.c), progress and report
+ * (batch_report.c), and the job that each worker process runs (batch_job.c). */
 #ifndef HV_TOOLS_BATCH_H
 #define HV_TOOLS_BATCH_H
 
 #include "cli.h"
 
 #include <stddef.h>
+#include <stdio.h>
 
 enum { BATCH_VDB = 0, BATCH_EXR = 1 };
 
@@ -60,5 +63,84 @@ typedef struct batch_buf {
 void bb_printf(batch_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 void bb_json_string(batch_buf *b, const char *s);
 void bb_free(batch_buf *b);
+
+/* strdup and asprintf for the driver: on out of memory they print a message
+ * and exit with HV_EXIT_FAIL. The caller frees the result. (batch_job.c) */
+char *batch_xstrdup(const char *s);
+char *batch_xprintf(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/* ---- the driver ---- */
+
+/* Most worker processes (-j). */
+#define BATCH_MAX_WORKERS 256
+
+/* One input of the driver. */
+typedef struct batch_job {
+    char *input;
+    char *stem;    /* output path without extension */
+    char *output;
+    char **args;   /* per-line options, owned */
+    int nargs;
+    batch_opts opts;
+    char hash[17];
+    char *error;   /* planning error: the job fails without running */
+    int skip;
+    int state;     /* 0 pending, 1 running, 2 done */
+} batch_job;
+
+typedef struct batch_joblist {
+    batch_job *v;
+    size_t n, cap;
+} batch_joblist;
+
+/* batch_inputs.c. Appends a job for input whose output is stem + extension;
+ * the strings are copied. */
+batch_job *batch_jobs_add(batch_joblist *l, const char *input, const char *stem);
+/* Frees every job and the list's array. */
+void batch_jobs_free(batch_joblist *l);
+/* Appends the jobs of each input: a mesh file, a directory (searched
+ * recursively for meshes; outputs keep the sub-directory under outdir) or a
+ * manifest. Inputs that cannot be read become jobs with an error. */
+void batch_inputs_find(batch_joblist *l, char *const *inputs, int ninputs, const char *outdir);
+
+/* batch_plan.c. Parses the options of every job (the global ones gargv, then
+ * its own), names its output and marks the jobs that are up to date (unless
+ * force) or cannot run. */
+void batch_plan(batch_joblist *l, int gargc, char **gargv, int force);
+/* The dry run: one line per job and a count on stdout; returns the exit code. */
+int batch_plan_print(const batch_joblist *l);
+
+/* batch_report.c. Counts, the progress bar and the report file of a run. */
+typedef struct batch_progress {
+    size_t total, done, ok, failed, skipped, to_run, ran;
+    double t0, drawn;
+    int tty, bar_shown;
+    const char *current;
+    FILE *report; /* --report, or NULL */
+} batch_progress;
+
+/* Zeroes p and starts the clock for the jobs of l (report NULL). */
+void batch_progress_start(batch_progress *p, const batch_joblist *l);
+/* Erases the bar if shown. */
+void batch_bar_clear(batch_progress *p);
+/* Redraws the bar (a terminal only), at most ten times a second unless forced. */
+void batch_bar_draw(batch_progress *p, int force);
+/* Appends one JSON line to the report, if any. */
+void batch_report_line(batch_progress *p, const char *line);
+/* A report line written by the driver itself (no worker report). */
+void batch_report_simple(batch_progress *p, const batch_job *j, const char *status,
+                         const char *error, const char *stage);
+/* One finished input: counts, a line on stderr, the bar. */
+void batch_finish(batch_progress *p, batch_job *j, int ok, int skipped, const char *error,
+                  double seconds);
+/* The summary line on stdout. */
+void batch_report_summary(const batch_progress *p, int sig);
+
+/* batch_pool.c. Number of CPUs online (at least 1). */
+int batch_ncpus(void);
+/* Runs every job of l, at most nworkers at once, exe being this program;
+ * returns the stop signal (0 when all finished). */
+int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nworkers, int gargc,
+                   char **gargv);
 
 #endif

@@ -1,4 +1,5 @@
-/* heatvox batch: job options, the resume sidecar, and the job one worker runs. */
+/* heatvox batch: job options, the resume sidecar, and the job one worker runs;
+ * also the text helpers the batch files share. */
 #include "batch.h"
 
 #include <errno.h>
@@ -10,7 +11,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-/* ---- growing text buffer ---- */
+/* ---- text: a growing buffer, and strings for the driver ---- */
 
 void bb_printf(batch_buf *b, const char *fmt, ...)
 {
@@ -62,6 +63,30 @@ void bb_free(batch_buf *b)
     free(b->s);
     b->s = NULL;
     b->len = b->cap = 0;
+}
+
+char *batch_xstrdup(const char *s)
+{
+    char *d = strdup(s);
+    if (!d) {
+        fprintf(stderr, "heatvox batch: out of memory\n");
+        exit(HV_EXIT_FAIL);
+    }
+    return d;
+}
+
+char *batch_xprintf(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    char *s = NULL;
+    int n = vasprintf(&s, fmt, ap);
+    va_end(ap);
+    if (n < 0) {
+        fprintf(stderr, "heatvox batch: out of memory\n");
+        exit(HV_EXIT_FAIL);
+    }
+    return s;
 }
 
 /* ---- options ---- */

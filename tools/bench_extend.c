@@ -2,6 +2,7 @@
  * diffusion against OpenVDB's tools::sdfToExt (fast sweeping) on the same
  * input in the same process; both are compared with the exact closest-point
  * extension. */
+#include "bench_ref.h"
 #include "cli.h"
 
 #include <math.h>
@@ -324,11 +325,11 @@ int bench_extend(int argc, char **argv)
     for (int r = 0; r < repeat; r++) {
         double s = 0;
         t0 = hv_now();
-        st = vec ? hv_vdb_sdf_to_ext_vec3(b.phi, b.in[0], b.in[1], b.in[2], vb, 1, 0.0f, ref[0],
-                                          ref[1], ref[2], &s)
-                 : hv_vdb_sdf_to_ext(b.phi, b.in[0], vb, 1, 0.0f, ref[0], &s);
+        st = vec ? ref_vdb_sdf_to_ext_vec3(b.phi, b.in[0], b.in[1], b.in[2], vb, 1, 0.0f, ref[0],
+                                           ref[1], ref[2], &s)
+                 : ref_vdb_sdf_to_ext(b.phi, b.in[0], vb, 1, 0.0f, ref[0], &s);
         if (st)
-            return cli_fail("bench extend", "OpenVDB sdfToExt", st);
+            return ref_vdb_fail("bench extend", "OpenVDB sdfToExt", st);
         ref_wall = fmin(ref_wall, hv_now() - t0);
         ref_seconds = fmin(ref_seconds, s);
     }

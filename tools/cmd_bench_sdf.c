@@ -1,5 +1,6 @@
 /* heatvox bench sdf: the signed heat method pipeline on a mesh, stage by stage,
  * against OpenVDB's meshToLevelSet on the same mesh and grid in the same run. */
+#include "bench_ref.h"
 #include "cli.h"
 
 #include <stdio.h>
@@ -104,7 +105,7 @@ int cmd_bench_sdf(int argc, char **argv)
     int ok = hv_grid_create(&ref, 3, phi->n, phi->h, phi->origin) == HV_OK;
     for (int r = 0; ok && r <= repeat; r++) {
         double t0 = hv_now();
-        ok = hv_vdb_mesh_to_levelset(m->verts, m->nverts, m->tris, m->ntris, 3.0, ref, &ref_inner) == HV_OK;
+        ok = ref_vdb_mesh_to_levelset(m->verts, m->nverts, m->tris, m->ntris, 3.0, ref, &ref_inner) == HV_OK;
         double t = hv_now() - t0;
         if (r > 0 && t < ref_seconds)
             ref_seconds = t;
@@ -131,5 +132,5 @@ int cmd_bench_sdf(int argc, char **argv)
     hv_grid_destroy(&phi);
     hv_grid_destroy(&ref);
     hv_mesh_destroy(&m);
-    return ok ? HV_EXIT_OK : cli_fail("bench sdf", "OpenVDB reference", HV_ERR_BACKEND);
+    return ok ? HV_EXIT_OK : ref_vdb_fail("bench sdf", "OpenVDB reference", HV_ERR_BACKEND);
 }

@@ -1,5 +1,5 @@
 /*
- * OpenVDB files and OpenVDB reference tools, behind a C API.
+ * OpenVDB files, behind a C API.
  *
  * Index convention: voxel (i,j,k) of an hv_grid is OpenVDB index (i,j,k), and
  * the grid's linear transform has voxel size h and maps that index to the cell
@@ -156,36 +156,6 @@ HV_API hv_status hv_vdb_common_box(const char *path, const char *const *names, s
  * grid's) as text into buf. Missing key: HV_ERR_INVALID_ARG naming it. */
 HV_API hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key, char *buf,
                                   size_t bufsize);
-
-/* ---- OpenVDB reference tools (for comparisons and benchmarks) ----------- */
-
-/* Narrow-band signed distance of a closed triangle mesh by
- * openvdb::tools::meshToLevelSet (exact distance in the band, sign by flood
- * fill), sampled on out's voxels (out: dim 3, caller-created; its n, h and
- * origin define the samples). Voxels outside the band take -/+ band_voxels*h by
- * sign. verts: 3*nv world coordinates; tris: 3*nt indices < nv. seconds, if
- * not NULL, receives the time spent inside OpenVDB (without the dense copy). */
-HV_API hv_status hv_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
-                                         double band_voxels, hv_grid *out, double *seconds);
-
-/* Extends a scalar field off the zero level set of phi by
- * openvdb::tools::sdfToExt (fast sweeping): on the surface the value is field
- * sampled trilinearly at the crossing points; elsewhere it is constant along
- * the characteristics (normals). phi, field and out must share n, h and origin.
- * band_voxels > 0 restricts the computation to |phi| < band_voxels*h (voxels
- * outside get `background`); band_voxels <= 0 computes on every voxel.
- * n_iter: fast-sweeping iterations (8 sweeps each; 0 means 1).
- * Note: OpenVDB 10.0.1 hands the boundary callback index-space coordinates
- * (upstream bug #1640); this function runs OpenVDB in index space so that the
- * result is right with either behaviour. */
-HV_API hv_status hv_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
-                                   int n_iter, float background, hv_grid *out, double *seconds);
-
-/* The same for a vector field (three components), extended as a Vec3s grid. */
-HV_API hv_status hv_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
-                                        const hv_grid *fz, double band_voxels, int n_iter,
-                                        float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
-                                        double *seconds);
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,470 @@
+// The OpenVDB writer behind include/heatvox/vdb.h: dense heatvox grids become
+// sparse OpenVDB grids (level sets, float, vec3, masks) built leaf by leaf,
+// written with their metadata through a temporary file.
+#include "heatvox/vdb.h"
+#include "heatvox/io.h"
+#include "io/vdb_internal.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/io/Archive.h>
+#include <openvdb/tools/Prune.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+using namespace hv_vdb_shim;
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::Vec3d;
+using openvdb::Vec3f;
+using openvdb::Vec3i;
+
+// ---- grid geometry ----------------------------------------------------------
+
+// Index (i,j,k) maps to the cell centre origin + (i+1/2)h.
+openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
+{
+    auto xf = openvdb::math::Transform::createLinearTransform(h);
+    xf->postTranslate(
+        Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
+    return xf;
+}
+
+// Where a dense block goes in index space: block voxel (i,j,k) is written at
+// index (i,j,k) + off, under transform xf.
+struct Placement {
+    int off[3] = {0, 0, 0};
+    openvdb::math::Transform::Ptr xf;
+};
+
+void check_grid(const hv_grid *g, const char *what)
+{
+    if (!g || !g->v)
+        fail(HV_ERR_INVALID_ARG, std::string(what) + " is NULL");
+    if (g->dim != 2 && g->dim != 3)
+        fail(HV_ERR_INVALID_ARG, std::string(what) + ": dimension must be 2 or 3");
+    for (int a = 0; a < 3; a++)
+        if (g->n[a] <= 0 || !std::isfinite(g->origin[a]))
+            fail(HV_ERR_INVALID_ARG, std::string(what) + ": bad size or origin");
+    if (!(g->h > 0) || !std::isfinite(g->h))
+        fail(HV_ERR_INVALID_ARG, std::string(what) + ": voxel size must be positive");
+}
+
+void check_same_shape(const hv_grid *a, const hv_grid *b, const char *an, const char *bn)
+{
+    bool same = a->n[0] == b->n[0] && a->n[1] == b->n[1] && a->n[2] == b->n[2] &&
+                std::fabs(a->h - b->h) <= 1e-12 * a->h;
+    for (int d = 0; d < 3 && same; d++)
+        same = std::fabs(a->origin[d] - b->origin[d]) <= 1e-9 * (a->h + std::fabs(a->origin[d]));
+    if (!same) {
+        char buf[512];
+        snprintf(buf, sizeof buf,
+                 "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
+                 "%g) must have the same size, voxel size and origin",
+                 an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
+                 b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
+        fail(HV_ERR_INVALID_ARG, buf);
+    }
+}
+
+inline size_t lin(const hv_grid *g, int i, int j, int k)
+{
+    return (size_t)i + (size_t)g->n[0] * ((size_t)j + (size_t)g->n[1] * (size_t)k);
+}
+
+// Builds a tree over the block [0,n) leaf by leaf. value(i,j,k, &active) gives
+// each block voxel; the voxels of boundary leaves beyond the block are
+// inactive and hold outside(i,j,k) of the nearest block voxel (the background,
+// or for a level set the background with that voxel's sign, so that the sign
+// stays continuous across the block's faces). Constant leaves are then
+// collapsed into tiles by tools::prune (tolerance 0, lossless).
+int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
+
+template <class GridT, class F, class G>
+void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside,
+                bool prune)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+    const int D = (int)LeafT::DIM;
+    // Leaves cover the index box [off, off + n), aligned to multiples of D.
+    int l0[3];
+    size_t L[3];
+    for (int a = 0; a < 3; a++) {
+        l0[a] = floor_div(off[a], D);
+        L[a] = (size_t)(floor_div(off[a] + n[a] - 1, D) - l0[a] + 1);
+    }
+    const size_t nleaf = L[0] * L[1] * L[2];
+    auto origin = [&](size_t l) {
+        return Coord((l0[0] + (int)(l % L[0])) * D, (l0[1] + (int)(l / L[0] % L[1])) * D,
+                     (l0[2] + (int)(l / L[0] / L[1])) * D);
+    };
+    // Leaves are built in parallel; a leaf-sized region with no active voxel
+    // and one value becomes a tile instead of a leaf.
+    std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
+    std::vector<ValueT> tiles(nleaf);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
+        std::vector<ValueT> vals(LeafT::SIZE);
+        std::vector<char> on(LeafT::SIZE);
+        for (size_t l = r.begin(); l != r.end(); l++) {
+            const Coord o = origin(l);
+            bool any_on = false;
+            for (int x = o[0]; x < o[0] + D; x++)
+                for (int y = o[1]; y < o[1] + D; y++)
+                    for (int z = o[2]; z < o[2] + D; z++) {
+                        const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
+                        const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
+                        const int i = std::clamp(bi, 0, n[0] - 1), j = std::clamp(bj, 0, n[1] - 1),
+                                  k = std::clamp(bk, 0, n[2] - 1);
+                        bool active = false;
+                        if (bi == i && bj == j && bk == k)
+                            vals[q] = value(i, j, k, &active);
+                        else
+                            vals[q] = outside(i, j, k);
+                        on[q] = active;
+                        any_on |= active;
+                    }
+            bool uniform = !any_on;
+            for (size_t q = 1; uniform && q < vals.size(); q++)
+                uniform = vals[q] == vals[0];
+            if (uniform) {
+                tiles[l] = vals[0];
+                continue;
+            }
+            auto leaf = std::make_unique<LeafT>(o, vals[0], false);
+            for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
+                if (on[q])
+                    leaf->setValueOn(q, vals[q]);
+                else
+                    leaf->setValueOff(q, vals[q]);
+            }
+            leaves[l] = std::move(leaf);
+        }
+    });
+    auto &tree = grid.tree();
+    for (size_t l = 0; l < nleaf; l++) {
+        if (leaves[l])
+            tree.addLeaf(leaves[l].release());
+        else
+            tree.addTile(1, origin(l), tiles[l], false);
+    }
+    if (prune)
+        openvdb::tools::prune(tree);
+}
+
+void tag_block(openvdb::GridBase &grid, const int n[3], const int off[3])
+{
+    grid.insertMeta(BLOCK_MIN, openvdb::Vec3IMetadata(Vec3i(off[0], off[1], off[2])));
+    grid.insertMeta(BLOCK_MAX, openvdb::Vec3IMetadata(Vec3i(off[0] + n[0] - 1, off[1] + n[1] - 1,
+                                                            off[2] + n[2] - 1)));
+}
+
+openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense,
+                                      bool prune, const Placement &pl = Placement())
+{
+    const float bg = (float)(band_voxels * g->h);
+    auto grid = openvdb::FloatGrid::create(bg);
+    const float *v = g->v;
+    fill_block(
+        *grid, g->n, pl.off,
+        [&](int i, int j, int k, bool *active) {
+            float p = v[lin(g, i, j, k)];
+            *active = dense || std::fabs(p) < bg;
+            if (*active)
+                return p;
+            return p < 0 ? -bg : bg;
+        },
+        [&](int i, int j, int k) { return v[lin(g, i, j, k)] < 0 ? -bg : bg; }, prune);
+    grid->setTransform(pl.xf ? pl.xf : make_transform(g->h, g->origin));
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    return grid;
+}
+
+} // namespace
+
+struct hv_vdb_writer {
+    openvdb::GridPtrVec grids;
+    openvdb::MetaMap meta;
+    bool has_index0 = false; // hv_vdb_writer_set_index_origin was called
+    double index0[3] = {0, 0, 0};
+};
+
+namespace {
+
+// Archive::write(stream, ...) is protected; File::write opens its own stream
+// and never checks it after closing, so a full disk would go unnoticed.
+class CheckedArchive : public openvdb::io::Archive {
+  public:
+    void write_to(std::ostream &os, const openvdb::GridCPtrVec &grids,
+                  const openvdb::MetaMap &meta) const
+    {
+        this->write(os, grids, /*seekable=*/true, meta);
+    }
+};
+
+void check_new_name(hv_vdb_writer *w, const char *name)
+{
+    if (!w)
+        fail(HV_ERR_INVALID_ARG, "vdb writer is NULL");
+    if (!name || !*name)
+        fail(HV_ERR_INVALID_ARG, "vdb writer: grid name is empty");
+    for (auto &g : w->grids)
+        if (g->getName() == name)
+            fail(HV_ERR_INVALID_ARG,
+                 std::string("vdb writer: a grid named '") + name + "' was already added");
+}
+
+// The placement of block g in this writer's index space: by default index
+// (0,0,0) is the block's first voxel; after hv_vdb_writer_set_index_origin the
+// transform puts index (0,0,0) at that world position and the block is shifted
+// by whole voxels to keep its world position.
+Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    Placement pl;
+    if (!w->has_index0) {
+        pl.xf = make_transform(g->h, g->origin);
+        return pl;
+    }
+    for (int a = 0; a < 3; a++) {
+        double s = (g->origin[a] + 0.5 * g->h - w->index0[a]) / g->h;
+        double r = std::nearbyint(s);
+        if (!(std::fabs(s - r) <= 1e-4) || std::fabs(r) > 1e9) {
+            char msg[256];
+            std::snprintf(msg, sizeof msg,
+                          "grid '%s': its voxels are not on the index lattice of the writer's "
+                          "index origin (axis %d is %.6g voxels off)",
+                          name, a, s - r);
+            fail(HV_ERR_INVALID_ARG, msg);
+        }
+        pl.off[a] = (int)r;
+    }
+    pl.xf = openvdb::math::Transform::createLinearTransform(g->h);
+    pl.xf->postTranslate(Vec3d(w->index0[0], w->index0[1], w->index0[2]));
+    return pl;
+}
+
+void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g,
+                 const char *name, const Placement &pl)
+{
+    grid->setName(name);
+    grid->setSaveFloatAsHalf(false);
+    grid->setCreator(std::string("heatvox ") + HV_VERSION_STRING);
+    tag_block(*grid, g->n, pl.off);
+    w->grids.push_back(grid);
+}
+
+} // namespace
+
+extern "C" {
+
+hv_status hv_vdb_writer_create(hv_vdb_writer **out)
+{
+    if (!out)
+        return hv_error(HV_ERR_INVALID_ARG, "hv_vdb_writer_create: out is NULL");
+    *out = nullptr;
+    return guarded("hv_vdb_writer_create", [&] {
+        init_vdb();
+        auto *w = new hv_vdb_writer;
+        w->meta.insertMeta("creator",
+                           openvdb::StringMetadata(std::string("heatvox ") + HV_VERSION_STRING));
+        *out = w;
+        return HV_OK;
+    });
+}
+
+void hv_vdb_writer_destroy(hv_vdb_writer **w)
+{
+    if (!w || !*w)
+        return;
+    delete *w;
+    *w = nullptr;
+}
+
+hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const char *name,
+                                     double band_voxels, int dense)
+{
+    return guarded("hv_vdb_writer_add_levelset", [&] {
+        check_new_name(w, name);
+        check_grid(g, "level set grid");
+        if (!(band_voxels > 0) || !std::isfinite(band_voxels))
+            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
+                                         "': band width must be positive, got " +
+                                         std::to_string(band_voxels));
+        hv_status st = hv_check_finite(g->v, hv_grid_count(g), name);
+        if (st)
+            return st;
+        Placement pl = placement(w, g, name);
+        auto grid = levelset_from(g, band_voxels, dense != 0, true, pl);
+        finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    return guarded("hv_vdb_writer_add_float", [&] {
+        check_new_name(w, name);
+        check_grid(g, "float grid");
+        Placement pl = placement(w, g, name);
+        auto grid = openvdb::FloatGrid::create(0.0f);
+        fill_block(
+            *grid, g->n, pl.off,
+            [&](int i, int j, int k, bool *active) {
+                *active = true;
+                return g->v[lin(g, i, j, k)];
+            },
+            [](int, int, int) { return 0.0f; }, true);
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_UNKNOWN);
+        finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
+                                 const hv_grid *gz, const char *name)
+{
+    return guarded("hv_vdb_writer_add_vec3", [&] {
+        check_new_name(w, name);
+        check_grid(gx, "x component");
+        check_grid(gy, "y component");
+        check_grid(gz, "z component");
+        check_same_shape(gx, gy, "x component", "y component");
+        check_same_shape(gx, gz, "x component", "z component");
+        Placement pl = placement(w, gx, name);
+        auto grid = openvdb::Vec3SGrid::create(Vec3f(0, 0, 0));
+        fill_block(
+            *grid, gx->n, pl.off,
+            [&](int i, int j, int k, bool *active) {
+                *active = true;
+                size_t c = lin(gx, i, j, k);
+                return Vec3f(gx->v[c], gy->v[c], gz->v[c]);
+            },
+            [](int, int, int) { return Vec3f(0, 0, 0); }, true);
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_UNKNOWN);
+        grid->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+        finish_grid(w, grid, gx, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    return guarded("hv_vdb_writer_add_mask", [&] {
+        check_new_name(w, name);
+        check_grid(g, "mask grid");
+        Placement pl = placement(w, g, name);
+        auto grid = openvdb::BoolGrid::create(false);
+        if (g->solid) {
+            auto acc = grid->getAccessor();
+            for (int k = 0; k < g->n[2]; k++)
+                for (int j = 0; j < g->n[1]; j++)
+                    for (int i = 0; i < g->n[0]; i++)
+                        if (g->solid[lin(g, i, j, k)])
+                            acc.setValueOn(Coord(i + pl.off[0], j + pl.off[1], k + pl.off[2]), true);
+            openvdb::tools::prune(grid->tree());
+        }
+        grid->setTransform(pl.xf);
+        finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_world[3])
+{
+    return guarded("hv_vdb_writer_set_index_origin", [&] {
+        if (!w || !index0_world)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: writer and position are required");
+        for (int a = 0; a < 3; a++)
+            if (!std::isfinite(index0_world[a]))
+                fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: position is not finite");
+        w->has_index0 = true;
+        for (int a = 0; a < 3; a++)
+            w->index0[a] = index0_world[a];
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value)
+{
+    return guarded("hv_vdb_writer_set_meta", [&] {
+        if (!w || !key || !*key || !value)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_meta: writer, key and value are required");
+        w->meta.removeMeta(key);
+        w->meta.insertMeta(key, openvdb::StringMetadata(value));
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name, const char *key,
+                                      const char *value)
+{
+    return guarded("hv_vdb_writer_set_grid_meta", [&] {
+        if (!w || !grid_name || !key || !*key || !value)
+            fail(HV_ERR_INVALID_ARG,
+                 "hv_vdb_writer_set_grid_meta: writer, grid, key and value are required");
+        for (auto &g : w->grids)
+            if (g->getName() == grid_name) {
+                g->removeMeta(key);
+                g->insertMeta(key, openvdb::StringMetadata(value));
+                return HV_OK;
+            }
+        fail(HV_ERR_INVALID_ARG, std::string("hv_vdb_writer_set_grid_meta: no grid named '") +
+                                     grid_name + "' was added");
+    });
+}
+
+hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path)
+{
+    char tmp[4096];
+    tmp[0] = '\0';
+    hv_status st = guarded(path ? path : "hv_vdb_writer_write", [&] {
+        if (!w)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_write: writer is NULL");
+        if (!path || !*path)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_write: output path is empty");
+        if (w->grids.empty())
+            fail(HV_ERR_INVALID_ARG, std::string(path) + ": no grids were added to the writer");
+        hv_status s = hv_tmp_name(path, tmp, sizeof tmp);
+        if (s) {
+            tmp[0] = '\0';
+            return s;
+        }
+        CheckedArchive ar;
+        uint32_t comp = openvdb::io::COMPRESS_ACTIVE_MASK;
+        comp |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
+                                                            : openvdb::io::COMPRESS_ZIP;
+        ar.setCompression(comp);
+        std::ofstream os(tmp, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+        if (!os)
+            fail(HV_ERR_IO, std::string(path) + ": cannot create the output file: " +
+                                strerror(errno));
+        openvdb::GridCPtrVec grids(w->grids.begin(), w->grids.end());
+        ar.write_to(os, grids, w->meta);
+        os.flush();
+        os.close();
+        if (os.fail())
+            fail(HV_ERR_IO, std::string(path) + ": writing failed (disk full?)");
+        s = hv_tmp_commit(tmp, path);
+        tmp[0] = '\0';
+        return s;
+    });
+    if (st && tmp[0])
+        hv_tmp_discard(tmp);
+    return st;
+}
+
+} // extern "C"

@@ -1,0 +1,57 @@
+/* OpenVDB's own algorithms that the benchmarks (heatvox bench sdf, bench
+ * extend) and tests/check_vdb.c compare heatvox with, behind a C API
+ * (tools/bench_ref_vdb.cpp). Not part of heatvox's API: the library does not
+ * contain them; the command and the tests that use them link that file.
+ *
+ * Grids follow include/heatvox/vdb.h: voxel (i,j,k) of an hv_grid is OpenVDB
+ * index (i,j,k), at the cell centre origin + (i+1/2, j+1/2, k+1/2) * h. Errors
+ * are returned as hv_status; the message is ref_vdb_last_error(), not
+ * hv_last_error(). */
+#ifndef HV_TOOLS_BENCH_REF_H
+#define HV_TOOLS_BENCH_REF_H
+
+#include "heatvox/grid.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Narrow-band signed distance of a closed triangle mesh by
+ * openvdb::tools::meshToLevelSet (exact distance in the band, sign by flood
+ * fill), sampled on out's voxels (out: dim 3, caller-created; its n, h and
+ * origin define the samples). Voxels outside the band take -/+ band_voxels*h by
+ * sign. verts: 3*nv world coordinates; tris: 3*nt indices < nv. seconds, if
+ * not NULL, receives the time spent inside OpenVDB (without the dense copy). */
+hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                   double band_voxels, hv_grid *out, double *seconds);
+
+/* Extends a scalar field off the zero level set of phi by
+ * openvdb::tools::sdfToExt (fast sweeping): on the surface the value is field
+ * sampled trilinearly at the crossing points; elsewhere it is constant along
+ * the characteristics (normals). phi, field and out must share n, h and origin.
+ * band_voxels > 0 restricts the computation to |phi| < band_voxels*h (voxels
+ * outside get `background`); band_voxels <= 0 computes on every voxel.
+ * n_iter: fast-sweeping iterations (8 sweeps each; 0 means 1).
+ * Note: OpenVDB 10.0.1 hands the boundary callback index-space coordinates
+ * (upstream bug #1640); this function runs OpenVDB in index space so that the
+ * result is right with either behaviour. */
+hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
+                             int n_iter, float background, hv_grid *out, double *seconds);
+
+/* The same for a vector field (three components), extended as a Vec3s grid. */
+hv_status ref_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
+                                  const hv_grid *fz, double band_voxels, int n_iter,
+                                  float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
+                                  double *seconds);
+
+/* Message of the last failed call above on this thread ("" when none). */
+const char *ref_vdb_last_error(void);
+
+/* cli_fail (tools/cli.h) for the calls above: prints "heatvox <cmd>: <what>:
+ * <status>: <ref_vdb_last_error()>" on stderr and returns HV_EXIT_FAIL. */
+int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,456 @@
+// OpenVDB's own algorithms that heatvox is measured against (tools/bench_ref.h):
+// meshToLevelSet for heatvox sdf, sdfToExt (fast sweeping) for heatvox extend.
+// Beside the benchmarks rather than in the library: heatvox's API does not
+// offer them. Every entry point runs its body inside guarded(), which turns
+// any exception into an hv_status and a message (ref_vdb_last_error()).
+// Compiled like the library's OpenVDB shim (C++17, default visibility), from
+// the public headers and OpenVDB's alone; the grid helpers below follow the
+// shim's (src/io/vdb_write.cpp, vdb_read.cpp) so that OpenVDB gets the same
+// grids.
+#include "bench_ref.h"
+
+extern "C" {
+#include "cli.h"
+}
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/Prune.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <string>
+#include <vector>
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+using openvdb::Vec3d;
+using openvdb::Vec3f;
+
+thread_local std::string last_error;
+
+// An error detected here, carried to the C boundary.
+struct Fail {
+    hv_status st;
+    std::string msg;
+};
+
+[[noreturn]] void fail(hv_status st, const std::string &msg) { throw Fail{st, msg}; }
+
+hv_status record(hv_status st, const std::string &msg)
+{
+    last_error = msg;
+    return st;
+}
+
+// `where` names the operation, so that OpenVDB's own messages still say which
+// call failed.
+template <class F> hv_status guarded(const char *where, F &&body)
+{
+    const std::string w(where);
+    try {
+        return body();
+    } catch (const Fail &e) {
+        return record(e.st, e.msg);
+    } catch (const openvdb::IoError &e) {
+        return record(HV_ERR_IO, w + ": " + e.what());
+    } catch (const openvdb::Exception &e) {
+        return record(HV_ERR_BACKEND, w + ": OpenVDB: " + e.what());
+    } catch (const std::bad_alloc &) {
+        return record(HV_ERR_NOMEM, w + ": out of memory");
+    } catch (const std::exception &e) {
+        return record(HV_ERR_BACKEND, w + ": " + e.what());
+    } catch (...) {
+        return record(HV_ERR_INTERNAL, w + ": unknown exception");
+    }
+}
+
+void init_vdb()
+{
+    static std::once_flag init_flag;
+    std::call_once(init_flag, [] { openvdb::initialize(); });
+}
+
+// Index (i,j,k) maps to the cell centre origin + (i+1/2)h.
+openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
+{
+    auto xf = openvdb::math::Transform::createLinearTransform(h);
+    xf->postTranslate(
+        Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
+    return xf;
+}
+
+void check_grid(const hv_grid *g, const char *what)
+{
+    if (!g || !g->v)
+        fail(HV_ERR_INVALID_ARG, std::string(what) + " is NULL");
+    if (g->dim != 2 && g->dim != 3)
+        fail(HV_ERR_INVALID_ARG, std::string(what) + ": dimension must be 2 or 3");
+    for (int a = 0; a < 3; a++)
+        if (g->n[a] <= 0 || !std::isfinite(g->origin[a]))
+            fail(HV_ERR_INVALID_ARG, std::string(what) + ": bad size or origin");
+    if (!(g->h > 0) || !std::isfinite(g->h))
+        fail(HV_ERR_INVALID_ARG, std::string(what) + ": voxel size must be positive");
+}
+
+void check_same_shape(const hv_grid *a, const hv_grid *b, const char *an, const char *bn)
+{
+    bool same = a->n[0] == b->n[0] && a->n[1] == b->n[1] && a->n[2] == b->n[2] &&
+                std::fabs(a->h - b->h) <= 1e-12 * a->h;
+    for (int d = 0; d < 3 && same; d++)
+        same = std::fabs(a->origin[d] - b->origin[d]) <= 1e-9 * (a->h + std::fabs(a->origin[d]));
+    if (!same) {
+        char buf[512];
+        snprintf(buf, sizeof buf,
+                 "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
+                 "%g) must have the same size, voxel size and origin",
+                 an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
+                 b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
+        fail(HV_ERR_INVALID_ARG, buf);
+    }
+}
+
+inline size_t lin(const hv_grid *g, int i, int j, int k)
+{
+    return (size_t)i + (size_t)g->n[0] * ((size_t)j + (size_t)g->n[1] * (size_t)k);
+}
+
+// Builds a tree over the block [0,n) leaf by leaf. value(i,j,k, &active) gives
+// each block voxel; the voxels of boundary leaves beyond the block are
+// inactive and hold outside(i,j,k) of the nearest block voxel (the background,
+// or for a level set the background with that voxel's sign, so that the sign
+// stays continuous across the block's faces). Constant leaves are then
+// collapsed into tiles by tools::prune (tolerance 0, lossless).
+int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
+
+template <class GridT, class F, class G>
+void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside,
+                bool prune)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+    const int D = (int)LeafT::DIM;
+    // Leaves cover the index box [off, off + n), aligned to multiples of D.
+    int l0[3];
+    size_t L[3];
+    for (int a = 0; a < 3; a++) {
+        l0[a] = floor_div(off[a], D);
+        L[a] = (size_t)(floor_div(off[a] + n[a] - 1, D) - l0[a] + 1);
+    }
+    const size_t nleaf = L[0] * L[1] * L[2];
+    auto origin = [&](size_t l) {
+        return Coord((l0[0] + (int)(l % L[0])) * D, (l0[1] + (int)(l / L[0] % L[1])) * D,
+                     (l0[2] + (int)(l / L[0] / L[1])) * D);
+    };
+    // Leaves are built in parallel; a leaf-sized region with no active voxel
+    // and one value becomes a tile instead of a leaf.
+    std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
+    std::vector<ValueT> tiles(nleaf);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
+        std::vector<ValueT> vals(LeafT::SIZE);
+        std::vector<char> on(LeafT::SIZE);
+        for (size_t l = r.begin(); l != r.end(); l++) {
+            const Coord o = origin(l);
+            bool any_on = false;
+            for (int x = o[0]; x < o[0] + D; x++)
+                for (int y = o[1]; y < o[1] + D; y++)
+                    for (int z = o[2]; z < o[2] + D; z++) {
+                        const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
+                        const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
+                        const int i = std::clamp(bi, 0, n[0] - 1), j = std::clamp(bj, 0, n[1] - 1),
+                                  k = std::clamp(bk, 0, n[2] - 1);
+                        bool active = false;
+                        if (bi == i && bj == j && bk == k)
+                            vals[q] = value(i, j, k, &active);
+                        else
+                            vals[q] = outside(i, j, k);
+                        on[q] = active;
+                        any_on |= active;
+                    }
+            bool uniform = !any_on;
+            for (size_t q = 1; uniform && q < vals.size(); q++)
+                uniform = vals[q] == vals[0];
+            if (uniform) {
+                tiles[l] = vals[0];
+                continue;
+            }
+            auto leaf = std::make_unique<LeafT>(o, vals[0], false);
+            for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
+                if (on[q])
+                    leaf->setValueOn(q, vals[q]);
+                else
+                    leaf->setValueOff(q, vals[q]);
+            }
+            leaves[l] = std::move(leaf);
+        }
+    });
+    auto &tree = grid.tree();
+    for (size_t l = 0; l < nleaf; l++) {
+        if (leaves[l])
+            tree.addLeaf(leaves[l].release());
+        else
+            tree.addTile(1, origin(l), tiles[l], false);
+    }
+    if (prune)
+        openvdb::tools::prune(tree);
+}
+
+// phi as an OpenVDB level set, block voxel (i,j,k) at index (i,j,k), built as
+// the shim's writer builds it (src/io/vdb_write.cpp), so that OpenVDB sees the
+// grid a heatvox file would hold.
+openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense)
+{
+    const float bg = (float)(band_voxels * g->h);
+    auto grid = openvdb::FloatGrid::create(bg);
+    const float *v = g->v;
+    const int off[3] = {0, 0, 0};
+    fill_block(
+        *grid, g->n, off,
+        [&](int i, int j, int k, bool *active) {
+            float p = v[lin(g, i, j, k)];
+            *active = dense || std::fabs(p) < bg;
+            if (*active)
+                return p;
+            return p < 0 ? -bg : bg;
+        },
+        [&](int i, int j, int k) { return v[lin(g, i, j, k)] < 0 ? -bg : bg; }, true);
+    grid->setTransform(make_transform(g->h, g->origin));
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    return grid;
+}
+
+// Calls put(linear index, value) for every voxel of box, parallel over z.
+template <class GridT, class F> void for_box(const GridT &grid, const CoordBBox &box, F &&put)
+{
+    const Coord lo = box.min();
+    const int64_t nx = box.dim()[0], ny = box.dim()[1];
+    tbb::parallel_for(tbb::blocked_range<int>(box.min()[2], box.max()[2] + 1),
+                      [&](const tbb::blocked_range<int> &r) {
+                          auto acc = grid.getConstAccessor();
+                          for (int k = r.begin(); k != r.end(); k++)
+                              for (int j = lo[1]; j <= box.max()[1]; j++)
+                                  for (int i = lo[0]; i <= box.max()[0]; i++) {
+                                      const Coord c(i, j, k);
+                                      const size_t idx =
+                                          (size_t)(i - lo[0]) +
+                                          (size_t)nx * ((size_t)(j - lo[1]) +
+                                                        (size_t)ny * (size_t)(k - lo[2]));
+                                      put(idx, acc, c);
+                                  }
+                      });
+}
+
+// A dense hv_grid block copied from a grid sampled at hv index (i,j,k).
+template <class GridT, class Conv>
+void copy_block(const GridT &grid, hv_grid *out, Conv &&conv)
+{
+    CoordBBox box(Coord(0, 0, 0), Coord(out->n[0] - 1, out->n[1] - 1, out->n[2] - 1));
+    for_box(grid, box, [&](size_t idx, auto &acc, const Coord &c) {
+        out->v[idx] = conv(acc.getValue(c), acc.isValueOn(c));
+    });
+}
+
+// Trilinear sample of a cell-centred field at continuous index position p
+// (sample (i,j,k) sits at p = (i,j,k)), clamped to the block.
+float sample(const hv_grid *g, const Vec3d &p)
+{
+    int i0[3];
+    double w[3];
+    for (int a = 0; a < 3; a++) {
+        double x = std::min(std::max(p[a], 0.0), (double)(g->n[a] - 1));
+        int i = std::min((int)std::floor(x), std::max(g->n[a] - 2, 0));
+        i0[a] = i;
+        w[a] = g->n[a] > 1 ? x - i : 0.0;
+    }
+    double s = 0;
+    for (int c = 0; c < 8; c++) {
+        int ii = i0[0] + (c & 1), jj = i0[1] + ((c >> 1) & 1), kk = i0[2] + ((c >> 2) & 1);
+        double wt = ((c & 1) ? w[0] : 1 - w[0]) * (((c >> 1) & 1) ? w[1] : 1 - w[1]) *
+                    (((c >> 2) & 1) ? w[2] : 1 - w[2]);
+        if (wt == 0)
+            continue;
+        s += wt * g->v[lin(g, std::min(ii, g->n[0] - 1), std::min(jj, g->n[1] - 1),
+                           std::min(kk, g->n[2] - 1))];
+    }
+    return (float)s;
+}
+
+// Boundary values for sdfToExt: the field sampled at the index-space point
+// OpenVDB hands over (see the header: we run in index space on purpose).
+struct ScalarOp {
+    const hv_grid *f;
+    float operator()(const openvdb::Vec3R &p) const { return sample(f, p); }
+};
+
+struct VecOp {
+    const hv_grid *fx, *fy, *fz;
+    Vec3f operator()(const openvdb::Vec3R &p) const
+    {
+        return Vec3f(sample(fx, p), sample(fy, p), sample(fz, p));
+    }
+};
+
+// phi/h on an identity transform: distances in voxels, and the callback's
+// coordinates are our index coordinates whatever transform OpenVDB applies.
+openvdb::FloatGrid::Ptr index_space_sdf(const hv_grid *phi, double band_voxels)
+{
+    hv_grid scaled = *phi;
+    std::vector<float> v(hv_grid_count(phi));
+    bool neg = false, pos = false;
+    for (size_t i = 0; i < v.size(); i++) {
+        v[i] = (float)(phi->v[i] / phi->h);
+        neg |= v[i] < 0;
+        pos |= v[i] > 0;
+    }
+    if (!neg || !pos)
+        fail(HV_ERR_INVALID_ARG, "sdf_to_ext: phi has no zero crossing (all of one sign)");
+    scaled.v = v.data();
+    scaled.h = 1.0;
+    const double o0[3] = {-0.5, -0.5, -0.5};
+    for (int a = 0; a < 3; a++)
+        scaled.origin[a] = o0[a];
+    const bool dense = !(band_voxels > 0);
+    double band = dense ? (double)std::max({phi->n[0], phi->n[1], phi->n[2]}) + 1.0 : band_voxels;
+    auto grid = levelset_from(&scaled, band, dense);
+    grid->tree().voxelizeActiveTiles(); // FastSweeping refuses active tiles
+    return grid;
+}
+
+void check_ext_args(const hv_grid *phi, const hv_grid *const *in, const hv_grid *const *out,
+                    int count)
+{
+    check_grid(phi, "sdf_to_ext: phi");
+    for (int c = 0; c < count; c++) {
+        check_grid(in[c], "sdf_to_ext: field");
+        check_grid(out[c], "sdf_to_ext: output");
+        check_same_shape(phi, in[c], "phi", "field");
+        check_same_shape(phi, out[c], "phi", "output");
+    }
+    hv_status st = hv_check_finite(phi->v, hv_grid_count(phi), "phi");
+    if (st)
+        fail(st, hv_last_error());
+}
+
+} // namespace
+
+extern "C" {
+
+hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                  double band_voxels, hv_grid *out, double *seconds)
+{
+    return guarded("ref_vdb_mesh_to_levelset", [&] {
+        init_vdb();
+        check_grid(out, "ref_vdb_mesh_to_levelset: output grid");
+        if (out->dim != 3)
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: output grid must be 3D");
+        if (!verts || !tris || nv == 0 || nt == 0)
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: empty mesh");
+        if (!(band_voxels >= 1) || !std::isfinite(band_voxels))
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: band must be at least 1 voxel");
+        hv_status st = hv_check_finite_d(verts, 3 * nv, "mesh vertices");
+        if (st)
+            fail(st, hv_last_error());
+        std::vector<openvdb::Vec3s> pts(nv);
+        for (size_t i = 0; i < nv; i++)
+            pts[i] = openvdb::Vec3s((float)verts[3 * i], (float)verts[3 * i + 1],
+                                    (float)verts[3 * i + 2]);
+        std::vector<openvdb::Vec3I> tri(nt);
+        for (size_t t = 0; t < nt; t++) {
+            for (int c = 0; c < 3; c++)
+                if (tris[3 * t + c] >= nv) {
+                    char b[160];
+                    snprintf(b, sizeof b,
+                             "ref_vdb_mesh_to_levelset: triangle %zu uses vertex %u of %zu", t,
+                             tris[3 * t + c], nv);
+                    fail(HV_ERR_INVALID_ARG, b);
+                }
+            tri[t] = openvdb::Vec3I(tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]);
+        }
+        auto xf = make_transform(out->h, out->origin);
+        auto t0 = std::chrono::steady_clock::now();
+        auto grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, tri,
+                                                                       (float)band_voxels);
+        auto t1 = std::chrono::steady_clock::now();
+        if (seconds)
+            *seconds = std::chrono::duration<double>(t1 - t0).count();
+        copy_block(*grid, out, [](float v, bool) { return v; });
+        return HV_OK;
+    });
+}
+
+hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
+                            int n_iter, float background, hv_grid *out, double *seconds)
+{
+    return guarded("ref_vdb_sdf_to_ext", [&] {
+        init_vdb();
+        const hv_grid *in[1] = {field};
+        const hv_grid *outs[1] = {out};
+        check_ext_args(phi, in, outs, 1);
+        auto sdf = index_space_sdf(phi, band_voxels);
+        auto t0 = std::chrono::steady_clock::now();
+        auto ext = openvdb::tools::sdfToExt(*sdf, ScalarOp{field}, background, 0.0f,
+                                            std::max(n_iter, 1));
+        auto t1 = std::chrono::steady_clock::now();
+        if (seconds)
+            *seconds = std::chrono::duration<double>(t1 - t0).count();
+        if (!ext)
+            fail(HV_ERR_BACKEND, "ref_vdb_sdf_to_ext: OpenVDB returned no grid");
+        copy_block(*ext, out, [background](float v, bool on) { return on ? v : background; });
+        return HV_OK;
+    });
+}
+
+hv_status ref_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
+                                 const hv_grid *fz, double band_voxels, int n_iter,
+                                 float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
+                                 double *seconds)
+{
+    return guarded("ref_vdb_sdf_to_ext_vec3", [&] {
+        init_vdb();
+        const hv_grid *in[3] = {fx, fy, fz};
+        const hv_grid *outs[3] = {ox, oy, oz};
+        check_ext_args(phi, in, outs, 3);
+        auto sdf = index_space_sdf(phi, band_voxels);
+        auto t0 = std::chrono::steady_clock::now();
+        auto ext = openvdb::tools::sdfToExt(*sdf, VecOp{fx, fy, fz},
+                                            Vec3f(background, background, background), 0.0f,
+                                            std::max(n_iter, 1));
+        auto t1 = std::chrono::steady_clock::now();
+        if (seconds)
+            *seconds = std::chrono::duration<double>(t1 - t0).count();
+        if (!ext)
+            fail(HV_ERR_BACKEND, "ref_vdb_sdf_to_ext_vec3: OpenVDB returned no grid");
+        CoordBBox box(Coord(0, 0, 0), Coord(ox->n[0] - 1, ox->n[1] - 1, ox->n[2] - 1));
+        for_box(*ext, box, [&](size_t idx, auto &acc, const Coord &c) {
+            const bool on = acc.isValueOn(c);
+            const Vec3f v = acc.getValue(c);
+            ox->v[idx] = on ? v[0] : background;
+            oy->v[idx] = on ? v[1] : background;
+            oz->v[idx] = on ? v[2] : background;
+        });
+        return HV_OK;
+    });
+}
+
+const char *ref_vdb_last_error(void) { return last_error.c_str(); }
+
+int ref_vdb_fail(const char *cmd, const char *what, hv_status st)
+{
+    const char *detail = ref_vdb_last_error();
+    fprintf(stderr, "heatvox %s: %s: %s%s%s\n", cmd, what, hv_status_str(st), *detail ? ": " : "",
+            detail);
+    return HV_EXIT_FAIL;
+}
+
+} // extern "C"
