@@ -32,7 +32,7 @@ LDFLAGS  += -fopenmp $(SANFLAGS)
 # Debian 12 packages the build and tests need; installed once when missing.
 DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
-            ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy
+            ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format
 
 C_SRC   := $(sort $(wildcard src/*/*.c))
 CXX_SRC := $(sort $(wildcard src/*/*.cpp))
@@ -49,7 +49,7 @@ LIB_SO  := $(BUILD)/libheatvox.so
 LIB_SOV := $(BUILD)/libheatvox.so.$(VERSION)
 BIN     := $(BUILD)/heatvox
 
-.PHONY: all deps check sanitize bench demo install format clean
+.PHONY: all deps check sanitize bench demo install format format-check clean
 .SECONDARY:
 all: $(LIB_A) $(LIB_SO) $(BIN)
 
@@ -99,6 +99,14 @@ $(BUILD)/obj/tools/%.o: tools/%.c | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(TOOL_CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
 
+# C++ under tools/: the OpenVDB reference algorithms of the benchmarks
+# (tools/bench_ref_vdb.cpp), not part of the library. Public headers and
+# OpenVDB's only; default visibility, like the library's OpenVDB shim.
+TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(wildcard tools/*.cpp))
+$(BUILD)/obj/tools/%.o: tools/%.cpp | $(STAMP)
+	@mkdir -p $(dir $@)
+	$(CXX) $(TOOL_CPPFLAGS) $(CXXFLAGS) -MMD -MP -c $< -o $@
+
 $(BUILD)/obj/%.o: %.c | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
@@ -120,7 +128,7 @@ $(LIB_SO): $(LIB_SOV)
 	ln -sf $(notdir $<) $(BUILD)/libheatvox.so.$(SOMAJOR)
 	ln -sf $(notdir $<) $@
 
-$(BIN): $(BUILD)/obj/tools/heatvox.o $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tools/heatvox.c,$(wildcard tools/*.c))) $(LIB_A)
+$(BIN): $(BUILD)/obj/tools/heatvox.o $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tools/heatvox.c,$(wildcard tools/*.c))) $(TOOL_CXX_OBJ) $(LIB_A)
 	$(CXX) -o $@ $^ $(LDFLAGS) $(LDLIBS)
 
 # Independent readers the tests compare against (OpenEXR's C++ library).
@@ -131,6 +139,11 @@ $(BUILD)/tests/exr_values: tests/exr_values.cpp | $(STAMP)
 	  -lOpenEXR-3_1 -lIex-3_1 -lImath-3_1
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
+	@mkdir -p $(dir $@)
+	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
+
+# check_vdb also tests the reference algorithms of the benchmarks.
+$(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/bench_ref_vdb.o $(TESTLIB) $(LIB_A)
 	@mkdir -p $(dir $@)
 	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
 
@@ -203,8 +216,15 @@ install: all
 	@case "$(PREFIX)" in /usr|/usr/local) echo "Run ldconfig (as root) once so that programs find the shared library.";; \
 	  *) echo "Build with PKG_CONFIG_PATH=$(PREFIX)/lib/pkgconfig and link with -Wl,-rpath,$(PREFIX)/lib (or add $(PREFIX)/lib to /etc/ld.so.conf.d/ and run ldconfig).";; esac
 
-format:
-	clang-format -i $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h tools/*.c tests/*.c)
+# make format lays out every C and C++ source by .clang-format; make
+# format-check (run by CI) fails, listing the places, when one differs.
+FORMAT_SRC = $(sort $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h tools/*.c tools/*.h \
+               tools/*.cpp tests/*.c tests/*.h tests/*.cpp tests/fuzz/*.c tests/fuzz/*.h))
+format: | $(STAMP)
+	clang-format -i $(FORMAT_SRC)
+
+format-check: | $(STAMP)
+	@clang-format --dry-run --Werror $(FORMAT_SRC) && echo "format-check: $(words $(FORMAT_SRC)) files as .clang-format lays them out"
 
 clean:
 	rm -rf build build-san out
@@ -243,7 +263,7 @@ FZ_RUNENV    := ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
 # (alignment), and OpenVDB 10's RootNode::readTopology reads a tile's
 # "active" flag straight from the file into a bool (bool; a corrupt byte is
 # UB there). Neither is heatvox's code.
-$(FZ)/obj/src/io/vdb_shim.o: CXXFLAGS += -fno-sanitize=alignment,bool
+$(FZ)/obj/src/io/vdb_read.o $(FZ)/obj/src/io/vdb_write.o $(FZ)/obj/tools/bench_ref_vdb.o: CXXFLAGS += -fno-sanitize=alignment,bool
 
 .PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
 fuzz-build:
