@@ -43,6 +43,11 @@ extern const hv_backend_ops hv_backend_mg_ops;
 extern const hv_backend_ops hv_backend_fftw_ops;
 extern const hv_backend_ops hv_backend_opencl_ops;
 
+/* The OpenCL device that HV_BACKEND_AUTO may take (hv_backend_resolve): -1
+ * none (no platform or device: logs one HV_LOG_WARN), 0 a CPU device, 1 a
+ * GPU. Probes once per process, creating no context (opencl.c). */
+int hv_opencl_auto_device(void);
+
 /* Records relres into info->history (capped) and bumps nhistory. */
 static inline void hv_info_push(hv_solve_info *info, double relres)
 {

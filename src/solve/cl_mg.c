@@ -266,7 +266,7 @@ void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
         for (int s = 0; s < steps; s++)
             cheb_step(m, L, 0.0, omega);
     } else {
-        /* Chebyshev of degree 2*steps on [lmax/8, lmax], as mg.c. */
+        /* Chebyshev of degree 2*steps on [lmax/8, lmax], as the CPU (mg_cycle.c). */
         double lmax = L->lmax, lmin = lmax / 8;
         double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin);
         double sigma = theta / delta, rho_old = 1.0 / sigma;

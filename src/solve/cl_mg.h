@@ -64,12 +64,13 @@ void hv_clmg_destroy(hv_clmg *m);
 /* Level kernels on level l's coefficients. */
 void hv_clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y);
 void hv_clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r);
-/* steps smoothing steps on lv[l].u[cur] for lv[l].f, as mg.c's smooth(). */
+/* steps smoothing steps on lv[l].u[cur] for lv[l].f, as the CPU's smooth()
+ * (mg_cycle.c). */
 void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse);
 /* lv[l+1].f = restriction of the residual lv[l].f - A lv[l].u[cur]. */
 void hv_clmg_restrict_residual(hv_clmg *m, int l);
-/* lv[l+1].f = P^T (pn .* lv[l].r) / 2^(coarsened axes), as mg.c's
- * mg_restrict_transpose (needs sym at creation). */
+/* lv[l+1].f = P^T (pn .* lv[l].r) / 2^(coarsened axes), as
+ * mg_restrict_transpose (mg_transfer.c) (needs sym at creation). */
 void hv_clmg_restrict_transpose(hv_clmg *m, int l);
 /* dst (level l+1) = mean of the children of src (level l). */
 void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst);

@@ -77,8 +77,9 @@ void mg_level_free_coeffs(mg_level *L);
  * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
 void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
                     int post, int pcg, hv_solver_stats *st);
-/* The same for the CPU backend (mg.c), whose fused passes move fewer bytes on
- * plain 3D levels and whose plain fine correction is a single pass. */
+/* The same for the CPU backend (mg.c), whose fused passes (mg_fused.c) move
+ * fewer bytes on plain 3D levels and whose plain fine correction is a single
+ * pass. */
 void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
                         int post, int pcg, hv_solver_stats *st);
 
@@ -95,8 +96,8 @@ void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x,
 void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u,
                   double *work);
 
-/* The symmetric restriction of the PCG preconditioner (mg.c; the OpenCL
- * backend uploads pn and runs the same gather in kernels/mg.cl).
+/* The symmetric restriction of the PCG preconditioner (mg_transfer.c; the
+ * OpenCL backend uploads pn and runs the same gather in kernels/mg.cl).
  * mg_prolong_norm: pn[fine cell] = 1 / (sum of the prolongation weights that
  * reach non-empty cells of the weighted coarse level C), 0 on solid fine cells
  * and where no weight reaches.

@@ -483,13 +483,13 @@ fail:
  * correction reads x and f and writes the float right-hand side, then adds the
  * correction into x.
  *
- * With `fused` (the CPU backend) fusable levels (plain 3D, mg.c: level_fusable)
+ * With `fused` (the CPU backend) fusable levels (plain 3D, mg_internal.h: mg_level_fusable)
  * move less: the first sweep from zero reads f and writes u (no clearing pass),
  * the last pre-sweep also forms the residual and restricts it (the fine residual
  * is never stored: only the coarse f is written), the first post-sweep also adds
  * the prolongation (reads the coarse u), and other levels clear u before the
  * cycle (a write). A binary level (the fine level of a mask) reads only 1/diag
- * there, the smoother and residual taking the plain stencil (mg.c). The correction of a plain fine level is one pass: reads x,
+ * there, the smoother and residual taking the plain stencil (mg_rows.c). The correction of a plain fine level is one pass: reads x,
  * the correction and f, writes x and the next float right-hand side. */
 static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre, int post,
                   int pcg, int fused, hv_solver_stats *st)

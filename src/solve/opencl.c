@@ -10,13 +10,19 @@
  * synchronization per cycle or CG iteration is reading back the residual
  * norm. On devices without fp64 the double part (residuals, CG vectors) runs
  * on the host and each cycle moves the fine residual and correction across.
+ * The outer iterations are iterate.c's, as on the CPU; this file provides
+ * their steps. It also tells HV_BACKEND_AUTO whether there is a device to
+ * take (hv_opencl_auto_device).
  */
 #include "backend.h"
 #include "cl_mg.h"
 #include "cl_ops.h"
 #include "core/error.h"
+#include "heatvox/opencl.h"
+#include "iterate.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -319,111 +325,92 @@ static hv_status fv_sync(ocl_state *o, double out[NSLOT])
     return hv_cl_check(o->cl);
 }
 
-/* ---------- outer iterations, as mg.c ---------- */
+/* ---------- the outer iterations' steps (iterate.h) ---------- */
 
-static int stagnated(const hv_solve_info *info)
-{
-    int n = info->nhistory;
-    return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
-}
+typedef struct ocl_iter {
+    ocl_state *o;
+    int rz; /* PCG: the slot of r.z (S_RZ0 or S_RZ1, alternating) */
+} ocl_iter;
 
-static hv_status solve_stationary(ocl_state *o, hv_solve_info *info, double fn)
+/* R = F - A X; the residual norm read back: the one synchronization. */
+static hv_status it_residual(void *ctx, double *norm)
 {
-    const hv_setup *s = o->s;
+    ocl_state *o = ((ocl_iter *)ctx)->o;
     double S[NSLOT];
-    hv_status st;
     fv_residual(o);
-    if ((st = fv_sync(o, S)))
+    hv_status st = fv_sync(o, S);
+    if (st)
         return st;
-    double rel = sqrt(S[S_RR]) / fn;
-    hv_info_push(info, rel);
-    for (int it = 0; it < s->o.max_iter; it++) {
-        if (rel <= s->o.tol) {
-            info->reason = HV_STOP_CONVERGED;
-            return HV_OK;
-        }
-        fv_correct(o, it == 0 && !s->o.nonzero_guess); /* FMG start, as mg.c */
-        fv_residual(o);
-        if ((st = fv_sync(o, S)))
-            return st;
-        rel = sqrt(S[S_RR]) / fn;
-        info->iterations = it + 1;
-        hv_info_push(info, rel);
-        if (!isfinite(rel))
-            return hv_error(HV_ERR_NUMERIC, "OpenCL multigrid diverged (residual %g)", rel);
-        if (stagnated(info) && rel > s->o.tol) {
-            info->reason = HV_STOP_STAGNATED;
-            return HV_OK;
-        }
-    }
-    info->reason = rel <= s->o.tol ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    *norm = sqrt(S[S_RR]);
     return HV_OK;
 }
 
-static hv_status solve_pcg(ocl_state *o, hv_solve_info *info, double fn)
+/* One cycle per correction (the FMG start, as mg.c), then the residual. */
+static hv_status it_correct(void *ctx, int it, double rel, hv_solve_info *info, double *norm)
 {
-    const hv_setup *s = o->s;
+    ocl_state *o = ((ocl_iter *)ctx)->o;
+    fv_correct(o, it == 0 && !o->s->o.nonzero_guess);
+    return it_residual(ctx, norm);
+}
+
+static hv_status it_pcg_start(void *ctx, hv_solve_info *info)
+{
+    ocl_iter *c = ctx;
+    fv_precondition(c->o);
+    fv_copy(c->o, VP, VZ);
+    c->rz = S_RZ0;
+    fv_dot(c->o, VR, VZ, c->rz);
+    return HV_OK;
+}
+
+/* The CG coefficient is formed on the device: one synchronization per step. */
+static hv_status it_pcg_step(void *ctx, double *pq, double *norm)
+{
+    ocl_iter *c = ctx;
     double S[NSLOT];
-    hv_status st;
-    fv_residual(o);
-    if ((st = fv_sync(o, S)))
+    fv_apply_dot(c->o);
+    fv_pcg_update(c->o, c->rz); /* a no-op when p.q <= 0 */
+    hv_status st = fv_sync(c->o, S);
+    if (st)
         return st;
-    double rel = sqrt(S[S_RR]) / fn;
-    hv_info_push(info, rel);
-    if (rel <= s->o.tol) {
-        info->reason = HV_STOP_CONVERGED;
-        return HV_OK;
-    }
-    fv_precondition(o);
-    fv_copy(o, VP, VZ);
-    int rz = S_RZ0;
-    fv_dot(o, VR, VZ, rz);
-    double best = rel;
-    int since_best = 0;
-    for (int it = 0; it < s->o.max_iter; it++) {
-        fv_apply_dot(o);
-        fv_pcg_update(o, rz); /* a no-op when p.q <= 0 */
-        if ((st = fv_sync(o, S)))
-            return st;
-        if (!(S[S_PQ] > 0)) {
-            info->reason = HV_STOP_STAGNATED;
-            return HV_OK;
-        }
-        rel = sqrt(S[S_RR]) / fn;
-        info->iterations = it + 1;
-        hv_info_push(info, rel);
-        if (!isfinite(rel))
-            return hv_error(HV_ERR_NUMERIC, "OpenCL preconditioned CG diverged (residual %g)", rel);
-        if (rel <= s->o.tol)
-            break;
-        if (rel < 0.9 * best) {
-            best = rel;
-            since_best = 0;
-        } else if (++since_best >= 50) { /* as mg.c: the symmetric cycle keeps CG converging */
-            info->reason = HV_STOP_STAGNATED;
-            break;
-        }
-        fv_precondition(o);
-        int rz_new = rz == S_RZ0 ? S_RZ1 : S_RZ0;
-        fv_dot(o, VR, VZ, rz_new);
-        fv_xpay(o, rz_new, rz);
-        rz = rz_new;
-    }
-    if (s->p.alpha == 0) {
+    *pq = S[S_PQ];
+    *norm = sqrt(S[S_RR]);
+    return HV_OK;
+}
+
+static hv_status it_pcg_next(void *ctx, hv_solve_info *info)
+{
+    ocl_iter *c = ctx;
+    fv_precondition(c->o);
+    int rz_new = c->rz == S_RZ0 ? S_RZ1 : S_RZ0;
+    fv_dot(c->o, VR, VZ, rz_new);
+    fv_xpay(c->o, rz_new, c->rz);
+    c->rz = rz_new;
+    return HV_OK;
+}
+
+static void it_project(void *ctx)
+{
+    ocl_state *o = ((ocl_iter *)ctx)->o;
+    if (o->s->p.alpha == 0) {
         if (o->dev64)
             hv_cl_project_d(o->cl, &o->reg, o->v[VX]);
         else
             host_project(o, o->h[VX]);
     }
-    /* Report the true residual of the returned iterate. */
-    fv_residual(o);
-    if ((st = fv_sync(o, S)))
-        return st;
-    rel = sqrt(S[S_RR]) / fn;
-    info->relres = rel;
-    if (info->reason != HV_STOP_STAGNATED)
-        info->reason = rel <= s->o.tol * 1.0001 ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
-    return HV_OK;
+}
+
+static const hv_iter_ops ocl_iter_ops = {"OpenCL ", it_residual, it_correct, it_pcg_start,
+                                         it_pcg_step, it_pcg_next, it_project};
+
+/* The solve once X holds the initial guess and F the right-hand side (on the
+ * device or, without fp64, on the host); fn = ||F|| > 0. */
+static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
+{
+    ocl_iter c = {o, S_RZ0};
+    const hv_solver_opts *opts = &o->s->o;
+    return o->use_pcg ? hv_iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
+                      : hv_iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
 }
 
 static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_info *info)
@@ -448,7 +435,7 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
         o->h[VX] = u;
         o->h[VF] = (double *)f;
     }
-    st = o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
+    st = solve_iterate(o, info, fn);
     if (o->dev64) {
         hv_cl_read(o->cl, o->v[VX], 0, n * sizeof(double), u);
         hv_status st2 = hv_cl_check(o->cl);
@@ -472,6 +459,29 @@ static void ocl_stats(const void *state, hv_solver_stats *st)
 
 const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy,
                                               ocl_stats};
+
+/* ---------- the device AUTO may take (backend.h) ---------- */
+
+/* What the one probe of the OpenCL devices found: -1 none usable by AUTO,
+ * 0 a CPU device, 1 a GPU. */
+static int auto_device = -1;
+static pthread_once_t auto_once = PTHREAD_ONCE_INIT;
+
+static void auto_probe(void)
+{
+    hv_opencl_device d;
+    if (hv_opencl_probe(&d) == HV_OK)
+        auto_device = d.gpu;
+    else
+        hv_log(HV_LOG_WARN, "backend auto: %s; solving on the CPU", hv_last_error());
+    hv_clear_error();
+}
+
+int hv_opencl_auto_device(void)
+{
+    pthread_once(&auto_once, auto_probe);
+    return auto_device;
+}
 
 /* ---------- device-resident solve (cl_ops.h) ---------- */
 
@@ -548,7 +558,7 @@ static hv_status device_solve(ocl_state *o, hv_solve_info *info)
         info->reason = HV_STOP_CONVERGED;
         return HV_OK;
     }
-    return o->use_pcg ? solve_pcg(o, info, fn) : solve_stationary(o, info, fn);
+    return solve_iterate(o, info, fn);
 }
 
 hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)

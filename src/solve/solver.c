@@ -5,10 +5,8 @@
  */
 #include "backend.h"
 #include "core/error.h"
-#include "heatvox/opencl.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -22,21 +20,6 @@ struct hv_solver {
     double *fd, *ud;  /* double buffers for the float interface */
 };
 
-/* What the one probe of the OpenCL devices found: -1 none usable by AUTO,
- * 0 a CPU device, 1 a GPU. */
-static int auto_device = -1;
-static pthread_once_t auto_once = PTHREAD_ONCE_INIT;
-
-static void auto_probe(void)
-{
-    hv_opencl_device d;
-    if (hv_opencl_probe(&d) == HV_OK)
-        auto_device = d.gpu;
-    else
-        hv_log(HV_LOG_WARN, "backend auto: %s; solving on the CPU", hv_last_error());
-    hv_clear_error();
-}
-
 hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid)
 {
     if (b != HV_BACKEND_AUTO)
@@ -46,10 +29,10 @@ hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid)
     const int mode = env && *env ? atoi(env) : -1; /* -1: GPUs on large grids */
     if (mode == 0)
         return cpu;
-    pthread_once(&auto_once, auto_probe);
+    const int device = hv_opencl_auto_device();
     if (mode > 0)
-        return auto_device >= 0 ? HV_BACKEND_OPENCL : cpu;
-    return auto_device == 1 && cells >= HV_AUTO_DEVICE_MIN_CELLS ? HV_BACKEND_OPENCL : cpu;
+        return device >= 0 ? HV_BACKEND_OPENCL : cpu;
+    return device == 1 && cells >= HV_AUTO_DEVICE_MIN_CELLS ? HV_BACKEND_OPENCL : cpu;
 }
 
 const char *hv_backend_name(hv_backend b)

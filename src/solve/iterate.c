@@ -1,0 +1,99 @@
+/*
+ * The outer iterations shared by the multigrid backends (iterate.h): the
+ * stationary defect correction and preconditioned CG, their stopping rules
+ * and residual histories. The arithmetic is the backends' (hv_iter_ops).
+ */
+#include "iterate.h"
+#include "core/error.h"
+
+#include <math.h>
+
+/* The residual has not fallen below 0.95 of its value three iterations ago. */
+static int stagnated(const hv_solve_info *info)
+{
+    int n = info->nhistory;
+    return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
+}
+
+hv_status hv_iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
+                                double fn, hv_solve_info *info)
+{
+    double norm;
+    hv_status st = ops->residual(ctx, &norm);
+    if (st)
+        return st;
+    double rel = norm / fn;
+    hv_info_push(info, rel);
+    for (int it = 0; it < o->max_iter; it++) {
+        if (rel <= o->tol)
+            break;
+        if ((st = ops->correct(ctx, it, rel, info, &norm)))
+            return st;
+        rel = norm / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "%smultigrid diverged (residual %g)", ops->prefix, rel);
+        if (stagnated(info) && rel > o->tol) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+    }
+    info->reason = rel <= o->tol ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+hv_status hv_iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
+                         hv_solve_info *info)
+{
+    double norm, pq;
+    hv_status st = ops->residual(ctx, &norm);
+    if (st)
+        return st;
+    double rel = norm / fn;
+    hv_info_push(info, rel);
+    if (rel <= o->tol) {
+        info->reason = HV_STOP_CONVERGED;
+        return HV_OK;
+    }
+    if ((st = ops->pcg_start(ctx, info)))
+        return st;
+    double best = rel;
+    int since_best = 0;
+    for (int it = 0; it < o->max_iter; it++) {
+        if ((st = ops->pcg_step(ctx, &pq, &norm)))
+            return st;
+        if (!(pq > 0)) {
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
+        rel = norm / fn;
+        info->iterations = it + 1;
+        hv_info_push(info, rel);
+        if (!isfinite(rel))
+            return hv_error(HV_ERR_NUMERIC, "%spreconditioned CG diverged (residual %g)",
+                            ops->prefix, rel);
+        if (rel <= o->tol)
+            break;
+        /* the symmetric cycle keeps CG converging: 50 iterations without a
+         * 10% gain is a stall */
+        if (rel < 0.9 * best) {
+            best = rel;
+            since_best = 0;
+        } else if (++since_best >= 50) {
+            info->reason = HV_STOP_STAGNATED;
+            break;
+        }
+        if ((st = ops->pcg_next(ctx, info)))
+            return st;
+    }
+    ops->project(ctx);
+    /* Report the true residual of the returned iterate. */
+    if ((st = ops->residual(ctx, &norm)))
+        return st;
+    rel = norm / fn;
+    info->relres = rel;
+    if (info->reason != HV_STOP_STAGNATED)
+        info->reason = rel <= o->tol * 1.0001 ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}

@@ -1,0 +1,308 @@
+/*
+ * The CPU multigrid's smoother and residual rows (docs/METHOD.md, "Multigrid"):
+ * red-black Gauss-Seidel rows of plain levels in AVX-512 (chosen at run time,
+ * mg_avx512) and in AVX2 and baseline clones (MG_KERNEL), the rows of weighted
+ * levels, and the level-wide sweeps made of them: a red-black colour sweep,
+ * the float residual and the Jacobi / Chebyshev update.
+ */
+#include "mg_internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#if MG_AVX512
+int mg_avx512_state = -1;
+
+int mg_avx512_probe(void)
+{
+    const char *e = getenv("HV_NO512");
+    mg_avx512_state = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0")) ? 1 : 0;
+    return mg_avx512_state;
+}
+
+/* One colour (cells of parity i0) of a plain row of nx cells, walls included,
+ * in 16-lane chunks aligned to the row start: the row's own values come from
+ * one load per chunk, their x-neighbours by lane shifts (valignd) of the chunks
+ * before and after, instead of two unaligned loads that straddle cache lines;
+ * a wall cell's missing x-neighbour is a zero lane and its lane takes its own
+ * diagonal (dyz + cx, or dyz alone when nx = 1). Every lane is computed and a
+ * masked store keeps this colour's cells, so the other colour's (which this
+ * row reads) are never written. cym..czp are the face coefficients, 0 at a
+ * y or z wall; dyz = alpha + the open y and z faces. */
+__attribute__((target("avx512f"))) static void rb_row_avx512(
+    float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
+    int nx, int i0, float cx, float cym, float cyp, float czm, float czp, float dyz)
+{
+    const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp),
+                 vinv = _mm512_set1_ps(1.0f / (dyz + 2 * cx));
+    const float wall = dyz + cx, inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
+    const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f;
+    const __mmask16 colour = i0 ? 0xAAAA : 0x5555; /* lane b is cell q + b, q even */
+    const int nq = (nx + 15) / 16, last = nx - 1;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
+    for (int c = 0, q = 0; c < nq; c++, q += 16) {
+        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+        __m512i next = c + 1 < nq
+                           ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                           : _mm512_setzero_si512();
+        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
+        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
+        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
+        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+        __m512 inv = vinv;
+        if (c == 0)
+            inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
+        if (c + 1 == nq && last > 0)
+            inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
+        _mm512_mask_storeu_ps(ur + q, colour & valid, _mm512_mul_ps(sm, inv));
+        prev = cur;
+        cur = next;
+    }
+}
+#endif
+
+/* Plain-level interior row update: the hot loop of the smoother, branch-free. */
+MG_KERNEL void mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
+                                int k, int col)
+{
+    const int nx = L->n[0];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const size_t base = L->sy * (size_t)j + L->sz * (size_t)k;
+    float *ur = u + base;
+    const float *fr = f + base;
+    const float wym = j > 0, wyp = j < L->n[1] - 1;
+    const float wzm = (m->dim == 3 && k > 0), wzp = (m->dim == 3 && k < L->n[2] - 1);
+    const float *ym = j > 0 ? ur - L->sy : ur, *yp = j < L->n[1] - 1 ? ur + L->sy : ur;
+    const float *zm = wzm ? ur - L->sz : ur, *zp = wzp ? ur + L->sz : ur;
+    const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+    const float inv_in = 1.0f / (dyz + 2 * cx);
+    int i0 = (j + k + col) & 1;
+#if MG_AVX512
+    if (mg_avx512()) {
+        rb_row_avx512(ur, fr, ym, yp, zm, zp, nx, i0, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
+        return;
+    }
+#endif
+    int i = i0;
+    if (i == 0) {
+        float d = dyz + (nx > 1 ? cx : 0);
+        float s = fr[0] + (nx > 1 ? cx * ur[1] : 0) + cy * (wym * ym[0] + wyp * yp[0]) +
+                  cz * (wzm * zm[0] + wzp * zp[0]);
+        ur[0] = d > 0 ? s / d : 0;
+        i = 2;
+    }
+    int last = nx - 1;
+    if (nx <= MG_ROW_BUF) {
+        /* Update every interior cell into a buffer (contiguous, so it vectorizes;
+         * the other colour's values are not changed by this colour), then keep
+         * this colour's cells: twice the flops, a fraction of the time. */
+        float buf[MG_ROW_BUF];
+        for (int q = 1; q < last; q++)
+            buf[q] = (fr[q] + cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                      cz * (wzm * zm[q] + wzp * zp[q])) *
+                     inv_in;
+        for (; i < last; i += 2)
+            ur[i] = buf[i];
+    } else {
+        for (; i < last; i += 2)
+            ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                     cz * (wzm * zm[i] + wzp * zp[i])) *
+                    inv_in;
+    }
+    if (i == last && last > 0) {
+        float d = dyz + cx;
+        float s = fr[i] + cx * ur[i - 1] + cy * (wym * ym[i] + wyp * yp[i]) +
+                  cz * (wzm * zm[i] + wzp * zp[i]);
+        ur[i] = s / d;
+    }
+}
+
+#if MG_AVX512
+/* One colour of plane k of a plain level: rb_row_avx512 over its rows, inlined
+ * here, without mg_rb_row_plain's call and set-up per row. */
+__attribute__((target("avx512f"))) void mg_rb_plane_avx512(const mg_state *m, const mg_level *L, int k,
+                                                           int col)
+{
+    const int nx = L->n[0], ny = L->n[1];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const float wzm = m->dim == 3 && k > 0, wzp = m->dim == 3 && k < L->n[2] - 1;
+    const ptrdiff_t zmo = wzm ? -(ptrdiff_t)L->sz : 0, zpo = wzp ? (ptrdiff_t)L->sz : 0;
+    for (int j = 0; j < ny; j++) {
+        float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
+        const float *fr = L->f + (ur - L->u);
+        const float wym = j > 0, wyp = j < ny - 1;
+        const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
+        rb_row_avx512(ur, fr, wym ? ur - L->sy : ur, wyp ? ur + L->sy : ur, ur + zmo, ur + zpo, nx,
+                      (j + k + col) & 1, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
+    }
+}
+#endif
+
+/* Off-diagonal sum at cell q of a weighted row (float; walls and solid faces
+ * have weight 0 and read a finite value). */
+#define WROW_SUM(R, u, q, cx, cy, cz)                                                              \
+    ((cx) * ((R).wx[q] * (u)[(q) - 1] + (R).wx[(q) + 1] * (u)[(q) + 1]) +                          \
+     (cy) * ((R).wyl[q] * (u)[(R).ym + (q)] + (R).wyh[q] * (u)[(R).yp + (q)]) +                     \
+     ((R).wzl ? (cz) * ((R).wzl[q] * (u)[(R).zm + (q)] + (R).wzh[q] * (u)[(R).zp + (q)]) : 0.0f))
+
+/* Diagonal at cell q of a weighted row. */
+#define WROW_DIAG(R, L, alpha, q, cx, cy, cz)                                                      \
+    ((alpha) * (L)->a[(R).base + (q)] + (cx) * ((R).wx[q] + (R).wx[(q) + 1]) +                     \
+     (cy) * ((R).wyl[q] + (R).wyh[q]) + ((R).wzl ? (cz) * ((R).wzl[q] + (R).wzh[q]) : 0.0f))
+
+/* WROW_SUM at the first or last cell q of a row of nx, without the missing x neighbour. */
+static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int nx, float cx, float cy,
+                                  float cz)
+{
+    float s = cy * (R->wyl[q] * u[R->ym + q] + R->wyh[q] * u[R->yp + q]);
+    if (R->wzl)
+        s += cz * (R->wzl[q] * u[R->zm + q] + R->wzh[q] * u[R->zp + q]);
+    if (q > 0)
+        s += cx * R->wx[q] * u[q - 1];
+    if (q < nx - 1)
+        s += cx * R->wx[q + 1] * u[q + 1];
+    return s;
+}
+
+/* One colour of row (j,k) of a weighted level: u = (f + S) / D, 0 where the row
+ * of A is empty (dinv = 0). The first and last cells are done apart (their
+ * missing x neighbour lies outside the row); the interior is computed for both
+ * colours into a buffer, a loop without branches, and this colour kept. */
+MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, int col)
+{
+    const int nx = L->n[0];
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+    float *u = L->u + R.base;
+    const float *f = L->f + R.base, *dinv = L->dinv + R.base;
+    int i = (j + k + col) & 1;
+    if (i == 0)
+        u[0] = (f[0] + wrow_edge_sum(&R, u, 0, nx, cx, cy, cz)) * dinv[0];
+    if (nx > 1 && ((nx - 1) & 1) == i)
+        u[nx - 1] = (f[nx - 1] + wrow_edge_sum(&R, u, nx - 1, nx, cx, cy, cz)) * dinv[nx - 1];
+    if (i == 0)
+        i = 2;
+    if (L->binary && nx <= MG_ROW_BUF) {
+        /* solid neighbours hold u = 0: the plain stencil, with this cell's dinv */
+        const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
+        const float *ym = u + R.ym, *yp = u + R.yp, *zm = u + R.zm, *zp = u + R.zp;
+        float buf[MG_ROW_BUF];
+        for (int q = 1; q < nx - 1; q++)
+            buf[q] = (f[q] + cx * (u[q - 1] + u[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                      cz * (wzm * zm[q] + wzp * zp[q])) *
+                     dinv[q];
+        for (; i < nx - 1; i += 2)
+            u[i] = buf[i];
+    } else if (nx <= MG_ROW_BUF) {
+        float buf[MG_ROW_BUF];
+        if (R.wzl) {
+            for (int q = 1; q < nx - 1; q++)
+                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
+                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q]) +
+                          cz * (R.wzl[q] * u[R.zm + q] + R.wzh[q] * u[R.zp + q])) *
+                         dinv[q];
+        } else {
+            for (int q = 1; q < nx - 1; q++)
+                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
+                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q])) *
+                         dinv[q];
+        }
+        for (; i < nx - 1; i += 2)
+            u[i] = buf[i];
+    } else {
+        for (; i < nx - 1; i += 2)
+            u[i] = (f[i] + WROW_SUM(R, u, i, cx, cy, cz)) * dinv[i];
+    }
+}
+
+void mg_rb_sweep(const mg_state *m, mg_level *L, int col)
+{
+    float *u = L->u;
+    const float *f = L->f;
+    if (L->plain) {
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
+        for (int k = 0; k < L->n[2]; k++)
+            for (int j = 0; j < L->n[1]; j++)
+                mg_rb_row_plain(m, L, u, f, j, k, col);
+        return;
+    }
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            rb_row_weighted(m, L, j, k, col);
+}
+
+/* Row (j,k) of r = f - A u on a weighted level. */
+MG_KERNEL static void residual_row_weighted(const mg_state *m, const mg_level *L, int j, int k)
+{
+    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const int nx = L->n[0];
+    const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+    const float *ur = L->u + R.base, *fr = L->f + R.base;
+    float *rr = L->r + R.base;
+    for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
+        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
+    if (L->binary) { /* solid neighbours hold u = 0; D = 1 / dinv, 0 on empty rows */
+        const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
+        const float *ym = ur + R.ym, *yp = ur + R.yp, *zm = ur + R.zm, *zp = ur + R.zp;
+        const float *dv = L->dinv + R.base;
+        for (int q = 1; q < nx - 1; q++) {
+            float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) + cz * (wzm * zm[q] + wzp * zp[q]);
+            rr[q] = dv[q] > 0 ? fr[q] - (ur[q] / dv[q] - sn) : fr[q];
+        }
+        return;
+    }
+    for (int q = 1; q < nx - 1; q++)
+        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
+}
+
+/* r = f - A u on a level (float). */
+void mg_level_residual(const mg_state *m, mg_level *L)
+{
+    const float *u = L->u, *f = L->f;
+    float *r = L->r;
+    if (L->plain) {
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
+        for (int k = 0; k < L->n[2]; k++)
+            for (int j = 0; j < L->n[1]; j++) {
+                mg_plain_row R = mg_plain_row_at(m, L, j, k);
+                float unused = 0;
+                MG_PLAIN_ROW_RESIDUAL(float, float, L, R, u, f, r + R.base, unused);
+                (void)unused;
+            }
+        return;
+    }
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            residual_row_weighted(m, L, j, k);
+}
+
+static double level_diag_at(const mg_state *m, const mg_level *L, size_t c, int i, int j, int k)
+{
+    return L->plain ? mg_level_diag(L, m->dim, m->alpha, i, j, k) : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
+}
+
+/* u += omega_k D^-1 r, the Jacobi-type update; with cheb != NULL the Chebyshev
+ * recurrence d = rho*rho_old*d + 2 rho/delta D^-1 r (Chebyshev on D^-1 A,
+ * docs/METHOD.md, "Multigrid"). */
+void mg_level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr)
+{
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                size_t c = (size_t)i + L->sy * j + L->sz * k;
+                double dg = level_diag_at(m, L, c, i, j, k);
+                double z = dg > 0 ? L->r[c] / dg : 0.0;
+                double d = cd * L->d[c] + cr * z;
+                L->d[c] = (float)d;
+                L->u[c] += (float)d;
+            }
+}
