@@ -75,14 +75,14 @@ $(BUILD)/gen/kernels.c: $(CL_SRC) Makefile | $(STAMP)
 	   echo '#include <stddef.h>'; \
 	   for f in $(CL_SRC); do \
 	     n=$$(basename $$f .cl | tr -c 'a-zA-Z0-9_\n' _); \
-	     echo "const char hv_kernel_$${n}[] ="; \
+	     echo "const char hv__kernel_$${n}[] ="; \
 	     sed -e 's/\\/\\\\/g' -e 's/"/\\"/g' -e 's/^/"/' -e 's/$$/\\n"/' $$f; \
 	     echo ';'; \
 	   done; \
-	   echo 'const char *const hv_kernel_sources[] = {'; \
-	   for f in $(CL_SRC); do n=$$(basename $$f .cl | tr -c 'a-zA-Z0-9_\n' _); echo "  hv_kernel_$${n},"; done; \
+	   echo 'const char *const hv__kernel_sources[] = {'; \
+	   for f in $(CL_SRC); do n=$$(basename $$f .cl | tr -c 'a-zA-Z0-9_\n' _); echo "  hv__kernel_$${n},"; done; \
 	   echo '  NULL};'; \
-	   echo 'const char *const hv_kernel_names[] = {'; \
+	   echo 'const char *const hv__kernel_names[] = {'; \
 	   for f in $(CL_SRC); do echo "  \"$$(basename $$f)\","; done; \
 	   echo '  NULL};'; } > $@
 

@@ -6,11 +6,11 @@
 
 /* Trilinear splat as a gather, so that no two work-items write one cell and
  * the sums do not depend on scheduling. The host sorts the samples by the
- * cell at the low corner of their stencil (the base cell of hv_trilinear):
+ * cell at the low corner of their stencil (the base cell of hv__trilinear):
  * samples of base cell b are [start[b], start[b+1]), with fractional
- * coordinates frac (0 along clamped axes, where hv_trilinear's step is 0) and
+ * coordinates frac (0 along clamped axes, where hv__trilinear's step is 0) and
  * values val. Cell c gathers from the base cells c - q, q in {0,1}^3; the
- * weight is prod_a (q_a ? f_a : 1 - f_a), as hv_trilinear. */
+ * weight is prod_a (q_a ? f_a : 1 - f_a), as hv__trilinear. */
 __kernel void heat_splat(int4 N, __global const uint *start, __global const float4 *frac,
                          __global const float *val, __global float *out)
 {

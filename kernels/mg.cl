@@ -1,6 +1,6 @@
 /*
  * Multigrid level kernels (float storage), the device twins of the CPU code in
- * src/solve/mg.c: operator apply and residual, red-black Gauss-Seidel by
+ * src/solve/mg_rows.c and mg_transfer.c: operator apply and residual, red-black Gauss-Seidel by
  * colour, the Jacobi/Chebyshev update (fused with its residual), restriction
  * (mean of children, fused with the residual; or P^T for the symmetric cycle
  * of PCG), cell-centred linear
@@ -144,7 +144,7 @@ __kernel void mg_restrict(int4 N, __global const float *src, int4 NC, int4 co,
     }
 
 /* Weight of coarse index I in the prolongation stencil of fine index i along
- * one axis (mg.c prolong_axis_weight). */
+ * one axis (mg_transfer.c prolong_axis_weight). */
 static float hv_prolong_axis_weight(int coarsen, int nc, int i, int I)
 {
     HV_PROLONG_AXIS(coarsen, nc, i, I0, I1, w1);
@@ -152,11 +152,11 @@ static float hv_prolong_axis_weight(int coarsen, int nc, int i, int I)
 }
 
 /* fc = P^T (pn .* r) / co.w, the restriction of the symmetric cycle (PCG), as
- * mg.c's mg_restrict_transpose: each coarse cell gathers the fine cells whose
+ * mg.c's hv__mg_restrict_transpose: each coarse cell gathers the fine cells whose
  * interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes), in the
  * CPU's order. ac is the coarse cell weights (NULL when the coarse level is
  * plain; empty coarse cells get 0), pn the fine renormalization (NULL = 1). */
-__kernel void mg_restrict_transpose(int4 N, __global const float *r, __global const float *pn,
+__kernel void hv__mg_restrict_transpose(int4 N, __global const float *r, __global const float *pn,
                                     int4 NC, __global const float *ac, int4 co,
                                     __global float *fc)
 {
@@ -342,7 +342,7 @@ static void hv_bottom_project(__global acc_t *v, size_t n, __global const int *r
  * relative (as the CPU bottom solver; 1e-6 without fp64, where it also stops
  * when the residual stalls). With region != NULL (Poisson) f and u are
  * projected onto mean-free per region. scr holds 5n + nregion acc_t. */
-__kernel void mg_bottom_cg(int4 N, acc4_t C, __global const float *a, __global const float *w0,
+__kernel void hv__mg_bottom_cg(int4 N, acc4_t C, __global const float *a, __global const float *w0,
                            __global const float *w1, __global const float *w2,
                            __global const float *f, __global float *u,
                            __global const int *region, __global const acc_t *rinv, int nregion,

@@ -54,7 +54,8 @@ static void analytic(int res)
                     for (int i = 0; i < g->n[0]; i++) {
                         double p[3];
                         hv_grid_cell_center(g, i, j, k, p);
-                        double t = truth[s](p), v = g->v[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)];
+                        double t = truth[s](p),
+                               v = g->v[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)];
                         double e = fabs(v - t) / g->h;
                         all = fmax(all, e);
                         if (fabs(t) < 3 * g->h)
@@ -63,10 +64,11 @@ static void analytic(int res)
                             far = fmax(far, e);
                         bad += fabs(t) > g->h && (v < 0) != (t < 0);
                     }
-            printf("analytic %-6s %3d^3 %-5s band(<3vox) mean %.4f max %.3f | grid max %.3f | far(>10vox) max %.3f | "
+            printf("analytic %-6s %3d^3 %-5s band(<3vox) mean %.4f max %.3f | grid max %.3f | "
+                   "far(>10vox) max %.3f | "
                    "sign errors beyond 1 vox %zu | surface rms %.3f -> %.3f vox | %.2f s\n",
-                   s ? "torus" : "sphere", res, mode ? "heat" : "exact", band / (double)nb, bmax, all, far,
-                   bad, S.surface_rms_before, S.surface_rms_after, S.t_total);
+                   s ? "torus" : "sphere", res, mode ? "heat" : "exact", band / (double)nb, bmax,
+                   all, far, bad, S.surface_rms_before, S.surface_rms_after, S.t_total);
             fflush(stdout);
             hv_grid_destroy(&g);
         }
@@ -108,9 +110,9 @@ static double iou(const hv_mesh *m, const hv_sdf_opts *o, const uint8_t *truth, 
 static void defects(int res)
 {
     const char *names[2] = {"bunny_small.obj", "spot.obj"};
-    static const unsigned configs[] = {0,
-                                       HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DEGENERATE | HV_SDF_REPAIR_DUPLICATES,
-                                       0x0f, 0x1f, HV_SDF_REPAIR_ALL};
+    static const unsigned configs[] = {
+        0, HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DEGENERATE | HV_SDF_REPAIR_DUPLICATES, 0x0f, 0x1f,
+        HV_SDF_REPAIR_ALL};
     static const char *cname[] = {"none", "weld+dedup", "+orient", "+outward", "+fill(all)"};
     for (int f = 0; f < 2; f++) {
         hv_mesh *clean = tu_load_shared(names[f]);
@@ -120,7 +122,8 @@ static void defects(int res)
         hv_sdf_opts o = fixed(clean, res, &tg);
         uint8_t *truth = malloc(hv_grid_count(tg));
         tu_ray_parity(clean, tg, truth);
-        const char *vn[] = {"clean", "holes3%", "holes5%", "flip30", "fliphalf", "soup", "dup10", "all"};
+        const char *vn[] = {"clean",    "holes3%", "holes5%", "flip30",
+                            "fliphalf", "soup",    "dup10",   "all"};
         for (int v = 0; v < 8; v++) {
             hv_mesh *d = NULL;
             hv_mesh_clone(clean, &d);
@@ -161,8 +164,9 @@ static void defects(int res)
 
 static void real(int res)
 {
-    const char *names[] = {"stanford-bunny.obj", "knot.obj", "chair.obj", "armadillo_bad.obj",
-                           "bun_zipper_res4.ply", "rocker.obj", "polygon-bear.obj", "cow.obj"};
+    const char *names[] = {
+        "stanford-bunny.obj",  "knot.obj",   "chair.obj",        "armadillo_bad.obj",
+        "bun_zipper_res4.ply", "rocker.obj", "polygon-bear.obj", "cow.obj"};
     for (size_t f = 0; f < sizeof names / sizeof names[0]; f++) {
         hv_mesh *m = tu_load_shared(names[f]);
         if (!m)
@@ -189,7 +193,8 @@ static void real(int res)
         double iou_or = -1, iou_full = -1;
         hv_mesh *rm = NULL;
         uint8_t *w2 = malloc(hv_grid_count(tg));
-        if (!hv_sdf_repair(m, HV_SDF_REPAIR_ALL & ~HV_SDF_REPAIR_FILL_HOLES, o.max_hole, &rm, NULL)) {
+        if (!hv_sdf_repair(m, HV_SDF_REPAIR_ALL & ~HV_SDF_REPAIR_FILL_HOLES, o.max_hole, &rm,
+                           NULL)) {
             tu_winding(rm, tg, w2);
             iou_or = tu_iou(g, w2);
             hv_mesh_destroy(&rm);
@@ -201,12 +206,14 @@ static void real(int res)
         }
         free(w2);
         printf("real %-20s IoU vs winding after orientation repair %.5f, vs the closed solid "
-               "(flat caps) %.5f\n", names[f], iou_or, iou_full);
-        printf("real %-20s %dx%dx%d IoU vs winding %.5f (beyond 1 vox %.5f) vs parity %.5f | holes %zu/%zu filled, "
+               "(flat caps) %.5f\n",
+               names[f], iou_or, iou_full);
+        printf("real %-20s %dx%dx%d IoU vs winding %.5f (beyond 1 vox %.5f) vs parity %.5f | holes "
+               "%zu/%zu filled, "
                "%zu faces flipped | %.2f s\n",
-               names[f], g->n[0], g->n[1], g->n[2], tu_iou(g, wn), U ? (double)I / U : 1, tu_iou(g, par),
-               S.repair.holes_filled, S.repair.holes_filled + S.repair.holes_left_open, S.repair.faces_flipped,
-               S.t_total);
+               names[f], g->n[0], g->n[1], g->n[2], tu_iou(g, wn), U ? (double)I / U : 1,
+               tu_iou(g, par), S.repair.holes_filled,
+               S.repair.holes_filled + S.repair.holes_left_open, S.repair.faces_flipped, S.t_total);
         fflush(stdout);
         hv_grid_destroy(&g);
         free(wn), free(par);
@@ -231,11 +238,13 @@ static void timing(int res)
             printf("timing %s: %s\n", hv_backend_name(o.backend), hv_last_error());
             continue;
         }
-        printf("timing stanford-bunny %dx%dx%d %s threads %d: repair %.2f splat %.2f diffuse %.2f normalize %.2f "
-               "poisson %.2f shift %.2f redistance %.2f total %.2f s | iterations %d/%d | peak RSS %.0f MB\n",
-               S.n[0], S.n[1], S.n[2], hv_backend_name(S.backend), hv_get_threads(), S.t_repair, S.t_splat,
-               S.t_diffuse, S.t_normalize, S.t_poisson, S.t_shift, S.t_redistance, S.t_total,
-               S.diffuse_iterations, S.poisson_iterations, hv_peak_rss() / 1e6);
+        printf("timing stanford-bunny %dx%dx%d %s threads %d: repair %.2f splat %.2f diffuse %.2f "
+               "normalize %.2f "
+               "poisson %.2f shift %.2f redistance %.2f total %.2f s | iterations %d/%d | peak RSS "
+               "%.0f MB\n",
+               S.n[0], S.n[1], S.n[2], hv_backend_name(S.backend), hv_get_threads(), S.t_repair,
+               S.t_splat, S.t_diffuse, S.t_normalize, S.t_poisson, S.t_shift, S.t_redistance,
+               S.t_total, S.diffuse_iterations, S.poisson_iterations, hv_peak_rss() / 1e6);
         fflush(stdout);
         hv_grid_destroy(&g);
     }

@@ -102,7 +102,8 @@ START_TEST(test_headers_compile_alone)
             FILE *f = fopen(src, "w");
             ck_assert_ptr_nonnull(f);
             /* twice: include guards */
-            fprintf(f, "#include <heatvox/%s>\n#include <heatvox/%s>\nint main(void) { return 0; }\n",
+            fprintf(f,
+                    "#include <heatvox/%s>\n#include <heatvox/%s>\nint main(void) { return 0; }\n",
                     e->d_name, e->d_name);
             ck_assert_int_eq(fclose(f), 0);
             snprintf(cmd, sizeof cmd, "%s -I'%s/include' -c '%s' -o '%s/one.o'", lang[l][1],
@@ -161,7 +162,8 @@ START_TEST(test_exports_are_the_public_api)
     free(seen);
     ck_assert_msg(missing_from_headers == 0 && not_exported == 0,
                   "%d symbols exported beyond the public API, %d public functions missing "
-                  "(listed above)", missing_from_headers, not_exported);
+                  "(listed above)",
+                  missing_from_headers, not_exported);
     ck_assert_int_eq(exported, count);
 }
 END_TEST
@@ -252,18 +254,20 @@ START_TEST(test_installed_copy_links)
 #endif
     static const char *const how[2] = {
         /* static: the archive first, then what it needs */
-        "cc" SAN " prog.c -o prog $(pkg-config --cflags heatvox) -Wl,-Bstatic -lheatvox -Wl,-Bdynamic "
+        "cc" SAN
+        " prog.c -o prog $(pkg-config --cflags heatvox) -Wl,-Bstatic -lheatvox -Wl,-Bdynamic "
         "-Wl,--as-needed $(pkg-config --static --libs heatvox)",
         /* shared, found through the rpath */
         "cc" SAN " prog.c -o prog $(pkg-config --cflags --libs heatvox) "
         "-Wl,-rpath,$(pkg-config --variable=libdir heatvox)"};
     for (int k = 0; k < 2; k++) {
         char cmd[4 * PATH_MAX], err[4096];
-        snprintf(cmd, sizeof cmd,
-                 "(cd '%s' && export PKG_CONFIG_PATH='%s/lib/pkgconfig' && unset LD_LIBRARY_PATH && "
-                 "%s && ./prog && if readelf -d prog | grep -q 'NEEDED.*libheatvox'; then echo "
-                 "shared; else echo static; fi > kind.txt)",
-                 dir, stage, how[k]);
+        snprintf(
+            cmd, sizeof cmd,
+            "(cd '%s' && export PKG_CONFIG_PATH='%s/lib/pkgconfig' && unset LD_LIBRARY_PATH && "
+            "%s && ./prog && if readelf -d prog | grep -q 'NEEDED.*libheatvox'; then echo "
+            "shared; else echo static; fi > kind.txt)",
+            dir, stage, how[k]);
         int rc = tl_run_cmd(cmd, dir, err, sizeof err);
         ck_assert_msg(rc == 0, "%s\nexit %d:\n%s", how[k], rc, err);
         char kindpath[PATH_MAX + 16], kind[32] = "";

@@ -82,8 +82,8 @@ static char *read_text(const char *p)
 static int run(const char *args)
 {
     char cmd[16384];
-    snprintf(cmd, sizeof cmd, "'%s' %.4000s >'%s/stdout.txt' 2>'%s/stderr.txt' </dev/null", bin, args,
-             dir, dir);
+    snprintf(cmd, sizeof cmd, "'%s' %.4000s >'%s/stdout.txt' 2>'%s/stderr.txt' </dev/null", bin,
+             args, dir, dir);
     int st = system(cmd);
     ck_assert_int_ne(st, -1);
     return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
@@ -243,8 +243,8 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
     ck_assert_msg(strstr(err, "does/not/exist.obj: cannot open") != NULL, "stderr:\n%s", err);
     ck_assert_msg(strstr(err, "--no-such-option") != NULL, "stderr:\n%s", err);
     /* summary on stdout: 3 written, 4 failed */
-    ck_assert_msg(strstr(out, "7 inputs: 3 written, 0 up to date, 4 failed") != NULL,
-                  "stdout:\n%s", out);
+    ck_assert_msg(strstr(out, "7 inputs: 3 written, 0 up to date, 4 failed") != NULL, "stdout:\n%s",
+                  out);
     /* report: one line per input with the documented fields */
     int lines = 0;
     for (const char *p = rep; *p; p++)
@@ -279,8 +279,8 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
     out = read_text(path("stdout.txt"));
     rep = read_text(path("report.jsonl"));
     ck_assert_int_eq(rc, 1);
-    ck_assert_msg(strstr(out, "7 inputs: 0 written, 3 up to date, 4 failed") != NULL,
-                  "stdout:\n%s", out);
+    ck_assert_msg(strstr(out, "7 inputs: 0 written, 3 up to date, 4 failed") != NULL, "stdout:\n%s",
+                  out);
     ck_assert(mtime(path("out/sphere.exr")) == t_sphere);
     l = report_line(rep, "in/sphere.obj", "out/sphere.exr");
     ck_assert_ptr_nonnull(strstr(l, "\"status\":\"skipped\""));
@@ -302,8 +302,8 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
     rc = run_in_dir("batch in -o out --res 20 --format exr --preview");
     out = read_text(path("stdout.txt"));
     ck_assert_int_eq(rc, 1); /* broken.obj and empty.obj */
-    ck_assert_msg(strstr(out, "4 inputs: 2 written, 0 up to date, 2 failed") != NULL,
-                  "stdout:\n%s", out);
+    ck_assert_msg(strstr(out, "4 inputs: 2 written, 0 up to date, 2 failed") != NULL, "stdout:\n%s",
+                  out);
     check_sdf_exr(path("out/sphere.exr"), 20, 1);
     free(out);
     rc = run_in_dir("batch in/sphere.obj -o out --res 20 --format exr --preview");
@@ -320,8 +320,7 @@ START_TEST(mixed_batch_should_isolate_failures_and_resume)
     unlink(path("out/sphere.png"));
     rc = run_in_dir("batch in/sphere.obj -o out --res 20 --format exr --preview --dry-run");
     out = read_text(path("stdout.txt"));
-    ck_assert_msg(strstr(out, "run  in/sphere.obj -> out/sphere.exr") != NULL, "stdout:\n%s",
-                  out);
+    ck_assert_msg(strstr(out, "run  in/sphere.obj -> out/sphere.exr") != NULL, "stdout:\n%s", out);
     free(out);
     ck_assert_int_eq(count_temps(path("out")), 0);
     remove_inputs();
@@ -348,8 +347,8 @@ START_TEST(default_output_should_be_a_vdb_level_set_that_slice_can_cut)
     float v = g->v[ijk[0] + (size_t)g->n[0] * (ijk[1] + (size_t)g->n[1] * ijk[2])];
     ck_assert(fabsf(v - (float)(2 * g->h)) < 1e-5f);
     char meta[2048];
-    TL_ASSERT_OK(hv_vdb_read_meta(path("out/torus.vdb"), NULL, "heatvox_options", meta,
-                                  sizeof meta));
+    TL_ASSERT_OK(
+        hv_vdb_read_meta(path("out/torus.vdb"), NULL, "heatvox_options", meta, sizeof meta));
     ck_assert_ptr_nonnull(strstr(meta, "res=24"));
     ck_assert_ptr_nonnull(strstr(meta, "band=2 dense=0"));
     hv_grid_destroy(&g);
@@ -413,9 +412,9 @@ END_TEST
 START_TEST(usage_errors_should_exit_2)
 {
     make_inputs();
-    ck_assert_int_eq(run_in_dir("batch in"), 2);                    /* no -o */
-    ck_assert_int_eq(run_in_dir("batch -o out"), 2);                /* no input */
-    ck_assert_int_eq(run_in_dir("batch in -o out --res zero"), 2);  /* bad global option */
+    ck_assert_int_eq(run_in_dir("batch in"), 2);                   /* no -o */
+    ck_assert_int_eq(run_in_dir("batch -o out"), 2);               /* no input */
+    ck_assert_int_eq(run_in_dir("batch in -o out --res zero"), 2); /* bad global option */
     ck_assert_int_eq(run_in_dir("batch in -o out -j 0"), 2);
     ck_assert_int_eq(run_in_dir("batch in -o out --frobnicate"), 2);
     ck_assert_int_eq(run_in_dir("batch --help"), 0);
@@ -486,8 +485,8 @@ static const char npy_vs_raw_py[] =
 static int is_mesh_name(const char *n)
 {
     const char *e = strrchr(n, '.');
-    return e && (!strcmp(e, ".obj") || !strcmp(e, ".ply") || !strcmp(e, ".stl") ||
-                 !strcmp(e, ".off"));
+    return e &&
+           (!strcmp(e, ".obj") || !strcmp(e, ".ply") || !strcmp(e, ".stl") || !strcmp(e, ".off"));
 }
 
 START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
@@ -526,8 +525,8 @@ START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
     int volumes = 0;
     for (int r = 0; r < 4; r++) {
         char args[16384];
-        snprintf(args, sizeof args, "batch%.9000s -o '%s/exr%d' --format exr --res %d -q", inputs, dir,
-                 res[r], res[r]);
+        snprintf(args, sizeof args, "batch%.9000s -o '%s/exr%d' --format exr --res %d -q", inputs,
+                 dir, res[r], res[r]);
         int rc = run(args);
         char *err = read_text(path("stderr.txt"));
         ck_assert_msg(rc == 0 || rc == 1, "batch exit %d: %s", rc, err);
@@ -542,8 +541,9 @@ START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
             ck_assert_int_eq(run(args), 0);
             ck_assert_msg(access(exr, F_OK) == 0, "batch wrote no %s", exr);
             char cmd[8192];
-            snprintf(cmd, sizeof cmd, "'%.3000s' '%s' distance '%s' && /usr/bin/python3 '%s' '%s' '%s' > '%s'",
-                     exe, exr, path("v.raw"), path("cmp.py"), path("v.npy"), path("v.raw"),
+            snprintf(cmd, sizeof cmd,
+                     "'%.3000s' '%s' distance '%s' && /usr/bin/python3 '%s' '%s' '%s' > '%s'", exe,
+                     exr, path("v.raw"), path("cmp.py"), path("v.npy"), path("v.raw"),
                      path("diff.txt"));
             ck_assert_msg(system(cmd) == 0, "%s: decoding or comparing failed", exr);
             char *diff = read_text(path("diff.txt"));

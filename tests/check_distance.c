@@ -25,7 +25,8 @@ typedef struct {
 /* A wall at x in [0.5, 0.53125] with a gap for y in [0.625, 0.75]. Obstacles
  * run past the unit square so that no path grazes along its edge around them;
  * corners outside the square are not graph vertices. */
-static const scene wall_gap = {2, {{0.5, -1.0, 0.53125, 0.625}, {0.5, 0.75, 0.53125, 2.0}}, {0.25, 0.3}};
+static const scene wall_gap = {
+    2, {{0.5, -1.0, 0.53125, 0.625}, {0.5, 0.75, 0.53125, 2.0}}, {0.25, 0.3}};
 /* An L-shaped room: the top-right quarter is solid. */
 static const scene l_room = {1, {{0.5, 0.5, 2.0, 2.0}}, {0.8, 0.2}};
 /* A serpentine corridor: four walls from alternate sides, eight corners to turn. */
@@ -102,7 +103,8 @@ static void build_graph(const scene *sc, vgraph *g)
         done[b] = 1;
         for (int i = 0; i < g->nv; i++)
             if (!done[i] && visible(sc, g->v[b], g->v[i]))
-                g->D[i] = fmin(g->D[i], g->D[b] + hypot(g->v[i][0] - g->v[b][0], g->v[i][1] - g->v[b][1]));
+                g->D[i] = fmin(g->D[i],
+                               g->D[b] + hypot(g->v[i][0] - g->v[b][0], g->v[i][1] - g->v[b][1]));
     }
 }
 
@@ -334,7 +336,8 @@ static double around_ball(const double s[3], const double x[3], double R)
     double gam = acos(fmax(-1, fmin(1, cosg)));
     double arc = gam - acos(R / ls) - acos(R / lx);
     if (arc <= 0) /* visible */
-        return sqrt((s[0] - x[0]) * (s[0] - x[0]) + (s[1] - x[1]) * (s[1] - x[1]) + (s[2] - x[2]) * (s[2] - x[2]));
+        return sqrt((s[0] - x[0]) * (s[0] - x[0]) + (s[1] - x[1]) * (s[1] - x[1]) +
+                    (s[2] - x[2]) * (s[2] - x[2]));
     return sqrt(ls * ls - R * R) + R * arc + sqrt(lx * lx - R * R);
 }
 
@@ -411,8 +414,10 @@ START_TEST(mesh_source_should_give_unsigned_distance_to_its_surface)
             for (int i = 0; i < n; i++) {
                 double x[3];
                 hv_grid_cell_center(g, i, j, k, x);
-                double ex = fabs(sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
-                                      (x[2] - c[2]) * (x[2] - c[2])) - R);
+                double ex =
+                    fabs(sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
+                              (x[2] - c[2]) * (x[2] - c[2])) -
+                         R);
                 double err = fabs(g->v[i + (size_t)n * (j + (size_t)n * k)] - ex) * n;
                 mean += err;
                 if (ex < 3.0 / n) {
@@ -499,7 +504,8 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     fclose(f);
     snprintf(cmd, sizeof cmd,
              "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0 0 0 1 1 1 "
-             "-o %s/d.vdb -q", bin, dir, dir, dir);
+             "-o %s/d.vdb -q",
+             bin, dir, dir, dir);
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
 
     snprintf(path, sizeof path, "%s/d.vdb", dir);
@@ -537,7 +543,8 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
      * transform, and its voxels their index coordinates (x from index 8). */
     snprintf(cmd, sizeof cmd,
              "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --bbox 0.25 0 0 1 1 1 "
-             "-o %s/d2.vdb -q", bin, dir, dir, dir);
+             "-o %s/d2.vdb -q",
+             bin, dir, dir, dir);
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox distance failed: %s", err);
     hv_vdb_grid_info gi[2];
     size_t gcount = 0;
@@ -556,15 +563,18 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
     ck_assert_ptr_nonnull(f);
     fprintf(f, "0.5 0.5 0.5\nvoxel 1 2\n");
     fclose(f);
-    snprintf(cmd, sizeof cmd, "%s distance --sources %s --bbox 0 0 0 1 1 1 -o %s/e.vdb", bin, path, dir);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s --bbox 0 0 0 1 1 1 -o %s/e.vdb", bin, path,
+             dir);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "bad.txt:2") != NULL, "message: %s", err);
-    snprintf(cmd, sizeof cmd,
-             "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --obstacle-grid nope -o %s/e.vdb",
-             bin, dir, dir, dir);
+    snprintf(
+        cmd, sizeof cmd,
+        "%s distance --sources %s/src.txt --obstacles %s/mask.vdb --obstacle-grid nope -o %s/e.vdb",
+        bin, dir, dir, dir);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nope") && strstr(err, "walls"), "message: %s", err);
-    snprintf(cmd, sizeof cmd, "%s distance --sources %s/src.txt -o %s/e.vdb --res 2", bin, dir, dir);
+    snprintf(cmd, sizeof cmd, "%s distance --sources %s/src.txt -o %s/e.vdb --res 2", bin, dir,
+             dir);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 2);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
     ck_assert_int_eq(system(cmd), 0);

@@ -83,7 +83,8 @@ static void compare(int dim, const int n[3])
     size_t count = (size_t)n[0] * n[1] * (dim == 3 ? n[2] : 1), finite = 0, inf = 0;
     double dmax = 0, vmax = 0;
     for (size_t i = 0; i < count; i++) {
-        ck_assert_msg(isinf(m.v[i]) == isinf(c.v[i]), "cell %zu: mg %g, opencl %g", i, m.v[i], c.v[i]);
+        ck_assert_msg(isinf(m.v[i]) == isinf(c.v[i]), "cell %zu: mg %g, opencl %g", i, m.v[i],
+                      c.v[i]);
         if (isinf(m.v[i])) {
             inf++;
             continue;
@@ -92,7 +93,8 @@ static void compare(int dim, const int n[3])
         dmax = fmax(dmax, fabs((double)m.v[i] - c.v[i]) * n[0]);
         vmax = fmax(vmax, m.v[i] * n[0]);
     }
-    printf("  %dD %dx%dx%d: %zu finite cells (max %.1f voxels), %zu infinite; max |device - host path| "
+    printf("  %dD %dx%dx%d: %zu finite cells (max %.1f voxels), %zu infinite; max |device - host "
+           "path| "
            "%.2e voxel; stages %d/%d, dead faces %zu/%zu, diffusion %d/%d and Poisson %d/%d "
            "iterations, Poisson restarts %d/%d; %.2f s host, %.2f s device\n",
            dim, n[0], n[1], dim == 3 ? n[2] : 1, finite, vmax, inf, dmax, m.st.stages, c.st.stages,
@@ -121,8 +123,8 @@ static void compare(int dim, const int n[3])
             gmax = fmax(gmax, fabs((double)g.v[i] - c.v[i]) * n[0]);
             gmean += fabs((double)g.v[i] - c.v[i]) * n[0] / (double)finite;
         }
-    printf("    against mg: max %.3f, mean %.4f voxel; mg Poisson %d iterations, %d restarts\n", gmax,
-           gmean, g.st.poisson_iterations, g.st.poisson_restarts);
+    printf("    against mg: max %.3f, mean %.4f voxel; mg Poisson %d iterations, %d restarts\n",
+           gmax, gmean, g.st.poisson_iterations, g.st.poisson_restarts);
     ck_assert(gmax < 1.0);
     free(g.v);
     free(m.v);
@@ -164,9 +166,9 @@ START_TEST(opencl_distance_without_fp64_should_fall_back_to_the_host)
 {
     setenv("HEATVOX_OPENCL_FP64", "0", 1);
     hv_cl *cl = NULL;
-    TL_ASSERT_OK(hv_cl_open(&cl));
+    TL_ASSERT_OK(hv__cl_open(&cl));
     int fp64 = cl->fp64;
-    hv_cl_close(&cl);
+    hv__cl_close(&cl);
     ck_assert_int_eq(fp64, 0);
     const int n[3] = {41, 39, 1};
     result m = run(2, n, HV_BACKEND_MG), c = run(2, n, HV_BACKEND_OPENCL);

@@ -41,7 +41,8 @@ static int closest(shape_kind s, const double x[3], double *phi, double cp[3])
         return 0;
     }
     double m[3] = {R * q[0] / rho, R * q[1] / rho, 0};
-    double d[3] = {q[0] - m[0], q[1] - m[1], q[2]}, dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    double d[3] = {q[0] - m[0], q[1] - m[1], q[2]},
+           dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     *phi = dn - rt;
     if (dn < 1e-12)
         return 0;
@@ -60,7 +61,7 @@ static void g_vector(const double p[3], double v[3])
 }
 
 typedef struct {
-    double near, all;  /* mean relative error within 5 voxels / over every cell */
+    double near, all; /* mean relative error within 5 voxels / over every cell */
     hv_extend_stats st;
 } ext_err;
 
@@ -237,8 +238,9 @@ static void check_constant(shape_kind s, int n, const hv_extend_opts *o)
             }
     hv_extender *e = NULL;
     TL_ASSERT_OK(hv_extender_create(&e, dim, phi->n, phi->h, NULL, o));
-    hv_extend_field fl[2] = {{1, {f->v, NULL, NULL}, {fo->v, NULL, NULL}},
-                             {3, {vin[0]->v, vin[1]->v, vin[2]->v}, {vout[0]->v, vout[1]->v, vout[2]->v}}};
+    hv_extend_field fl[2] = {
+        {1, {f->v, NULL, NULL}, {fo->v, NULL, NULL}},
+        {3, {vin[0]->v, vin[1]->v, vin[2]->v}, {vout[0]->v, vout[1]->v, vout[2]->v}}};
     hv_extend_stats st;
     TL_ASSERT_OK(hv_extend_many(e, phi->v, 2, fl, &st));
     ck_assert_int_eq(st.solves, st.levels * 6);
@@ -332,7 +334,8 @@ START_TEST(band_solve_should_agree_with_the_box_solve)
     /* A thin band around a sphere (out_band 3): the band solve covers a part of
      * the box and gives the box solve's extension. */
     const int n = 64;
-    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *a = make_grid(3, n), *b = make_grid(3, n);
+    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *a = make_grid(3, n),
+            *b = make_grid(3, n);
     for (int k = 0; k < n; k++)
         for (int j = 0; j < n; j++)
             for (int i = 0; i < n; i++) {
@@ -358,8 +361,10 @@ START_TEST(band_solve_should_agree_with_the_box_solve)
     double worst = 0;
     for (size_t c = 0; c < hv_grid_count(a); c++)
         worst = fmax(worst, fabs(a->v[c] - b->v[c]) / fmax(fabs(b->v[c]), 1e-3));
-    printf("  band solve vs box solve, sphere 64^3: %zu vs %zu cells, max relative difference %.2e, "
-           "%.3f vs %.3f s\n", sb.solve_cells, sx.solve_cells, worst, sb.t_solve, sx.t_solve);
+    printf(
+        "  band solve vs box solve, sphere 64^3: %zu vs %zu cells, max relative difference %.2e, "
+        "%.3f vs %.3f s\n",
+        sb.solve_cells, sx.solve_cells, worst, sb.t_solve, sx.t_solve);
     ck_assert_msg(sb.solve_cells < sx.solve_cells / 2, "band %zu cells, box %zu", sb.solve_cells,
                   sx.solve_cells);
     ck_assert_msg(worst <= 2e-5, "band and box differ by %.3g", worst);
@@ -374,7 +379,8 @@ END_TEST
 START_TEST(extender_should_be_reusable_across_steps)
 {
     const int n = 40;
-    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *a = make_grid(3, n), *b = make_grid(3, n);
+    hv_grid *phi = make_grid(3, n), *f = make_grid(3, n), *a = make_grid(3, n),
+            *b = make_grid(3, n);
     hv_extender *e = NULL;
     TL_ASSERT_OK(hv_extender_create(&e, 3, phi->n, phi->h, NULL, NULL));
     for (int step = 0; step < 3; step++) {
@@ -538,8 +544,8 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     snprintf(out, sizeof out, "%s/out.vdb", dir);
     const int n = 48;
     write_input(in, n, 0);
-    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s -q", bin,
-             in, out);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s -q",
+             bin, in, out);
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
 
     /* Names, value types, classes, and the input's index space. */
@@ -580,7 +586,8 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     TL_ASSERT_OK(hv_vdb_read_float(out, "surface", NULL, &phi, &cls));
     TL_ASSERT_OK(hv_vdb_read_float(in, "surface", NULL, &phi0, NULL));
     ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
-    hv_vdb_read_opts ro = {1, {IN_OFF[0], IN_OFF[1], IN_OFF[2]},
+    hv_vdb_read_opts ro = {1,
+                           {IN_OFF[0], IN_OFF[1], IN_OFF[2]},
                            {IN_OFF[0] + n - 1, IN_OFF[1] + n - 1, IN_OFF[2] + n - 1}};
     TL_ASSERT_OK(hv_vdb_read_vec3(out, "v", &ro, &v[0], &v[1], &v[2]));
     TL_ASSERT_OK(hv_vdb_read_float(out, "temp", &ro, &t, NULL));
@@ -617,8 +624,10 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
                 }
             }
     printf("  heatvox extend round trip (narrow-band level set, 48^3): velocity %.2e within 3 "
-           "voxels, %.2e everywhere; temp %.2e / %.2e\n", evn / mn, ev / m, etn / mn, et / m);
-    ck_assert_msg(evn / mn <= 0.01 && etn / mn <= 0.01, "near errors %.3g %.3g", evn / mn, etn / mn);
+           "voxels, %.2e everywhere; temp %.2e / %.2e\n",
+           evn / mn, ev / m, etn / mn, et / m);
+    ck_assert_msg(evn / mn <= 0.01 && etn / mn <= 0.01, "near errors %.3g %.3g", evn / mn,
+                  etn / mn);
     /* Beyond the level set's band phi is clamped: plain diffusion there, coarser. */
     ck_assert_msg(ev / m <= 0.1 && et / m <= 0.1, "overall errors %.3g %.3g", ev / m, et / m);
     hv_grid_destroy(&phi);
@@ -628,11 +637,12 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
         hv_grid_destroy(&v[q]);
 
     /* Missing grids and mismatched transforms fail with the names. */
-    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field nothere -o %s/x.vdb", bin, in,
-             dir);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field nothere -o %s/x.vdb", bin,
+             in, dir);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nothere") && strstr(err, "'v'"), "message: %s", err);
-    snprintf(cmd, sizeof cmd, "%s extend %s --levelset nosurface --field v -o %s/x.vdb", bin, in, dir);
+    snprintf(cmd, sizeof cmd, "%s extend %s --levelset nosurface --field v -o %s/x.vdb", bin, in,
+             dir);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
     ck_assert_msg(strstr(err, "nosurface") != NULL, "message: %s", err);
     write_input(in, n, 1.5 * 2.0 / n);

@@ -98,10 +98,9 @@ static hv_status extend(ext_case *c, const hv_extend_opts *o)
     hv_status st = hv_extender_create(&e, c->dim, c->n, c->phi->h, c->solid, o);
     if (st)
         return st;
-    hv_extend_field f[2] = {{1, {c->in[0]->v, NULL, NULL}, {c->out[0]->v, NULL, NULL}},
-                            {3,
-                             {c->in[1]->v, c->in[2]->v, c->in[3]->v},
-                             {c->out[1]->v, c->out[2]->v, c->out[3]->v}}};
+    hv_extend_field f[2] = {
+        {1, {c->in[0]->v, NULL, NULL}, {c->out[0]->v, NULL, NULL}},
+        {3, {c->in[1]->v, c->in[2]->v, c->in[3]->v}, {c->out[1]->v, c->out[2]->v, c->out[3]->v}}};
     st = hv_extend_many(e, c->phi->v, 2, f, &c->st);
     hv_extender_destroy(&e);
     return st;
@@ -130,7 +129,8 @@ static diff compare(const ext_case *a, const ext_case *b, float background)
         const double es = fabs((double)b->out[0]->v[c] - a->out[0]->v[c]) / fabs(a->out[0]->v[c]);
         double d2 = 0, a2 = 0;
         for (int q = 1; q < 4; q++) {
-            d2 += ((double)b->out[q]->v[c] - a->out[q]->v[c]) * ((double)b->out[q]->v[c] - a->out[q]->v[c]);
+            d2 += ((double)b->out[q]->v[c] - a->out[q]->v[c]) *
+                  ((double)b->out[q]->v[c] - a->out[q]->v[c]);
             a2 += (double)a->out[q]->v[c] * a->out[q]->v[c];
         }
         const double ev = sqrt(d2 / a2);
@@ -192,8 +192,9 @@ static diff agree(const char *name, shape_kind s, int n, double out_band, int so
 static void agree_one_level(const char *name, shape_kind s, int n, double out_band, int solid)
 {
     diff d = agree(name, s, n, out_band, solid, 1);
-    ck_assert_msg(d.off <= d.weak, "%s: %zu cells differ by more than 1e-5 (max %.3g %.3g), %zu weak",
-                  name, d.off, d.smax, d.vmax, d.weak);
+    ck_assert_msg(d.off <= d.weak,
+                  "%s: %zu cells differ by more than 1e-5 (max %.3g %.3g), %zu weak", name, d.off,
+                  d.smax, d.vmax, d.weak);
 }
 
 /* Levels: besides the weak cells, a cell whose weight lies between the two
@@ -253,8 +254,8 @@ START_TEST(opencl_extension_should_reproduce_constant_fields)
                 for (int q = 0; q < 3; q++)
                     bad += fabs(c.out[1 + q]->v[i] - 0.25f * (q + 1)) > 4e-7f * 0.25f * (q + 1);
             }
-            ck_assert_msg(bad == 0, "shape %d closest_point %d: %zu values off the constant", s, cpt,
-                          bad);
+            ck_assert_msg(bad == 0, "shape %d closest_point %d: %zu values off the constant", s,
+                          cpt, bad);
             case_free(&c);
         }
 }
@@ -367,7 +368,8 @@ START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
         dnear = fmax(dnear, sqrt(d2 / a2));
     }
     printf("  heatvox extend --backend opencl: %zu of %zu cells as the library's; max relative "
-           "difference to --backend fftw within 2 voxels %.2e\n", same, count, dnear);
+           "difference to --backend fftw within 2 voxels %.2e\n",
+           same, count, dnear);
     ck_assert_uint_eq(same, count);
     ck_assert_msg(dnear <= 1e-5, "differ from fftw by %g near the surface", dnear);
     case_free(&r);
@@ -432,7 +434,8 @@ START_TEST(heatvox_without_a_platform_should_fail_clearly)
     snprintf(cmd, sizeof cmd, "%s %s sdf %s -o %s --res 16", env, bin, mesh, out);
     ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 0);
     const char *warn = strstr(err, "warning: backend auto");
-    ck_assert_msg(warn && strstr(err, "no OpenCL platform") && !strstr(warn + 1, "warning: backend auto"),
+    ck_assert_msg(warn && strstr(err, "no OpenCL platform") &&
+                      !strstr(warn + 1, "warning: backend auto"),
                   "stderr: %s", err);
     ck_assert(access(out, F_OK) == 0);
     snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
@@ -457,7 +460,8 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, opencl_extension_should_reproduce_constant_fields, have_cl, why);
     TL_ADD_IF(tc, opencl_extension_without_fp64_should_match_mg, have_cl, why);
     TL_ADD_IF(tc, opencl_extension_should_reject_nan_in_the_band_and_no_surface, have_cl, why);
-    TL_ADD_IF(tc, heatvox_extend_with_backend_opencl_should_give_the_library_s_fields, have_cl, why);
+    TL_ADD_IF(tc, heatvox_extend_with_backend_opencl_should_give_the_library_s_fields, have_cl,
+              why);
     suite_add_tcase(su, tc);
     return tl_run(su);
 }

@@ -54,7 +54,8 @@ static void setup(void)
 static void teardown(void) { tl_rm_rf(dir); }
 
 /* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
-static int hv(char *err, size_t errsize, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static int hv(char *err, size_t errsize, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 static int hv(char *err, size_t errsize, const char *fmt, ...)
 {
     char args[3000], cmd[8000];
@@ -100,8 +101,7 @@ START_TEST(outputs_onto_special_files_should_be_refused_and_left_alone)
         {"sdf sc/meshes/torus_holes.obj -o fifo.vdb --res 24", "fifo.vdb"},
         {"sdf sc/meshes/torus_holes.obj -o a.vdb --npy null.npy --res 24", "null.npy"},
         {"sdf sc/meshes/torus_holes.obj -o a.vdb --preview dir.png --res 24", "dir.png"},
-        {"extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o fifo.vdb",
-         "fifo.vdb"},
+        {"extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o fifo.vdb", "fifo.vdb"},
         {"slice sc/levelset/sphere_velocity.vdb --grid sdf -o fifo.exr", "fifo.exr"},
         {"distance --sources src.txt --obstacles none --res 16 -o fifo.vdb", "fifo.vdb"},
         {"distance --sources src.txt --obstacles none --res 16 --npy null.npy", "null.npy"},

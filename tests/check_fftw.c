@@ -99,17 +99,19 @@ static double solve_random(const hv_setup *s, hv_solve_info *info)
     random_rhs(s, f);
     for (size_t i = 0; i < s->count; i++)
         u[i] = NAN; /* the backend must not read u */
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, s), HV_OK);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, s), HV_OK);
     memset(info, 0, sizeof *info);
-    ck_assert_int_eq(hv_backend_fftw_ops.solve(st, f, u, info), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.solve(st, f, u, info), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
     double r = ref_relres(s, f, u);
     free(f);
     free(u);
     return r;
 }
 
-struct box { int dim, n[3]; };
+struct box {
+    int dim, n[3];
+};
 static const struct box boxes[] = {
     {2, {33, 20, 1}}, {3, {17, 24, 9}}, {3, {48, 48, 48}},
     {3, {7, 1, 5}},   {2, {1, 9, 4}},   {2, {1, 1, 0}},
@@ -131,8 +133,7 @@ static void check_exact(int dbl, double tol)
             double r = solve_random(&s, &info);
             ck_assert_msg(r < tol, "%s %dD %dx%dx%d t/h^2=%g: relres %.3g >= %.1g",
                           dbl ? "double" : "float", s.p.dim, s.p.n[0], s.p.n[1],
-                          s.p.dim == 3 ? s.p.n[2] : 1,
-                          steps[c], r, tol);
+                          s.p.dim == 3 ? s.p.n[2] : 1, steps[c], r, tol);
             ck_assert_int_eq(info.reason, HV_STOP_EXACT);
             ck_assert_int_eq(info.iterations, 1);
             ck_assert_int_eq(info.nhistory, 2);
@@ -146,16 +147,10 @@ static void check_exact(int dbl, double tol)
 
 /* ---- exactness ------------------------------------------------------------ */
 
-START_TEST(double_solve_should_leave_relres_below_1e12)
-{
-    check_exact(1, 1e-12);
-}
+START_TEST(double_solve_should_leave_relres_below_1e12) { check_exact(1, 1e-12); }
 END_TEST
 
-START_TEST(float_solve_should_leave_relres_below_1e5)
-{
-    check_exact(0, 1e-5);
-}
+START_TEST(float_solve_should_leave_relres_below_1e5) { check_exact(0, 1e-5); }
 END_TEST
 
 START_TEST(poisson_solution_should_be_mean_free)
@@ -166,9 +161,9 @@ START_TEST(poisson_solution_should_be_mean_free)
         void *st = NULL;
         double *f = malloc(s.count * sizeof *f), *u = malloc(s.count * sizeof *u);
         random_rhs(&s, f);
-        ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &s), HV_OK);
+        ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &s), HV_OK);
         hv_solve_info info;
-        ck_assert_int_eq(hv_backend_fftw_ops.solve(st, f, u, &info), HV_OK);
+        ck_assert_int_eq(hv__backend_fftw_ops.solve(st, f, u, &info), HV_OK);
         double sum = 0, umax = 0;
         for (size_t i = 0; i < s.count; i++) {
             sum += u[i];
@@ -177,7 +172,7 @@ START_TEST(poisson_solution_should_be_mean_free)
         ck_assert(umax > 0);
         ck_assert_msg(fabs(sum / (double)s.count) < 1e-14 * umax, "mean %.3g, max %.3g",
                       sum / (double)s.count, umax);
-        hv_backend_fftw_ops.destroy(st);
+        hv__backend_fftw_ops.destroy(st);
         free(f);
         free(u);
     }
@@ -189,15 +184,15 @@ START_TEST(plans_should_be_reusable_across_solves)
     hv_setup s;
     make_setup(&s, 3, 16, 12, 10, 0.1, 1.0, 0.03, 1);
     void *st = NULL;
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &s), HV_OK);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &s), HV_OK);
     double *f = malloc(s.count * sizeof *f), *u = malloc(s.count * sizeof *u);
     for (int rep = 0; rep < 3; rep++) {
         random_rhs(&s, f);
         hv_solve_info info;
-        ck_assert_int_eq(hv_backend_fftw_ops.solve(st, f, u, &info), HV_OK);
+        ck_assert_int_eq(hv__backend_fftw_ops.solve(st, f, u, &info), HV_OK);
         ck_assert(ref_relres(&s, f, u) < 1e-12);
     }
-    hv_backend_fftw_ops.destroy(st);
+    hv__backend_fftw_ops.destroy(st);
     free(f);
     free(u);
 }
@@ -211,7 +206,7 @@ START_TEST(mask_should_make_create_fail_unsupported)
     solid[10] = 1;
     s.p.solid = solid;
     void *st = (void *)&s;
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &s), HV_ERR_UNSUPPORTED);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &s), HV_ERR_UNSUPPORTED);
     ck_assert_ptr_null(st);
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "plain boxes"));
     free(solid);
@@ -240,13 +235,14 @@ static double max_error(int dim, const int n0[3], int refine, double alpha, doub
                 double b = 0.5 * cos(3 * kx * x);
                 size_t at = i + (size_t)n[0] * (j + (size_t)n[1] * k);
                 ue[at] = a + b;
-                f[at] = alpha * ue[at] + beta * ((kx * kx + ky * ky + kz * kz) * a + 9 * kx * kx * b);
+                f[at] =
+                    alpha * ue[at] + beta * ((kx * kx + ky * ky + kz * kz) * a + 9 * kx * kx * b);
             }
     void *st = NULL;
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &s), HV_OK);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &s), HV_OK);
     hv_solve_info info;
-    ck_assert_int_eq(hv_backend_fftw_ops.solve(st, f, u, &info), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.solve(st, f, u, &info), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
     double err = 0;
     for (size_t i = 0; i < s.count; i++)
         err = fmax(err, fabs(u[i] - ue[i]));
@@ -265,8 +261,8 @@ static void check_order(int dim, const int n0[3])
             e[r] = max_error(dim, n0, r, ab[c][0], ab[c][1]);
         for (int r = 0; r < 2; r++) {
             double ratio = e[r] / e[r + 1];
-            ck_assert_msg(ratio > 3.6 && ratio < 4.4, "%dD %s: error %.3g -> %.3g, ratio %.3f",
-                          dim, c ? "Poisson" : "heat", e[r], e[r + 1], ratio);
+            ck_assert_msg(ratio > 3.6 && ratio < 4.4, "%dD %s: error %.3g -> %.3g, ratio %.3f", dim,
+                          c ? "Poisson" : "heat", e[r], e[r + 1], ratio);
         }
     }
 }
@@ -469,10 +465,10 @@ START_TEST(wisdom_should_round_trip_through_the_file)
 
     /* a missing file is the first run: no warning, and the file is written */
     warnings = 0;
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &sd), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &sf), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &sd), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &sf), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
     ck_assert_int_eq(warnings, 0);
     char *text = slurp(path);
     ck_assert_ptr_nonnull(text);
@@ -486,8 +482,8 @@ START_TEST(wisdom_should_round_trip_through_the_file)
     fftwf_forget_wisdom();
     ck_assert(!have_wisdom(&sd, 1) && !have_wisdom(&sf, 0));
     sd.o.fftw_measure = 0;
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &sd), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &sd), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
     ck_assert_int_eq(warnings, 0);
     ck_assert(have_wisdom(&sd, 1));
     ck_assert(have_wisdom(&sf, 0));
@@ -496,8 +492,8 @@ START_TEST(wisdom_should_round_trip_through_the_file)
     FILE *fp = fopen(path, "wb");
     fputs("(fftw-3.3.10 fftw_wisdom #x0 garbage", fp);
     fclose(fp);
-    ck_assert_int_eq(hv_backend_fftw_ops.create(&st, &sd), HV_OK);
-    hv_backend_fftw_ops.destroy(st);
+    ck_assert_int_eq(hv__backend_fftw_ops.create(&st, &sd), HV_OK);
+    hv__backend_fftw_ops.destroy(st);
     ck_assert_int_eq(warnings, 1);
     ck_assert_ptr_nonnull(strstr(last_warning, path));
     text = slurp(path);

@@ -108,7 +108,8 @@ static void replay(const char *target, const char *file)
         check_status(st, file);
         for (size_t i = 0; st == HV_OK && i < count && i < 4; i++) {
             hv_grid *g = NULL;
-            hv_vdb_read_opts o = {1, {info[i].bbox_lo[0], info[i].bbox_lo[1], info[i].bbox_lo[2]},
+            hv_vdb_read_opts o = {1,
+                                  {info[i].bbox_lo[0], info[i].bbox_lo[1], info[i].bbox_lo[2]},
                                   {info[i].bbox_lo[0], info[i].bbox_lo[1], info[i].bbox_lo[2]}};
             check_status(hv_vdb_read_mask(file, info[i].name, &o, &g), file);
             hv_grid_destroy(&g);

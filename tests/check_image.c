@@ -297,8 +297,9 @@ START_TEST(exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading)
     ck_assert_int_eq(exr_add_part(ctx, "heatvox", EXR_STORAGE_SCANLINE, &part), EXR_ERR_SUCCESS);
     ck_assert_int_eq(exr_initialize_required_attr_simple(ctx, part, nx, 16, EXR_COMPRESSION_ZIP),
                      EXR_ERR_SUCCESS);
-    ck_assert_int_eq(exr_add_channel(ctx, part, "Y", EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1),
-                     EXR_ERR_SUCCESS);
+    ck_assert_int_eq(
+        exr_add_channel(ctx, part, "Y", EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1),
+        EXR_ERR_SUCCESS);
     ck_assert_int_eq(exr_write_header(ctx), EXR_ERR_SUCCESS);
     ck_assert_int_eq(exr_write_scanline_chunk(ctx, part, 0, z, n), EXR_ERR_SUCCESS);
     ck_assert_int_eq(exr_finish(&ctx), EXR_ERR_SUCCESS);
@@ -307,8 +308,8 @@ START_TEST(exr_chunk_deflated_but_flagged_raw_should_be_recovered_on_reading)
     ck_assert_int_eq(r->n[0], nx);
     ck_assert_int_eq(r->n[1], 16);
     for (int y = 0; y < 16; y++) /* image row y is grid row 15-y */
-        ck_assert_int_eq(memcmp(r->v + (size_t)(15 - y) * nx, raw + (size_t)y * nx * 4,
-                                (size_t)nx * 4), 0);
+        ck_assert_int_eq(
+            memcmp(r->v + (size_t)(15 - y) * nx, raw + (size_t)y * nx * 4, (size_t)nx * 4), 0);
     hv_grid_destroy(&r);
     free(raw);
     free(z);

@@ -246,15 +246,14 @@ static const char *write_ascii_stl(const char *name)
 
 /* OBJ: quads, negative indices, v/vt/vn variants, CRLF, records to skip,
  * numbers like "1." "+1e0", a trailing w, no final newline. */
-static const char cube_obj[] =
-    "# cube\r\nmtllib x.mtl\r\no cube\r\ng g1\r\ns off\r\nusemtl m\r\n"
-    "v 0 0 0\r\nv 1. 0 0\r\nv +1e0 1 0\r\nv 0 1.0 0\r\n"
-    "vt 0 0\r\nvn 0 0 1\r\nvp 0.5\r\n"
-    "f -4/1/1 -1/1/1 -2/1/1 -3/1/1\r\n"
-    "v 0 0 1\r\nv 1 0 +1.\r\nv 1 1 1\r\nv 0 1 1 1.0\r\n"
-    "f 5//1 6//1 7//1 8//1\r\n"
-    "l 1 2\r\np 3\r\n"
-    "f 1/1 2/1 6/1 5/1\r\nf 2 3 7 6\r\nf 3 4 8 7\r\nf\t4 1 5 8";
+static const char cube_obj[] = "# cube\r\nmtllib x.mtl\r\no cube\r\ng g1\r\ns off\r\nusemtl m\r\n"
+                               "v 0 0 0\r\nv 1. 0 0\r\nv +1e0 1 0\r\nv 0 1.0 0\r\n"
+                               "vt 0 0\r\nvn 0 0 1\r\nvp 0.5\r\n"
+                               "f -4/1/1 -1/1/1 -2/1/1 -3/1/1\r\n"
+                               "v 0 0 1\r\nv 1 0 +1.\r\nv 1 1 1\r\nv 0 1 1 1.0\r\n"
+                               "f 5//1 6//1 7//1 8//1\r\n"
+                               "l 1 2\r\np 3\r\n"
+                               "f 1/1 2/1 6/1 5/1\r\nf 2 3 7 6\r\nf 3 4 8 7\r\nf\t4 1 5 8";
 
 START_TEST(cube_written_in_every_format_should_load_to_12_triangles_on_8_vertices)
 {
@@ -268,8 +267,8 @@ START_TEST(cube_written_in_every_format_should_load_to_12_triangles_on_8_vertice
                                 "property uchar red\nelement face 6\n"
                                 "property list uint8 int32 vertex_index\nend_header\n");
     for (int i = 0; i < 8; i++)
-        n += (size_t)snprintf(ply + n, sizeof ply - n, "%g %g %g 255\n", cube_v[i][0],
-                              cube_v[i][1], cube_v[i][2]);
+        n += (size_t)snprintf(ply + n, sizeof ply - n, "%g %g %g 255\n", cube_v[i][0], cube_v[i][1],
+                              cube_v[i][2]);
     for (int f = 0; f < 6; f++)
         n += (size_t)snprintf(ply + n, sizeof ply - n, "4 %d %d %d %d\n", cube_q[f][0],
                               cube_q[f][1], cube_q[f][2], cube_q[f][3]);
@@ -436,8 +435,7 @@ static void check_one(const char *root, const char *rel)
     ck_assert_msg(dt < 3.0, "%s took %.2f s", rel, dt);
     if (st == HV_OK) {
         files_loaded++;
-        ck_assert_msg(!x || x->tris >= 0, "%s should fail but loaded %zu triangles", rel,
-                      m->ntris);
+        ck_assert_msg(!x || x->tris >= 0, "%s should fail but loaded %zu triangles", rel, m->ntris);
         ck_assert_msg(m->ntris > 0 && m->nverts > 0, "%s: empty mesh returned", rel);
         ck_assert_msg(!x || x->tris == 0 || (size_t)x->tris == m->ntris,
                       "%s: %zu triangles, expected %ld", rel, m->ntris, x ? x->tris : 0L);
@@ -452,8 +450,8 @@ static void check_one(const char *root, const char *rel)
         ck_assert_msg(st == HV_ERR_PARSE || st == HV_ERR_IO, "%s: status %s (%s)", rel,
                       hv_status_str(st), hv_last_error());
         ck_assert_ptr_null(m);
-        ck_assert_msg(strstr(hv_last_error(), path), "%s: message '%s' does not name the file",
-                      rel, hv_last_error());
+        ck_assert_msg(strstr(hv_last_error(), path), "%s: message '%s' does not name the file", rel,
+                      hv_last_error());
         ck_assert_msg(!x || !x->part || strstr(hv_last_error(), x->part),
                       "%s: message '%s' lacks '%s'", rel, hv_last_error(), x ? x->part : "");
     }
@@ -595,8 +593,8 @@ START_TEST(igea_tristrips_should_become_a_consistent_surface)
     ck_assert_uint_gt(m->ntris, 100000);
     ck_assert_uint_eq(r.inconsistent_edges, 0);
     ck_assert_uint_eq(r.degenerate_faces, 0);
-    printf("igea.ply: %zu triangles from strips, %zu boundary edges, %zu components\n",
-           m->ntris, r.boundary_edges, r.components);
+    printf("igea.ply: %zu triangles from strips, %zu boundary edges, %zu components\n", m->ntris,
+           r.boundary_edges, r.components);
     hv_mesh_destroy(&m);
 }
 END_TEST
@@ -633,7 +631,11 @@ START_TEST(malformed_files_should_fail_with_the_line_or_byte)
     assert_fails(tmp_write_str("two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n"), "line 4");
     assert_fails(tmp_write_str("num.obj", "v 0 0 0\nv 1 0 0\nv 0 1x 0\nf 1 2 3\n"), "line 3");
     assert_fails(tmp_write_str("short.obj", "v 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), "line 1");
-    assert_fails(tmp_write("utf16le.obj", "\xff\xfev\0 \0" "0\0", 8), "UTF-16");
+    assert_fails(tmp_write("utf16le.obj",
+                           "\xff\xfev\0 \0"
+                           "0\0",
+                           8),
+                 "UTF-16");
     assert_fails(tmp_write_str("empty.obj", ""), "empty");
     assert_fails(tmp_write_str("comments.obj", "# nothing\n"), "no triangles");
     assert_fails(tmp_write_str("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"),
@@ -967,10 +969,10 @@ START_TEST(from_arrays_should_weld_exact_positions_only)
 {
     /* two triangles sharing an edge given as a soup (-0 == +0); a NaN vertex
      * repeated is not merged; an unused vertex is dropped */
-    const double v[] = {0, 0, 0, 1, 0, 0, 0, 1, 0,        /* t0 */
-                        1, -0.0, 0, 1, 1, 0, 0, 1, 0,     /* t1 */
-                        NAN, 0, 0, NAN, 0, 0, 5, 5, 5,    /* t2 */
-                        9, 9, 9};                         /* unused */
+    const double v[] = {0,   0,    0, 1,   0, 0, 0, 1, 0, /* t0 */
+                        1,   -0.0, 0, 1,   1, 0, 0, 1, 0, /* t1 */
+                        NAN, 0,    0, NAN, 0, 0, 5, 5, 5, /* t2 */
+                        9,   9,    9};                    /* unused */
     const uint32_t t[] = {0, 1, 4, 3, 5, 4, 6, 7, 8};
     hv_mesh *m = NULL;
     ck_assert_int_eq(hv_mesh_from_arrays(&m, v, 10, t, 3), HV_OK);
@@ -1024,8 +1026,7 @@ START_TEST(icosphere_should_be_closed_consistent_and_outward)
         ck_assert_uint_eq(r.edges, 3 * f / 2);
         ck_assert_uint_eq(r.duplicate_faces + r.degenerate_faces, 0);
         double exact = 4.0 / 3.0 * M_PI * 8.0;
-        ck_assert_msg(r.signed_volume > 0 && r.signed_volume < exact, "volume %g",
-                      r.signed_volume);
+        ck_assert_msg(r.signed_volume > 0 && r.signed_volume < exact, "volume %g", r.signed_volume);
         if (s == 4)
             ck_assert_msg(exact - r.signed_volume < 0.01 * exact, "volume %g", r.signed_volume);
         for (size_t i = 0; i < m->nverts; i++) {
@@ -1052,8 +1053,8 @@ START_TEST(torus_should_be_closed_outward_with_euler_characteristic_zero)
     assert_closed_consistent(&r, "torus");
     ck_assert_int_eq((long)r.vertices - (long)r.edges + (long)r.triangles, 0);
     double exact = 2 * M_PI * M_PI * 2.0 * 0.25;
-    ck_assert_msg(fabs(r.signed_volume - exact) < 0.01 * exact, "volume %g vs %g",
-                  r.signed_volume, exact);
+    ck_assert_msg(fabs(r.signed_volume - exact) < 0.01 * exact, "volume %g vs %g", r.signed_volume,
+                  exact);
     hv_mesh_destroy(&m);
     ck_assert_int_eq(hv_mesh_make_torus(&m, c, 1.0, 2.0, 8, 8), HV_ERR_INVALID_ARG);
 }

@@ -43,7 +43,11 @@ static double worst_factor(const shape *sh, double t_over_h2, int poisson, hv_sm
 {
     double h = 1.0 / sh->n[0];
     uint8_t *mask = make_mask(sh);
-    hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, mask, poisson ? 0.0 : 1.0,
+    hv_problem p = {sh->dim,
+                    {sh->n[0], sh->n[1], sh->n[2]},
+                    h,
+                    mask,
+                    poisson ? 0.0 : 1.0,
                     poisson ? 1.0 : t_over_h2 * h * h};
     hv_solver_opts o;
     hv_solver_opts_default(&o);
@@ -128,7 +132,8 @@ static double analytic_error(int dim, int n, int poisson, hv_backend b)
     hv_solver *s = NULL;
     TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
     size_t cnt = (size_t)n * n * (dim == 3 ? n : 1);
-    double *f = malloc(cnt * sizeof *f), *u = calloc(cnt, sizeof *u), *ex = malloc(cnt * sizeof *ex);
+    double *f = malloc(cnt * sizeof *f), *u = calloc(cnt, sizeof *u),
+           *ex = malloc(cnt * sizeof *ex);
     for (size_t c = 0; c < cnt; c++) {
         int i = c % n, j = (c / n) % n, k = (int)(c / ((size_t)n * n));
         double v = cos(M_PI * (i + 0.5) * h) * cos(M_PI * (j + 0.5) * h) *
@@ -165,16 +170,17 @@ END_TEST
 START_TEST(multigrid_and_fftw_should_agree)
 {
     /* 4500 x 7: rows wider than the kernels' row buffers (MG_ROW_BUF) */
-    const shape plain[] = {{3, {48, 48, 48}, 0}, {3, {37, 64, 80}, 0}, {2, {101, 77, 1}, 0},
-                           {2, {4500, 7, 1}, 0}};
+    const shape plain[] = {
+        {3, {48, 48, 48}, 0}, {3, {37, 64, 80}, 0}, {2, {101, 77, 1}, 0}, {2, {4500, 7, 1}, 0}};
     for (int q = 0; q < (int)(sizeof plain / sizeof plain[0]); q++)
         for (int poisson = 0; poisson <= 1; poisson++) {
             const shape *sh = &plain[q];
             double h = 1.0 / sh->n[0];
-            hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, NULL, poisson ? 0 : 1,
-                            poisson ? 1 : 4 * h * h};
+            hv_problem p = {sh->dim,         {sh->n[0], sh->n[1], sh->n[2]}, h, NULL,
+                            poisson ? 0 : 1, poisson ? 1 : 4 * h * h};
             size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
-            float *f = malloc(n * sizeof *f), *u1 = calloc(n, sizeof *u1), *u2 = calloc(n, sizeof *u2);
+            float *f = malloc(n * sizeof *f), *u1 = calloc(n, sizeof *u1),
+                  *u2 = calloc(n, sizeof *u2);
             tl_fill_random(f, n, 9);
             hv_solver_opts o;
             hv_solver_opts_default(&o);
@@ -225,7 +231,8 @@ START_TEST(wide_rows_with_solid_cells_should_converge)
     hv_solve_info info;
     TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
     ck_assert_msg(info.reason == HV_STOP_CONVERGED && info.iterations <= 20,
-                  "reason %d after %d iterations at %g", (int)info.reason, info.iterations, info.relres);
+                  "reason %d after %d iterations at %g", (int)info.reason, info.iterations,
+                  info.relres);
     for (size_t c = 0; c < n; c++)
         ck_assert(isfinite(u[c]) && (!mask[c] || u[c] == 0));
     hv_solver_destroy(&s);
@@ -248,7 +255,8 @@ START_TEST(poisson_solution_should_be_mean_free_in_each_region)
     float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
     /* Incompatible data: a different mean in each room. The solver projects it. */
     for (size_t c = 0; c < n; c++)
-        f[c] = (c % 64) < 32 ? 1.0f + 0.1f * (float)((c * 7) % 5) : -3.0f + 0.2f * (float)((c * 3) % 4);
+        f[c] = (c % 64) < 32 ? 1.0f + 0.1f * (float)((c * 7) % 5)
+                             : -3.0f + 0.2f * (float)((c * 3) % 4);
     hv_solve_info info;
     TL_ASSERT_OK(hv_solver_solve(s, f, u, &info));
     ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
@@ -420,11 +428,16 @@ START_TEST(auto_cycles_should_save_corrections_and_report_the_true_residual)
             for (int t = 0; t < 2; t++) {
                 const shape *sh = &cases[c];
                 double h = 1.0 / sh->n[0];
-                hv_problem p = {sh->dim, {sh->n[0], sh->n[1], sh->n[2]}, h, NULL, poisson ? 0.0 : 1.0,
+                hv_problem p = {sh->dim,
+                                {sh->n[0], sh->n[1], sh->n[2]},
+                                h,
+                                NULL,
+                                poisson ? 0.0 : 1.0,
                                 poisson ? 1.0 : 4 * h * h};
                 size_t n = (size_t)sh->n[0] * sh->n[1] * (sh->dim == 3 ? sh->n[2] : 1);
                 float *f = malloc(n * sizeof *f), *u = calloc(n, sizeof *u);
-                double *fd = malloc(n * sizeof *fd), *ud = malloc(n * sizeof *ud), *au = malloc(n * sizeof *au);
+                double *fd = malloc(n * sizeof *fd), *ud = malloc(n * sizeof *ud),
+                       *au = malloc(n * sizeof *au);
                 tl_fill_random(f, n, 7 + c);
                 double mean = 0;
                 for (size_t i = 0; i < n; i++)
@@ -444,7 +457,8 @@ START_TEST(auto_cycles_should_save_corrections_and_report_the_true_residual)
                     TL_ASSERT_OK(hv_solver_solve_d(s, fd, ud, &info[one]));
                     hv_solver_destroy(&s);
                     /* the reported residual is the true one of the returned solution */
-                    TL_ASSERT_OK(hv_apply_helmholtz_d(p.dim, p.n, h, NULL, p.alpha, p.beta, ud, au));
+                    TL_ASSERT_OK(
+                        hv_apply_helmholtz_d(p.dim, p.n, h, NULL, p.alpha, p.beta, ud, au));
                     double rr = 0, ff = 0;
                     for (size_t i = 0; i < n; i++) {
                         rr += (fd[i] - au[i]) * (fd[i] - au[i]);
@@ -461,8 +475,8 @@ START_TEST(auto_cycles_should_save_corrections_and_report_the_true_residual)
                 ck_assert_int_eq(b->cycles, b->iterations);
                 ck_assert_int_ge(a->cycles, a->iterations);
                 ck_assert_msg(a->iterations < b->iterations && a->cycles <= b->cycles + 1,
-                              "case %d poisson %d tol %g: auto %d/%d cycles, one per iteration %d", c,
-                              poisson, tols[t], a->iterations, a->cycles, b->iterations);
+                              "case %d poisson %d tol %g: auto %d/%d cycles, one per iteration %d",
+                              c, poisson, tols[t], a->iterations, a->cycles, b->iterations);
                 free(f);
                 free(u);
                 free(fd);
@@ -509,8 +523,11 @@ START_TEST(cycles_should_not_depend_on_the_thread_count)
             for (size_t i = 0; i < n; i++)
                 if (memcmp(&u[i], &u1[i], sizeof(float)) && !bad++)
                     first = i;
-            ck_assert_msg(!bad, "%dx%dx%d on %d threads: %zu cells differ from one thread, first at plane %zu",
-                          sh->n[0], sh->n[1], sh->n[2], threads[t], bad, first / ((size_t)sh->n[0] * sh->n[1]));
+            ck_assert_msg(
+                !bad,
+                "%dx%dx%d on %d threads: %zu cells differ from one thread, first at plane %zu",
+                sh->n[0], sh->n[1], sh->n[2], threads[t], bad,
+                first / ((size_t)sh->n[0] * sh->n[1]));
         }
         free(f);
         free(u);
@@ -522,7 +539,7 @@ START_TEST(cycles_should_not_depend_on_the_thread_count)
 END_TEST
 
 /* One axis of the cell-centred prolongation, written out independently of
- * mg.c: weight of coarse index I for fine index i among nc coarse cells. */
+ * mg_transfer.c: weight of coarse index I for fine index i among nc coarse cells. */
 static double p_axis(int coarsen, int nc, int i, int I)
 {
     if (!coarsen)
@@ -539,9 +556,10 @@ static double p_axis(int coarsen, int nc, int i, int I)
  * above MG_PAR_MIN cells run threaded). */
 START_TEST(restriction_should_be_the_transpose_of_prolongation)
 {
-    const shape shapes[] = {{3, {13, 10, 7}, 1}, {3, {16, 9, 12}, 2}, {3, {21, 18, 16}, 1},
-                            {2, {45, 38, 1}, 1}, {2, {60, 61, 1}, 2}, {3, {12, 12, 12}, 0},
-                            {3, {40, 33, 27}, 1}, {2, {250, 141, 1}, 2}}; /* the last two run threaded */
+    const shape shapes[] = {
+        {3, {13, 10, 7}, 1},  {3, {16, 9, 12}, 2},  {3, {21, 18, 16}, 1},
+        {2, {45, 38, 1}, 1},  {2, {60, 61, 1}, 2},  {3, {12, 12, 12}, 0},
+        {3, {40, 33, 27}, 1}, {2, {250, 141, 1}, 2}}; /* the last two run threaded */
     for (size_t q = 0; q < sizeof shapes / sizeof shapes[0]; q++) {
         const shape *sh = &shapes[q];
         uint8_t *solid = make_mask(sh);
@@ -552,7 +570,7 @@ START_TEST(restriction_should_be_the_transpose_of_prolongation)
         st.count = (size_t)sh->n[0] * sh->n[1] * sh->n[2];
         st.nregion = 1;
         mg_hierarchy H;
-        ck_assert_int_eq(mg_hierarchy_build(&H, &st, 0), HV_OK);
+        ck_assert_int_eq(hv__mg_hierarchy_build(&H, &st, 0), HV_OK);
         ck_assert_msg(H.nlev >= 2, "shape %zu: one level", q);
         for (int l = 0; l + 1 < H.nlev; l++) {
             const mg_level *F = &H.lv[l], *C = &H.lv[l + 1];
@@ -565,7 +583,7 @@ START_TEST(restriction_should_be_the_transpose_of_prolongation)
             tl_fill_random(v, C->count, 2000 + 77 * q + l);
             const float *pnp = NULL;
             if (!C->plain) {
-                mg_prolong_norm(F, C, pn);
+                hv__mg_prolong_norm(F, C, pn);
                 pnp = pn;
             }
             int nchild = 1;
@@ -603,17 +621,17 @@ START_TEST(restriction_should_be_the_transpose_of_prolongation)
                         mag += fabs((double)r[fcell] * pv);
                     }
             for (int threads = 1; threads <= nt; threads += nt - 1) {
-                mg_restrict_transpose(F, C, sh->dim, pnp, r, fc, work, threads);
+                hv__mg_restrict_transpose(F, C, sh->dim, pnp, r, fc, work, threads);
                 double lhs = 0;
                 for (size_t c = 0; c < C->count; c++)
                     lhs += (double)fc[c] * v[c] * nchild;
                 ck_assert_msg(fabs(lhs - rhs) <= 1e-5 * mag,
-                              "shape %zu level %d, %d threads: <Rr,v> 2^d = %.9g, <r,Pv> = %.9g", q, l,
-                              threads, lhs, rhs);
+                              "shape %zu level %d, %d threads: <Rr,v> 2^d = %.9g, <r,Pv> = %.9g", q,
+                              l, threads, lhs, rhs);
             }
             free(r), free(pn), free(fc), free(v), free(work);
         }
-        mg_hierarchy_free(&H);
+        hv__mg_hierarchy_free(&H);
         free(solid);
     }
 }

@@ -171,8 +171,7 @@ START_TEST(npy_reader_should_accept_float64_and_version_2_headers)
     char p[256];
     double d[6] = {1.5, -2.25, 3e-3, 4e10, -5, 6};
     path_in_dir(p, sizeof p, "f8.npy");
-    write_npy_raw(p, 1, "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3), }", d,
-                  sizeof d);
+    write_npy_raw(p, 1, "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3), }", d, sizeof d);
     hv_grid *r = NULL;
     ck_assert_int_eq(hv_read_npy(p, &r), HV_OK);
     ck_assert_int_eq(r->dim, 2);
@@ -239,8 +238,7 @@ START_TEST(npy_reader_should_refuse_other_dtypes_fortran_order_and_1d)
                   sizeof iv);
     expect_error(p, HV_ERR_UNSUPPORTED, "Fortran");
     path_in_dir(p, sizeof p, "1d.npy");
-    write_npy_raw(p, 1, "{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", iv,
-                  sizeof iv);
+    write_npy_raw(p, 1, "{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", iv, sizeof iv);
     expect_error(p, HV_ERR_UNSUPPORTED, "1 dimension");
     path_in_dir(p, sizeof p, "missing.npy");
     expect_error(p, HV_ERR_IO, "cannot open");

@@ -22,8 +22,8 @@
 
 extern char **environ;
 
-static hv_cl *CL;           /* opened once in main */
-static const char *SELF;    /* this binary, for the no-platform child */
+static hv_cl *CL;        /* opened once in main */
+static const char *SELF; /* this binary, for the no-platform child */
 
 /* ---------- problems ---------- */
 
@@ -41,12 +41,15 @@ static const cfg CFGS[] = {
     {"2d odd plain poisson", 2, {67, 53, 1}, 0.0, 0},
     {"2d masked poisson", 2, {61, 47, 1}, 0.0, 1},
     {"3d masked poisson", 3, {19, 24, 14}, 0.0, 1},
-    {"3d even plain heat", 3, {16, 20, 12}, 1.0, 0},         /* plain coarse levels */
-    {"3d flat plain poisson", 3, {2, 40, 36}, 0.0, 0},       /* x never coarsened */
+    {"3d even plain heat", 3, {16, 20, 12}, 1.0, 0},   /* plain coarse levels */
+    {"3d flat plain poisson", 3, {2, 40, 36}, 0.0, 0}, /* x never coarsened */
 };
 #define NCFG ((int)(sizeof CFGS / sizeof CFGS[0]))
 
-static size_t cfg_count(const cfg *c) { return (size_t)c->n[0] * c->n[1] * (c->dim == 3 ? c->n[2] : 1); }
+static size_t cfg_count(const cfg *c)
+{
+    return (size_t)c->n[0] * c->n[1] * (c->dim == 3 ? c->n[2] : 1);
+}
 
 /* A ball and a full wall (two fluid regions), or NULL without mask. */
 static uint8_t *make_mask(const cfg *c)
@@ -130,23 +133,26 @@ static void hier_make(hier *h, const cfg *c, hv_smoother sm)
     h->s.o.smoother = sm;
     h->s.count = cfg_count(c);
     h->s.nregion = 1;
-    ck_assert_int_eq(mg_hierarchy_build(&h->H, &h->s, 1), HV_OK);
-    ck_assert_msg(hv_clmg_create(&h->m, CL, &h->H, sm, 2, 2, 1) == HV_OK, "%s", hv_last_error());
+    ck_assert_int_eq(hv__mg_hierarchy_build(&h->H, &h->s, 1), HV_OK);
+    ck_assert_msg(hv__clmg_create(&h->m, CL, &h->H, sm, 2, 2, 1) == HV_OK, "%s", hv_last_error());
 }
 
 static void hier_free(hier *h)
 {
-    hv_clmg_destroy(&h->m);
-    mg_hierarchy_free(&h->H);
+    hv__clmg_destroy(&h->m);
+    hv__mg_hierarchy_free(&h->H);
     free(h->solid);
 }
 
-static void upload(cl_mem m, const float *v, size_t n) { hv_cl_write(CL, m, 0, n * sizeof(float), v); }
+static void upload(cl_mem m, const float *v, size_t n)
+{
+    hv__cl_write(CL, m, 0, n * sizeof(float), v);
+}
 
 static void download(cl_mem m, float *v, size_t n)
 {
-    hv_cl_read(CL, m, 0, n * sizeof(float), v);
-    ck_assert_msg(hv_cl_check(CL) == HV_OK, "%s", hv_last_error());
+    hv__cl_read(CL, m, 0, n * sizeof(float), v);
+    ck_assert_msg(hv__cl_check(CL) == HV_OK, "%s", hv_last_error());
 }
 
 /* ---------- CPU references (mg.c semantics) ---------- */
@@ -167,7 +173,7 @@ static void ref_residual(const mg_hierarchy *H, const mg_level *L, const float *
 static double ref_diag(const mg_hierarchy *H, const mg_level *L, size_t c)
 {
     int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
-    return L->plain ? mg_level_diag(L, H->dim, H->alpha, i, j, k)
+    return L->plain ? hv__mg_level_diag(L, H->dim, H->alpha, i, j, k)
                     : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
 }
 
@@ -273,7 +279,8 @@ static void ref_prolong(const mg_level *F, const mg_level *C, const float *uc, f
                 ref_axis(co[0], C->n[0], i, &I[0], &I[1], &wi);
                 ref_axis(co[1], C->n[1], j, &J[0], &J[1], &wj);
                 ref_axis(co[2], C->n[2], k, &K[0], &K[1], &wk);
-                double Wi[2] = {1 - wi, wi}, Wj[2] = {1 - wj, wj}, Wk[2] = {1 - wk, wk}, s = 0, ws = 0;
+                double Wi[2] = {1 - wi, wi}, Wj[2] = {1 - wj, wj}, Wk[2] = {1 - wk, wk}, s = 0,
+                       ws = 0;
                 for (int a = 0; a < 2; a++)
                     for (int b = 0; b < 2; b++)
                         for (int e = 0; e < 2; e++) {
@@ -300,26 +307,27 @@ START_TEST(apply_and_residual_should_match_cpu_on_every_level)
         for (int l = 0; l < h.H.nlev; l++) {
             const mg_level *L = &h.H.lv[l];
             size_t n = L->count;
-            float *u = malloc(n * 4), *f = malloc(n * 4), *ref = malloc(n * 4), *got = malloc(n * 4);
+            float *u = malloc(n * 4), *f = malloc(n * 4), *ref = malloc(n * 4),
+                  *got = malloc(n * 4);
             fill_f(u, n);
             fill_f(f, n);
             cl_mem du = h.m.lv[l].u[0], df = h.m.lv[l].f, out;
-            ck_assert_int_eq(hv_cl_alloc(CL, n * 4, NULL, &out), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, n * 4, NULL, &out), HV_OK);
             upload(du, u, n);
             upload(df, f, n);
-            hv_clmg_apply(&h.m, l, du, out);
+            hv__clmg_apply(&h.m, l, du, out);
             download(out, got, n);
             ref_residual(&h.H, L, u, NULL, ref);
             for (size_t c = 0; c < n; c++)
                 ref[c] = -ref[c];
-            ck_assert_msg(rel_diff_f(got, ref, n) < 1e-5, "apply, %s level %d: %g", CFGS[ci].name, l,
-                          rel_diff_f(got, ref, n));
-            hv_clmg_residual(&h.m, l, du, df, out);
+            ck_assert_msg(rel_diff_f(got, ref, n) < 1e-5, "apply, %s level %d: %g", CFGS[ci].name,
+                          l, rel_diff_f(got, ref, n));
+            hv__clmg_residual(&h.m, l, du, df, out);
             download(out, got, n);
             ref_residual(&h.H, L, u, f, ref);
-            ck_assert_msg(rel_diff_f(got, ref, n) < 1e-5, "residual, %s level %d: %g", CFGS[ci].name,
-                          l, rel_diff_f(got, ref, n));
-            hv_cl_free(&out);
+            ck_assert_msg(rel_diff_f(got, ref, n) < 1e-5, "residual, %s level %d: %g",
+                          CFGS[ci].name, l, rel_diff_f(got, ref, n));
+            hv__cl_free(&out);
             free(u);
             free(f);
             free(ref);
@@ -351,7 +359,7 @@ START_TEST(smoother_sweeps_should_match_cpu)
                                 u[c] = f[c] = 0;
                     upload(D->u[D->cur], u, n);
                     upload(D->f, f, n);
-                    hv_clmg_smooth(&h.m, l, 2, rev);
+                    hv__clmg_smooth(&h.m, l, 2, rev);
                     download(D->u[D->cur], got, n);
                     ref_smooth(&h.H, L, sms[si], u, f, 2, rev);
                     double e = rel_diff_f(got, u, n);
@@ -379,17 +387,18 @@ START_TEST(restriction_should_be_the_mean_of_the_children)
             fill_f(f, F->count);
             upload(h.m.lv[l].f, f, F->count);
             upload(h.m.lv[l].u[0], u, F->count);
-            hv_clmg_restrict(&h.m, l, h.m.lv[l].f, h.m.lv[l + 1].f);
+            hv__clmg_restrict(&h.m, l, h.m.lv[l].f, h.m.lv[l + 1].f);
             download(h.m.lv[l + 1].f, got, C->count);
             ref_restrict(F, C, f, ref);
             ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5, "restrict, %s level %d",
                           CFGS[ci].name, l);
-            hv_clmg_restrict_residual(&h.m, l);
+            hv__clmg_restrict_residual(&h.m, l);
             download(h.m.lv[l + 1].f, got, C->count);
             ref_residual(&h.H, F, u, f, r);
             ref_restrict(F, C, r, ref);
-            ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5, "restrict residual, %s level %d: %g",
-                          CFGS[ci].name, l, rel_diff_f(got, ref, C->count));
+            ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5,
+                          "restrict residual, %s level %d: %g", CFGS[ci].name, l,
+                          rel_diff_f(got, ref, C->count));
             free(u);
             free(f);
             free(r);
@@ -418,37 +427,41 @@ START_TEST(transpose_restriction_should_match_cpu_and_be_the_adjoint_of_prolonga
         for (int l = 0; l + 1 < h.H.nlev; l++) {
             const mg_level *F = &h.H.lv[l], *C = &h.H.lv[l + 1];
             float *r = malloc(F->count * 4), *pn = NULL, *ref = malloc(C->count * 4);
-            float *got = malloc(C->count * 4), *uc = malloc(C->count * 4), *pu = calloc(F->count, 4);
+            float *got = malloc(C->count * 4), *uc = malloc(C->count * 4),
+                  *pu = calloc(F->count, 4);
             fill_f(r, F->count);
             if (!C->plain) {
                 weighted++;
                 pn = malloc(F->count * 4);
-                mg_prolong_norm(F, C, pn);
+                hv__mg_prolong_norm(F, C, pn);
             }
             ck_assert(h.m.lv[l].r != NULL && (h.m.lv[l].pn != NULL) == !C->plain);
             upload(h.m.lv[l].r, r, F->count);
-            hv_clmg_restrict_transpose(&h.m, l);
+            hv__clmg_restrict_transpose(&h.m, l);
             download(h.m.lv[l + 1].f, got, C->count);
             float *work = malloc(mg_restrict_transpose_work(F, C) * sizeof(float));
             ck_assert(work != NULL);
-            mg_restrict_transpose(F, C, h.H.dim, pn, r, ref, work, 1);
+            hv__mg_restrict_transpose(F, C, h.H.dim, pn, r, ref, work, 1);
             free(work);
-            ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5, "restrict transpose, %s level %d: %g",
-                          CFGS[ci].name, l, rel_diff_f(got, ref, C->count));
+            ck_assert_msg(rel_diff_f(got, ref, C->count) < 1e-5,
+                          "restrict transpose, %s level %d: %g", CFGS[ci].name, l,
+                          rel_diff_f(got, ref, C->count));
             /* adjoint of the device prolongation: <R r, uc> 2^d = <r, P uc>
              * (P leaves solid fine cells alone, and pn is 0 there) */
             fill_f(uc, C->count);
             upload(h.m.lv[l].u[0], pu, F->count);
             upload(h.m.lv[l + 1].u[0], uc, C->count);
-            hv_clmg_prolong(&h.m, l);
+            hv__clmg_prolong(&h.m, l);
             download(h.m.lv[l].u[0], pu, F->count);
             if (!F->plain)
                 for (size_t c = 0; c < F->count; c++)
                     if (F->a[c] == 0.0f)
                         r[c] = 0;
-            int nchild = (F->coarsen[0] ? 2 : 1) * (F->coarsen[1] ? 2 : 1) * (F->coarsen[2] ? 2 : 1);
+            int nchild =
+                (F->coarsen[0] ? 2 : 1) * (F->coarsen[1] ? 2 : 1) * (F->coarsen[2] ? 2 : 1);
             double lhs = nchild * dot_f(got, uc, C->count), rhs = dot_f(r, pu, F->count);
-            ck_assert_msg(fabs(lhs - rhs) <= 1e-5 * sqrt(dot_f(r, r, F->count) * dot_f(pu, pu, F->count)),
+            ck_assert_msg(fabs(lhs - rhs) <=
+                              1e-5 * sqrt(dot_f(r, r, F->count) * dot_f(pu, pu, F->count)),
                           "adjoint, %s level %d: %g vs %g", CFGS[ci].name, l, lhs, rhs);
             free(r);
             free(pn);
@@ -468,7 +481,7 @@ static void precondition(hier *h, const float *x, float *y)
 {
     hv_clmg_level *L0 = &h->m.lv[0];
     upload(L0->f, x, L0->count);
-    hv_clmg_vcycle(&h->m, 0, 0, 1);
+    hv__clmg_vcycle(&h->m, 0, 0, 1);
     download(L0->u[L0->cur], y, L0->count);
 }
 
@@ -515,12 +528,13 @@ START_TEST(prolongation_should_match_cpu)
         hier_make(&h, &CFGS[ci], HV_SMOOTH_RBGS);
         for (int l = 0; l + 1 < h.H.nlev; l++) {
             const mg_level *F = &h.H.lv[l], *C = &h.H.lv[l + 1];
-            float *uf = malloc(F->count * 4), *uc = malloc(C->count * 4), *got = malloc(F->count * 4);
+            float *uf = malloc(F->count * 4), *uc = malloc(C->count * 4),
+                  *got = malloc(F->count * 4);
             fill_f(uf, F->count);
             fill_f(uc, C->count);
             upload(h.m.lv[l].u[0], uf, F->count);
             upload(h.m.lv[l + 1].u[0], uc, C->count);
-            hv_clmg_prolong(&h.m, l);
+            hv__clmg_prolong(&h.m, l);
             download(h.m.lv[l].u[0], got, F->count);
             ref_prolong(F, C, uc, uf);
             ck_assert_msg(rel_diff_f(got, uf, F->count) < 1e-5, "prolong, %s level %d (%s->%s): %g",
@@ -561,7 +575,7 @@ START_TEST(bottom_solver_should_solve_the_coarsest_level)
                     f[c] -= (float)(s[L->region[c]] / cnt[L->region[c]]);
         }
         upload(h.m.lv[b].f, f, n);
-        hv_clmg_bottom(&h.m);
+        hv__clmg_bottom(&h.m);
         download(h.m.lv[b].u[0], u, n);
         ref_residual(&h.H, L, u, f, r);
         ck_assert_msg(max_abs_f(r, n) < 1e-5 * max_abs_f(f, n), "bottom residual, %s: %g",
@@ -572,7 +586,8 @@ START_TEST(bottom_solver_should_solve_the_coarsest_level)
                 if (L->region[c] >= 0)
                     s[L->region[c]] += u[c];
             for (int q = 0; q < L->nregion; q++)
-                ck_assert_msg(fabs(s[q]) < 1e-4 * max_abs_f(u, n) * n, "region %d not mean-free", q);
+                ck_assert_msg(fabs(s[q]) < 1e-4 * max_abs_f(u, n) * n, "region %d not mean-free",
+                              q);
         }
         free(f);
         free(u);
@@ -606,14 +621,14 @@ START_TEST(face_gradient_and_divergence_should_match_cpu)
         hv_faces *F;
         ck_assert_int_eq(hv_faces_create(&F, u), HV_OK);
         cl_mem du, ds = NULL, dg[3] = {NULL, NULL, NULL}, dd;
-        ck_assert_int_eq(hv_cl_alloc(CL, n * 4, u->v, &du), HV_OK);
-        ck_assert_int_eq(hv_cl_alloc(CL, n * 4, NULL, &dd), HV_OK);
+        ck_assert_int_eq(hv__cl_alloc(CL, n * 4, u->v, &du), HV_OK);
+        ck_assert_int_eq(hv__cl_alloc(CL, n * 4, NULL, &dd), HV_OK);
         if (solid)
-            ck_assert_int_eq(hv_cl_alloc(CL, n, solid, &ds), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, n, solid, &ds), HV_OK);
         for (int a = 0; a < c->dim; a++)
-            ck_assert_int_eq(hv_cl_alloc(CL, hv_faces_count(F, a) * 4, NULL, &dg[a]), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, hv_faces_count(F, a) * 4, NULL, &dg[a]), HV_OK);
         /* gradient */
-        hv_cl_face_gradient(CL, c->dim, c->n, u->h, ds, du, dg);
+        hv__cl_face_gradient(CL, c->dim, c->n, u->h, ds, du, dg);
         ck_assert_int_eq(hv_face_gradient(u, F), HV_OK);
         for (int a = 0; a < c->dim; a++) {
             size_t nf = hv_faces_count(F, a);
@@ -627,18 +642,18 @@ START_TEST(face_gradient_and_divergence_should_match_cpu)
             fill_f(F->f[a], hv_faces_count(F, a));
             upload(dg[a], F->f[a], hv_faces_count(F, a));
         }
-        hv_cl_face_divergence(CL, c->dim, c->n, u->h, ds, dg, dd);
+        hv__cl_face_divergence(CL, c->dim, c->n, u->h, ds, dg, dd);
         ck_assert_int_eq(hv_face_divergence(F, div), HV_OK);
         float *got = malloc(n * 4);
         download(dd, got, n);
         ck_assert_msg(rel_diff_f(got, div->v, n) < 1e-5, "divergence, %s: %g", c->name,
                       rel_diff_f(got, div->v, n));
         free(got);
-        hv_cl_free(&du);
-        hv_cl_free(&dd);
-        hv_cl_free(&ds);
+        hv__cl_free(&du);
+        hv__cl_free(&dd);
+        hv__cl_free(&ds);
         for (int a = 0; a < 3; a++)
-            hv_cl_free(&dg[a]);
+            hv__cl_free(&dg[a]);
         hv_faces_destroy(&F);
         hv_grid_destroy(&u);
         hv_grid_destroy(&div);
@@ -676,18 +691,18 @@ START_TEST(face_normalize_should_give_unit_normal_components)
         float *v[3] = {NULL, NULL, NULL};
         cl_mem dv[3] = {NULL, NULL, NULL}, dout[3] = {NULL, NULL, NULL}, ds = NULL;
         if (solid)
-            ck_assert_int_eq(hv_cl_alloc(CL, n, solid, &ds), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, n, solid, &ds), HV_OK);
         for (int b = 0; b < c->dim; b++) {
             v[b] = malloc(n * 4);
             fill_f(v[b], n);
             /* tiny vectors (far from a heat source) must survive the float math */
             for (size_t q = 0; q < n; q += 7)
                 v[b][q] *= 1e-30f;
-            ck_assert_int_eq(hv_cl_alloc(CL, n * 4, v[b], &dv[b]), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, n * 4, v[b], &dv[b]), HV_OK);
             size_t nf = n / c->n[b] * (c->n[b] + 1);
-            ck_assert_int_eq(hv_cl_alloc(CL, nf * 4, NULL, &dout[b]), HV_OK);
+            ck_assert_int_eq(hv__cl_alloc(CL, nf * 4, NULL, &dout[b]), HV_OK);
         }
-        hv_cl_face_normalize(CL, c->dim, c->n, ds, dv, dout, 0.0);
+        hv__cl_face_normalize(CL, c->dim, c->n, ds, dv, dout, 0.0);
         for (int a = 0; a < c->dim; a++) {
             int m[3] = {c->n[0] + (a == 0), c->n[1] + (a == 1), nz + (a == 2)};
             size_t nf = (size_t)m[0] * m[1] * m[2];
@@ -706,10 +721,10 @@ START_TEST(face_normalize_should_give_unit_normal_components)
         }
         for (int b = 0; b < 3; b++) {
             free(v[b]);
-            hv_cl_free(&dv[b]);
-            hv_cl_free(&dout[b]);
+            hv__cl_free(&dv[b]);
+            hv__cl_free(&dout[b]);
         }
-        hv_cl_free(&ds);
+        hv__cl_free(&ds);
         free(solid);
     }
 }
@@ -722,22 +737,22 @@ START_TEST(ratio_and_axpy_should_match_cpu)
     fill_f(a, n);
     fill_f(b, n);
     cl_mem da, db, dout;
-    ck_assert_int_eq(hv_cl_alloc(CL, n * 4, a, &da), HV_OK);
-    ck_assert_int_eq(hv_cl_alloc(CL, n * 4, b, &db), HV_OK);
-    ck_assert_int_eq(hv_cl_alloc(CL, n * 4, NULL, &dout), HV_OK);
-    hv_cl_ratio(CL, n, da, db, dout, 0.01);
+    ck_assert_int_eq(hv__cl_alloc(CL, n * 4, a, &da), HV_OK);
+    ck_assert_int_eq(hv__cl_alloc(CL, n * 4, b, &db), HV_OK);
+    ck_assert_int_eq(hv__cl_alloc(CL, n * 4, NULL, &dout), HV_OK);
+    hv__cl_ratio(CL, n, da, db, dout, 0.01);
     download(dout, got, n);
     for (size_t c = 0; c < n; c++)
         ref[c] = b[c] > 0.01f ? a[c] / b[c] : 0.0f;
     ck_assert(rel_diff_f(got, ref, n) < 1e-6);
-    hv_cl_axpy(CL, n, -2.5, da, db);
+    hv__cl_axpy(CL, n, -2.5, da, db);
     download(db, got, n);
     for (size_t c = 0; c < n; c++)
         ref[c] = b[c] - 2.5f * a[c];
     ck_assert(rel_diff_f(got, ref, n) < 1e-6);
-    hv_cl_free(&da);
-    hv_cl_free(&db);
-    hv_cl_free(&dout);
+    hv__cl_free(&da);
+    hv__cl_free(&db);
+    hv__cl_free(&dout);
     free(a);
     free(b);
     free(got);
@@ -749,7 +764,7 @@ START_TEST(reductions_should_match_double_sums)
 {
     const size_t sizes[] = {1, 63, 1025, 100003};
     cl_mem S;
-    ck_assert_int_eq(hv_cl_alloc(CL, 8 * sizeof(double), NULL, &S), HV_OK);
+    ck_assert_int_eq(hv__cl_alloc(CL, 8 * sizeof(double), NULL, &S), HV_OK);
     for (int si = 0; si < 4; si++) {
         size_t n = sizes[si];
         float *a = malloc(n * 4), *b = malloc(n * 4);
@@ -762,20 +777,20 @@ START_TEST(reductions_should_match_double_sums)
             mag += fabs(a[c]);
         }
         cl_mem da, db;
-        ck_assert_int_eq(hv_cl_alloc(CL, n * 4, a, &da), HV_OK);
-        ck_assert_int_eq(hv_cl_alloc(CL, n * 4, b, &db), HV_OK);
-        hv_cl_dot_f(CL, da, db, n, S, 0);
-        hv_cl_dot_f(CL, da, NULL, n, S, 1);
-        hv_cl_read_acc(CL, S, 0, 2, got);
-        ck_assert_int_eq(hv_cl_check(CL), HV_OK);
+        ck_assert_int_eq(hv__cl_alloc(CL, n * 4, a, &da), HV_OK);
+        ck_assert_int_eq(hv__cl_alloc(CL, n * 4, b, &db), HV_OK);
+        hv__cl_dot_f(CL, da, db, n, S, 0);
+        hv__cl_dot_f(CL, da, NULL, n, S, 1);
+        hv__cl_read_acc(CL, S, 0, 2, got);
+        ck_assert_int_eq(hv__cl_check(CL), HV_OK);
         ck_assert_msg(fabs(got[0] - dot) <= 1e-5 * mag, "dot over %zu: %g vs %g", n, got[0], dot);
         ck_assert_msg(fabs(got[1] - sum) <= 1e-5 * mag, "sum over %zu: %g vs %g", n, got[1], sum);
-        hv_cl_free(&da);
-        hv_cl_free(&db);
+        hv__cl_free(&da);
+        hv__cl_free(&db);
         free(a);
         free(b);
     }
-    hv_cl_free(&S);
+    hv__cl_free(&S);
 
     /* per-region sums and the mean projection, with many small regions and a
      * large one (several chunks) */
@@ -794,15 +809,15 @@ START_TEST(reductions_should_match_double_sums)
             mag += fabs(v[c]);
         }
     hv_cl_regions R;
-    ck_assert_int_eq(hv_cl_regions_create(CL, &R, n, region, nregion), HV_OK);
+    ck_assert_int_eq(hv__cl_regions_create(CL, &R, n, region, nregion), HV_OK);
     cl_mem dv;
-    ck_assert_int_eq(hv_cl_alloc(CL, n * 4, v, &dv), HV_OK);
-    hv_cl_region_sums(CL, &R, dv, 0);
+    ck_assert_int_eq(hv__cl_alloc(CL, n * 4, v, &dv), HV_OK);
+    hv__cl_region_sums(CL, &R, dv, 0);
     double rs[64];
-    hv_cl_read_acc(CL, R.sum, 0, nregion, rs);
+    hv__cl_read_acc(CL, R.sum, 0, nregion, rs);
     for (int r = 0; r < nregion; r++)
         ck_assert_msg(fabs(rs[r] - sum[r]) <= 1e-6 * mag, "region %d: %g vs %g", r, rs[r], sum[r]);
-    hv_cl_project(CL, &R, dv);
+    hv__cl_project(CL, &R, dv);
     download(dv, got, n);
     double err = 0;
     for (size_t c = 0; c < n; c++) {
@@ -810,8 +825,8 @@ START_TEST(reductions_should_match_double_sums)
         err = fmax(err, fabs(got[c] - want));
     }
     ck_assert_msg(err < 1e-6, "projection error %g", err);
-    hv_cl_regions_destroy(&R);
-    hv_cl_free(&dv);
+    hv__cl_regions_destroy(&R);
+    hv__cl_free(&dv);
     free(region);
     free(v);
     free(got);
@@ -831,16 +846,16 @@ static double true_relres(const hv_problem *p, const double *f, const double *u)
     s.count = (size_t)s.p.n[0] * s.p.n[1] * s.p.n[2];
     hv_solver_opts_default(&s.o);
     mg_hierarchy H;
-    ck_assert_int_eq(mg_hierarchy_build(&H, &s, 0), HV_OK);
+    ck_assert_int_eq(hv__mg_hierarchy_build(&H, &s, 0), HV_OK);
     double *y = malloc(s.count * sizeof *y), rr = 0, ff = 0;
-    mg_level_apply_d(&H.lv[0], H.dim, H.alpha, u, y);
+    hv__mg_level_apply_d(&H.lv[0], H.dim, H.alpha, u, y);
     for (size_t c = 0; c < s.count; c++)
         if (!p->solid || !p->solid[c]) {
             rr += (f[c] - y[c]) * (f[c] - y[c]);
             ff += f[c] * f[c];
         }
     free(y);
-    mg_hierarchy_free(&H);
+    hv__mg_hierarchy_free(&H);
     return sqrt(rr / ff);
 }
 
@@ -860,16 +875,16 @@ static double *make_rhs(const hv_problem *p, size_t n)
             s.p.n[2] = 1;
         s.count = n;
         mg_hierarchy H;
-        ck_assert_int_eq(mg_hierarchy_build(&H, &s, 0), HV_OK);
-        mg_level_apply_d(&H.lv[0], H.dim, H.alpha, v, f);
-        mg_hierarchy_free(&H);
+        ck_assert_int_eq(hv__mg_hierarchy_build(&H, &s, 0), HV_OK);
+        hv__mg_level_apply_d(&H.lv[0], H.dim, H.alpha, v, f);
+        hv__mg_hierarchy_free(&H);
     }
     free(v);
     return f;
 }
 
-static void solve_with(const hv_problem *p, hv_backend b, hv_smoother sm, double tol, const double *f,
-                       double *u, hv_solve_info *info)
+static void solve_with(const hv_problem *p, hv_backend b, hv_smoother sm, double tol,
+                       const double *f, double *u, hv_solve_info *info)
 {
     hv_solver_opts o;
     hv_solver_opts_default(&o);
@@ -904,18 +919,20 @@ static void check_solves(hv_smoother sm, const double *tols, int ntol)
             double *f = make_rhs(&p, n), *ucl = malloc(n * 8), *umg = malloc(n * 8);
             hv_solve_info icl, img;
             solve_with(&p, HV_BACKEND_OPENCL, sm, tols[ti], f, ucl, &icl);
-            solve_with(&p, HV_BACKEND_MG, sm == HV_SMOOTH_AUTO ? HV_SMOOTH_CHEBYSHEV : sm, tols[ti], f,
-                       umg, &img);
+            solve_with(&p, HV_BACKEND_MG, sm == HV_SMOOTH_AUTO ? HV_SMOOTH_CHEBYSHEV : sm, tols[ti],
+                       f, umg, &img);
             ck_assert_msg(icl.reason == HV_STOP_CONVERGED && icl.relres <= tols[ti] * 1.0001,
                           "%s tol %g: %s after %d iterations at %g", c->name, tols[ti],
                           hv_stop_reason_str(icl.reason), icl.iterations, icl.relres);
             double tr = true_relres(&p, f, ucl);
-            ck_assert_msg(tr <= tols[ti] * 1.01, "%s tol %g: true residual %g", c->name, tols[ti], tr);
+            ck_assert_msg(tr <= tols[ti] * 1.01, "%s tol %g: true residual %g", c->name, tols[ti],
+                          tr);
             /* agreement with mg: tight where both are accurate; at 1e-6 the
              * solutions differ by up to cond(A) * tol, so only heat is compared */
             double d = rel_diff_d(ucl, umg, n);
             if (tols[ti] <= 1e-10 || c->alpha > 0)
-                ck_assert_msg(d < 1e-5, "%s tol %g: opencl and mg differ by %g", c->name, tols[ti], d);
+                ck_assert_msg(d < 1e-5, "%s tol %g: opencl and mg differ by %g", c->name, tols[ti],
+                              d);
             if (solid)
                 for (size_t q = 0; q < n; q++)
                     if (solid[q])
@@ -1030,12 +1047,15 @@ END_TEST
 static cl_mem guarded(size_t bytes, cl_mem *parent)
 {
     ck_assert_int_le(bytes, GUARD_BYTES / 2);
-    ck_assert_int_eq(hv_cl_alloc(CL, GUARD_BYTES, NULL, parent), HV_OK);
+    ck_assert_int_eq(hv__cl_alloc(CL, GUARD_BYTES, NULL, parent), HV_OK);
     const cl_uchar pattern = 0xab;
-    ck_assert_int_eq(clEnqueueFillBuffer(CL->q, *parent, &pattern, 1, 0, GUARD_BYTES, 0, NULL, NULL), CL_SUCCESS);
+    ck_assert_int_eq(
+        clEnqueueFillBuffer(CL->q, *parent, &pattern, 1, 0, GUARD_BYTES, 0, NULL, NULL),
+        CL_SUCCESS);
     cl_buffer_region reg = {0, bytes};
     cl_int e;
-    cl_mem sub = clCreateSubBuffer(*parent, CL_MEM_READ_WRITE, CL_BUFFER_CREATE_TYPE_REGION, &reg, &e);
+    cl_mem sub =
+        clCreateSubBuffer(*parent, CL_MEM_READ_WRITE, CL_BUFFER_CREATE_TYPE_REGION, &reg, &e);
     ck_assert_int_eq(e, CL_SUCCESS);
     return sub;
 }
@@ -1043,20 +1063,19 @@ static cl_mem guarded(size_t bytes, cl_mem *parent)
 static void check_guard(cl_mem parent, size_t bytes, const char *what)
 {
     unsigned char *h = malloc(GUARD_BYTES);
-    hv_cl_read(CL, parent, 0, GUARD_BYTES, h);
-    ck_assert_int_eq(hv_cl_check(CL), HV_OK);
+    hv__cl_read(CL, parent, 0, GUARD_BYTES, h);
+    ck_assert_int_eq(hv__cl_check(CL), HV_OK);
     for (size_t i = bytes; i < GUARD_BYTES; i++)
-        ck_assert_msg(h[i] == 0xab, "%s wrote %zu bytes past its %zu-byte buffer", what, i - bytes, bytes);
+        ck_assert_msg(h[i] == 0xab, "%s wrote %zu bytes past its %zu-byte buffer", what, i - bytes,
+                      bytes);
     free(h);
 }
 
 START_TEST(kernels_should_write_only_inside_tiny_levels)
 {
     const cfg tiny[] = {
-        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},
-        {"2d one cell poisson", 2, {1, 1, 1}, 0.0, 0},
-        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},
-        {"2d 2x5 heat", 2, {2, 5, 1}, 1.0, 0},
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},   {"2d one cell poisson", 2, {1, 1, 1}, 0.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},   {"2d 2x5 heat", 2, {2, 5, 1}, 1.0, 0},
         {"2d 1x601 poisson", 2, {1, 601, 1}, 0.0, 0}, /* two levels */
         {"3d 9x9x9 heat", 3, {9, 9, 9}, 1.0, 0},      /* odd: weighted coarse level */
         {"3d 9x8x9 masked", 3, {9, 8, 9}, 0.0, 1},
@@ -1074,7 +1093,7 @@ START_TEST(kernels_should_write_only_inside_tiny_levels)
                 cl_mem *slot[NB] = {&L->u[0], &L->u[1], &L->f, &L->d, &L->r};
                 for (int q = 0; q < NB; q++)
                     if (*slot[q]) {
-                        hv_cl_free(slot[q]);
+                        hv__cl_free(slot[q]);
                         *slot[q] = guarded(L->count * sizeof(float), &parent[l][q]);
                     }
             }
@@ -1082,10 +1101,10 @@ START_TEST(kernels_should_write_only_inside_tiny_levels)
             float *v = malloc(L0->count * sizeof(float));
             fill_f(v, L0->count);
             upload(L0->f, v, L0->count);
-            hv_clmg_vcycle(&h.m, 0, 0, 1);
-            hv_clmg_fmg(&h.m);
-            hv_clmg_smooth(&h.m, 0, 1, 0);
-            ck_assert_int_eq(hv_cl_finish(CL), HV_OK);
+            hv__clmg_vcycle(&h.m, 0, 0, 1);
+            hv__clmg_fmg(&h.m);
+            hv__clmg_smooth(&h.m, 0, 1, 0);
+            ck_assert_int_eq(hv__cl_finish(CL), HV_OK);
             for (int l = 0; l < h.m.nlev; l++)
                 for (int q = 0; q < NB; q++)
                     if (parent[l][q]) {
@@ -1096,7 +1115,7 @@ START_TEST(kernels_should_write_only_inside_tiny_levels)
             hier_free(&h);
             for (int l = 0; l < MG_MAX_LEVELS; l++)
                 for (int q = 0; q < NB; q++)
-                    hv_cl_free(&parent[l][q]);
+                    hv__cl_free(&parent[l][q]);
             free(v);
         }
 }
@@ -1107,9 +1126,12 @@ START_TEST(tiny_and_degenerate_grids_should_solve_like_mg)
     /* one-cell and one-row grids: the bottom kernel once wrote past such
      * levels (PoCL), which only a heap checker or a later crash revealed */
     const cfg tiny[] = {
-        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},   {"2d one cell heat", 2, {1, 1, 1}, 1.0, 0},
-        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},   {"2d 1x700 heat", 2, {1, 700, 1}, 1.0, 0},
-        {"3d 1000x2x2 poisson", 3, {1000, 2, 2}, 0.0, 0}, {"3d 5x7x9 poisson", 3, {5, 7, 9}, 0.0, 0},
+        {"3d one cell heat", 3, {1, 1, 1}, 1.0, 0},
+        {"2d one cell heat", 2, {1, 1, 1}, 1.0, 0},
+        {"3d 3x1x1 poisson", 3, {3, 1, 1}, 0.0, 0},
+        {"2d 1x700 heat", 2, {1, 700, 1}, 1.0, 0},
+        {"3d 1000x2x2 poisson", 3, {1000, 2, 2}, 0.0, 0},
+        {"3d 5x7x9 poisson", 3, {5, 7, 9}, 0.0, 0},
     };
     for (int ci = 0; ci < (int)(sizeof tiny / sizeof tiny[0]); ci++) {
         hv_problem p = make_problem(&tiny[ci], NULL);
@@ -1258,7 +1280,7 @@ START_TEST(kernel_build_failure_should_report_the_build_log)
     int saved = dup(2), null = open("/dev/null", O_WRONLY);
     if (null >= 0)
         dup2(null, 2);
-    hv_status st = hv_cl_build(CL, src, 1, "", &prog);
+    hv_status st = hv__cl_build(CL, src, 1, "", &prog);
     if (saved >= 0)
         dup2(saved, 2);
     if (null >= 0)
@@ -1267,7 +1289,8 @@ START_TEST(kernel_build_failure_should_report_the_build_log)
         close(saved);
     ck_assert_int_eq(st, HV_ERR_BACKEND);
     ck_assert_ptr_null(prog);
-    ck_assert_msg(strstr(hv_last_error(), "failed to build") && strstr(hv_last_error(), "undeclared_name"),
+    ck_assert_msg(strstr(hv_last_error(), "failed to build") &&
+                      strstr(hv_last_error(), "undeclared_name"),
                   "message: %s", hv_last_error());
     ck_assert(strlen(hv_last_error()) < 1000);
 }
@@ -1370,7 +1393,8 @@ START_TEST(no_platform_should_make_the_backend_unsupported)
     char **env = calloc(ne + 2, sizeof *env);
     size_t k = 0;
     for (size_t i = 0; i < ne; i++)
-        if (strncmp(environ[i], "OCL_ICD_VENDORS=", 16) && strncmp(environ[i], "HEATVOX_OPENCL_DEVICE=", 22))
+        if (strncmp(environ[i], "OCL_ICD_VENDORS=", 16) &&
+            strncmp(environ[i], "HEATVOX_OPENCL_DEVICE=", 22))
             env[k++] = environ[i];
     env[k++] = "OCL_ICD_VENDORS=/nonexistent-heatvox-icd-dir";
     env[k] = NULL;
@@ -1410,7 +1434,7 @@ int main(int argc, char **argv)
                hv_last_error());
         tcase_add_test(tc, opencl_should_be_reported_unsupported_without_a_platform);
     } else {
-        st = hv_cl_open(&CL);
+        st = hv__cl_open(&CL);
         if (st) {
             fprintf(stderr, "check_opencl: cannot open the OpenCL device: %s\n", hv_last_error());
             return 1;
@@ -1422,7 +1446,8 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, smoother_sweeps_should_match_cpu, have_cl, why);
     TL_ADD_IF(tc, restriction_should_be_the_mean_of_the_children, have_cl, why);
     TL_ADD_IF(tc, prolongation_should_match_cpu, have_cl, why);
-    TL_ADD_IF(tc, transpose_restriction_should_match_cpu_and_be_the_adjoint_of_prolongation, have_cl, why);
+    TL_ADD_IF(tc, transpose_restriction_should_match_cpu_and_be_the_adjoint_of_prolongation,
+              have_cl, why);
     TL_ADD_IF(tc, symmetric_cycle_should_be_a_symmetric_operator, have_cl, why);
     TL_ADD_IF(tc, bottom_solver_should_solve_the_coarsest_level, have_cl, why);
     TL_ADD_IF(tc, face_gradient_and_divergence_should_match_cpu, have_cl, why);
@@ -1452,6 +1477,6 @@ int main(int argc, char **argv)
     int failed = srunner_ntests_failed(sr);
     srunner_free(sr);
     if (CL)
-        hv_cl_close(&CL);
+        hv__cl_close(&CL);
     return failed ? 1 : 0;
 }

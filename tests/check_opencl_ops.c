@@ -34,26 +34,26 @@ static double rel_diff(const float *a, const float *b, size_t n)
 static cl_mem dev_alloc(size_t n, const float *init)
 {
     cl_mem m = NULL;
-    TL_ASSERT_OK(hv_cl_alloc(CL, n * sizeof(float), init, &m));
+    TL_ASSERT_OK(hv__cl_alloc(CL, n * sizeof(float), init, &m));
     return m;
 }
 
 static void download(cl_mem m, float *v, size_t n)
 {
-    hv_cl_read(CL, m, 0, n * sizeof(float), v);
-    TL_ASSERT_OK(hv_cl_check(CL));
+    hv__cl_read(CL, m, 0, n * sizeof(float), v);
+    TL_ASSERT_OK(hv__cl_check(CL));
 }
 
 /* ---------- splat ---------- */
 
-/* The CPU splat of src/heat/sdf.c: hv_trilinear weights, float sums. */
+/* The CPU splat of src/heat/sdf.c: hv__trilinear weights, float sums. */
 static void cpu_splat(const hv_grid *g, size_t npts, const double *x, const double *val,
                       size_t stride, double scale, float *out)
 {
     for (size_t p = 0; p < npts; p++) {
         size_t c0, step[3];
         double wt[8];
-        hv_trilinear(g, x + 3 * p, &c0, step, wt);
+        hv__trilinear(g, x + 3 * p, &c0, step, wt);
         for (int q = 0; q < 8; q++) {
             if (wt[q] == 0)
                 continue;
@@ -91,29 +91,30 @@ static void check_splat(int dim, const int n[3], size_t npts)
     double *x = malloc(3 * npts * sizeof *x), *val = malloc(3 * npts * sizeof *val);
     random_samples(g, npts, x, val, 7 + (uint64_t)dim);
     hv_cl_splat sp;
-    TL_ASSERT_OK(hv_cl_splat_create(CL, &sp, dim, n, h, origin, npts, x));
+    TL_ASSERT_OK(hv__cl_splat_create(CL, &sp, dim, n, h, origin, npts, x));
     float *ref = calloc(count, sizeof *ref), *got = malloc(count * sizeof *got);
     cl_mem out = dev_alloc(count, NULL);
     const double scale = 1.0 / (h * h * h);
     for (int b = 0; b < 3; b++) {
         memset(ref, 0, count * sizeof *ref);
         cpu_splat(g, npts, x, val + b, 3, scale, ref);
-        TL_ASSERT_OK(hv_cl_splat_run(CL, &sp, val + b, 3, scale, out));
+        TL_ASSERT_OK(hv__cl_splat_run(CL, &sp, val + b, 3, scale, out));
         download(out, got, count);
         double d = rel_diff(got, ref, count);
-        printf("splat %dD %dx%dx%d, %zu samples, component %d: max rel diff %.2e\n", dim, n[0], n[1],
-               dim == 3 ? n[2] : 1, npts, b, d);
+        printf("splat %dD %dx%dx%d, %zu samples, component %d: max rel diff %.2e\n", dim, n[0],
+               n[1], dim == 3 ? n[2] : 1, npts, b, d);
         ck_assert_msg(d < 1e-5, "component %d differs by %g", b, d);
     }
     /* val == NULL splats the scale: the total is npts * scale */
-    TL_ASSERT_OK(hv_cl_splat_run(CL, &sp, NULL, 0, 2.0, out));
+    TL_ASSERT_OK(hv__cl_splat_run(CL, &sp, NULL, 0, 2.0, out));
     download(out, got, count);
     double sum = 0;
     for (size_t c = 0; c < count; c++)
         sum += got[c];
-    ck_assert_msg(fabs(sum - 2.0 * npts) < 1e-4 * npts, "unit splat sums to %g, not %g", sum, 2.0 * npts);
-    hv_cl_free(&out);
-    hv_cl_splat_destroy(&sp);
+    ck_assert_msg(fabs(sum - 2.0 * npts) < 1e-4 * npts, "unit splat sums to %g, not %g", sum,
+                  2.0 * npts);
+    hv__cl_free(&out);
+    hv__cl_splat_destroy(&sp);
     free(x), free(val), free(ref), free(got);
     hv_grid_destroy(&g);
 }
@@ -143,26 +144,26 @@ START_TEST(splat_of_a_mesh_quadrature_should_match_the_cpu)
     for (int a = 0; a < 3; a++)
         hi[a] = origin[a] + n[a] * h;
     hv_quad q;
-    TL_ASSERT_OK(hv_quad_build(m, h, origin, hi, &q));
+    TL_ASSERT_OK(hv__quad_build(m, h, origin, hi, &q));
     const size_t count = hv_grid_count(g);
     hv_cl_splat sp;
-    TL_ASSERT_OK(hv_cl_splat_create(CL, &sp, 3, n, h, origin, q.count, q.x));
+    TL_ASSERT_OK(hv__cl_splat_create(CL, &sp, 3, n, h, origin, q.count, q.x));
     float *ref = malloc(count * sizeof *ref), *got = malloc(count * sizeof *got);
     cl_mem out = dev_alloc(count, NULL);
     for (int b = 0; b < 4; b++) {
         memset(ref, 0, count * sizeof *ref);
         const double *v = b < 3 ? q.w + b : q.area;
         cpu_splat(g, q.count, q.x, v, b < 3 ? 3 : 1, 1.0 / (h * h * h), ref);
-        TL_ASSERT_OK(hv_cl_splat_run(CL, &sp, v, b < 3 ? 3 : 1, 1.0 / (h * h * h), out));
+        TL_ASSERT_OK(hv__cl_splat_run(CL, &sp, v, b < 3 ? 3 : 1, 1.0 / (h * h * h), out));
         download(out, got, count);
         double d = rel_diff(got, ref, count);
         printf("splat of a torus's %zu samples, %s: max rel diff %.2e\n", q.count,
                b < 3 ? "normal component" : "area", d);
         ck_assert_msg(d < 1e-5, "field %d differs by %g", b, d);
     }
-    hv_cl_free(&out);
-    hv_cl_splat_destroy(&sp);
-    hv_quad_free(&q);
+    hv__cl_free(&out);
+    hv__cl_splat_destroy(&sp);
+    hv__quad_free(&q);
     free(ref), free(got);
     hv_grid_destroy(&g);
     hv_mesh_destroy(&m);
@@ -174,9 +175,10 @@ static double cpu_interp(const hv_grid *g, const float *v, const double x[3])
 {
     size_t c0, step[3];
     double wt[8], val = 0;
-    hv_trilinear(g, x, &c0, step, wt);
+    hv__trilinear(g, x, &c0, step, wt);
     for (int q = 0; q < 8; q++)
-        val += wt[q] * v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
+        val +=
+            wt[q] * v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
     return val;
 }
 
@@ -191,19 +193,19 @@ static void check_sample(int dim, const int n[3], size_t npts)
     float *v = malloc(count * sizeof *v), *got = malloc(npts * sizeof *got);
     tl_fill_random(v, count, 17);
     hv_cl_splat sp;
-    TL_ASSERT_OK(hv_cl_splat_create(CL, &sp, dim, n, h, origin, npts, x));
+    TL_ASSERT_OK(hv__cl_splat_create(CL, &sp, dim, n, h, origin, npts, x));
     cl_mem dv = dev_alloc(count, v), dout = dev_alloc(npts, NULL);
-    hv_cl_splat_sample(CL, &sp, dv, dout);
+    hv__cl_splat_sample(CL, &sp, dv, dout);
     download(dout, got, npts);
     double d = 0;
     for (size_t k = 0; k < npts; k++)
         d = fmax(d, fabs(got[k] - cpu_interp(g, v, x + 3 * sp.order[k])));
     d /= 0.5; /* max |v| */
-    printf("sample %dD %dx%dx%d at %zu points: max rel diff %.2e\n", dim, n[0], n[1], dim == 3 ? n[2] : 1,
-           npts, d);
+    printf("sample %dD %dx%dx%d at %zu points: max rel diff %.2e\n", dim, n[0], n[1],
+           dim == 3 ? n[2] : 1, npts, d);
     ck_assert_msg(d < 1e-5, "interpolation differs by %g", d);
-    hv_cl_free(&dv), hv_cl_free(&dout);
-    hv_cl_splat_destroy(&sp);
+    hv__cl_free(&dv), hv__cl_free(&dout);
+    hv__cl_splat_destroy(&sp);
     free(x), free(val), free(v), free(got);
     hv_grid_destroy(&g);
 }
@@ -218,7 +220,8 @@ END_TEST
 START_TEST(shift_should_match_the_cpu_zero_set_correction)
 {
     const size_t n = 5001;
-    float *phi = malloc(n * sizeof *phi), *num = malloc(n * sizeof *num), *den = malloc(n * sizeof *den);
+    float *phi = malloc(n * sizeof *phi), *num = malloc(n * sizeof *num),
+          *den = malloc(n * sizeof *den);
     float *ref = malloc(n * sizeof *ref), *got = malloc(n * sizeof *got);
     tl_fill_random(phi, n, 1);
     tl_fill_random(num, n, 2);
@@ -235,13 +238,13 @@ START_TEST(shift_should_match_the_cpu_zero_set_correction)
         ref[c] -= (float)(taper * num[c] / d);
     }
     cl_mem dphi = dev_alloc(n, phi), dnum = dev_alloc(n, num), dden = dev_alloc(n, den);
-    hv_cl_sdf_shift(CL, n, dphi, NULL, NULL, sh, 0.0, 0);
-    hv_cl_sdf_shift(CL, n, dphi, dnum, dden, 0.0, tau, 1);
+    hv__cl_sdf_shift(CL, n, dphi, NULL, NULL, sh, 0.0, 0);
+    hv__cl_sdf_shift(CL, n, dphi, dnum, dden, 0.0, tau, 1);
     download(dphi, got, n);
     double d = rel_diff(got, ref, n);
     printf("zero-set shift: max rel diff %.2e\n", d);
     ck_assert_msg(d < 1e-5, "shift differs by %g", d);
-    hv_cl_free(&dphi), hv_cl_free(&dnum), hv_cl_free(&dden);
+    hv__cl_free(&dphi), hv__cl_free(&dnum), hv__cl_free(&dden);
     free(phi), free(num), free(den), free(ref), free(got);
 }
 END_TEST
@@ -273,8 +276,8 @@ static void cpu_face_vec(const float *Y, size_t count, int unsig, const int n[3]
 }
 
 static double cpu_flux(const float *Y, size_t count, int nlev, const double *tau, int unsig,
-                       const int n[3], const size_t s[3], double h, int a, size_t c, const int idx[3],
-                       int *dead)
+                       const int n[3], const size_t s[3], double h, int a, size_t c,
+                       const int idx[3], int *dead)
 {
     const int ncomp = unsig ? 1 : 3;
     for (int k = 0; k < nlev; k++) {
@@ -309,7 +312,8 @@ static size_t cpu_rhs(const float *Y, size_t count, int nlev, const double *tau,
                     if (idx[a] < n[a] - 1) {
                         int up[3] = {i, j, k};
                         up[a]++;
-                        div += cpu_flux(Y, count, nlev, tau, unsig, n, s, h, a, c + s[a], up, &dead);
+                        div +=
+                            cpu_flux(Y, count, nlev, tau, unsig, n, s, h, a, c + s[a], up, &dead);
                     }
                 }
                 rhs[c] = (float)(-div / h);
@@ -332,7 +336,8 @@ static void heat_like_fields(const int n[3], int nlev, int ncomp, float *Y)
                     double r = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) + 0.3;
                     double e = exp(-r / (l ? 12.0 : 1.5)) * (1 + 0.1 * sin(i + 2.0 * j));
                     for (int b = 0; b < ncomp; b++)
-                        Y[((size_t)l * ncomp + b) * count + c] = (float)(ncomp == 1 ? e : e * p[b] / r);
+                        Y[((size_t)l * ncomp + b) * count + c] =
+                            (float)(ncomp == 1 ? e : e * p[b] / r);
                 }
 }
 
@@ -346,27 +351,29 @@ static size_t check_rhs(int unsig, int nlev)
     double tau[2] = {unsig ? 1e-3 : 1e-4, unsig ? 0.5 : 0.3};
     float *ref = malloc(count * sizeof *ref), *got = malloc(count * sizeof *got);
     size_t dead_ref = cpu_rhs(Y, count, nlev, tau, unsig, n, h, ref);
-    cl_mem dY = dev_alloc((size_t)nlev * ncomp * count, Y), drhs = dev_alloc(count, NULL), dtau, ddead;
+    cl_mem dY = dev_alloc((size_t)nlev * ncomp * count, Y), drhs = dev_alloc(count, NULL), dtau,
+           ddead;
     float tauf[2] = {(float)tau[0], (float)tau[1]};
     const uint32_t zero = 0;
-    TL_ASSERT_OK(hv_cl_alloc(CL, 2 * CL->acc, CL->fp64 ? (void *)tau : (void *)tauf, &dtau));
-    TL_ASSERT_OK(hv_cl_alloc(CL, sizeof zero, &zero, &ddead));
-    hv_cl_sdf_rhs(CL, n, h, dY, nlev, ncomp, dtau, drhs, ddead);
+    TL_ASSERT_OK(hv__cl_alloc(CL, 2 * CL->acc, CL->fp64 ? (void *)tau : (void *)tauf, &dtau));
+    TL_ASSERT_OK(hv__cl_alloc(CL, sizeof zero, &zero, &ddead));
+    hv__cl_sdf_rhs(CL, n, h, dY, nlev, ncomp, dtau, drhs, ddead);
     download(drhs, got, count);
     uint32_t dead = 0;
-    hv_cl_read(CL, ddead, 0, sizeof dead, &dead);
-    TL_ASSERT_OK(hv_cl_check(CL));
+    hv__cl_read(CL, ddead, 0, sizeof dead, &dead);
+    TL_ASSERT_OK(hv__cl_check(CL));
     double d = rel_diff(got, ref, count);
     size_t faces = (size_t)(n[0] - 1) * n[1] * n[2] + (size_t)n[0] * (n[1] - 1) * n[2] +
                    (size_t)n[0] * n[1] * (n[2] - 1);
     printf("sdf rhs %s, %d level(s): max rel diff %.2e, dead faces %u (cpu %zu) of %zu\n",
            unsig ? "unsigned" : "signed", nlev, d, dead, dead_ref, faces);
     ck_assert_msg(d < 1e-5, "rhs differs by %g", d);
-    ck_assert_msg(dead_ref > 0 && dead_ref < faces, "the fields should leave some faces dead, not %zu of %zu",
-                  dead_ref, faces);
+    ck_assert_msg(dead_ref > 0 && dead_ref < faces,
+                  "the fields should leave some faces dead, not %zu of %zu", dead_ref, faces);
     /* a face right at a bound may tip either way in float */
-    ck_assert_msg(fabs((double)dead - (double)dead_ref) <= 2, "dead faces %u, cpu %zu", dead, dead_ref);
-    hv_cl_free(&dY), hv_cl_free(&drhs), hv_cl_free(&dtau), hv_cl_free(&ddead);
+    ck_assert_msg(fabs((double)dead - (double)dead_ref) <= 2, "dead faces %u, cpu %zu", dead,
+                  dead_ref);
+    hv__cl_free(&dY), hv__cl_free(&drhs), hv__cl_free(&dtau), hv__cl_free(&ddead);
     free(Y), free(ref), free(got);
     return dead_ref;
 }
@@ -374,14 +381,16 @@ static size_t check_rhs(int unsig, int nlev)
 START_TEST(sdf_rhs_should_match_the_cpu_with_levels_and_dead_faces)
 {
     size_t one = check_rhs(0, 1), two = check_rhs(0, 2);
-    ck_assert_msg(two < one, "a second level should serve faces dead on the first (%zu, %zu)", one, two);
+    ck_assert_msg(two < one, "a second level should serve faces dead on the first (%zu, %zu)", one,
+                  two);
 }
 END_TEST
 
 START_TEST(sdf_rhs_should_match_the_cpu_for_the_unsigned_gradient)
 {
     size_t one = check_rhs(1, 1), two = check_rhs(1, 2);
-    ck_assert_msg(two < one, "a second level should serve faces dead on the first (%zu, %zu)", one, two);
+    ck_assert_msg(two < one, "a second level should serve faces dead on the first (%zu, %zu)", one,
+                  two);
 }
 END_TEST
 
@@ -410,8 +419,8 @@ static void check_device_solve(const scfg *c)
                 }
     }
     const double h = 1.0 / c->n[0];
-    hv_problem p = {c->dim, {c->n[0], c->n[1], c->n[2]}, h, solid, c->alpha,
-                    c->alpha > 0 ? 16 * h * h : 1.0};
+    hv_problem p = {c->dim,   {c->n[0], c->n[1], c->n[2]},    h, solid,
+                    c->alpha, c->alpha > 0 ? 16 * h * h : 1.0};
     hv_solver_opts so;
     hv_solver_opts_default(&so);
     so.backend = HV_BACKEND_OPENCL;
@@ -428,20 +437,21 @@ static void check_device_solve(const scfg *c)
     hv_solve_info hi, di;
     TL_ASSERT_OK(hv_solver_solve(sv, f, ref, &hi));
     cl_mem df = dev_alloc(count, f), du = dev_alloc(count, u0);
-    TL_ASSERT_OK(hv_cl_finish(CL));
-    TL_ASSERT_OK(hv_cl_solver_solve(sv, df, du, &di));
+    TL_ASSERT_OK(hv__cl_finish(CL));
+    TL_ASSERT_OK(hv__cl_solver_solve(sv, df, du, &di));
     download(du, got, count);
     double d = rel_diff(got, ref, count);
-    printf("device solve %dD %dx%dx%d alpha %g%s%s: max rel diff %.2e, %d/%d iterations, relres %.1e\n",
-           c->dim, c->n[0], c->n[1], nz, c->alpha, c->mask ? " masked" : "", c->guess ? " guess" : "",
-           d, di.iterations, hi.iterations, di.relres);
-    ck_assert_msg(di.reason == HV_STOP_CONVERGED && di.relres <= 1e-8, "device solve stopped: %s at %g",
-                  hv_stop_reason_str(di.reason), di.relres);
+    printf("device solve %dD %dx%dx%d alpha %g%s%s: max rel diff %.2e, %d/%d iterations, relres "
+           "%.1e\n",
+           c->dim, c->n[0], c->n[1], nz, c->alpha, c->mask ? " masked" : "",
+           c->guess ? " guess" : "", d, di.iterations, hi.iterations, di.relres);
+    ck_assert_msg(di.reason == HV_STOP_CONVERGED && di.relres <= 1e-8,
+                  "device solve stopped: %s at %g", hv_stop_reason_str(di.reason), di.relres);
     ck_assert_int_eq(di.backend, HV_BACKEND_OPENCL);
     ck_assert_msg(d < 1e-5, "device and host solves differ by %g", d);
     for (size_t q = 0; solid && q < count; q++)
         ck_assert_msg(!solid[q] || got[q] == 0.0f, "solid cell %zu holds %g", q, got[q]);
-    hv_cl_free(&df), hv_cl_free(&du);
+    hv__cl_free(&df), hv__cl_free(&du);
     hv_solver_destroy(&sv);
     free(solid), free(f), free(u0), free(ref), free(got);
 }
@@ -466,25 +476,25 @@ START_TEST(device_solve_should_refuse_other_backends_and_zero_rhs_gives_zero)
     hv_solver *sv = NULL;
     TL_ASSERT_OK(hv_solver_create(&sv, &p, &so));
     cl_mem f = dev_alloc(512, NULL), u = dev_alloc(512, NULL);
-    hv_cl_zero(CL, f, 512 * sizeof(float));
-    TL_ASSERT_OK(hv_cl_finish(CL));
-    ck_assert_int_eq(hv_cl_solver_solve(sv, f, u, NULL), HV_ERR_UNSUPPORTED);
+    hv__cl_zero(CL, f, 512 * sizeof(float));
+    TL_ASSERT_OK(hv__cl_finish(CL));
+    ck_assert_int_eq(hv__cl_solver_solve(sv, f, u, NULL), HV_ERR_UNSUPPORTED);
     hv_solver_destroy(&sv);
     so.backend = HV_BACKEND_OPENCL;
     TL_ASSERT_OK(hv_solver_create(&sv, &p, &so));
     float *v = malloc(512 * sizeof *v);
     for (int i = 0; i < 512; i++)
         v[i] = 1.0f;
-    hv_cl_write(CL, u, 0, 512 * sizeof(float), v);
-    TL_ASSERT_OK(hv_cl_finish(CL));
+    hv__cl_write(CL, u, 0, 512 * sizeof(float), v);
+    TL_ASSERT_OK(hv__cl_finish(CL));
     hv_solve_info info;
-    TL_ASSERT_OK(hv_cl_solver_solve(sv, f, u, &info));
+    TL_ASSERT_OK(hv__cl_solver_solve(sv, f, u, &info));
     download(u, v, 512);
     for (int i = 0; i < 512; i++)
         ck_assert_msg(v[i] == 0.0f, "cell %d holds %g", i, v[i]);
     ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
     hv_solver_destroy(&sv);
-    hv_cl_free(&f), hv_cl_free(&u);
+    hv__cl_free(&f), hv__cl_free(&u);
     free(v);
 }
 END_TEST
@@ -501,7 +511,7 @@ int main(int argc, char **argv)
     char why[512];
     snprintf(why, sizeof why, "no usable OpenCL device (%s)", hv_last_error());
     if (have_cl) {
-        if (hv_cl_open(&CL)) {
+        if (hv__cl_open(&CL)) {
             fprintf(stderr, "check_opencl_ops: cannot open the OpenCL device: %s\n",
                     hv_last_error());
             return 1;
@@ -521,6 +531,6 @@ int main(int argc, char **argv)
     suite_add_tcase(su, tc);
     int rc = tl_run(su);
     if (CL)
-        hv_cl_close(&CL);
+        hv__cl_close(&CL);
     return rc;
 }

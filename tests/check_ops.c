@@ -125,7 +125,8 @@ START_TEST(laplacian_should_converge_at_second_order)
                         double x[3];
                         hv_grid_cell_center(u, i, j, k, x);
                         u->v[i + (size_t)n * (j + (size_t)n * k)] =
-                            (float)(cos(M_PI * x[0]) * cos(2 * M_PI * x[1]) * (dim == 3 ? cos(M_PI * x[2]) : 1));
+                            (float)(cos(M_PI * x[0]) * cos(2 * M_PI * x[1]) *
+                                    (dim == 3 ? cos(M_PI * x[2]) : 1));
                     }
             TL_ASSERT_OK(hv_laplacian(u, L));
             double e = 0;
@@ -136,7 +137,8 @@ START_TEST(laplacian_should_converge_at_second_order)
             hv_grid_destroy(&L);
         }
         /* Second order: halving h quarters the error (first order would halve it). */
-        ck_assert_msg(err[0] / err[1] > 3.5 && err[1] / err[2] > 3.5, "dim %d: errors %g %g %g", dim, err[0], err[1], err[2]);
+        ck_assert_msg(err[0] / err[1] > 3.5 && err[1] / err[2] > 3.5, "dim %d: errors %g %g %g",
+                      dim, err[0], err[1], err[2]);
     }
 }
 END_TEST

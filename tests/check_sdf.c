@@ -63,11 +63,11 @@ static hv_sdf_opts box_opts(int n)
 }
 
 typedef struct errs {
-    double band_mean;   /* mean |phi - truth| over |truth| < 3h, voxels */
+    double band_mean; /* mean |phi - truth| over |truth| < 3h, voxels */
     double band_max;
-    double max_all;     /* over the whole grid */
-    double far_max;     /* over |truth| > 10 h */
-    size_t sign_bad;    /* cells with |truth| > h and the wrong sign */
+    double max_all;  /* over the whole grid */
+    double far_max;  /* over |truth| > 10 h */
+    size_t sign_bad; /* cells with |truth| > h and the wrong sign */
     size_t sign_cells;
 } errs;
 
@@ -111,9 +111,9 @@ static errs run(const hv_mesh *m, hv_sdf_opts o, sdf_fn truth, hv_sdf_stats *sta
     errs e = measure(g, truth, o.unsigned_distance);
     printf("  %-6s n=%d %s%s: band mean %.4f max %.3f | whole grid max %.3f | far max %.3f | "
            "sign %zu/%zu wrong | %.2f s\n",
-           truth == sphere_sdf ? "sphere" : "torus", g->n[0], o.unsigned_distance ? "unsigned " : "",
-           o.magnitude == HV_SDF_EXACT ? "exact" : "heat", e.band_mean, e.band_max, e.max_all,
-           e.far_max, e.sign_bad, e.sign_cells, S.t_total);
+           truth == sphere_sdf ? "sphere" : "torus", g->n[0],
+           o.unsigned_distance ? "unsigned " : "", o.magnitude == HV_SDF_EXACT ? "exact" : "heat",
+           e.band_mean, e.band_max, e.max_all, e.far_max, e.sign_bad, e.sign_cells, S.t_total);
     if (stats)
         *stats = S;
     hv_grid_destroy(&g);
@@ -125,23 +125,19 @@ static void check_targets(sdf_fn truth, hv_mesh *(*make)(void))
     hv_mesh *m = make();
     for (int n = 32; n <= 64; n *= 2) {
         errs e = run(m, box_opts(n), truth, NULL);
-        ck_assert_msg(e.sign_bad == 0, "n=%d: %zu cells beyond 1 voxel have the wrong sign", n, e.sign_bad);
-        ck_assert_msg(e.band_mean <= 0.1, "n=%d: mean error %.4f voxel within 3 voxels", n, e.band_mean);
+        ck_assert_msg(e.sign_bad == 0, "n=%d: %zu cells beyond 1 voxel have the wrong sign", n,
+                      e.sign_bad);
+        ck_assert_msg(e.band_mean <= 0.1, "n=%d: mean error %.4f voxel within 3 voxels", n,
+                      e.band_mean);
         ck_assert_msg(e.max_all <= 1.5, "n=%d: max error %.3f voxels over the grid", n, e.max_all);
     }
     hv_mesh_destroy(&m);
 }
 
-START_TEST(sphere_should_meet_the_voxel_targets)
-{
-    check_targets(sphere_sdf, make_sphere);
-}
+START_TEST(sphere_should_meet_the_voxel_targets) { check_targets(sphere_sdf, make_sphere); }
 END_TEST
 
-START_TEST(torus_should_meet_the_voxel_targets)
-{
-    check_targets(torus_sdf, make_torus);
-}
+START_TEST(torus_should_meet_the_voxel_targets) { check_targets(torus_sdf, make_torus); }
 END_TEST
 
 /* Large grids run the heat method (which then only decides the sign) on a
@@ -203,7 +199,8 @@ START_TEST(unsigned_distance_should_match_the_absolute_sdf)
         o.unsigned_distance = 1;
         o.magnitude = HV_SDF_HEAT;
         e = run(m, o, torus_sdf, NULL);
-        ck_assert_msg(e.band_mean <= 0.3, "heat unsigned distance: band error %.3f voxel", e.band_mean);
+        ck_assert_msg(e.band_mean <= 0.3, "heat unsigned distance: band error %.3f voxel",
+                      e.band_mean);
         world[q] = e.band_mean * 2.0 / (32 << q);
     }
     ck_assert_msg(world[1] < 0.8 * world[0], "unsigned band error %.3g -> %.3g under refinement",
@@ -231,14 +228,16 @@ START_TEST(far_field_should_keep_sign_and_distance)
                 double p[3];
                 hv_grid_cell_center(g, i, j, k, p);
                 double t = sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
-                                (p[2] - c[2]) * (p[2] - c[2])) - 0.12;
+                                (p[2] - c[2]) * (p[2] - c[2])) -
+                           0.12;
                 double v = g->v[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)];
                 if (t > 20 * g->h) {
                     bad += v <= 0;
                     worst = fmax(worst, fabs(v - t) / g->h);
                 }
             }
-    printf("  far field (> 20 voxels, up to %.0f): max error %.3f voxel, %zu wrong signs, %zu dead faces\n",
+    printf("  far field (> 20 voxels, up to %.0f): max error %.3f voxel, %zu wrong signs, %zu dead "
+           "faces\n",
            (sqrt(3.0) * 2 - 0.2) / g->h, worst, bad, S.dead_faces);
     ck_assert_uint_gt(S.dead_faces, 0); /* the test does reach beyond the diffusion */
     ck_assert_uint_eq(bad, 0);
@@ -310,7 +309,8 @@ START_TEST(repair_should_drop_duplicates_weld_soups_and_fix_orientation)
     ck_assert_double_gt(mr.signed_volume, 0);
     hv_mesh_destroy(&r);
     /* Without the orientation steps the inconsistency stays. */
-    ck_assert_int_eq(hv_sdf_repair(m, HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DUPLICATES, 0.5, &r, &R), HV_OK);
+    ck_assert_int_eq(hv_sdf_repair(m, HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DUPLICATES, 0.5, &r, &R),
+                     HV_OK);
     ck_assert_uint_gt(R.inconsistent_after, 0);
     hv_mesh_destroy(&r);
     hv_mesh_destroy(&m);
@@ -377,7 +377,8 @@ START_TEST(open_tube_should_be_capped_at_its_rims)
         }
     for (int k = 0; k < nz; k++)
         for (int i = 0; i < nu; i++) {
-            uint32_t a = k * nu + i, b = k * nu + (i + 1) % nu, c = (k + 1) * nu + (i + 1) % nu, d = (k + 1) * nu + i;
+            uint32_t a = k * nu + i, b = k * nu + (i + 1) % nu, c = (k + 1) * nu + (i + 1) % nu,
+                     d = (k + 1) * nu + i;
             uint32_t q[6] = {a, b, c, a, c, d};
             memcpy(T + 3 * t, q, sizeof q);
             t += 2;

@@ -149,8 +149,8 @@ static double annulus_sdf(double x, double y, const double *p)
 }
 
 typedef struct measure {
-    double sign_agree;  /* fraction of cells with |truth| > 1 px whose sign matches */
-    double band_mean;   /* mean |phi - truth| over |truth| <= 3 px, in pixels */
+    double sign_agree; /* fraction of cells with |truth| > 1 px whose sign matches */
+    double band_mean;  /* mean |phi - truth| over |truth| <= 3 px, in pixels */
     size_t wrong;
 } measure;
 
@@ -215,8 +215,7 @@ static measure run_case(hv_curves *c, truth_fn f, const double *prm, const char 
 static void expect_good(measure m, const char *what)
 {
     ck_assert_msg(m.wrong == 0, "%s: %zu cells beyond 1 px have the wrong sign", what, m.wrong);
-    ck_assert_msg(m.band_mean <= 0.1, "%s: mean |error| within 3 px is %.4f px", what,
-                  m.band_mean);
+    ck_assert_msg(m.band_mean <= 0.1, "%s: mean |error| within 3 px is %.4f px", what, m.band_mean);
 }
 
 /* ---- tests ---- */
@@ -283,8 +282,7 @@ START_TEST(rotated_square_with_gaps_and_flips_should_keep_sign_and_distance)
     /* gaps at segments 16-17, 69-70, 122-123: none takes a corner away */
     add_broken_polygon(&cs, v, 160, 3, 2, 0.3, 0.3, 5);
     hv_curves *c = cs_finish(&cs);
-    expect_good(run_case(c, square_sdf, prm, "square, 3 gaps, 30% flipped", NULL),
-                "broken square");
+    expect_good(run_case(c, square_sdf, prm, "square, 3 gaps, 30% flipped", NULL), "broken square");
     hv_curves_destroy(&c);
     free(v);
 }
@@ -351,8 +349,7 @@ START_TEST(nested_circles_both_counter_clockwise_should_give_an_annulus)
     cs_line(&cs, inner, 140, 1);
     hv_curves *c = cs_finish(&cs);
     hv_sdf2d_stats st;
-    expect_good(run_case(c, annulus_sdf, prm, "annulus, both counter-clockwise", &st),
-                "annulus");
+    expect_good(run_case(c, annulus_sdf, prm, "annulus, both counter-clockwise", &st), "annulus");
     ck_assert_int_eq(st.cycles, 2);
     ck_assert_int_eq(st.segments_flipped, 140);
     hv_curves_destroy(&c);
@@ -402,7 +399,7 @@ START_TEST(without_repair_a_duplicate_drawn_backwards_should_break_the_sign)
     double prm[3] = {0, 0, 40};
     double *v = circle_pts(0, 0, 40, 240, 1), *w = circle_pts(0, 0, 40, 240, 0);
     cset cs = {0};
-    cs_line(&cs, v, 120, 0);  /* half the circle, drawn twice in opposite directions */
+    cs_line(&cs, v, 120, 0); /* half the circle, drawn twice in opposite directions */
     double *back = malloc(2 * 121 * sizeof *back);
     for (int k = 0; k <= 120; k++) {
         back[2 * k] = v[2 * (120 - k)];
@@ -523,12 +520,12 @@ static void expect_index_agrees(hv_curves *c, const hv_sdf2d_opts *o, const char
     hv_grid *g = NULL, *ref = NULL;
     hv_sdf2d_stats st, rs;
     TL_ASSERT_OK(hv_curves_sdf(c, o, &g, &st));
-    hv_sdf2d_all_pairs = 1;
+    hv__sdf2d_all_pairs = 1;
     hv_status s = hv_curves_sdf(c, o, &ref, &rs);
-    hv_sdf2d_all_pairs = 0;
+    hv__sdf2d_all_pairs = 0;
     TL_ASSERT_OK(s);
-    printf("%-44s nesting tests %zu (all pairs %zu), flipped %zu, chains %zu, cycles %zu\n",
-           what, st.nesting_tests, rs.nesting_tests, st.segments_flipped, st.chains, st.cycles);
+    printf("%-44s nesting tests %zu (all pairs %zu), flipped %zu, chains %zu, cycles %zu\n", what,
+           st.nesting_tests, rs.nesting_tests, st.segments_flipped, st.chains, st.cycles);
     ck_assert_int_eq(g->n[0], ref->n[0]);
     ck_assert_int_eq(g->n[1], ref->n[1]);
     ck_assert_msg(memcmp(g->v, ref->v, hv_grid_count(g) * sizeof *g->v) == 0,
@@ -569,9 +566,9 @@ START_TEST(nesting_tests_should_grow_linearly_with_disjoint_loops)
     c = hexagon_lattice(300, &cw);
     hv_sdf2d_stats all;
     expect_index_agrees(c, &o, "lattice of 300 hexagons", &st);
-    hv_sdf2d_all_pairs = 1;
+    hv__sdf2d_all_pairs = 1;
     TL_ASSERT_OK(hv_curves_sdf(c, &o, &g, &all));
-    hv_sdf2d_all_pairs = 0;
+    hv__sdf2d_all_pairs = 0;
     ck_assert_int_eq(all.nesting_tests, 300 * 299);
     ck_assert_int_eq(st.nesting_tests, 0);
     hv_grid_destroy(&g);
@@ -753,8 +750,8 @@ START_TEST(text_format_should_read_commands_and_number_lines)
     ck_assert_int_eq(hv_curves_segments(c), 6);
     ck_assert(c->pts[2 * 6] == 4 && c->pts[2 * 6 + 1] == 2.5);
     hv_curves_destroy(&c);
-    const char *bad[] = {"M 0 0\nL 1\n", "L 1 1\n", "M 0 0\nL 1 1 foo\n", "1 2 3\n",
-                         "M 0 0\nQ 1 1\n", "# nothing\n"};
+    const char *bad[] = {"M 0 0\nL 1\n", "L 1 1\n",        "M 0 0\nL 1 1 foo\n",
+                         "1 2 3\n",      "M 0 0\nQ 1 1\n", "# nothing\n"};
     const char *where[] = {"line 2", "line 1", "line 2", "line 1", "line 2", "no curve"};
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
         ck_assert_int_eq(hv_curves_parse(bad[k], strlen(bad[k]), 0, "bad.txt", &c), HV_ERR_PARSE);
@@ -767,14 +764,13 @@ END_TEST
 
 START_TEST(svg_paths_should_read_absolute_relative_and_implicit_commands)
 {
-    const char *svg =
-        "<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\">\n"
-        "<!-- <path d=\"M 99 99 L 98 98\"/> is a comment -->\n"
-        "<path id='a' d=\"M10,20 h 5 v5 H10 z\"/>\n"
-        "<path d='m 0 0 10-5 l.5.5 V 0' fill=\"none\"/>\n"
-        "<polygon points=\"0,0 4,0 4,4\"/>\n"
-        "<path d=\"M0 0 Q 5 5 10 0 T 20 0\"/>\n"
-        "</svg>\n";
+    const char *svg = "<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\">\n"
+                      "<!-- <path d=\"M 99 99 L 98 98\"/> is a comment -->\n"
+                      "<path id='a' d=\"M10,20 h 5 v5 H10 z\"/>\n"
+                      "<path d='m 0 0 10-5 l.5.5 V 0' fill=\"none\"/>\n"
+                      "<polygon points=\"0,0 4,0 4,4\"/>\n"
+                      "<path d=\"M0 0 Q 5 5 10 0 T 20 0\"/>\n"
+                      "</svg>\n";
     hv_curves *c = NULL;
     TL_ASSERT_OK(hv_curves_parse(svg, strlen(svg), 1, "t.svg", &c));
     ck_assert_int_eq(c->nlines, 4);
@@ -787,8 +783,7 @@ START_TEST(svg_paths_should_read_absolute_relative_and_implicit_commands)
     /* path 2: m 0 0, implicit relative line-to 10 -5, l .5 .5, V 0 */
     const double *q = c->pts + 2 * c->start[1];
     ck_assert_int_eq(c->start[2] - c->start[1], 4);
-    ck_assert(q[2] == 10 && q[3] == 5 && q[4] == 10.5 && q[5] == 4.5 && q[6] == 10.5 &&
-              q[7] == 0);
+    ck_assert(q[2] == 10 && q[3] == 5 && q[4] == 10.5 && q[5] == 4.5 && q[6] == 10.5 && q[7] == 0);
     ck_assert_int_eq(c->closed[1], 0);
     /* polygon: closed triangle */
     ck_assert_int_eq(c->start[3] - c->start[2], 3);
@@ -797,7 +792,7 @@ START_TEST(svg_paths_should_read_absolute_relative_and_implicit_commands)
     ck_assert_int_eq(c->start[4] - c->start[3], 33);
     const double *e = c->pts + 2 * (c->npoints - 1);
     ck_assert(fabs(e[0] - 20) < 1e-12 && fabs(e[1]) < 1e-12);
-    const double *mid = c->pts + 2 * (c->start[3] + 24); /* t = 1/2 of the T curve */
+    const double *mid = c->pts + 2 * (c->start[3] + 24);                /* t = 1/2 of the T curve */
     ck_assert(fabs(mid[0] - 15) < 1e-12 && fabs(mid[1] - 2.5) < 1e-12); /* below: -(-2.5) */
     hv_curves_destroy(&c);
 
@@ -823,7 +818,8 @@ START_TEST(svg_circle_file_should_give_a_circle_distance)
     FILE *f = fopen(path, "w");
     fprintf(f, "<svg xmlns=\"http://www.w3.org/2000/svg\"><path d=\"M %.9f %.9f", 10 + 40.0, 5.0);
     for (int k = 1; k < 236; k++)
-        fprintf(f, " L %.9f %.9f", 10 + 40 * cos(2 * M_PI * k / 240), 5 + 40 * sin(2 * M_PI * k / 240));
+        fprintf(f, " L %.9f %.9f", 10 + 40 * cos(2 * M_PI * k / 240),
+                5 + 40 * sin(2 * M_PI * k / 240));
     fprintf(f, "\"/></svg>\n");
     fclose(f);
     hv_curves *c = NULL;

@@ -53,7 +53,8 @@ START_TEST(mg_and_opencl_should_give_the_same_sdf)
         hv_grid *g_cl = run(HV_BACKEND_OPENCL, (hv_sdf_magnitude)mag, m);
         hv_grid *g_ff = run(HV_BACKEND_FFTW, (hv_sdf_magnitude)mag, m);
         double d_cl = max_diff_voxels(g_mg, g_cl), d_ff = max_diff_voxels(g_mg, g_ff);
-        printf("check_sdf_backends: magnitude %s: max |mg - opencl| %.2e voxel, |mg - fftw| %.2e voxel\n",
+        printf("check_sdf_backends: magnitude %s: max |mg - opencl| %.2e voxel, |mg - fftw| %.2e "
+               "voxel\n",
                mag == HV_SDF_EXACT ? "exact" : "heat", d_cl, d_ff);
         ck_assert_msg(d_cl <= 1e-4, "mg vs opencl: %g voxel", d_cl);
         ck_assert_msg(d_ff <= 1e-3, "mg vs fftw: %g voxel", d_ff);
@@ -91,7 +92,8 @@ START_TEST(narrow_band_should_match_the_whole_grid_in_the_band)
         else
             ck_assert(fabs(band->v[q]) >= 3 * h);
     }
-    printf("check_sdf_backends: band_only 3: max diff in the band %.2e voxel, redistance %.3f s vs %.3f s\n",
+    printf("check_sdf_backends: band_only 3: max diff in the band %.2e voxel, redistance %.3f s vs "
+           "%.3f s\n",
            worst, sb.t_redistance, sf.t_redistance);
     ck_assert_uint_eq(sign_diff, 0);
     ck_assert_msg(worst <= 0.01, "band differs by %g voxel", worst);

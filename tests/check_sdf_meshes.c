@@ -104,9 +104,10 @@ static void defects_on(const char *name)
     static const struct {
         const char *name;
         int which;
-    } v[] = {{"holes", D_HOLES},   {"30% flipped", D_FLIP}, {"half flipped", D_HALF},
-             {"soup", D_SOUP},     {"10% duplicated", D_DUP},
-             {"all at once", D_HOLES | D_FLIP | D_HALF | D_SOUP | D_DUP}};
+    } v[] = {
+        {"holes", D_HOLES},        {"30% flipped", D_FLIP},
+        {"half flipped", D_HALF},  {"soup", D_SOUP},
+        {"10% duplicated", D_DUP}, {"all at once", D_HOLES | D_FLIP | D_HALF | D_SOUP | D_DUP}};
     for (size_t i = 0; i < sizeof v / sizeof v[0]; i++) {
         hv_mesh *d = with_defects(clean, v[i].which);
         snprintf(label, sizeof label, "%s %s", name, v[i].name);
@@ -119,16 +120,10 @@ static void defects_on(const char *name)
     hv_mesh_destroy(&clean);
 }
 
-START_TEST(bunny_small_defects_should_keep_iou_099)
-{
-    defects_on("bunny_small.obj");
-}
+START_TEST(bunny_small_defects_should_keep_iou_099) { defects_on("bunny_small.obj"); }
 END_TEST
 
-START_TEST(spot_defects_should_keep_iou_099)
-{
-    defects_on("spot.obj");
-}
+START_TEST(spot_defects_should_keep_iou_099) { defects_on("spot.obj"); }
 END_TEST
 
 /* What repair buys: a coherently flipped half turns half the solid inside
@@ -175,8 +170,7 @@ static void real_mesh(const char *name, int truth_kind, double min_iou, double m
         tu_ray_parity(m, tg, truth);
     } else if (truth_kind == TRUTH_CLOSED) {
         hv_mesh *closed = NULL;
-        ck_assert_int_eq(hv_sdf_repair(m, HV_SDF_REPAIR_ALL, o.max_hole,
-                                       &closed, NULL), HV_OK);
+        ck_assert_int_eq(hv_sdf_repair(m, HV_SDF_REPAIR_ALL, o.max_hole, &closed, NULL), HV_OK);
         tu_winding(closed, tg, truth);
         hv_mesh_destroy(&closed);
     } else {
@@ -197,11 +191,12 @@ static void real_mesh(const char *name, int truth_kind, double min_iou, double m
     double beyond = U ? (double)I / U : 1.0;
     static const char *kinds[] = {"the winding number", "ray parity", "the closed solid"};
     printf("  %-28s IoU %.5f against %s; against the raw winding number %.5f, beyond 1 voxel "
-           "%.5f\n", name, iou, kinds[truth_kind], iou_wn, beyond);
+           "%.5f\n",
+           name, iou, kinds[truth_kind], iou_wn, beyond);
     ck_assert_msg(iou >= min_iou, "%s: inside-IoU %.5f < %.3f", name, iou, min_iou);
     if (truth_kind != TRUTH_PARITY)
-        ck_assert_msg(beyond >= min_iou_beyond_1, "%s: inside-IoU beyond 1 voxel %.5f < %.3f",
-                      name, beyond, min_iou_beyond_1);
+        ck_assert_msg(beyond >= min_iou_beyond_1, "%s: inside-IoU beyond 1 voxel %.5f < %.3f", name,
+                      beyond, min_iou_beyond_1);
     hv_grid_destroy(&g);
     free(truth);
     free(wn);
@@ -235,10 +230,7 @@ END_TEST
  * 0.93-0.97). The intended solid is the closed mesh (flat caps); beyond one
  * voxel from the surface the result must also agree with the raw winding
  * number. */
-START_TEST(knot_should_match_its_closed_solid)
-{
-    real_mesh("knot.obj", TRUTH_CLOSED, 0.98, 0.995);
-}
+START_TEST(knot_should_match_its_closed_solid) { real_mesh("knot.obj", TRUTH_CLOSED, 0.98, 0.995); }
 END_TEST
 
 START_TEST(chair_should_match_its_closed_solid)

@@ -853,8 +853,8 @@ static void run_child(char *const argv[], const char *errfile, int capped, child
         struct rlimit rl = {CHILD_AS_BYTES, CHILD_AS_BYTES};
         int out = open("/dev/null", O_WRONLY | O_CLOEXEC);
         int err = open(errfile, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-        if ((capped && setrlimit(RLIMIT_AS, &rl) != 0) || out < 0 || err < 0 ||
-            dup2(out, 1) < 0 || dup2(err, 2) < 0)
+        if ((capped && setrlimit(RLIMIT_AS, &rl) != 0) || out < 0 || err < 0 || dup2(out, 1) < 0 ||
+            dup2(err, 2) < 0)
             _exit(126);
         alarm(CHILD_SECONDS);
         execve(argv[0], argv, env);
@@ -1237,15 +1237,16 @@ int main(int argc, char **argv)
     tcase_add_test(tc, levelset_read_with_a_larger_box_should_place_the_block_and_keep_signs);
     tcase_add_test(tc, dense_levelset_should_keep_every_value_and_activate_every_voxel);
     tcase_add_test(tc, openvdb_own_reader_should_see_the_level_set_we_wrote);
-    tcase_add_test(tc,
-                   files_made_by_openvdb_should_read_on_their_active_box_and_refuse_nonuniform_voxels);
+    tcase_add_test(
+        tc, files_made_by_openvdb_should_read_on_their_active_box_and_refuse_nonuniform_voxels);
     tcase_add_test(tc, vec3_round_trip_should_keep_each_component);
     tcase_add_test(tc, writing_into_a_missing_directory_should_fail_with_io_and_leave_no_temporary);
     tcase_add_test(tc, reading_a_missing_grid_should_name_it_the_file_and_what_is_there);
     tcase_add_test(tc, missing_and_corrupt_files_should_give_io_errors_naming_the_file);
     tcase_add_test(tc, metadata_should_round_trip_on_file_and_grid);
     tcase_add_test(tc, common_box_should_cover_all_grids_and_refuse_mismatched_transforms);
-    tcase_add_test(tc, index_origin_should_keep_the_input_index_space_and_refuse_off_lattice_blocks);
+    tcase_add_test(tc,
+                   index_origin_should_keep_the_input_index_space_and_refuse_off_lattice_blocks);
     tcase_add_test(tc, masks_should_round_trip_and_level_sets_should_read_as_their_inside);
     tcase_add_test(tc, mesh_to_levelset_reference_should_match_the_box_sdf_near_the_surface);
     tcase_add_test(tc, sdf_to_ext_reference_should_extend_a_surface_field_along_normals);

@@ -41,8 +41,10 @@ static hv_mesh *tu_load_shared(const char *name)
 static void tu_centroid(const hv_mesh *m, size_t f, double c[3])
 {
     for (int d = 0; d < 3; d++)
-        c[d] = (m->verts[3 * (size_t)m->tris[3 * f] + d] + m->verts[3 * (size_t)m->tris[3 * f + 1] + d] +
-                m->verts[3 * (size_t)m->tris[3 * f + 2] + d]) / 3;
+        c[d] = (m->verts[3 * (size_t)m->tris[3 * f] + d] +
+                m->verts[3 * (size_t)m->tris[3 * f + 1] + d] +
+                m->verts[3 * (size_t)m->tris[3 * f + 2] + d]) /
+               3;
 }
 
 /* ---------- truths ---------- */
@@ -82,18 +84,27 @@ static void tu_ray_parity(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
         const double *P[3];
         for (int k = 0; k < 3; k++)
             P[k] = m->verts + 3 * (size_t)m->tris[3 * f + k];
-        double area = (P[1][1] - P[0][1]) * (P[2][2] - P[0][2]) - (P[1][2] - P[0][2]) * (P[2][1] - P[0][1]);
+        double area =
+            (P[1][1] - P[0][1]) * (P[2][2] - P[0][2]) - (P[1][2] - P[0][2]) * (P[2][1] - P[0][1]);
         if (area == 0)
             continue;
         int orient = area > 0 ? 1 : -1;
-        double ylo = fmin(P[0][1], fmin(P[1][1], P[2][1])), yhi = fmax(P[0][1], fmax(P[1][1], P[2][1]));
-        double zlo = fmin(P[0][2], fmin(P[1][2], P[2][2])), zhi = fmax(P[0][2], fmax(P[1][2], P[2][2]));
-        int j0 = (int)ceil((ylo - g->origin[1]) / g->h - 0.5), j1 = (int)floor((yhi - g->origin[1]) / g->h - 0.5);
-        int k0 = (int)ceil((zlo - g->origin[2]) / g->h - 0.5), k1 = (int)floor((zhi - g->origin[2]) / g->h - 0.5);
-        if (j0 < 0) j0 = 0;
-        if (k0 < 0) k0 = 0;
-        if (j1 > g->n[1] - 1) j1 = g->n[1] - 1;
-        if (k1 > g->n[2] - 1) k1 = g->n[2] - 1;
+        double ylo = fmin(P[0][1], fmin(P[1][1], P[2][1])),
+               yhi = fmax(P[0][1], fmax(P[1][1], P[2][1]));
+        double zlo = fmin(P[0][2], fmin(P[1][2], P[2][2])),
+               zhi = fmax(P[0][2], fmax(P[1][2], P[2][2]));
+        int j0 = (int)ceil((ylo - g->origin[1]) / g->h - 0.5),
+            j1 = (int)floor((yhi - g->origin[1]) / g->h - 0.5);
+        int k0 = (int)ceil((zlo - g->origin[2]) / g->h - 0.5),
+            k1 = (int)floor((zhi - g->origin[2]) / g->h - 0.5);
+        if (j0 < 0)
+            j0 = 0;
+        if (k0 < 0)
+            k0 = 0;
+        if (j1 > g->n[1] - 1)
+            j1 = g->n[1] - 1;
+        if (k1 > g->n[2] - 1)
+            k1 = g->n[2] - 1;
         for (int k = k0; k <= k1; k++)
             for (int j = j0; j <= j1; j++) {
                 double pu = g->origin[1] + (j + 0.5) * g->h, pv = g->origin[2] + (k + 0.5) * g->h;
@@ -103,8 +114,10 @@ static void tu_ray_parity(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
                 if (s0 != orient || s1 != orient || s2 != orient)
                     continue;
                 /* Barycentric x of the crossing. */
-                double l0 = ((P[1][1] - pu) * (P[2][2] - pv) - (P[1][2] - pv) * (P[2][1] - pu)) / area;
-                double l1 = ((P[2][1] - pu) * (P[0][2] - pv) - (P[2][2] - pv) * (P[0][1] - pu)) / area;
+                double l0 =
+                    ((P[1][1] - pu) * (P[2][2] - pv) - (P[1][2] - pv) * (P[2][1] - pu)) / area;
+                double l1 =
+                    ((P[2][1] - pu) * (P[0][2] - pv) - (P[2][2] - pv) * (P[0][1] - pu)) / area;
                 double x = l0 * P[0][0] + l1 * P[1][0] + (1 - l0 - l1) * P[2][0];
                 if (nh == cap)
                     H = realloc(H, (cap *= 2) * sizeof *H);
@@ -150,11 +163,14 @@ static double tu_solid_angle(const double *p, const double *a, const double *b, 
     double A[3], B[3], C[3];
     for (int d = 0; d < 3; d++)
         A[d] = a[d] - p[d], B[d] = b[d] - p[d], C[d] = c[d] - p[d];
-    double la = sqrt(A[0] * A[0] + A[1] * A[1] + A[2] * A[2]), lb = sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2]),
+    double la = sqrt(A[0] * A[0] + A[1] * A[1] + A[2] * A[2]),
+           lb = sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2]),
            lc = sqrt(C[0] * C[0] + C[1] * C[1] + C[2] * C[2]);
-    double det = A[0] * (B[1] * C[2] - B[2] * C[1]) - A[1] * (B[0] * C[2] - B[2] * C[0]) + A[2] * (B[0] * C[1] - B[1] * C[0]);
+    double det = A[0] * (B[1] * C[2] - B[2] * C[1]) - A[1] * (B[0] * C[2] - B[2] * C[0]) +
+                 A[2] * (B[0] * C[1] - B[1] * C[0]);
     double den = la * lb * lc + (A[0] * B[0] + A[1] * B[1] + A[2] * B[2]) * lc +
-                 (A[0] * C[0] + A[1] * C[1] + A[2] * C[2]) * lb + (B[0] * C[0] + B[1] * C[1] + B[2] * C[2]) * la;
+                 (A[0] * C[0] + A[1] * C[1] + A[2] * C[2]) * lb +
+                 (B[0] * C[0] + B[1] * C[1] + B[2] * C[2]) * la;
     return 2 * atan2(det, den);
 }
 
@@ -166,13 +182,17 @@ static int tu_wn_build(tu_wn *W, size_t first, size_t count, int axis_hint)
     tu_node nd;
     memset(&nd, 0, sizeof nd);
     nd.first = first, nd.count = count, nd.left = nd.right = -1;
-    double asum = 0, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double asum = 0, lo[3] = {INFINITY, INFINITY, INFINITY},
+           hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t q = first; q < first + count; q++) {
         size_t f = W->order[q];
-        const double *a = W->m->verts + 3 * (size_t)W->m->tris[3 * f], *b = W->m->verts + 3 * (size_t)W->m->tris[3 * f + 1],
+        const double *a = W->m->verts + 3 * (size_t)W->m->tris[3 * f],
+                     *b = W->m->verts + 3 * (size_t)W->m->tris[3 * f + 1],
                      *c = W->m->verts + 3 * (size_t)W->m->tris[3 * f + 2];
-        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-        double n[3] = {0.5 * (u[1] * v[2] - u[2] * v[1]), 0.5 * (u[2] * v[0] - u[0] * v[2]), 0.5 * (u[0] * v[1] - u[1] * v[0])};
+        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+               v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double n[3] = {0.5 * (u[1] * v[2] - u[2] * v[1]), 0.5 * (u[2] * v[0] - u[0] * v[2]),
+                       0.5 * (u[0] * v[1] - u[1] * v[0])};
         double A = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         for (int d = 0; d < 3; d++) {
             nd.N[d] += n[d];
@@ -187,8 +207,9 @@ static int tu_wn_build(tu_wn *W, size_t first, size_t count, int axis_hint)
     for (size_t q = first; q < first + count; q++)
         for (int k = 0; k < 3; k++) {
             const double *x = W->m->verts + 3 * (size_t)W->m->tris[3 * W->order[q] + k];
-            double r = sqrt((x[0] - nd.c[0]) * (x[0] - nd.c[0]) + (x[1] - nd.c[1]) * (x[1] - nd.c[1]) +
-                            (x[2] - nd.c[2]) * (x[2] - nd.c[2]));
+            double r =
+                sqrt((x[0] - nd.c[0]) * (x[0] - nd.c[0]) + (x[1] - nd.c[1]) * (x[1] - nd.c[1]) +
+                     (x[2] - nd.c[2]) * (x[2] - nd.c[2]));
             nd.r = fmax(nd.r, r);
         }
     if (count > 8) {
@@ -228,7 +249,8 @@ static double tu_wn_eval(const tu_wn *W, int id, const double p[3])
     double d[3] = {nd->c[0] - p[0], nd->c[1] - p[1], nd->c[2] - p[2]};
     double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     if (dist > W->beta * nd->r)
-        return (nd->N[0] * d[0] + nd->N[1] * d[1] + nd->N[2] * d[2]) / (4 * M_PI * dist * dist * dist);
+        return (nd->N[0] * d[0] + nd->N[1] * d[1] + nd->N[2] * d[2]) /
+               (4 * M_PI * dist * dist * dist);
     if (nd->left < 0) {
         double w = 0;
         for (size_t q = nd->first; q < nd->first + nd->count; q++) {
@@ -258,7 +280,8 @@ static void tu_winding(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
             for (int i = 0; i < g->n[0]; i++) {
                 double p[3];
                 hv_grid_cell_center(g, i, j, k, p);
-                inside[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)] = tu_wn_eval(&W, 0, p) > 0.5;
+                inside[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)] =
+                    tu_wn_eval(&W, 0, p) > 0.5;
             }
     free(W.order);
     free(W.nodes);

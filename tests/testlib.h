@@ -55,7 +55,8 @@ int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize);
 #define TL_ASSERT_OK(expr)                                                                         \
     do {                                                                                           \
         hv_status st_ = (expr);                                                                    \
-        ck_assert_msg(st_ == HV_OK, "%s failed: %s: %s", #expr, hv_status_str(st_), hv_last_error()); \
+        ck_assert_msg(st_ == HV_OK, "%s failed: %s: %s", #expr, hv_status_str(st_),                \
+                      hv_last_error());                                                            \
     } while (0)
 
 #endif

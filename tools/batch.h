@@ -15,10 +15,10 @@ enum { BATCH_VDB = 0, BATCH_EXR = 1 };
 /* The options of one job: the signed-distance options plus output choices. */
 typedef struct batch_opts {
     hv_sdf_opts sdf;
-    int format;        /* BATCH_VDB or BATCH_EXR */
-    int preview;       /* also write <output>.png: the three middle slices */
-    double band;       /* VDB narrow band half width in voxels */
-    int dense;         /* VDB: every voxel active */
+    int format;  /* BATCH_VDB or BATCH_EXR */
+    int preview; /* also write <output>.png: the three middle slices */
+    double band; /* VDB narrow band half width in voxels */
+    int dense;   /* VDB: every voxel active */
 } batch_opts;
 
 void batch_opts_default(batch_opts *o);
@@ -45,8 +45,7 @@ void batch_preview_path(const char *output, char *buf, size_t size);
 
 /* True when output exists, is not older than input, and its sidecar records the
  * same input path and options hash (and the preview exists when asked for). */
-int batch_up_to_date(const char *input, const char *output, const batch_opts *o,
-                     const char *hash);
+int batch_up_to_date(const char *input, const char *output, const batch_opts *o, const char *hash);
 
 /* mkdir -p; 0 or -1 with errno. */
 int batch_mkdirs(const char *dir);
@@ -77,15 +76,15 @@ char *batch_xprintf(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* One input of the driver. */
 typedef struct batch_job {
     char *input;
-    char *stem;    /* output path without extension */
+    char *stem; /* output path without extension */
     char *output;
-    char **args;   /* per-line options, owned */
+    char **args; /* per-line options, owned */
     int nargs;
     batch_opts opts;
     char hash[17];
-    char *error;   /* planning error: the job fails without running */
+    char *error; /* planning error: the job fails without running */
     int skip;
-    int state;     /* 0 pending, 1 running, 2 done */
+    int state; /* 0 pending, 1 running, 2 done */
 } batch_job;
 
 typedef struct batch_joblist {

@@ -184,7 +184,7 @@ static void read_manifest(batch_joblist *l, const char *path, const char *outdir
             continue;
         }
         char *mesh = toks[0][0] == '/' || !strcmp(dir, ".") ? batch_xstrdup(toks[0])
-                                                             : batch_xprintf("%s/%s", dir, toks[0]);
+                                                            : batch_xprintf("%s/%s", dir, toks[0]);
         char *stem = stem_of(mesh);
         char *out = batch_xprintf("%s/%s", outdir, stem);
         batch_job *j = batch_jobs_add(l, mesh, out);

@@ -95,10 +95,10 @@ static const struct {
     const char *name;
     int nargs;
 } job_options[] = {
-    {"--res", 1},         {"--voxel-size", 1},  {"--pad", 1},         {"--bbox", 6},
-    {"--round-to", 1},    {"--unsigned", 0},    {"--heat", 0},        {"--exact", 0},
-    {"--t-scale", 1},     {"--far-levels", 1},  {"--no-repair", 0},   {"--backend", 1},
-    {"--diffuse-tol", 1}, {"--poisson-tol", 1}, {"--threads", 1},     {"--band", 1},
+    {"--res", 1},         {"--voxel-size", 1},  {"--pad", 1},       {"--bbox", 6},
+    {"--round-to", 1},    {"--unsigned", 0},    {"--heat", 0},      {"--exact", 0},
+    {"--t-scale", 1},     {"--far-levels", 1},  {"--no-repair", 0}, {"--backend", 1},
+    {"--diffuse-tol", 1}, {"--poisson-tol", 1}, {"--threads", 1},   {"--band", 1},
     {"--dense", 0},       {"--format", 1},      {"--preview", 0},
 };
 
@@ -278,8 +278,7 @@ static char *read_small_file(const char *path, size_t max)
     return s;
 }
 
-int batch_up_to_date(const char *input, const char *output, const batch_opts *o,
-                     const char *hash)
+int batch_up_to_date(const char *input, const char *output, const batch_opts *o, const char *hash)
 {
     struct stat si, so;
     if (stat(input, &si) != 0 || stat(output, &so) != 0 || !newer_or_same(&so, &si))
@@ -350,8 +349,8 @@ static void error_text(hv_status st, const char *file, char *buf, size_t size)
         snprintf(buf, size, "%s: %s%s%s", file, hv_status_str(st), *msg ? ": " : "", msg);
 }
 
-static int write_sidecar(const char *input, const char *output, const char *canon,
-                         const char *hash, double seconds, char *err, size_t errsize)
+static int write_sidecar(const char *input, const char *output, const char *canon, const char *hash,
+                         double seconds, char *err, size_t errsize)
 {
     char side[4200], tmp[4200];
     batch_sidecar_path(output, side, sizeof side);
@@ -540,8 +539,7 @@ report:;
                   ",\"poisson_iterations\":%d,\"poisson_relres\":%.3g,\"dead_faces\":%zu}",
                   r->vertices_welded, r->degenerate_removed, r->duplicates_removed,
                   r->faces_flipped, r->components_flipped, r->holes_filled, r->holes_left_open,
-                  r->boundary_edges,
-                  r->inconsistent_after, stats.levels, stats.diffuse_iterations,
+                  r->boundary_edges, r->inconsistent_after, stats.levels, stats.diffuse_iterations,
                   stats.diffuse_relres, stats.poisson_iterations, stats.poisson_relres,
                   stats.dead_faces);
     }

@@ -66,7 +66,6 @@ int batch_plan_print(const batch_joblist *l)
             nrun++;
         }
     }
-    printf("heatvox batch: dry run: %zu to run, %zu up to date, %zu failing\n", nrun, nskip,
-           nfail);
+    printf("heatvox batch: dry run: %zu to run, %zu up to date, %zu failing\n", nrun, nskip, nfail);
     return nfail ? HV_EXIT_FAIL : HV_EXIT_OK;
 }

@@ -19,7 +19,7 @@
 
 typedef struct worker {
     pid_t pid;
-    int fd[2];         /* stdout, stderr pipes; -1 once closed */
+    int fd[2]; /* stdout, stderr pipes; -1 once closed */
     batch_buf buf[2];
     batch_job *job;
     double t0;

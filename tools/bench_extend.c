@@ -40,7 +40,10 @@ static void field_at(const double p[3], double v[3])
     v[2] = 0.5 + 0.2 * p[2] + 0.3 * sin(3 * p[0]);
 }
 
-static double scalar_at(const double p[3]) { return 2 + sin(3 * p[0]) * cos(2 * p[1]) + 0.5 * p[2]; }
+static double scalar_at(const double p[3])
+{
+    return 2 + sin(3 * p[0]) * cos(2 * p[1]) + 0.5 * p[2];
+}
 
 typedef struct {
     hv_grid *phi;
@@ -235,11 +238,13 @@ int bench_extend(int argc, char **argv)
                 return cli_usage_error("bench extend", "--n must be an integer >= 16, got '%s'", v);
         } else if (!strcmp(a, "--shape")) {
             if (strcmp(v, "sphere") && strncmp(v, "mesh:", 5))
-                return cli_usage_error("bench extend", "--shape must be sphere or mesh:PATH, got '%s'", v);
+                return cli_usage_error("bench extend",
+                                       "--shape must be sphere or mesh:PATH, got '%s'", v);
             shape = v;
         } else if (!strcmp(a, "--field")) {
             if (strcmp(v, "vector") && strcmp(v, "scalar"))
-                return cli_usage_error("bench extend", "--field must be vector or scalar, got '%s'", v);
+                return cli_usage_error("bench extend", "--field must be vector or scalar, got '%s'",
+                                       v);
             vec = !strcmp(v, "vector");
         } else if (!strcmp(a, "--out-band")) {
             if (cli_parse_double(v, &out_band) || out_band <= 0)
@@ -275,7 +280,8 @@ int bench_extend(int argc, char **argv)
 
     bench_case b = {0};
     double sdf_seconds = 0;
-    hv_status st = is_mesh ? make_mesh(&b, shape + 5, n, vec, &sdf_seconds) : make_sphere(&b, n, vec);
+    hv_status st =
+        is_mesh ? make_mesh(&b, shape + 5, n, vec, &sdf_seconds) : make_sphere(&b, n, vec);
     if (st) {
         free_case(&b);
         return cli_fail("bench extend", is_mesh ? shape + 5 : "building the sphere", st);
@@ -304,8 +310,8 @@ int bench_extend(int argc, char **argv)
     double t0 = hv_now();
     if ((st = hv_extender_create(&e, 3, b.phi->n, b.phi->h, NULL, &o)))
         return cli_fail("bench extend", "creating the extender", st);
-    hv_extend_field f = {vec ? 3 : 1, {b.in[0]->v, b.in[1]->v, b.in[2]->v},
-                         {out[0]->v, out[1]->v, out[2]->v}};
+    hv_extend_field f = {
+        vec ? 3 : 1, {b.in[0]->v, b.in[1]->v, b.in[2]->v}, {out[0]->v, out[1]->v, out[2]->v}};
     hv_extend_stats es;
     if ((st = hv_extend_many(e, b.phi->v, 1, &f, &es)))
         return cli_fail("bench extend", "extending", st);
@@ -340,14 +346,15 @@ int bench_extend(int argc, char **argv)
     printf("{\"bench\":\"extend\",\"n\":%d,\"grid\":[%d,%d,%d],\"shape\":\"%s\",\"field\":\"%s\","
            "\"output\":\"%s\",\"backend\":\"%s\",\"threads\":%d,\"band\":%g,\"t_scale\":%g,"
            "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"solves\":%d,\"levels\":%d,"
-           "\"weights_seconds\":%.4f,\"solve_seconds\":%.4f,\"eval_seconds\":%.4f,\"solve_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
+           "\"weights_seconds\":%.4f,\"solve_seconds\":%.4f,\"eval_seconds\":%.4f,\"solve_cells\":%"
+           "zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
            "\"ref\":\"openvdb-sdfToExt\",\"ref_seconds\":%.4f,\"ref_wall_seconds\":%.4f,"
            "\"ratio\":%.3f,\"err\":%.3e,\"ref_err\":%.3e,\"err_near\":%.3e,\"ref_err_near\":%.3e",
            n, b.phi->n[0], b.phi->n[1], b.phi->n[2], is_mesh ? shape + 5 : "sphere",
            vec ? "vector" : "scalar", out_band > 0 ? "band" : "dense", hv_backend_name(backend),
-           threads, band, tscale, seconds, setup, es.solves, es.levels, es.t_weights, es.t_solve, es.t_eval, es.solve_cells,
-           es.cp_cells, es.ratio_cells, ref_seconds, ref_wall, seconds / ref_seconds, err, rerr,
-           err_near, rerr_near);
+           threads, band, tscale, seconds, setup, es.solves, es.levels, es.t_weights, es.t_solve,
+           es.t_eval, es.solve_cells, es.cp_cells, es.ratio_cells, ref_seconds, ref_wall,
+           seconds / ref_seconds, err, rerr, err_near, rerr_near);
     if (out_band > 0)
         printf(",\"out_band\":%g", out_band);
     if (is_mesh)

@@ -31,7 +31,8 @@ extern "C" {
 #include <string>
 #include <vector>
 
-namespace {
+namespace
+{
 
 using openvdb::Coord;
 using openvdb::CoordBBox;
@@ -86,8 +87,7 @@ void init_vdb()
 openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
 {
     auto xf = openvdb::math::Transform::createLinearTransform(h);
-    xf->postTranslate(
-        Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
+    xf->postTranslate(Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
     return xf;
 }
 
@@ -112,11 +112,12 @@ void check_same_shape(const hv_grid *a, const hv_grid *b, const char *an, const 
         same = std::fabs(a->origin[d] - b->origin[d]) <= 1e-9 * (a->h + std::fabs(a->origin[d]));
     if (!same) {
         char buf[512];
-        snprintf(buf, sizeof buf,
-                 "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
-                 "%g) must have the same size, voxel size and origin",
-                 an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
-                 b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
+        snprintf(
+            buf, sizeof buf,
+            "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
+            "%g) must have the same size, voxel size and origin",
+            an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
+            b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
         fail(HV_ERR_INVALID_ARG, buf);
     }
 }
@@ -135,8 +136,7 @@ inline size_t lin(const hv_grid *g, int i, int j, int k)
 int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
 
 template <class GridT, class F, class G>
-void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside,
-                bool prune)
+void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside, bool prune)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
     using ValueT = typename GridT::ValueType;
@@ -157,44 +157,46 @@ void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&ou
     // and one value becomes a tile instead of a leaf.
     std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
     std::vector<ValueT> tiles(nleaf);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
-        std::vector<ValueT> vals(LeafT::SIZE);
-        std::vector<char> on(LeafT::SIZE);
-        for (size_t l = r.begin(); l != r.end(); l++) {
-            const Coord o = origin(l);
-            bool any_on = false;
-            for (int x = o[0]; x < o[0] + D; x++)
-                for (int y = o[1]; y < o[1] + D; y++)
-                    for (int z = o[2]; z < o[2] + D; z++) {
-                        const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
-                        const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
-                        const int i = std::clamp(bi, 0, n[0] - 1), j = std::clamp(bj, 0, n[1] - 1),
-                                  k = std::clamp(bk, 0, n[2] - 1);
-                        bool active = false;
-                        if (bi == i && bj == j && bk == k)
-                            vals[q] = value(i, j, k, &active);
-                        else
-                            vals[q] = outside(i, j, k);
-                        on[q] = active;
-                        any_on |= active;
-                    }
-            bool uniform = !any_on;
-            for (size_t q = 1; uniform && q < vals.size(); q++)
-                uniform = vals[q] == vals[0];
-            if (uniform) {
-                tiles[l] = vals[0];
-                continue;
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
+            std::vector<ValueT> vals(LeafT::SIZE);
+            std::vector<char> on(LeafT::SIZE);
+            for (size_t l = r.begin(); l != r.end(); l++) {
+                const Coord o = origin(l);
+                bool any_on = false;
+                for (int x = o[0]; x < o[0] + D; x++)
+                    for (int y = o[1]; y < o[1] + D; y++)
+                        for (int z = o[2]; z < o[2] + D; z++) {
+                            const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
+                            const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
+                            const int i = std::clamp(bi, 0, n[0] - 1),
+                                      j = std::clamp(bj, 0, n[1] - 1),
+                                      k = std::clamp(bk, 0, n[2] - 1);
+                            bool active = false;
+                            if (bi == i && bj == j && bk == k)
+                                vals[q] = value(i, j, k, &active);
+                            else
+                                vals[q] = outside(i, j, k);
+                            on[q] = active;
+                            any_on |= active;
+                        }
+                bool uniform = !any_on;
+                for (size_t q = 1; uniform && q < vals.size(); q++)
+                    uniform = vals[q] == vals[0];
+                if (uniform) {
+                    tiles[l] = vals[0];
+                    continue;
+                }
+                auto leaf = std::make_unique<LeafT>(o, vals[0], false);
+                for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
+                    if (on[q])
+                        leaf->setValueOn(q, vals[q]);
+                    else
+                        leaf->setValueOff(q, vals[q]);
+                }
+                leaves[l] = std::move(leaf);
             }
-            auto leaf = std::make_unique<LeafT>(o, vals[0], false);
-            for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
-                if (on[q])
-                    leaf->setValueOn(q, vals[q]);
-                else
-                    leaf->setValueOff(q, vals[q]);
-            }
-            leaves[l] = std::move(leaf);
-        }
-    });
+        });
     auto &tree = grid.tree();
     for (size_t l = 0; l < nleaf; l++) {
         if (leaves[l])
@@ -252,8 +254,7 @@ template <class GridT, class F> void for_box(const GridT &grid, const CoordBBox 
 }
 
 // A dense hv_grid block copied from a grid sampled at hv index (i,j,k).
-template <class GridT, class Conv>
-void copy_block(const GridT &grid, hv_grid *out, Conv &&conv)
+template <class GridT, class Conv> void copy_block(const GridT &grid, hv_grid *out, Conv &&conv)
 {
     CoordBBox box(Coord(0, 0, 0), Coord(out->n[0] - 1, out->n[1] - 1, out->n[2] - 1));
     for_box(grid, box, [&](size_t idx, auto &acc, const Coord &c) {
@@ -347,7 +348,7 @@ void check_ext_args(const hv_grid *phi, const hv_grid *const *in, const hv_grid 
 extern "C" {
 
 hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
-                                  double band_voxels, hv_grid *out, double *seconds)
+                                   double band_voxels, hv_grid *out, double *seconds)
 {
     return guarded("ref_vdb_mesh_to_levelset", [&] {
         init_vdb();
@@ -379,8 +380,8 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
         }
         auto xf = make_transform(out->h, out->origin);
         auto t0 = std::chrono::steady_clock::now();
-        auto grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, tri,
-                                                                       (float)band_voxels);
+        auto grid =
+            openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, tri, (float)band_voxels);
         auto t1 = std::chrono::steady_clock::now();
         if (seconds)
             *seconds = std::chrono::duration<double>(t1 - t0).count();
@@ -390,7 +391,7 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
 }
 
 hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
-                            int n_iter, float background, hv_grid *out, double *seconds)
+                             int n_iter, float background, hv_grid *out, double *seconds)
 {
     return guarded("ref_vdb_sdf_to_ext", [&] {
         init_vdb();
@@ -399,8 +400,8 @@ hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double ba
         check_ext_args(phi, in, outs, 1);
         auto sdf = index_space_sdf(phi, band_voxels);
         auto t0 = std::chrono::steady_clock::now();
-        auto ext = openvdb::tools::sdfToExt(*sdf, ScalarOp{field}, background, 0.0f,
-                                            std::max(n_iter, 1));
+        auto ext =
+            openvdb::tools::sdfToExt(*sdf, ScalarOp{field}, background, 0.0f, std::max(n_iter, 1));
         auto t1 = std::chrono::steady_clock::now();
         if (seconds)
             *seconds = std::chrono::duration<double>(t1 - t0).count();
@@ -412,9 +413,9 @@ hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double ba
 }
 
 hv_status ref_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const hv_grid *fy,
-                                 const hv_grid *fz, double band_voxels, int n_iter,
-                                 float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
-                                 double *seconds)
+                                  const hv_grid *fz, double band_voxels, int n_iter,
+                                  float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
+                                  double *seconds)
 {
     return guarded("ref_vdb_sdf_to_ext_vec3", [&] {
         init_vdb();

@@ -90,8 +90,7 @@ int cli_check_outputs(const char *cmd, const char *const *outs, int nout, const 
             struct stat sj;
             if (outs[j] && stat(outs[j], &sj) == 0 && sj.st_dev == so.st_dev &&
                 sj.st_ino == so.st_ino) {
-                fprintf(stderr, "heatvox %s: %s and %s are the same file\n", cmd, outs[j],
-                        outs[i]);
+                fprintf(stderr, "heatvox %s: %s and %s are the same file\n", cmd, outs[j], outs[i]);
                 return HV_EXIT_FAIL;
             }
         }

@@ -93,7 +93,8 @@ static uint8_t *make_obstacle(const char *kind, int dim, int n)
             for (int i = 0; i < n; i++) {
                 size_t c = (size_t)i + (size_t)n * ((size_t)j + (size_t)n * k);
                 if (!strcmp(kind, "ball")) {
-                    double x = i + 0.5 - 0.5 * n, y = j + 0.5 - 0.5 * n, z = dim == 3 ? k + 0.5 - 0.5 * n : 0;
+                    double x = i + 0.5 - 0.5 * n, y = j + 0.5 - 0.5 * n,
+                           z = dim == 3 ? k + 0.5 - 0.5 * n : 0;
                     solid[c] = x * x + y * y + z * z < 0.0625 * n * n;
                 } else { /* baffles: wall at w1 open at high y, wall at w2 open at low y */
                     solid[c] = (i == w1 && j < n - gap) || (i == w2 && j >= gap);
@@ -122,7 +123,7 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
         if (st)
             return st;
         if (r == 0 && repeat > 0)
-            continue; /* warm-up */
+            continue;    /* warm-up */
         if (t < *best) { /* the info of the fastest run */
             *best = t;
             *info = run;
@@ -136,25 +137,27 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
 
 static int usage_solve(FILE *out)
 {
-    fprintf(out,
-            "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
-            "                           [--backend mg|fftw|opencl] [--smoother rbgs|jacobi|chebyshev]\n"
-            "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
-            "                           [--obstacle none|ball|baffles]\n"
-            "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
-            "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
-            "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
-            "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
-            "streaming copy in the same process, best of trials run between the timed solves;\n"
-            "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
-            "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
-            "cycles_timed of them),\n"
-            "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref \"fftw\",\n"
-            "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
-            "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
-            "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
-            "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
-            "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
+    fprintf(
+        out,
+        "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
+        "                           [--backend mg|fftw|opencl] [--smoother rbgs|jacobi|chebyshev]\n"
+        "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
+        "                           [--obstacle none|ball|baffles]\n"
+        "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
+        "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
+        "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
+        "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
+        "streaming copy in the same process, best of trials run between the timed solves;\n"
+        "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
+        "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
+        "cycles_timed of them),\n"
+        "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref "
+        "\"fftw\",\n"
+        "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
+        "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
+        "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
+        "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
+        "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -201,7 +204,8 @@ static int bench_solve(int argc, char **argv)
                 return cli_usage_error("bench solve", "--repeat must be >= 1, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &backend) || backend == HV_BACKEND_AUTO)
-                return cli_usage_error("bench solve", "--backend must be mg, fftw or opencl, got '%s'", v);
+                return cli_usage_error("bench solve",
+                                       "--backend must be mg, fftw or opencl, got '%s'", v);
         } else if (!strcmp(a, "--smoother")) {
             smoother_set = 1;
             if (!strcmp(v, "rbgs"))
@@ -216,7 +220,8 @@ static int bench_solve(int argc, char **argv)
             wisdom = v;
         } else if (!strcmp(a, "--obstacle")) {
             if (strcmp(v, "none") && strcmp(v, "ball") && strcmp(v, "baffles"))
-                return cli_usage_error("bench solve", "--obstacle must be none, ball or baffles, got '%s'", v);
+                return cli_usage_error("bench solve",
+                                       "--obstacle must be none, ball or baffles, got '%s'", v);
             obstacle = v;
         } else {
             return cli_usage_error("bench solve", "unknown option '%s'", a);
@@ -230,8 +235,8 @@ static int bench_solve(int argc, char **argv)
     threads = hv_get_threads();
 
     double h = 1.0 / n;
-    hv_problem p = {dim, {n, n, dim == 3 ? n : 1}, h, NULL, poisson ? 0.0 : 1.0,
-                    poisson ? 1.0 : tscale * h * h};
+    hv_problem p = {dim,  {n, n, dim == 3 ? n : 1}, h,
+                    NULL, poisson ? 0.0 : 1.0,      poisson ? 1.0 : tscale * h * h};
     size_t count = (size_t)n * n * (dim == 3 ? n : 1);
     hv_status st = hv_check_dims(dim, p.n, h, 24);
     if (st)
@@ -250,7 +255,8 @@ static int bench_solve(int argc, char **argv)
         p.solid = solid;
     }
     copy_ref ref;
-    if (copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float) : (256u << 20))) {
+    if (copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float)
+                                                                 : (256u << 20))) {
         copy_ref_free(&ref);
         free(solid);
         hv_free(f);
@@ -284,22 +290,27 @@ static int bench_solve(int argc, char **argv)
     double traffic = stats.bytes_per_iteration * info.iterations;
     if (info.cycles > info.iterations && stats.bytes_per_cycle > 0)
         traffic += stats.bytes_per_cycle * (info.cycles - info.iterations);
-    double solve_gbs = info.iterations > 0 && backend != HV_BACKEND_FFTW ? traffic / seconds / 1e9 : 0;
+    double solve_gbs =
+        info.iterations > 0 && backend != HV_BACKEND_FFTW ? traffic / seconds / 1e9 : 0;
     /* The V-cycle's own bandwidth where the backend times its cycles (mg);
      * otherwise the whole solve's. */
     double cycle_gbs = best_cycle_gbs > 0 ? best_cycle_gbs : solve_gbs;
     hv_solver_destroy(&s);
 
-    printf("{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
-           "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
-           "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\",\"levels\":%d,"
-           "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
-           "\"obstacle\":\"%s\"",
-           n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
-           smoother == HV_SMOOTH_RBGS ? "rbgs" : smoother == HV_SMOOTH_JACOBI ? "jacobi" : "chebyshev",
-           threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
-           hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
-           solve_gbs, obstacle);
+    printf(
+        "{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
+        "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
+        "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\","
+        "\"levels\":%d,"
+        "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
+        "\"obstacle\":\"%s\"",
+        n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
+        smoother == HV_SMOOTH_RBGS     ? "rbgs"
+        : smoother == HV_SMOOTH_JACOBI ? "jacobi"
+                                       : "chebyshev",
+        threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
+        hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
+        solve_gbs, obstacle);
     if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;
         p.solid = NULL; /* FFTW solves plain boxes: the reference is the box without it */
@@ -308,7 +319,8 @@ static int bench_solve(int argc, char **argv)
         if (hv_solver_create(&s, &p, &o) == HV_OK &&
             time_solve(s, f, u, repeat, NULL, &ref_seconds, &rinfo, &unused) == HV_OK)
             printf(",\"ref\":\"%s\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
-                   solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres, seconds / ref_seconds);
+                   solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres,
+                   seconds / ref_seconds);
         hv_solver_destroy(&s);
     }
     printf(",\"copy1_gbs\":%.2f", copy1_gbs);
@@ -327,7 +339,8 @@ int cmd_bench(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *out = argc < 2 ? stderr : stdout;
-        fprintf(out, "usage: heatvox bench <solve|sdf|sdf2d|extend> [options]   (heatvox bench <name> --help)\n");
+        fprintf(out, "usage: heatvox bench <solve|sdf|sdf2d|extend> [options]   (heatvox bench "
+                     "<name> --help)\n");
         return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
     }
     if (!strcmp(argv[1], "solve"))

@@ -105,7 +105,8 @@ int cmd_bench_sdf(int argc, char **argv)
     int ok = hv_grid_create(&ref, 3, phi->n, phi->h, phi->origin) == HV_OK;
     for (int r = 0; ok && r <= repeat; r++) {
         double t0 = hv_now();
-        ok = ref_vdb_mesh_to_levelset(m->verts, m->nverts, m->tris, m->ntris, 3.0, ref, &ref_inner) == HV_OK;
+        ok = ref_vdb_mesh_to_levelset(m->verts, m->nverts, m->tris, m->ntris, 3.0, ref,
+                                      &ref_inner) == HV_OK;
         double t = hv_now() - t0;
         if (r > 0 && t < ref_seconds)
             ref_seconds = t;
@@ -115,14 +116,15 @@ int cmd_bench_sdf(int argc, char **argv)
         for (size_t c = 0; c < cells; c++)
             agree += (phi->v[c] < 0) == (ref->v[c] < 0);
 
-    printf("{\"bench\":\"sdf\",\"mesh\":\"%s\",\"n\":%d,\"grid\":[%d,%d,%d],\"triangles\":%zu,"
-           "\"backend\":\"%s\",\"threads\":%d,\"seconds\":%.4f,\"repair\":%.4f,\"splat\":%.4f,"
-           "\"diffuse\":%.4f,\"normalize\":%.4f,\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,"
-           "\"dense_seconds\":%.4f,\"dense_redistance\":%.4f,\"peak_rss_mb\":%.1f",
-           path, n, phi->n[0], phi->n[1], phi->n[2], m->ntris, hv_backend_name(band_best.backend),
-           hv_get_threads(), band_best.t_total, band_best.t_repair, band_best.t_splat,
-           band_best.t_diffuse, band_best.t_normalize, band_best.t_poisson, band_best.t_shift,
-           band_best.t_redistance, best.t_total, best.t_redistance, peak);
+    printf(
+        "{\"bench\":\"sdf\",\"mesh\":\"%s\",\"n\":%d,\"grid\":[%d,%d,%d],\"triangles\":%zu,"
+        "\"backend\":\"%s\",\"threads\":%d,\"seconds\":%.4f,\"repair\":%.4f,\"splat\":%.4f,"
+        "\"diffuse\":%.4f,\"normalize\":%.4f,\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,"
+        "\"dense_seconds\":%.4f,\"dense_redistance\":%.4f,\"peak_rss_mb\":%.1f",
+        path, n, phi->n[0], phi->n[1], phi->n[2], m->ntris, hv_backend_name(band_best.backend),
+        hv_get_threads(), band_best.t_total, band_best.t_repair, band_best.t_splat,
+        band_best.t_diffuse, band_best.t_normalize, band_best.t_poisson, band_best.t_shift,
+        band_best.t_redistance, best.t_total, best.t_redistance, peak);
     if (ok)
         printf(",\"ref\":\"openvdb\",\"ref_seconds\":%.4f,\"ratio\":%.3f,\"ratio_dense\":%.3f,"
                "\"inside_agreement\":%.5f",

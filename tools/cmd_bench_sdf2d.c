@@ -82,8 +82,9 @@ static int run_sdf2d(const char *svg, const char *exr, int res, int repair, doub
 {
     char rs[32];
     snprintf(rs, sizeof rs, "%d", res);
-    char *argv[] = {"heatvox", "sdf2d", (char *)svg, "-o", (char *)exr, "--res", rs,
-                    repair ? NULL : "--no-repair", NULL};
+    char *argv[] = {"heatvox",   "sdf2d", (char *)svg, "-o",
+                    (char *)exr, "--res", rs,          repair ? NULL : "--no-repair",
+                    NULL};
     int fd[2];
     if (pipe(fd))
         return -1;

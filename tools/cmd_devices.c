@@ -7,17 +7,16 @@
 
 static void usage(FILE *out)
 {
-    fprintf(out,
-            "usage: heatvox devices [--json] [-q] [-v]\n"
-            "\n"
-            "Lists the OpenCL devices of every platform; '*' marks the one --backend opencl\n"
-            "uses. Choose another with HEATVOX_OPENCL_DEVICE=\"P:D\" (platform:device) or\n"
-            "part of a device name; by default the first GPU, else the first device.\n"
-            "\n"
-            "  --json   one JSON object per device and line\n"
-            "\n"
-            "exit codes: 0 devices listed, 1 no OpenCL platform or HEATVOX_OPENCL_DEVICE\n"
-            "names no device, 2 usage error\n");
+    fprintf(out, "usage: heatvox devices [--json] [-q] [-v]\n"
+                 "\n"
+                 "Lists the OpenCL devices of every platform; '*' marks the one --backend opencl\n"
+                 "uses. Choose another with HEATVOX_OPENCL_DEVICE=\"P:D\" (platform:device) or\n"
+                 "part of a device name; by default the first GPU, else the first device.\n"
+                 "\n"
+                 "  --json   one JSON object per device and line\n"
+                 "\n"
+                 "exit codes: 0 devices listed, 1 no OpenCL platform or HEATVOX_OPENCL_DEVICE\n"
+                 "names no device, 2 usage error\n");
 }
 
 static void json_string(const char *s)
@@ -72,7 +71,8 @@ int cmd_devices(int argc, char **argv)
             json_string(d[i].platform_name);
             printf(",\"version\":");
             json_string(d[i].version);
-            printf(",\"global_mem\":%llu,\"compute_units\":%d,\"fp64\":%s,\"gpu\":%s,\"selected\":%s}\n",
+            printf(",\"global_mem\":%llu,\"compute_units\":%d,\"fp64\":%s,\"gpu\":%s,\"selected\":%"
+                   "s}\n",
                    (unsigned long long)d[i].global_mem, d[i].compute_units,
                    d[i].fp64 ? "true" : "false", d[i].gpu ? "true" : "false",
                    d[i].selected ? "true" : "false");

@@ -15,8 +15,10 @@ static int usage(FILE *out)
     fprintf(out,
             "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
             "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb\n"
-            "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 x1 y1 z1]\n"
-            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend auto|mg|fftw|opencl]\n"
+            "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 "
+            "x1 y1 z1]\n"
+            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
+            "auto|mg|fftw|opencl]\n"
             "                        [--unreachable V] [--threads T] [-q] [-v]\n"
             "\n"
             "Geodesic distance from the sources through free space, around obstacles, by the\n"
@@ -154,7 +156,9 @@ static int read_sources(const char *path, int dim, source_list *s)
             continue;
         }
         if (*kw && strcmp(kw, "voxel") && strcmp(kw, "point")) {
-            fprintf(stderr, "heatvox distance: %s:%d: unknown record '%s' (expected x y z, point, voxel or mesh)\n",
+            fprintf(stderr,
+                    "heatvox distance: %s:%d: unknown record '%s' (expected x y z, point, voxel or "
+                    "mesh)\n",
                     path, lineno, kw);
             rc = HV_EXIT_FAIL;
             break;
@@ -188,8 +192,8 @@ static int read_sources(const char *path, int dim, source_list *s)
             int iv[3] = {0, 0, 0};
             for (int a = 0; a < dim; a++) {
                 if (v[a] != floor(v[a]) || fabs(v[a]) > 1e9) {
-                    fprintf(stderr, "heatvox distance: %s:%d: voxel indices must be integers\n", path,
-                            lineno);
+                    fprintf(stderr, "heatvox distance: %s:%d: voxel indices must be integers\n",
+                            path, lineno);
                     rc = HV_EXIT_FAIL;
                     break;
                 }
@@ -349,7 +353,8 @@ int cmd_distance(int argc, char **argv)
             while (k < 6 && i + 1 + k < argc && cli_parse_double(argv[i + 1 + k], &bbox[k]) == 0)
                 k++;
             if (k != 4 && k != 6)
-                return cli_usage_error(CMD, "--bbox needs x0 y0 z0 x1 y1 z1 (or x0 y0 x1 y1 in 2D)");
+                return cli_usage_error(CMD,
+                                       "--bbox needs x0 y0 z0 x1 y1 z1 (or x0 y0 x1 y1 in 2D)");
             if (k == 4) {
                 double b4[4] = {bbox[0], bbox[1], bbox[2], bbox[3]};
                 bbox[0] = b4[0];
@@ -398,7 +403,8 @@ int cmd_distance(int argc, char **argv)
                 return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
+                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'",
+                                       v);
         } else if (!strcmp(a, "--unreachable")) {
             if (parse_unreachable(v, &o.unreachable))
                 return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);
@@ -415,15 +421,19 @@ int cmd_distance(int argc, char **argv)
     if (!out && !npy)
         return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
     if ((mask != NULL) + (obst_mesh != NULL) + none > 1)
-        return cli_usage_error(CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");
+        return cli_usage_error(
+            CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");
     if (mask && (res || vsize))
-        return cli_usage_error(CMD, "--res/--voxel-size cannot be used with --obstacles MASK.vdb (its voxels are the grid)");
+        return cli_usage_error(CMD, "--res/--voxel-size cannot be used with --obstacles MASK.vdb "
+                                    "(its voxels are the grid)");
     if (mask && dim == 2)
-        return cli_usage_error(CMD, "--dim 2 cannot be used with a VDB mask (a one-voxel-thick mask is fine in 3D)");
+        return cli_usage_error(
+            CMD, "--dim 2 cannot be used with a VDB mask (a one-voxel-thick mask is fine in 3D)");
     if (obst_mesh && dim == 2)
         return cli_usage_error(CMD, "--obstacle-mesh needs a 3D grid");
     if (use_bbox && (use_bbox == 4) != (dim == 2))
-        return cli_usage_error(CMD, "--bbox takes %d numbers for a %dD grid", dim == 2 ? 4 : 6, dim);
+        return cli_usage_error(CMD, "--bbox takes %d numbers for a %dD grid", dim == 2 ? 4 : 6,
+                               dim);
     if (res && vsize)
         return cli_usage_error(CMD, "give --res or --voxel-size, not both");
     const char *outs[] = {out, npy}, *ins[] = {sources, mask, obst_mesh};
@@ -458,7 +468,8 @@ int cmd_distance(int argc, char **argv)
                 hi[a] = bbox[3 + a];
             }
         } else if (src.nvox) {
-            rc = cli_usage_error(CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
+            rc = cli_usage_error(
+                CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
             goto done;
         } else if (!source_bounds(&src, om, lo, hi)) {
             rc = cli_usage_error(CMD, "cannot size the grid: give --bbox");
@@ -510,7 +521,8 @@ int cmd_distance(int argc, char **argv)
         goto done;
     }
     if (st_d.sources_in_solid)
-        fprintf(stderr, "heatvox distance: warning: %zu sources lie in obstacles and were skipped\n",
+        fprintf(stderr,
+                "heatvox distance: warning: %zu sources lie in obstacles and were skipped\n",
                 st_d.sources_in_solid);
     if (st_d.unreachable_cells && cli_verbose >= 0)
         fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
@@ -536,8 +548,8 @@ int cmd_distance(int argc, char **argv)
             st = hv_vdb_writer_add_float(w, g, "distance");
         if (!st && g->solid)
             st = hv_vdb_writer_add_mask(w, g, "obstacles");
-        snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s",
-                 o.t_scale, st_d.stages, sources);
+        snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s", o.t_scale,
+                 st_d.stages, sources);
         if (!st)
             st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_method", buf);
         snprintf(buf, sizeof buf, "%zu", st_d.unreachable_cells);

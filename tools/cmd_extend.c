@@ -13,30 +13,32 @@ static const char *CMD = "extend";
 
 static int usage(FILE *out)
 {
-    fprintf(out,
-            "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...] -o OUT.vdb\n"
-            "                      [--band W] [--t-scale K] [--dense | --out-band W] [--plain]\n"
-            "                      [--backend auto|mg|fftw|opencl] [--threads T] [-q] [-v]\n"
-            "\n"
-            "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
-            "velocity) off the zero set of the level set by diffusion (heat.h): the values\n"
-            "on cells with |phi| < W voxels (--band, default 1.5) are diffused with their\n"
-            "weights, and every output cell takes the ratio at its closest point on the\n"
-            "surface where phi is a distance, at itself elsewhere (clamped narrow-band level\n"
-            "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
-            "direction are diffused separately (vector heat method). All fields are solved\n"
-            "together with one solver per diffusion time.\n"
-            "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
-            "  --dense       every voxel of the block (default)\n"
-            "  --out-band W  only voxels with |phi| < W voxels; the others get 0\n"
-            "  --plain       no closest points: the diffusion ratio at every voxel\n"
-            "\n"
-            "The grids are read onto one dense block (the union of their active boxes, all\n"
-            "transforms must match) and OUT.vdb gets the level set (a level set again, its\n"
-            "band = its background) and the extended fields, with their names, voxel size,\n"
-            "world placement, index coordinates and classes; fields come back fully active. Other grids of\n"
-            "IN.vdb are not copied. Prints a JSON summary on stdout (not with -q).\n"
-            "Exit codes: 0 success, 1 failure, 2 usage error.\n");
+    fprintf(
+        out,
+        "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...] -o OUT.vdb\n"
+        "                      [--band W] [--t-scale K] [--dense | --out-band W] [--plain]\n"
+        "                      [--backend auto|mg|fftw|opencl] [--threads T] [-q] [-v]\n"
+        "\n"
+        "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
+        "velocity) off the zero set of the level set by diffusion (heat.h): the values\n"
+        "on cells with |phi| < W voxels (--band, default 1.5) are diffused with their\n"
+        "weights, and every output cell takes the ratio at its closest point on the\n"
+        "surface where phi is a distance, at itself elsewhere (clamped narrow-band level\n"
+        "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
+        "direction are diffused separately (vector heat method). All fields are solved\n"
+        "together with one solver per diffusion time.\n"
+        "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
+        "  --dense       every voxel of the block (default)\n"
+        "  --out-band W  only voxels with |phi| < W voxels; the others get 0\n"
+        "  --plain       no closest points: the diffusion ratio at every voxel\n"
+        "\n"
+        "The grids are read onto one dense block (the union of their active boxes, all\n"
+        "transforms must match) and OUT.vdb gets the level set (a level set again, its\n"
+        "band = its background) and the extended fields, with their names, voxel size,\n"
+        "world placement, index coordinates and classes; fields come back fully active. Other "
+        "grids of\n"
+        "IN.vdb are not copied. Prints a JSON summary on stdout (not with -q).\n"
+        "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -60,7 +62,8 @@ static void list_grids(const char *path, const hv_vdb_grid_info *info, size_t co
     fprintf(stderr, "\n");
 }
 
-static const hv_vdb_grid_info *find_grid(const hv_vdb_grid_info *info, size_t count, const char *name)
+static const hv_vdb_grid_info *find_grid(const hv_vdb_grid_info *info, size_t count,
+                                         const char *name)
 {
     for (size_t i = 0; i < count && i < MAX_GRIDS; i++)
         if (!strcmp(info[i].name, name))
@@ -123,7 +126,8 @@ int cmd_extend(int argc, char **argv)
                 return cli_usage_error(CMD, "--out-band must be positive (voxels), got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'", v);
+                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'",
+                                       v);
         } else if (!strcmp(a, "--threads")) {
             if (cli_parse_threads(v, 1, &threads))
                 return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
@@ -170,11 +174,13 @@ int cmd_extend(int argc, char **argv)
                           : !is_scalar(gi->value_type) && !is_vector(gi->value_type)) {
             fprintf(stderr, "heatvox extend: %s: grid '%s' holds %s values; %s\n", in, names[q],
                     gi->value_type,
-                    q ? "fields must be float, double, vec3s or vec3d" : "the level set must be float or double");
+                    q ? "fields must be float, double, vec3s or vec3d"
+                      : "the level set must be float or double");
             missing = 1;
         } else if (!gi->uniform) {
-            fprintf(stderr, "heatvox extend: %s: grid '%s' has a non-uniform or rotated transform\n",
-                    in, names[q]);
+            fprintf(stderr,
+                    "heatvox extend: %s: grid '%s' has a non-uniform or rotated transform\n", in,
+                    names[q]);
             missing = 1;
         }
     }
@@ -213,8 +219,10 @@ int cmd_extend(int argc, char **argv)
             goto done;
         }
         if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
-            fprintf(stderr, "heatvox extend: warning: '%s' is staggered; its components are "
-                            "extended as if they sat at voxel centres\n", fields[q]);
+            fprintf(stderr,
+                    "heatvox extend: warning: '%s' is staggered; its components are "
+                    "extended as if they sat at voxel centres\n",
+                    fields[q]);
         ef[q].ncomp = vec ? 3 : 1;
         for (int c = 0; c < 3; c++) {
             ef[q].in[c] = NULL;
@@ -239,8 +247,10 @@ int cmd_extend(int argc, char **argv)
         goto done;
     }
     if (es.weak_cells && cli_verbose >= 0)
-        fprintf(stderr, "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
-                        "their values are unreliable\n", es.weak_cells);
+        fprintf(stderr,
+                "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
+                "their values are unreliable\n",
+                es.weak_cells);
 
     /* Output: the level set (band = its background, the largest |phi| on the block)
      * and the fields, with names and classes. */
@@ -258,8 +268,9 @@ int cmd_extend(int argc, char **argv)
         st = hv_vdb_writer_add_levelset(w, phi, ls, band, 0);
     for (int q = 0; q < nfields && !st; q++) {
         const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
-        st = ef[q].ncomp == 3 ? hv_vdb_writer_add_vec3(w, fout[q][0], fout[q][1], fout[q][2], fields[q])
-                              : hv_vdb_writer_add_float(w, fout[q][0], fields[q]);
+        st = ef[q].ncomp == 3
+                 ? hv_vdb_writer_add_vec3(w, fout[q][0], fout[q][1], fout[q][2], fields[q])
+                 : hv_vdb_writer_add_float(w, fout[q][0], fields[q]);
         /* OpenVDB keeps a grid's class in its "class" metadata string. */
         if (!st && gi->grid_class != HV_VDB_UNKNOWN && gi->grid_class != HV_VDB_LEVEL_SET)
             st = hv_vdb_writer_set_grid_meta(w, fields[q], "class", class_name(gi->grid_class));

@@ -11,47 +11,46 @@
 
 static void help(void)
 {
-    printf(
-        "usage: heatvox sdf MESH -o OUT.vdb [options]\n"
-        "\n"
-        "Computes the signed distance field of a triangle mesh (OBJ, PLY, STL, OFF) with\n"
-        "the signed heat method on a regular grid, robust to holes, flipped faces,\n"
-        "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
-        "level set (negative inside). Prints one summary line on stdout.\n"
-        "\n"
-        "grid (cell-centred; sample (i,j,k) at corner + (i+1/2, j+1/2, k+1/2) h):\n"
-        "  --res N            cells along the longest axis of the padded box (default 128)\n"
-        "  --voxel-size H     voxel size in mesh units (instead of --res)\n"
-        "  --pad P            cells between the mesh bounds and the block boundary (default 4)\n"
-        "  --bbox X0 Y0 Z0 X1 Y1 Z1\n"
-        "                     outer boundary of the voxel block (with --res N: h = longest\n"
-        "                     side / N); --pad is ignored\n"
-        "output:\n"
-        "  -o, --output FILE  the .vdb file (required; written to a temporary, then renamed)\n"
-        "  --band W           narrow band half width in voxels (default 3)\n"
-        "  --dense            store every voxel of the block as active\n"
-        "                     (--unsigned always writes a dense float grid, class unknown)\n"
-        "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
-        "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
-        "                     (blue inside, red outside, black zero contour)\n"
-        "  --name NAME        grid name in the .vdb (default \"sdf\")\n"
-        "method:\n"
-        "  --unsigned         unsigned distance to the mesh (no inside)\n"
-        "  --heat             keep the heat method's own |phi| instead of the exact distance\n"
-        "                     to the triangles (sign from the heat method either way)\n"
-        "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
-        "  --heat-coarsen F   run the heat method (which then only decides the sign) on a\n"
-        "                     grid F = 1..4 times coarser; default: 2 above 2^22 cells, else 1\n"
-        "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
-        "  --domed-caps       close holes with caps that bulge like the wall around them\n"
-        "                     (default: planar caps)\n"
-        "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
-        "  --threads N        worker threads (default: all cores)\n"
-        "  -v                 progress and details on stderr\n"
-        "  -q                 no summary line\n"
-        "  --help             this text\n"
-        "\n"
-        "exit: 0 success, 1 failure (unreadable mesh, bad geometry, I/O), 2 usage error\n");
+    printf("usage: heatvox sdf MESH -o OUT.vdb [options]\n"
+           "\n"
+           "Computes the signed distance field of a triangle mesh (OBJ, PLY, STL, OFF) with\n"
+           "the signed heat method on a regular grid, robust to holes, flipped faces,\n"
+           "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
+           "level set (negative inside). Prints one summary line on stdout.\n"
+           "\n"
+           "grid (cell-centred; sample (i,j,k) at corner + (i+1/2, j+1/2, k+1/2) h):\n"
+           "  --res N            cells along the longest axis of the padded box (default 128)\n"
+           "  --voxel-size H     voxel size in mesh units (instead of --res)\n"
+           "  --pad P            cells between the mesh bounds and the block boundary (default 4)\n"
+           "  --bbox X0 Y0 Z0 X1 Y1 Z1\n"
+           "                     outer boundary of the voxel block (with --res N: h = longest\n"
+           "                     side / N); --pad is ignored\n"
+           "output:\n"
+           "  -o, --output FILE  the .vdb file (required; written to a temporary, then renamed)\n"
+           "  --band W           narrow band half width in voxels (default 3)\n"
+           "  --dense            store every voxel of the block as active\n"
+           "                     (--unsigned always writes a dense float grid, class unknown)\n"
+           "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
+           "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
+           "                     (blue inside, red outside, black zero contour)\n"
+           "  --name NAME        grid name in the .vdb (default \"sdf\")\n"
+           "method:\n"
+           "  --unsigned         unsigned distance to the mesh (no inside)\n"
+           "  --heat             keep the heat method's own |phi| instead of the exact distance\n"
+           "                     to the triangles (sign from the heat method either way)\n"
+           "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
+           "  --heat-coarsen F   run the heat method (which then only decides the sign) on a\n"
+           "                     grid F = 1..4 times coarser; default: 2 above 2^22 cells, else 1\n"
+           "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
+           "  --domed-caps       close holes with caps that bulge like the wall around them\n"
+           "                     (default: planar caps)\n"
+           "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
+           "  --threads N        worker threads (default: all cores)\n"
+           "  -v                 progress and details on stderr\n"
+           "  -q                 no summary line\n"
+           "  --help             this text\n"
+           "\n"
+           "exit: 0 success, 1 failure (unreadable mesh, bad geometry, I/O), 2 usage error\n");
 }
 
 /* One line rewritten in place on a terminal, one line per stage otherwise. */
@@ -123,7 +122,8 @@ int cmd_sdf(int argc, char **argv)
         } else if (!strcmp(a, "--voxel-size")) {
             NEED(1);
             if (cli_parse_double(argv[++i], &o.voxel_size) || !(o.voxel_size > 0))
-                return cli_usage_error("sdf", "--voxel-size needs a positive number, got '%s'", argv[i]);
+                return cli_usage_error("sdf", "--voxel-size needs a positive number, got '%s'",
+                                       argv[i]);
             have_h = 1;
         } else if (!strcmp(a, "--pad")) {
             NEED(1);
@@ -133,7 +133,8 @@ int cmd_sdf(int argc, char **argv)
             NEED(6);
             for (int k = 0; k < 6; k++)
                 if (cli_parse_double(argv[i + 1 + k], &o.bbox[k]))
-                    return cli_usage_error("sdf", "--bbox needs 6 finite numbers, got '%s'", argv[i + 1 + k]);
+                    return cli_usage_error("sdf", "--bbox needs 6 finite numbers, got '%s'",
+                                           argv[i + 1 + k]);
             for (int k = 0; k < 3; k++)
                 if (!(o.bbox[3 + k] > o.bbox[k]))
                     return cli_usage_error("sdf", "--bbox: %c1 (%g) must exceed %c0 (%g)", "XYZ"[k],
@@ -143,7 +144,8 @@ int cmd_sdf(int argc, char **argv)
         } else if (!strcmp(a, "--band")) {
             NEED(1);
             if (cli_parse_double(argv[++i], &band) || !(band > 0))
-                return cli_usage_error("sdf", "--band needs a positive number of voxels, got '%s'", argv[i]);
+                return cli_usage_error("sdf", "--band needs a positive number of voxels, got '%s'",
+                                       argv[i]);
         } else if (!strcmp(a, "--dense")) {
             dense = 1;
         } else if (!strcmp(a, "--unsigned")) {
@@ -153,11 +155,14 @@ int cmd_sdf(int argc, char **argv)
         } else if (!strcmp(a, "--t-scale")) {
             NEED(1);
             if (cli_parse_double(argv[++i], &o.t_scale) || !(o.t_scale > 0))
-                return cli_usage_error("sdf", "--t-scale needs a positive number, got '%s'", argv[i]);
+                return cli_usage_error("sdf", "--t-scale needs a positive number, got '%s'",
+                                       argv[i]);
         } else if (!strcmp(a, "--heat-coarsen")) {
             NEED(1);
-            if (cli_parse_int(argv[++i], &o.heat_coarsen) || o.heat_coarsen < 1 || o.heat_coarsen > 4)
-                return cli_usage_error("sdf", "--heat-coarsen needs an integer in 1..4, got '%s'", argv[i]);
+            if (cli_parse_int(argv[++i], &o.heat_coarsen) || o.heat_coarsen < 1 ||
+                o.heat_coarsen > 4)
+                return cli_usage_error("sdf", "--heat-coarsen needs an integer in 1..4, got '%s'",
+                                       argv[i]);
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--domed-caps")) {
@@ -238,7 +243,8 @@ int cmd_sdf(int argc, char **argv)
     cli_outputs co = {0};
     const char *t_out = cli_stage("sdf", &co, out);
     const char *t_npy = npy && t_out ? cli_stage("sdf", &co, npy) : NULL;
-    const char *t_prev = preview && t_out && (!npy || t_npy) ? cli_stage("sdf", &co, preview) : NULL;
+    const char *t_prev =
+        preview && t_out && (!npy || t_npy) ? cli_stage("sdf", &co, preview) : NULL;
     if (!t_out || (npy && !t_npy) || (preview && !t_prev)) {
         cli_discard(&co);
         hv_grid_destroy(&g);
@@ -279,15 +285,17 @@ int cmd_sdf(int argc, char **argv)
                 S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
                 S.surface_rms_after, S.dead_faces, S.near_sign_cells, S.near_sign_changed);
     if (cli_verbose >= 0)
-        printf("sdf %s -> %s: grid %dx%dx%d h=%.6g | s: read %.2f repair %.2f splat %.2f diffuse %.2f "
-               "normalize %.2f poisson %.2f shift %.2f redistance %.2f write %.2f total %.2f | "
-               "peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
-               "flipped %zu holes %zu/%zu filled, boundary %zu nonmanifold %zu inconsistent %zu->%zu\n",
-               mesh_path, out, S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat,
-               S.t_diffuse, S.t_normalize, S.t_poisson, S.t_shift, S.t_redistance, tw,
-               hv_now() - t0, hv_peak_rss() / 1e6, R->triangles_in, R->triangles_out,
-               R->vertices_welded, R->degenerate_removed, R->duplicates_removed, R->faces_flipped,
-               R->holes_filled, R->holes_filled + R->holes_left_open, R->boundary_edges,
-               R->nonmanifold_edges, R->inconsistent_before, R->inconsistent_after);
+        printf(
+            "sdf %s -> %s: grid %dx%dx%d h=%.6g | s: read %.2f repair %.2f splat %.2f diffuse %.2f "
+            "normalize %.2f poisson %.2f shift %.2f redistance %.2f write %.2f total %.2f | "
+            "peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
+            "flipped %zu holes %zu/%zu filled, boundary %zu nonmanifold %zu inconsistent "
+            "%zu->%zu\n",
+            mesh_path, out, S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat, S.t_diffuse,
+            S.t_normalize, S.t_poisson, S.t_shift, S.t_redistance, tw, hv_now() - t0,
+            hv_peak_rss() / 1e6, R->triangles_in, R->triangles_out, R->vertices_welded,
+            R->degenerate_removed, R->duplicates_removed, R->faces_flipped, R->holes_filled,
+            R->holes_filled + R->holes_left_open, R->boundary_edges, R->nonmanifold_edges,
+            R->inconsistent_before, R->inconsistent_after);
     return HV_EXIT_OK;
 }

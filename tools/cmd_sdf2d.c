@@ -61,8 +61,7 @@ int cmd_sdf2d(int argc, char **argv)
                                        a[2] == 'r' ? 2 : 0);
             *(a[2] == 'r' ? &o.res : &o.pad) = v;
             i++;
-        } else if (!strcmp(a, "--voxel-size") || !strcmp(a, "--t-scale") ||
-                   !strcmp(a, "--range")) {
+        } else if (!strcmp(a, "--voxel-size") || !strcmp(a, "--t-scale") || !strcmp(a, "--range")) {
             double v;
             if (!more || cli_parse_double(argv[i + 1], &v) || !(v > 0))
                 return cli_usage_error("sdf2d", "%s needs a positive number", a);
@@ -135,8 +134,8 @@ int cmd_sdf2d(int argc, char **argv)
         return HV_EXIT_FAIL;
     double t_write = hv_now() - t0;
     if (cli_verbose >= 0) {
-        printf("%s: %d x %d cells, h %g, origin (%g, %g)\n", in, S.n[0], S.n[1], S.h,
-               S.origin[0], S.origin[1]);
+        printf("%s: %d x %d cells, h %g, origin (%g, %g)\n", in, S.n[0], S.n[1], S.h, S.origin[0],
+               S.origin[1]);
         printf("  segments %zu in, %zu used (%zu points welded, %zu zero-length, %zu "
                "duplicates dropped; %zu reversed; %zu chains, %zu closed)\n",
                S.segments_in, S.segments_out, S.points_welded, S.zero_length_removed,

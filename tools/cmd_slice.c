@@ -141,7 +141,7 @@ int cmd_slice(int argc, char **argv)
         return cli_fail("slice", out, st);
     }
     if (cli_verbose >= 0)
-        printf("%s: %c = %d slice, %d x %d -> %s\n", in, "xyz"[axis], index, s->n[0], s->n[1],
+        printf("%s: %c = %d slice, %d x %d -> %s\n", in, "xyz"[axis], index, s -> n[0], s -> n[1],
                out);
     hv_grid_destroy(&s);
     return HV_EXIT_OK;

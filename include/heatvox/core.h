@@ -30,15 +30,15 @@ extern "C" {
 
 typedef enum hv_status {
     HV_OK = 0,
-    HV_ERR_INVALID_ARG,   /* an argument is out of range or inconsistent */
-    HV_ERR_NOMEM,         /* an allocation failed or would exceed memory */
-    HV_ERR_IO,            /* a file could not be opened, read or written */
-    HV_ERR_PARSE,         /* an input file is malformed */
-    HV_ERR_NUMERIC,       /* NaN or Inf in an input, or a numeric breakdown */
-    HV_ERR_UNSUPPORTED,   /* a feature or backend is not available */
-    HV_ERR_BACKEND,       /* a backend library (OpenCL, FFTW, OpenVDB) failed */
-    HV_ERR_CANCELLED,     /* a progress callback asked to stop */
-    HV_ERR_INTERNAL       /* a bug in heatvox */
+    HV_ERR_INVALID_ARG, /* an argument is out of range or inconsistent */
+    HV_ERR_NOMEM,       /* an allocation failed or would exceed memory */
+    HV_ERR_IO,          /* a file could not be opened, read or written */
+    HV_ERR_PARSE,       /* an input file is malformed */
+    HV_ERR_NUMERIC,     /* NaN or Inf in an input, or a numeric breakdown */
+    HV_ERR_UNSUPPORTED, /* a feature or backend is not available */
+    HV_ERR_BACKEND,     /* a backend library (OpenCL, FFTW, OpenVDB) failed */
+    HV_ERR_CANCELLED,   /* a progress callback asked to stop */
+    HV_ERR_INTERNAL     /* a bug in heatvox */
 } hv_status;
 
 /* Static name of a status ("invalid argument", ...). Never NULL. */

@@ -36,11 +36,11 @@ extern "C" {
 
 typedef struct hv_curves {
     size_t npoints;
-    double *pts;      /* 2 * npoints coordinates, owned */
+    double *pts; /* 2 * npoints coordinates, owned */
     size_t nlines;
-    size_t *start;    /* nlines + 1 offsets into the points: polyline k is points
+    size_t *start;   /* nlines + 1 offsets into the points: polyline k is points
                          start[k] .. start[k+1]-1, owned */
-    uint8_t *closed;  /* nlines flags: 1 = a segment joins the last point to the first */
+    uint8_t *closed; /* nlines flags: 1 = a segment joins the last point to the first */
 } hv_curves;
 
 /* Reads curves, choosing the format by extension (.svg, else the text format).
@@ -109,7 +109,7 @@ typedef struct hv_sdf2d_stats {
     size_t segments_split;   /* segments cut at points lying on them (overlaps) */
     size_t segments_flipped; /* by the repair */
     size_t chains, cycles;
-    size_t nesting_tests;    /* windings of one loop evaluated at a point of another: only
+    size_t nesting_tests; /* windings of one loop evaluated at a point of another: only
                                 loops whose bounding box holds the point are tried */
     size_t dead_faces;
     hv_backend backend;

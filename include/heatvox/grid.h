@@ -17,19 +17,20 @@ extern "C" {
 #endif
 
 typedef struct hv_grid {
-    int dim;           /* 2 or 3 */
-    int n[3];          /* cells per axis; n[2] == 1 when dim == 2 */
-    double h;          /* voxel size (world units) */
-    double origin[3];  /* world position of the block's lower corner */
-    float *v;          /* values, 64-byte aligned, owned by the grid */
-    uint8_t *solid;    /* NULL, or one byte per cell (non-zero = solid), owned */
+    int dim;          /* 2 or 3 */
+    int n[3];         /* cells per axis; n[2] == 1 when dim == 2 */
+    double h;         /* voxel size (world units) */
+    double origin[3]; /* world position of the block's lower corner */
+    float *v;         /* values, 64-byte aligned, owned by the grid */
+    uint8_t *solid;   /* NULL, or one byte per cell (non-zero = solid), owned */
 } hv_grid;
 
 /* Allocates a zeroed grid. n[2] is ignored (taken as 1) when dim == 2.
  * origin may be NULL (zero). Fails with HV_ERR_INVALID_ARG for sizes <= 0 or
  * h <= 0, HV_ERR_NOMEM when the grid would not fit in memory.
  * The caller owns *out and frees it with hv_grid_destroy(). */
-HV_API hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const double origin[3]);
+HV_API hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h,
+                                const double origin[3]);
 
 /* Frees the grid and sets *g to NULL. Accepts NULL and *g == NULL. */
 HV_API void hv_grid_destroy(hv_grid **g);

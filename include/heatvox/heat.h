@@ -57,42 +57,42 @@ extern "C" {
 
 /* Where the distance is zero. Any combination; all arrays are borrowed. */
 typedef struct hv_distance_sources {
-    const int *voxels;     /* nvoxels triples i j k (k = 0 on 2D grids) */
+    const int *voxels; /* nvoxels triples i j k (k = 0 on 2D grids) */
     size_t nvoxels;
-    const double *points;  /* npoints world triples x y z (z ignored on 2D grids),
+    const double *points; /* npoints world triples x y z (z ignored on 2D grids),
                               splatted trilinearly onto the fluid cells around them */
     size_t npoints;
-    const hv_mesh *mesh;   /* NULL, or a mesh whose surface is the source (3D grids):
+    const hv_mesh *mesh; /* NULL, or a mesh whose surface is the source (3D grids):
                               sampled at spacing <= h/2 and splatted by area */
 } hv_distance_sources;
 
 typedef struct hv_distance_opts {
-    double t_scale;        /* diffusion time t = t_scale * h^2; default 2 */
-    int max_stages;        /* most diffusions (the source, then fronts); each reaches
+    double t_scale;     /* diffusion time t = t_scale * h^2; default 2 */
+    int max_stages;     /* most diffusions (the source, then fronts); each reaches
                               about 20 sqrt(t) further; default 1000 */
-    double diffuse_tol;    /* relative residual of the heat solves; default 1e-11 */
-    double poisson_tol;    /* relative residual of the Poisson solve; default 1e-9 */
-    hv_backend backend;    /* default AUTO (FFTW without obstacles, multigrid with) */
-    float unreachable;     /* value of fluid cells in regions without a source;
+    double diffuse_tol; /* relative residual of the heat solves; default 1e-11 */
+    double poisson_tol; /* relative residual of the Poisson solve; default 1e-9 */
+    hv_backend backend; /* default AUTO (FFTW without obstacles, multigrid with) */
+    float unreachable;  /* value of fluid cells in regions without a source;
                               default +INFINITY */
-    float solid_value;     /* value of solid cells; default +INFINITY */
+    float solid_value;  /* value of solid cells; default +INFINITY */
 } hv_distance_opts;
 
 typedef struct hv_distance_stats {
-    double t;                 /* diffusion time */
-    int stages;               /* diffusions run */
-    size_t faces_per_stage[8];/* open faces whose direction came from stage l (first 8) */
-    size_t dead_faces;        /* open faces of reachable regions no stage reached (X = 0) */
-    size_t source_cells;      /* cells with a source weight */
-    size_t sources_in_solid;  /* voxels/points/mesh samples with no fluid cell to land on */
-    size_t regions;           /* connected fluid regions that hold a source */
-    size_t unreachable_cells; /* fluid cells in regions without a source */
-    int diffuse_iterations;   /* summed over stages */
-    double diffuse_relres;    /* worst final relative residual of the heat solves */
-    int poisson_iterations;   /* summed over restarts */
-    int poisson_restarts;     /* defect-correction restarts of the Poisson solve */
-    double poisson_relres;    /* final relative residual */
-    hv_backend backend;       /* backend of the solves */
+    double t;                  /* diffusion time */
+    int stages;                /* diffusions run */
+    size_t faces_per_stage[8]; /* open faces whose direction came from stage l (first 8) */
+    size_t dead_faces;         /* open faces of reachable regions no stage reached (X = 0) */
+    size_t source_cells;       /* cells with a source weight */
+    size_t sources_in_solid;   /* voxels/points/mesh samples with no fluid cell to land on */
+    size_t regions;            /* connected fluid regions that hold a source */
+    size_t unreachable_cells;  /* fluid cells in regions without a source */
+    int diffuse_iterations;    /* summed over stages */
+    double diffuse_relres;     /* worst final relative residual of the heat solves */
+    int poisson_iterations;    /* summed over restarts */
+    int poisson_restarts;      /* defect-correction restarts of the Poisson solve */
+    double poisson_relres;     /* final relative residual */
+    hv_backend backend;        /* backend of the solves */
     double t_splat, t_diffuse, t_normalize, t_poisson, t_total; /* seconds */
 } hv_distance_stats;
 
@@ -118,23 +118,23 @@ HV_API hv_status hv_mask_from_mesh(hv_grid *g, const hv_mesh *m, size_t *nsolid)
 /* ---- Extension ----------------------------------------------------------- */
 
 typedef struct hv_extend_opts {
-    double band;           /* source cells: |phi| < band * h, weight (1 - (phi/(band h))^2)^2;
+    double band;        /* source cells: |phi| < band * h, weight (1 - (phi/(band h))^2)^2;
                               default 1.5 */
-    double t_scale;        /* diffusion time t = t_scale * h^2; default 0.25 (the ratio at a
+    double t_scale;     /* diffusion time t = t_scale * h^2; default 0.25 (the ratio at a
                               closest point averages over ~sqrt(t): mean error 0.17% at 0.25,
                               0.24% at 0.5, 0.38% at 1, 0.65% at 2 on a 96^3 sphere; the
                               band solve is also cheaper at shorter times) */
-    int closest_point;     /* 1 (default): evaluate at the closest point where phi is a
+    int closest_point;  /* 1 (default): evaluate at the closest point where phi is a
                               distance; 0: plain diffusion ratio at every cell */
-    double out_band;       /* 0 (default): every cell; > 0: only cells with
+    double out_band;    /* 0 (default): every cell; > 0: only cells with
                               |phi| < out_band * h, the others get `background` */
-    float background;      /* default 0 */
-    int max_levels;        /* diffusion times t * 16^l for cells the first has not
+    float background;   /* default 0 */
+    int max_levels;     /* diffusion times t * 16^l for cells the first has not
                               reached reliably (plain-ratio cells only); default 6 */
-    hv_backend backend;    /* default AUTO */
-    double tol;            /* relative residual of the iterative solves; default 1e-10 (the
+    hv_backend backend; /* default AUTO */
+    double tol;         /* relative residual of the iterative solves; default 1e-10 (the
                               band solve below runs in float to max(tol, 3e-5)) */
-    int box_only;          /* 0 (default): with backend auto or mg, t_scale <= 8 and no
+    int box_only;       /* 0 (default): with backend auto or mg, t_scale <= 8 and no
                               solid cells, the first diffusion time is solved only on the
                               cells near the weights and the cells read (grown by 6 sqrt(t)
                               voxels) when those are under half the box, by Chebyshev
@@ -143,17 +143,17 @@ typedef struct hv_extend_opts {
 } hv_extend_opts;
 
 typedef struct hv_extend_stats {
-    size_t source_cells;   /* cells with a weight */
-    size_t cp_cells;       /* output cells evaluated at their closest point */
-    size_t ratio_cells;    /* output cells evaluated at the cell itself */
-    size_t weak_cells;     /* ratio cells whose weight no level brought above the error
+    size_t source_cells; /* cells with a weight */
+    size_t cp_cells;     /* output cells evaluated at their closest point */
+    size_t ratio_cells;  /* output cells evaluated at the cell itself */
+    size_t weak_cells;   /* ratio cells whose weight no level brought above the error
                               bound (value taken from the last level anyway) */
-    int levels;            /* diffusion times used in this call */
-    size_t solve_cells;    /* cells of the first level's solve: the box around the weights
+    int levels;          /* diffusion times used in this call */
+    size_t solve_cells;  /* cells of the first level's solve: the box around the weights
                               and the cells read at themselves, plus 6 sqrt(t), or the
                               band's cells */
-    int solves;            /* right-hand sides solved */
-    double relres;         /* worst relative residual */
+    int solves;          /* right-hand sides solved */
+    double relres;       /* worst relative residual */
     double t_weights, t_solve, t_eval, t_total; /* seconds: weights, input checks and the
                                                    choice of evaluation points; solves (with
                                                    the band's set-up); background and

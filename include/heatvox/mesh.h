@@ -18,8 +18,8 @@ extern "C" {
 typedef struct hv_mesh {
     size_t nverts;
     size_t ntris;
-    double *verts;    /* 3 * nverts coordinates, owned */
-    uint32_t *tris;   /* 3 * ntris vertex indices, owned */
+    double *verts;  /* 3 * nverts coordinates, owned */
+    uint32_t *tris; /* 3 * ntris vertex indices, owned */
     /* What the reader did (0 / NULL for meshes not read from a file). */
     const char *format;           /* static name, e.g. "PLY binary_little_endian" */
     size_t input_vertices;        /* vertices in the input, before welding */
@@ -28,23 +28,23 @@ typedef struct hv_mesh {
 } hv_mesh;
 
 typedef struct hv_mesh_report {
-    size_t vertices;            /* after welding */
-    size_t triangles;           /* after fanning */
-    size_t polygons_fanned;     /* input faces with more than 3 corners */
-    size_t boundary_edges;      /* edges used by exactly one triangle */
-    size_t nonmanifold_edges;   /* edges used by more than two triangles */
-    size_t inconsistent_edges;  /* manifold edges whose two triangles traverse it the same way */
-    size_t duplicate_faces;     /* triangles repeating the vertex set of an earlier one */
-    size_t degenerate_faces;    /* repeated vertex index or zero area */
-    size_t nonfinite_vertices;  /* NaN or Inf coordinates */
-    size_t components;          /* edge-connected components of triangles */
+    size_t vertices;           /* after welding */
+    size_t triangles;          /* after fanning */
+    size_t polygons_fanned;    /* input faces with more than 3 corners */
+    size_t boundary_edges;     /* edges used by exactly one triangle */
+    size_t nonmanifold_edges;  /* edges used by more than two triangles */
+    size_t inconsistent_edges; /* manifold edges whose two triangles traverse it the same way */
+    size_t duplicate_faces;    /* triangles repeating the vertex set of an earlier one */
+    size_t degenerate_faces;   /* repeated vertex index or zero area */
+    size_t nonfinite_vertices; /* NaN or Inf coordinates */
+    size_t components;         /* edge-connected components of triangles */
     /* Added fields. */
-    size_t edges;               /* distinct undirected edges */
-    size_t vertex_components;   /* components joined through shared vertices (an hourglass
+    size_t edges;                 /* distinct undirected edges */
+    size_t vertex_components;     /* components joined through shared vertices (an hourglass
                                    touching at one vertex is 1 here, 2 in components) */
-    size_t input_vertices;      /* copied from the mesh (0 when not read from a file) */
+    size_t input_vertices;        /* copied from the mesh (0 when not read from a file) */
     size_t unreferenced_vertices; /* copied from the mesh */
-    double signed_volume;       /* sum of det(a,b,c)/6 over finite triangles: > 0 when a
+    double signed_volume;         /* sum of det(a,b,c)/6 over finite triangles: > 0 when a
                                    closed mesh is oriented outward */
 } hv_mesh_report;
 

@@ -21,16 +21,16 @@ extern "C" {
 #endif
 
 typedef struct hv_opencl_device {
-    int platform;            /* P in HEATVOX_OPENCL_DEVICE="P:D" */
-    int device;              /* D */
+    int platform; /* P in HEATVOX_OPENCL_DEVICE="P:D" */
+    int device;   /* D */
     char name[128];
     char platform_name[128];
-    char version[128];       /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
-    uint64_t global_mem;     /* bytes */
+    char version[128];   /* CL_DEVICE_VERSION, e.g. "OpenCL 3.0 PoCL ..." */
+    uint64_t global_mem; /* bytes */
     int compute_units;
-    int fp64;                /* double precision: the defect correction runs on the device */
-    int gpu;                 /* a GPU (else CPU or accelerator) */
-    int selected;            /* the device the opencl backend would use now */
+    int fp64;     /* double precision: the defect correction runs on the device */
+    int gpu;      /* a GPU (else CPU or accelerator) */
+    int selected; /* the device the opencl backend would use now */
 } hv_opencl_device;
 
 /* Lists the OpenCL devices of every platform into out[0..max) (out may be

@@ -19,8 +19,8 @@ extern "C" {
 
 typedef struct hv_faces {
     int dim;
-    int n[3];      /* the cell counts of the grid the faces belong to */
-    float *f[3];   /* f[a]: faces normal to axis a; f[2] NULL in 2D; owned */
+    int n[3];    /* the cell counts of the grid the faces belong to */
+    float *f[3]; /* f[a]: faces normal to axis a; f[2] NULL in 2D; owned */
 } hv_faces;
 
 /* Zeroed face arrays matching grid g. Caller frees with hv_faces_destroy(). */

@@ -46,52 +46,52 @@ extern "C" {
 
 /* Mesh repair steps (bit flags), applied in the order listed. */
 enum {
-    HV_SDF_REPAIR_WELD = 1u << 0,        /* merge vertices at exactly the same position */
-    HV_SDF_REPAIR_DEGENERATE = 1u << 1,  /* drop faces with a repeated vertex or zero area */
-    HV_SDF_REPAIR_DUPLICATES = 1u << 2,  /* drop faces repeating an earlier face's vertex set */
-    HV_SDF_REPAIR_ORIENT = 1u << 3,      /* one orientation per manifold-connected component */
-    HV_SDF_REPAIR_FILL_HOLES = 1u << 5,  /* close boundary loops with planar caps (see max_hole) */
-    HV_SDF_REPAIR_OUTWARD = 1u << 4,     /* orient components outward by winding number,
+    HV_SDF_REPAIR_WELD = 1u << 0,       /* merge vertices at exactly the same position */
+    HV_SDF_REPAIR_DEGENERATE = 1u << 1, /* drop faces with a repeated vertex or zero area */
+    HV_SDF_REPAIR_DUPLICATES = 1u << 2, /* drop faces repeating an earlier face's vertex set */
+    HV_SDF_REPAIR_ORIENT = 1u << 3,     /* one orientation per manifold-connected component */
+    HV_SDF_REPAIR_FILL_HOLES = 1u << 5, /* close boundary loops with planar caps (see max_hole) */
+    HV_SDF_REPAIR_OUTWARD = 1u << 4,    /* orient components outward by winding number,
                                             cavities inward */
     HV_SDF_REPAIR_ALL = 0x3fu,
-    HV_SDF_REPAIR_DOMED_CAPS = 1u << 6   /* with FILL_HOLES: caps that bulge like the wall
+    HV_SDF_REPAIR_DOMED_CAPS = 1u << 6 /* with FILL_HOLES: caps that bulge like the wall
                                             around the hole instead of planar ones (not in ALL) */
 };
 
 /* How |phi| is obtained. */
 typedef enum hv_sdf_magnitude {
-    HV_SDF_EXACT = 0,  /* exact distance to the repaired triangles, heat-method sign (default) */
-    HV_SDF_HEAT        /* the heat method's phi itself */
+    HV_SDF_EXACT = 0, /* exact distance to the repaired triangles, heat-method sign (default) */
+    HV_SDF_HEAT       /* the heat method's phi itself */
 } hv_sdf_magnitude;
 
 typedef struct hv_sdf_opts {
     /* Grid placement. Exactly one of res / voxel_size is used (voxel_size when > 0). */
-    int res;              /* cells along the longest axis of the padded box; default 128 */
-    double voxel_size;    /* h; default 0 (use res) */
-    int pad;              /* cells between the mesh bounds and the block boundary; default 4 */
-    int use_bbox;         /* 1: bbox below is the block's outer boundary (pad ignored) */
-    double bbox[6];       /* x0 y0 z0 x1 y1 z1 */
-    int round_to;         /* without bbox, round cell counts up to a multiple of this (extra
+    int res;           /* cells along the longest axis of the padded box; default 128 */
+    double voxel_size; /* h; default 0 (use res) */
+    int pad;           /* cells between the mesh bounds and the block boundary; default 4 */
+    int use_bbox;      /* 1: bbox below is the block's outer boundary (pad ignored) */
+    double bbox[6];    /* x0 y0 z0 x1 y1 z1 */
+    int round_to;      /* without bbox, round cell counts up to a multiple of this (extra
                              padding, centred) so multigrid coarsens well; default 8, 1 = off */
 
     /* Method. */
     int unsigned_distance;      /* 1: unsigned distance to the mesh; default 0 */
     hv_sdf_magnitude magnitude; /* default HV_SDF_EXACT */
-    double t_scale;       /* diffusion time t = (t_scale * h)^2; default 1 */
-    int far_levels;       /* extra diffusions with t multiplied by 16 each, used on faces where the
+    double t_scale;             /* diffusion time t = (t_scale * h)^2; default 1 */
+    int far_levels;   /* extra diffusions with t multiplied by 16 each, used on faces where the
                              shorter ones have decayed below solver accuracy; -1 (default): as many
                              as needed to reach the whole grid (0 with HV_SDF_EXACT) */
-    unsigned repair;      /* HV_SDF_REPAIR_* flags; default HV_SDF_REPAIR_ALL */
-    double max_hole;      /* holes wider than this times their component's bounding-box diagonal
+    unsigned repair;  /* HV_SDF_REPAIR_* flags; default HV_SDF_REPAIR_ALL */
+    double max_hole;  /* holes wider than this times their component's bounding-box diagonal
                              stay open (rims of bowls and sheets); default 0.5 */
-    double near_sign;     /* HV_SDF_EXACT, signed: within this many voxels of the mesh (and where
+    double near_sign; /* HV_SDF_EXACT, signed: within this many voxels of the mesh (and where
                              |phi| < 1.5 times it) the sign comes from the nearest feature's
                              angle-weighted pseudonormal when that feature is clean; 0 = off;
                              default 1 */
-    int local_shift;      /* 1 (default): after the global shift, subtract the residual of phi
+    int local_shift;  /* 1 (default): after the global shift, subtract the residual of phi
                              at the surface extended into the volume by normalized heat
                              convolution, so the zero set follows the mesh (signed only) */
-    double band_only;     /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
+    double band_only; /* HV_SDF_EXACT: > 0 computes the exact distance only within this many
                              voxels of the mesh, as a narrow-band level set needs; farther cells
                              get (band_only + 1) h with the heat method's sign. Bands up to 4
                              voxels are rasterized whole, wider ones dilated from a 2-voxel
@@ -99,34 +99,34 @@ typedef struct hv_sdf_opts {
                              0 (default): exact everywhere */
 
     /* Solves. */
-    hv_backend backend;   /* default HV_BACKEND_AUTO */
-    double diffuse_tol;   /* relative residual of the heat solves; 0 (default): 1e-6 where the heat
+    hv_backend backend; /* default HV_BACKEND_AUTO */
+    double diffuse_tol; /* relative residual of the heat solves; 0 (default): 1e-6 where the heat
                              method only decides the sign (HV_SDF_EXACT, signed), else 1e-10 */
-    double poisson_tol;   /* relative residual of the Poisson solve; 0 (default): 1e-4 where the
+    double poisson_tol; /* relative residual of the Poisson solve; 0 (default): 1e-4 where the
                              heat method only decides the sign, else 1e-8 */
-    int heat_coarsen;     /* HV_SDF_EXACT, signed: run the heat method (which then only decides
+    int heat_coarsen;   /* HV_SDF_EXACT, signed: run the heat method (which then only decides
                              the sign) on a grid this many times coarser, 1..4; 0 (default):
                              2 on grids above 2^22 cells (about 160^3), else 1 */
-    int threads;          /* > 0: calls hv_set_threads(threads) (process-wide) first;
+    int threads;        /* > 0: calls hv_set_threads(threads) (process-wide) first;
                              0 (default) leaves the current setting */
 } hv_sdf_opts;
 
 typedef struct hv_sdf_repair_report {
     size_t vertices_in, triangles_in;
-    size_t vertices_welded;       /* vertices merged into an earlier one */
+    size_t vertices_welded; /* vertices merged into an earlier one */
     size_t degenerate_removed;
-    size_t duplicates_removed;    /* same vertex set as an earlier face, either orientation */
-    size_t holes_filled;          /* boundary loops closed with caps */
-    size_t holes_left_open;       /* loops too wide, or not traceable (non-manifold rims) */
+    size_t duplicates_removed; /* same vertex set as an earlier face, either orientation */
+    size_t holes_filled;       /* boundary loops closed with caps */
+    size_t holes_left_open;    /* loops too wide, or not traceable (non-manifold rims) */
     size_t cap_triangles;
     size_t boundary_edges_closed; /* boundary edges on filled loops */
     size_t boundary_edges;        /* after repair */
     size_t nonmanifold_edges;     /* after repair */
     size_t inconsistent_before;   /* manifold edges traversed the same way by both faces */
     size_t inconsistent_after;
-    size_t components;            /* components connected through manifold edges */
-    size_t faces_flipped;         /* by orientation propagation and outward orientation */
-    size_t components_flipped;    /* whole components turned outward */
+    size_t components;         /* components connected through manifold edges */
+    size_t faces_flipped;      /* by orientation propagation and outward orientation */
+    size_t components_flipped; /* whole components turned outward */
     size_t vertices_out, triangles_out;
 } hv_sdf_repair_report;
 
@@ -134,25 +134,26 @@ typedef struct hv_sdf_stats {
     int n[3];
     double h;
     double origin[3];
-    double t;                    /* diffusion time of the finest level */
-    int levels;                  /* diffusion levels used */
-    int heat_coarsen;            /* the heat method's grid was this many times coarser */
-    hv_backend backend;          /* the solver backend that ran */
-    size_t surface_samples;      /* quadrature points */
+    double t;               /* diffusion time of the finest level */
+    int levels;             /* diffusion levels used */
+    int heat_coarsen;       /* the heat method's grid was this many times coarser */
+    hv_backend backend;     /* the solver backend that ran */
+    size_t surface_samples; /* quadrature points */
     /* Seconds per stage. */
     double t_repair, t_splat, t_diffuse, t_normalize, t_poisson, t_shift, t_redistance, t_total;
-    int diffuse_iterations;      /* summed over components and levels */
-    double diffuse_relres;       /* worst final relative residual */
+    int diffuse_iterations; /* summed over components and levels */
+    double diffuse_relres;  /* worst final relative residual */
     int poisson_iterations;
     double poisson_relres;
-    double shift;                /* value subtracted from phi (global shift) */
-    double surface_rms_before;   /* rms of phi at the surface samples, voxels, after the global shift */
-    double surface_rms_after;    /* the same after the local correction */
-    size_t dead_faces;           /* faces where no level was above solver accuracy (X = 0) */
-    size_t band_cells;           /* cells whose exact distance came from rasterization */
-    size_t near_sign_cells;      /* cells signed by a pseudonormal (one that agreed with the heat
+    double shift; /* value subtracted from phi (global shift) */
+    double
+        surface_rms_before; /* rms of phi at the surface samples, voxels, after the global shift */
+    double surface_rms_after; /* the same after the local correction */
+    size_t dead_faces;        /* faces where no level was above solver accuracy (X = 0) */
+    size_t band_cells;        /* cells whose exact distance came from rasterization */
+    size_t near_sign_cells;   /* cells signed by a pseudonormal (one that agreed with the heat
                                     sign counts even where its face's trust was not tested) */
-    size_t near_sign_changed;    /* of those, cells where it disagreed with the heat sign */
+    size_t near_sign_changed; /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
 } hv_sdf_stats;
 

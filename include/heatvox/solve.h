@@ -34,18 +34,18 @@ typedef enum hv_backend {
 } hv_backend;
 
 typedef enum hv_smoother {
-    HV_SMOOTH_RBGS = 0,    /* red-black Gauss-Seidel (CPU default) */
-    HV_SMOOTH_JACOBI,      /* weighted Jacobi, omega 6/7 (3D) or 4/5 (2D) */
-    HV_SMOOTH_CHEBYSHEV,   /* Chebyshev on D^-1 A, degree 4 (GPU default) */
-    HV_SMOOTH_AUTO         /* the backend's default: RBGS (mg), CHEBYSHEV (opencl) */
+    HV_SMOOTH_RBGS = 0,  /* red-black Gauss-Seidel (CPU default) */
+    HV_SMOOTH_JACOBI,    /* weighted Jacobi, omega 6/7 (3D) or 4/5 (2D) */
+    HV_SMOOTH_CHEBYSHEV, /* Chebyshev on D^-1 A, degree 4 (GPU default) */
+    HV_SMOOTH_AUTO       /* the backend's default: RBGS (mg), CHEBYSHEV (opencl) */
 } hv_smoother;
 
 typedef enum hv_stop_reason {
     HV_STOP_NONE = 0,
-    HV_STOP_CONVERGED,     /* relative residual <= tol */
-    HV_STOP_MAX_ITER,      /* max_iter reached above tol */
-    HV_STOP_STAGNATED,     /* residual stopped decreasing above tol */
-    HV_STOP_EXACT          /* direct solve (FFTW) */
+    HV_STOP_CONVERGED, /* relative residual <= tol */
+    HV_STOP_MAX_ITER,  /* max_iter reached above tol */
+    HV_STOP_STAGNATED, /* residual stopped decreasing above tol */
+    HV_STOP_EXACT      /* direct solve (FFTW) */
 } hv_stop_reason;
 
 HV_API const char *hv_backend_name(hv_backend b);
@@ -70,25 +70,26 @@ HV_API const char *hv_stop_reason_str(hv_stop_reason r);
 HV_API hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid);
 
 typedef struct hv_problem {
-    int dim;                /* 2 or 3 */
-    int n[3];               /* n[2] ignored in 2D */
-    double h;               /* voxel size */
-    const uint8_t *solid;   /* NULL or one byte per cell; copied at create */
-    double alpha;           /* >= 0 */
-    double beta;            /* > 0 */
+    int dim;              /* 2 or 3 */
+    int n[3];             /* n[2] ignored in 2D */
+    double h;             /* voxel size */
+    const uint8_t *solid; /* NULL or one byte per cell; copied at create */
+    double alpha;         /* >= 0 */
+    double beta;          /* > 0 */
 } hv_problem;
 
 typedef struct hv_solver_opts {
-    hv_backend backend;     /* default AUTO */
-    hv_smoother smoother;   /* default AUTO: RBGS (mg), CHEBYSHEV (opencl) */
-    double tol;             /* relative residual ||f - A u|| / ||f||, default 1e-6; >= 1e-12 */
-    int max_iter;           /* outer iterations (cycles), default 50 */
-    int pre_smooth;         /* default 2 */
-    int post_smooth;        /* default 2 */
-    int nonzero_guess;      /* 1: u holds an initial guess on entry; default 0 */
-    int fftw_double;        /* FFTW backend: 1 = double transforms, 0 = float; default 1 */
-    const char *wisdom_file;/* FFTW wisdom loaded at create and saved after planning; NULL = none */
-    int fftw_measure;       /* 1: FFTW_MEASURE planning, 0: FFTW_ESTIMATE; default 0 */
+    hv_backend backend;   /* default AUTO */
+    hv_smoother smoother; /* default AUTO: RBGS (mg), CHEBYSHEV (opencl) */
+    double tol;           /* relative residual ||f - A u|| / ||f||, default 1e-6; >= 1e-12 */
+    int max_iter;         /* outer iterations (cycles), default 50 */
+    int pre_smooth;       /* default 2 */
+    int post_smooth;      /* default 2 */
+    int nonzero_guess;    /* 1: u holds an initial guess on entry; default 0 */
+    int fftw_double;      /* FFTW backend: 1 = double transforms, 0 = float; default 1 */
+    const char
+        *wisdom_file; /* FFTW wisdom loaded at create and saved after planning; NULL = none */
+    int fftw_measure; /* 1: FFTW_MEASURE planning, 0: FFTW_ESTIMATE; default 0 */
     int cycles_per_iteration; /* mg, plain grid: V-cycles per double-precision correction;
                                  0 (default) = as many as the tolerance needs (1..3, RBGS),
                                  else that many (1..8) */
@@ -97,7 +98,7 @@ typedef struct hv_solver_opts {
 #define HV_MAX_HISTORY 64
 
 typedef struct hv_solve_info {
-    hv_backend backend;             /* the backend that ran */
+    hv_backend backend; /* the backend that ran */
     hv_stop_reason reason;
     int iterations;                 /* outer iterations: corrections or CG iterations */
     int cycles;                     /* V-cycles run (mg: >= iterations); 0 when not counted */
@@ -136,12 +137,12 @@ HV_API hv_status hv_solver_solve_many(hv_solver *s, int k, const float *const *f
 #define HV_MAX_LEVELS 40
 
 typedef struct hv_solver_stats {
-    int levels;                  /* multigrid levels (1 for direct solvers) */
-    int n[HV_MAX_LEVELS][3];     /* cells per axis on each level */
-    int plain[HV_MAX_LEVELS];    /* 1 where a level needs no coefficient arrays */
-    double bytes_per_iteration;  /* modelled memory traffic of one outer iteration (one cycle) */
-    double bytes_per_cycle;      /* of each further V-cycle in an iteration (0: not modelled) */
-    size_t memory_bytes;         /* memory held by the backend's arrays */
+    int levels;                 /* multigrid levels (1 for direct solvers) */
+    int n[HV_MAX_LEVELS][3];    /* cells per axis on each level */
+    int plain[HV_MAX_LEVELS];   /* 1 where a level needs no coefficient arrays */
+    double bytes_per_iteration; /* modelled memory traffic of one outer iteration (one cycle) */
+    double bytes_per_cycle;     /* of each further V-cycle in an iteration (0: not modelled) */
+    size_t memory_bytes;        /* memory held by the backend's arrays */
 } hv_solver_stats;
 
 /* Describes the backend's data structures (for benchmarks and tests). */

@@ -83,8 +83,8 @@ HV_API hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double i
 HV_API hv_status hv_vdb_writer_set_meta(hv_vdb_writer *w, const char *key, const char *value);
 
 /* Sets a string metadata entry on a grid already added under grid_name. */
-HV_API hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name, const char *key,
-                                             const char *value);
+HV_API hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_name,
+                                             const char *key, const char *value);
 
 /* Writes every grid added so far to path (Blosc compression with active-mask
  * compression, floats stored as 32 bit), through a temporary file in the same
@@ -97,14 +97,14 @@ HV_API hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path);
 
 /* Description of one grid in a file. */
 typedef struct hv_vdb_grid_info {
-    char name[256];          /* truncated if longer */
-    char value_type[32];     /* OpenVDB's value type name: "float", "double", "vec3s", "bool", ... */
-    int grid_class;          /* hv_vdb_class */
-    int uniform;             /* 1: linear, axis-aligned, uniform scale (readable by heatvox) */
-    double voxel_size[3];    /* world units per index step along each index axis */
-    double index0_world[3];  /* world position of index (0,0,0), a voxel centre */
-    int64_t active_voxels;   /* number of active voxels (tiles counted by their voxels) */
-    int bbox_lo[3];          /* active voxel bounding box, inclusive; lo > hi when empty */
+    char name[256];         /* truncated if longer */
+    char value_type[32];    /* OpenVDB's value type name: "float", "double", "vec3s", "bool", ... */
+    int grid_class;         /* hv_vdb_class */
+    int uniform;            /* 1: linear, axis-aligned, uniform scale (readable by heatvox) */
+    double voxel_size[3];   /* world units per index step along each index axis */
+    double index0_world[3]; /* world position of index (0,0,0), a voxel centre */
+    int64_t active_voxels;  /* number of active voxels (tiles counted by their voxels) */
+    int bbox_lo[3];         /* active voxel bounding box, inclusive; lo > hi when empty */
     int bbox_hi[3];
 } hv_vdb_grid_info;
 
@@ -149,13 +149,13 @@ HV_API hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_v
  * dense block: the union of their default boxes (see hv_vdb_read_opts).
  * Fails with HV_ERR_INVALID_ARG naming both grids when their transforms differ
  * (voxel size or translation), or naming a missing grid. */
-HV_API hv_status hv_vdb_common_box(const char *path, const char *const *names, size_t count, int lo[3],
-                                   int hi[3]);
+HV_API hv_status hv_vdb_common_box(const char *path, const char *const *names, size_t count,
+                                   int lo[3], int hi[3]);
 
 /* Copies a metadata entry (file metadata when grid_name is NULL, else the
  * grid's) as text into buf. Missing key: HV_ERR_INVALID_ARG naming it. */
-HV_API hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key, char *buf,
-                                  size_t bufsize);
+HV_API hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key,
+                                  char *buf, size_t bufsize);
 
 #ifdef __cplusplus
 }

@@ -37,7 +37,7 @@ const char *hv_last_error(void) { return last_error; }
 
 void hv_clear_error(void) { last_error[0] = '\0'; }
 
-hv_status hv_error(hv_status s, const char *fmt, ...)
+hv_status hv__error(hv_status s, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -52,7 +52,7 @@ void hv_set_log(hv_log_fn fn, void *user)
     log_user = user;
 }
 
-void hv_log(hv_log_level level, const char *fmt, ...)
+void hv__log(hv_log_level level, const char *fmt, ...)
 {
     if (!log_fn)
         return;
@@ -70,10 +70,10 @@ void hv_set_progress(hv_progress_fn fn, void *user)
     progress_user = user;
 }
 
-hv_status hv_progress(double fraction, const char *stage)
+hv_status hv__progress(double fraction, const char *stage)
 {
     if (progress_fn && progress_fn(fraction, stage, progress_user))
-        return hv_error(HV_ERR_CANCELLED, "cancelled during %s", stage);
+        return hv__error(HV_ERR_CANCELLED, "cancelled during %s", stage);
     return HV_OK;
 }
 

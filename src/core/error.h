@@ -5,13 +5,13 @@
 #include "heatvox/core.h"
 
 /* Records a formatted message for this thread and returns s, so that the
- * function detecting an error can write `return hv_error(HV_ERR_IO, "...")`. */
-hv_status hv_error(hv_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+ * function detecting an error can write `return hv__error(HV_ERR_IO, "...")`. */
+hv_status hv__error(hv_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 /* Sends a message to the log callback, if any. */
-void hv_log(hv_log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+void hv__log(hv_log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 /* Calls the progress callback; returns HV_ERR_CANCELLED if it asked to stop. */
-hv_status hv_progress(double fraction, const char *stage);
+hv_status hv__progress(double fraction, const char *stage);
 
 #endif

@@ -56,35 +56,35 @@ static size_t physical_memory(void)
 hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell)
 {
     if (dim != 2 && dim != 3)
-        return hv_error(HV_ERR_INVALID_ARG, "grid dimension must be 2 or 3, got %d", dim);
+        return hv__error(HV_ERR_INVALID_ARG, "grid dimension must be 2 or 3, got %d", dim);
     if (!n)
-        return hv_error(HV_ERR_INVALID_ARG, "grid size is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "grid size is NULL");
     for (int a = 0; a < dim; a++)
         if (n[a] <= 0)
-            return hv_error(HV_ERR_INVALID_ARG, "grid size along %c must be positive, got %d",
-                            "xyz"[a], n[a]);
+            return hv__error(HV_ERR_INVALID_ARG, "grid size along %c must be positive, got %d",
+                             "xyz"[a], n[a]);
     if (!(h > 0) || !isfinite(h))
-        return hv_error(HV_ERR_INVALID_ARG, "voxel size must be positive and finite, got %g", h);
+        return hv__error(HV_ERR_INVALID_ARG, "voxel size must be positive and finite, got %g", h);
     double cells = (double)n[0] * n[1] * (dim == 3 ? n[2] : 1);
     double bytes = cells * (double)(bytes_per_cell ? bytes_per_cell : 1);
     if (bytes >= (double)SIZE_MAX / 2 || bytes > (double)physical_memory())
-        return hv_error(HV_ERR_NOMEM,
-                        "grid %d x %d x %d needs %.3g GB, more than this machine's %.3g GB",
-                        n[0], n[1], dim == 3 ? n[2] : 1, bytes / 1e9, physical_memory() / 1e9);
+        return hv__error(HV_ERR_NOMEM,
+                         "grid %d x %d x %d needs %.3g GB, more than this machine's %.3g GB", n[0],
+                         n[1], dim == 3 ? n[2] : 1, bytes / 1e9, physical_memory() / 1e9);
     return HV_OK;
 }
 
 hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const double origin[3])
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_create: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_grid_create: out is NULL");
     *out = NULL;
     hv_status st = hv_check_dims(dim, n, h, sizeof(float));
     if (st)
         return st;
     hv_grid *g = calloc(1, sizeof *g);
     if (!g)
-        return hv_error(HV_ERR_NOMEM, "hv_grid_create: no memory for the grid header");
+        return hv__error(HV_ERR_NOMEM, "hv_grid_create: no memory for the grid header");
     g->dim = dim;
     g->n[0] = n[0];
     g->n[1] = n[1];
@@ -96,8 +96,8 @@ hv_status hv_grid_create(hv_grid **out, int dim, const int n[3], double h, const
     if (!g->v) {
         size_t c = hv_grid_count(g);
         free(g);
-        return hv_error(HV_ERR_NOMEM, "cannot allocate a grid of %zu cells (%.3g GB)", c,
-                        c * 4.0 / 1e9);
+        return hv__error(HV_ERR_NOMEM, "cannot allocate a grid of %zu cells (%.3g GB)", c,
+                         c * 4.0 / 1e9);
     }
     *out = g;
     return HV_OK;
@@ -116,12 +116,12 @@ void hv_grid_destroy(hv_grid **g)
 hv_status hv_grid_add_mask(hv_grid *g)
 {
     if (!g)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_add_mask: grid is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_grid_add_mask: grid is NULL");
     if (g->solid)
         return HV_OK;
     g->solid = hv_calloc(hv_grid_count(g), 1);
     if (!g->solid)
-        return hv_error(HV_ERR_NOMEM, "cannot allocate a mask of %zu cells", hv_grid_count(g));
+        return hv__error(HV_ERR_NOMEM, "cannot allocate a mask of %zu cells", hv_grid_count(g));
     return HV_OK;
 }
 
@@ -145,8 +145,8 @@ hv_status hv_check_finite(const float *v, size_t count, const char *what)
         if (!isfinite(v[i]) && i < bad)
             bad = i;
     if (bad != SIZE_MAX)
-        return hv_error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
-                        (double)v[bad], bad);
+        return hv__error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
+                         (double)v[bad], bad);
     return HV_OK;
 }
 
@@ -158,7 +158,7 @@ hv_status hv_check_finite_d(const double *v, size_t count, const char *what)
         if (!isfinite(v[i]) && i < bad)
             bad = i;
     if (bad != SIZE_MAX)
-        return hv_error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
-                        v[bad], bad);
+        return hv__error(HV_ERR_NUMERIC, "%s holds a non-finite value (%g) at cell %zu", what,
+                         v[bad], bad);
     return HV_OK;
 }

@@ -70,27 +70,27 @@ static void remove_stale(const char *dir, const char *base)
 hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
 {
     if (!target || !*target)
-        return hv_error(HV_ERR_INVALID_ARG, "output path is empty");
+        return hv__error(HV_ERR_INVALID_ARG, "output path is empty");
     const char *slash = strrchr(target, '/');
     int dirlen = slash ? (int)(slash - target + 1) : 0;
     const char *base = slash ? slash + 1 : target;
     if (!*base)
-        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' names a directory", target);
+        return hv__error(HV_ERR_INVALID_ARG, "output path '%s' names a directory", target);
     /* Renaming onto a device or FIFO would replace it (as root, /dev/null). */
     struct stat sb;
     if (stat(target, &sb) == 0 && !S_ISREG(sb.st_mode))
-        return hv_error(HV_ERR_IO, "%s: exists and is not a regular file; it is not replaced",
-                        target);
+        return hv__error(HV_ERR_IO, "%s: exists and is not a regular file; it is not replaced",
+                         target);
     char dir[HV_TMP_LEN];
     if (dirlen >= (int)sizeof dir)
-        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
+        return hv__error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
     memcpy(dir, target, (size_t)dirlen);
     dir[dirlen] = '\0';
     remove_stale(dir, base);
     int n = snprintf(tmp, tmpsize, "%.*s.%s.tmp-%ld-%u", dirlen, target, base, (long)getpid(),
                      atomic_fetch_add(&tmp_counter, 1u));
     if (n < 0 || (size_t)n >= tmpsize || n >= HV_TMP_LEN)
-        return hv_error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
+        return hv__error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
     tmp_register(tmp);
     return HV_OK;
 }
@@ -101,8 +101,8 @@ hv_status hv_tmp_commit(const char *tmp, const char *target)
         int e = errno;
         unlink(tmp);
         tmp_unregister(tmp);
-        return hv_error(HV_ERR_IO, "%s: cannot rename the finished output into place: %s", target,
-                        strerror(e));
+        return hv__error(HV_ERR_IO, "%s: cannot rename the finished output into place: %s", target,
+                         strerror(e));
     }
     tmp_unregister(tmp);
     return HV_OK;

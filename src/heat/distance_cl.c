@@ -19,9 +19,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-extern const char hv_kernel_distance[]; /* kernels/distance.cl, embedded by the Makefile */
+extern const char hv__kernel_distance[]; /* kernels/distance.cl, embedded by the Makefile */
 
-static const char *const dist_sources[] = {hv_kernel_distance, NULL};
+static const char *const dist_sources[] = {hv__kernel_distance, NULL};
 enum { DK_FACES, DK_LOG, DK_ASSIGN, DK_FRONT_SUMS, DK_FRONT, DK_DIV, DK_GATHER, DK_OUTPUT };
 static const char *const dist_kernels[] = {"dist_faces",      "dist_log",    "dist_assign",
                                            "dist_front_sums", "dist_front",  "dist_div",
@@ -44,12 +44,12 @@ static void work_free(dist_cl_work *k)
     cl_mem *m[] = {&k->region, &k->X[0], &k->X[1], &k->X[2], &k->w,    &k->u,   &k->u2, &k->ok,
                    &k->inside, &k->cnt,  &k->part, &k->idx,  &k->gath, &k->off, &k->out};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
-        hv_cl_free(m[i]);
+        hv__cl_free(m[i]);
     free(k->hpart);
     free(k->hidx);
     free(k->hval);
     free(k->num);
-    hv_cl_close(&k->cl);
+    hv__cl_close(&k->cl);
 }
 
 static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, double beta, double tol)
@@ -67,9 +67,9 @@ static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, doub
 /* Reads the two counters and zeroes them. */
 static hv_status read_counts(hv_cl *cl, cl_mem cnt, uint32_t out[2])
 {
-    hv_cl_read(cl, cnt, 0, 2 * sizeof(uint32_t), out);
-    hv_cl_zero(cl, cnt, 2 * sizeof(uint32_t));
-    return hv_cl_check(cl);
+    hv__cl_read(cl, cnt, 0, 2 * sizeof(uint32_t), out);
+    hv__cl_zero(cl, cnt, 2 * sizeof(uint32_t));
+    return hv__cl_check(cl);
 }
 
 /* Sum of the ngroups partials of stride nsum at the slot j (read beforehand). */
@@ -91,12 +91,12 @@ static hv_status poisson_restarts(dist_cl_work *k, const hv_grid *g, const int32
            *r = hv_malloc(bytes);
     hv_status st = HV_OK;
     if (!rhs || !u || !Au || !r) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for the Poisson restarts");
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory for the Poisson restarts");
         goto out;
     }
-    hv_cl_read(k->cl, k->u2, 0, bytes, rhs);
-    hv_cl_read(k->cl, k->u, 0, bytes, u);
-    if ((st = hv_cl_check(k->cl)))
+    hv__cl_read(k->cl, k->u2, 0, bytes, rhs);
+    hv__cl_read(k->cl, k->u, 0, bytes, u);
+    if ((st = hv__cl_check(k->cl)))
         goto out;
     double fn = 0;
     for (size_t c = 0; c < n; c++)
@@ -120,8 +120,8 @@ static hv_status poisson_restarts(dist_cl_work *k, const hv_grid *g, const int32
         S->poisson_iterations += pinfo.iterations;
         S->poisson_restarts++;
     }
-    hv_cl_write(k->cl, k->u, 0, bytes, u);
-    st = hv_cl_finish(k->cl);
+    hv__cl_write(k->cl, k->u, 0, bytes, u);
+    st = hv__cl_finish(k->cl);
 out:
     hv_free(rhs);
     hv_free(u);
@@ -130,9 +130,9 @@ out:
     return st;
 }
 
-hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32_t *region,
-                              size_t nregions, const double *w0, const float *ref,
-                              hv_distance_stats *S, int *handled)
+hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32_t *region,
+                               size_t nregions, const double *w0, const float *ref,
+                               hv_distance_stats *S, int *handled)
 {
     dist_cl_work k;
     memset(&k, 0, sizeof k);
@@ -140,17 +140,17 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     const char *env = getenv("HEATVOX_DISTANCE_CL");
     if (env && !strcmp(env, "0")) /* tests: the host path with the same backend */
         return HV_OK;
-    hv_status st = hv_cl_open(&k.cl);
+    hv_status st = hv__cl_open(&k.cl);
     if (st)
         return st;
     hv_cl *cl = k.cl;
     if (!cl->fp64) {
-        hv_cl_close(&k.cl);
+        hv__cl_close(&k.cl);
         return HV_OK;
     }
     *handled = 1;
-    if ((st = hv_cl_module_open(cl, &dist_module))) {
-        hv_cl_close(&k.cl);
+    if ((st = hv__cl_module_open(cl, &dist_module))) {
+        hv__cl_close(&k.cl);
         return st;
     }
     const int dim = g->dim;
@@ -158,36 +158,37 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     const size_t count = hv_grid_count(g), dbytes = count * sizeof(double);
     size_t nface[3] = {0, 0, 0};
     size_t g1[1], l1[1], g2[2], l2[2], gc[2], lc[2], gr, lr;
-    hv_cl_range1(count, g1, l1);
-    hv_cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
-    const size_t ngroups = hv_cl_range_red(count, &gr, &lr);
+    hv__cl_range1(count, g1, l1);
+    hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
+    const size_t ngroups = hv__cl_range_red(count, &gr, &lr);
     uint32_t cnt[2];
     double t0 = hv_now();
 
     /* Buffers; faces closed (0) or open (NaN). */
     for (int a = 0; a < dim; a++)
         nface[a] = (size_t)(N[0] + (a == 0)) * (N[1] + (a == 1)) * (N[2] + (a == 2));
-    if ((st = hv_cl_alloc(cl, count * sizeof(int32_t), region, &k.region)) ||
-        (st = hv_cl_alloc(cl, dbytes, w0, &k.w)) || (st = hv_cl_alloc(cl, dbytes, NULL, &k.u)) ||
-        (st = hv_cl_alloc(cl, dbytes, NULL, &k.u2)) || (st = hv_cl_alloc(cl, count, NULL, &k.ok)) ||
-        (st = hv_cl_alloc(cl, count, NULL, &k.inside)) ||
-        (st = hv_cl_alloc(cl, 2 * sizeof(uint32_t), NULL, &k.cnt)) ||
-        (st = hv_cl_alloc(cl, 3 * ngroups * sizeof(double), NULL, &k.part)))
+    if ((st = hv__cl_alloc(cl, count * sizeof(int32_t), region, &k.region)) ||
+        (st = hv__cl_alloc(cl, dbytes, w0, &k.w)) || (st = hv__cl_alloc(cl, dbytes, NULL, &k.u)) ||
+        (st = hv__cl_alloc(cl, dbytes, NULL, &k.u2)) ||
+        (st = hv__cl_alloc(cl, count, NULL, &k.ok)) ||
+        (st = hv__cl_alloc(cl, count, NULL, &k.inside)) ||
+        (st = hv__cl_alloc(cl, 2 * sizeof(uint32_t), NULL, &k.cnt)) ||
+        (st = hv__cl_alloc(cl, 3 * ngroups * sizeof(double), NULL, &k.part)))
         goto done;
     if (!(k.hpart = malloc(3 * ngroups * sizeof *k.hpart))) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for partial sums");
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory for partial sums");
         goto done;
     }
     for (int a = 0; a < dim; a++)
-        if ((st = hv_cl_alloc(cl, nface[a] * sizeof(float), NULL, &k.X[a])))
+        if ((st = hv__cl_alloc(cl, nface[a] * sizeof(float), NULL, &k.X[a])))
             goto done;
-    hv_cl_zero(cl, k.inside, count);
-    hv_cl_zero(cl, k.cnt, 2 * sizeof(uint32_t));
+    hv__cl_zero(cl, k.inside, count);
+    hv__cl_zero(cl, k.cnt, 2 * sizeof(uint32_t));
     for (int a = 0; a < dim; a++) {
-        hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
-                     l2);
-        hv_cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
-        hv_cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
+        hv__cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
+                      l2);
+        hv__cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
+        hv__cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
     }
     if ((st = read_counts(cl, k.cnt, cnt)))
         goto done;
@@ -200,13 +201,13 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     for (int l = 0; l < o->max_stages && left > 0; l++) {
         t0 = hv_now();
         hv_solve_info info[2];
-        if ((st = hv_cl_finish(cl)))
+        if ((st = hv__cl_finish(cl)))
             goto done;
         for (int q = 0; q < 2; q++) {
             if (!k.sv[q] &&
                 (st = make_solver(&k.sv[q], g, 1.0, S->t * (q ? T_RATIO : 1), o->diffuse_tol)))
                 goto done;
-            if ((st = hv_cl_solver_solve_d(k.sv[q], k.w, q ? k.u2 : k.u, &info[q])))
+            if ((st = hv__cl_solver_solve_d(k.sv[q], k.w, q ? k.u2 : k.u, &info[q])))
                 goto done;
             S->diffuse_iterations += info[q].iterations;
             S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
@@ -215,23 +216,23 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
         S->t_diffuse += hv_now() - t0;
         t0 = hv_now();
         /* ||w||, then the trust bounds */
-        hv_cl_args(cl, HV_K_FINE_DOT, "mmlm", k.w, k.w, count, k.part);
-        hv_cl_run(cl, HV_K_FINE_DOT, 1, &gr, &lr);
-        hv_cl_read(cl, k.part, 0, ngroups * sizeof(double), k.hpart);
-        if ((st = hv_cl_check(cl)))
+        hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", k.w, k.w, count, k.part);
+        hv__cl_run(cl, HV_K_FINE_DOT, 1, &gr, &lr);
+        hv__cl_read(cl, k.part, 0, ngroups * sizeof(double), k.hpart);
+        if ((st = hv__cl_check(cl)))
             goto done;
         const double wn = sqrt(sum_parts(k.hpart, ngroups, 1, 0));
-        const double lthr = hv_dist_trust_log(info[0].relres, wn, o->t_scale);
-        const double lthr2 = hv_dist_trust_log(info[1].relres, wn, o->t_scale * T_RATIO);
-        hv_cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok,
-                          lthr, lthr2);
-        hv_cl_module_run(cl, &dist_module, DK_LOG, 1, g1, l1);
+        const double lthr = hv__dist_trust_log(info[0].relres, wn, o->t_scale);
+        const double lthr2 = hv__dist_trust_log(info[1].relres, wn, o->t_scale * T_RATIO);
+        hv__cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok,
+                           lthr, lthr2);
+        hv__cl_module_run(cl, &dist_module, DK_LOG, 1, g1, l1);
         for (int a = 0; a < dim; a++) {
-            hv_cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
-                         l2);
-            hv_cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a],
-                              k.cnt);
-            hv_cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
+            hv__cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)),
+                          g2, l2);
+            hv__cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a],
+                               k.cnt);
+            hv__cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
         }
         if ((st = read_counts(cl, k.cnt, cnt)))
             goto done;
@@ -245,23 +246,23 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
             break;
         if (left) {
             /* next_front: the front's level of psi and ln u, then the cell pass */
-            hv_cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u,
-                              k.ok, k.part);
-            hv_cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &gr, &lr);
-            hv_cl_read(cl, k.part, 0, 3 * ngroups * sizeof(double), k.hpart);
-            if ((st = hv_cl_check(cl)))
+            hv__cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u,
+                               k.ok, k.part);
+            hv__cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &gr, &lr);
+            hv__cl_read(cl, k.part, 0, 3 * ngroups * sizeof(double), k.hpart);
+            if ((st = hv__cl_check(cl)))
                 goto done;
             const double sw = sum_parts(k.hpart, ngroups, 3, 2);
             if (!(sw > 0))
                 break;
             const double psi0 = sum_parts(k.hpart, ngroups, 3, 0) / sw;
             const double lu0 = sum_parts(k.hpart, ngroups, 3, 1) / sw;
-            const double step = hv_dist_front_step(lu0, lthr, dim, tau[0]);
+            const double step = hv__dist_front_step(lu0, lthr, dim, tau[0]);
             if (!(step >= 2))
                 break;
-            hv_cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside,
-                              k.w, psi0, step, tau[0], tau[1], FRONT_BAND, k.cnt);
-            hv_cl_module_run(cl, &dist_module, DK_FRONT, 2, gc, lc);
+            hv__cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside,
+                               k.w, psi0, step, tau[0], tau[1], FRONT_BAND, k.cnt);
+            hv__cl_module_run(cl, &dist_module, DK_FRONT, 2, gc, lc);
             if ((st = read_counts(cl, k.cnt, cnt)))
                 goto done;
             if (!cnt[0])
@@ -275,13 +276,13 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     t0 = hv_now();
     hv_solver_destroy(&k.sv[0]);
     hv_solver_destroy(&k.sv[1]);
-    hv_cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", N, k.region, k.X[0], k.X[1],
-                      dim == 3 ? k.X[2] : NULL, 1.0 / g->h, k.u2);
-    hv_cl_module_run(cl, &dist_module, DK_DIV, 2, gc, lc);
-    if ((st = hv_cl_finish(cl)) || (st = make_solver(&k.sv[0], g, 0.0, 1.0, o->poisson_tol)))
+    hv__cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", N, k.region, k.X[0], k.X[1],
+                       dim == 3 ? k.X[2] : NULL, 1.0 / g->h, k.u2);
+    hv__cl_module_run(cl, &dist_module, DK_DIV, 2, gc, lc);
+    if ((st = hv__cl_finish(cl)) || (st = make_solver(&k.sv[0], g, 0.0, 1.0, o->poisson_tol)))
         goto done;
     hv_solve_info pinfo;
-    if ((st = hv_cl_solver_solve_d(k.sv[0], k.u2, k.u, &pinfo)))
+    if ((st = hv__cl_solver_solve_d(k.sv[0], k.u2, k.u, &pinfo)))
         goto done;
     S->poisson_iterations = pinfo.iterations;
     double rel = pinfo.relres;
@@ -300,7 +301,7 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     k.hval = malloc((m ? m : 1) * sizeof *k.hval);
     k.num = calloc(2 * nregions + 1, sizeof *k.num);
     if (!k.hidx || !k.hval || !k.num) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory");
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
         goto done;
     }
     m = 0;
@@ -308,15 +309,15 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
         if (ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0)
             k.hidx[m++] = (uint32_t)c;
     if (m) {
-        if ((st = hv_cl_alloc(cl, m * sizeof(uint32_t), k.hidx, &k.idx)) ||
-            (st = hv_cl_alloc(cl, m * sizeof(double), NULL, &k.gath)))
+        if ((st = hv__cl_alloc(cl, m * sizeof(uint32_t), k.hidx, &k.idx)) ||
+            (st = hv__cl_alloc(cl, m * sizeof(double), NULL, &k.gath)))
             goto done;
         size_t gg[1], lg[1];
-        hv_cl_range1(m, gg, lg);
-        hv_cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k.u, k.idx, k.gath, m);
-        hv_cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
-        hv_cl_read(cl, k.gath, 0, m * sizeof(double), k.hval);
-        if ((st = hv_cl_check(cl)))
+        hv__cl_range1(m, gg, lg);
+        hv__cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k.u, k.idx, k.gath, m);
+        hv__cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
+        hv__cl_read(cl, k.gath, 0, m * sizeof(double), k.hval);
+        if ((st = hv__cl_check(cl)))
             goto done;
     }
     for (size_t q = 0; q < m; q++) {
@@ -327,14 +328,14 @@ hv_status hv_distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32
     }
     for (size_t r = 0; r < nregions; r++)
         k.num[r] = k.num[2 * r] / k.num[2 * r + 1];
-    if ((st = hv_cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k.num, &k.off)) ||
-        (st = hv_cl_alloc(cl, count * sizeof(float), NULL, &k.out)))
+    if ((st = hv__cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k.num, &k.off)) ||
+        (st = hv__cl_alloc(cl, count * sizeof(float), NULL, &k.out)))
         goto done;
-    hv_cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", count, k.region, k.u, k.off,
-                      (double)o->solid_value, (double)o->unreachable, k.out);
-    hv_cl_module_run(cl, &dist_module, DK_OUTPUT, 1, g1, l1);
-    hv_cl_read(cl, k.out, 0, count * sizeof(float), g->v);
-    st = hv_cl_check(cl);
+    hv__cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", count, k.region, k.u, k.off,
+                       (double)o->solid_value, (double)o->unreachable, k.out);
+    hv__cl_module_run(cl, &dist_module, DK_OUTPUT, 1, g1, l1);
+    hv__cl_read(cl, k.out, 0, count * sizeof(float), g->v);
+    st = hv__cl_check(cl);
 done:
     work_free(&k);
     return st;

@@ -7,7 +7,7 @@
 
 #include <math.h>
 
-double hv_dist_lattice_kappa(const double nu[3], int dim, double tau)
+double hv__dist_lattice_kappa(const double nu[3], int dim, double tau)
 {
     double k = sqrt(tau);
     for (int it = 0; it < 8; it++) {
@@ -26,13 +26,13 @@ double hv_dist_lattice_kappa(const double nu[3], int dim, double tau)
     return k;
 }
 
-double hv_dist_trust_log(double relres, double wn, double t_scale)
+double hv__dist_trust_log(double relres, double wn, double t_scale)
 {
     return log(RELIABLE * fmax(relres, 1e-14) * wn * sqrt(t_scale));
 }
 
-double hv_dist_front_step(double lu0, double lthr, int dim, double tau)
+double hv__dist_front_step(double lu0, double lthr, int dim, double tau)
 {
     const double axis[3] = {1, 0, 0};
-    return (lu0 - lthr - FRONT_MARGIN) / hv_dist_lattice_kappa(axis, dim, tau);
+    return (lu0 - lthr - FRONT_MARGIN) / hv__dist_lattice_kappa(axis, dim, tau);
 }

@@ -54,7 +54,7 @@ static hv_status label_regions(dist_ctx *d, const double *w, size_t *nregions, s
     size_t *stack = malloc(n * sizeof *stack);
     if (!d->region || !stack) {
         free(stack);
-        return hv_error(HV_ERR_NOMEM, "distance: out of memory labelling regions of %zu cells", n);
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory labelling regions of %zu cells", n);
     }
     for (size_t c = 0; c < n; c++)
         d->region[c] = fluid(d, c) ? -2 : -1;
@@ -237,7 +237,7 @@ static size_t next_front(const dist_ctx *d, const double *psi, const double *lu,
     if (!(sw > 0))
         return 0;
     const double psi0 = s0 / sw, lu0 = s1 / sw;
-    const double step = hv_dist_front_step(lu0, lthr, d->dim, d->tau[0]);
+    const double step = hv__dist_front_step(lu0, lthr, d->dim, d->tau[0]);
     if (!(step >= 2))
         return 0;
     size_t nf = 0;
@@ -260,8 +260,8 @@ static size_t next_front(const dist_ctx *d, const double *psi, const double *lu,
                         nn = sqrt(nn);
                         for (int b = 0; b < d->dim; b++)
                             nu[b] = fabs(nu[b]) / nn;
-                        double dk = hv_dist_lattice_kappa(nu, d->dim, d->tau[0]) -
-                                    hv_dist_lattice_kappa(nu, d->dim, d->tau[1]);
+                        double dk = hv__dist_lattice_kappa(nu, d->dim, d->tau[0]) -
+                                    hv__dist_lattice_kappa(nu, d->dim, d->tau[1]);
                         double e = (psi0 - psi[c]) / dk;
                         double s = (e - step) / FRONT_BAND;
                         if (fabs(s) < 1) {
@@ -303,20 +303,20 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
 {
     double t_start = hv_now();
     if (!g || !src)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_distance_compute: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_distance_compute: NULL argument");
     hv_distance_opts o;
     if (opts)
         o = *opts;
     else
         hv_distance_opts_default(&o);
     if (!(o.t_scale > 0) || !isfinite(o.t_scale))
-        return hv_error(HV_ERR_INVALID_ARG, "distance: t_scale must be positive, got %g",
-                        o.t_scale);
+        return hv__error(HV_ERR_INVALID_ARG, "distance: t_scale must be positive, got %g",
+                         o.t_scale);
     if (o.max_stages < 1)
-        return hv_error(HV_ERR_INVALID_ARG, "distance: max_stages must be >= 1, got %d",
-                        o.max_stages);
+        return hv__error(HV_ERR_INVALID_ARG, "distance: max_stages must be >= 1, got %d",
+                         o.max_stages);
     if ((src->nvoxels && !src->voxels) || (src->npoints && !src->points))
-        return hv_error(HV_ERR_INVALID_ARG, "distance: source counts given without arrays");
+        return hv__error(HV_ERR_INVALID_ARG, "distance: source counts given without arrays");
     hv_distance_stats lst;
     hv_distance_stats *S = stats ? stats : &lst;
     memset(S, 0, sizeof *S);
@@ -343,14 +343,14 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     float *ref = hv_malloc(d.count * sizeof *ref);
     hv_solver *sv[2] = {NULL, NULL};
     if (!w || !u || !u2 || !inside || !ok || !ref) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for a %d x %d x %d grid", d.n[0],
-                      d.n[1], d.n[2]);
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory for a %d x %d x %d grid", d.n[0],
+                       d.n[1], d.n[2]);
         goto done;
     }
     for (int a = 0; a < d.dim; a++) {
         d.nface[a] = (size_t)(d.n[0] + (a == 0)) * (d.n[1] + (a == 1)) * (d.n[2] + (a == 2));
         if (!(d.X[a] = hv_malloc(d.nface[a] * sizeof(float)))) {
-            st = hv_error(HV_ERR_NOMEM, "distance: out of memory for face arrays");
+            st = hv__error(HV_ERR_NOMEM, "distance: out of memory for face arrays");
             goto done;
         }
     }
@@ -359,15 +359,15 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     double t0 = hv_now();
     for (size_t c = 0; c < d.count; c++)
         ref[c] = INFINITY;
-    if ((st = hv_dist_splat(g, src, w, ref, &S->sources_in_solid)))
+    if ((st = hv__dist_splat(g, src, w, ref, &S->sources_in_solid)))
         goto done;
     for (size_t c = 0; c < d.count; c++)
         S->source_cells += w[c] > 0;
     if (!S->source_cells) {
-        st = hv_error(HV_ERR_INVALID_ARG,
-                      "distance: no source lands on a fluid cell (%zu in solid "
-                      "cells)",
-                      S->sources_in_solid);
+        st = hv__error(HV_ERR_INVALID_ARG,
+                       "distance: no source lands on a fluid cell (%zu in solid "
+                       "cells)",
+                       S->sources_in_solid);
         goto done;
     }
     if ((st = label_regions(&d, w, &S->regions, &S->unreachable_cells)))
@@ -377,7 +377,7 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     if (o.backend == HV_BACKEND_OPENCL) { /* the rest on the device (fp64 devices) */
         int handled = 0;
         S->t_splat = hv_now() - t0;
-        st = hv_distance_heat_cl(g, &o, d.region, S->regions, w, ref, S, &handled);
+        st = hv__distance_heat_cl(g, &o, d.region, S->regions, w, ref, S, &handled);
         if (st || handled)
             goto done;
     }
@@ -407,8 +407,8 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
         S->t_diffuse += hv_now() - t0;
         t0 = hv_now();
         double wn = norm2(w, d.count);
-        double lthr = hv_dist_trust_log(info[0].relres, wn, o.t_scale);
-        double lthr2 = hv_dist_trust_log(info[1].relres, wn, o.t_scale * T_RATIO);
+        double lthr = hv__dist_trust_log(info[0].relres, wn, o.t_scale);
+        double lthr2 = hv__dist_trust_log(info[1].relres, wn, o.t_scale * T_RATIO);
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < d.count; c++) {
             double l1 = u[c] > 0 ? log(u[c]) : -INFINITY, l2 = u2[c] > 0 ? log(u2[c]) : -INFINITY;
@@ -441,7 +441,7 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     hv_solver_destroy(&sv[1]);
     double *rhs = hv_malloc(d.count * sizeof *rhs);
     if (!rhs) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory for the Poisson right-hand side");
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory for the Poisson right-hand side");
         goto done;
     }
     divergence(&d, rhs);
@@ -484,7 +484,7 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
 
     double *num = calloc(2 * S->regions, sizeof *num);
     if (!num) {
-        st = hv_error(HV_ERR_NOMEM, "distance: out of memory");
+        st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
         goto done;
     }
     /* The Poisson solve rounds the cone at a source off over a voxel or two: fit

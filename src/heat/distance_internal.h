@@ -30,18 +30,18 @@
 
 /* kappa h of the lattice plane wave travelling normal to direction nu (unit):
  * sum_b 2 (cosh(kappa h nu_b) - 1) = tau (Newton from the continuum value). */
-double hv_dist_lattice_kappa(const double nu[3], int dim, double tau);
+double hv__dist_lattice_kappa(const double nu[3], int dim, double tau);
 
 /* The trust bound on ln u of a diffusion for t_scale h^2 (t_scale itself, or
  * times T_RATIO): ln(RELIABLE * relres * ||w||_2 * sqrt(t_scale)), relres
  * floored at 1e-14, for the solve's relative residual relres and the norm wn
  * of the front weights w. */
-double hv_dist_trust_log(double relres, double wn, double t_scale);
+double hv__dist_trust_log(double relres, double wn, double t_scale);
 
 /* Voxels from the current front to the next: where ln u(t) (lu0 on the
  * current front) falls to FRONT_MARGIN above the trust bound lthr, at the
  * axis-aligned lattice decay rate for tau = h^2 / t. Below 2: no progress. */
-double hv_dist_front_step(double lu0, double lthr, int dim, double tau);
+double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
 
 /* Adds the source weights of src onto w (one double per cell of g, zeroed by
  * the caller): voxels weigh 1, points 1 spread trilinearly over the fluid cells
@@ -51,7 +51,7 @@ double hv_dist_front_step(double lu0, double lthr, int dim, double tau);
  * sample), the least distance from the cell centre to one: the distance those
  * cells should have (when no obstacle intervenes), used to place the zero.
  * *in_solid counts sources with no fluid cell to land on. */
-hv_status hv_dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
-                        size_t *in_solid);
+hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
+                         size_t *in_solid);
 
 #endif

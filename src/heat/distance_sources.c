@@ -106,8 +106,9 @@ static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float
         for (int c = 0; c < 3; c++) {
             uint32_t v = m->tris[3 * t + c];
             if (v >= m->nverts)
-                return hv_error(HV_ERR_INVALID_ARG, "source mesh: triangle %zu uses vertex %u of %zu",
-                                t, v, m->nverts);
+                return hv__error(HV_ERR_INVALID_ARG,
+                                 "source mesh: triangle %zu uses vertex %u of %zu", t, v,
+                                 m->nverts);
             p[c] = m->verts + 3 * (size_t)v;
         }
         double e1[3], e2[3], cr[3], lmax = 0;
@@ -126,7 +127,7 @@ static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float
             lmax = fmax(lmax, d);
         }
         if (!isfinite(area) || !isfinite(lmax))
-            return hv_error(HV_ERR_NUMERIC, "source mesh: triangle %zu has a NaN/Inf vertex", t);
+            return hv__error(HV_ERR_NUMERIC, "source mesh: triangle %zu has a NaN/Inf vertex", t);
         /* m x m sub-triangles, each sampled at its centroid: spacing <= h/2. A
          * degenerate triangle still marks its centroid (weight floor) so that a
          * sliver-only mesh is not silently empty. */
@@ -134,9 +135,9 @@ static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float
         if (sub < 1)
             sub = 1;
         if (sub > 4096)
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "source mesh: triangle %zu is %.3g voxels long; use a coarser grid",
-                            t, lmax / h);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "source mesh: triangle %zu is %.3g voxels long; use a coarser grid", t,
+                             lmax / h);
         double wt = fmax(area / ((double)sub * sub * h * h), 1e-6);
         for (int a = 0; a < sub; a++)
             for (int b = 0; a + b < sub; b++)
@@ -156,8 +157,8 @@ static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float
     return HV_OK;
 }
 
-hv_status hv_dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
-                        size_t *in_solid)
+hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
+                         size_t *in_solid)
 {
     *in_solid = 0;
     const int *n = g->n;
@@ -166,9 +167,9 @@ hv_status hv_dist_splat(const hv_grid *g, const hv_distance_sources *src, double
         int k = g->dim == 3 ? v[2] : 0;
         if (v[0] < 0 || v[0] >= n[0] || v[1] < 0 || v[1] >= n[1] || k < 0 || k >= n[2] ||
             (g->dim == 2 && v[2] != 0))
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "source voxel %zu (%d %d %d) lies outside the %d x %d x %d grid", s,
-                            v[0], v[1], v[2], n[0], n[1], n[2]);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "source voxel %zu (%d %d %d) lies outside the %d x %d x %d grid", s,
+                             v[0], v[1], v[2], n[0], n[1], n[2]);
         size_t c = v[0] + (size_t)n[0] * (v[1] + (size_t)n[1] * k);
         if (g->solid && g->solid[c])
             (*in_solid)++;
@@ -182,17 +183,17 @@ hv_status hv_dist_splat(const hv_grid *g, const hv_distance_sources *src, double
     for (size_t s = 0; s < src->npoints; s++) {
         const double *x = src->points + 3 * s;
         if (!isfinite(x[0]) || !isfinite(x[1]) || (g->dim == 3 && !isfinite(x[2])))
-            return hv_error(HV_ERR_NUMERIC, "source point %zu has a NaN/Inf coordinate", s);
+            return hv__error(HV_ERR_NUMERIC, "source point %zu has a NaN/Inf coordinate", s);
         if (!inside_block(g, x))
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "source point %zu (%g %g %g) lies outside the grid's block", s, x[0],
-                            x[1], g->dim == 3 ? x[2] : 0.0);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "source point %zu (%g %g %g) lies outside the grid's block", s, x[0],
+                             x[1], g->dim == 3 ? x[2] : 0.0);
         if (!splat_point(g, x, 1.0, w, ref))
             (*in_solid)++;
     }
     if (src->mesh) {
         if (g->dim != 3)
-            return hv_error(HV_ERR_INVALID_ARG, "a mesh source needs a 3D grid");
+            return hv__error(HV_ERR_INVALID_ARG, "a mesh source needs a 3D grid");
         hv_status st = splat_mesh(g, src->mesh, w, ref, in_solid);
         if (st)
             return st;
@@ -205,8 +206,8 @@ hv_status hv_dist_splat(const hv_grid *g, const hv_distance_sources *src, double
 /* Separating-axis test of a triangle against an axis-aligned box (centre c,
  * half sizes e), after Akenine-Moeller, "Fast 3D Triangle-Box Overlap Testing"
  * (2001): box axes, triangle normal, and the nine edge cross products. */
-static int tri_box_overlap(const double c[3], const double e[3], const double *p0,
-                           const double *p1, const double *p2)
+static int tri_box_overlap(const double c[3], const double e[3], const double *p0, const double *p1,
+                           const double *p2)
 {
     double v[3][3], f[3][3];
     for (int a = 0; a < 3; a++) {
@@ -225,7 +226,7 @@ static int tri_box_overlap(const double c[3], const double e[3], const double *p
         f[1][a] = v[2][a] - v[1][a];
         f[2][a] = v[0][a] - v[2][a];
     }
-    for (int i = 0; i < 3; i++)      /* box axis i */
+    for (int i = 0; i < 3; i++)       /* box axis i */
         for (int j = 0; j < 3; j++) { /* triangle edge j */
             double ax[3] = {0, 0, 0};
             /* axis = e_i x f_j */
@@ -252,9 +253,9 @@ static int tri_box_overlap(const double c[3], const double e[3], const double *p
 hv_status hv_mask_from_mesh(hv_grid *g, const hv_mesh *m, size_t *nsolid)
 {
     if (!g || !m)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mask_from_mesh: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mask_from_mesh: NULL argument");
     if (g->dim != 3)
-        return hv_error(HV_ERR_INVALID_ARG, "an obstacle mesh needs a 3D grid");
+        return hv__error(HV_ERR_INVALID_ARG, "an obstacle mesh needs a 3D grid");
     hv_status st = hv_grid_add_mask(g);
     if (st)
         return st;
@@ -269,16 +270,20 @@ hv_status hv_mask_from_mesh(hv_grid *g, const hv_mesh *m, size_t *nsolid)
         for (int c = 0; c < 3; c++) {
             uint32_t v = m->tris[3 * t + c];
             if (v >= m->nverts)
-                return hv_error(HV_ERR_INVALID_ARG, "obstacle mesh: triangle %zu uses vertex %u of %zu",
-                                t, v, m->nverts);
+                return hv__error(HV_ERR_INVALID_ARG,
+                                 "obstacle mesh: triangle %zu uses vertex %u of %zu", t, v,
+                                 m->nverts);
             p[c] = m->verts + 3 * (size_t)v;
             if (!isfinite(p[c][0]) || !isfinite(p[c][1]) || !isfinite(p[c][2]))
-                return hv_error(HV_ERR_NUMERIC, "obstacle mesh: triangle %zu has a NaN/Inf vertex", t);
+                return hv__error(HV_ERR_NUMERIC, "obstacle mesh: triangle %zu has a NaN/Inf vertex",
+                                 t);
         }
         int skip = 0;
         for (int a = 0; a < 3; a++) {
-            double mn = fmin(p[0][a], fmin(p[1][a], p[2][a])), mx = fmax(p[0][a], fmax(p[1][a], p[2][a]));
-            double l = floor((mn - g->origin[a]) / h - 1e-9), u = floor((mx - g->origin[a]) / h + 1e-9);
+            double mn = fmin(p[0][a], fmin(p[1][a], p[2][a])),
+                   mx = fmax(p[0][a], fmax(p[1][a], p[2][a]));
+            double l = floor((mn - g->origin[a]) / h - 1e-9),
+                   u = floor((mx - g->origin[a]) / h + 1e-9);
             if (u < 0 || l >= g->n[a]) {
                 skip = 1;
                 break;

@@ -63,13 +63,13 @@ struct bseg {
     float d;
 };
 
-int hv_extend_band_allowed(const hv_extender *e)
+int hv__extend_band_allowed(const hv_extender *e)
 {
     return !e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
            (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG);
 }
 
-void hv_extend_band_free(hv_extend_band *b)
+void hv__extend_band_free(hv_extend_band *b)
 {
     free(b->runs);
     free(b->roff);
@@ -233,7 +233,7 @@ static size_t run_segments(const hv_extender *e, const hv_extend_band *b, const 
  * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
  * band is not worth it (more than BAND_MAX_FRACTION of box_cells), 1 when
  * built, -1 when out of memory. */
-int hv_extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R)
+int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R)
 {
     const int m = (int)lround(BOX_MARGIN * sqrt(e->o.t_scale));
     if (!e->bg0 && !(e->bg0 = hv_malloc(e->count)))
@@ -563,17 +563,17 @@ static void build_rhs_band(const hv_extender *e, hv_extend_band *b, int nfields,
 /* Level 0 on the band: every right-hand side at once by Chebyshev sweeps;
  * solutions stored interleaved on the band's cells (level 0 reads nothing
  * else: closest-point stencils and cells read at themselves are band cells).
- * thr as in hv_extend_solve_level, from the max-norm bound |u - u*| <= |r|_inf (A has
+ * thr as in hv__extend_solve_level, from the max-norm bound |u - u*| <= |r|_inf (A has
  * unit diagonal excess, ||A^-1||_inf <= 1). */
-hv_status hv_extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
-                               const hv_extend_field *f, double *thr, hv_extend_stats *S)
+hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
+                                const hv_extend_field *f, double *thr, hv_extend_stats *S)
 {
     const int R = b->R;
     const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
     build_rhs_band(e, b, nfields, f);
     double *nrm = malloc((3 + 3 * (size_t)omp_get_max_threads()) * R * sizeof *nrm);
     if (!nrm)
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
     float *cur = b->u0, *old = b->u1;
     /* x1 = D^-1 f / theta from x0 = 0. */
     band_first(b, old, cur, (float)(1 / theta));

@@ -1,7 +1,7 @@
 /*
  * The extension off a level set (extend_vhm.c) with its fields on one OpenCL
  * device (kernels/extend.cl): weights, the choice of where each cell is read,
- * the right-hand sides, every solve (device-resident, hv_cl_solver_solve(_d)),
+ * the right-hand sides, every solve (device-resident, hv__cl_solver_solve(_d)),
  * the closest-point evaluation and the later levels for the cells the first
  * did not reach. Same boxes, levels, trust bound and rules as the host path's
  * box solve, so both give the same fields to the solves' tolerance. The host
@@ -18,9 +18,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-extern const char hv_kernel_extend[]; /* kernels/extend.cl, embedded by the Makefile */
+extern const char hv__kernel_extend[]; /* kernels/extend.cl, embedded by the Makefile */
 
-static const char *const extend_sources[] = {hv_kernel_extend, NULL};
+static const char *const extend_sources[] = {hv__kernel_extend, NULL};
 enum { EK_SETUP, EK_CHECK, EK_RHS, EK_SCATTER, EK_EVAL };
 static const char *const extend_kernels[] = {"ext_setup",   "ext_check", "ext_rhs",
                                              "ext_scatter", "ext_eval",  NULL};
@@ -52,7 +52,7 @@ struct hv_extend_cl {
     int blo[MAX_LEVELS][3], bn[MAX_LEVELS][3];
 };
 
-void hv_extend_cl_destroy(hv_extend_cl **state)
+void hv__extend_cl_destroy(hv_extend_cl **state)
 {
     if (!state || !*state)
         return;
@@ -62,8 +62,8 @@ void hv_extend_cl_destroy(hv_extend_cl **state)
     cl_mem *m[] = {&x->solid, &x->phi, &x->w,   &x->pending, &x->ncomp, &x->K,   &x->S,
                    &x->in,    &x->out, &x->sol, &x->f,       &x->u,     &x->part};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
-        hv_cl_free(m[i]);
-    hv_cl_close(&x->cl);
+        hv__cl_free(m[i]);
+    hv__cl_close(&x->cl);
     free(x);
     *state = NULL;
 }
@@ -75,9 +75,9 @@ static hv_status ensure(hv_cl *cl, cl_mem *m, size_t *cap, size_t want, size_t u
         want = 1;
     if (*m && *cap >= want)
         return HV_OK;
-    hv_cl_free(m);
+    hv__cl_free(m);
     *cap = 0;
-    hv_status st = hv_cl_alloc(cl, want * unit, NULL, m);
+    hv_status st = hv__cl_alloc(cl, want * unit, NULL, m);
     if (!st)
         *cap = want;
     return st;
@@ -87,18 +87,18 @@ static hv_status state_create(hv_extend_cl **out, const hv_extend_grid *g)
 {
     hv_extend_cl *x = calloc(1, sizeof *x);
     if (!x)
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
-    hv_status st = hv_cl_open(&x->cl);
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    hv_status st = hv__cl_open(&x->cl);
     hv_cl *cl = x->cl;
-    if (st || (st = hv_cl_module_open(cl, &extend_module)) ||
-        (st = hv_cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
-        (st = hv_cl_alloc(cl, g->count * sizeof(float), NULL, &x->w)) ||
-        (st = hv_cl_alloc(cl, g->count, NULL, &x->pending)) ||
-        (st = hv_cl_alloc(cl, MAX_FIELDS_PER_CALL * sizeof(cl_int), NULL, &x->ncomp)) ||
-        (st = hv_cl_alloc(cl, K_COUNT * sizeof(cl_int), NULL, &x->K)) ||
-        (st = hv_cl_alloc(cl, sizeof(double), NULL, &x->S)) ||
-        (g->solid && (st = hv_cl_alloc(cl, g->count, g->solid, &x->solid)))) {
-        hv_extend_cl_destroy(&x);
+    if (st || (st = hv__cl_module_open(cl, &extend_module)) ||
+        (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
+        (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->w)) ||
+        (st = hv__cl_alloc(cl, g->count, NULL, &x->pending)) ||
+        (st = hv__cl_alloc(cl, MAX_FIELDS_PER_CALL * sizeof(cl_int), NULL, &x->ncomp)) ||
+        (st = hv__cl_alloc(cl, K_COUNT * sizeof(cl_int), NULL, &x->K)) ||
+        (st = hv__cl_alloc(cl, sizeof(double), NULL, &x->S)) ||
+        (g->solid && (st = hv__cl_alloc(cl, g->count, g->solid, &x->solid)))) {
+        hv__extend_cl_destroy(&x);
         return st;
     }
     *out = x;
@@ -136,21 +136,21 @@ static hv_status norm2sq(hv_extend_cl *x, cl_mem v, size_t n, double *out)
     hv_cl *cl = x->cl;
     *out = 0;
     if (!cl->fp64) {
-        hv_cl_dot_f(cl, v, v, n, x->S, 0);
+        hv__cl_dot_f(cl, v, v, n, x->S, 0);
     } else {
-        size_t g, l, groups = hv_cl_range_red(n, &g, &l);
+        size_t g, l, groups = hv__cl_range_red(n, &g, &l);
         hv_status st = ensure(cl, &x->part, &x->cap_part, groups, sizeof(double));
         if (st)
             return st;
-        hv_cl_args(cl, HV_K_FINE_DOT, "mmlm", v, v, n, x->part);
-        hv_cl_run(cl, HV_K_FINE_DOT, 1, &g, &l);
-        hv_cl_finish_sum(cl, x->part, groups, x->S, 0);
+        hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", v, v, n, x->part);
+        hv__cl_run(cl, HV_K_FINE_DOT, 1, &g, &l);
+        hv__cl_finish_sum(cl, x->part, groups, x->S, 0);
     }
-    hv_cl_read_acc(cl, x->S, 0, 1, out);
-    return hv_cl_check(cl);
+    hv__cl_read_acc(cl, x->S, 0, 1, out);
+    return hv__cl_check(cl);
 }
 
-/* hv_extend_solve_level (extend_levels.c) on the device: every right-hand
+/* hv__extend_solve_level (extend_levels.c) on the device: every right-hand
  * side of level l solved on the box [lo, lo + bn) and stored in the solution
  * planes, 0 outside the box; *thr the level's trust bound. */
 static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, const int lo[3],
@@ -158,8 +158,8 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
                              double *thr, hv_extend_stats *S)
 {
     hv_cl *cl = x->cl;
-    hv_status st = hv_extend_level_solver(g->dim, g->n, g->h, g->solid, g->o, HV_BACKEND_OPENCL, l,
-                                          lo, bn, &x->sv[l], x->blo[l], x->bn[l]);
+    hv_status st = hv__extend_level_solver(g->dim, g->n, g->h, g->solid, g->o, HV_BACKEND_OPENCL, l,
+                                           lo, bn, &x->sv[l], x->blo[l], x->bn[l]);
     if (st)
         return st;
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
@@ -168,48 +168,48 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
         return st;
     const size_t count = g->count;
     if (bcount != count)
-        hv_cl_zero(cl, x->sol, (size_t)nrhs * count * sizeof(float));
+        hv__cl_zero(cl, x->sol, (size_t)nrhs * count * sizeof(float));
     const cl_int N[4] = {g->n[0], g->n[1], g->n[2], g->dim};
     const cl_int B[4] = {bn[0], bn[1], bn[2], 0}, L[4] = {lo[0], lo[1], lo[2], 0};
     size_t g2[2], l2[2];
-    hv_cl_range2((size_t)bn[0], (size_t)bn[1] * bn[2], g2, l2);
+    hv__cl_range2((size_t)bn[0], (size_t)bn[1] * bn[2], g2, l2);
     double relmax = 0, wn2 = 0;
     for (int r = 0; r < nrhs; r++) {
         int mode, ncomp;
         size_t plane;
         rhs_source(r, nfields, f, &mode, &plane, &ncomp);
-        hv_cl_module_args(cl, &extend_module, EK_RHS, "IIImmililm", N, B, L, x->w, x->in, mode,
-                          plane * count, ncomp, count, x->f);
-        hv_cl_module_run(cl, &extend_module, EK_RHS, 2, g2, l2);
+        hv__cl_module_args(cl, &extend_module, EK_RHS, "IIImmililm", N, B, L, x->w, x->in, mode,
+                           plane * count, ncomp, count, x->f);
+        hv__cl_module_run(cl, &extend_module, EK_RHS, 2, g2, l2);
         if (r == 0 && (st = norm2sq(x, x->f, bcount, &wn2)))
             return st;
         /* the solver has its own queue: f must be complete */
-        if ((st = hv_cl_finish(cl)))
+        if ((st = hv__cl_finish(cl)))
             return st;
         hv_solve_info info;
-        st = cl->fp64 ? hv_cl_solver_solve_d(x->sv[l], x->f, x->u, &info)
-                      : hv_cl_solver_solve(x->sv[l], x->f, x->u, &info);
+        st = cl->fp64 ? hv__cl_solver_solve_d(x->sv[l], x->f, x->u, &info)
+                      : hv__cl_solver_solve(x->sv[l], x->f, x->u, &info);
         if (st)
             return st;
         relmax = fmax(relmax, info.relres);
-        hv_cl_module_args(cl, &extend_module, EK_SCATTER, "IIImml", N, B, L, x->u, x->sol,
-                          (size_t)r * count);
-        hv_cl_module_run(cl, &extend_module, EK_SCATTER, 2, g2, l2);
+        hv__cl_module_args(cl, &extend_module, EK_SCATTER, "IIImml", N, B, L, x->u, x->sol,
+                           (size_t)r * count);
+        hv__cl_module_run(cl, &extend_module, EK_SCATTER, 2, g2, l2);
         S->solves++;
     }
     S->relres = fmax(S->relres, relmax);
     if (l == 0)
         S->solve_cells = bcount;
     *thr = fmax(RELIABLE * fmax(relmax, 1e-14) * sqrt(wn2), 1e-30);
-    return hv_cl_check(cl);
+    return hv__cl_check(cl);
 }
 
-hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
-                           int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S)
+hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
+                            int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S)
 {
     if (g->count > (size_t)INT32_MAX)
-        return hv_error(HV_ERR_UNSUPPORTED, "extend: %zu cells exceed the OpenCL path's 2^31 limit",
-                        g->count);
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "extend: %zu cells exceed the OpenCL path's 2^31 limit", g->count);
     hv_status st;
     if (!*state && (st = state_create(state, g)))
         return st;
@@ -228,11 +228,11 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
         (st = ensure(cl, &x->out, &x->cap_out, (size_t)nout, fb)) ||
         (st = ensure(cl, &x->sol, &x->cap_sol, (size_t)nrhs, fb)))
         return st;
-    hv_cl_write(cl, x->phi, 0, fb, phi);
+    hv__cl_write(cl, x->phi, 0, fb, phi);
     for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
         for (int q = 0; q < f[i].ncomp; q++)
-            hv_cl_write(cl, x->in, (size_t)(q0 + q) * fb, fb, f[i].in[q]);
-    hv_cl_write(cl, x->ncomp, 0, (size_t)nfields * sizeof(cl_int), nc);
+            hv__cl_write(cl, x->in, (size_t)(q0 + q) * fb, fb, f[i].in[q]);
+    hv__cl_write(cl, x->ncomp, 0, (size_t)nfields * sizeof(cl_int), nc);
     cl_int K[K_COUNT];
     for (int q = 0; q < K_COUNT; q++)
         K[q] = q >= K_BAD ? K_NONE : 0;
@@ -240,40 +240,40 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
         K[K_WBOX + a] = K[K_RBOX + a] = K_EMPTY;
         K[K_WBOX + 3 + a] = K[K_RBOX + 3 + a] = -K_EMPTY;
     }
-    hv_cl_write(cl, x->K, 0, sizeof K, K);
+    hv__cl_write(cl, x->K, 0, sizeof K, K);
 
     /* Weights, where each output cell is read, the background, the checks. */
     const cl_int N[4] = {g->n[0], g->n[1], g->n[2], g->dim};
     const double P[4] = {o->band, g->h, GRAD_MIN, GRAD_MAX};
     const double Q[4] = {o->band * g->h, o->out_band * g->h, 0, 0};
     size_t gc[2], lc[2], g1[1], l1[1];
-    hv_cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
-    hv_cl_range1(count, g1, l1);
-    hv_cl_module_args(cl, &extend_module, EK_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point,
-                      x->phi, x->solid, x->w, x->pending, x->out, nout, count,
-                      (double)o->background, x->K);
-    hv_cl_module_run(cl, &extend_module, EK_SETUP, 2, gc, lc);
+    hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
+    hv__cl_range1(count, g1, l1);
+    hv__cl_module_args(cl, &extend_module, EK_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point,
+                       x->phi, x->solid, x->w, x->pending, x->out, nout, count,
+                       (double)o->background, x->K);
+    hv__cl_module_run(cl, &extend_module, EK_SETUP, 2, gc, lc);
     for (int q = 0; q < nout; q++) {
-        hv_cl_module_args(cl, &extend_module, EK_CHECK, "mmllmi", x->w, x->in, (size_t)q * count,
-                          count, x->K, q);
-        hv_cl_module_run(cl, &extend_module, EK_CHECK, 1, g1, l1);
+        hv__cl_module_args(cl, &extend_module, EK_CHECK, "mmllmi", x->w, x->in, (size_t)q * count,
+                           count, x->K, q);
+        hv__cl_module_run(cl, &extend_module, EK_CHECK, 1, g1, l1);
     }
-    hv_cl_read(cl, x->K, 0, sizeof K, K);
-    if ((st = hv_cl_check(cl)))
+    hv__cl_read(cl, x->K, 0, sizeof K, K);
+    if ((st = hv__cl_check(cl)))
         return st;
     S->source_cells = (size_t)K[K_NSRC];
     if (!K[K_NSRC])
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
-                        "zero crossing in the grid, or the band is too thin)",
-                        o->band * g->h);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
+                         "zero crossing in the grid, or the band is too thin)",
+                         o->band * g->h);
     for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
         for (int q = 0; q < f[i].ncomp; q++)
             if (K[K_BAD + q0 + q] != K_NONE)
-                return hv_error(HV_ERR_NUMERIC,
-                                "extend: field %d component %d is NaN/Inf at cell %d, inside "
-                                "the source band",
-                                i, q, K[K_BAD + q0 + q]);
+                return hv__error(HV_ERR_NUMERIC,
+                                 "extend: field %d component %d is NaN/Inf at cell %d, inside "
+                                 "the source band",
+                                 i, q, K[K_BAD + q0 + q]);
     size_t npend = (size_t)K[K_NPEND];
     int wlo[3], whi[3], rlo[3], rhi[3];
     for (int a = 0; a < 3; a++) {
@@ -287,7 +287,7 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
     /* The levels, as hv_extend_many. */
     for (int l = 0; l < o->max_levels && npend > 0; l++) {
         int lo[3], bn[3];
-        hv_extend_level_box(g->e, wlo, whi, rlo, rhi, l, lo, bn);
+        hv__extend_level_box(g->e, wlo, whi, rlo, rhi, l, lo, bn);
         t0 = hv_now();
         double thr = 0;
         if ((st = solve_level(x, g, l, lo, bn, nrhs, nfields, f, &thr, S)))
@@ -302,13 +302,13 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
         }
         for (int q = K_LEFT; q <= K_WEAK; q++)
             K[q] = 0;
-        hv_cl_write(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
-        hv_cl_module_args(cl, &extend_module, EK_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending,
-                          x->sol, count, x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels,
-                          (double)o->background, x->K);
-        hv_cl_module_run(cl, &extend_module, EK_EVAL, 2, gc, lc);
-        hv_cl_read(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
-        if ((st = hv_cl_check(cl)))
+        hv__cl_write(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
+        hv__cl_module_args(cl, &extend_module, EK_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending,
+                           x->sol, count, x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels,
+                           (double)o->background, x->K);
+        hv__cl_module_run(cl, &extend_module, EK_EVAL, 2, gc, lc);
+        hv__cl_read(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
+        if ((st = hv__cl_check(cl)))
             break;
         S->cp_cells += (size_t)K[K_CP];
         S->ratio_cells += (size_t)K[K_RATIO];
@@ -325,8 +325,8 @@ hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const 
     t0 = hv_now();
     for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
         for (int q = 0; q < f[i].ncomp; q++)
-            hv_cl_read(cl, x->out, (size_t)(q0 + q) * fb, fb, f[i].out[q]);
-    st = hv_cl_check(cl);
+            hv__cl_read(cl, x->out, (size_t)(q0 + q) * fb, fb, f[i].out[q]);
+    st = hv__cl_check(cl);
     S->t_eval += hv_now() - t0;
     return st;
 }

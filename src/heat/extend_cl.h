@@ -23,10 +23,10 @@ typedef struct hv_extend_grid {
  * finite, nrhs right-hand sides): weights, every solve (the level boxes of the
  * host path), the closest-point evaluation and the later levels on the
  * device; reads back the outputs and the counts the stats need. *state is
- * created on first use (and freed with hv_extend_cl_destroy). Fills S but for
+ * created on first use (and freed with hv__extend_cl_destroy). Fills S but for
  * t_total. */
-hv_status hv_extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
-                           int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S);
-void hv_extend_cl_destroy(hv_extend_cl **state);
+hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
+                            int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S);
+void hv__extend_cl_destroy(hv_extend_cl **state);
 
 #endif

@@ -190,9 +190,9 @@ static void write_cell(const hv_extender *e, int nfields, const hv_extend_field 
     }
 }
 
-hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
-                             const hv_extend_field *f, uint8_t *need, size_t *nsrc_out,
-                             size_t *npend_out, ibox *wbox, ibox *rbox)
+hv_status hv__extend_classify(hv_extender *e, const float *phi, int nfields,
+                              const hv_extend_field *f, uint8_t *need, size_t *nsrc_out,
+                              size_t *npend_out, ibox *wbox, ibox *rbox)
 {
     uint8_t *pending = e->pending;
     /* need is only ever set in this pass, so that the stencils' marks from
@@ -260,16 +260,16 @@ hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
         }
     }
     if (badphi != SIZE_MAX)
-        return hv_error(HV_ERR_NUMERIC,
-                        "extend: the level set holds a non-finite value (%g) at cell %zu",
-                        (double)phi[badphi], badphi);
+        return hv__error(HV_ERR_NUMERIC,
+                         "extend: the level set holds a non-finite value (%g) at cell %zu",
+                         (double)phi[badphi], badphi);
     for (int i = 0; i < nfields && badf != SIZE_MAX; i++)
         for (int q = 0; q < f[i].ncomp; q++)
             if (!isfinite(f[i].in[q][badf]))
-                return hv_error(HV_ERR_NUMERIC,
-                                "extend: field %d component %d is NaN/Inf at cell %zu, inside "
-                                "the source band",
-                                i, q, badf);
+                return hv__error(HV_ERR_NUMERIC,
+                                 "extend: field %d component %d is NaN/Inf at cell %zu, inside "
+                                 "the source band",
+                                 i, q, badf);
     *nsrc_out = nsrc;
     *npend_out = npend;
     *wbox = band_box;
@@ -277,7 +277,7 @@ hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
     return HV_OK;
 }
 
-void hv_extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f)
+void hv__extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f)
 {
     const uint8_t *pending = e->pending;
     const size_t rows = (size_t)e->n[1] * e->n[2], nx = (size_t)e->n[0];
@@ -304,9 +304,9 @@ void hv_extend_fill_background(const hv_extender *e, int nfields, const hv_exten
     }
 }
 
-void hv_extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
-                          double thr, int last, const uint8_t *trusted, ibox *rbox,
-                          hv_extend_counts *n)
+void hv__extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
+                           double thr, int last, const uint8_t *trusted, ibox *rbox,
+                           hv_extend_counts *n)
 {
     uint8_t *pending = e->pending;
     size_t left = 0, cp = 0, ratio = 0, weak = 0;

@@ -141,12 +141,12 @@ static inline void box_union(ibox *b, const ibox *o)
  * closest points' stencils. Counts the weighted cells (*nsrc) and the output
  * cells (*npend). HV_ERR_NUMERIC for a non-finite phi or field value where it
  * is read; nothing is written to the outputs (they may alias the inputs). */
-hv_status hv_extend_classify(hv_extender *e, const float *phi, int nfields,
-                             const hv_extend_field *f, uint8_t *need, size_t *nsrc, size_t *npend,
-                             ibox *wbox, ibox *rbox);
+hv_status hv__extend_classify(hv_extender *e, const float *phi, int nfields,
+                              const hv_extend_field *f, uint8_t *need, size_t *nsrc, size_t *npend,
+                              ibox *wbox, ibox *rbox);
 
 /* The background on the output cells that no level will write (pending 0). */
-void hv_extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f);
+void hv__extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f);
 
 /* Counts of one level's evaluation pass. */
 typedef struct {
@@ -159,9 +159,9 @@ typedef struct {
  * thr (or, on the last level, anywhere: the background where it is 0).
  * trusted (NULL: every cell) marks the cells the level's solve answers for.
  * *rbox receives the box of the cells left for the next level. */
-void hv_extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
-                          double thr, int last, const uint8_t *trusted, ibox *rbox,
-                          hv_extend_counts *n);
+void hv__extend_eval_level(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
+                           double thr, int last, const uint8_t *trusted, ibox *rbox,
+                           hv_extend_counts *n);
 
 /* ---- the levels (extend_levels.c) ------------------------------------------- */
 
@@ -170,29 +170,29 @@ void hv_extend_eval_level(hv_extender *e, const float *phi, int nfields, const h
  * points' stencils), joined with the box of the cells read at themselves
  * (rlo..rhi; lo > hi when empty), grown by BOX_MARGIN sqrt(t_l) voxels and
  * then to a size the solvers like, within the grid: corner lo, size bn. */
-void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3], const int rlo[3],
-                         const int rhi[3], int l, int lo[3], int bn[3]);
+void hv__extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3],
+                          const int rlo[3], const int rhi[3], int l, int lo[3], int bn[3]);
 
 /* The solver of diffusion level l (t_scale h^2 16^l) on the box [lo, lo + bn)
  * (Neumann walls at its faces), for `backend`: *sv is kept while the box keeps
  * its size and, with solid cells, its place (blo, bnk: the box it was made
  * for), and rebuilt otherwise. Shared by the host and device paths. */
-hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
-                                 const hv_extend_opts *o, hv_backend backend, int l,
-                                 const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
-                                 int bnk[3]);
+hv_status hv__extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
+                                  const hv_extend_opts *o, hv_backend backend, int l,
+                                  const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
+                                  int bnk[3]);
 
 /* Solves every right-hand side (nrhs = e->nsol) for level l on the box
  * [lo, lo + bn) and stores the solutions in e->sol, 0 outside the box; *thr
  * is the level's trust bound for the weight. */
-hv_status hv_extend_solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
-                                int nfields, const hv_extend_field *f, double *thr,
-                                hv_extend_stats *S);
+hv_status hv__extend_solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
+                                 int nfields, const hv_extend_field *f, double *thr,
+                                 hv_extend_stats *S);
 
 /* ---- the band solve (extend_band.c) ----------------------------------------- */
 
 /* The first level's cells near what is read, for the Chebyshev band solve;
- * built by hv_extend_band_build, on the stack of hv_extend_many. */
+ * built by hv__extend_band_build, on the stack of hv_extend_many. */
 typedef struct hv_extend_band hv_extend_band;
 typedef struct xrun xrun; /* x-runs of band cells and their segments (extend_band.c) */
 typedef struct bseg bseg;
@@ -216,18 +216,18 @@ struct hv_extend_band {
 /* Whether hv_extend_many may solve the first level on a band: short times,
  * no obstacles, CPU backends only (an explicit fftw or opencl backend gets its
  * own solver), box_only off. */
-int hv_extend_band_allowed(const hv_extender *e);
+int hv__extend_band_allowed(const hv_extender *e);
 
 /* Builds the band from b->need: grown, cut into x-runs and segments, laid out
  * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
  * band is not worth it (more than half of box_cells), 1 when built, -1 when
  * out of memory. */
-int hv_extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R);
-void hv_extend_band_free(hv_extend_band *b);
+int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R);
+void hv__extend_band_free(hv_extend_band *b);
 
 /* Level 0 on the band: every right-hand side at once; solutions stored in
- * e->sol on the band's cells; *thr as hv_extend_solve_level's. */
-hv_status hv_extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
-                               const hv_extend_field *f, double *thr, hv_extend_stats *S);
+ * e->sol on the band's cells; *thr as hv__extend_solve_level's. */
+hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
+                                const hv_extend_field *f, double *thr, hv_extend_stats *S);
 
 #endif

@@ -47,8 +47,8 @@ static void box_grow(const hv_extender *e, const ibox *b, int g, int lo[3], int 
     }
 }
 
-void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3], const int rlo[3],
-                         const int rhi[3], int l, int lo[3], int bn[3])
+void hv__extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3],
+                          const int rlo[3], const int rhi[3], int l, int lo[3], int bn[3])
 {
     ibox need, r;
     for (int a = 0; a < 3; a++) {
@@ -66,10 +66,10 @@ void hv_extend_level_box(const hv_extender *e, const int wlo[3], const int whi[3
     }
 }
 
-hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
-                                 const hv_extend_opts *o, hv_backend backend, int l,
-                                 const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
-                                 int bnk[3])
+hv_status hv__extend_level_solver(int dim, const int n[3], double h, const uint8_t *solid,
+                                  const hv_extend_opts *o, hv_backend backend, int l,
+                                  const int lo[3], const int bn[3], hv_solver **sv, int blo[3],
+                                  int bnk[3])
 {
     if (*sv && (memcmp(bnk, bn, 3 * sizeof *bn) || (solid && memcmp(blo, lo, 3 * sizeof *lo))))
         hv_solver_destroy(sv);
@@ -79,7 +79,7 @@ hv_status hv_extend_level_solver(int dim, const int n[3], double h, const uint8_
     uint8_t *sub = NULL;
     if (solid) {
         if (!(sub = malloc(bcount)))
-            return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+            return hv__error(HV_ERR_NOMEM, "extend: out of memory");
         for (size_t b = 0; b < bcount; b++) {
             size_t bi = b % (size_t)bn[0], bj = (b / (size_t)bn[0]) % (size_t)bn[1];
             size_t bk = b / ((size_t)bn[0] * bn[1]);
@@ -127,12 +127,12 @@ static double norm2_d(const double *v, size_t n)
     return sqrt(s);
 }
 
-hv_status hv_extend_solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
-                                int nfields, const hv_extend_field *f, double *thr,
-                                hv_extend_stats *S)
+hv_status hv__extend_solve_level(hv_extender *e, int l, const int lo[3], const int bn[3], int nrhs,
+                                 int nfields, const hv_extend_field *f, double *thr,
+                                 hv_extend_stats *S)
 {
-    hv_status st = hv_extend_level_solver(e->dim, e->n, e->h, e->solid, &e->o, e->o.backend, l, lo,
-                                          bn, &e->sv[l], e->blo[l], e->bn[l]);
+    hv_status st = hv__extend_level_solver(e->dim, e->n, e->h, e->solid, &e->o, e->o.backend, l, lo,
+                                           bn, &e->sv[l], e->blo[l], e->bn[l]);
     if (st)
         return st;
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];

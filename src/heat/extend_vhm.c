@@ -32,7 +32,7 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
                              const uint8_t *solid, const hv_extend_opts *opts)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_extender_create: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_extender_create: out is NULL");
     *out = NULL;
     hv_status st = hv_check_dims(dim, n, h, 2 * sizeof(double) + 6 * sizeof(float));
     if (st)
@@ -43,21 +43,21 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
     else
         hv_extend_opts_default(&o);
     if (!(o.band > 0) || !isfinite(o.band))
-        return hv_error(HV_ERR_INVALID_ARG, "extend: band must be positive (voxels), got %g",
-                        o.band);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: band must be positive (voxels), got %g",
+                         o.band);
     if (!(o.t_scale > 0) || !isfinite(o.t_scale))
-        return hv_error(HV_ERR_INVALID_ARG, "extend: t_scale must be positive, got %g", o.t_scale);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: t_scale must be positive, got %g", o.t_scale);
     if (!(o.out_band >= 0) || !isfinite(o.out_band))
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "extend: out_band must be >= 0 (0 = every cell), got %g", o.out_band);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: out_band must be >= 0 (0 = every cell), got %g", o.out_band);
     if (o.max_levels < 1 || o.max_levels > MAX_LEVELS)
-        return hv_error(HV_ERR_INVALID_ARG, "extend: max_levels must be in 1..%d, got %d",
-                        MAX_LEVELS, o.max_levels);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: max_levels must be in 1..%d, got %d",
+                         MAX_LEVELS, o.max_levels);
     if (!(o.tol >= 1e-12) || !(o.tol < 1))
-        return hv_error(HV_ERR_INVALID_ARG, "extend: tol must be in [1e-12, 1), got %g", o.tol);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: tol must be in [1e-12, 1), got %g", o.tol);
     hv_extender *e = calloc(1, sizeof *e);
     if (!e)
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
     e->dim = dim;
     e->n[0] = n[0];
     e->n[1] = n[1];
@@ -78,8 +78,8 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
     }
     if (!e->fd || !e->ud || !e->w || (solid && !e->solid)) {
         hv_extender_destroy(&e);
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory for a %d x %d x %d grid", e->n[0],
-                        e->n[1], e->n[2]);
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory for a %d x %d x %d grid", e->n[0],
+                         e->n[1], e->n[2]);
     }
     *out = e;
     return HV_OK;
@@ -103,7 +103,7 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->pending);
     hv_free(e->bg0);
     hv_free(e->bg1);
-    hv_extend_cl_destroy(&e->cl);
+    hv__extend_cl_destroy(&e->cl);
     free(e->solid);
     free(e);
     *ep = NULL;
@@ -115,7 +115,7 @@ static hv_status ensure_solutions(hv_extender *e, int k)
         hv_free(e->sol);
         e->capsol = 0;
         if (!(e->sol = hv_malloc(e->count * (size_t)k * sizeof(float))))
-            return hv_error(HV_ERR_NOMEM, "extend: out of memory for %d solutions", k);
+            return hv__error(HV_ERR_NOMEM, "extend: out of memory for %d solutions", k);
         e->capsol = k;
     }
     e->nsol = k;
@@ -127,22 +127,22 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
 {
     double t_start = hv_now();
     if (!e || !phi || nfields < 0 || (nfields > 0 && !f))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_many: bad arguments");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_extend_many: bad arguments");
     hv_extend_stats lst;
     hv_extend_stats *S = stats ? stats : &lst;
     memset(S, 0, sizeof *S);
     int nrhs = 1;
     if (nfields > MAX_FIELDS_PER_CALL)
-        return hv_error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
-                        MAX_FIELDS_PER_CALL);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
+                         MAX_FIELDS_PER_CALL);
     for (int i = 0; i < nfields; i++) {
         if (f[i].ncomp < 1 || f[i].ncomp > 3)
-            return hv_error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 to 3)", i,
-                            f[i].ncomp);
+            return hv__error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 to 3)", i,
+                             f[i].ncomp);
         for (int q = 0; q < f[i].ncomp; q++)
             if (!f[i].in[q] || !f[i].out[q])
-                return hv_error(HV_ERR_INVALID_ARG, "extend: field %d component %d has no array", i,
-                                q);
+                return hv__error(HV_ERR_INVALID_ARG, "extend: field %d component %d has no array",
+                                 i, q);
         nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
     hv_status st;
@@ -151,7 +151,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
             return st;
         const hv_extend_grid g = {e,        e->dim, {e->n[0], e->n[1], e->n[2]}, e->h, e->count,
                                   e->solid, &e->o};
-        st = hv_extend_cl_run(&e->cl, &g, phi, nfields, f, nrhs, S);
+        st = hv__extend_cl_run(&e->cl, &g, phi, nfields, f, nrhs, S);
         S->t_total = hv_now() - t_start;
         return st;
     }
@@ -162,23 +162,23 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     hv_extend_band band;
     memset(&band, 0, sizeof band);
     uint8_t *need = NULL;
-    if (hv_extend_band_allowed(e) && (e->bneed || (e->bneed = hv_malloc(e->count))))
+    if (hv__extend_band_allowed(e) && (e->bneed || (e->bneed = hv_malloc(e->count))))
         need = e->bneed;
 
     /* One pass over the grid: the weights, the checks, where each output cell
      * is read, the boxes, the band solve's cells. */
     if (!e->pending && !(e->pending = hv_malloc(e->count)))
-        return hv_error(HV_ERR_NOMEM, "extend: out of memory");
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
     size_t nsrc, npend;
     ibox band_box, ratio_box;
-    if ((st = hv_extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box)))
+    if ((st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box)))
         return st;
     S->source_cells = nsrc;
     if (!nsrc)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
-                        "zero crossing in the grid, or the band is too thin)",
-                        e->o.band * e->h);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
+                         "zero crossing in the grid, or the band is too thin)",
+                         e->o.band * e->h);
     if ((st = ensure_solutions(e, nrhs)))
         return st;
     S->t_weights = hv_now() - t0;
@@ -186,46 +186,46 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     /* The background, on the cells no level will write: runs of each row. */
     t0 = hv_now();
     if (npend < e->count)
-        hv_extend_fill_background(e, nfields, f);
+        hv__extend_fill_background(e, nfields, f);
     S->t_eval = hv_now() - t0;
     t0 = hv_now();
     if (need) {
         int lo[3], bn[3];
-        hv_extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
+        hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
         band.need = need;
-        int built =
-            hv_extend_band_build(e, &band, (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1), nrhs);
+        int built = hv__extend_band_build(e, &band,
+                                          (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1), nrhs);
         if (built < 0) {
-            hv_extend_band_free(&band);
-            return hv_error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+            hv__extend_band_free(&band);
+            return hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
         }
         if (!built)
-            hv_extend_band_free(&band);
+            hv__extend_band_free(&band);
     }
     S->t_solve = hv_now() - t0;
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
         double thr;
         int lo[3], bn[3];
-        hv_extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
+        hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
         t0 = hv_now();
         const uint8_t *trusted = l == 0 && band.runs ? band.need : NULL;
-        if ((st = trusted ? hv_extend_band_solve(e, &band, nfields, f, &thr, S)
-                          : hv_extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
+        if ((st = trusted ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
+                          : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
         t0 = hv_now();
         hv_extend_counts k;
-        hv_extend_eval_level(e, phi, nfields, f, thr, l + 1 == e->o.max_levels, trusted, &ratio_box,
-                             &k);
+        hv__extend_eval_level(e, phi, nfields, f, thr, l + 1 == e->o.max_levels, trusted,
+                              &ratio_box, &k);
         S->cp_cells += k.cp;
         S->ratio_cells += k.ratio;
         S->weak_cells += k.weak;
         npend = k.left;
         S->t_eval += hv_now() - t0;
     }
-    hv_extend_band_free(&band);
+    hv__extend_band_free(&band);
     S->t_total = hv_now() - t_start;
     return st;
 }
@@ -234,20 +234,20 @@ static hv_status check_grid(const hv_extender *e, const hv_grid *g, const hv_gri
                             const char *what)
 {
     if (!g)
-        return hv_error(HV_ERR_INVALID_ARG, "extend: %s is NULL", what);
+        return hv__error(HV_ERR_INVALID_ARG, "extend: %s is NULL", what);
     if (g->dim != e->dim || g->n[0] != e->n[0] || g->n[1] != e->n[1] || g->n[2] != e->n[2] ||
         fabs(g->h - e->h) > 1e-9 * e->h)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "extend: %s is %dD %d x %d x %d with h = %g; the extender was made for %dD "
-                        "%d x %d x %d with h = %g",
-                        what, g->dim, g->n[0], g->n[1], g->n[2], g->h, e->dim, e->n[0], e->n[1],
-                        e->n[2], e->h);
+        return hv__error(
+            HV_ERR_INVALID_ARG,
+            "extend: %s is %dD %d x %d x %d with h = %g; the extender was made for %dD "
+            "%d x %d x %d with h = %g",
+            what, g->dim, g->n[0], g->n[1], g->n[2], g->h, e->dim, e->n[0], e->n[1], e->n[2], e->h);
     for (int a = 0; a < 3; a++)
         if (fabs(g->origin[a] - phi->origin[a]) > 1e-6 * e->h)
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "extend: %s has origin (%g %g %g), the level set (%g %g %g)", what,
-                            g->origin[0], g->origin[1], g->origin[2], phi->origin[0],
-                            phi->origin[1], phi->origin[2]);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "extend: %s has origin (%g %g %g), the level set (%g %g %g)", what,
+                             g->origin[0], g->origin[1], g->origin[2], phi->origin[0],
+                             phi->origin[1], phi->origin[2]);
     return HV_OK;
 }
 
@@ -255,7 +255,7 @@ hv_status hv_extend_scalar(hv_extender *e, const hv_grid *phi, const hv_grid *fi
                            hv_extend_stats *stats)
 {
     if (!e || !phi)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_scalar: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_extend_scalar: NULL argument");
     hv_status st;
     if ((st = check_grid(e, phi, phi, "the level set")) ||
         (st = check_grid(e, field, phi, "the field")) ||
@@ -269,7 +269,7 @@ hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *cons
                          hv_grid *const out[3], hv_extend_stats *stats)
 {
     if (!e || !phi || !in || !out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_extend_vec3: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_extend_vec3: NULL argument");
     hv_status st;
     if ((st = check_grid(e, phi, phi, "the level set")))
         return st;

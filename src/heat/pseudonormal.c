@@ -30,7 +30,7 @@ static int cmp_pedge(const void *pa, const void *pb)
     return a->slot < b->slot ? -1 : a->slot > b->slot;
 }
 
-void hv_pseudo_free(hv_pseudo *ps)
+void hv__pseudo_free(hv_pseudo *ps)
 {
     free(ps->fn);
     free(ps->vn);
@@ -38,11 +38,11 @@ void hv_pseudo_free(hv_pseudo *ps)
     free(ps->vok);
     free(ps->ftrust);
     if (ps->have_W)
-        hv_wn_free(&ps->W);
+        hv__wn_free(&ps->W);
     memset(ps, 0, sizeof *ps);
 }
 
-hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps)
+hv_status hv__pseudo_build(const hv_mesh *m, hv_pseudo *ps)
 {
     memset(ps, 0, sizeof *ps);
     size_t nt = m->ntris, nv = m->nverts;
@@ -53,8 +53,8 @@ hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps)
     pedge *E = malloc(3 * nt * sizeof *E);
     if (!ps->fn || !ps->vn || !ps->other || !ps->vok || !E) {
         free(E);
-        hv_pseudo_free(ps);
-        return hv_error(HV_ERR_NOMEM, "pseudonormals: out of memory for %zu triangles", nt);
+        hv__pseudo_free(ps);
+        return hv__error(HV_ERR_NOMEM, "pseudonormals: out of memory for %zu triangles", nt);
     }
     memset(ps->vok, 1, nv);
     for (size_t f = 0; f < nt; f++) {
@@ -123,15 +123,15 @@ hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps)
     uint32_t *all = malloc((nt ? nt : 1) * sizeof *all);
     if (!ps->ftrust || !all) {
         free(all);
-        hv_pseudo_free(ps);
-        return hv_error(HV_ERR_NOMEM, "pseudonormals: out of memory for %zu triangles", nt);
+        hv__pseudo_free(ps);
+        return hv__error(HV_ERR_NOMEM, "pseudonormals: out of memory for %zu triangles", nt);
     }
     for (size_t f = 0; f < nt; f++)
         all[f] = (uint32_t)f;
-    hv_status st = hv_wn_build(&ps->W, m->verts, m->tris, all, nt, NULL);
+    hv_status st = hv__wn_build(&ps->W, m->verts, m->tris, all, nt, NULL);
     free(all);
     if (st) {
-        hv_pseudo_free(ps);
+        hv__pseudo_free(ps);
         return st;
     }
     ps->have_W = 1;
@@ -148,23 +148,24 @@ static int pseudo_trusted(hv_pseudo *ps, const hv_mesh *m, uint32_t f)
         for (int d = 0; d < 3; d++)
             c[d] = (m->verts[3 * (size_t)m->tris[3 * (size_t)f] + d] +
                     m->verts[3 * (size_t)m->tris[3 * (size_t)f + 1] + d] +
-                    m->verts[3 * (size_t)m->tris[3 * (size_t)f + 2] + d]) / 3.0;
+                    m->verts[3 * (size_t)m->tris[3 * (size_t)f + 2] + d]) /
+                   3.0;
         /* Only |w - 1/2| < 1/4 is asked: a coarser far field (dipoles from 2
          * cluster radii on; errors of a few 0.01) halves the cost. */
-        double w = hv_wn_eval_beta(&ps->W, c, f, 2.0);
+        double w = hv__wn_eval_beta(&ps->W, c, f, 2.0);
         v = fabs(w - 0.5) < 0.25 ? 1 : 2;
         __atomic_store_n(&ps->ftrust[f], v, __ATOMIC_RELAXED);
     }
     return v == 1;
 }
 
-int hv_pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current)
+int hv__pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current)
 {
     const uint32_t *t = m->tris + 3 * (size_t)tri;
     double diff[3];
     int region;
-    hv_point_triangle_region(p, m->verts + 3 * (size_t)t[0], m->verts + 3 * (size_t)t[1],
-                             m->verts + 3 * (size_t)t[2], diff, &region);
+    hv__point_triangle_region(p, m->verts + 3 * (size_t)t[0], m->verts + 3 * (size_t)t[1],
+                              m->verts + 3 * (size_t)t[2], diff, &region);
     double n[3];
     uint32_t o = UINT32_MAX;
     if (region == 0) {

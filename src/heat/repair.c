@@ -54,9 +54,9 @@ static int cmp_face_key(const void *pa, const void *pb)
 }
 
 typedef struct edge_rec {
-    uint64_t key;   /* lo << 32 | hi */
+    uint64_t key; /* lo << 32 | hi */
     uint32_t face;
-    uint32_t fwd;   /* 1 if the face traverses lo -> hi */
+    uint32_t fwd; /* 1 if the face traverses lo -> hi */
 } edge_rec;
 
 static int cmp_edge(const void *pa, const void *pb)
@@ -70,9 +70,12 @@ static int cmp_edge(const void *pa, const void *pb)
 static void sort3(uint32_t v[3])
 {
     uint32_t t;
-    if (v[0] > v[1]) t = v[0], v[0] = v[1], v[1] = t;
-    if (v[1] > v[2]) t = v[1], v[1] = v[2], v[2] = t;
-    if (v[0] > v[1]) t = v[0], v[0] = v[1], v[1] = t;
+    if (v[0] > v[1])
+        t = v[0], v[0] = v[1], v[1] = t;
+    if (v[1] > v[2])
+        t = v[1], v[1] = v[2], v[2] = t;
+    if (v[0] > v[1])
+        t = v[0], v[0] = v[1], v[1] = t;
 }
 
 static void cross_at(const double *V, const uint32_t *t, double n[3])
@@ -97,14 +100,14 @@ static hv_status orient_components(size_t nt, const edge_rec *E, size_t ne, cons
     uint32_t *queue = malloc(nt * sizeof *queue);
     if (!nb || !same || !queue) {
         free(nb), free(same), free(queue);
-        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
+        return hv__error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
     }
     for (size_t i = 0; i < nt * 3; i++)
         nb[i] = UINT32_MAX;
     uint8_t *slot = calloc(nt, 1);
     if (!slot) {
         free(nb), free(same), free(queue);
-        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
+        return hv__error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu faces", nt);
     }
     for (size_t g = 0; g < ne; g++) {
         size_t s = estart[g], e = estart[g + 1];
@@ -113,8 +116,10 @@ static hv_status orient_components(size_t nt, const edge_rec *E, size_t ne, cons
         uint32_t f0 = E[s].face, f1 = E[s + 1].face;
         /* Same traversal direction means inconsistent orientation. */
         uint8_t agree = E[s].fwd == E[s + 1].fwd;
-        if (slot[f0] < 3) nb[3 * f0 + slot[f0]] = f1, same[3 * f0 + slot[f0]++] = agree;
-        if (slot[f1] < 3) nb[3 * f1 + slot[f1]] = f0, same[3 * f1 + slot[f1]++] = agree;
+        if (slot[f0] < 3)
+            nb[3 * f0 + slot[f0]] = f1, same[3 * f0 + slot[f0]++] = agree;
+        if (slot[f1] < 3)
+            nb[3 * f1 + slot[f1]] = f0, same[3 * f1 + slot[f1]++] = agree;
     }
     free(slot);
     for (size_t f = 0; f < nt; f++)
@@ -244,8 +249,10 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
             sa[i] = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
             sf[i] = f;
             for (int d = 0; d < 3; d++)
-                sx[3 * i + d] = (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
-                                 V[3 * (size_t)T[3 * (size_t)f + 2] + d]) / 3.0;
+                sx[3 * i + d] =
+                    (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
+                     V[3 * (size_t)T[3 * (size_t)f + 2] + d]) /
+                    3.0;
         }
         for (size_t q = start[k]; q < start[k + 1]; q++) {
             double n[3];
@@ -273,11 +280,11 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
     for (size_t b = 0; b < nc; b++) {
         size_t k = big[b]; /* every component, largest first */
         hv_wn_tree W;
-        if ((st = hv_wn_build(&W, V, T, faces + start[k], start[k + 1] - start[k], flip)))
+        if ((st = hv__wn_build(&W, V, T, faces + start[k], start[k + 1] - start[k], flip)))
             goto out;
         double num = 0, den = 0;
         for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
-            sw[i] = hv_wn_eval(&W, sx + 3 * i, sf[i]);
+            sw[i] = hv__wn_eval(&W, sx + 3 * i, sf[i]);
             num += sa[i] * sw[i];
             den += sa[i];
         }
@@ -285,7 +292,7 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
         if (b < nbig)
             trees[b] = W;
         else
-            hv_wn_free(&W);
+            hv__wn_free(&W);
     }
     st = HV_OK;
     /* (2) Nesting among the big components, outermost first. */
@@ -304,7 +311,7 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
                 double wo = 0;
                 for (size_t o = 0; o < nbig; o++)
                     if (o != b)
-                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                        wo += sgn[big[o]] * hv__wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
                 num += sa[i] * wo;
                 den += sa[i];
             }
@@ -326,7 +333,7 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
                 double wo = 0;
                 for (size_t o = 0; o < nbig; o++)
                     if (o != b)
-                        wo += sgn[big[o]] * hv_wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
+                        wo += sgn[big[o]] * hv__wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
                 double ws = sgn[k] * sw[i];
                 cost[0] += sa[i] * fabs(wo + ws - 0.5);
                 cost[1] += sa[i] * fabs(wo - ws - 0.5);
@@ -347,12 +354,12 @@ static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, u
 out:
     if (trees)
         for (size_t b = 0; b < nbig; b++)
-            hv_wn_free(&trees[b]);
+            hv__wn_free(&trees[b]);
     free(trees);
     free(start), free(faces), free(carea), free(sgn), free(big), free(cs);
     free(sx), free(sa), free(sw), free(sf), free(depth);
     if (st == HV_ERR_NOMEM)
-        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory orienting %zu components", nc);
+        return hv__error(HV_ERR_NOMEM, "mesh repair: out of memory orienting %zu components", nc);
     return st;
 }
 
@@ -390,7 +397,8 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, const uint32_t *rimf,
         x->rep->holes_left_open++;
         return HV_OK;
     }
-    double c[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double c[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY},
+           hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < k; i++)
         for (int d = 0; d < 3; d++) {
             double v = x->V[3 * (size_t)loop[i] + d];
@@ -404,7 +412,8 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, const uint32_t *rimf,
     double diag = sqrt((b[3] - b[0]) * (b[3] - b[0]) + (b[4] - b[1]) * (b[4] - b[1]) +
                        (b[5] - b[2]) * (b[5] - b[2]));
     size_t add_t = k == 3 ? 1 : 3 * k, add_v = k == 3 ? 0 : k + 1;
-    if (!(ext <= x->max_rel * diag) || x->nv + add_v >= UINT32_MAX || x->nt + add_t >= UINT32_MAX / 3) {
+    if (!(ext <= x->max_rel * diag) || x->nv + add_v >= UINT32_MAX ||
+        x->nt + add_t >= UINT32_MAX / 3) {
         x->rep->holes_left_open++;
         return HV_OK;
     }
@@ -444,7 +453,8 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, const uint32_t *rimf,
             for (int d = 0; d < 3; d++)
                 N[d] /= nl;
             for (size_t i = 0; i < k; i++) {
-                const double *p = x->V + 3 * (size_t)loop[i], *q = x->V + 3 * (size_t)loop[(i + 1) % k];
+                const double *p = x->V + 3 * (size_t)loop[i],
+                             *q = x->V + 3 * (size_t)loop[(i + 1) % k];
                 double r[3], e = 0, nf[3];
                 for (int d = 0; d < 3; d++) {
                     r[d] = p[d] - c[d];
@@ -468,7 +478,8 @@ static hv_status add_cap(cap_ctx *x, const uint32_t *loop, const uint32_t *rimf,
         size_t ring = x->nv, apex = x->nv + k;
         for (size_t i = 0; i < k; i++)
             for (int d = 0; d < 3; d++)
-                x->V[3 * (ring + i) + d] = 0.5 * (c[d] + x->V[3 * (size_t)loop[i] + d]) + 0.75 * H * N[d];
+                x->V[3 * (ring + i) + d] =
+                    0.5 * (c[d] + x->V[3 * (size_t)loop[i] + d]) + 0.75 * H * N[d];
         for (int d = 0; d < 3; d++)
             x->V[3 * apex + d] = c[d] + H * N[d];
         for (size_t i = 0; i < k; i++) {
@@ -513,14 +524,16 @@ static hv_status fill_holes(double **Vp, size_t *nvp, uint32_t **Tp, size_t *ntp
     size_t ncomp = 0;
     for (size_t f = 0; f < x.nt; f++)
         ncomp = x.comp[f] + 1 > ncomp ? x.comp[f] + 1 : ncomp;
-    uint32_t *from = malloc(nb * sizeof *from), *to = malloc(nb * sizeof *to), *ecomp = malloc(nb * sizeof *ecomp);
+    uint32_t *from = malloc(nb * sizeof *from), *to = malloc(nb * sizeof *to),
+             *ecomp = malloc(nb * sizeof *ecomp);
     uint32_t *start = calloc(nv0 + 1, sizeof *start), *adj = malloc(nb * sizeof *adj);
     uint8_t *used = calloc(nb, 1);
     uint32_t *loop = malloc((nb + 1) * sizeof *loop), *loopf = malloc((nb + 1) * sizeof *loopf);
     uint32_t *eface = malloc(nb * sizeof *eface);
     int64_t *pos = malloc(nv0 * sizeof *pos);
     double *cbox = malloc(6 * (ncomp ? ncomp : 1) * sizeof *cbox);
-    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !loopf || !eface || !pos || !cbox)
+    if (!from || !to || !ecomp || !start || !adj || !used || !loop || !loopf || !eface || !pos ||
+        !cbox)
         goto out;
     x.cbox = cbox;
     for (size_t v = 0; v < nv0; v++)
@@ -607,7 +620,7 @@ out:
     free(from), free(to), free(ecomp), free(start), free(adj), free(used), free(loop), free(loopf);
     free(eface), free(pos), free(cbox);
     if (st)
-        return hv_error(HV_ERR_NOMEM, "mesh repair: out of memory filling holes");
+        return hv__error(HV_ERR_NOMEM, "mesh repair: out of memory filling holes");
     return HV_OK;
 }
 
@@ -615,26 +628,30 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
                         hv_sdf_repair_report *report)
 {
     if (!in || !out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_repair: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_repair: NULL argument");
     *out = NULL;
     hv_sdf_repair_report rep;
     memset(&rep, 0, sizeof rep);
     size_t nv = in->nverts, nt = in->ntris;
     rep.vertices_in = nv, rep.triangles_in = nt;
     if (!(max_hole >= 0) || !isfinite(max_hole))
-        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: max hole size must be finite and >= 0, got %g", max_hole);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "mesh repair: max hole size must be finite and >= 0, got %g", max_hole);
     if (nt == 0 || nv == 0 || !in->verts || !in->tris)
-        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: the mesh is empty (%zu vertices, %zu triangles)", nv, nt);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "mesh repair: the mesh is empty (%zu vertices, %zu triangles)", nv, nt);
     if (nv >= UINT32_MAX || nt >= UINT32_MAX / 3)
-        return hv_error(HV_ERR_INVALID_ARG, "mesh repair: too many vertices or triangles (%zu, %zu)", nv, nt);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "mesh repair: too many vertices or triangles (%zu, %zu)", nv, nt);
     for (size_t i = 0; i < 3 * nv; i++)
         if (!isfinite(in->verts[i]))
-            return hv_error(HV_ERR_NUMERIC, "mesh repair: vertex %zu has a non-finite coordinate (%g)",
-                            i / 3, in->verts[i]);
+            return hv__error(HV_ERR_NUMERIC,
+                             "mesh repair: vertex %zu has a non-finite coordinate (%g)", i / 3,
+                             in->verts[i]);
     for (size_t i = 0; i < 3 * nt; i++)
         if (in->tris[i] >= nv)
-            return hv_error(HV_ERR_INVALID_ARG, "mesh repair: triangle %zu uses vertex %u of %zu",
-                            i / 3, in->tris[i], nv);
+            return hv__error(HV_ERR_INVALID_ARG, "mesh repair: triangle %zu uses vertex %u of %zu",
+                             i / 3, in->tris[i], nv);
 
     hv_status st = HV_ERR_NOMEM;
     uint32_t *remap = malloc(nv * sizeof *remap);
@@ -733,7 +750,7 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
         if (keep[f])
             memmove(T + 3 * ntk++, T + 3 * f, 3 * sizeof *T);
     if (ntk == 0) {
-        st = hv_error(HV_ERR_INVALID_ARG, "mesh repair: all %zu triangles are degenerate", nt);
+        st = hv__error(HV_ERR_INVALID_ARG, "mesh repair: all %zu triangles are degenerate", nt);
         goto fail;
     }
     /* 4. Edges, orientation propagation, components. */
@@ -773,7 +790,7 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
         goto fail;
     if ((flags & HV_SDF_REPAIR_FILL_HOLES) &&
         (st = fill_holes(&V, &nvo, &T, &ntk, &flip, &comp, E, estart, ne, max_hole,
-                          (flags & HV_SDF_REPAIR_DOMED_CAPS) ? DOME_SCALE : 0.0, &rep)))
+                         (flags & HV_SDF_REPAIR_DOMED_CAPS) ? DOME_SCALE : 0.0, &rep)))
         goto fail;
     if ((flags & HV_SDF_REPAIR_OUTWARD) && rep.holes_filled &&
         (st = orient_outward(V, T, ntk, flip, comp, nc, &dummy, &rep.components_flipped)))
@@ -811,8 +828,10 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
     return HV_OK;
 fail:
     if (st == HV_ERR_NOMEM)
-        st = hv_error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu vertices, %zu triangles", nv, nt);
-    free(remap), free(T), free(V), free(keep), free(fk), free(E), free(estart), free(comp), free(flip);
+        st = hv__error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu vertices, %zu triangles",
+                       nv, nt);
+    free(remap), free(T), free(V), free(keep), free(fk), free(E), free(estart), free(comp),
+        free(flip);
     if (m) {
         free(m->verts);
         free(m->tris);

@@ -94,46 +94,56 @@ static int heat_factor(const hv_sdf_opts *o, const int n[3])
 static hv_status check_opts(const hv_sdf_opts *o)
 {
     if (!(o->voxel_size >= 0) || !isfinite(o->voxel_size))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size must be positive and finite, got %g", o->voxel_size);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: voxel size must be positive and finite, got %g",
+                         o->voxel_size);
     if (o->voxel_size == 0 && o->res <= 0)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: resolution must be positive, got %d", o->res);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: resolution must be positive, got %d", o->res);
     if (o->pad < 0)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: padding must be >= 0 cells, got %d", o->pad);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: padding must be >= 0 cells, got %d", o->pad);
     if (!o->use_bbox && o->voxel_size == 0 && o->res <= 2 * o->pad)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "sdf: resolution %d leaves no cells inside a padding of %d on each side",
-                        o->res, o->pad);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: resolution %d leaves no cells inside a padding of %d on each side",
+                         o->res, o->pad);
     if (o->round_to < 0 || o->round_to > 64)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: round_to must be in [0, 64], got %d", o->round_to);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: round_to must be in [0, 64], got %d",
+                         o->round_to);
     if (!(o->t_scale > 0) || !isfinite(o->t_scale) || o->t_scale > 1e4)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: t scale must be in (0, 1e4], got %g", o->t_scale);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: t scale must be in (0, 1e4], got %g",
+                         o->t_scale);
     if (o->far_levels < -1 || o->far_levels > 8)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: far levels must be in [-1, 8], got %d", o->far_levels);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: far levels must be in [-1, 8], got %d",
+                         o->far_levels);
     if (o->magnitude != HV_SDF_EXACT && o->magnitude != HV_SDF_HEAT)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown magnitude mode %d", (int)o->magnitude);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: unknown magnitude mode %d", (int)o->magnitude);
     if (!(o->max_hole >= 0) || !isfinite(o->max_hole))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: max hole size must be finite and >= 0, got %g", o->max_hole);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: max hole size must be finite and >= 0, got %g",
+                         o->max_hole);
     if (o->repair & ~(unsigned)(HV_SDF_REPAIR_ALL | HV_SDF_REPAIR_DOMED_CAPS))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: unknown repair flags 0x%x", o->repair);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: unknown repair flags 0x%x", o->repair);
     if (!(o->diffuse_tol == 0 || (o->diffuse_tol >= 1e-12 && o->diffuse_tol < 1)) ||
         !(o->poisson_tol == 0 || (o->poisson_tol >= 1e-12 && o->poisson_tol < 1)))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: tolerances must be 0 (auto) or in [1e-12, 1), got %g and %g",
-                        o->diffuse_tol, o->poisson_tol);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: tolerances must be 0 (auto) or in [1e-12, 1), got %g and %g",
+                         o->diffuse_tol, o->poisson_tol);
     if (o->heat_coarsen < 0 || o->heat_coarsen > 4)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: heat coarsening must be in [0, 4], got %d", o->heat_coarsen);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: heat coarsening must be in [0, 4], got %d",
+                         o->heat_coarsen);
     if (!(o->near_sign >= 0) || o->near_sign > 16)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: near-sign width must be in [0, 16] voxels, got %g", o->near_sign);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: near-sign width must be in [0, 16] voxels, got %g", o->near_sign);
     if (o->threads < 0 || o->threads > HV_MAX_THREADS)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: thread count must be in [0, %d], got %d",
-                        HV_MAX_THREADS, o->threads);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: thread count must be in [0, %d], got %d",
+                         HV_MAX_THREADS, o->threads);
     if (o->use_bbox) {
         for (int a = 0; a < 6; a++)
             if (!isfinite(o->bbox[a]))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf: bounding box coordinate %d is not finite", a);
+                return hv__error(HV_ERR_INVALID_ARG,
+                                 "sdf: bounding box coordinate %d is not finite", a);
         for (int a = 0; a < 3; a++)
             if (!(o->bbox[3 + a] > o->bbox[a]))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf: bounding box is empty along %c (%g to %g)",
-                                "xyz"[a], o->bbox[a], o->bbox[3 + a]);
+                return hv__error(HV_ERR_INVALID_ARG,
+                                 "sdf: bounding box is empty along %c (%g to %g)", "xyz"[a],
+                                 o -> bbox[a], o -> bbox[3 + a]);
     }
     return HV_OK;
 }
@@ -142,18 +152,20 @@ static hv_status check_opts(const hv_sdf_opts *o)
 static hv_status used_bounds(const hv_mesh *m, double lo[3], double hi[3])
 {
     if (!m || m->ntris == 0 || m->nverts == 0 || !m->tris || !m->verts)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf: the mesh is empty (%zu vertices, %zu triangles)",
-                        m ? m->nverts : 0, m ? m->ntris : 0);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: the mesh is empty (%zu vertices, %zu triangles)",
+                         m ? m->nverts : 0, m ? m->ntris : 0);
     for (int a = 0; a < 3; a++)
         lo[a] = INFINITY, hi[a] = -INFINITY;
     for (size_t i = 0; i < 3 * m->ntris; i++) {
         uint32_t v = m->tris[i];
         if (v >= m->nverts)
-            return hv_error(HV_ERR_INVALID_ARG, "sdf: triangle %zu uses vertex %u of %zu", i / 3, v, m->nverts);
+            return hv__error(HV_ERR_INVALID_ARG, "sdf: triangle %zu uses vertex %u of %zu", i / 3,
+                             v, m->nverts);
         const double *x = m->verts + 3 * (size_t)v;
         for (int a = 0; a < 3; a++) {
             if (!isfinite(x[a]))
-                return hv_error(HV_ERR_NUMERIC, "sdf: vertex %u has a non-finite coordinate (%g)", v, x[a]);
+                return hv__error(HV_ERR_NUMERIC, "sdf: vertex %u has a non-finite coordinate (%g)",
+                                 v, x[a]);
             lo[a] = x[a] < lo[a] ? x[a] : lo[a];
             hi[a] = x[a] > hi[a] ? x[a] : hi[a];
         }
@@ -191,7 +203,7 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
         opts = &def;
     }
     if (!n || !h || !origin)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
     hv_status st = check_opts(opts);
     double lo[3], hi[3];
     if (st || (st = used_bounds(m, lo, hi)))
@@ -203,7 +215,8 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
         for (int a = 0; a < 3; a++) {
             double c = ceil((b[3 + a] - b[a]) / *h - 1e-9);
             if (!(c < 1e9))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c", *h, c, "xyz"[a]);
+                return hv__error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c",
+                                 *h, c, "xyz"[a]);
             n[a] = c < 1 ? 1 : (int)c;
             origin[a] = b[a];
         }
@@ -214,12 +227,15 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
         else if (L > 0)
             *h = L / (opts->res - 2 * opts->pad);
         else
-            return hv_error(HV_ERR_INVALID_ARG, "sdf: the mesh has no extent (all vertices at one point); give a voxel size");
+            return hv__error(
+                HV_ERR_INVALID_ARG,
+                "sdf: the mesh has no extent (all vertices at one point); give a voxel size");
         int longest = (hi[0] - lo[0] == L) ? 0 : (hi[1] - lo[1] == L) ? 1 : 2;
         for (int a = 0; a < 3; a++) {
             double c = ceil((hi[a] - lo[a]) / *h - 1e-9) + 2.0 * opts->pad;
             if (!(c < 1e9))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c", *h, c, "xyz"[a]);
+                return hv__error(HV_ERR_INVALID_ARG, "sdf: voxel size %g gives %g cells along %c",
+                                 *h, c, "xyz"[a]);
             n[a] = c < 1 ? 1 : (int)c;
             /* Extra padding for multigrid; the longest axis keeps --res exactly. */
             int r = opts->round_to > 1 ? opts->round_to : 1;
@@ -262,9 +278,9 @@ static inline void face_vec(const float *const *Y, int unsig, const int n[3], co
 
 /* Normalized flux through the face (axis a, between c - s[a] and c) from the
  * first level whose field is above its noise threshold; 0 if none. */
-static inline double face_flux(float ***Y, int nlev, const double *tau, int unsig,
-                               const int n[3], const size_t s[3], double h, int a, size_t c,
-                               const int idx[3], int *dead)
+static inline double face_flux(float ***Y, int nlev, const double *tau, int unsig, const int n[3],
+                               const size_t s[3], double h, int a, size_t c, const int idx[3],
+                               int *dead)
 {
     for (int k = 0; k < nlev; k++) {
         double v[3];
@@ -280,8 +296,8 @@ static inline double face_flux(float ***Y, int nlev, const double *tau, int unsi
 }
 
 /* rhs = -div X for the Poisson solve (alpha = 0: -Lap phi = -div X). */
-static size_t build_rhs(float ***Y, int nlev, const double *tau, int unsig,
-                        const hv_grid *g, float *rhs)
+static size_t build_rhs(float ***Y, int nlev, const double *tau, int unsig, const hv_grid *g,
+                        float *rhs)
 {
     const int *n = g->n;
     const size_t s[3] = {1, (size_t)n[0], (size_t)n[0] * n[1]};
@@ -330,15 +346,15 @@ typedef struct sdf_work {
     float *dist;
     uint32_t *tri;
     hv_solver *solver;
-    hv_solver *heat;  /* the level-0 diffusion, kept for the local shift */
-    hv_grid *g;       /* the output grid */
-    hv_grid *gh;      /* the heat method's grid when it is not g */
+    hv_solver *heat; /* the level-0 diffusion, kept for the local shift */
+    hv_grid *g;      /* the output grid */
+    hv_grid *gh;     /* the heat method's grid when it is not g */
 } sdf_work;
 
 static void work_free(sdf_work *w)
 {
     hv_mesh_destroy(&w->repaired);
-    hv_quad_free(&w->q);
+    hv__quad_free(&w->q);
     for (int b = 0; b < 3; b++)
         hv_free(w->Y0[b]);
     for (int k = 0; k < 9; k++)
@@ -368,19 +384,17 @@ static hv_status solver_create(hv_solver **s, const hv_problem *p, const hv_solv
     return st;
 }
 
-static hv_status stage(double f, const char *name)
-{
-    return hv_progress(f, name);
-}
+static hv_status stage(double f, const char *name) { return hv__progress(f, name); }
 
 /* Trilinear interpolation of v at x. */
 static double interp(const hv_grid *g, const float *v, const double x[3])
 {
     size_t c0, step[3];
     double wt[8], val = 0;
-    hv_trilinear(g, x, &c0, step, wt);
+    hv__trilinear(g, x, &c0, step, wt);
     for (int q = 0; q < 8; q++)
-        val += wt[q] * v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
+        val +=
+            wt[q] * v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
     return val;
 }
 
@@ -419,14 +433,15 @@ static void splat(const hv_grid *g, const hv_quad *q, int ncomp, const double *v
                 continue;
             size_t c0, step[3];
             double wt[8];
-            hv_trilinear(g, q->x + 3 * p, &c0, step, wt);
+            hv__trilinear(g, q->x + 3 * p, &c0, step, wt);
             const int kb = (int)(c0 / plane), kt = kb + (step[2] ? 1 : 0);
             const double *v = vals + (size_t)vstride * p;
             for (int k = 0; k < 8; k++) {
                 int z = k & 4 ? kt : kb;
                 if (wt[k] == 0 || z < z0 || z >= z1)
                     continue;
-                size_t c = c0 + (k & 1 ? step[0] : 0) + (k & 2 ? step[1] : 0) + (k & 4 ? step[2] : 0);
+                size_t c =
+                    c0 + (k & 1 ? step[0] : 0) + (k & 2 ? step[1] : 0) + (k & 4 ? step[2] : 0);
                 const double s = wt[k] * inv_h3;
                 for (int b = 0; b < ncomp; b++)
                     out[b][c] += (float)(s * v[b]);
@@ -456,7 +471,8 @@ static hv_status local_shift(sdf_work *w, const hv_grid *g, const hv_sdf_opts *o
     float *f0 = hv_calloc(count, sizeof(float)), *f1 = hv_calloc(count, sizeof(float));
     float *num = hv_malloc(count * sizeof(float)), *den = hv_malloc(count * sizeof(float));
     if (!res || !f0 || !f1 || !num || !den) {
-        st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the zero-set correction (%zu cells)", count);
+        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the zero-set correction (%zu cells)",
+                       count);
         goto out;
     }
 #pragma omp parallel for schedule(static)
@@ -538,7 +554,8 @@ static size_t build_rhs1(float *const *Y, double tau, const hv_grid *g, float *c
                     Fa[0] = 0;
                 size_t dl = 0;
                 for (int i = i0; i < n[0]; i++) {
-                    float vx = x0[i] + x0[i - off], vy = y0[i] + y0[i - off], vz = z0[i] + z0[i - off];
+                    float vx = x0[i] + x0[i - off], vy = y0[i] + y0[i - off],
+                          vz = z0[i] + z0[i - off];
                     float l2 = vx * vx + vy * vy + vz * vz;
                     float va = ya[i] + ya[i - off];
                     int live = l2 > tau2;
@@ -577,7 +594,7 @@ static hv_status upsample(const hv_grid *gh, const float *v, const hv_grid *g, f
         base[a] = malloc((size_t)g->n[a] * sizeof(int));
         frac[a] = malloc((size_t)g->n[a] * sizeof(float));
         if (!base[a] || !frac[a]) {
-            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory");
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory");
             goto out;
         }
         for (int i = 0; i < g->n[a]; i++) {
@@ -588,7 +605,7 @@ static hv_status upsample(const hv_grid *gh, const float *v, const hv_grid *g, f
             if (nh == 1 || s <= 0)
                 i0 = 0, f = 0;
             else if (i0 >= nh - 1)
-                i0 = nh - 2, f = 1; /* past the last centre: its value, as hv_trilinear clamps */
+                i0 = nh - 2, f = 1; /* past the last centre: its value, as hv__trilinear clamps */
             base[a][i] = i0;
             frac[a][i] = (float)f;
         }
@@ -600,14 +617,16 @@ static hv_status upsample(const hv_grid *gh, const float *v, const hv_grid *g, f
             const size_t sz = gh->n[2] > 1 ? step[2] : 0, sy = gh->n[1] > 1 ? step[1] : 0;
             const float *p00 = v + (size_t)base[2][k] * step[2] + (size_t)base[1][j] * step[1];
             const float *p01 = p00 + sy, *p10 = p00 + sz, *p11 = p00 + sz + sy;
-            const float w00 = (1 - fz) * (1 - fy), w01 = (1 - fz) * fy, w10 = fz * (1 - fy), w11 = fz * fy;
+            const float w00 = (1 - fz) * (1 - fy), w01 = (1 - fz) * fy, w10 = fz * (1 - fy),
+                        w11 = fz * fy;
             float *o = out + ((size_t)k * g->n[1] + j) * g->n[0];
             const int sx = gh->n[0] > 1;
             for (int i = 0; i < g->n[0]; i++) {
                 const int b = base[0][i];
                 const float fx = frac[0][i];
                 float lo = w00 * p00[b] + w01 * p01[b] + w10 * p10[b] + w11 * p11[b];
-                float hi = w00 * p00[b + sx] + w01 * p01[b + sx] + w10 * p10[b + sx] + w11 * p11[b + sx];
+                float hi =
+                    w00 * p00[b + sx] + w01 * p01[b + sx] + w10 * p10[b + sx] + w11 * p11[b + sx];
                 o[i] = lo + fx * (hi - lo);
             }
         }
@@ -619,10 +638,11 @@ out:
     return st;
 }
 
-hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out, hv_sdf_stats *stats)
+hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
+                         hv_sdf_stats *stats)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_sdf_compute: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute: out is NULL");
     *out = NULL;
     hv_sdf_opts o;
     if (opts)
@@ -650,9 +670,10 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         return st;
     tt = hv_now();
     if (o.repair) {
-        if ((st = hv_sdf_repair(m, unsig ? (o.repair & (HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DEGENERATE |
-                                                         HV_SDF_REPAIR_DUPLICATES))
-                                         : o.repair,
+        if ((st = hv_sdf_repair(m,
+                                unsig ? (o.repair & (HV_SDF_REPAIR_WELD | HV_SDF_REPAIR_DEGENERATE |
+                                                     HV_SDF_REPAIR_DUPLICATES))
+                                      : o.repair,
                                 o.max_hole, &w.repaired, &S.repair)))
             return st;
         M = w.repaired;
@@ -705,11 +726,11 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         blo[a] = origin[a];
         bhi[a] = origin[a] + n[a] * h;
     }
-    if ((st = hv_quad_build(M, hh, blo, bhi, &w.q)))
+    if ((st = hv__quad_build(M, hh, blo, bhi, &w.q)))
         goto done;
     S.surface_samples = w.q.count;
     if (w.q.count == 0) {
-        st = hv_error(HV_ERR_INVALID_ARG, "sdf: no part of the mesh lies inside the grid block");
+        st = hv__error(HV_ERR_INVALID_ARG, "sdf: no part of the mesh lies inside the grid block");
         goto done;
     }
     const int ncomp = unsig ? 1 : 3;
@@ -717,13 +738,14 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     const int on_device = need_heat && o.backend == HV_BACKEND_OPENCL;
     if (on_device) {
         S.t_splat = hv_now() - tt;
-        if ((st = hv_sdf_heat_cl(&w.q, (hv_grid *)gh, nlev, unsig, &o, &S)))
+        if ((st = hv__sdf_heat_cl(&w.q, (hv_grid *)gh, nlev, unsig, &o, &S)))
             goto done;
     }
     if (need_heat && !on_device) {
         for (int b = 0; b < ncomp; b++)
             if (!(w.Y0[b] = hv_calloc(hcount, sizeof(float)))) {
-                st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)", hcount);
+                st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
+                               hcount);
                 goto done;
             }
         if (unsig)
@@ -741,7 +763,8 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     if (need_heat && !on_device) {
         w.Ybuf = hv_malloc((size_t)nlev * ncomp * hcount * sizeof(float));
         if (!w.Ybuf) {
-            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells", nlev * ncomp, hcount);
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells",
+                           nlev * ncomp, hcount);
             goto done;
         }
         double f2 = 0;
@@ -754,7 +777,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         so.max_iter = 100;
         for (int k = 0; k < nlev; k++) {
             if (!(w.Y[k] = malloc(3 * sizeof(float *)))) {
-                st = hv_error(HV_ERR_NOMEM, "sdf: out of memory");
+                st = hv__error(HV_ERR_NOMEM, "sdf: out of memory");
                 goto done;
             }
             for (int b = 0; b < ncomp; b++)
@@ -795,7 +818,8 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             goto done;
         tt = hv_now();
         if (!(w.rhs = hv_malloc(hcount * sizeof(float)))) {
-            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)", hcount);
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)",
+                           hcount);
             goto done;
         }
         if (nlev == 1 && !unsig)
@@ -866,12 +890,14 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             goto done;
         tt = hv_now();
         if (!(w.dist = hv_malloc(count * sizeof(float)))) {
-            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for the exact distance (%zu cells)", count);
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the exact distance (%zu cells)",
+                           count);
             goto done;
         }
         const int want_tri = !unsig && o.near_sign > 0;
         if (want_tri && !(w.tri = hv_malloc(count * sizeof *w.tri))) {
-            st = hv_error(HV_ERR_NOMEM, "sdf: out of memory for nearest triangles (%zu cells)", count);
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for nearest triangles (%zu cells)",
+                           count);
             goto done;
         }
         /* A narrow band needs exact values within band_only voxels only;
@@ -884,7 +910,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         const double raster = o.band_only > 0 && o.band_only <= SDF_RASTER_MAX
                                   ? fmax(SDF_EXACT_BAND, o.band_only)
                                   : SDF_EXACT_BAND;
-        if ((st = hv_exact_distance(M, w.g, raster, cap, w.dist, w.tri, &S.band_cells)))
+        if ((st = hv__exact_distance(M, w.g, raster, cap, w.dist, w.tri, &S.band_cells)))
             goto done;
         float *res = w.g->v;
         const float *dist = w.dist;
@@ -902,7 +928,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             const uint32_t *tri = w.tri;
             hv_pseudo ps;
             const int use_ps = o.near_sign > 0;
-            if (use_ps && (st = hv_pseudo_build(M, &ps)))
+            if (use_ps && (st = hv__pseudo_build(M, &ps)))
                 goto done;
             const float dlim = (float)(o.near_sign * h), hlim = (float)(1.5 * o.near_sign * h);
             size_t changed = 0, used = 0;
@@ -915,7 +941,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
                         if (use_ps && d < dlim && fabsf(sg) < hlim && tri[c] != UINT32_MAX) {
                             double p[3];
                             hv_grid_cell_center(w.g, i, j, k, p);
-                            int s = hv_pseudo_sign(&ps, M, tri[c], p, sg < 0 ? -1 : 1);
+                            int s = hv__pseudo_sign(&ps, M, tri[c], p, sg < 0 ? -1 : 1);
                             if (s) {
                                 used++;
                                 if ((s < 0) != (sg < 0)) {
@@ -930,7 +956,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             S.near_sign_cells = used;
             S.near_sign_changed = changed;
             if (use_ps)
-                hv_pseudo_free(&ps);
+                hv__pseudo_free(&ps);
         }
         S.t_redistance = hv_now() - tt;
     }

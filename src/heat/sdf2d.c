@@ -44,45 +44,46 @@ void hv_sdf2d_opts_default(hv_sdf2d_opts *o)
 static hv_status check_opts(const hv_sdf2d_opts *o)
 {
     if (!(o->voxel_size >= 0) || !isfinite(o->voxel_size))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: voxel size must be positive and finite, got %g",
-                        o->voxel_size);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf2d: voxel size must be positive and finite, got %g", o->voxel_size);
     if (o->voxel_size == 0 && !o->use_bbox && o->res <= 2 * o->pad)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "sdf2d: resolution %d leaves no cells inside a padding of %d on each side",
-                        o->res, o->pad);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf2d: resolution %d leaves no cells inside a padding of %d on each side",
+                         o->res, o->pad);
     if (o->voxel_size == 0 && o->res < 2)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: resolution must be at least 2, got %d", o->res);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: resolution must be at least 2, got %d",
+                         o->res);
     if (o->pad < 0)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: padding must be >= 0 cells, got %d", o->pad);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: padding must be >= 0 cells, got %d", o->pad);
     if (!(o->t_scale > 0) || !(o->t_scale <= 1e4))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: t scale must be in (0, 1e4], got %g",
-                        o->t_scale);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: t scale must be in (0, 1e4], got %g",
+                         o->t_scale);
     if (!(o->weld_tol >= 0) || !(o->weld_tol < 1))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: weld tolerance must be in [0, 1), got %g",
-                        o->weld_tol);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: weld tolerance must be in [0, 1), got %g",
+                         o->weld_tol);
     if (!(o->tol >= 1e-12 && o->tol < 1))
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: tolerance must be in [1e-12, 1), got %g",
-                        o->tol);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: tolerance must be in [1e-12, 1), got %g",
+                         o->tol);
     if (o->use_bbox)
         for (int a = 0; a < 2; a++)
             if (!isfinite(o->bbox[a]) || !isfinite(o->bbox[a + 2]) ||
                 !(o->bbox[a + 2] > o->bbox[a]))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf2d: bounding box is empty along %c",
-                                "xy"[a]);
+                return hv__error(HV_ERR_INVALID_ARG, "sdf2d: bounding box is empty along %c",
+                                 "xy"[a]);
     return HV_OK;
 }
 
 /* ---- grid ---- */
 
-static hv_status place_grid(const double *P, size_t np, const hv_sdf2d_opts *o, int n[2],
-                            double *h, double origin[2])
+static hv_status place_grid(const double *P, size_t np, const hv_sdf2d_opts *o, int n[2], double *h,
+                            double origin[2])
 {
     double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
     for (size_t i = 0; i < np; i++)
         for (int a = 0; a < 2; a++) {
             double v = P[2 * i + a];
             if (!isfinite(v))
-                return hv_error(HV_ERR_NUMERIC, "sdf2d: point %zu has a non-finite coordinate", i);
+                return hv__error(HV_ERR_NUMERIC, "sdf2d: point %zu has a non-finite coordinate", i);
             lo[a] = fmin(lo[a], v);
             hi[a] = fmax(hi[a], v);
         }
@@ -93,7 +94,7 @@ static hv_status place_grid(const double *P, size_t np, const hv_sdf2d_opts *o, 
         for (int a = 0; a < 2; a++) {
             double c = ceil((b[a + 2] - b[a]) / *h - 1e-9);
             if (!(c < 1e8))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf2d: %g cells along %c", c, "xy"[a]);
+                return hv__error(HV_ERR_INVALID_ARG, "sdf2d: %g cells along %c", c, "xy"[a]);
             n[a] = c < 1 ? 1 : (int)c;
             origin[a] = b[a];
         }
@@ -104,12 +105,12 @@ static hv_status place_grid(const double *P, size_t np, const hv_sdf2d_opts *o, 
         else if (L > 0)
             *h = L / (o->res - 2 * o->pad);
         else
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "sdf2d: the curves have no extent (one point); give a voxel size");
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "sdf2d: the curves have no extent (one point); give a voxel size");
         for (int a = 0; a < 2; a++) {
             double c = ceil((hi[a] - lo[a]) / *h - 1e-9) + 2.0 * o->pad;
             if (!(c < 1e8))
-                return hv_error(HV_ERR_INVALID_ARG, "sdf2d: %g cells along %c", c, "xy"[a]);
+                return hv__error(HV_ERR_INVALID_ARG, "sdf2d: %g cells along %c", c, "xy"[a]);
             n[a] = c < 1 ? 1 : (int)c;
             origin[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * *h;
         }
@@ -167,10 +168,10 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
                         hv_sdf2d_stats *stats)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_sdf: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_sdf: out is NULL");
     *out = NULL;
     if (!c || !c->pts || !c->start || c->nlines == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_sdf: no curves");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_sdf: no curves");
     hv_sdf2d_opts o;
     if (opts)
         o = *opts;
@@ -180,7 +181,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     if (st)
         return st;
     if (c->npoints >= UINT32_MAX)
-        return hv_error(HV_ERR_INVALID_ARG, "sdf2d: too many points (%zu)", c->npoints);
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: too many points (%zu)", c->npoints);
     hv_sdf2d_stats S;
     memset(&S, 0, sizeof S);
     double t0 = hv_now(), tt = t0;
@@ -203,13 +204,13 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     hv_solver *solver = NULL;
     hv_grid *g = NULL;
     if (!Sg) {
-        st = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the segments");
+        st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the segments");
         goto done;
     }
     for (size_t k = 0; k < c->nlines; k++) {
         size_t a = c->start[k], b = c->start[k + 1];
         if (b > c->npoints || b < a + 2) {
-            st = hv_error(HV_ERR_INVALID_ARG, "sdf2d: polyline %zu has a bad point range", k);
+            st = hv__error(HV_ERR_INVALID_ARG, "sdf2d: polyline %zu has a bad point range", k);
             goto done;
         }
         for (size_t i = a; i + 1 < b; i++)
@@ -220,19 +221,19 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     S.segments_in = ns;
 
     /* 1. Repair. */
-    if ((st = hv_progress(0.0, "repair")))
+    if ((st = hv__progress(0.0, "repair")))
         goto done;
-    if (o.repair && (st = hv_sdf2d_repair(P, c->npoints, &Sg, &ns, o.weld_tol * h, h, &S)))
+    if (o.repair && (st = hv__sdf2d_repair(P, c->npoints, &Sg, &ns, o.weld_tol * h, h, &S)))
         goto done;
     S.segments_out = ns;
     S.t_repair = hv_now() - tt;
     if (ns == 0) {
-        st = hv_error(HV_ERR_INVALID_ARG, "sdf2d: no segment of non-zero length");
+        st = hv__error(HV_ERR_INVALID_ARG, "sdf2d: no segment of non-zero length");
         goto done;
     }
 
     /* 2. Splat length-weighted normals (right-hand side of each segment). */
-    if ((st = hv_progress(0.05, "splat")))
+    if ((st = hv__progress(0.05, "splat")))
         goto done;
     tt = hv_now();
     size_t cap = 0;
@@ -241,7 +242,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     samp = malloc(3 * cap * sizeof *samp); /* x, y, length */
     Y = calloc(2 * count, sizeof *Y);
     if (!samp || !Y) {
-        st = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the surface field");
+        st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the surface field");
         goto done;
     }
     double f2 = 0;
@@ -283,7 +284,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     S.levels = nlev;
     Ylev = malloc((size_t)nlev * 2 * count * sizeof *Ylev);
     if (!Ylev) {
-        st = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for %d diffused fields", 2 * nlev);
+        st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for %d diffused fields", 2 * nlev);
         goto done;
     }
     double tau[SDF2_MAX_LEVELS];
@@ -293,7 +294,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     so.tol = o.tol;
     so.max_iter = 200;
     for (int k = 0; k < nlev; k++) {
-        if ((st = hv_progress(0.1 + 0.5 * k / nlev, "diffuse")))
+        if ((st = hv__progress(0.1 + 0.5 * k / nlev, "diffuse")))
             goto done;
         double t = (o.t_scale * h) * (o.t_scale * h) * pow(16.0, k);
         hv_problem pb = {2, {n[0], n[1], 1}, h, NULL, 1.0, t};
@@ -314,13 +315,13 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     S.t_diffuse = hv_now() - tt;
 
     /* 4. Normalize on faces, rhs = -div X. */
-    if ((st = hv_progress(0.6, "normalize")))
+    if ((st = hv__progress(0.6, "normalize")))
         goto done;
     tt = hv_now();
     rhs = calloc(count, sizeof *rhs);
     phi = calloc(count, sizeof *phi);
     if (!rhs || !phi) {
-        st = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the divergence");
+        st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the divergence");
         goto done;
     }
     const size_t step[2] = {1, (size_t)n[0]};
@@ -349,7 +350,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     S.t_normalize = hv_now() - tt;
 
     /* 5. Poisson: -Lap phi = -div X, Neumann walls, mean-free. */
-    if ((st = hv_progress(0.65, "poisson")))
+    if ((st = hv__progress(0.65, "poisson")))
         goto done;
     tt = hv_now();
     {
@@ -385,10 +386,10 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     if ((st = hv_grid_create(&g, 2, n3, h, org3)))
         goto done;
     if (!o.heat_magnitude) {
-        if ((st = hv_progress(0.85, "distance")))
+        if ((st = hv__progress(0.85, "distance")))
             goto done;
         tt = hv_now();
-        if ((st = hv_sdf2d_exact_distance(P, Sg, ns, n, h, org, rhs)))
+        if ((st = hv__sdf2d_exact_distance(P, Sg, ns, n, h, org, rhs)))
             goto done;
         for (size_t i = 0; i < count; i++)
             g->v[i] = (float)(phi[i] < 0 ? -rhs[i] : rhs[i]);
@@ -397,7 +398,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
         for (size_t i = 0; i < count; i++)
             g->v[i] = (float)phi[i];
     }
-    if ((st = hv_progress(1.0, "done")))
+    if ((st = hv__progress(1.0, "done")))
         goto done;
     S.t_total = hv_now() - t0;
     *out = g;

@@ -24,13 +24,13 @@ static double point_seg_d2(double x, double y, const double *p, const double *q)
 /* Exact distance to the segments: rasterized within SDF2_BAND cells of each
  * segment, then nearest-segment candidates passed on by sweeps in the four
  * diagonal directions (twice). */
-hv_status hv_sdf2d_exact_distance(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
-                                  double h, const double org[2], double *dist)
+hv_status hv__sdf2d_exact_distance(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
+                                   double h, const double org[2], double *dist)
 {
     size_t count = (size_t)n[0] * n[1];
     uint32_t *near = malloc(count * sizeof *near);
     if (!near)
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the exact distance");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the exact distance");
     for (size_t c = 0; c < count; c++) {
         dist[c] = INFINITY;
         near[c] = UINT32_MAX;

@@ -1,6 +1,6 @@
 /* Private pieces of the 2D signed heat method, shared by its files: the method
  * (sdf2d.c), curve repair (sdf2d_repair.c, sdf2d_orient.c) and the exact
- * distance (sdf2d_exact.c); hv_sdf2d_all_pairs is for the tests. */
+ * distance (sdf2d_exact.c); hv__sdf2d_all_pairs is for the tests. */
 #ifndef HV_HEAT_SDF2D_INTERNAL_H
 #define HV_HEAT_SDF2D_INTERNAL_H
 
@@ -13,7 +13,7 @@
 /* 1: the repair tests every loop against every other for nesting, without the
  * spatial index (the quadratic reference the index must agree with bit for
  * bit). 0 by default; tests only, not thread-safe to change during a run. */
-extern int hv_sdf2d_all_pairs;
+extern int hv__sdf2d_all_pairs;
 
 /* A segment from point a to point b (indices into the curves' points). */
 typedef struct sdf2d_seg {
@@ -46,19 +46,19 @@ static inline int sdf2d_by_u64(const void *a, const void *b)
  * drops zero-length and duplicate segments, and orients every chain (h: the
  * cell size, for the overlap search). *Sp (malloc'ed, *ns segments) may be
  * replaced by a new array; the counts of st are added to. sdf2d_repair.c. */
-hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
-                          double h, hv_sdf2d_stats *st);
+hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
+                           double h, hv_sdf2d_stats *st);
 
 /* Which chains to reverse as a whole: turn[c] ^= 1 for chain c (members
  * mstart[c] .. mstart[c+1]-1 of members, each consistent along itself; deg the
  * CSR offsets of the points' incident segments). sdf2d_orient.c. */
-hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
-                                 const uint32_t *mstart, const uint32_t *members, double tol,
-                                 uint8_t *turn, hv_sdf2d_stats *st);
+hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
+                                  const uint32_t *mstart, const uint32_t *members, double tol,
+                                  uint8_t *turn, hv_sdf2d_stats *st);
 
 /* dist[c] = distance from cell centre c of the n[0] x n[1] grid (cell size h,
  * corner org) to the nearest of the ns segments. sdf2d_exact.c. */
-hv_status hv_sdf2d_exact_distance(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
-                                  double h, const double org[2], double *dist);
+hv_status hv__sdf2d_exact_distance(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
+                                   double h, const double org[2], double *dist);
 
 #endif

@@ -1,9 +1,9 @@
 /*
  * Curve repair, last step: which way each chain of segments runs (open chains
  * by their mutual coupling, then every loop by its nesting depth), for
- * hv_sdf2d_repair in sdf2d_repair.c. The nesting is found through a
+ * hv__sdf2d_repair in sdf2d_repair.c. The nesting is found through a
  * bounding-volume hierarchy that gives the same depths as testing every pair
- * of loops (hv_sdf2d_all_pairs, for the tests).
+ * of loops (hv__sdf2d_all_pairs, for the tests).
  */
 #include "core/error.h"
 #include "heat/sdf2d_internal.h"
@@ -15,7 +15,7 @@
 /* Most units per leaf of the nesting index. */
 #define SDF2_BVH_LEAF 8
 
-int hv_sdf2d_all_pairs = 0;
+int hv__sdf2d_all_pairs = 0;
 
 /*
  * Orientation of chains, after each chain was made consistent along itself.
@@ -158,7 +158,7 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
         free(key);
         free(ids);
         free(nd);
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     }
     double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
     for (uint32_t v = 0; v < nu; v++) {
@@ -190,9 +190,9 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
             continue;
         uint32_t q[2];
         for (int a = 0; a < 2; a++) {
-            double t = hi[a] > lo[a] ? (0.5 * (box[4 * v + a] + box[4 * v + 2 + a]) - lo[a]) /
-                                           (hi[a] - lo[a])
-                                     : 0;
+            double t = hi[a] > lo[a]
+                           ? (0.5 * (box[4 * v + a] + box[4 * v + 2 + a]) - lo[a]) / (hi[a] - lo[a])
+                           : 0;
             q[a] = (uint32_t)(fmin(fmax(t, 0), 1) * 65535.0);
         }
         key[n++] = (uint64_t)(spread16(q[0]) | spread16(q[1]) << 1) << 32 | v;
@@ -212,7 +212,7 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
         int depth = 0;
         for (uint32_t k = 0; k < nn;) {
             const bvh_node *b = &nd[k];
-            if (!hv_sdf2d_all_pairs &&
+            if (!hv__sdf2d_all_pairs &&
                 (x < b->lo[0] || x > b->hi[0] || y < b->lo[1] || y > b->hi[1])) {
                 k = b->skip;
                 continue;
@@ -220,8 +220,8 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
             for (uint32_t j = b->first; j < b->first + b->count; j++) {
                 uint32_t v = ids[j];
                 const double *vb = box + 4 * v;
-                if (v == u || (!hv_sdf2d_all_pairs &&
-                               (x < vb[0] || x > vb[2] || y < vb[1] || y > vb[3])))
+                if (v == u ||
+                    (!hv__sdf2d_all_pairs && (x < vb[0] || x > vb[2] || y < vb[1] || y > vb[3])))
                     continue;
                 depth += fabs(unit_winding(P, S, ustart, useg, segturn, v, x, y)) > 0.5;
                 count++;
@@ -238,9 +238,9 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
     return HV_OK;
 }
 
-hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
-                                 const uint32_t *mstart, const uint32_t *members, double tol,
-                                 uint8_t *turn, hv_sdf2d_stats *st)
+hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
+                                  const uint32_t *mstart, const uint32_t *members, double tol,
+                                  uint8_t *turn, hv_sdf2d_stats *st)
 {
     hv_status status = HV_OK;
     uint8_t *is_cycle = calloc(nc, 1);
@@ -250,7 +250,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     uint32_t *gpar = NULL, *gid = NULL;
     uint8_t *segturn = NULL;
     if (!is_cycle || !open || !unit || !ce) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto out;
     }
     uint32_t m = 0;
@@ -275,7 +275,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     double eps = fmax(tol, 1e-12);
     acc = calloc(m ? m : 1, sizeof *acc);
     if (!acc) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto out;
     }
     for (uint32_t i = 0; i < m; i++)
@@ -305,7 +305,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     gpar = malloc((m ? m : 1) * sizeof *gpar);
     gid = malloc((m ? m : 1) * sizeof *gid);
     if (!gpar || !gid) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto out;
     }
     for (uint32_t i = 0; i < m; i++)
@@ -325,7 +325,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     if (ng > 1 && ng <= 4096) {
         G = calloc((size_t)ng * ng, sizeof *G);
         if (!G) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto out;
         }
         for (uint32_t i = 0; i < m; i++)
@@ -380,7 +380,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     double *ugap = NULL;
     uint32_t *ufirst = NULL, *ulast = NULL;
     if (!ustart || !useg || !upt || !ulen || !uarea || !utot || !uturn) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto units_out;
     }
     for (uint32_t c = 0; c < nc; c++)
@@ -390,7 +390,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     {
         uint32_t *fill = calloc(nu ? nu : 1, sizeof *fill);
         if (!fill) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto units_out;
         }
         for (uint32_t c = 0; c < nc; c++)
@@ -403,7 +403,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
         size_t nseg = mstart[nc];
         segturn = calloc(nseg ? nseg : 1, 1);
         if (!segturn) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto units_out;
         }
         for (uint32_t c = 0; c < nc; c++)
@@ -434,7 +434,7 @@ hv_status hv_sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *
     ufirst = malloc((nu ? nu : 1) * sizeof *ufirst);
     ulast = malloc((nu ? nu : 1) * sizeof *ulast);
     if (!ugap || !ufirst || !ulast) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto units_out;
     }
     for (uint32_t u = 0; u < nu; u++) {

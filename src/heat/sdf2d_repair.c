@@ -72,7 +72,7 @@ static hv_status pg_build(point_grid *g, const double *P, size_t np, const uint8
     g->ids = malloc((n ? n : 1) * sizeof *g->ids);
     if (!g->start || !g->ids) {
         pg_free(g);
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     }
     for (size_t i = 0; i < np; i++)
         if (!used || used[i])
@@ -117,8 +117,8 @@ static uint64_t bucket_key(int64_t bx, int64_t by)
 }
 
 /* rank[p]: the place of point p in the walk's buckets, sorted by bucket. */
-static hv_status walk_ranks(const double *P, size_t np, const uint8_t *used, size_t nu,
-                            double cell, uint32_t **rank)
+static hv_status walk_ranks(const double *P, size_t np, const uint8_t *used, size_t nu, double cell,
+                            uint32_t **rank)
 {
     uint64_t *keys = malloc(2 * (nu ? nu : 1) * sizeof *keys);
     *rank = malloc((np ? np : 1) * sizeof **rank);
@@ -126,12 +126,13 @@ static hv_status walk_ranks(const double *P, size_t np, const uint8_t *used, siz
         free(keys);
         free(*rank);
         *rank = NULL;
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     }
     size_t n = 0;
     for (size_t i = 0; i < np; i++)
         if (used[i]) {
-            keys[2 * n] = bucket_key((int64_t)floor(P[2 * i] / cell), (int64_t)floor(P[2 * i + 1] / cell));
+            keys[2 * n] =
+                bucket_key((int64_t)floor(P[2 * i] / cell), (int64_t)floor(P[2 * i + 1] / cell));
             keys[2 * n + 1] = i;
             n++;
         }
@@ -150,7 +151,8 @@ static int walk_meets(const double *P, const double *a, double dx, double dy, in
     int64_t px = (int64_t)floor(P[2 * p] / cell), py = (int64_t)floor(P[2 * p + 1] / cell);
     for (int m = 0; m <= steps; m++) {
         double t = steps ? (double)m / steps : 0;
-        int64_t bx = (int64_t)floor((a[0] + t * dx) / cell), by = (int64_t)floor((a[1] + t * dy) / cell);
+        int64_t bx = (int64_t)floor((a[0] + t * dx) / cell),
+                by = (int64_t)floor((a[1] + t * dy) / cell);
         if (px - bx >= -1 && px - bx <= 1 && py - by >= -1 && py - by <= 1) {
             h->step = (uint32_t)m;
             h->around = (uint32_t)(3 * (px - bx + 1) + (py - by + 1));
@@ -202,7 +204,7 @@ static hv_status cells_hits(const point_grid *g, int64_t x0, int64_t x1, int64_t
                     *cap = *cap ? 2 * *cap : 16;
                     tp *more = realloc(*hits, *cap * sizeof **hits);
                     if (!more)
-                        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
                     *hits = more;
                 }
                 (*hits)[*nh] = (tp){along, p, 0, 0, 0};
@@ -225,7 +227,7 @@ static hv_status split_overlaps(const double *P, size_t np, sdf2d_seg **Sp, size
     size_t nu = 0, nout = 0, capout = 0, caphits = 0;
     hv_status status = HV_OK;
     if (!used)
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     for (size_t k = 0; k < *ns; k++)
         used[S[k].a] = used[S[k].b] = 1;
     for (size_t i = 0; i < np; i++)
@@ -281,7 +283,7 @@ static hv_status split_overlaps(const double *P, size_t np, sdf2d_seg **Sp, size
             capout = 2 * (nout + nh + 1) + *ns;
             sdf2d_seg *no = realloc(out, capout * sizeof *out);
             if (!no) {
-                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
                 goto done;
             }
             out = no;
@@ -337,14 +339,14 @@ static void weld_near(const double *P, const point_grid *g, int64_t cx, int64_t 
 
 /* Welds, drops zero-length and duplicate segments, orients chains (see
  * sdf2d_internal.h). */
-hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
-                          double h, hv_sdf2d_stats *st)
+hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
+                           double h, hv_sdf2d_stats *st)
 {
     sdf2d_seg *S = *Sp;
     hv_status status = HV_OK;
     uint32_t *par = malloc(np * sizeof *par);
     if (!par)
-        return hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     for (uint32_t i = 0; i < np; i++)
         par[i] = i;
     /* 1. Weld: points within tol, pairs found on a grid of cells >= 2 tol. The
@@ -380,7 +382,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
     /* 2. Duplicates (either direction): keep the first. */
     uint64_t *key = malloc(n * 2 * sizeof *key);
     if (!key && n) {
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto out;
     }
     for (size_t k = 0; k < n; k++) {
@@ -393,7 +395,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
     uint8_t *drop = calloc(n ? n : 1, 1);
     if (!drop) {
         free(key);
-        status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
         goto out;
     }
     for (size_t k = 1; k < n; k++)
@@ -421,7 +423,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
         double *vote = NULL;
         uint32_t *members = NULL, *mstart = NULL;
         if (!deg || !inc || !comp || !queue || !flip) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto chains_out;
         }
         for (size_t k = 0; k < n; k++) {
@@ -433,7 +435,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
         {
             uint32_t *fill = calloc(np, sizeof *fill);
             if (!fill) {
-                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
                 goto chains_out;
             }
             for (uint32_t k = 0; k < n; k++) {
@@ -477,7 +479,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
         mstart = calloc((size_t)nc + 1, sizeof *mstart);
         members = malloc(n * sizeof *members);
         if (!vote || !mstart || !members) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto chains_out;
         }
         for (size_t k = 0; k < n; k++) {
@@ -489,7 +491,7 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
         {
             uint32_t *fill = calloc(nc, sizeof *fill);
             if (!fill) {
-                status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+                status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
                 goto chains_out;
             }
             for (uint32_t k = 0; k < n; k++)
@@ -509,10 +511,10 @@ hv_status hv_sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns
          * then every loop by nesting). */
         uint8_t *turn = calloc(nc, 1);
         if (!turn) {
-            status = hv_error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
             goto chains_out;
         }
-        status = hv_sdf2d_orient_chains(P, S, deg, nc, mstart, members, tol, turn, st);
+        status = hv__sdf2d_orient_chains(P, S, deg, nc, mstart, members, tol, turn, st);
         if (status != HV_OK) {
             free(turn);
             goto chains_out;

@@ -18,38 +18,38 @@
 
 /* ---------- the device steps and their kernels ---------- */
 
-extern const char hv_kernel_heat[]; /* kernels/heat.cl, embedded by the Makefile */
+extern const char hv__kernel_heat[]; /* kernels/heat.cl, embedded by the Makefile */
 
-static const char *const heat_sources[] = {hv_kernel_heat, NULL};
+static const char *const heat_sources[] = {hv__kernel_heat, NULL};
 enum { K_SPLAT, K_SDF_RHS, K_SAMPLE, K_SHIFT };
 static const char *const heat_kernels[] = {"heat_splat", "heat_sdf_rhs", "heat_sample",
                                            "heat_shift", NULL};
 static const hv_cl_module heat_module = {"heat", heat_sources, heat_kernels, 0};
 
-void hv_cl_splat_destroy(hv_cl_splat *S)
+void hv__cl_splat_destroy(hv_cl_splat *S)
 {
     free(S->order);
     free(S->stage);
-    hv_cl_free(&S->base);
-    hv_cl_free(&S->start);
-    hv_cl_free(&S->frac);
-    hv_cl_free(&S->val);
+    hv__cl_free(&S->base);
+    hv__cl_free(&S->start);
+    hv__cl_free(&S->frac);
+    hv__cl_free(&S->val);
     memset(S, 0, sizeof *S);
 }
 
-hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3], double h,
-                             const double origin[3], size_t npts, const double *x)
+hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3], double h,
+                              const double origin[3], size_t npts, const double *x)
 {
     memset(S, 0, sizeof *S);
     if ((dim != 2 && dim != 3) || !(h > 0) || !n || !origin || (npts && !x))
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "OpenCL splat: bad grid (dim %d, h %g) or NULL argument", dim, h);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "OpenCL splat: bad grid (dim %d, h %g) or NULL argument", dim, h);
     const int nn[3] = {n[0], n[1], dim == 3 ? n[2] : 1};
     const size_t count = (size_t)nn[0] * nn[1] * nn[2];
     if (nn[0] < 1 || nn[1] < 1 || nn[2] < 1 || count >= UINT32_MAX || npts >= UINT32_MAX)
-        return hv_error(HV_ERR_INVALID_ARG, "OpenCL splat: %zu samples on %d x %d x %d cells", npts,
-                        nn[0], nn[1], nn[2]);
-    hv_status st = hv_cl_module_open(cl, &heat_module);
+        return hv__error(HV_ERR_INVALID_ARG, "OpenCL splat: %zu samples on %d x %d x %d cells",
+                         npts, nn[0], nn[1], nn[2]);
+    hv_status st = hv__cl_module_open(cl, &heat_module);
     if (st)
         return st;
     for (int a = 0; a < 3; a++)
@@ -63,11 +63,11 @@ hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3],
     S->order = malloc((npts + 1) * sizeof *S->order);
     S->stage = malloc((npts + 1) * sizeof *S->stage);
     if (!start || !base || !sbase || !frac || !f || !S->order || !S->stage) {
-        st = hv_error(HV_ERR_NOMEM, "OpenCL splat: out of memory for %zu samples", npts);
+        st = hv__error(HV_ERR_NOMEM, "OpenCL splat: out of memory for %zu samples", npts);
         goto done;
     }
     const size_t stride[3] = {1, (size_t)nn[0], (size_t)nn[0] * nn[1]};
-    /* base cell and fractions exactly as hv_trilinear (src/heat/surface.c) */
+    /* base cell and fractions exactly as hv__trilinear (src/heat/surface.c) */
     for (size_t p = 0; p < npts; p++) {
         size_t b = 0;
         for (int a = 0; a < 3; a++) {
@@ -100,10 +100,10 @@ hv_status hv_cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3],
     for (size_t c = count; c > 0; c--)
         start[c] = start[c - 1];
     start[0] = 0;
-    if ((st = hv_cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
-        (st = hv_cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
-        (st = hv_cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
-        (st = hv_cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
+    if ((st = hv__cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
+        (st = hv__cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
+        (st = hv__cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
+        (st = hv__cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
         goto done;
 done:
     free(start);
@@ -112,54 +112,54 @@ done:
     free(frac);
     free(f);
     if (st)
-        hv_cl_splat_destroy(S);
+        hv__cl_splat_destroy(S);
     return st;
 }
 
-hv_status hv_cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t stride, double scale,
-                          cl_mem out)
+hv_status hv__cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t stride,
+                           double scale, cl_mem out)
 {
     if (!S->start || !out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_cl_splat_run: no binned samples or no output");
+        return hv__error(HV_ERR_INVALID_ARG, "hv__cl_splat_run: no binned samples or no output");
     for (size_t q = 0; q < S->npts; q++)
         S->stage[q] = (float)(val ? scale * val[(size_t)S->order[q] * stride] : scale);
-    hv_cl_write(cl, S->val, 0, S->npts * sizeof(float), S->stage);
+    hv__cl_write(cl, S->val, 0, S->npts * sizeof(float), S->stage);
     size_t g[2], l[2];
-    hv_cl_range2((size_t)S->N[0], (size_t)S->N[1] * S->N[2], g, l);
-    hv_cl_module_args(cl, &heat_module, K_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
-    hv_cl_module_run(cl, &heat_module, K_SPLAT, 2, g, l);
-    return hv_cl_check(cl);
+    hv__cl_range2((size_t)S->N[0], (size_t)S->N[1] * S->N[2], g, l);
+    hv__cl_module_args(cl, &heat_module, K_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
+    hv__cl_module_run(cl, &heat_module, K_SPLAT, 2, g, l);
+    return hv__cl_check(cl);
 }
 
-void hv_cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int ncomp, cl_mem tau,
-                   cl_mem rhs, cl_mem dead)
+void hv__cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int ncomp, cl_mem tau,
+                    cl_mem rhs, cl_mem dead)
 {
     const cl_int N[4] = {n[0], n[1], n[2], 3};
     const size_t count = (size_t)n[0] * n[1] * n[2];
     size_t g[2], l[2];
-    hv_cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
-    hv_cl_module_args(cl, &heat_module, K_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau,
-                      1.0 / h, rhs, dead);
-    hv_cl_module_run(cl, &heat_module, K_SDF_RHS, 2, g, l);
+    hv__cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
+    hv__cl_module_args(cl, &heat_module, K_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau,
+                       1.0 / h, rhs, dead);
+    hv__cl_module_run(cl, &heat_module, K_SDF_RHS, 2, g, l);
 }
 
-void hv_cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
+void hv__cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
 {
     size_t g[1], l[1];
-    hv_cl_range1(S->npts, g, l);
-    hv_cl_module_args(cl, &heat_module, K_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out,
-                      S->npts);
-    hv_cl_module_run(cl, &heat_module, K_SAMPLE, 1, g, l);
+    hv__cl_range1(S->npts, g, l);
+    hv__cl_module_args(cl, &heat_module, K_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out,
+                       S->npts);
+    hv__cl_module_run(cl, &heat_module, K_SAMPLE, 1, g, l);
 }
 
-void hv_cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
-                     double tau, int local_shift)
+void hv__cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
+                      double tau, int local_shift)
 {
     size_t g[1], l[1];
-    hv_cl_range1(n, g, l);
-    hv_cl_module_args(cl, &heat_module, K_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift,
-                      n);
-    hv_cl_module_run(cl, &heat_module, K_SHIFT, 1, g, l);
+    hv__cl_range1(n, g, l);
+    hv__cl_module_args(cl, &heat_module, K_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift,
+                       n);
+    hv__cl_module_run(cl, &heat_module, K_SHIFT, 1, g, l);
 }
 
 /* ---------- the stages ---------- */
@@ -179,20 +179,20 @@ typedef struct sdf_cl_work {
 static void work_free(sdf_cl_work *w)
 {
     hv_solver_destroy(&w->solver);
-    hv_cl_splat_destroy(&w->sp);
+    hv__cl_splat_destroy(&w->sp);
     for (int b = 0; b < 3; b++)
-        hv_cl_free(&w->Y0[b]);
-    hv_cl_free(&w->Y);
-    hv_cl_free(&w->tmp);
-    hv_cl_free(&w->tau);
-    hv_cl_free(&w->rhs);
-    hv_cl_free(&w->phi);
-    hv_cl_free(&w->dead);
-    hv_cl_free(&w->sums);
-    hv_cl_free(&w->samp);
+        hv__cl_free(&w->Y0[b]);
+    hv__cl_free(&w->Y);
+    hv__cl_free(&w->tmp);
+    hv__cl_free(&w->tau);
+    hv__cl_free(&w->rhs);
+    hv__cl_free(&w->phi);
+    hv__cl_free(&w->dead);
+    hv__cl_free(&w->sums);
+    hv__cl_free(&w->samp);
     free(w->vals);
     free(w->res);
-    hv_cl_close(&w->cl);
+    hv__cl_close(&w->cl);
 }
 
 static hv_status opencl_solver(hv_solver **s, const hv_grid *g, double alpha, double beta,
@@ -213,15 +213,15 @@ static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, doub
 {
     const size_t np = q->count;
     hv_status st;
-    if (!w->samp && (st = hv_cl_alloc(w->cl, np * sizeof(float), NULL, &w->samp)))
+    if (!w->samp && (st = hv__cl_alloc(w->cl, np * sizeof(float), NULL, &w->samp)))
         return st;
     if (!w->vals && !(w->vals = malloc(np * sizeof *w->vals)))
-        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+        return hv__error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
     if (!w->res && !(w->res = malloc(np * sizeof *w->res)))
-        return hv_error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
-    hv_cl_splat_sample(w->cl, &w->sp, w->phi, w->samp);
-    hv_cl_read(w->cl, w->samp, 0, np * sizeof(float), w->vals);
-    if ((st = hv_cl_check(w->cl)))
+        return hv__error(HV_ERR_NOMEM, "sdf: out of memory for %zu surface samples", np);
+    hv__cl_splat_sample(w->cl, &w->sp, w->phi, w->samp);
+    hv__cl_read(w->cl, w->samp, 0, np * sizeof(float), w->vals);
+    if ((st = hv__cl_check(w->cl)))
         return st;
     double a = 0, b = 0, c = 0;
 #pragma omp parallel for reduction(+ : a, b, c) schedule(static)
@@ -235,8 +235,8 @@ static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, doub
     return HV_OK;
 }
 
-hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
-                         hv_sdf_stats *S)
+hv_status hv__sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
+                          hv_sdf_stats *S)
 {
     sdf_cl_work w;
     memset(&w, 0, sizeof w);
@@ -248,24 +248,24 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
     double tt = hv_now();
 
     /* 2. Splat: bin the samples once, one gather per component. */
-    if ((st = hv_cl_open(&w.cl)))
+    if ((st = hv__cl_open(&w.cl)))
         return st;
     hv_cl *cl = w.cl;
-    if ((st = hv_cl_splat_create(cl, &w.sp, 3, n, h, g->origin, q->count, q->x)))
+    if ((st = hv__cl_splat_create(cl, &w.sp, 3, n, h, g->origin, q->count, q->x)))
         goto done;
     const double inv_h3 = 1.0 / (h * h * h);
     for (int b = 0; b < ncomp; b++)
-        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[b])) ||
-            (st = hv_cl_splat_run(cl, &w.sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
-                                  w.Y0[b])))
+        if ((st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[b])) ||
+            (st = hv__cl_splat_run(cl, &w.sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
+                                   w.Y0[b])))
             goto done;
-    if ((st = hv_cl_alloc(cl, 4 * sizeof(double), NULL, &w.sums)))
+    if ((st = hv__cl_alloc(cl, 4 * sizeof(double), NULL, &w.sums)))
         goto done;
     for (int b = 0; b < ncomp; b++)
-        hv_cl_dot_f(cl, w.Y0[b], w.Y0[b], count, w.sums, b);
+        hv__cl_dot_f(cl, w.Y0[b], w.Y0[b], count, w.sums, b);
     double sq[3] = {0, 0, 0}, f2 = 0;
-    hv_cl_read_acc(cl, w.sums, 0, ncomp, sq);
-    if ((st = hv_cl_check(cl)))
+    hv__cl_read_acc(cl, w.sums, 0, ncomp, sq);
+    if ((st = hv__cl_check(cl)))
         goto done;
     for (int b = 0; b < ncomp; b++)
         f2 += sq[b];
@@ -274,25 +274,25 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
     /* 3. Diffuse: one backward-Euler step per level, straight into Y. */
     tt = hv_now();
     double tau[9] = {0};
-    if ((st = hv_cl_alloc(cl, (size_t)nlev * ncomp * bytes, NULL, &w.Y)) ||
-        (st = hv_cl_alloc(cl, bytes, NULL, &w.tmp)) || (st = hv_cl_finish(cl)))
+    if ((st = hv__cl_alloc(cl, (size_t)nlev * ncomp * bytes, NULL, &w.Y)) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w.tmp)) || (st = hv__cl_finish(cl)))
         goto done;
     for (int k = 0; k < nlev; k++) {
-        if ((st = hv_progress(0.1 + 0.5 * k / nlev, "diffuse")))
+        if ((st = hv__progress(0.1 + 0.5 * k / nlev, "diffuse")))
             goto done;
         if ((st = opencl_solver(&w.solver, g, 1.0, S->t * pow(16.0, k), o->diffuse_tol)))
             goto done;
         for (int b = 0; b < ncomp; b++) {
             hv_solve_info info;
-            if ((st = hv_cl_solver_solve(w.solver, w.Y0[b], w.tmp, &info)))
+            if ((st = hv__cl_solver_solve(w.solver, w.Y0[b], w.tmp, &info)))
                 goto done;
             S->diffuse_iterations += info.iterations;
             S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
-            hv_cl_fail(cl,
-                       clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
-                                           bytes, 0, NULL, NULL),
-                       "clEnqueueCopyBuffer");
-            if ((st = hv_cl_finish(cl)))
+            hv__cl_fail(cl,
+                        clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
+                                            bytes, 0, NULL, NULL),
+                        "clEnqueueCopyBuffer");
+            if ((st = hv__cl_finish(cl)))
                 goto done;
         }
         hv_solver_destroy(&w.solver);
@@ -302,52 +302,52 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
     }
     S->backend = HV_BACKEND_OPENCL;
     for (int b = 0; b < ncomp; b++)
-        hv_cl_free(&w.Y0[b]);
+        hv__cl_free(&w.Y0[b]);
     S->t_diffuse = hv_now() - tt;
 
     /* 4. Normalize on faces, divergence. */
-    if ((st = hv_progress(0.6, "normalize")))
+    if ((st = hv__progress(0.6, "normalize")))
         goto done;
     tt = hv_now();
     float tauf[9];
     for (int k = 0; k < nlev; k++)
         tauf[k] = (float)tau[k];
     const uint32_t zero = 0;
-    if ((st = hv_cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf,
-                          &w.tau)) ||
-        (st = hv_cl_alloc(cl, sizeof zero, &zero, &w.dead)) ||
-        (st = hv_cl_alloc(cl, bytes, NULL, &w.rhs)))
+    if ((st = hv__cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf,
+                           &w.tau)) ||
+        (st = hv__cl_alloc(cl, sizeof zero, &zero, &w.dead)) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w.rhs)))
         goto done;
-    hv_cl_sdf_rhs(cl, n, h, w.Y, nlev, ncomp, w.tau, w.rhs, w.dead);
+    hv__cl_sdf_rhs(cl, n, h, w.Y, nlev, ncomp, w.tau, w.rhs, w.dead);
     uint32_t dead = 0;
-    hv_cl_read(cl, w.dead, 0, sizeof dead, &dead);
-    if ((st = hv_cl_check(cl)))
+    hv__cl_read(cl, w.dead, 0, sizeof dead, &dead);
+    if ((st = hv__cl_check(cl)))
         goto done;
     S->dead_faces = dead;
-    hv_cl_free(&w.Y);
+    hv__cl_free(&w.Y);
     S->t_normalize = hv_now() - tt;
 
     /* 5. Poisson, then phi to the host: the one read of a field. */
-    if ((st = hv_progress(0.65, "poisson")))
+    if ((st = hv__progress(0.65, "poisson")))
         goto done;
     tt = hv_now();
     if ((st = opencl_solver(&w.solver, g, 0.0, 1.0, o->poisson_tol)) ||
-        (st = hv_cl_alloc(cl, bytes, NULL, &w.phi)))
+        (st = hv__cl_alloc(cl, bytes, NULL, &w.phi)))
         goto done;
     hv_solve_info info;
-    if ((st = hv_cl_solver_solve(w.solver, w.rhs, w.phi, &info)))
+    if ((st = hv__cl_solver_solve(w.solver, w.rhs, w.phi, &info)))
         goto done;
     S->poisson_iterations = info.iterations;
     S->poisson_relres = info.relres;
-    if ((st = hv_cl_check(cl)))
+    if ((st = hv__cl_check(cl)))
         goto done;
     hv_solver_destroy(&w.solver);
-    hv_cl_free(&w.rhs);
+    hv__cl_free(&w.rhs);
     S->t_poisson = hv_now() - tt;
 
     /* 6. Shift: area-weighted mean of phi at the samples to zero, then the
      * local zero-set correction, as sdf.c. */
-    if ((st = hv_progress(0.8, "shift")))
+    if ((st = hv__progress(0.8, "shift")))
         goto done;
     tt = hv_now();
     double num, den, rms;
@@ -356,43 +356,43 @@ hv_status hv_sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, cons
     S->shift = den > 0 ? num / den : 0;
     S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / h;
     S->surface_rms_after = S->surface_rms_before;
-    hv_cl_sdf_shift(cl, count, w.phi, NULL, NULL, (float)S->shift, 0.0, 0);
+    hv__cl_sdf_shift(cl, count, w.phi, NULL, NULL, (float)S->shift, 0.0, 0);
     if (o->local_shift && !unsig) {
         /* c = K*(a r) / K*(a), K = (I - t Lap)^-1, r = phi at the samples */
         if ((st = sample_sums(&w, q, &num, &den, &rms)))
             goto done;
         for (size_t k = 0; k < q->count; k++)
             w.res[w.sp.order[k]] = q->area[w.sp.order[k]] * w.vals[k];
-        if ((st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[0])) ||
-            (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
-            (st = hv_cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
-            (st = hv_cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
-            (st = hv_cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
+        if ((st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[0])) ||
+            (st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
+            (st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
+            (st = hv__cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
+            (st = hv__cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
             goto done;
-        hv_cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
+        hv__cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
         double f1sq = 0;
-        hv_cl_read_acc(cl, w.sums, 0, 1, &f1sq);
-        if ((st = hv_cl_finish(cl)) ||
+        hv__cl_read_acc(cl, w.sums, 0, 1, &f1sq);
+        if ((st = hv__cl_finish(cl)) ||
             (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
             goto done;
         hv_solve_info info;
-        if ((st = hv_cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))
+        if ((st = hv__cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))
             goto done;
         S->diffuse_iterations += info.iterations;
-        if ((st = hv_cl_solver_solve(w.solver, w.Y0[1], w.tmp, &info)))
+        if ((st = hv__cl_solver_solve(w.solver, w.Y0[1], w.tmp, &info)))
             goto done;
         S->diffuse_iterations += info.iterations;
         hv_solver_destroy(&w.solver);
         const double tau_den = fmax(info.relres, o->diffuse_tol) * sqrt(f1sq);
-        hv_cl_sdf_shift(cl, count, w.phi, w.Y0[2], w.tmp, 0.0, tau_den, 1);
+        hv__cl_sdf_shift(cl, count, w.phi, w.Y0[2], w.tmp, 0.0, tau_den, 1);
         if ((st = sample_sums(&w, q, &num, &den, &rms)))
             goto done;
         S->surface_rms_after = sqrt(rms / den) / h;
     }
 
     /* phi to the host: the one read of a field */
-    hv_cl_read(cl, w.phi, 0, bytes, g->v);
-    st = hv_cl_check(cl);
+    hv__cl_read(cl, w.phi, 0, bytes, g->v);
+    st = hv__cl_check(cl);
     S->t_shift = hv_now() - tt;
 done:
     work_free(&w);

@@ -11,24 +11,24 @@
  * (the voxel block) are dropped. */
 typedef struct hv_quad {
     size_t count;
-    double *x;      /* 3 * count positions */
-    double *w;      /* 3 * count area-weighted normals (vector areas) */
-    double *area;   /* count areas */
+    double *x;    /* 3 * count positions */
+    double *w;    /* 3 * count area-weighted normals (vector areas) */
+    double *area; /* count areas */
 } hv_quad;
 
-hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3],
-                        hv_quad *q);
-void hv_quad_free(hv_quad *q);
+hv_status hv__quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3],
+                         hv_quad *q);
+void hv__quad_free(hv_quad *q);
 
 /* Trilinear weights of world point x on the cell centres of g (clamped to the
  * block): base cell in c0, weights for the 8 corners (x fastest) in w, and the
  * per-axis steps (0 where clamped to one cell) in step. */
-void hv_trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3], double w[8]);
+void hv__trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3], double w[8]);
 
 /* Ericson, Real-Time Collision Detection, 5.1.5: closest point on a triangle
  * by Voronoi regions. diff = p - closest point; region as in sdf_internal.h. */
 static inline double hv_closest(const double p[3], const double a[3], const double b[3],
-                             const double c[3], double q[3], int *region)
+                                const double c[3], double q[3], int *region)
 {
     double ab[3], ac[3], ap[3];
     for (int i = 0; i < 3; i++) {
@@ -90,15 +90,14 @@ static inline double hv_closest(const double p[3], const double a[3], const doub
 #undef DOT
 }
 
-
 /* Closest point on triangle abc to p; returns the squared distance. */
-double hv_point_triangle_d2(const double p[3], const double a[3], const double b[3],
-                            const double c[3]);
+double hv__point_triangle_d2(const double p[3], const double a[3], const double b[3],
+                             const double c[3]);
 
 /* The same with p - closest point in diff and the closest feature in region:
  * 0 the face, 1..3 vertex a, b, c, 4 edge ab, 5 edge bc, 6 edge ca. */
-double hv_point_triangle_region(const double p[3], const double a[3], const double b[3],
-                                const double c[3], double diff[3], int *region);
+double hv__point_triangle_region(const double p[3], const double a[3], const double b[3],
+                                 const double c[3], double diff[3], int *region);
 
 /* Exact unsigned distance from every cell centre of g to the triangles of m:
  * rasterized within `band` cells of each triangle, then carried to the rest of
@@ -106,8 +105,8 @@ double hv_point_triangle_region(const double p[3], const double a[3], const doub
  * INFINITY for the whole grid): cells farther than cap get INFINITY. Writes
  * dist (world units) and, if tri is not NULL, the nearest triangle
  * (UINT32_MAX where none). band_cells counts rasterized cells. */
-hv_status hv_exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
-                            float *dist, uint32_t *tri, size_t *band_cells);
+hv_status hv__exact_distance(const hv_mesh *m, const hv_grid *g, double band, double cap,
+                             float *dist, uint32_t *tri, size_t *band_cells);
 
 /* Fast generalized winding number over a subset of a mesh's faces. */
 typedef struct hv_wn_node {
@@ -120,20 +119,20 @@ typedef struct hv_wn_tree {
     const double *V;
     const uint32_t *T;
     uint32_t *order;
-    signed char *sign;    /* -1 for faces taken reversed */
+    signed char *sign; /* -1 for faces taken reversed */
     hv_wn_node *nodes;
     int nnodes;
 } hv_wn_tree;
 
 /* Builds the tree over faces[0..nfaces) of (V, T); flip (may be NULL) reverses faces. */
-hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
-                      size_t nfaces, const uint8_t *flip);
+hv_status hv__wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
+                       size_t nfaces, const uint8_t *flip);
 /* Winding number at p, leaving out face `skip` (UINT32_MAX: none). */
-double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip);
+double hv__wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip);
 /* The same with clusters farther than beta times their radius taken as
- * dipoles (hv_wn_eval: 2.5; smaller is faster and coarser). */
-double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta);
-void hv_wn_free(hv_wn_tree *W);
+ * dipoles (hv__wn_eval: 2.5; smaller is faster and coarser). */
+double hv__wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta);
+void hv__wn_free(hv_wn_tree *W);
 
 /* Angle-weighted pseudonormals of a mesh, with cleanliness of each feature. */
 typedef struct hv_pseudo {
@@ -147,12 +146,12 @@ typedef struct hv_pseudo {
     int have_W;
 } hv_pseudo;
 
-hv_status hv_pseudo_build(const hv_mesh *m, hv_pseudo *ps);
-void hv_pseudo_free(hv_pseudo *ps);
+hv_status hv__pseudo_build(const hv_mesh *m, hv_pseudo *ps);
+void hv__pseudo_free(hv_pseudo *ps);
 /* Sign (+1 outside, -1 inside) from the pseudonormal of triangle tri's feature
  * nearest to p, where that feature is clean; 0 where it is not. Where that
  * sign differs from `current` it is only given when the feature's faces bound
  * a solid (tested on demand; thread-safe). */
-int hv_pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current);
+int hv__pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current);
 
 #endif

@@ -42,7 +42,7 @@ static hv_status quad_reserve(hv_quad *q, size_t *cap, size_t more)
         q->w = nw;
     double *na = nw ? realloc(q->area, nc * sizeof *na) : NULL;
     if (!na)
-        return hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", nc);
+        return hv__error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", nc);
     q->area = na;
     *cap = nc;
     return HV_OK;
@@ -50,13 +50,14 @@ static hv_status quad_reserve(hv_quad *q, size_t *cap, size_t more)
 
 static double dist2(const double *a, const double *b)
 {
-    return (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]);
+    return (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+           (a[2] - b[2]) * (a[2] - b[2]);
 }
 
 /* Centroids of the k x k barycentric subdivision of T (vector area N, area A
  * of this piece), those inside [lo, hi]. */
-static hv_status leaf_points(hv_quad *q, size_t *cap, const double T[9], const double N[3], double A,
-                             double h, const double lo[3], const double hi[3])
+static hv_status leaf_points(hv_quad *q, size_t *cap, const double T[9], const double N[3],
+                             double A, double h, const double lo[3], const double hi[3])
 {
     double e2 = fmax(dist2(T, T + 3), fmax(dist2(T + 3, T + 6), dist2(T, T + 6)));
     int k = (int)ceil(sqrt(e2) / (QUAD_EDGE * h) - 1e-9);
@@ -93,8 +94,8 @@ static hv_status leaf_points(hv_quad *q, size_t *cap, const double T[9], const d
 }
 
 /* The points of triangles [f0, f1) into q. */
-static hv_status quad_range(const hv_mesh *m, double h, const double lo[3], const double hi[3], size_t f0,
-                            size_t f1, hv_quad *q)
+static hv_status quad_range(const hv_mesh *m, double h, const double lo[3], const double hi[3],
+                            size_t f0, size_t f1, hv_quad *q)
 {
     size_t cap = 0;
     const double split2 = QUAD_SPLIT * QUAD_SPLIT * h * h;
@@ -144,8 +145,8 @@ static hv_status quad_range(const hv_mesh *m, double h, const double lo[3], cons
                 M[3 + ax] = 0.5 * (T[3 + ax] + T[6 + ax]);
                 M[6 + ax] = 0.5 * (T[6 + ax] + T[ax]);
             }
-            const double *sub[4][3] = {{T, M, M + 6}, {M, T + 3, M + 3}, {M + 6, M + 3, T + 6},
-                                       {M, M + 3, M + 6}};
+            const double *sub[4][3] = {
+                {T, M, M + 6}, {M, T + 3, M + 3}, {M + 6, M + 3, T + 6}, {M, M + 3, M + 6}};
             for (int s = 0; s < 4; s++) {
                 for (int k = 0; k < 3; k++)
                     memcpy(stack[top] + 3 * k, sub[s][k], 3 * sizeof(double));
@@ -156,7 +157,8 @@ static hv_status quad_range(const hv_mesh *m, double h, const double lo[3], cons
     return HV_OK;
 }
 
-hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3], hv_quad *q)
+hv_status hv__quad_build(const hv_mesh *m, double h, const double lo[3], const double hi[3],
+                         hv_quad *q)
 {
     memset(q, 0, sizeof *q);
     /* Contiguous triangle ranges per thread, joined in order: the points come
@@ -169,7 +171,7 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
         nth = (int)(m->ntris / 256 + 1);
     hv_quad *part = calloc((size_t)nth, sizeof *part);
     if (!part)
-        return hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory");
+        return hv__error(HV_ERR_NOMEM, "surface quadrature: out of memory");
     hv_status err = HV_OK;
 #pragma omp parallel for schedule(static, 1) num_threads(nth)
     for (int p = 0; p < nth; p++) {
@@ -184,14 +186,16 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
     for (int p = 0; p < nth; p++)
         total += part[p].count;
     if (err) /* the message was recorded in a worker thread */
-        err = hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for the points of %zu triangles",
-                       m->ntris);
+        err = hv__error(HV_ERR_NOMEM,
+                        "surface quadrature: out of memory for the points of %zu triangles",
+                        m->ntris);
     if (!err && total) {
         q->x = malloc(3 * total * sizeof *q->x);
         q->w = malloc(3 * total * sizeof *q->w);
         q->area = malloc(total * sizeof *q->area);
         if (!q->x || !q->w || !q->area) {
-            err = hv_error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", total);
+            err =
+                hv__error(HV_ERR_NOMEM, "surface quadrature: out of memory for %zu points", total);
         } else {
             for (int p = 0; p < nth; p++) {
                 memcpy(q->x + 3 * q->count, part[p].x, 3 * part[p].count * sizeof *q->x);
@@ -202,14 +206,14 @@ hv_status hv_quad_build(const hv_mesh *m, double h, const double lo[3], const do
         }
     }
     for (int p = 0; p < nth; p++)
-        hv_quad_free(&part[p]);
+        hv__quad_free(&part[p]);
     free(part);
     if (err)
-        hv_quad_free(q);
+        hv__quad_free(q);
     return err;
 }
 
-void hv_quad_free(hv_quad *q)
+void hv__quad_free(hv_quad *q)
 {
     free(q->x);
     free(q->w);
@@ -217,7 +221,7 @@ void hv_quad_free(hv_quad *q)
     memset(q, 0, sizeof *q);
 }
 
-void hv_trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3], double w[8])
+void hv__trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3], double w[8])
 {
     size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
     size_t base = 0;
@@ -243,16 +247,16 @@ void hv_trilinear(const hv_grid *g, const double x[3], size_t *c0, size_t step[3
         w[q] = (q & 1 ? f[0] : 1 - f[0]) * (q & 2 ? f[1] : 1 - f[1]) * (q & 4 ? f[2] : 1 - f[2]);
 }
 
-double hv_point_triangle_d2(const double p[3], const double a[3], const double b[3],
-                            const double c[3])
+double hv__point_triangle_d2(const double p[3], const double a[3], const double b[3],
+                             const double c[3])
 {
     double q[3];
     int region;
     return hv_closest(p, a, b, c, q, &region);
 }
 
-double hv_point_triangle_region(const double p[3], const double a[3], const double b[3],
-                                const double c[3], double diff[3], int *region)
+double hv__point_triangle_region(const double p[3], const double a[3], const double b[3],
+                                 const double c[3], double diff[3], int *region)
 {
     return hv_closest(p, a, b, c, diff, region);
 }

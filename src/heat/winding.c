@@ -18,8 +18,10 @@
 static void face_info(const hv_wn_tree *W, uint32_t f, double c[3], double N[3], double *area)
 {
     const uint32_t *t = W->T + 3 * (size_t)f;
-    const double *a = W->V + 3 * (size_t)t[0], *b = W->V + 3 * (size_t)t[1], *d = W->V + 3 * (size_t)t[2];
-    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
+    const double *a = W->V + 3 * (size_t)t[0], *b = W->V + 3 * (size_t)t[1],
+                 *d = W->V + 3 * (size_t)t[2];
+    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+           v[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
     N[0] = 0.5 * (u[1] * v[2] - u[2] * v[1]);
     N[1] = 0.5 * (u[2] * v[0] - u[0] * v[2]);
     N[2] = 0.5 * (u[0] * v[1] - u[1] * v[0]);
@@ -42,7 +44,8 @@ static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
     nd->first = first;
     nd->count = count;
     nd->left = nd->right = -1;
-    double asum = 0, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double asum = 0, lo[3] = {INFINITY, INFINITY, INFINITY},
+           hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t q = first; q < first + count; q++) {
         const finfo *f = &F[q];
         double s = W->sign[q];
@@ -60,7 +63,8 @@ static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
     for (size_t q = first; q < first + count; q++)
         for (int v = 0; v < 3; v++) {
             const double *x = W->V + 3 * (size_t)W->T[3 * (size_t)W->order[q] + v];
-            double d2 = (x[0] - nd->c[0]) * (x[0] - nd->c[0]) + (x[1] - nd->c[1]) * (x[1] - nd->c[1]) +
+            double d2 = (x[0] - nd->c[0]) * (x[0] - nd->c[0]) +
+                        (x[1] - nd->c[1]) * (x[1] - nd->c[1]) +
                         (x[2] - nd->c[2]) * (x[2] - nd->c[2]);
             r2 = d2 > r2 ? d2 : r2;
         }
@@ -98,8 +102,8 @@ static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
     return id;
 }
 
-hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
-                      size_t nfaces, const uint8_t *flip)
+hv_status hv__wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
+                       size_t nfaces, const uint8_t *flip)
 {
     memset(W, 0, sizeof *W);
     W->V = V;
@@ -110,8 +114,8 @@ hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const u
     finfo *F = malloc((nfaces ? nfaces : 1) * sizeof *F);
     if (!W->order || !W->sign || !W->nodes || !F) {
         free(F);
-        hv_wn_free(W);
-        return hv_error(HV_ERR_NOMEM, "winding number: out of memory for %zu faces", nfaces);
+        hv__wn_free(W);
+        return hv__error(HV_ERR_NOMEM, "winding number: out of memory for %zu faces", nfaces);
     }
     for (size_t q = 0; q < nfaces; q++) {
         W->order[q] = faces[q];
@@ -124,7 +128,7 @@ hv_status hv_wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const u
     return HV_OK;
 }
 
-void hv_wn_free(hv_wn_tree *W)
+void hv__wn_free(hv_wn_tree *W)
 {
     free(W->order);
     free(W->sign);
@@ -151,12 +155,12 @@ static double solid_angle(const double p[3], const double *a, const double *b, c
     return 2.0 * atan2(det, den);
 }
 
-double hv_wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
+double hv__wn_eval(const hv_wn_tree *W, const double p[3], uint32_t skip)
 {
-    return hv_wn_eval_beta(W, p, skip, WN_BETA);
+    return hv__wn_eval_beta(W, p, skip, WN_BETA);
 }
 
-double hv_wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta)
+double hv__wn_eval_beta(const hv_wn_tree *W, const double p[3], uint32_t skip, double beta)
 {
     if (!W->nnodes)
         return 0;

@@ -29,7 +29,7 @@ typedef struct builder {
     size_t *start;
     uint8_t *closed;
     size_t nl, capl;
-    int open;   /* a polyline is being built */
+    int open; /* a polyline is being built */
     int nomem;
 } builder;
 
@@ -103,16 +103,16 @@ static hv_status b_finish(builder *b, const char *name, hv_curves **out)
     b_end(b, 0);
     if (b->nomem) {
         b_free(b);
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory reading curves", name);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory reading curves", name);
     }
     if (b->nl == 0) {
         b_free(b);
-        return hv_error(HV_ERR_PARSE, "%s: no curve with a segment", name);
+        return hv__error(HV_ERR_PARSE, "%s: no curve with a segment", name);
     }
     hv_curves *c = calloc(1, sizeof *c);
     if (!c) {
         b_free(b);
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory reading curves", name);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory reading curves", name);
     }
     b->start[b->nl] = b->np;
     c->npoints = b->np;
@@ -174,9 +174,10 @@ static const char *skip_sep(const char *p, const char *end)
 
 static hv_status text_coord_error(const char *name, int line, double v)
 {
-    return hv_error(HV_ERR_NUMERIC, "%s: line %d: coordinate %g is beyond the bound +-%g heatvox "
-                                    "accepts",
-                    name, line, v, CURVE_MAX_COORD);
+    return hv__error(HV_ERR_NUMERIC,
+                     "%s: line %d: coordinate %g is beyond the bound +-%g heatvox "
+                     "accepts",
+                     name, line, v, CURVE_MAX_COORD);
 }
 
 static hv_status parse_text(const char *text, size_t len, const char *name, hv_curves **out)
@@ -201,8 +202,8 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                     const char *r = scan_number(q, stop, &v[k]);
                     if (!r) {
                         b_free(&b);
-                        return hv_error(HV_ERR_PARSE, "%s: line %d: '%c' needs two numbers", name,
-                                        line, cmd);
+                        return hv__error(HV_ERR_PARSE, "%s: line %d: '%c' needs two numbers", name,
+                                         line, cmd);
                     }
                     if (!coord_ok(v[k])) {
                         b_free(&b);
@@ -212,29 +213,30 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                 }
                 if (skip_sep(q, stop) != stop) {
                     b_free(&b);
-                    return hv_error(HV_ERR_PARSE, "%s: line %d: unexpected text after '%c x y'",
-                                    name, line, cmd);
+                    return hv__error(HV_ERR_PARSE, "%s: line %d: unexpected text after '%c x y'",
+                                     name, line, cmd);
                 }
                 if (cmd == 'M') {
                     b_end(&b, 0);
                     b_begin(&b);
                 } else if (!b.open) {
                     b_free(&b);
-                    return hv_error(HV_ERR_PARSE, "%s: line %d: 'L' without a current polyline "
-                                                  "(start one with M x y)",
-                                    name, line);
+                    return hv__error(HV_ERR_PARSE,
+                                     "%s: line %d: 'L' without a current polyline "
+                                     "(start one with M x y)",
+                                     name, line);
                 }
                 b_point(&b, v[0], v[1]);
             } else if (cmd == 'Z') {
                 if (!b.open) {
                     b_free(&b);
-                    return hv_error(HV_ERR_PARSE, "%s: line %d: 'Z' without a current polyline",
-                                    name, line);
+                    return hv__error(HV_ERR_PARSE, "%s: line %d: 'Z' without a current polyline",
+                                     name, line);
                 }
                 if (skip_sep(q + 1, stop) != stop) {
                     b_free(&b);
-                    return hv_error(HV_ERR_PARSE, "%s: line %d: unexpected text after 'Z'", name,
-                                    line);
+                    return hv__error(HV_ERR_PARSE, "%s: line %d: unexpected text after 'Z'", name,
+                                     line);
                 }
                 b_end(&b, 1);
             } else {
@@ -247,9 +249,9 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                     const char *r = scan_number(q, stop, &v[0]);
                     if (!r) {
                         b_free(&b);
-                        return hv_error(HV_ERR_PARSE,
-                                        "%s: line %d: expected M, L, Z or numbers, found '%.*s'",
-                                        name, line, (int)(stop - q > 12 ? 12 : stop - q), q);
+                        return hv__error(HV_ERR_PARSE,
+                                         "%s: line %d: expected M, L, Z or numbers, found '%.*s'",
+                                         name, line, (int)(stop - q > 12 ? 12 : stop - q), q);
                     }
                     if (!coord_ok(v[0])) {
                         b_free(&b);
@@ -263,10 +265,10 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
                 }
                 if (count % 2 || count < 4) {
                     b_free(&b);
-                    return hv_error(HV_ERR_PARSE,
-                                    "%s: line %d: a polyline needs an even count of at least 4 "
-                                    "numbers, got %d",
-                                    name, line, count);
+                    return hv__error(HV_ERR_PARSE,
+                                     "%s: line %d: a polyline needs an even count of at least 4 "
+                                     "numbers, got %d",
+                                     name, line, count);
                 }
                 b_end(&b, 0);
             }
@@ -281,10 +283,10 @@ static hv_status parse_text(const char *text, size_t len, const char *name, hv_c
 typedef struct svg_state {
     builder *b;
     const char *name, *base;
-    double cx, cy;   /* current point */
-    double sx, sy;   /* subpath start */
-    double qx, qy;   /* last control point (for S and T) */
-    char last;       /* last command, upper case */
+    double cx, cy; /* current point */
+    double sx, sy; /* subpath start */
+    double qx, qy; /* last control point (for S and T) */
+    char last;     /* last command, upper case */
     int after_close;
 } svg_state;
 
@@ -320,9 +322,9 @@ static void svg_bezier(svg_state *s, const double *c, int cubic)
 
 static hv_status svg_coord_error(const svg_state *s, const char *at, double v)
 {
-    return hv_error(HV_ERR_NUMERIC,
-                    "%s: byte %ld: coordinate %g is beyond the bound +-%g heatvox accepts",
-                    s->name, (long)(at - s->base), v, CURVE_MAX_COORD);
+    return hv__error(HV_ERR_NUMERIC,
+                     "%s: byte %ld: coordinate %g is beyond the bound +-%g heatvox accepts",
+                     s->name, (long)(at - s->base), v, CURVE_MAX_COORD);
 }
 
 static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
@@ -338,10 +340,10 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
         if ((*p >= 'A' && *p <= 'Z') || (*p >= 'a' && *p <= 'z')) {
             cmd = *p++;
             if (strchr("MmLlHhVvZzCcSsQqTt", cmd) == NULL)
-                return hv_error(cmd == 'A' || cmd == 'a' ? HV_ERR_UNSUPPORTED : HV_ERR_PARSE,
-                                "%s: byte %ld: path command '%c' is not supported%s", s->name,
-                                (long)(p - 1 - s->base), cmd,
-                                cmd == 'A' || cmd == 'a' ? " (arcs: convert them to curves)" : "");
+                return hv__error(cmd == 'A' || cmd == 'a' ? HV_ERR_UNSUPPORTED : HV_ERR_PARSE,
+                                 "%s: byte %ld: path command '%c' is not supported%s", s->name,
+                                 (long)(p - 1 - s->base), cmd,
+                                 cmd == 'A' || cmd == 'a' ? " (arcs: convert them to curves)" : "");
             if (cmd == 'Z' || cmd == 'z') {
                 if (s->b->open) {
                     b_end(s->b, 1);
@@ -353,11 +355,11 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
                 continue;
             }
         } else if (!cmd) {
-            return hv_error(HV_ERR_PARSE, "%s: byte %ld: path data must start with a command",
-                            s->name, (long)(p - s->base));
+            return hv__error(HV_ERR_PARSE, "%s: byte %ld: path data must start with a command",
+                             s->name, (long)(p - s->base));
         } else if (cmd == 'Z' || cmd == 'z') {
-            return hv_error(HV_ERR_PARSE, "%s: byte %ld: numbers after 'Z'", s->name,
-                            (long)(p - s->base));
+            return hv__error(HV_ERR_PARSE, "%s: byte %ld: numbers after 'Z'", s->name,
+                             (long)(p - s->base));
         }
         char up = (char)(cmd & ~0x20);
         int rel = cmd != up;
@@ -368,8 +370,8 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
             p = skip_sep(p, end);
             const char *r = scan_number(p, end, &v[k]);
             if (!r)
-                return hv_error(HV_ERR_PARSE, "%s: byte %ld: expected a number for '%c'",
-                                s->name, (long)(p - s->base), cmd);
+                return hv__error(HV_ERR_PARSE, "%s: byte %ld: expected a number for '%c'", s->name,
+                                 (long)(p - s->base), cmd);
             p = r;
         }
         double ox = rel ? s->cx : 0, oy = rel ? s->cy : 0;
@@ -383,15 +385,9 @@ static hv_status parse_path_data(svg_state *s, const char *p, const char *end)
             s->after_close = 0;
             cmd = rel ? 'l' : 'L'; /* further pairs are line-tos */
             break;
-        case 'L':
-            svg_line_to(s, v[0] + ox, v[1] + oy);
-            break;
-        case 'H':
-            svg_line_to(s, v[0] + ox, s->cy);
-            break;
-        case 'V':
-            svg_line_to(s, s->cx, v[0] + (rel ? s->cy : 0));
-            break;
+        case 'L': svg_line_to(s, v[0] + ox, v[1] + oy); break;
+        case 'H': svg_line_to(s, v[0] + ox, s->cy); break;
+        case 'V': svg_line_to(s, s->cx, v[0] + (rel ? s->cy : 0)); break;
         case 'C':
         case 'S':
         case 'Q':
@@ -439,8 +435,8 @@ static hv_status parse_points(svg_state *s, const char *p, const char *end, int 
     while ((p = skip_sep(p, end)) < end) {
         const char *r = scan_number(p, end, &v);
         if (!r)
-            return hv_error(HV_ERR_PARSE, "%s: byte %ld: expected a number in points", s->name,
-                            (long)(p - s->base));
+            return hv__error(HV_ERR_PARSE, "%s: byte %ld: expected a number in points", s->name,
+                             (long)(p - s->base));
         if (!coord_ok(v))
             return svg_coord_error(s, p, v);
         p = r;
@@ -450,8 +446,8 @@ static hv_status parse_points(svg_state *s, const char *p, const char *end, int 
             x = v;
     }
     if (count % 2)
-        return hv_error(HV_ERR_PARSE, "%s: byte %ld: odd number of coordinates in points",
-                        s->name, (long)(end - s->base));
+        return hv__error(HV_ERR_PARSE, "%s: byte %ld: odd number of coordinates in points", s->name,
+                         (long)(end - s->base));
     b_end(s->b, closed);
     return HV_OK;
 }
@@ -526,7 +522,7 @@ static hv_status parse_svg(const char *text, size_t len, const char *name, hv_cu
             q++;
         }
         if (q >= end) {
-            st = hv_error(HV_ERR_PARSE, "%s: byte %ld: unterminated tag", name, (long)(p - text));
+            st = hv__error(HV_ERR_PARSE, "%s: byte %ld: unterminated tag", name, (long)(p - text));
             break;
         }
         size_t tl = 0;
@@ -553,14 +549,13 @@ static hv_status parse_svg(const char *text, size_t len, const char *name, hv_cu
 
 /* ---- public ---- */
 
-hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *name,
-                          hv_curves **out)
+hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *name, hv_curves **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_parse: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_parse: out is NULL");
     *out = NULL;
     if (!text)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_parse: text is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_parse: text is NULL");
     if (!name)
         name = "curves";
     return svg ? parse_svg(text, len, name, out) : parse_text(text, len, name, out);
@@ -569,33 +564,33 @@ hv_status hv_curves_parse(const char *text, size_t len, int svg, const char *nam
 hv_status hv_curves_read(const char *path, hv_curves **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_read: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_read: out is NULL");
     *out = NULL;
     if (!path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_read: path is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_read: path is NULL");
     /* Regular files and pipes only: a device such as /dev/zero never ends. */
     struct stat sb;
     if (stat(path, &sb) != 0)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))
-        return hv_error(HV_ERR_IO, "%s: is %s; curves are read from regular files or pipes", path,
-                        S_ISDIR(sb.st_mode)   ? "a directory"
-                        : S_ISCHR(sb.st_mode) ? "a character device"
-                        : S_ISBLK(sb.st_mode) ? "a block device"
-                                              : "not a regular file");
+        return hv__error(HV_ERR_IO, "%s: is %s; curves are read from regular files or pipes", path,
+                         S_ISDIR(sb.st_mode)   ? "a directory"
+                         : S_ISCHR(sb.st_mode) ? "a character device"
+                         : S_ISBLK(sb.st_mode) ? "a block device"
+                                               : "not a regular file");
     FILE *f = fopen(path, "rb");
     if (!f)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (fstat(fileno(f), &sb) != 0 || (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))) {
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: not a regular file or pipe", path);
+        return hv__error(HV_ERR_IO, "%s: not a regular file or pipe", path);
     }
     size_t cap = 1 << 16, len = 0;
     char *text = malloc(cap);
     for (;;) {
         if (!text) {
             fclose(f);
-            return hv_error(HV_ERR_NOMEM, "%s: out of memory", path);
+            return hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
         }
         len += fread(text + len, 1, cap - len, f);
         if (len < cap)
@@ -603,9 +598,10 @@ hv_status hv_curves_read(const char *path, hv_curves **out)
         if (len > CURVE_MAX_PIPE_BYTES) {
             free(text);
             fclose(f);
-            return hv_error(HV_ERR_IO, "%s: more than %zu MiB of curves; heatvox reads at most "
-                                       "that",
-                            path, CURVE_MAX_PIPE_BYTES >> 20);
+            return hv__error(HV_ERR_IO,
+                             "%s: more than %zu MiB of curves; heatvox reads at most "
+                             "that",
+                             path, CURVE_MAX_PIPE_BYTES >> 20);
         }
         cap *= 2;
         char *t = realloc(text, cap);
@@ -617,7 +613,7 @@ hv_status hv_curves_read(const char *path, hv_curves **out)
     fclose(f);
     if (err) {
         free(text);
-        return hv_error(HV_ERR_IO, "%s: read error", path);
+        return hv__error(HV_ERR_IO, "%s: read error", path);
     }
     const char *dot = strrchr(path, '.');
     const char *slash = strrchr(path, '/');

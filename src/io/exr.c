@@ -83,7 +83,7 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
     int lpc = 1;
     exr_result_t rv = exr_get_scanlines_per_chunk(ctx, part, &lpc);
     if (rv != EXR_ERR_SUCCESS || lpc < 1)
-        return hv_error(HV_ERR_BACKEND, "%s: OpenEXR: lines per chunk: %s", path, exr_reason(rv));
+        return hv__error(HV_ERR_BACKEND, "%s: OpenEXR: lines per chunk: %s", path, exr_reason(rv));
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
     exr_guard guard = {NULL};
     int started = 0;
@@ -95,8 +95,8 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
             rv = started ? exr_encoding_update(ctx, part, &ci, &enc)
                          : exr_encoding_initialize(ctx, part, &ci, &enc);
         if (rv != EXR_ERR_SUCCESS) {
-            st = hv_error(HV_ERR_IO, "%s: writing part %d, line %d: %s", path, part, y,
-                          exr_reason(rv));
+            st = hv__error(HV_ERR_IO, "%s: writing part %d, line %d: %s", path, part, y,
+                           exr_reason(rv));
             break;
         }
         /* Image row y shows grid row ny-1-y (second axis up). */
@@ -121,8 +121,8 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_encoding_run(ctx, part, &enc);
         if (rv != EXR_ERR_SUCCESS)
-            st = hv_error(HV_ERR_IO, "%s (writing %s): part %d, line %d: %s", path, tmp, part, y,
-                          exr_reason(rv));
+            st = hv__error(HV_ERR_IO, "%s (writing %s): part %d, line %d: %s", path, tmp, part, y,
+                           exr_reason(rv));
     }
     if (started)
         exr_encoding_destroy(ctx, &enc);
@@ -132,13 +132,13 @@ static hv_status write_part(exr_context_t ctx, int part, const float *slice, int
 hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel)
 {
     if (!path || !g || !g->v)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_write: path or grid is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_exr_write: path or grid is NULL");
     if (!channel)
         channel = "Y";
     size_t clen = strlen(channel);
     if (clen < 1 || clen > 31)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: EXR channel name '%s' must be 1 to 31 characters",
-                        path, channel);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: EXR channel name '%s' must be 1 to 31 characters",
+                         path, channel);
     int nx = g->n[0], ny = g->n[1], nparts = g->dim == 3 ? g->n[2] : 1;
     char tmp[4096];
     hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
@@ -147,13 +147,13 @@ hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel)
     float *buf = malloc(sizeof(float) * (size_t)nx * 64);
     if (!buf) {
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_NOMEM, "%s: no memory for an EXR line buffer", path);
+        return hv__error(HV_ERR_NOMEM, "%s: no memory for an EXR line buffer", path);
     }
     exr_context_initializer_t init = exr_init();
     exr_context_t ctx = NULL;
     exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
     if (rv != EXR_ERR_SUCCESS) {
-        st = hv_error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, exr_reason(rv));
+        st = hv__error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, exr_reason(rv));
         goto done;
     }
     exr_attr_v3d_t org = {{{g->origin[0], g->origin[1], g->origin[2]}}};
@@ -166,8 +166,8 @@ hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel)
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_initialize_required_attr_simple(ctx, part, nx, ny, EXR_COMPRESSION_ZIP);
         if (rv == EXR_ERR_SUCCESS)
-            rv = exr_add_channel(ctx, part, channel, EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1,
-                                 1);
+            rv =
+                exr_add_channel(ctx, part, channel, EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1);
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_attr_set_double(ctx, part, "heatvox:voxelSize", g->h);
         if (rv == EXR_ERR_SUCCESS)
@@ -177,18 +177,18 @@ hv_status hv_exr_write(const char *path, const hv_grid *g, const char *channel)
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_attr_set_int(ctx, part, "heatvox:sliceIndex", k);
         if (rv != EXR_ERR_SUCCESS) {
-            st = hv_error(HV_ERR_BACKEND, "%s: OpenEXR header of part %d: %s", path, k,
-                          exr_reason(rv));
+            st = hv__error(HV_ERR_BACKEND, "%s: OpenEXR header of part %d: %s", path, k,
+                           exr_reason(rv));
             goto done;
         }
     }
     rv = exr_write_header(ctx);
     if (rv != EXR_ERR_SUCCESS) {
-        st = hv_error(HV_ERR_IO, "%s: writing the EXR header: %s", path, exr_reason(rv));
+        st = hv__error(HV_ERR_IO, "%s: writing the EXR header: %s", path, exr_reason(rv));
         goto done;
     }
     for (int k = 0; k < nparts && st == HV_OK; k++) {
-        st = hv_progress((double)k / nparts, "exr");
+        st = hv__progress((double)k / nparts, "exr");
         if (st == HV_OK)
             st = write_part(ctx, k, g->v + (size_t)k * nx * ny, nx, ny, buf, tmp, path);
     }
@@ -197,7 +197,7 @@ done:
     if (ctx) {
         rv = exr_finish(&ctx);
         if (st == HV_OK && rv != EXR_ERR_SUCCESS)
-            st = hv_error(HV_ERR_IO, "%s: finishing %s: %s", path, tmp, exr_reason(rv));
+            st = hv__error(HV_ERR_IO, "%s: finishing %s: %s", path, tmp, exr_reason(rv));
     }
     if (st == HV_OK)
         st = verify_written(tmp, path, g, channel);
@@ -218,8 +218,8 @@ done:
  * predictor undone here; the rows land in dst. Only parts of one FLOAT channel
  * (heatvox's own layout) are recovered. Returns 1 when the chunk was
  * recovered, 0 when it is to be decoded as usual. */
-static int recover_misflagged(exr_context_t ctx, int part, const exr_chunk_info_t *ci,
-                              float *dst, int nx, const char *path)
+static int recover_misflagged(exr_context_t ctx, int part, const exr_chunk_info_t *ci, float *dst,
+                              int nx, const char *path)
 {
     exr_compression_t comp;
     const exr_attr_chlist_t *chl = NULL;
@@ -246,10 +246,10 @@ static int recover_misflagged(exr_context_t ctx, int part, const exr_chunk_info_
                          (uint32_t)z[4 * k + 2] << 16 | (uint32_t)z[4 * k + 3] << 24;
             memcpy(dst + k, &b, sizeof b);
         }
-        hv_log(HV_LOG_WARN,
-               "%s: part %d, lines %d..%d: a deflated chunk flagged as raw (OpenEXR 3.1's ZIP "
-               "encoder) was inflated",
-               path, part, ci->start_y, ci->start_y + ci->height - 1);
+        hv__log(HV_LOG_WARN,
+                "%s: part %d, lines %d..%d: a deflated chunk flagged as raw (OpenEXR 3.1's ZIP "
+                "encoder) was inflated",
+                path, part, ci->start_y, ci->start_y + ci->height - 1);
     }
     free(z);
     free(t);
@@ -263,8 +263,8 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
     int lpc = 1;
     exr_result_t rv = exr_get_scanlines_per_chunk(ctx, part, &lpc);
     if (rv != EXR_ERR_SUCCESS || lpc < 1)
-        return hv_error(HV_ERR_PARSE, "%s: part %d (%s): lines per chunk: %s", path, part, pname,
-                        exr_reason(rv));
+        return hv__error(HV_ERR_PARSE, "%s: part %d (%s): lines per chunk: %s", path, part, pname,
+                         exr_reason(rv));
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     int started = 0;
     hv_status st = HV_OK;
@@ -279,8 +279,8 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
             rv = started ? exr_decoding_update(ctx, part, &ci, &dec)
                          : exr_decoding_initialize(ctx, part, &ci, &dec);
         if (rv != EXR_ERR_SUCCESS) {
-            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s), line %d: %s", path, part, pname, y,
-                          exr_reason(rv));
+            st = hv__error(HV_ERR_PARSE, "%s: part %d (%s), line %d: %s", path, part, pname, y,
+                           exr_reason(rv));
             break;
         }
         int found = 0;
@@ -298,8 +298,8 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
             }
         }
         if (!found) {
-            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s): channel '%s' missing from a chunk", path,
-                          part, pname, channel);
+            st = hv__error(HV_ERR_PARSE, "%s: part %d (%s): channel '%s' missing from a chunk",
+                           path, part, pname, channel);
             break;
         }
         if (!started) {
@@ -309,8 +309,8 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_decoding_run(ctx, part, &dec);
         if (rv != EXR_ERR_SUCCESS)
-            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s), lines %d..%d: %s", path, part, pname,
-                          ci.start_y, ci.start_y + ci.height - 1, exr_reason(rv));
+            st = hv__error(HV_ERR_PARSE, "%s: part %d (%s), lines %d..%d: %s", path, part, pname,
+                           ci.start_y, ci.start_y + ci.height - 1, exr_reason(rv));
     }
     if (started)
         exr_decoding_destroy(ctx, &dec);
@@ -318,14 +318,14 @@ static hv_status read_part(exr_context_t ctx, int part, const exr_attr_box2i_t *
 }
 
 /* Picks the channel to read from part 0 and checks it has full resolution. */
-static hv_status choose_channel(exr_context_t ctx, const char *want, const char *path,
-                                char *out, size_t outsize)
+static hv_status choose_channel(exr_context_t ctx, const char *want, const char *path, char *out,
+                                size_t outsize)
 {
     const exr_attr_chlist_t *chl = NULL;
     exr_result_t rv = exr_get_channels(ctx, 0, &chl);
     if (rv != EXR_ERR_SUCCESS || !chl || chl->num_channels < 1)
-        return hv_error(HV_ERR_PARSE, "%s: no channels: %s", path,
-                        rv != EXR_ERR_SUCCESS ? exr_reason(rv) : "empty channel list");
+        return hv__error(HV_ERR_PARSE, "%s: no channels: %s", path,
+                         rv != EXR_ERR_SUCCESS ? exr_reason(rv) : "empty channel list");
     const exr_attr_chlist_entry_t *pick = NULL;
     const char *name = want ? want : chl->num_channels == 1 ? chl->entries[0].name.str : "Y";
     for (int c = 0; c < chl->num_channels; c++)
@@ -337,12 +337,12 @@ static hv_status choose_channel(exr_context_t ctx, const char *want, const char 
             size_t l = strlen(list);
             snprintf(list + l, sizeof list - l, "%s%s", c ? ", " : "", chl->entries[c].name.str);
         }
-        return hv_error(HV_ERR_PARSE, "%s: no channel '%s' (channels: %s)%s", path, name, list,
-                        want ? "" : "; name one");
+        return hv__error(HV_ERR_PARSE, "%s: no channel '%s' (channels: %s)%s", path, name, list,
+                         want ? "" : "; name one");
     }
     if (pick->x_sampling != 1 || pick->y_sampling != 1)
-        return hv_error(HV_ERR_UNSUPPORTED, "%s: channel '%s' is subsampled (%d x %d)", path, name,
-                        pick->x_sampling, pick->y_sampling);
+        return hv__error(HV_ERR_UNSUPPORTED, "%s: channel '%s' is subsampled (%d x %d)", path, name,
+                         pick->x_sampling, pick->y_sampling);
     snprintf(out, outsize, "%s", name);
     return HV_OK;
 }
@@ -350,21 +350,21 @@ static hv_status choose_channel(exr_context_t ctx, const char *want, const char 
 hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_read: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_exr_read: out is NULL");
     *out = NULL;
     if (!path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_exr_read: path is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_exr_read: path is NULL");
     struct stat sb;
     if (stat(path, &sb) != 0)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (!S_ISREG(sb.st_mode))
-        return hv_error(HV_ERR_IO, "%s: not a regular file", path);
+        return hv__error(HV_ERR_IO, "%s: not a regular file", path);
     exr_context_initializer_t init = exr_init();
     exr_context_t ctx = NULL;
     exr_result_t rv = exr_start_read(&ctx, path, &init);
     if (rv != EXR_ERR_SUCCESS) {
-        hv_status st = hv_error(HV_ERR_PARSE, "%s: not a readable EXR file: %s", path,
-                                exr_reason(rv));
+        hv_status st =
+            hv__error(HV_ERR_PARSE, "%s: not a readable EXR file: %s", path, exr_reason(rv));
         if (ctx)
             exr_finish(&ctx);
         return st;
@@ -377,7 +377,7 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
     char chan[64];
     rv = exr_get_count(ctx, &nparts);
     if (rv != EXR_ERR_SUCCESS || nparts < 1) {
-        st = hv_error(HV_ERR_PARSE, "%s: no image parts", path);
+        st = hv__error(HV_ERR_PARSE, "%s: no image parts", path);
         goto done;
     }
     for (int p = 0; p < nparts; p++) {
@@ -387,23 +387,22 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
         if (rv == EXR_ERR_SUCCESS)
             rv = exr_get_data_window(ctx, p, &dw);
         if (rv != EXR_ERR_SUCCESS) {
-            st = hv_error(HV_ERR_PARSE, "%s: part %d: %s", path, p, exr_reason(rv));
+            st = hv__error(HV_ERR_PARSE, "%s: part %d: %s", path, p, exr_reason(rv));
             goto done;
         }
         if (storage != EXR_STORAGE_SCANLINE) {
-            st = hv_error(HV_ERR_UNSUPPORTED, "%s: part %d is %s; only scanline images are read",
-                          path, p,
-                          storage == EXR_STORAGE_TILED ? "tiled" : "deep");
+            st = hv__error(HV_ERR_UNSUPPORTED, "%s: part %d is %s; only scanline images are read",
+                           path, p, storage == EXR_STORAGE_TILED ? "tiled" : "deep");
             goto done;
         }
         if (p == 0)
             dw0 = dw;
         else if (memcmp(&dw, &dw0, sizeof dw) != 0) {
-            st = hv_error(HV_ERR_PARSE,
-                          "%s: part %d has data window (%d,%d)-(%d,%d), part 0 (%d,%d)-(%d,%d); "
-                          "parts of one volume must match",
-                          path, p, dw.min.x, dw.min.y, dw.max.x, dw.max.y, dw0.min.x, dw0.min.y,
-                          dw0.max.x, dw0.max.y);
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: part %d has data window (%d,%d)-(%d,%d), part 0 (%d,%d)-(%d,%d); "
+                           "parts of one volume must match",
+                           path, p, dw.min.x, dw.min.y, dw.max.x, dw.max.y, dw0.min.x, dw0.min.y,
+                           dw0.max.x, dw0.max.y);
             goto done;
         }
     }
@@ -429,10 +428,10 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
      * that from this file is a damaged header. */
     double want = 4.0 * n[0] * (double)n[1] * nparts;
     if (n[0] < 1 || n[1] < 1 || want > EXR_MAX_RATIO * (double)sb.st_size + EXR_SMALL_GRID) {
-        st = hv_error(HV_ERR_PARSE,
-                      "%s: data window %d x %d in %d part(s) needs %.3g bytes, more than a file "
-                      "of %lld bytes can hold",
-                      path, n[0], n[1], nparts, want, (long long)sb.st_size);
+        st = hv__error(HV_ERR_PARSE,
+                       "%s: data window %d x %d in %d part(s) needs %.3g bytes, more than a file "
+                       "of %lld bytes can hold",
+                       path, n[0], n[1], nparts, want, (long long)sb.st_size);
         goto done;
     }
     if ((st = hv_grid_create(&g, dim, n, h, origin)) != HV_OK)
@@ -440,7 +439,7 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
     size_t plane = (size_t)n[0] * n[1];
     rows = malloc(sizeof(float) * plane);
     if (!rows) {
-        st = hv_error(HV_ERR_NOMEM, "%s: no memory for a %d x %d image", path, n[0], n[1]);
+        st = hv__error(HV_ERR_NOMEM, "%s: no memory for a %d x %d image", path, n[0], n[1]);
         goto done;
     }
     for (int p = 0; p < nparts && st == HV_OK; p++) {
@@ -454,8 +453,8 @@ hv_status hv_exr_read(const char *path, const char *channel, hv_grid **out)
                 has |= !strcmp(chl->entries[c].name.str, chan) && chl->entries[c].x_sampling == 1 &&
                        chl->entries[c].y_sampling == 1;
         if (!has) {
-            st = hv_error(HV_ERR_PARSE, "%s: part %d (%s) has no full-resolution channel '%s'",
-                          path, p, pname, chan);
+            st = hv__error(HV_ERR_PARSE, "%s: part %d (%s) has no full-resolution channel '%s'",
+                           path, p, pname, chan);
             break;
         }
         st = read_part(ctx, p, &dw0, chan, rows, n[0], path, pname);
@@ -487,15 +486,15 @@ static hv_status verify_written(const char *tmp, const char *path, const hv_grid
     if (hv_exr_read(tmp, channel, &back) != HV_OK) {
         char why[512];
         snprintf(why, sizeof why, "%s", hv_last_error());
-        return hv_error(HV_ERR_IO, "%s: the EXR file just written does not decode (%s); not kept",
-                        path, why);
+        return hv__error(HV_ERR_IO, "%s: the EXR file just written does not decode (%s); not kept",
+                         path, why);
     }
     hv_status st = HV_OK;
     size_t n = hv_grid_count(g);
     if (back->dim != g->dim || back->n[0] != g->n[0] || back->n[1] != g->n[1] ||
         (g->dim == 3 && back->n[2] != g->n[2]) || hv_grid_count(back) != n) {
-        st = hv_error(HV_ERR_IO, "%s: the EXR file just written decodes to another shape; not kept",
-                      path);
+        st = hv__error(HV_ERR_IO,
+                       "%s: the EXR file just written decodes to another shape; not kept", path);
     } else if (memcmp(back->v, g->v, sizeof(float) * n) != 0) {
         size_t i = 0, bad = 0;
         for (size_t k = 0; k < n; k++)
@@ -504,10 +503,10 @@ static hv_status verify_written(const char *tmp, const char *path, const hv_grid
                     i = k;
                 bad++;
             }
-        st = hv_error(HV_ERR_IO,
-                      "%s: the EXR file just written decodes to other values in %zu of %zu voxels "
-                      "(first at index %zu: %g instead of %g); not kept",
-                      path, bad, n, i, (double)back->v[i], (double)g->v[i]);
+        st = hv__error(HV_ERR_IO,
+                       "%s: the EXR file just written decodes to other values in %zu of %zu voxels "
+                       "(first at index %zu: %g instead of %g); not kept",
+                       path, bad, n, i, (double)back->v[i], (double)g->v[i]);
     }
     hv_grid_destroy(&back);
     return st;

@@ -41,11 +41,11 @@ static void swap8(void *p)
 hv_status hv_write_npy(const char *path, const hv_grid *g)
 {
     if (!path || !*path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_write_npy: output path is empty");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_write_npy: output path is empty");
     if (!g || !g->v)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: hv_write_npy: grid is NULL", path);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: hv_write_npy: grid is NULL", path);
     if (g->dim != 2 && g->dim != 3)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: grid dimension must be 2 or 3", path);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: grid dimension must be 2 or 3", path);
 
     char dict[256];
     if (g->dim == 3)
@@ -77,7 +77,7 @@ hv_status hv_write_npy(const char *path, const hv_grid *g)
     if (!f) {
         int e = errno;
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_IO, "%s: cannot create the output file: %s", path, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: cannot create the output file: %s", path, strerror(e));
     }
     int ok = fwrite(head, 1, total, f) == total;
     size_t count = hv_grid_count(g);
@@ -100,7 +100,7 @@ hv_status hv_write_npy(const char *path, const hv_grid *g)
     }
     if (!ok) {
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_IO, "%s: writing failed: %s", path, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: writing failed: %s", path, strerror(e));
     }
     return hv_tmp_commit(tmp, path);
 }
@@ -131,27 +131,27 @@ static const char *dict_value(const char *hdr, const char *key)
 hv_status hv_read_npy(const char *path, hv_grid **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_read_npy: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: out is NULL");
     *out = NULL;
     if (!path || !*path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_read_npy: input path is empty");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: input path is empty");
     /* The data's size is checked against the file's: only a regular file has
      * one (a pipe or a device such as /dev/zero is refused before opening). */
     struct stat sb;
     if (stat(path, &sb) != 0)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (!S_ISREG(sb.st_mode))
-        return hv_error(HV_ERR_IO, "%s: is %s; .npy arrays are read from regular files", path,
-                        S_ISDIR(sb.st_mode)   ? "a directory"
-                        : S_ISCHR(sb.st_mode) ? "a character device"
-                        : S_ISFIFO(sb.st_mode) ? "a pipe"
-                                               : "not a regular file");
+        return hv__error(HV_ERR_IO, "%s: is %s; .npy arrays are read from regular files", path,
+                         S_ISDIR(sb.st_mode)    ? "a directory"
+                         : S_ISCHR(sb.st_mode)  ? "a character device"
+                         : S_ISFIFO(sb.st_mode) ? "a pipe"
+                                                : "not a regular file");
     FILE *f = fopen(path, "rb");
     if (!f)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (fstat(fileno(f), &sb) != 0 || !S_ISREG(sb.st_mode)) {
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: not a regular file", path);
+        return hv__error(HV_ERR_IO, "%s: not a regular file", path);
     }
 
     hv_status st = HV_OK;
@@ -160,8 +160,8 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
     double *dbuf = NULL;
     uint8_t pre[12];
     if (fread(pre, 1, 10, f) != 10 || memcmp(pre, NPY_MAGIC, NPY_MAGIC_LEN) != 0) {
-        st = hv_error(HV_ERR_PARSE, "%s: not a NumPy .npy file (no \\x93NUMPY magic at byte 0)",
-                      path);
+        st = hv__error(HV_ERR_PARSE, "%s: not a NumPy .npy file (no \\x93NUMPY magic at byte 0)",
+                       path);
         goto done;
     }
     int major = pre[6], minor = pre[7];
@@ -171,34 +171,34 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         data_off = 10 + hlen;
     } else if (major == 2 || major == 3) {
         if (fread(pre + 10, 1, 2, f) != 2) {
-            st = hv_error(HV_ERR_PARSE, "%s: truncated .npy header (byte 10)", path);
+            st = hv__error(HV_ERR_PARSE, "%s: truncated .npy header (byte 10)", path);
             goto done;
         }
-        hlen = (size_t)pre[8] | (size_t)pre[9] << 8 | (size_t)pre[10] << 16 |
-               (size_t)pre[11] << 24;
+        hlen = (size_t)pre[8] | (size_t)pre[9] << 8 | (size_t)pre[10] << 16 | (size_t)pre[11] << 24;
         data_off = 12 + hlen;
     } else {
-        st = hv_error(HV_ERR_UNSUPPORTED, "%s: .npy format version %d.%d is not supported", path,
-                      major, minor);
+        st = hv__error(HV_ERR_UNSUPPORTED, "%s: .npy format version %d.%d is not supported", path,
+                       major, minor);
         goto done;
     }
     if (hlen == 0 || hlen > NPY_MAX_HEADER) {
-        st = hv_error(HV_ERR_PARSE, "%s: .npy header length %zu is out of range", path, hlen);
+        st = hv__error(HV_ERR_PARSE, "%s: .npy header length %zu is out of range", path, hlen);
         goto done;
     }
     hdr = malloc(hlen + 1);
     if (!hdr) {
-        st = hv_error(HV_ERR_NOMEM, "%s: no memory for the .npy header", path);
+        st = hv__error(HV_ERR_NOMEM, "%s: no memory for the .npy header", path);
         goto done;
     }
     if (fread(hdr, 1, hlen, f) != hlen) {
-        st = hv_error(HV_ERR_PARSE, "%s: truncated .npy header (expected %zu bytes after byte %zu)",
+        st =
+            hv__error(HV_ERR_PARSE, "%s: truncated .npy header (expected %zu bytes after byte %zu)",
                       path, hlen, data_off - hlen);
         goto done;
     }
     hdr[hlen] = '\0';
     if (memchr(hdr, '\0', hlen)) {
-        st = hv_error(HV_ERR_PARSE, "%s: .npy header contains a NUL byte", path);
+        st = hv__error(HV_ERR_PARSE, "%s: .npy header contains a NUL byte", path);
         goto done;
     }
 
@@ -206,8 +206,11 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
     const char *fortran = dict_value(hdr, "fortran_order");
     const char *shape = dict_value(hdr, "shape");
     if (!descr || !fortran || !shape) {
-        st = hv_error(HV_ERR_PARSE, "%s: .npy header lacks '%s': %s", path,
-                      !descr ? "descr" : !fortran ? "fortran_order" : "shape", hdr);
+        st = hv__error(HV_ERR_PARSE, "%s: .npy header lacks '%s': %s", path,
+                       !descr     ? "descr"
+                       : !fortran ? "fortran_order"
+                                  : "shape",
+                       hdr);
         goto done;
     }
     size_t itemsize;
@@ -219,25 +222,25 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         int len = 0;
         while (descr[len] && descr[len] != ',' && descr[len] != '}' && len < 40)
             len++;
-        st = hv_error(HV_ERR_UNSUPPORTED,
-                      "%s: .npy dtype %.*s is not supported (need little-endian float32 '<f4' or "
-                      "float64 '<f8')",
-                      path, len, descr);
+        st = hv__error(HV_ERR_UNSUPPORTED,
+                       "%s: .npy dtype %.*s is not supported (need little-endian float32 '<f4' or "
+                       "float64 '<f8')",
+                       path, len, descr);
         goto done;
     }
     if (!strncmp(fortran, "True", 4)) {
-        st = hv_error(HV_ERR_UNSUPPORTED,
-                      "%s: .npy array is in Fortran order; save it in C order "
-                      "(numpy.ascontiguousarray)",
-                      path);
+        st = hv__error(HV_ERR_UNSUPPORTED,
+                       "%s: .npy array is in Fortran order; save it in C order "
+                       "(numpy.ascontiguousarray)",
+                       path);
         goto done;
     }
     if (strncmp(fortran, "False", 5)) {
-        st = hv_error(HV_ERR_PARSE, "%s: .npy header: bad fortran_order value", path);
+        st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad fortran_order value", path);
         goto done;
     }
     if (*shape != '(') {
-        st = hv_error(HV_ERR_PARSE, "%s: .npy header: shape is not a tuple", path);
+        st = hv__error(HV_ERR_PARSE, "%s: .npy header: shape is not a tuple", path);
         goto done;
     }
     long dims[4];
@@ -249,18 +252,18 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         if (*p == ')')
             break;
         if (!isdigit((unsigned char)*p)) {
-            st = hv_error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
+            st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
             goto done;
         }
         char *end;
         errno = 0;
         long v = strtol(p, &end, 10);
         if (errno || v > 0x7fffffffL) {
-            st = hv_error(HV_ERR_INVALID_ARG, "%s: .npy shape entry is too large", path);
+            st = hv__error(HV_ERR_INVALID_ARG, "%s: .npy shape entry is too large", path);
             goto done;
         }
         if (nd == 4) {
-            st = hv_error(HV_ERR_UNSUPPORTED, "%s: .npy array has more than 3 dimensions", path);
+            st = hv__error(HV_ERR_UNSUPPORTED, "%s: .npy array has more than 3 dimensions", path);
             goto done;
         }
         dims[nd++] = v;
@@ -270,15 +273,15 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         if (*p == ',')
             p++;
         else if (*p != ')') {
-            st = hv_error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
+            st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
             goto done;
         }
     }
     if (nd != 2 && nd != 3) {
-        st = hv_error(HV_ERR_UNSUPPORTED,
-                      "%s: .npy array has %d dimension%s; heatvox grids need 2 (ny, nx) or 3 "
-                      "(nz, ny, nx)",
-                      path, nd, nd == 1 ? "" : "s");
+        st = hv__error(HV_ERR_UNSUPPORTED,
+                       "%s: .npy array has %d dimension%s; heatvox grids need 2 (ny, nx) or 3 "
+                       "(nz, ny, nx)",
+                       path, nd, nd == 1 ? "" : "s");
         goto done;
     }
     int n[3] = {(int)dims[nd - 1], (int)dims[nd - 2], nd == 3 ? (int)dims[0] : 1};
@@ -286,32 +289,33 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
     if (st) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", hv_last_error());
-        st = hv_error(st, "%s: %s", path, msg);
+        st = hv__error(st, "%s: %s", path, msg);
         goto done;
     }
     size_t count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
     size_t need = count * itemsize;
     if (fseek(f, 0, SEEK_END) != 0) {
-        st = hv_error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
+        st = hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
         goto done;
     }
     long fsize = ftell(f);
     if (fsize < 0 || fseek(f, (long)data_off, SEEK_SET) != 0) {
-        st = hv_error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
+        st = hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
         goto done;
     }
     if ((size_t)fsize < data_off + need) {
-        st = hv_error(HV_ERR_PARSE,
-                      "%s: truncated .npy data: shape needs %zu bytes from byte %zu, the file has "
-                      "%zu",
-                      path, need, data_off, (size_t)fsize > data_off ? (size_t)fsize - data_off : 0);
+        st = hv__error(HV_ERR_PARSE,
+                       "%s: truncated .npy data: shape needs %zu bytes from byte %zu, the file has "
+                       "%zu",
+                       path, need, data_off,
+                       (size_t)fsize > data_off ? (size_t)fsize - data_off : 0);
         goto done;
     }
     if ((size_t)fsize > data_off + need) {
-        st = hv_error(HV_ERR_PARSE,
-                      "%s: .npy file has %zu bytes after the data that the shape describes "
-                      "(data from byte %zu, %zu bytes)",
-                      path, (size_t)fsize - data_off - need, data_off, need);
+        st = hv__error(HV_ERR_PARSE,
+                       "%s: .npy file has %zu bytes after the data that the shape describes "
+                       "(data from byte %zu, %zu bytes)",
+                       path, (size_t)fsize - data_off - need, data_off, need);
         goto done;
     }
     st = hv_grid_create(&g, nd, n, 1.0, NULL);
@@ -320,7 +324,7 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
     int little = host_is_little_endian();
     if (itemsize == 4) {
         if (fread(g->v, 4, count, f) != count) {
-            st = hv_error(HV_ERR_IO, "%s: read error in the data", path);
+            st = hv__error(HV_ERR_IO, "%s: read error in the data", path);
             goto done;
         }
         if (!little)
@@ -330,13 +334,13 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         enum { CHUNK = 4096 };
         dbuf = malloc(CHUNK * sizeof(double));
         if (!dbuf) {
-            st = hv_error(HV_ERR_NOMEM, "%s: no memory for a read buffer", path);
+            st = hv__error(HV_ERR_NOMEM, "%s: no memory for a read buffer", path);
             goto done;
         }
         for (size_t i = 0; i < count; i += CHUNK) {
             size_t m = count - i < CHUNK ? count - i : CHUNK;
             if (fread(dbuf, 8, m, f) != m) {
-                st = hv_error(HV_ERR_IO, "%s: read error in the data", path);
+                st = hv__error(HV_ERR_IO, "%s: read error in the data", path);
                 goto done;
             }
             for (size_t j = 0; j < m; j++) {

@@ -61,10 +61,9 @@ static void colormap_into(const hv_grid *g, double range, uint8_t *rgb, int stri
         uint8_t *px = rgb + 3 * ((size_t)(bottom - j) * stride);
         for (int i = 0; i < nx; i++, px += 3) {
             float v = row[i];
-            int black = (i > 0 && on_contour(v, row[i - 1])) ||
-                        (i + 1 < nx && on_contour(v, row[i + 1])) ||
-                        (j > 0 && on_contour(v, row[i - nx])) ||
-                        (j + 1 < ny && on_contour(v, row[i + nx]));
+            int black =
+                (i > 0 && on_contour(v, row[i - 1])) || (i + 1 < nx && on_contour(v, row[i + 1])) ||
+                (j > 0 && on_contour(v, row[i - nx])) || (j + 1 < ny && on_contour(v, row[i + nx]));
             if (black)
                 px[0] = px[1] = px[2] = 0;
             else
@@ -76,10 +75,10 @@ static void colormap_into(const hv_grid *g, double range, uint8_t *rgb, int stri
 static hv_status check_2d(const hv_grid *g, const char *what)
 {
     if (!g || !g->v)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: grid is NULL", what);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: grid is NULL", what);
     if (g->dim != 2)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: a preview image needs a 2D grid (slice it first)",
-                        what);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: a preview image needs a 2D grid (slice it first)",
+                         what);
     return HV_OK;
 }
 
@@ -89,7 +88,7 @@ hv_status hv_image_colormap(const hv_grid *g, double range, uint8_t *rgb)
     if (st)
         return st;
     if (!rgb)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_image_colormap: rgb is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_image_colormap: rgb is NULL");
     if (!(range > 0) || !isfinite(range))
         range = auto_range(&g, 1);
     colormap_into(g, range, rgb, g->n[0], g->n[1] - 1);
@@ -119,8 +118,8 @@ static void on_png_warning(png_structp png, png_const_charp msg)
 static hv_status png_write_file(FILE *f, const uint8_t *rgb, int width, int height,
                                 struct png_err *err)
 {
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, err, on_png_error,
-                                              on_png_warning);
+    png_structp png =
+        png_create_write_struct(PNG_LIBPNG_VER_STRING, err, on_png_error, on_png_warning);
     if (!png) {
         snprintf(err->msg, sizeof err->msg, "libpng could not start");
         return HV_ERR_BACKEND;
@@ -146,10 +145,10 @@ static hv_status png_write_file(FILE *f, const uint8_t *rgb, int width, int heig
 hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int height)
 {
     if (!path || !rgb)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_png_write_rgb: path or pixels NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_png_write_rgb: path or pixels NULL");
     if (width < 1 || height < 1 || width > 1000000 || height > 1000000)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: PNG size %d x %d is out of range", path, width,
-                        height);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: PNG size %d x %d is out of range", path, width,
+                         height);
     char tmp[4096];
     hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
     if (st)
@@ -158,7 +157,7 @@ hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int 
     if (!f) {
         int e = errno;
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, strerror(e));
     }
     struct png_err err;
     err.msg[0] = '\0';
@@ -170,7 +169,7 @@ hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int 
     }
     if (st != HV_OK) {
         hv_tmp_discard(tmp);
-        return hv_error(st, "%s: writing PNG: %s", path, err.msg);
+        return hv__error(st, "%s: writing PNG: %s", path, err.msg);
     }
     return hv_tmp_commit(tmp, path);
 }
@@ -179,7 +178,7 @@ hv_status hv_png_write_slices(const char *path, const hv_grid *const *slices, in
                               double range)
 {
     if (!slices || count < 1)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: no slices to draw", path ? path : "PNG");
+        return hv__error(HV_ERR_INVALID_ARG, "%s: no slices to draw", path ? path : "PNG");
     int width = 0, height = 0;
     for (int s = 0; s < count; s++) {
         hv_status st = check_2d(slices[s], path ? path : "PNG");
@@ -193,7 +192,7 @@ hv_status hv_png_write_slices(const char *path, const hv_grid *const *slices, in
         range = auto_range(slices, count);
     uint8_t *rgb = malloc(3 * (size_t)width * height);
     if (!rgb)
-        return hv_error(HV_ERR_NOMEM, "%s: no memory for a %d x %d image", path, width, height);
+        return hv__error(HV_ERR_NOMEM, "%s: no memory for a %d x %d image", path, width, height);
     memset(rgb, 255, 3 * (size_t)width * height);
     int x0 = 0;
     for (int s = 0; s < count; s++) {
@@ -213,8 +212,8 @@ hv_status hv_png_write(const char *path, const hv_grid *g, double range)
 hv_status hv_png_write_preview(const char *path, const hv_grid *g, double range)
 {
     if (!g || !g->v || g->dim != 3)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: the three-slice preview needs a 3D grid",
-                        path ? path : "PNG");
+        return hv__error(HV_ERR_INVALID_ARG, "%s: the three-slice preview needs a 3D grid",
+                         path ? path : "PNG");
     hv_grid *s[3] = {NULL, NULL, NULL};
     hv_status st = HV_OK;
     for (int a = 0; a < 3 && st == HV_OK; a++)
@@ -231,30 +230,30 @@ hv_status hv_png_write_preview(const char *path, const hv_grid *g, double range)
 hv_status hv_png_read_rgb(const char *path, uint8_t **rgb, int *width, int *height)
 {
     if (!path || !rgb || !width || !height)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_png_read_rgb: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_png_read_rgb: NULL argument");
     *rgb = NULL;
     *width = *height = 0;
     FILE *f = fopen(path, "rb");
     if (!f)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     struct png_err err;
     err.msg[0] = '\0';
-    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &err, on_png_error,
-                                             on_png_warning);
+    png_structp png =
+        png_create_read_struct(PNG_LIBPNG_VER_STRING, &err, on_png_error, on_png_warning);
     png_infop info = png ? png_create_info_struct(png) : NULL;
     uint8_t *volatile pix = NULL;
     png_bytep *volatile rows = NULL;
     if (!png || !info) {
         png_destroy_read_struct(&png, &info, NULL);
         fclose(f);
-        return hv_error(HV_ERR_BACKEND, "%s: libpng could not start", path);
+        return hv__error(HV_ERR_BACKEND, "%s: libpng could not start", path);
     }
     if (setjmp(err.jmp)) {
         png_destroy_read_struct(&png, &info, NULL);
         fclose(f);
         free(pix);
         free(rows);
-        return hv_error(HV_ERR_PARSE, "%s: not a readable PNG: %s", path, err.msg);
+        return hv__error(HV_ERR_PARSE, "%s: not a readable PNG: %s", path, err.msg);
     }
     png_init_io(png, f);
     png_read_info(png, info);

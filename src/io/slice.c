@@ -7,19 +7,19 @@
 hv_status hv_grid_slice(const hv_grid *g, int axis, int index, hv_grid **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_slice: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_grid_slice: out is NULL");
     *out = NULL;
     if (!g || !g->v)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_grid_slice: grid is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_grid_slice: grid is NULL");
     if (axis < 0 || axis > 2)
-        return hv_error(HV_ERR_INVALID_ARG, "slice axis must be 0, 1 or 2 (x, y, z), got %d",
-                        axis);
+        return hv__error(HV_ERR_INVALID_ARG, "slice axis must be 0, 1 or 2 (x, y, z), got %d",
+                         axis);
     if (g->dim == 2 && axis != 2)
-        return hv_error(HV_ERR_INVALID_ARG, "a 2D grid can only be sliced along z, not %c",
-                        "xyz"[axis]);
+        return hv__error(HV_ERR_INVALID_ARG, "a 2D grid can only be sliced along z, not %c",
+                         "xyz"[axis]);
     if (index < 0 || index >= g->n[axis])
-        return hv_error(HV_ERR_INVALID_ARG, "slice index %d along %c is outside 0..%d", index,
-                        "xyz"[axis], g->n[axis] - 1);
+        return hv__error(HV_ERR_INVALID_ARG, "slice index %d along %c is outside 0..%d", index,
+                         "xyz"[axis], g -> n[axis] - 1);
     /* The remaining axes, in increasing order: u is the image's horizontal axis. */
     int u = axis == 0 ? 1 : 0, w = axis == 2 ? 1 : 2;
     int n2[3] = {g->n[u], g->n[w], 1};

@@ -23,8 +23,10 @@
 #include <unordered_set>
 #include <vector>
 
-namespace hv_vdb_check {
-namespace {
+namespace hv_vdb_check
+{
+namespace
+{
 
 const int64_t VDB_MAGIC = 0x56444220;
 // OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION (OpenVDB 2.0, 2013): per-grid
@@ -109,7 +111,8 @@ uint32_t le32(const uint8_t *p)
 // The file through a window of WINDOW bytes. `end` is the end of the region
 // being walked (the file, a grid, its topology, one metadata value): nothing
 // at or after it is ever read, and a field that would cross it is an error.
-class Reader {
+class Reader
+{
   public:
     explicit Reader(const std::string &path) : path_(path), buf_(WINDOW)
     {
@@ -509,8 +512,8 @@ struct FileCheck::Impl {
             r.corrupt("a negative grid count (" + std::to_string(count) + ")");
         for (int32_t i = 0; i < count; i++) {
             Grid g;
-            r.ctx = "grid descriptor " + num((uint64_t)i + 1) + " of " + num((uint64_t)count) +
-                    ": ";
+            r.ctx =
+                "grid descriptor " + num((uint64_t)i + 1) + " of " + num((uint64_t)count) + ": ";
             g.unique = r.str("grid name");
             g.name = g.unique.substr(0, g.unique.find('\x1e'));
             g.label = grid_label(g.unique);

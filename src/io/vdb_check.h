@@ -1,4 +1,4 @@
-/* Private to the OpenVDB shim (vdb_shim.cpp): checks the layout of a .vdb file
+/* Private to the OpenVDB shim (vdb_read.cpp): checks the layout of a .vdb file
  * against the file's size before OpenVDB reads it. OpenVDB trusts every length
  * and count it reads (a string length, a metadata size, a node count, a
  * compressed block size) and keeps reading after the end of a truncated file
@@ -15,7 +15,8 @@
 #include <memory>
 #include <string>
 
-namespace hv_vdb_check {
+namespace hv_vdb_check
+{
 
 /* Why a file must not be handed to OpenVDB. st is HV_ERR_IO for a file that
  * cannot be read or is truncated or corrupt, HV_ERR_UNSUPPORTED for a format
@@ -25,7 +26,8 @@ struct Rejected {
     std::string msg;
 };
 
-class FileCheck {
+class FileCheck
+{
   public:
     /* Checks the header, the file metadata, every grid descriptor (names,
      * types, positions within the file and in order) and every grid's

@@ -18,7 +18,8 @@ extern "C" {
 #include <new>
 #include <string>
 
-namespace hv_vdb_shim {
+namespace hv_vdb_shim
+{
 
 // Grid metadata of heatvox's writer: the index box of the dense block.
 inline constexpr const char *BLOCK_MIN = "heatvox_block_min";
@@ -39,17 +40,17 @@ template <class F> hv_status guarded(const char *where, F &&body)
     try {
         return body();
     } catch (const Fail &e) {
-        return hv_error(e.st, "%s", e.msg.c_str());
+        return hv__error(e.st, "%s", e.msg.c_str());
     } catch (const openvdb::IoError &e) {
-        return hv_error(HV_ERR_IO, "%s: %s", where, e.what());
+        return hv__error(HV_ERR_IO, "%s: %s", where, e.what());
     } catch (const openvdb::Exception &e) {
-        return hv_error(HV_ERR_BACKEND, "%s: OpenVDB: %s", where, e.what());
+        return hv__error(HV_ERR_BACKEND, "%s: OpenVDB: %s", where, e.what());
     } catch (const std::bad_alloc &) {
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory", where);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory", where);
     } catch (const std::exception &e) {
-        return hv_error(HV_ERR_BACKEND, "%s: %s", where, e.what());
+        return hv__error(HV_ERR_BACKEND, "%s: %s", where, e.what());
     } catch (...) {
-        return hv_error(HV_ERR_INTERNAL, "%s: unknown exception", where);
+        return hv__error(HV_ERR_INTERNAL, "%s: unknown exception", where);
     }
 }
 

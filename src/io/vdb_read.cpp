@@ -22,7 +22,8 @@
 
 using namespace hv_vdb_shim;
 
-namespace {
+namespace
+{
 
 using openvdb::Coord;
 using openvdb::CoordBBox;
@@ -93,8 +94,8 @@ struct OpenFile {
         if (!name || !*name)
             fail(HV_ERR_INVALID_ARG, path + ": grid name is empty");
         if (!file.hasGrid(name))
-            fail(HV_ERR_INVALID_ARG, path + ": no grid named '" + name + "' (the file has " +
-                                         names() + ")");
+            fail(HV_ERR_INVALID_ARG,
+                 path + ": no grid named '" + name + "' (the file has " + names() + ")");
     }
 
     openvdb::GridBase::Ptr read(const char *name)
@@ -172,8 +173,8 @@ CoordBBox default_box(const openvdb::GridBase &g, const std::string &path, bool 
         if (!box.empty())
             return box;
     }
-    fail(HV_ERR_INVALID_ARG, path + ": grid '" + g.getName() +
-                                 "' has no active voxels; pass an index box to read it");
+    fail(HV_ERR_INVALID_ARG,
+         path + ": grid '" + g.getName() + "' has no active voxels; pass an index box to read it");
 }
 
 CoordBBox read_box(const openvdb::GridBase &g, const std::string &path, const hv_vdb_read_opts *o)
@@ -184,7 +185,7 @@ CoordBBox read_box(const openvdb::GridBase &g, const std::string &path, const hv
         if (o->box_hi[a] < o->box_lo[a]) {
             char buf[160];
             snprintf(buf, sizeof buf, ": index box is empty along %c (lo %d > hi %d)", "xyz"[a],
-                     o->box_lo[a], o->box_hi[a]);
+                     o -> box_lo[a], o -> box_hi[a]);
             fail(HV_ERR_INVALID_ARG, path + buf);
         }
     return CoordBBox(Coord(o->box_lo[0], o->box_lo[1], o->box_lo[2]),
@@ -305,7 +306,7 @@ hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_rea
                             hv_grid **out, int *grid_class)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_vdb_read_float: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_vdb_read_float: out is NULL");
     *out = nullptr;
     return guarded(path ? path : "hv_vdb_read_float", [&] {
         OpenFile f(path);
@@ -314,14 +315,16 @@ hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_rea
         GridOwner o;
         o.g = new_dense(*base, f.path, box);
         hv_grid *g = o.g;
-        auto put = [g](size_t idx, auto &acc, const Coord &c) { g->v[idx] = (float)acc.getValue(c); };
+        auto put = [g](size_t idx, auto &acc, const Coord &c) {
+            g->v[idx] = (float)acc.getValue(c);
+        };
         if (auto fg = openvdb::GridBase::grid<openvdb::FloatGrid>(base))
             for_box(*fg, box, put);
         else if (auto dg = openvdb::GridBase::grid<openvdb::DoubleGrid>(base))
             for_box(*dg, box, put);
         else
-            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " +
-                                         base->valueType() + " values, not float or double");
+            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " + base->valueType() +
+                                         " values, not float or double");
         if (grid_class)
             *grid_class = (int)base->getGridClass();
         *out = o.release();
@@ -333,7 +336,7 @@ hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read
                            hv_grid **gx, hv_grid **gy, hv_grid **gz)
 {
     if (!gx || !gy || !gz)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_vdb_read_vec3: an output pointer is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_vdb_read_vec3: an output pointer is NULL");
     *gx = *gy = *gz = nullptr;
     return guarded(path ? path : "hv_vdb_read_vec3", [&] {
         OpenFile f(path);
@@ -355,8 +358,8 @@ hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read
         else if (auto dg = openvdb::GridBase::grid<openvdb::Vec3DGrid>(base))
             for_box(*dg, box, put);
         else
-            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " +
-                                         base->valueType() + " values, not vec3s or vec3d");
+            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " + base->valueType() +
+                                         " values, not vec3s or vec3d");
         *gx = ox.release();
         *gy = oy.release();
         *gz = oz.release();
@@ -368,7 +371,7 @@ hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_vdb_read
                            hv_grid **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_vdb_read_mask: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_vdb_read_mask: out is NULL");
     *out = nullptr;
     return guarded(path ? path : "hv_vdb_read_mask", [&] {
         OpenFile f(path);
@@ -401,8 +404,7 @@ hv_status hv_vdb_read_mask(const char *path, const char *name, const hv_vdb_read
         else if (auto dg = openvdb::GridBase::grid<openvdb::DoubleGrid>(base))
             for_box(*dg, box, by_value);
         else
-            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " +
-                                         base->valueType() +
+            fail(HV_ERR_INVALID_ARG, f.path + ": grid '" + name + "' holds " + base->valueType() +
                                          " values; a mask must be bool, mask, float or double");
         *out = o.release();
         return HV_OK;

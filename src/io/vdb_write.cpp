@@ -24,7 +24,8 @@
 
 using namespace hv_vdb_shim;
 
-namespace {
+namespace
+{
 
 using openvdb::Coord;
 using openvdb::Vec3d;
@@ -37,8 +38,7 @@ using openvdb::Vec3i;
 openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
 {
     auto xf = openvdb::math::Transform::createLinearTransform(h);
-    xf->postTranslate(
-        Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
+    xf->postTranslate(Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
     return xf;
 }
 
@@ -70,11 +70,12 @@ void check_same_shape(const hv_grid *a, const hv_grid *b, const char *an, const 
         same = std::fabs(a->origin[d] - b->origin[d]) <= 1e-9 * (a->h + std::fabs(a->origin[d]));
     if (!same) {
         char buf[512];
-        snprintf(buf, sizeof buf,
-                 "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
-                 "%g) must have the same size, voxel size and origin",
-                 an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
-                 b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
+        snprintf(
+            buf, sizeof buf,
+            "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
+            "%g) must have the same size, voxel size and origin",
+            an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
+            b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
         fail(HV_ERR_INVALID_ARG, buf);
     }
 }
@@ -93,8 +94,7 @@ inline size_t lin(const hv_grid *g, int i, int j, int k)
 int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
 
 template <class GridT, class F, class G>
-void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside,
-                bool prune)
+void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside, bool prune)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
     using ValueT = typename GridT::ValueType;
@@ -115,44 +115,46 @@ void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&ou
     // and one value becomes a tile instead of a leaf.
     std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
     std::vector<ValueT> tiles(nleaf);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
-        std::vector<ValueT> vals(LeafT::SIZE);
-        std::vector<char> on(LeafT::SIZE);
-        for (size_t l = r.begin(); l != r.end(); l++) {
-            const Coord o = origin(l);
-            bool any_on = false;
-            for (int x = o[0]; x < o[0] + D; x++)
-                for (int y = o[1]; y < o[1] + D; y++)
-                    for (int z = o[2]; z < o[2] + D; z++) {
-                        const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
-                        const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
-                        const int i = std::clamp(bi, 0, n[0] - 1), j = std::clamp(bj, 0, n[1] - 1),
-                                  k = std::clamp(bk, 0, n[2] - 1);
-                        bool active = false;
-                        if (bi == i && bj == j && bk == k)
-                            vals[q] = value(i, j, k, &active);
-                        else
-                            vals[q] = outside(i, j, k);
-                        on[q] = active;
-                        any_on |= active;
-                    }
-            bool uniform = !any_on;
-            for (size_t q = 1; uniform && q < vals.size(); q++)
-                uniform = vals[q] == vals[0];
-            if (uniform) {
-                tiles[l] = vals[0];
-                continue;
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
+            std::vector<ValueT> vals(LeafT::SIZE);
+            std::vector<char> on(LeafT::SIZE);
+            for (size_t l = r.begin(); l != r.end(); l++) {
+                const Coord o = origin(l);
+                bool any_on = false;
+                for (int x = o[0]; x < o[0] + D; x++)
+                    for (int y = o[1]; y < o[1] + D; y++)
+                        for (int z = o[2]; z < o[2] + D; z++) {
+                            const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
+                            const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
+                            const int i = std::clamp(bi, 0, n[0] - 1),
+                                      j = std::clamp(bj, 0, n[1] - 1),
+                                      k = std::clamp(bk, 0, n[2] - 1);
+                            bool active = false;
+                            if (bi == i && bj == j && bk == k)
+                                vals[q] = value(i, j, k, &active);
+                            else
+                                vals[q] = outside(i, j, k);
+                            on[q] = active;
+                            any_on |= active;
+                        }
+                bool uniform = !any_on;
+                for (size_t q = 1; uniform && q < vals.size(); q++)
+                    uniform = vals[q] == vals[0];
+                if (uniform) {
+                    tiles[l] = vals[0];
+                    continue;
+                }
+                auto leaf = std::make_unique<LeafT>(o, vals[0], false);
+                for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
+                    if (on[q])
+                        leaf->setValueOn(q, vals[q]);
+                    else
+                        leaf->setValueOff(q, vals[q]);
+                }
+                leaves[l] = std::move(leaf);
             }
-            auto leaf = std::make_unique<LeafT>(o, vals[0], false);
-            for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
-                if (on[q])
-                    leaf->setValueOn(q, vals[q]);
-                else
-                    leaf->setValueOff(q, vals[q]);
-            }
-            leaves[l] = std::move(leaf);
-        }
-    });
+        });
     auto &tree = grid.tree();
     for (size_t l = 0; l < nleaf; l++) {
         if (leaves[l])
@@ -167,12 +169,12 @@ void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&ou
 void tag_block(openvdb::GridBase &grid, const int n[3], const int off[3])
 {
     grid.insertMeta(BLOCK_MIN, openvdb::Vec3IMetadata(Vec3i(off[0], off[1], off[2])));
-    grid.insertMeta(BLOCK_MAX, openvdb::Vec3IMetadata(Vec3i(off[0] + n[0] - 1, off[1] + n[1] - 1,
-                                                            off[2] + n[2] - 1)));
+    grid.insertMeta(BLOCK_MAX, openvdb::Vec3IMetadata(
+                                   Vec3i(off[0] + n[0] - 1, off[1] + n[1] - 1, off[2] + n[2] - 1)));
 }
 
-openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense,
-                                      bool prune, const Placement &pl = Placement())
+openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense, bool prune,
+                                      const Placement &pl = Placement())
 {
     const float bg = (float)(band_voxels * g->h);
     auto grid = openvdb::FloatGrid::create(bg);
@@ -201,11 +203,13 @@ struct hv_vdb_writer {
     double index0[3] = {0, 0, 0};
 };
 
-namespace {
+namespace
+{
 
 // Archive::write(stream, ...) is protected; File::write opens its own stream
 // and never checks it after closing, so a full disk would go unnoticed.
-class CheckedArchive : public openvdb::io::Archive {
+class CheckedArchive : public openvdb::io::Archive
+{
   public:
     void write_to(std::ostream &os, const openvdb::GridCPtrVec &grids,
                   const openvdb::MetaMap &meta) const
@@ -255,8 +259,8 @@ Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
     return pl;
 }
 
-void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g,
-                 const char *name, const Placement &pl)
+void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g, const char *name,
+                 const Placement &pl)
 {
     grid->setName(name);
     grid->setSaveFloatAsHalf(false);
@@ -272,7 +276,7 @@ extern "C" {
 hv_status hv_vdb_writer_create(hv_vdb_writer **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_vdb_writer_create: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_vdb_writer_create: out is NULL");
     *out = nullptr;
     return guarded("hv_vdb_writer_create", [&] {
         init_vdb();
@@ -374,7 +378,8 @@ hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char 
                 for (int j = 0; j < g->n[1]; j++)
                     for (int i = 0; i < g->n[0]; i++)
                         if (g->solid[lin(g, i, j, k)])
-                            acc.setValueOn(Coord(i + pl.off[0], j + pl.off[1], k + pl.off[2]), true);
+                            acc.setValueOn(Coord(i + pl.off[0], j + pl.off[1], k + pl.off[2]),
+                                           true);
             openvdb::tools::prune(grid->tree());
         }
         grid->setTransform(pl.xf);
@@ -387,7 +392,8 @@ hv_status hv_vdb_writer_set_index_origin(hv_vdb_writer *w, const double index0_w
 {
     return guarded("hv_vdb_writer_set_index_origin", [&] {
         if (!w || !index0_world)
-            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: writer and position are required");
+            fail(HV_ERR_INVALID_ARG,
+                 "hv_vdb_writer_set_index_origin: writer and position are required");
         for (int a = 0; a < 3; a++)
             if (!std::isfinite(index0_world[a]))
                 fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_set_index_origin: position is not finite");
@@ -450,8 +456,8 @@ hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path)
         ar.setCompression(comp);
         std::ofstream os(tmp, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
         if (!os)
-            fail(HV_ERR_IO, std::string(path) + ": cannot create the output file: " +
-                                strerror(errno));
+            fail(HV_ERR_IO,
+                 std::string(path) + ": cannot create the output file: " + strerror(errno));
         openvdb::GridCPtrVec grids(w->grids.begin(), w->grids.end());
         ar.write_to(os, grids, w->meta);
         os.flush();

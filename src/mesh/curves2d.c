@@ -11,31 +11,31 @@ hv_status hv_curves_from_arrays(hv_curves **out, const double *pts, size_t npoin
                                 const size_t *start, size_t nlines, const uint8_t *closed)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_from_arrays: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_from_arrays: out is NULL");
     *out = NULL;
     if (!pts || !start || nlines == 0 || npoints == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_curves_from_arrays: no points or lines");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_curves_from_arrays: no points or lines");
     if (start[0] != 0 || start[nlines] != npoints)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_curves_from_arrays: offsets must run from 0 to npoints (%zu)",
-                        npoints);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_curves_from_arrays: offsets must run from 0 to npoints (%zu)",
+                         npoints);
     for (size_t k = 0; k < nlines; k++)
         if (start[k + 1] < start[k] + 2)
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "hv_curves_from_arrays: polyline %zu has fewer than 2 points", k);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "hv_curves_from_arrays: polyline %zu has fewer than 2 points", k);
     for (size_t i = 0; i < 2 * npoints; i++)
         if (!isfinite(pts[i]))
-            return hv_error(HV_ERR_NUMERIC, "hv_curves_from_arrays: point %zu is not finite",
-                            i / 2);
+            return hv__error(HV_ERR_NUMERIC, "hv_curves_from_arrays: point %zu is not finite",
+                             i / 2);
     hv_curves *c = calloc(1, sizeof *c);
     if (!c)
-        return hv_error(HV_ERR_NOMEM, "hv_curves_from_arrays: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_curves_from_arrays: out of memory");
     c->pts = malloc(2 * npoints * sizeof *c->pts);
     c->start = malloc((nlines + 1) * sizeof *c->start);
     c->closed = calloc(nlines, 1);
     if (!c->pts || !c->start || !c->closed) {
         hv_curves_destroy(&c);
-        return hv_error(HV_ERR_NOMEM, "hv_curves_from_arrays: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_curves_from_arrays: out of memory");
     }
     memcpy(c->pts, pts, 2 * npoints * sizeof *c->pts);
     memcpy(c->start, start, (nlines + 1) * sizeof *c->start);
@@ -71,7 +71,7 @@ size_t hv_curves_segments(const hv_curves *c)
 hv_status hv_curves_bounds(const hv_curves *c, double lo[2], double hi[2])
 {
     if (!c || c->npoints == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "curves: no points");
+        return hv__error(HV_ERR_INVALID_ARG, "curves: no points");
     lo[0] = lo[1] = INFINITY;
     hi[0] = hi[1] = -INFINITY;
     for (size_t i = 0; i < c->npoints; i++)

@@ -14,19 +14,19 @@ static hv_status grow(void **p, size_t *cap, size_t need, size_t elem, const cha
     size_t c = *cap ? *cap : 64;
     while (c < need) {
         if (c > SIZE_MAX / 2 / elem)
-            return hv_error(HV_ERR_NOMEM, "%s: mesh too large", path ? path : "mesh");
+            return hv__error(HV_ERR_NOMEM, "%s: mesh too large", path ? path : "mesh");
         c *= 2;
     }
     void *q = realloc(*p, c * elem);
     if (!q)
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory for %zu elements", path ? path : "mesh",
-                        c);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory for %zu elements", path ? path : "mesh",
+                         c);
     *p = q;
     *cap = c;
     return HV_OK;
 }
 
-hv_status u32vec_push(u32vec *v, uint32_t x)
+hv_status hv__u32vec_push(u32vec *v, uint32_t x)
 {
     if (v->n == v->cap) {
         hv_status st = grow((void **)&v->a, &v->cap, v->n + 1, sizeof *v->a, NULL);
@@ -37,36 +37,36 @@ hv_status u32vec_push(u32vec *v, uint32_t x)
     return HV_OK;
 }
 
-void u32vec_free(u32vec *v)
+void hv__u32vec_free(u32vec *v)
 {
     free(v->a);
     v->a = NULL;
     v->n = v->cap = 0;
 }
 
-void mb_init(mesh_builder *b, const char *path)
+void hv__mb_init(mesh_builder *b, const char *path)
 {
     memset(b, 0, sizeof *b);
     b->path = path;
 }
 
-void mb_free(mesh_builder *b)
+void hv__mb_free(mesh_builder *b)
 {
     free(b->v);
     free(b->t);
-    mb_init(b, b->path);
+    hv__mb_init(b, b->path);
 }
 
-hv_status mb_reserve_verts(mesh_builder *b, size_t n)
+hv_status hv__mb_reserve_verts(mesh_builder *b, size_t n)
 {
     if (n > MESH_MAX_COUNT - b->nv)
-        return hv_error(HV_ERR_PARSE, "%s: more than %zu vertices", b->path, MESH_MAX_COUNT);
+        return hv__error(HV_ERR_PARSE, "%s: more than %zu vertices", b->path, MESH_MAX_COUNT);
     size_t need = b->nv + n;
     if (need <= b->vcap)
         return HV_OK;
     double *q = realloc(b->v, need * 3 * sizeof *q);
     if (!q)
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory for %zu vertices", b->path, need);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory for %zu vertices", b->path, need);
     b->v = q;
     b->vcap = need;
     return HV_OK;
@@ -82,7 +82,7 @@ static int absurd_coord(const double *p)
     return -1;
 }
 
-hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z)
+hv_status hv__mb_add_vertex(mesh_builder *b, double x, double y, double z)
 {
     const double c[3] = {x, y, z};
     int a = absurd_coord(c);
@@ -90,14 +90,14 @@ hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z)
         char at[48] = "";
         if (b->line)
             snprintf(at, sizeof at, "line %zu: ", b->line);
-        return hv_error(HV_ERR_NUMERIC,
-                        "%s: %svertex %zu: coordinate %c = %g is beyond the bound +-%g heatvox "
-                        "accepts (volumes and bounding boxes of such a mesh overflow)",
-                        b->path, at, b->nv + 1, "xyz"[a], c[a], MESH_MAX_COORD);
+        return hv__error(HV_ERR_NUMERIC,
+                         "%s: %svertex %zu: coordinate %c = %g is beyond the bound +-%g heatvox "
+                         "accepts (volumes and bounding boxes of such a mesh overflow)",
+                         b->path, at, b->nv + 1, "xyz"[a], c[a], MESH_MAX_COORD);
     }
     if (b->nv == b->vcap) {
         if (b->nv >= MESH_MAX_COUNT)
-            return hv_error(HV_ERR_PARSE, "%s: more than %zu vertices", b->path, MESH_MAX_COUNT);
+            return hv__error(HV_ERR_PARSE, "%s: more than %zu vertices", b->path, MESH_MAX_COUNT);
         hv_status st = grow((void **)&b->v, &b->vcap, b->nv + 1, 3 * sizeof *b->v, b->path);
         if (st)
             return st;
@@ -109,12 +109,11 @@ hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z)
     return HV_OK;
 }
 
-hv_status mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2)
+hv_status hv__mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2)
 {
     if (b->nt == b->tcap) {
         if (b->nt >= MESH_MAX_COUNT)
-            return hv_error(HV_ERR_PARSE, "%s: more than %zu triangles", b->path,
-                            MESH_MAX_COUNT);
+            return hv__error(HV_ERR_PARSE, "%s: more than %zu triangles", b->path, MESH_MAX_COUNT);
         hv_status st = grow((void **)&b->t, &b->tcap, b->nt + 1, 3 * sizeof *b->t, b->path);
         if (st)
             return st;
@@ -126,12 +125,12 @@ hv_status mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2)
     return HV_OK;
 }
 
-hv_status mb_add_polygon(mesh_builder *b, const uint32_t *idx, size_t k)
+hv_status hv__mb_add_polygon(mesh_builder *b, const uint32_t *idx, size_t k)
 {
     if (k < 3)
-        return hv_error(HV_ERR_INTERNAL, "%s: polygon with %zu corners", b->path, k);
+        return hv__error(HV_ERR_INTERNAL, "%s: polygon with %zu corners", b->path, k);
     for (size_t i = 1; i + 1 < k; i++) {
-        hv_status st = mb_add_tri(b, idx[0], idx[i], idx[i + 1]);
+        hv_status st = hv__mb_add_tri(b, idx[0], idx[i], idx[i + 1]);
         if (st)
             return st;
     }
@@ -160,14 +159,14 @@ static uint64_t hash3(const double *p)
     return h;
 }
 
-hv_status mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t ntris,
-                    double **wverts, size_t *wn, size_t *nreferenced)
+hv_status hv__mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t ntris,
+                        double **wverts, size_t *wn, size_t *nreferenced)
 {
     *wverts = NULL;
     *wn = 0;
     uint32_t *map = malloc((nverts ? nverts : 1) * sizeof *map);
     if (!map)
-        return hv_error(HV_ERR_NOMEM, "out of memory welding %zu vertices", nverts);
+        return hv__error(HV_ERR_NOMEM, "out of memory welding %zu vertices", nverts);
     const uint32_t unused = UINT32_MAX;
     for (size_t i = 0; i < nverts; i++)
         map[i] = unused;
@@ -186,7 +185,7 @@ hv_status mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t n
         free(map);
         free(table);
         free(out);
-        return hv_error(HV_ERR_NOMEM, "out of memory welding %zu vertices", nverts);
+        return hv__error(HV_ERR_NOMEM, "out of memory welding %zu vertices", nverts);
     }
     memset(table, 0xff, cap * sizeof *table);
     size_t n = 0;
@@ -236,36 +235,37 @@ hv_status mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t n
     return HV_OK;
 }
 
-hv_status mb_finish(mesh_builder *b, const char *format, hv_mesh **out)
+hv_status hv__mb_finish(mesh_builder *b, const char *format, hv_mesh **out)
 {
     *out = NULL;
     hv_status st = HV_OK;
     if (b->nt == 0) {
-        st = b->nv ? hv_error(HV_ERR_PARSE, "%s: no triangles (%zu vertices and no faces: a "
-                                            "point cloud or lines, not a surface)",
-                              b->path, b->nv)
-                   : hv_error(HV_ERR_PARSE, "%s: no triangles (no vertices or faces found)",
-                              b->path);
-        mb_free(b);
+        st = b->nv ? hv__error(HV_ERR_PARSE,
+                               "%s: no triangles (%zu vertices and no faces: a "
+                               "point cloud or lines, not a surface)",
+                               b->path, b->nv)
+                   : hv__error(HV_ERR_PARSE, "%s: no triangles (no vertices or faces found)",
+                               b->path);
+        hv__mb_free(b);
         return st;
     }
     for (size_t i = 0; i < 3 * b->nt; i++)
         if (b->t[i] >= b->nv) {
-            st = hv_error(HV_ERR_INTERNAL, "%s: index %u past %zu vertices", b->path, b->t[i],
-                          b->nv);
-            mb_free(b);
+            st = hv__error(HV_ERR_INTERNAL, "%s: index %u past %zu vertices", b->path, b->t[i],
+                           b->nv);
+            hv__mb_free(b);
             return st;
         }
     hv_mesh *m = calloc(1, sizeof *m);
     if (!m) {
-        mb_free(b);
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory", b->path);
+        hv__mb_free(b);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory", b->path);
     }
     size_t nref = 0;
-    st = mesh_weld(b->v, b->nv, b->t, b->nt, &m->verts, &m->nverts, &nref);
+    st = hv__mesh_weld(b->v, b->nv, b->t, b->nt, &m->verts, &m->nverts, &nref);
     if (st) {
         free(m);
-        mb_free(b);
+        hv__mb_free(b);
         return st;
     }
     m->tris = b->t;
@@ -280,7 +280,7 @@ hv_status mb_finish(mesh_builder *b, const char *format, hv_mesh **out)
     m->input_vertices = b->nv;
     m->unreferenced_vertices = b->nv - nref;
     m->polygons_fanned = b->polygons_fanned;
-    mb_free(b);
+    hv__mb_free(b);
     *out = m;
     return HV_OK;
 }
@@ -291,42 +291,42 @@ hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
                               const uint32_t *tris, size_t ntris)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: out is NULL");
     *out = NULL;
     if (ntris == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: no triangles");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: no triangles");
     if (!verts || !tris)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: %s is NULL",
-                        verts ? "tris" : "verts");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_from_arrays: %s is NULL",
+                         verts ? "tris" : "verts");
     if (nverts > MESH_MAX_COUNT || ntris > MESH_MAX_COUNT)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_mesh_from_arrays: %zu vertices, %zu triangles: at most %zu each",
-                        nverts, ntris, MESH_MAX_COUNT);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_mesh_from_arrays: %zu vertices, %zu triangles: at most %zu each",
+                         nverts, ntris, MESH_MAX_COUNT);
     for (size_t i = 0; i < 3 * ntris; i++)
         if (tris[i] >= nverts)
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "hv_mesh_from_arrays: triangle %zu uses vertex %u, but there are "
-                            "only %zu vertices",
-                            i / 3, tris[i], nverts);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "hv_mesh_from_arrays: triangle %zu uses vertex %u, but there are "
+                             "only %zu vertices",
+                             i / 3, tris[i], nverts);
     for (size_t i = 0; i < nverts; i++) {
         int a = absurd_coord(verts + 3 * i);
         if (a >= 0)
-            return hv_error(HV_ERR_NUMERIC,
-                            "hv_mesh_from_arrays: vertex %zu: coordinate %c = %g is beyond the "
-                            "bound +-%g heatvox accepts",
-                            i, "xyz"[a], verts[3 * i + a], MESH_MAX_COORD);
+            return hv__error(HV_ERR_NUMERIC,
+                             "hv_mesh_from_arrays: vertex %zu: coordinate %c = %g is beyond the "
+                             "bound +-%g heatvox accepts",
+                             i, "xyz"[a], verts[3 * i + a], MESH_MAX_COORD);
     }
     hv_mesh *m = calloc(1, sizeof *m);
     uint32_t *t = malloc(ntris * 3 * sizeof *t);
     if (!m || !t) {
         free(m);
         free(t);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_from_arrays: out of memory for %zu triangles",
-                        ntris);
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_from_arrays: out of memory for %zu triangles",
+                         ntris);
     }
     memcpy(t, tris, ntris * 3 * sizeof *t);
     size_t nref = 0;
-    hv_status st = mesh_weld(verts, nverts, t, ntris, &m->verts, &m->nverts, &nref);
+    hv_status st = hv__mesh_weld(verts, nverts, t, ntris, &m->verts, &m->nverts, &nref);
     if (st) {
         free(m);
         free(t);
@@ -343,20 +343,19 @@ hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
 hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_clone: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_clone: out is NULL");
     *out = NULL;
     if (!m)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_clone: mesh is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_clone: mesh is NULL");
     hv_mesh *c = calloc(1, sizeof *c);
     if (!c)
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_clone: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_clone: out of memory");
     *c = *m;
     c->verts = malloc((m->nverts ? m->nverts : 1) * 3 * sizeof *c->verts);
     c->tris = malloc((m->ntris ? m->ntris : 1) * 3 * sizeof *c->tris);
     if (!c->verts || !c->tris) {
         hv_mesh_destroy(&c);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_clone: out of memory for %zu triangles",
-                        m->ntris);
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_clone: out of memory for %zu triangles", m->ntris);
     }
     if (m->nverts)
         memcpy(c->verts, m->verts, m->nverts * 3 * sizeof *c->verts);
@@ -379,7 +378,7 @@ void hv_mesh_destroy(hv_mesh **m)
 hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3])
 {
     if (!m || !lo || !hi)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_bounds: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_bounds: NULL argument");
     for (int a = 0; a < 3; a++) {
         lo[a] = INFINITY;
         hi[a] = -INFINITY;
@@ -398,7 +397,7 @@ hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3])
         }
     }
     if (!nfinite)
-        return hv_error(HV_ERR_NUMERIC, "hv_mesh_bounds: none of the %zu vertices is finite",
-                        m->nverts);
+        return hv__error(HV_ERR_NUMERIC, "hv_mesh_bounds: none of the %zu vertices is finite",
+                         m->nverts);
     return HV_OK;
 }

@@ -29,34 +29,34 @@ typedef struct mesh_builder {
     size_t polygons_fanned;
 } mesh_builder;
 
-void mb_init(mesh_builder *b, const char *path);
-void mb_free(mesh_builder *b);
+void hv__mb_init(mesh_builder *b, const char *path);
+void hv__mb_free(mesh_builder *b);
 /* Makes room for n more vertices (n already checked against the file size). */
-hv_status mb_reserve_verts(mesh_builder *b, size_t n);
+hv_status hv__mb_reserve_verts(mesh_builder *b, size_t n);
 /* Refuses finite coordinates beyond MESH_MAX_COORD, naming the vertex (and
  * b->line when set). */
-hv_status mb_add_vertex(mesh_builder *b, double x, double y, double z);
-hv_status mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2);
+hv_status hv__mb_add_vertex(mesh_builder *b, double x, double y, double z);
+hv_status hv__mb_add_tri(mesh_builder *b, uint32_t a, uint32_t c1, uint32_t c2);
 /* Fans a polygon of k >= 3 corners (v0, vi, vi+1); counts it when k > 3. */
-hv_status mb_add_polygon(mesh_builder *b, const uint32_t *idx, size_t k);
+hv_status hv__mb_add_polygon(mesh_builder *b, const uint32_t *idx, size_t k);
 /* Checks indices, requires a triangle, welds and hands the result to *out. The
  * builder is emptied either way. */
-hv_status mb_finish(mesh_builder *b, const char *format, hv_mesh **out);
+hv_status hv__mb_finish(mesh_builder *b, const char *format, hv_mesh **out);
 
 /* Welds verts by exact position, drops vertices tris do not use, and rewrites
  * tris in place (indices must be < nverts). On success *wverts (owned) holds *wn
  * vertices, in order of first appearance; *nreferenced (may be NULL) counts the
  * input vertices some triangle used. */
-hv_status mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t ntris,
-                    double **wverts, size_t *wn, size_t *nreferenced);
+hv_status hv__mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size_t ntris,
+                        double **wverts, size_t *wn, size_t *nreferenced);
 
 /* A growable array of uint32_t for polygon corners (no fixed limit). */
 typedef struct u32vec {
     uint32_t *a;
     size_t n, cap;
 } u32vec;
-hv_status u32vec_push(u32vec *v, uint32_t x);
-void u32vec_free(u32vec *v);
+hv_status hv__u32vec_push(u32vec *v, uint32_t x);
+void hv__u32vec_free(u32vec *v);
 
 /* Text scanning. Buffers handed to readers end with a NUL byte (not counted in
  * their length), so scanning functions may look one byte past a token. */
@@ -67,18 +67,18 @@ static inline int mesh_is_delim(char c) { return mesh_is_space(c) || c == '\0'; 
 /* Parses a number at s (no leading space skipped) in the C locale, whatever the
  * process locale; accepts what strtod accepts (also nan, inf). *end is the first
  * byte after it. Returns 0 on success, -1 if s does not start a number. */
-int mesh_parse_double(const char *s, const char **end, double *out);
+int hv__mesh_parse_double(const char *s, const char **end, double *out);
 /* Parses an optionally signed decimal integer; -1 on no digits or overflow. */
-int mesh_parse_i64(const char *s, const char **end, int64_t *out);
+int hv__mesh_parse_i64(const char *s, const char **end, int64_t *out);
 
 /* Shows up to 24 bytes of a token for an error message (static buffer per thread). */
-const char *mesh_token_preview(const char *s, const char *end);
+const char *hv__mesh_token_preview(const char *s, const char *end);
 
 /* Format readers: buf has len bytes followed by a NUL. */
-hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh **out);
-hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out);
-hv_status mesh_read_stl(const char *path, const char *buf, size_t len, hv_mesh **out);
-hv_status mesh_read_off(const char *path, const char *buf, size_t len, hv_mesh **out);
+hv_status hv__mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh **out);
+hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out);
+hv_status hv__mesh_read_stl(const char *path, const char *buf, size_t len, hv_mesh **out);
+hv_status hv__mesh_read_off(const char *path, const char *buf, size_t len, hv_mesh **out);
 
 /* Splitmix64, for the defect makers. */
 static inline uint64_t mesh_rng_next(uint64_t *s)

@@ -20,12 +20,11 @@ static hv_mesh *mesh_new(double *v, size_t nv, uint32_t *t, size_t nt)
 }
 
 /* Icosahedron with counter-clockwise faces seen from outside. */
-static const double ico_v[12][3] = {{-1, 1.6180339887498949, 0}, {1, 1.6180339887498949, 0},
-                                    {-1, -1.6180339887498949, 0}, {1, -1.6180339887498949, 0},
-                                    {0, -1, 1.6180339887498949},  {0, 1, 1.6180339887498949},
-                                    {0, -1, -1.6180339887498949}, {0, 1, -1.6180339887498949},
-                                    {1.6180339887498949, 0, -1},  {1.6180339887498949, 0, 1},
-                                    {-1.6180339887498949, 0, -1}, {-1.6180339887498949, 0, 1}};
+static const double ico_v[12][3] = {
+    {-1, 1.6180339887498949, 0},  {1, 1.6180339887498949, 0},   {-1, -1.6180339887498949, 0},
+    {1, -1.6180339887498949, 0},  {0, -1, 1.6180339887498949},  {0, 1, 1.6180339887498949},
+    {0, -1, -1.6180339887498949}, {0, 1, -1.6180339887498949},  {1.6180339887498949, 0, -1},
+    {1.6180339887498949, 0, 1},   {-1.6180339887498949, 0, -1}, {-1.6180339887498949, 0, 1}};
 static const uint32_t ico_t[20][3] = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                                       {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
                                       {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
@@ -42,13 +41,13 @@ static void unit(double *p)
 hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int subdiv)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_make_sphere: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_make_sphere: out is NULL");
     *out = NULL;
     if (!c || !(r > 0) || !isfinite(r) || subdiv < 0 || subdiv > 9)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_mesh_make_sphere: need a centre, radius > 0 (got %g) and subdiv in "
-                        "0..9 (got %d)",
-                        r, subdiv);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_mesh_make_sphere: need a centre, radius > 0 (got %g) and subdiv in "
+                         "0..9 (got %d)",
+                         r, subdiv);
     size_t nt = 20;
     double *v = malloc(12 * 3 * sizeof *v);
     uint32_t *t = malloc(20 * 3 * sizeof *t);
@@ -88,7 +87,7 @@ hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int su
         }
         free(v);
         v = NULL;
-        hv_status st = mesh_weld(v2, nv2, t2, nt2, &v, &nv, NULL);
+        hv_status st = hv__mesh_weld(v2, nv2, t2, nt2, &v, &nv, NULL);
         free(v2);
         if (st) {
             free(t2);
@@ -108,27 +107,27 @@ hv_status hv_mesh_make_sphere(hv_mesh **out, const double c[3], double r, int su
 nomem:
     free(v);
     free(t);
-    return hv_error(HV_ERR_NOMEM, "hv_mesh_make_sphere: out of memory (subdiv %d)", subdiv);
+    return hv__error(HV_ERR_NOMEM, "hv_mesh_make_sphere: out of memory (subdiv %d)", subdiv);
 }
 
 hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double r, int nu, int nv)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_make_torus: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_make_torus: out is NULL");
     *out = NULL;
     if (!c || !(r > 0) || !(R > r) || !isfinite(R) || nu < 3 || nv < 3 || nu > 65536 ||
         nv > 65536 || (size_t)nu * (size_t)nv > MESH_MAX_COUNT / 2)
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_mesh_make_torus: need 0 < r < R (got R=%g r=%g) and 3 <= nu, nv <= "
-                        "65536 (got %d, %d)",
-                        R, r, nu, nv);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_mesh_make_torus: need 0 < r < R (got R=%g r=%g) and 3 <= nu, nv <= "
+                         "65536 (got %d, %d)",
+                         R, r, nu, nv);
     size_t n = (size_t)nu * (size_t)nv;
     double *v = malloc(n * 3 * sizeof *v);
     uint32_t *t = malloc(2 * n * 3 * sizeof *t);
     if (!v || !t) {
         free(v);
         free(t);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_make_torus: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_make_torus: out of memory");
     }
     const double two_pi = 6.283185307179586;
     for (int i = 0; i < nu; i++) {
@@ -155,7 +154,7 @@ hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double 
     if (!(*out = mesh_new(v, n, t, 2 * n))) {
         free(v);
         free(t);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_make_torus: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_make_torus: out of memory");
     }
     return HV_OK;
 }
@@ -165,7 +164,7 @@ hv_status hv_mesh_make_torus(hv_mesh **out, const double c[3], double R, double 
 static hv_status check_mesh(const hv_mesh *m, const char *fn)
 {
     if (!m || !m->verts || !m->tris || m->ntris == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: empty or NULL mesh", fn);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: empty or NULL mesh", fn);
     return HV_OK;
 }
 
@@ -184,7 +183,7 @@ static hv_status compact(hv_mesh *m)
 {
     uint32_t *map = malloc((m->nverts ? m->nverts : 1) * sizeof *map);
     if (!map)
-        return hv_error(HV_ERR_NOMEM, "out of memory compacting %zu vertices", m->nverts);
+        return hv__error(HV_ERR_NOMEM, "out of memory compacting %zu vertices", m->nverts);
     for (size_t i = 0; i < m->nverts; i++)
         map[i] = UINT32_MAX;
     for (size_t i = 0; i < 3 * m->ntris; i++)
@@ -234,10 +233,10 @@ hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsig
     if (st)
         return st;
     if (nholes < 0 || !(radius_frac >= 0) || !isfinite(radius_frac))
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_mesh_defect_holes: need nholes >= 0 (got %d) and radius_frac >= 0 "
-                        "(got %g)",
-                        nholes, radius_frac);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_mesh_defect_holes: need nholes >= 0 (got %d) and radius_frac >= 0 "
+                         "(got %g)",
+                         nholes, radius_frac);
     double rad = radius_frac * diagonal(m), rad2 = rad * rad;
     uint64_t rng = seed;
     unsigned char *gone = calloc(m->ntris, 1);
@@ -247,7 +246,7 @@ hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsig
         free(gone);
         free(centres);
         free(cid);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_defect_holes: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_defect_holes: out of memory");
     }
     for (int h = 0; h < nholes; h++) {
         /* a random corner of a random triangle: a vertex that is in use */
@@ -274,9 +273,9 @@ hv_status hv_mesh_defect_holes(hv_mesh *m, int nholes, double radius_frac, unsig
     free(cid);
     if (kept == 0) {
         free(gone);
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "hv_mesh_defect_holes: %d holes of radius %g would remove every triangle",
-                        nholes, radius_frac);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_mesh_defect_holes: %d holes of radius %g would remove every triangle",
+                         nholes, radius_frac);
     }
     size_t n = 0;
     for (size_t t = 0; t < m->ntris; t++)
@@ -295,13 +294,13 @@ hv_status hv_mesh_defect_flip(hv_mesh *m, double fraction, unsigned seed)
     if (st)
         return st;
     if (!(fraction >= 0 && fraction <= 1))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_flip: fraction %g not in [0,1]",
-                        fraction);
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_flip: fraction %g not in [0,1]",
+                         fraction);
     uint64_t rng = seed;
     size_t k = (size_t)llround(fraction * (double)m->ntris);
     uint32_t *perm = pick(m->ntris, k, &rng);
     if (!perm)
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_defect_flip: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_defect_flip: out of memory");
     for (size_t i = 0; i < k; i++)
         flip(m->tris + 3 * (size_t)perm[i]);
     free(perm);
@@ -314,19 +313,21 @@ hv_status hv_mesh_defect_flip_half(hv_mesh *m, int axis)
     if (st)
         return st;
     if (axis < 0 || axis > 2)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_flip_half: axis %d not 0, 1 or 2",
-                        axis);
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_flip_half: axis %d not 0, 1 or 2",
+                         axis);
     double mean = 0;
     for (size_t t = 0; t < m->ntris; t++) {
         const uint32_t *c = m->tris + 3 * t;
         mean += (m->verts[3 * (size_t)c[0] + axis] + m->verts[3 * (size_t)c[1] + axis] +
-                 m->verts[3 * (size_t)c[2] + axis]) / 3;
+                 m->verts[3 * (size_t)c[2] + axis]) /
+                3;
     }
     mean /= (double)m->ntris;
     for (size_t t = 0; t < m->ntris; t++) {
         uint32_t *c = m->tris + 3 * t;
         double x = (m->verts[3 * (size_t)c[0] + axis] + m->verts[3 * (size_t)c[1] + axis] +
-                    m->verts[3 * (size_t)c[2] + axis]) / 3;
+                    m->verts[3 * (size_t)c[2] + axis]) /
+                   3;
         if (x > mean)
             flip(c);
     }
@@ -339,17 +340,17 @@ hv_status hv_mesh_defect_duplicate(hv_mesh *m, double fraction, unsigned seed)
     if (st)
         return st;
     if (!(fraction >= 0 && fraction <= 1))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_duplicate: fraction %g not in [0,1]",
-                        fraction);
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_duplicate: fraction %g not in [0,1]",
+                         fraction);
     size_t k = (size_t)llround(fraction * (double)m->ntris);
     if (k > MESH_MAX_COUNT - m->ntris)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_duplicate: too many triangles");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_duplicate: too many triangles");
     uint64_t rng = seed;
     uint32_t *perm = pick(m->ntris, k, &rng);
     uint32_t *t = perm ? realloc(m->tris, (m->ntris + k) * 3 * sizeof *t) : NULL;
     if (!t) {
         free(perm);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_defect_duplicate: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_defect_duplicate: out of memory");
     }
     m->tris = t;
     for (size_t i = 0; i < k; i++) {
@@ -369,14 +370,14 @@ hv_status hv_mesh_defect_soup(hv_mesh *m, double jitter_rel, unsigned seed)
     if (st)
         return st;
     if (!(jitter_rel >= 0) || !isfinite(jitter_rel))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_soup: jitter_rel %g must be >= 0",
-                        jitter_rel);
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_soup: jitter_rel %g must be >= 0",
+                         jitter_rel);
     if (m->ntris > MESH_MAX_COUNT / 3)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_defect_soup: too many triangles");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_defect_soup: too many triangles");
     double amp = jitter_rel * diagonal(m);
     double *v = malloc(m->ntris * 9 * sizeof *v);
     if (!v)
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_defect_soup: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_defect_soup: out of memory");
     uint64_t rng = seed;
     for (size_t i = 0; i < 3 * m->ntris; i++) {
         for (int x = 0; x < 3; x++) {

@@ -17,7 +17,7 @@ static locale_t c_locale;
 static pthread_once_t c_locale_once = PTHREAD_ONCE_INIT;
 static void c_locale_init(void) { c_locale = newlocale(LC_ALL_MASK, "C", (locale_t)0); }
 
-int mesh_parse_double(const char *s, const char **end, double *out)
+int hv__mesh_parse_double(const char *s, const char **end, double *out)
 {
     /* strtod would skip leading white space, newlines included */
     if (mesh_is_delim(*s))
@@ -32,7 +32,7 @@ int mesh_parse_double(const char *s, const char **end, double *out)
     return 0;
 }
 
-int mesh_parse_i64(const char *s, const char **end, int64_t *out)
+int hv__mesh_parse_i64(const char *s, const char **end, int64_t *out)
 {
     int neg = 0;
     const char *p = s;
@@ -52,7 +52,7 @@ int mesh_parse_i64(const char *s, const char **end, int64_t *out)
     return 0;
 }
 
-const char *mesh_token_preview(const char *s, const char *end)
+const char *hv__mesh_token_preview(const char *s, const char *end)
 {
     static _Thread_local char buf[64];
     size_t n = 0;
@@ -75,9 +75,11 @@ const char *mesh_token_preview(const char *s, const char *end)
 
 static const char *file_kind(mode_t m)
 {
-    return S_ISDIR(m) ? "a directory" : S_ISCHR(m) ? "a character device"
-                                      : S_ISBLK(m) ? "a block device"
-                                      : S_ISSOCK(m) ? "a socket" : "not a regular file";
+    return S_ISDIR(m)    ? "a directory"
+           : S_ISCHR(m)  ? "a character device"
+           : S_ISBLK(m)  ? "a block device"
+           : S_ISSOCK(m) ? "a socket"
+                         : "not a regular file";
 }
 
 /* Regular files are read whole; FIFOs up to MESH_MAX_PIPE_BYTES; anything else
@@ -89,27 +91,27 @@ static hv_status read_whole_file(const char *path, char **out, size_t *len)
     *len = 0;
     struct stat sb;
     if (stat(path, &sb) != 0)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (!S_ISREG(sb.st_mode) && !S_ISFIFO(sb.st_mode))
-        return hv_error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
-                        file_kind(sb.st_mode));
+        return hv__error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
+                         file_kind(sb.st_mode));
     FILE *f = fopen(path, "rb");
     if (!f)
-        return hv_error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
     if (fstat(fileno(f), &sb) != 0) {
         int e = errno;
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: cannot stat: %s", path, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: cannot stat: %s", path, strerror(e));
     }
     int regular = S_ISREG(sb.st_mode);
     if (!regular && !S_ISFIFO(sb.st_mode)) {
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
-                        file_kind(sb.st_mode));
+        return hv__error(HV_ERR_IO, "%s: is %s; meshes are read from regular files or pipes", path,
+                         file_kind(sb.st_mode));
     }
     if (regular && (uint64_t)sb.st_size >= SIZE_MAX / 2) {
         fclose(f);
-        return hv_error(HV_ERR_NOMEM, "%s: file too large", path);
+        return hv__error(HV_ERR_NOMEM, "%s: file too large", path);
     }
     /* A regular file's size sizes the buffer (it may still grow while read); a
      * pipe's buffer grows up to the bound. */
@@ -118,21 +120,21 @@ static hv_status read_whole_file(const char *path, char **out, size_t *len)
     char *buf = malloc(cap);
     if (!buf) {
         fclose(f);
-        return hv_error(HV_ERR_NOMEM, "%s: out of memory for %zu bytes", path, cap);
+        return hv__error(HV_ERR_NOMEM, "%s: out of memory for %zu bytes", path, cap);
     }
     for (;;) {
         if (!regular && n > limit) {
             free(buf);
             fclose(f);
-            return hv_error(HV_ERR_IO, "%s: more than %zu MiB from a pipe; save it to a file",
-                            path, limit >> 20);
+            return hv__error(HV_ERR_IO, "%s: more than %zu MiB from a pipe; save it to a file",
+                             path, limit >> 20);
         }
         if (n + 1 >= cap) {
             char *q = cap < SIZE_MAX / 4 ? realloc(buf, cap * 2) : NULL;
             if (!q) {
                 free(buf);
                 fclose(f);
-                return hv_error(HV_ERR_NOMEM, "%s: out of memory reading the file", path);
+                return hv__error(HV_ERR_NOMEM, "%s: out of memory reading the file", path);
             }
             buf = q;
             cap *= 2;
@@ -149,7 +151,7 @@ static hv_status read_whole_file(const char *path, char **out, size_t *len)
         int e = errno;
         free(buf);
         fclose(f);
-        return hv_error(HV_ERR_IO, "%s: read error after %zu bytes: %s", path, n, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: read error after %zu bytes: %s", path, n, strerror(e));
     }
     fclose(f);
     buf[n] = '\0';
@@ -209,8 +211,8 @@ static mesh_format format_by_content(const char *buf, size_t len)
             return FMT_UNKNOWN;
         p = nl + 1;
     }
-    static const char *const off_words[] = {"OFF", "COFF", "NOFF", "CNOFF", "STOFF", "STCOFF",
-                                            "STNOFF", "STCNOFF"};
+    static const char *const off_words[] = {"OFF",   "COFF",   "NOFF",   "CNOFF",
+                                            "STOFF", "STCOFF", "STNOFF", "STCNOFF"};
     for (size_t i = 0; i < sizeof off_words / sizeof off_words[0]; i++) {
         size_t n = strlen(off_words[i]);
         if (!strncmp(p, off_words[i], n) && (mesh_is_delim(p[n]) || (p[n] >= '0' && p[n] <= '9')))
@@ -236,10 +238,10 @@ static mesh_format format_by_content(const char *buf, size_t len)
 hv_status hv_mesh_read(const char *path, hv_mesh **out)
 {
     if (!out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_read: out is NULL");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_read: out is NULL");
     *out = NULL;
     if (!path || !*path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_read: empty path");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_read: empty path");
     char *buf;
     size_t len;
     hv_status st = read_whole_file(path, &buf, &len);
@@ -247,26 +249,28 @@ hv_status hv_mesh_read(const char *path, hv_mesh **out)
         return st;
     if (len == 0) {
         free(buf);
-        return hv_error(HV_ERR_PARSE, "%s: empty file", path);
+        return hv__error(HV_ERR_PARSE, "%s: empty file", path);
     }
     mesh_format fmt = format_by_extension(path);
     if (fmt == FMT_UNKNOWN)
         fmt = format_by_content(buf, len);
     switch (fmt) {
-    case FMT_OBJ: st = mesh_read_obj(path, buf, len, out); break;
-    case FMT_PLY: st = mesh_read_ply(path, buf, len, out); break;
-    case FMT_STL: st = mesh_read_stl(path, buf, len, out); break;
-    case FMT_OFF: st = mesh_read_off(path, buf, len, out); break;
+    case FMT_OBJ: st = hv__mesh_read_obj(path, buf, len, out); break;
+    case FMT_PLY: st = hv__mesh_read_ply(path, buf, len, out); break;
+    case FMT_STL: st = hv__mesh_read_stl(path, buf, len, out); break;
+    case FMT_OFF: st = hv__mesh_read_off(path, buf, len, out); break;
     default:
         if (len >= 2 && (((unsigned char)buf[0] == 0xFE && (unsigned char)buf[1] == 0xFF) ||
                          ((unsigned char)buf[0] == 0xFF && (unsigned char)buf[1] == 0xFE)))
-            st = hv_error(HV_ERR_PARSE, "%s: UTF-16 text (byte order mark); save it as UTF-8 or "
-                                        "ASCII", path);
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: UTF-16 text (byte order mark); save it as UTF-8 or "
+                           "ASCII",
+                           path);
         else
-            st = hv_error(HV_ERR_PARSE,
-                          "%s: not a mesh format heatvox reads (OBJ, PLY, STL, OFF), judging by "
-                          "its extension and content",
-                          path);
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: not a mesh format heatvox reads (OBJ, PLY, STL, OFF), judging by "
+                           "its extension and content",
+                           path);
     }
     free(buf);
     return st;

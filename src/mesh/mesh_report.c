@@ -65,7 +65,7 @@ static int collapsed(const uint32_t *t) { return t[0] == t[1] || t[1] == t[2] ||
 hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
 {
     if (!m || !r)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: NULL argument");
     memset(r, 0, sizeof *r);
     size_t nt = m->ntris;
     r->vertices = m->nverts;
@@ -74,13 +74,13 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
     r->input_vertices = m->input_vertices;
     r->unreferenced_vertices = m->unreferenced_vertices;
     if (nt > MESH_MAX_COUNT / 3)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: %zu triangles is too many",
-                        nt);
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: %zu triangles is too many",
+                         nt);
     for (size_t i = 0; i < 3 * nt; i++)
         if (m->tris[i] >= m->nverts)
-            return hv_error(HV_ERR_INVALID_ARG,
-                            "hv_mesh_report_compute: triangle %zu uses vertex %u of %zu", i / 3,
-                            m->tris[i], m->nverts);
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "hv_mesh_report_compute: triangle %zu uses vertex %u of %zu", i / 3,
+                             m->tris[i], m->nverts);
 
     for (size_t i = 0; i < m->nverts; i++) {
         const double *p = m->verts + 3 * i;
@@ -121,17 +121,20 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
         free(val);
         free(tv);
         free(parent);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory for %zu triangles",
-                        nt);
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory for %zu triangles",
+                         nt);
     }
 
     /* Duplicates: sort the triangles by their sorted corner triple (two stable
      * passes: by the largest corner, then by the two smaller ones). */
     for (size_t t = 0; t < nt; t++) {
         uint32_t a = m->tris[3 * t], b = m->tris[3 * t + 1], c = m->tris[3 * t + 2], x;
-        if (a > b) x = a, a = b, b = x;
-        if (b > c) x = b, b = c, c = x;
-        if (a > b) x = a, a = b, b = x;
+        if (a > b)
+            x = a, a = b, b = x;
+        if (b > c)
+            x = b, b = c, c = x;
+        if (a > b)
+            x = a, a = b, b = x;
         key[t] = c;
         val[t] = (uint32_t)t;
     }
@@ -139,9 +142,12 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
     for (size_t i = 0; i < nt; i++) {
         const uint32_t *c = m->tris + 3 * (size_t)val[i];
         uint32_t a = c[0], b = c[1], d = c[2], x;
-        if (a > b) x = a, a = b, b = x;
-        if (b > d) x = b, b = d, d = x;
-        if (a > b) x = a, a = b, b = x;
+        if (a > b)
+            x = a, a = b, b = x;
+        if (b > d)
+            x = b, b = d, d = x;
+        if (a > b)
+            x = a, a = b, b = x;
         key[i] = (uint64_t)a << 32 | b;
     }
     radix_sort(key, val, tk, tv, nt);
@@ -204,7 +210,7 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
         free(val);
         free(tv);
         free(vp ? vp : parent);
-        return hv_error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory");
     }
     parent = vp;
     for (size_t i = 0; i < m->nverts; i++)

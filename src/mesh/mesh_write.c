@@ -9,11 +9,11 @@
 hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path)
 {
     if (!m || !path)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_mesh_write_obj: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_write_obj: NULL argument");
     for (size_t i = 0; i < 3 * m->ntris; i++)
         if (m->tris[i] >= m->nverts)
-            return hv_error(HV_ERR_INVALID_ARG, "%s: triangle %zu uses vertex %u of %zu", path,
-                            i / 3, m->tris[i], m->nverts);
+            return hv__error(HV_ERR_INVALID_ARG, "%s: triangle %zu uses vertex %u of %zu", path,
+                             i / 3, m->tris[i], m->nverts);
     char tmp[PATH_MAX];
     hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
     if (st)
@@ -22,7 +22,7 @@ hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path)
     if (!f) {
         int e = errno;
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_IO, "%s: cannot create: %s", tmp, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: cannot create: %s", tmp, strerror(e));
     }
     fprintf(f, "# heatvox %s: %zu vertices, %zu triangles\n", hv_version(), m->nverts, m->ntris);
     for (size_t i = 0; i < m->nverts; i++) {
@@ -42,7 +42,7 @@ hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path)
     }
     if (bad) {
         hv_tmp_discard(tmp);
-        return hv_error(HV_ERR_IO, "%s: write failed: %s", path, strerror(e));
+        return hv__error(HV_ERR_IO, "%s: write failed: %s", path, strerror(e));
     }
     return hv_tmp_commit(tmp, path);
 }

@@ -16,19 +16,19 @@ static const char *skip_hspace(const char *p, const char *eol)
     return p;
 }
 
-hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh **out)
+hv_status hv__mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh **out)
 {
     *out = NULL;
     const unsigned char *u = (const unsigned char *)buf;
     if (len >= 2 && ((u[0] == 0xFE && u[1] == 0xFF) || (u[0] == 0xFF && u[1] == 0xFE)))
-        return hv_error(HV_ERR_PARSE,
-                        "%s: UTF-16 text (byte order mark); save the OBJ as UTF-8 or ASCII", path);
+        return hv__error(HV_ERR_PARSE,
+                         "%s: UTF-16 text (byte order mark); save the OBJ as UTF-8 or ASCII", path);
     const char *p = buf, *end = buf + len;
     if (len >= 3 && u[0] == 0xEF && u[1] == 0xBB && u[2] == 0xBF)
         p += 3; /* UTF-8 byte order mark */
 
     mesh_builder b;
-    mb_init(&b, path);
+    hv__mb_init(&b, path);
     u32vec corners = {0};
     hv_status st = HV_OK;
     size_t line = 0;
@@ -58,21 +58,21 @@ hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh *
                 q = skip_hspace(q, lend);
                 const char *e;
                 if (q >= lend) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: vertex has %d coordinates, needs 3",
-                                  path, line, a);
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: vertex has %d coordinates, needs 3",
+                                   path, line, a);
                     break;
                 }
-                if (mesh_parse_double(q, &e, &x[a]) || (e < lend && !mesh_is_delim(*e)) ||
+                if (hv__mesh_parse_double(q, &e, &x[a]) || (e < lend && !mesh_is_delim(*e)) ||
                     e > lend) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: malformed number '%s'", path, line,
-                                  mesh_token_preview(q, lend));
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: malformed number '%s'", path, line,
+                                   hv__mesh_token_preview(q, lend));
                     break;
                 }
                 q = e;
             }
             b.line = line;
             if (!st)
-                st = mb_add_vertex(&b, x[0], x[1], x[2]);
+                st = hv__mb_add_vertex(&b, x[0], x[1], x[2]);
         } else if (word_is(kw, kwlen, "f") || word_is(kw, kwlen, "fo")) {
             corners.n = 0;
             for (;;) {
@@ -81,9 +81,10 @@ hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh *
                     break;
                 const char *e;
                 int64_t i;
-                if (mesh_parse_i64(q, &e, &i) || (e < lend && !mesh_is_delim(*e) && *e != '/')) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: malformed face corner '%s'", path,
-                                  line, mesh_token_preview(q, lend));
+                if (hv__mesh_parse_i64(q, &e, &i) ||
+                    (e < lend && !mesh_is_delim(*e) && *e != '/')) {
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: malformed face corner '%s'", path,
+                                   line, hv__mesh_token_preview(q, lend));
                     break;
                 }
                 /* skip /vt/vn */
@@ -99,45 +100,45 @@ hv_status mesh_read_obj(const char *path, const char *buf, size_t len, hv_mesh *
                 } else if (i < 0) {
                     idx = (int64_t)b.nv + i;
                     if (idx < 0) {
-                        st = hv_error(HV_ERR_PARSE,
-                                      "%s: line %zu: relative vertex index %lld points before the "
-                                      "first vertex (%zu vertices so far)",
-                                      path, line, (long long)i, b.nv);
+                        st = hv__error(HV_ERR_PARSE,
+                                       "%s: line %zu: relative vertex index %lld points before the "
+                                       "first vertex (%zu vertices so far)",
+                                       path, line, (long long)i, b.nv);
                         break;
                     }
                 } else {
-                    st = hv_error(HV_ERR_PARSE,
-                                  "%s: line %zu: vertex index 0 (OBJ indices start at 1)", path,
-                                  line);
+                    st = hv__error(HV_ERR_PARSE,
+                                   "%s: line %zu: vertex index 0 (OBJ indices start at 1)", path,
+                                   line);
                     break;
                 }
                 if ((uint64_t)idx >= MESH_MAX_COUNT) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: vertex index %lld too large", path,
-                                  line, (long long)i);
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: vertex index %lld too large", path,
+                                   line, (long long)i);
                     break;
                 }
-                st = u32vec_push(&corners, (uint32_t)idx);
+                st = hv__u32vec_push(&corners, (uint32_t)idx);
                 if (st)
                     break;
                 q = e;
             }
             if (!st && corners.n < 3)
-                st = hv_error(HV_ERR_PARSE,
-                              "%s: line %zu: face with %zu corners (a face needs at least 3)", path,
-                              line, corners.n);
+                st = hv__error(HV_ERR_PARSE,
+                               "%s: line %zu: face with %zu corners (a face needs at least 3)",
+                               path, line, corners.n);
             if (!st)
-                st = mb_add_polygon(&b, corners.a, corners.n);
+                st = hv__mb_add_polygon(&b, corners.a, corners.n);
         }
         p = next;
     }
-    u32vec_free(&corners);
+    hv__u32vec_free(&corners);
     if (!st && max_forward > b.nv)
-        st = hv_error(HV_ERR_PARSE,
-                      "%s: line %zu: vertex index %llu out of range (the file has %zu vertices)",
-                      path, max_forward_line, (unsigned long long)max_forward, b.nv);
+        st = hv__error(HV_ERR_PARSE,
+                       "%s: line %zu: vertex index %llu out of range (the file has %zu vertices)",
+                       path, max_forward_line, (unsigned long long)max_forward, b.nv);
     if (st) {
-        mb_free(&b);
+        hv__mb_free(&b);
         return st;
     }
-    return mb_finish(&b, "OBJ", out);
+    return hv__mb_finish(&b, "OBJ", out);
 }

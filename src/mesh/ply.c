@@ -15,10 +15,10 @@ static const struct {
     const char *name;
     ply_type type;
 } type_names[] = {
-    {"char", T_I8},    {"int8", T_I8},     {"uchar", T_U8},  {"uint8", T_U8},
-    {"short", T_I16},  {"int16", T_I16},   {"ushort", T_U16}, {"uint16", T_U16},
-    {"int", T_I32},    {"int32", T_I32},   {"uint", T_U32},  {"uint32", T_U32},
-    {"float", T_F32},  {"float32", T_F32}, {"double", T_F64}, {"float64", T_F64},
+    {"char", T_I8},   {"int8", T_I8},     {"uchar", T_U8},   {"uint8", T_U8},
+    {"short", T_I16}, {"int16", T_I16},   {"ushort", T_U16}, {"uint16", T_U16},
+    {"int", T_I32},   {"int32", T_I32},   {"uint", T_U32},   {"uint32", T_U32},
+    {"float", T_F32}, {"float32", T_F32}, {"double", T_F64}, {"float64", T_F64},
 };
 
 static const size_t type_size[] = {0, 1, 1, 2, 2, 4, 4, 4, 8};
@@ -150,20 +150,20 @@ static hv_status ascii_value(ply_reader *r, ply_type t, double *d, int64_t *i, c
 {
     const char *s = ascii_token(r);
     if (!s)
-        return hv_error(HV_ERR_PARSE, "%s: line %zu: data ends inside %s", r->path, r->line,
-                        what);
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: data ends inside %s", r->path, r->line, what);
     const char *e;
     int ok;
     if (is_int_type(t)) {
-        ok = mesh_parse_i64(s, &e, i) == 0 && mesh_is_delim(*e);
+        ok = hv__mesh_parse_i64(s, &e, i) == 0 && mesh_is_delim(*e);
         if (!ok) { /* some writers put integral values as "3.0" */
             double x;
-            ok = mesh_parse_double(s, &e, &x) == 0 && mesh_is_delim(*e);
+            ok = hv__mesh_parse_double(s, &e, &x) == 0 && mesh_is_delim(*e);
             /* converting a double outside int64's range is undefined behaviour */
             if (ok && !(x >= -0x1p63 && x < 0x1p63))
-                return hv_error(HV_ERR_PARSE, "%s: line %zu: %s '%s' is out of range for an "
-                                              "integer property",
-                                r->path, r->line, what, mesh_token_preview(s, r->end));
+                return hv__error(HV_ERR_PARSE,
+                                 "%s: line %zu: %s '%s' is out of range for an "
+                                 "integer property",
+                                 r->path, r->line, what, hv__mesh_token_preview(s, r->end));
             ok = ok && x == (double)(int64_t)x;
             if (ok)
                 *i = (int64_t)x;
@@ -171,12 +171,12 @@ static hv_status ascii_value(ply_reader *r, ply_type t, double *d, int64_t *i, c
         if (ok)
             *d = (double)*i;
     } else {
-        ok = mesh_parse_double(s, &e, d) == 0 && mesh_is_delim(*e);
+        ok = hv__mesh_parse_double(s, &e, d) == 0 && mesh_is_delim(*e);
         *i = 0;
     }
     if (!ok)
-        return hv_error(HV_ERR_PARSE, "%s: line %zu: malformed %s '%s'", r->path, r->line, what,
-                        mesh_token_preview(s, r->end));
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: malformed %s '%s'", r->path, r->line, what,
+                         hv__mesh_token_preview(s, r->end));
     r->p = e;
     return HV_OK;
 }
@@ -187,8 +187,8 @@ static hv_status read_value(ply_reader *r, ply_type t, double *d, int64_t *i, co
         return ascii_value(r, t, d, i, what);
     size_t at = (size_t)(r->p - r->base);
     if (bin_value(r, t, d, i))
-        return hv_error(HV_ERR_PARSE, "%s: byte %zu: data ends inside %s (file truncated?)",
-                        r->path, at, what);
+        return hv__error(HV_ERR_PARSE, "%s: byte %zu: data ends inside %s (file truncated?)",
+                         r->path, at, what);
     return HV_OK;
 }
 
@@ -212,13 +212,13 @@ static hv_status read_count(ply_reader *r, const ply_prop *pr, uint64_t *count)
     if (st)
         return st;
     if (n < 0)
-        return hv_error(HV_ERR_PARSE, "%s: %s: negative list length %lld", r->path, where(r),
-                        (long long)n);
+        return hv__error(HV_ERR_PARSE, "%s: %s: negative list length %lld", r->path, where(r),
+                         (long long)n);
     size_t left = (size_t)(r->end - r->p);
     size_t min_item = r->format == PLY_ASCII ? 1 : type_size[pr->type];
     if ((uint64_t)n > left / min_item + 1)
-        return hv_error(HV_ERR_PARSE, "%s: %s: list of %lld items but only %zu bytes remain",
-                        r->path, where(r), (long long)n, left);
+        return hv__error(HV_ERR_PARSE, "%s: %s: list of %lld items but only %zu bytes remain",
+                         r->path, where(r), (long long)n, left);
     *count = (uint64_t)n;
     return HV_OK;
 }
@@ -236,8 +236,8 @@ static hv_status skip_prop(ply_reader *r, const ply_prop *pr)
     if (r->format != PLY_ASCII) {
         size_t bytes = (size_t)n * type_size[pr->type];
         if (bytes > (size_t)(r->end - r->p))
-            return hv_error(HV_ERR_PARSE, "%s: %s: data ends inside a list (file truncated?)",
-                            r->path, where(r));
+            return hv__error(HV_ERR_PARSE, "%s: %s: data ends inside a list (file truncated?)",
+                             r->path, where(r));
         r->p += bytes;
         return HV_OK;
     }
@@ -274,13 +274,13 @@ typedef struct ply_state {
 static hv_status note_index(ply_reader *r, ply_state *s, int64_t v)
 {
     if (v < 0 || (uint64_t)v >= MESH_MAX_COUNT)
-        return hv_error(HV_ERR_PARSE, "%s: %s: vertex index %lld out of range", r->path, where(r),
-                        (long long)v);
+        return hv__error(HV_ERR_PARSE, "%s: %s: vertex index %lld out of range", r->path, where(r),
+                         (long long)v);
     if ((uint64_t)v + 1 > s->max_index) {
         s->max_index = (uint64_t)v + 1;
         snprintf(s->max_where, sizeof s->max_where, "%s", where(r));
     }
-    return u32vec_push(&s->poly, (uint32_t)v);
+    return hv__u32vec_push(&s->poly, (uint32_t)v);
 }
 
 static hv_status read_vertices(ply_reader *r, ply_state *s, const ply_elem *e)
@@ -288,17 +288,18 @@ static hv_status read_vertices(ply_reader *r, ply_state *s, const ply_elem *e)
     int ix[3] = {-1, -1, -1};
     for (size_t k = 0; k < e->nprops; k++)
         for (int a = 0; a < 3; a++)
-            if (name_is(e->props[k].name, e->props[k].namelen, (const char[]){(char)('x' + a), 0})) {
+            if (name_is(e->props[k].name, e->props[k].namelen,
+                        (const char[]){(char)('x' + a), 0})) {
                 if (e->props[k].count_type != T_NONE)
-                    return hv_error(HV_ERR_PARSE, "%s: line %zu: vertex property %c is a list",
-                                    r->path, e->line, 'x' + a);
+                    return hv__error(HV_ERR_PARSE, "%s: line %zu: vertex property %c is a list",
+                                     r->path, e->line, 'x' + a);
                 ix[a] = (int)k;
             }
     for (int a = 0; a < 3; a++)
         if (ix[a] < 0)
-            return hv_error(HV_ERR_PARSE, "%s: line %zu: vertex element has no property %c",
-                            r->path, e->line, 'x' + a);
-    hv_status st = mb_reserve_verts(&s->b, (size_t)e->count);
+            return hv__error(HV_ERR_PARSE, "%s: line %zu: vertex element has no property %c",
+                             r->path, e->line, 'x' + a);
+    hv_status st = hv__mb_reserve_verts(&s->b, (size_t)e->count);
     for (uint64_t n = 0; n < e->count && !st; n++) {
         double x[3] = {0, 0, 0};
         for (size_t k = 0; k < e->nprops && !st; k++) {
@@ -314,7 +315,7 @@ static hv_status read_vertices(ply_reader *r, ply_state *s, const ply_elem *e)
         }
         s->b.line = r->format == PLY_ASCII ? r->line : 0;
         if (!st)
-            st = mb_add_vertex(&s->b, x[0], x[1], x[2]);
+            st = hv__mb_add_vertex(&s->b, x[0], x[1], x[2]);
     }
     return st;
 }
@@ -327,16 +328,15 @@ static const ply_prop *find_index_list(const ply_reader *r, const ply_elem *e, h
         if (name_is(pr->name, pr->namelen, "vertex_indices") ||
             name_is(pr->name, pr->namelen, "vertex_index")) {
             if (pr->count_type == T_NONE || !is_int_type(pr->type)) {
-                *st = hv_error(HV_ERR_PARSE,
-                               "%s: line %zu: %.*s must be a list of integers", r->path, e->line,
-                               (int)pr->namelen, pr->name);
+                *st = hv__error(HV_ERR_PARSE, "%s: line %zu: %.*s must be a list of integers",
+                                r->path, e->line, (int)pr->namelen, pr->name);
                 return NULL;
             }
             return pr;
         }
     }
-    *st = hv_error(HV_ERR_PARSE, "%s: line %zu: element %.*s has no vertex_indices list", r->path,
-                   e->line, (int)e->namelen, e->name);
+    *st = hv__error(HV_ERR_PARSE, "%s: line %zu: element %.*s has no vertex_indices list", r->path,
+                    e->line, (int)e->namelen, e->name);
     return NULL;
 }
 
@@ -353,7 +353,7 @@ static hv_status read_index_list(ply_reader *r, ply_state *s, const ply_prop *pr
         if (st)
             break;
         if (strips && v < 0) {
-            st = u32vec_push(&s->poly, UINT32_MAX); /* strip restart */
+            st = hv__u32vec_push(&s->poly, UINT32_MAX); /* strip restart */
             continue;
         }
         st = note_index(r, s, v);
@@ -381,11 +381,11 @@ static hv_status read_faces(ply_reader *r, ply_state *s, const ply_elem *e)
             snprintf(at, sizeof at, "%s", where(r));
             st = read_index_list(r, s, pr, 0);
             if (!st && s->poly.n < 3)
-                st = hv_error(HV_ERR_PARSE,
-                              "%s: %s: face %llu has %zu corners (a face needs at least 3)",
-                              r->path, at, (unsigned long long)n, s->poly.n);
+                st = hv__error(HV_ERR_PARSE,
+                               "%s: %s: face %llu has %zu corners (a face needs at least 3)",
+                               r->path, at, (unsigned long long)n, s->poly.n);
             if (!st)
-                st = mb_add_polygon(&s->b, s->poly.a, s->poly.n);
+                st = hv__mb_add_polygon(&s->b, s->poly.a, s->poly.n);
         }
     return st;
 }
@@ -419,7 +419,8 @@ static hv_status read_strips(ply_reader *r, ply_state *s, const ply_elem *e)
                         s->strips_dropped++;
                         continue;
                     }
-                    st = (j - start) % 2 ? mb_add_tri(&s->b, b, a, c) : mb_add_tri(&s->b, a, b, c);
+                    st = (j - start) % 2 ? hv__mb_add_tri(&s->b, b, a, c)
+                                         : hv__mb_add_tri(&s->b, a, b, c);
                 }
                 start = i + 1;
             }
@@ -445,12 +446,12 @@ static void free_elems(ply_elem *el, size_t n)
     free(el);
 }
 
-hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out)
+hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out)
 {
     *out = NULL;
     const char *p = buf, *end = buf + len;
     if (len < 4 || strncmp(buf, "ply", 3) || (buf[3] != '\n' && buf[3] != '\r'))
-        return hv_error(HV_ERR_PARSE, "%s: not a PLY file (does not start with \"ply\")", path);
+        return hv__error(HV_ERR_PARSE, "%s: not a PLY file (does not start with \"ply\")", path);
     int format = -1;
     ply_elem *el = NULL;
     size_t nel = 0, elcap = 0, line = 0;
@@ -460,7 +461,7 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
         line++;
         const char *eol = memchr(p, '\n', (size_t)(end - p));
         if (!eol) {
-            st = hv_error(HV_ERR_PARSE, "%s: line %zu: header has no end_header line", path, line);
+            st = hv__error(HV_ERR_PARSE, "%s: line %zu: header has no end_header line", path, line);
             break;
         }
         const char *w[6];
@@ -481,21 +482,21 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
             else if (nw >= 2 && name_is(w[1], wl[1], "binary_big_endian"))
                 format = PLY_BE;
             else
-                st = hv_error(HV_ERR_PARSE, "%s: line %zu: unknown PLY format '%s'", path, line,
-                              nw >= 2 ? mesh_token_preview(w[1], eol) : "");
+                st = hv__error(HV_ERR_PARSE, "%s: line %zu: unknown PLY format '%s'", path, line,
+                               nw >= 2 ? hv__mesh_token_preview(w[1], eol) : "");
         } else if (name_is(w[0], wl[0], "element")) {
             int64_t count;
             const char *e;
-            if (nw != 3 || mesh_parse_i64(w[2], &e, &count) || e != w[2] + wl[2] || count < 0) {
-                st = hv_error(HV_ERR_PARSE, "%s: line %zu: expected 'element NAME COUNT'", path,
-                              line);
+            if (nw != 3 || hv__mesh_parse_i64(w[2], &e, &count) || e != w[2] + wl[2] || count < 0) {
+                st = hv__error(HV_ERR_PARSE, "%s: line %zu: expected 'element NAME COUNT'", path,
+                               line);
                 break;
             }
             if (nel == elcap) {
                 size_t c = elcap ? 2 * elcap : 8;
                 ply_elem *q = realloc(el, c * sizeof *q);
                 if (!q) {
-                    st = hv_error(HV_ERR_NOMEM, "%s: out of memory", path);
+                    st = hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
                     break;
                 }
                 el = q;
@@ -504,8 +505,8 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
             el[nel++] = (ply_elem){w[1], wl[1], (uint64_t)count, line, NULL, 0, 0};
         } else if (name_is(w[0], wl[0], "property")) {
             if (!nel) {
-                st = hv_error(HV_ERR_PARSE, "%s: line %zu: property before any element", path,
-                              line);
+                st = hv__error(HV_ERR_PARSE, "%s: line %zu: property before any element", path,
+                               line);
                 break;
             }
             ply_prop pr = {0};
@@ -515,8 +516,8 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
                 pr.name = w[4];
                 pr.namelen = wl[4];
                 if (pr.count_type == T_NONE || pr.type == T_NONE || !is_int_type(pr.count_type)) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: bad list types '%.*s %.*s'", path,
-                                  line, (int)wl[2], w[2], (int)wl[3], w[3]);
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: bad list types '%.*s %.*s'", path,
+                                   line, (int)wl[2], w[2], (int)wl[3], w[3]);
                     break;
                 }
             } else if (nw == 3) {
@@ -524,12 +525,12 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
                 pr.name = w[2];
                 pr.namelen = wl[2];
                 if (pr.type == T_NONE) {
-                    st = hv_error(HV_ERR_PARSE, "%s: line %zu: unknown property type '%.*s'", path,
-                                  line, (int)wl[1], w[1]);
+                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: unknown property type '%.*s'", path,
+                                   line, (int)wl[1], w[1]);
                     break;
                 }
             } else {
-                st = hv_error(HV_ERR_PARSE, "%s: line %zu: malformed property line", path, line);
+                st = hv__error(HV_ERR_PARSE, "%s: line %zu: malformed property line", path, line);
                 break;
             }
             ply_elem *e = &el[nel - 1];
@@ -537,7 +538,7 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
                 size_t c = e->cap ? 2 * e->cap : 8;
                 ply_prop *q = realloc(e->props, c * sizeof *q);
                 if (!q) {
-                    st = hv_error(HV_ERR_NOMEM, "%s: out of memory", path);
+                    st = hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
                     break;
                 }
                 e->props = q;
@@ -546,14 +547,14 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
             e->props[e->nprops++] = pr;
         } else {
             /* some exporters write free text without "comment" (Blender 2.4x) */
-            hv_log(HV_LOG_DEBUG, "%s: line %zu: skipping unknown header line", path, line);
+            hv__log(HV_LOG_DEBUG, "%s: line %zu: skipping unknown header line", path, line);
         }
         p = next;
     }
     if (!st && !data)
-        st = hv_error(HV_ERR_PARSE, "%s: header has no end_header line", path);
+        st = hv__error(HV_ERR_PARSE, "%s: header has no end_header line", path);
     if (!st && format < 0)
-        st = hv_error(HV_ERR_PARSE, "%s: header has no format line", path);
+        st = hv__error(HV_ERR_PARSE, "%s: header has no format line", path);
     if (st) {
         free_elems(el, nel);
         return st;
@@ -562,7 +563,7 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
     ply_reader r = {path, data, end, buf, line + 1, format};
     ply_state s;
     memset(&s, 0, sizeof s);
-    mb_init(&s.b, path);
+    hv__mb_init(&s.b, path);
     int seen_vertex = 0;
     for (size_t k = 0; k < nel && !st; k++) {
         ply_elem *e = &el[k];
@@ -571,11 +572,11 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
         size_t min = min_record_bytes(e, format);
         size_t left = (size_t)(end - r.p);
         if (e->count && min && e->count > (left + 2) / min)
-            st = hv_error(HV_ERR_PARSE,
-                          "%s: line %zu: element %.*s declares %llu records but only %zu bytes of "
-                          "data remain (at least %zu bytes each)",
-                          path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
-                          left, min);
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: line %zu: element %.*s declares %llu records but only %zu bytes of "
+                           "data remain (at least %zu bytes each)",
+                           path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
+                           left, min);
         else if (e->nprops == 0)
             continue;
         else if (name_is(e->name, e->namelen, "vertex") && !seen_vertex) {
@@ -590,20 +591,20 @@ hv_status mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh *
     }
     free_elems(el, nel);
     if (!st && s.max_index > s.b.nv)
-        st = hv_error(HV_ERR_PARSE, "%s: %s: vertex index %llu out of range (%zu vertices)", path,
-                      s.max_where, (unsigned long long)(s.max_index - 1), s.b.nv);
+        st = hv__error(HV_ERR_PARSE, "%s: %s: vertex index %llu out of range (%zu vertices)", path,
+                       s.max_where, (unsigned long long)(s.max_index - 1), s.b.nv);
     if (!st && !s.has_faces)
-        st = hv_error(HV_ERR_PARSE,
-                      "%s: no triangles (no face or tristrips element: a point cloud?)", path);
-    u32vec_free(&s.poly);
+        st = hv__error(HV_ERR_PARSE,
+                       "%s: no triangles (no face or tristrips element: a point cloud?)", path);
+    hv__u32vec_free(&s.poly);
     if (st) {
-        mb_free(&s.b);
+        hv__mb_free(&s.b);
         return st;
     }
     if (s.strips_dropped)
-        hv_log(HV_LOG_DEBUG, "%s: dropped %zu zero-area stitching triangles from strips", path,
-               s.strips_dropped);
+        hv__log(HV_LOG_DEBUG, "%s: dropped %zu zero-area stitching triangles from strips", path,
+                s.strips_dropped);
     static const char *const names[] = {"PLY ascii", "PLY binary_little_endian",
                                         "PLY binary_big_endian"};
-    return mb_finish(&s.b, names[format], out);
+    return hv__mb_finish(&s.b, names[format], out);
 }

@@ -22,19 +22,19 @@ size_t hv_faces_count(const hv_faces *f, int axis) { return face_count(f->dim, f
 hv_status hv_faces_create(hv_faces **out, const hv_grid *g)
 {
     if (!out || !g)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_faces_create: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_faces_create: NULL argument");
     *out = NULL;
     hv_faces *f = calloc(1, sizeof *f);
     if (!f)
-        return hv_error(HV_ERR_NOMEM, "hv_faces_create: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_faces_create: out of memory");
     f->dim = g->dim;
     memcpy(f->n, g->n, sizeof f->n);
     for (int a = 0; a < g->dim; a++) {
         f->f[a] = hv_calloc(face_count(f->dim, f->n, a), sizeof(float));
         if (!f->f[a]) {
             hv_faces_destroy(&f);
-            return hv_error(HV_ERR_NOMEM, "cannot allocate face arrays for a %d x %d x %d grid",
-                            g->n[0], g->n[1], g->n[2]);
+            return hv__error(HV_ERR_NOMEM, "cannot allocate face arrays for a %d x %d x %d grid",
+                             g->n[0], g->n[1], g->n[2]);
         }
     }
     *out = f;
@@ -67,7 +67,7 @@ static void strides(const int n[3], int a, size_t cs[3], size_t fs[3])
 hv_status hv_face_gradient(const hv_grid *u, hv_faces *g)
 {
     if (!u || !g || g->dim != u->dim || memcmp(g->n, u->n, sizeof g->n))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_face_gradient: faces do not match the grid");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_face_gradient: faces do not match the grid");
     const int *n = u->n;
     const float inv_h = (float)(1.0 / u->h);
     const uint8_t *s = u->solid;
@@ -95,7 +95,7 @@ hv_status hv_face_gradient(const hv_grid *u, hv_faces *g)
 hv_status hv_face_divergence(const hv_faces *F, hv_grid *out)
 {
     if (!F || !out || F->dim != out->dim || memcmp(F->n, out->n, sizeof F->n))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_face_divergence: faces do not match the grid");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_face_divergence: faces do not match the grid");
     const int *n = out->n;
     const double inv_h = 1.0 / out->h;
     const uint8_t *s = out->solid;
@@ -128,7 +128,8 @@ hv_status hv_face_divergence(const hv_faces *F, hv_grid *out)
 hv_status hv_laplacian(const hv_grid *u, hv_grid *out)
 {
     if (!u || !out || u->dim != out->dim || memcmp(u->n, out->n, sizeof u->n) || u->v == out->v)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_laplacian: output must match the input grid and not alias it");
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_laplacian: output must match the input grid and not alias it");
     const int *n = u->n;
     const double inv_h2 = 1.0 / (u->h * u->h);
     const uint8_t *s = u->solid;
@@ -144,7 +145,7 @@ hv_status hv_laplacian(const hv_grid *u, hv_grid *out)
                 }
                 double uc = u->v[c], acc = 0.0;
                 /* Each open face adds (u_nb - u_c); walls and solid neighbours add nothing. */
-#define HV_FACE(cond, off)                                                                        \
+#define HV_FACE(cond, off)                                                                         \
     if ((cond) && !(s && s[c + (off)]))                                                            \
         acc += u->v[c + (off)] - uc;
                 HV_FACE(i > 0, -(ptrdiff_t)1)

@@ -84,9 +84,9 @@ hv_status hv_apply_helmholtz_d(int dim, const int n[3], double h, const uint8_t 
     if (st)
         return st;
     if (!u || !out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_apply_helmholtz_d: %s is NULL", u ? "out" : "u");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_apply_helmholtz_d: %s is NULL", u ? "out" : "u");
     if (u == out)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_apply_helmholtz_d: out must not alias u");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_apply_helmholtz_d: out must not alias u");
     const double c = 1.0 / (h * h);
     if (solid)
         rows_masked(dim, n, solid, c, alpha, beta, u, out);

@@ -11,11 +11,11 @@
 #include "heatvox/solve.h"
 
 typedef struct hv_setup {
-    hv_problem p;           /* p.solid points at the front end's copy (or NULL) */
-    hv_solver_opts o;       /* defaults filled in */
-    size_t count;           /* cells */
-    int nregion;            /* connected fluid regions (1 without a mask) */
-    const int32_t *region;  /* NULL without a mask; else region id per cell, -1 on solid */
+    hv_problem p;          /* p.solid points at the front end's copy (or NULL) */
+    hv_solver_opts o;      /* defaults filled in */
+    size_t count;          /* cells */
+    int nregion;           /* connected fluid regions (1 without a mask) */
+    const int32_t *region; /* NULL without a mask; else region id per cell, -1 on solid */
 } hv_setup;
 
 typedef struct hv_backend_ops {
@@ -39,14 +39,14 @@ typedef struct hv_backend_ops {
 /* Every backend always builds and is referenced strongly: a weak undefined
  * symbol would not pull its object out of libheatvox.a. OpenCL links only the
  * ICD loader; without a platform its create fails with HV_ERR_UNSUPPORTED. */
-extern const hv_backend_ops hv_backend_mg_ops;
-extern const hv_backend_ops hv_backend_fftw_ops;
-extern const hv_backend_ops hv_backend_opencl_ops;
+extern const hv_backend_ops hv__backend_mg_ops;
+extern const hv_backend_ops hv__backend_fftw_ops;
+extern const hv_backend_ops hv__backend_opencl_ops;
 
 /* The OpenCL device that HV_BACKEND_AUTO may take (hv_backend_resolve): -1
  * none (no platform or device: logs one HV_LOG_WARN), 0 a CPU device, 1 a
  * GPU. Probes once per process, creating no context (opencl.c). */
-int hv_opencl_auto_device(void);
+int hv__opencl_auto_device(void);
 
 /* Records relres into info->history (capped) and bumps nhistory. */
 static inline void hv_info_push(hv_solve_info *info, double relres)
@@ -58,13 +58,13 @@ static inline void hv_info_push(hv_solve_info *info, double relres)
 
 /* The backend behind a solver and its state, for backend-specific entry
  * points (the OpenCL device-resident solve, cl_ops.h). */
-const hv_backend_ops *hv_solver_ops(const hv_solver *sv);
-void *hv_solver_state(hv_solver *sv);
+const hv_backend_ops *hv__solver_ops(const hv_solver *sv);
+void *hv__solver_state(hv_solver *sv);
 
 /* Subtracts the per-region mean of u (regions as in s; whole grid without mask). */
-void hv_project_mean(const hv_setup *s, double *u);
+void hv__project_mean(const hv_setup *s, double *u);
 
 /* ||v||_2 over fluid cells. */
-double hv_norm2(const hv_setup *s, const double *v);
+double hv__norm2(const hv_setup *s, const double *v);
 
 #endif

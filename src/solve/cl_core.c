@@ -26,11 +26,11 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_MG_JACOBI] = "mg_jacobi",
     [HV_K_MG_RESTRICT_RESIDUAL] = "mg_restrict_residual",
     [HV_K_MG_RESTRICT] = "mg_restrict",
-    [HV_K_MG_RESTRICT_TRANSPOSE] = "mg_restrict_transpose",
+    [HV_K_MG_RESTRICT_TRANSPOSE] = "hv__mg_restrict_transpose",
     [HV_K_MG_PROLONG] = "mg_prolong",
     [HV_K_MG_PROLONG_W] = "mg_prolong_w",
     [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",
-    [HV_K_MG_BOTTOM_CG] = "mg_bottom_cg",
+    [HV_K_MG_BOTTOM_CG] = "hv__mg_bottom_cg",
     [HV_K_RED_DOT_F] = "red_dot_f",
     [HV_K_RED_FINISH] = "red_finish",
     [HV_K_RED_CHUNK_F] = "red_chunk_f",
@@ -54,7 +54,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_FINE_MASK] = "fine_mask",
 };
 
-const char *hv_cl_strerror(cl_int e)
+const char *hv__cl_strerror(cl_int e)
 {
     switch (e) {
     case CL_SUCCESS: return "CL_SUCCESS";
@@ -139,12 +139,12 @@ static hv_status enumerate(devlist *L)
     L->n = 0;
     cl_int e = clGetPlatformIDs(MAX_PLATFORMS, p, &np);
     if (e == CL_PLATFORM_NOT_FOUND_KHR || (e == CL_SUCCESS && np == 0))
-        return hv_error(HV_ERR_UNSUPPORTED,
-                        "no OpenCL platform is installed (an ICD such as "
-                        "Debian's pocl-opencl-icd or a GPU driver provides one)");
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "no OpenCL platform is installed (an ICD such as "
+                         "Debian's pocl-opencl-icd or a GPU driver provides one)");
     if (e != CL_SUCCESS)
-        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL: clGetPlatformIDs failed: %s",
-                        hv_cl_strerror(e));
+        return hv__error(HV_ERR_UNSUPPORTED, "OpenCL: clGetPlatformIDs failed: %s",
+                         hv__cl_strerror(e));
     if (np > MAX_PLATFORMS)
         np = MAX_PLATFORMS;
     for (cl_uint pi = 0; pi < np; pi++) {
@@ -164,7 +164,7 @@ static hv_status enumerate(devlist *L)
         }
     }
     if (L->n == 0)
-        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL platforms are installed but offer no device");
+        return hv__error(HV_ERR_UNSUPPORTED, "OpenCL platforms are installed but offer no device");
     return HV_OK;
 }
 
@@ -202,20 +202,20 @@ static hv_status choose(const devlist *L, int *index)
             break;
         len += (size_t)w;
     }
-    return hv_error(HV_ERR_INVALID_ARG,
-                    "HEATVOX_OPENCL_DEVICE='%s' names no OpenCL device (give \"P:D\" or part of a "
-                    "device name); devices: %s",
-                    spec, list);
+    return hv__error(HV_ERR_INVALID_ARG,
+                     "HEATVOX_OPENCL_DEVICE='%s' names no OpenCL device (give \"P:D\" or part of a "
+                     "device name); devices: %s",
+                     spec, list);
 }
 
 hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *count)
 {
     if (!count || max < 0 || (max > 0 && !out))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_opencl_list_devices: bad arguments");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_list_devices: bad arguments");
     *count = 0;
     devlist *L = malloc(sizeof *L);
     if (!L)
-        return hv_error(HV_ERR_NOMEM, "hv_opencl_list_devices: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_opencl_list_devices: out of memory");
     hv_status st = enumerate(L);
     if (st == HV_OK) {
         int sel = -1;
@@ -236,7 +236,7 @@ hv_status hv_opencl_probe(hv_opencl_device *out)
 {
     devlist *L = malloc(sizeof *L);
     if (!L)
-        return hv_error(HV_ERR_NOMEM, "hv_opencl_probe: out of memory");
+        return hv__error(HV_ERR_NOMEM, "hv_opencl_probe: out of memory");
     int sel = -1;
     hv_status st = enumerate(L);
     if (st == HV_OK)
@@ -251,7 +251,7 @@ hv_status hv_opencl_probe(hv_opencl_device *out)
 
 /* ---------- the shared context and programs ---------- */
 
-/* A module's program on one context (hv_cl_program). */
+/* A module's program on one context (hv__cl_program). */
 typedef struct modprog {
     struct modprog *next;
     const hv_cl_module *m;
@@ -278,8 +278,8 @@ static hv_status build_program(cl_context ctx, cl_device_id dev, const char *dev
     cl_int e;
     *prog = clCreateProgramWithSource(ctx, (cl_uint)nsrc, (const char **)sources, NULL, &e);
     if (e != CL_SUCCESS)
-        return hv_error(HV_ERR_BACKEND, "OpenCL: clCreateProgramWithSource failed: %s",
-                        hv_cl_strerror(e));
+        return hv__error(HV_ERR_BACKEND, "OpenCL: clCreateProgramWithSource failed: %s",
+                         hv__cl_strerror(e));
     e = clBuildProgram(*prog, 1, &dev, options, NULL, NULL);
     if (e == CL_SUCCESS)
         return HV_OK;
@@ -301,8 +301,8 @@ static hv_status build_program(cl_context ctx, cl_device_id dev, const char *dev
     free(full);
     clReleaseProgram(*prog);
     *prog = NULL;
-    return hv_error(HV_ERR_BACKEND, "OpenCL kernels failed to build on '%s' (%s): %s", devname,
-                    hv_cl_strerror(e), *log ? log : "(no build log)");
+    return hv__error(HV_ERR_BACKEND, "OpenCL kernels failed to build on '%s' (%s): %s", devname,
+                     hv__cl_strerror(e), *log ? log : "(no build log)");
 }
 
 /* The options of every program on a context: the solver's and the modules'
@@ -324,17 +324,17 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         }
     hv_cl_shared *s = calloc(1, sizeof *s);
     if (!s)
-        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+        return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
     cl_context_properties props[] = {CL_CONTEXT_PLATFORM, (cl_context_properties)plat, 0};
     cl_int e;
     s->ctx = clCreateContext(props, 1, &dev, NULL, NULL, &e);
     if (e != CL_SUCCESS) {
         free(s);
-        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
-                        hv_cl_strerror(e));
+        return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
+                         hv__cl_strerror(e));
     }
-    const char *src[] = {hv_kernel_common, hv_kernel_mg,    hv_kernel_reduce,
-                         hv_kernel_fine,   hv_kernel_faces, hv_kernel_pointwise};
+    const char *src[] = {hv__kernel_common, hv__kernel_mg,    hv__kernel_reduce,
+                         hv__kernel_fine,   hv__kernel_faces, hv__kernel_pointwise};
     char opts[128];
     build_options(fp64, opts, sizeof opts);
     hv_status st =
@@ -375,12 +375,12 @@ static void shared_put(hv_cl_shared *s)
     pthread_mutex_unlock(&shared_lock);
 }
 
-void hv_cl_close(hv_cl **pcl)
+void hv__cl_close(hv_cl **pcl)
 {
     if (!pcl || !*pcl)
         return;
     hv_cl *cl = *pcl;
-    hv_cl_free(&cl->part);
+    hv__cl_free(&cl->part);
     for (int k = 0; k < HV_K_COUNT; k++)
         if (cl->k[k])
             clReleaseKernel(cl->k[k]);
@@ -398,7 +398,7 @@ void hv_cl_close(hv_cl **pcl)
     *pcl = NULL;
 }
 
-hv_status hv_cl_open(hv_cl **out)
+hv_status hv__cl_open(hv_cl **out)
 {
     *out = NULL;
     hv_cl *cl = calloc(1, sizeof *cl);
@@ -406,7 +406,7 @@ hv_status hv_cl_open(hv_cl **out)
     if (!cl || !L) {
         free(cl);
         free(L);
-        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+        return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
     }
     pthread_mutex_lock(&shared_lock);
     int sel = -1;
@@ -432,43 +432,43 @@ hv_status hv_cl_open(hv_cl **out)
     cl_int e;
     cl->q = clCreateCommandQueue(cl->ctx, cl->dev, 0, &e);
     if (e != CL_SUCCESS) {
-        hv_cl_close(&cl);
-        return hv_error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
-                        hv_cl_strerror(e));
+        hv__cl_close(&cl);
+        return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
+                         hv__cl_strerror(e));
     }
     for (int k = 0; k < HV_K_COUNT; k++) {
         if (k >= HV_K_FIRST_FP64 && !cl->fp64)
             continue;
         cl->k[k] = clCreateKernel(cl->sh->prog, kernel_names[k], &e);
         if (e != CL_SUCCESS) {
-            hv_cl_close(&cl);
-            return hv_error(HV_ERR_BACKEND, "OpenCL: kernel '%s' is missing: %s", kernel_names[k],
-                            hv_cl_strerror(e));
+            hv__cl_close(&cl);
+            return hv__error(HV_ERR_BACKEND, "OpenCL: kernel '%s' is missing: %s", kernel_names[k],
+                             hv__cl_strerror(e));
         }
     }
     size_t wg = 0;
     clGetDeviceInfo(cl->dev, CL_DEVICE_MAX_WORK_GROUP_SIZE, sizeof wg, &wg, NULL);
     cl->max_wg = wg;
     if (wg < HV_CL_WG) {
-        hv_cl_close(&cl);
-        return hv_error(HV_ERR_UNSUPPORTED,
-                        "OpenCL device '%s' allows work-groups of %zu items; "
-                        "heatvox needs %d",
-                        cl->info.name, wg, HV_CL_WG);
+        hv__cl_close(&cl);
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "OpenCL device '%s' allows work-groups of %zu items; "
+                         "heatvox needs %d",
+                         cl->info.name, wg, HV_CL_WG);
     }
     *out = cl;
     return HV_OK;
 }
 
-hv_status hv_cl_build(hv_cl *cl, const char *const *sources, int nsrc, const char *options,
-                      cl_program *prog)
+hv_status hv__cl_build(hv_cl *cl, const char *const *sources, int nsrc, const char *options,
+                       cl_program *prog)
 {
     return build_program(cl->ctx, cl->dev, cl->info.name, sources, nsrc, options, prog);
 }
 
 /* ---------- modules' programs and kernels ---------- */
 
-hv_status hv_cl_program(hv_cl *cl, const hv_cl_module *m, cl_program *prog)
+hv_status hv__cl_program(hv_cl *cl, const hv_cl_module *m, cl_program *prog)
 {
     *prog = NULL;
     hv_status st = HV_OK;
@@ -484,9 +484,9 @@ hv_status hv_cl_program(hv_cl *cl, const hv_cl_module *m, cl_program *prog)
         if (!src || !(mp = calloc(1, sizeof *mp))) {
             free(src);
             pthread_mutex_unlock(&shared_lock);
-            return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+            return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
         }
-        src[0] = hv_kernel_common;
+        src[0] = hv__kernel_common;
         for (int i = 0; i < nsrc; i++)
             src[i + 1] = m->sources[i];
         char opts[128];
@@ -517,20 +517,20 @@ static cl_kernel *module_kernels(const hv_cl *cl, const hv_cl_module *m)
     return NULL;
 }
 
-hv_status hv_cl_module_open(hv_cl *cl, const hv_cl_module *m)
+hv_status hv__cl_module_open(hv_cl *cl, const hv_cl_module *m)
 {
     if (module_kernels(cl, m))
         return HV_OK;
     if (m->fp64 && !cl->fp64)
-        return hv_error(HV_ERR_UNSUPPORTED,
-                        "OpenCL: the %s kernels need fp64, which '%s' lacks "
-                        "(or HEATVOX_OPENCL_FP64=0)",
-                        m->name, cl->info.name);
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "OpenCL: the %s kernels need fp64, which '%s' lacks "
+                         "(or HEATVOX_OPENCL_FP64=0)",
+                         m->name, cl->info.name);
     if (cl->nmod == HV_CL_MODULES)
-        return hv_error(HV_ERR_BACKEND, "OpenCL: more than %d kernel modules on one handle",
-                        HV_CL_MODULES);
+        return hv__error(HV_ERR_BACKEND, "OpenCL: more than %d kernel modules on one handle",
+                         HV_CL_MODULES);
     cl_program prog;
-    hv_status st = hv_cl_program(cl, m, &prog);
+    hv_status st = hv__cl_program(cl, m, &prog);
     if (st)
         return st;
     int nk = 0;
@@ -538,7 +538,7 @@ hv_status hv_cl_module_open(hv_cl *cl, const hv_cl_module *m)
         nk++;
     cl_kernel *k = calloc((size_t)nk + 1, sizeof *k);
     if (!k)
-        return hv_error(HV_ERR_NOMEM, "OpenCL: out of memory");
+        return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
     for (int i = 0; i < nk; i++) {
         cl_int e;
         k[i] = clCreateKernel(prog, m->kernels[i], &e);
@@ -546,8 +546,8 @@ hv_status hv_cl_module_open(hv_cl *cl, const hv_cl_module *m)
             for (int j = 0; j < i; j++)
                 clReleaseKernel(k[j]);
             free(k);
-            return hv_error(HV_ERR_BACKEND, "OpenCL: kernel '%s' of the %s kernels is missing: %s",
-                            m->kernels[i], m->name, hv_cl_strerror(e));
+            return hv__error(HV_ERR_BACKEND, "OpenCL: kernel '%s' of the %s kernels is missing: %s",
+                             m->kernels[i], m->name, hv__cl_strerror(e));
         }
     }
     cl->mod[cl->nmod].m = m;
@@ -561,12 +561,12 @@ hv_status hv_cl_module_open(hv_cl *cl, const hv_cl_module *m)
 static cl_kernel module_kernel(hv_cl *cl, const hv_cl_module *m, int k)
 {
     cl_kernel *ks = module_kernels(cl, m);
-    if (!ks && cl->err == CL_SUCCESS && hv_cl_module_open(cl, m) == HV_OK)
+    if (!ks && cl->err == CL_SUCCESS && hv__cl_module_open(cl, m) == HV_OK)
         ks = module_kernels(cl, m);
     if (!ks) {
         char where[96];
         snprintf(where, sizeof where, "building the %s kernels", m->name);
-        hv_cl_fail(cl, CL_BUILD_PROGRAM_FAILURE, where);
+        hv__cl_fail(cl, CL_BUILD_PROGRAM_FAILURE, where);
         return NULL;
     }
     return ks[k];
@@ -574,7 +574,7 @@ static cl_kernel module_kernel(hv_cl *cl, const hv_cl_module *m, int k)
 
 /* ---------- errors, buffers, launches ---------- */
 
-int hv_cl_fail(hv_cl *cl, cl_int e, const char *where)
+int hv__cl_fail(hv_cl *cl, cl_int e, const char *where)
 {
     if (e == CL_SUCCESS)
         return 0;
@@ -585,7 +585,7 @@ int hv_cl_fail(hv_cl *cl, cl_int e, const char *where)
     return 1;
 }
 
-hv_status hv_cl_check(hv_cl *cl)
+hv_status hv__cl_check(hv_cl *cl)
 {
     if (cl->err == CL_SUCCESS)
         return HV_OK;
@@ -594,17 +594,17 @@ hv_status hv_cl_check(hv_cl *cl)
     hv_status st = (e == CL_MEM_OBJECT_ALLOCATION_FAILURE || e == CL_OUT_OF_HOST_MEMORY)
                        ? HV_ERR_NOMEM
                        : HV_ERR_BACKEND;
-    return hv_error(st, "OpenCL: %s failed on '%s': %s", cl->err_where, cl->info.name,
-                    hv_cl_strerror(e));
+    return hv__error(st, "OpenCL: %s failed on '%s': %s", cl->err_where, cl->info.name,
+                     hv__cl_strerror(e));
 }
 
-hv_status hv_cl_finish(hv_cl *cl)
+hv_status hv__cl_finish(hv_cl *cl)
 {
-    hv_cl_fail(cl, clFinish(cl->q), "clFinish");
-    return hv_cl_check(cl);
+    hv__cl_fail(cl, clFinish(cl->q), "clFinish");
+    return hv__cl_check(cl);
 }
 
-hv_status hv_cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
+hv_status hv__cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
 {
     cl_int e;
     if (bytes == 0) /* OpenCL has no empty buffers */
@@ -616,13 +616,13 @@ hv_status hv_cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
     *out = NULL;
     if (e == CL_INVALID_BUFFER_SIZE || e == CL_MEM_OBJECT_ALLOCATION_FAILURE ||
         e == CL_OUT_OF_RESOURCES || e == CL_OUT_OF_HOST_MEMORY)
-        return hv_error(HV_ERR_NOMEM, "OpenCL: cannot allocate %zu bytes on '%s': %s", bytes,
-                        cl->info.name, hv_cl_strerror(e));
-    return hv_error(HV_ERR_BACKEND, "OpenCL: clCreateBuffer(%zu bytes) failed: %s", bytes,
-                    hv_cl_strerror(e));
+        return hv__error(HV_ERR_NOMEM, "OpenCL: cannot allocate %zu bytes on '%s': %s", bytes,
+                         cl->info.name, hv__cl_strerror(e));
+    return hv__error(HV_ERR_BACKEND, "OpenCL: clCreateBuffer(%zu bytes) failed: %s", bytes,
+                     hv__cl_strerror(e));
 }
 
-void hv_cl_free(cl_mem *m)
+void hv__cl_free(cl_mem *m)
 {
     if (m && *m) {
         clReleaseMemObject(*m);
@@ -630,40 +630,40 @@ void hv_cl_free(cl_mem *m)
     }
 }
 
-void hv_cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *src)
+void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *src)
 {
     if (bytes)
-        hv_cl_fail(cl, clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL, NULL),
-                   "clEnqueueWriteBuffer");
+        hv__cl_fail(cl, clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL, NULL),
+                    "clEnqueueWriteBuffer");
 }
 
-void hv_cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst)
+void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst)
 {
     if (bytes)
-        hv_cl_fail(cl, clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL, NULL),
-                   "clEnqueueReadBuffer");
+        hv__cl_fail(cl, clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL, NULL),
+                    "clEnqueueReadBuffer");
 }
 
-void hv_cl_zero(hv_cl *cl, cl_mem m, size_t bytes)
+void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes)
 {
     const cl_uchar zero = 0;
     if (bytes)
-        hv_cl_fail(cl, clEnqueueFillBuffer(cl->q, m, &zero, 1, 0, bytes, 0, NULL, NULL),
-                   "clEnqueueFillBuffer");
+        hv__cl_fail(cl, clEnqueueFillBuffer(cl->q, m, &zero, 1, 0, bytes, 0, NULL, NULL),
+                    "clEnqueueFillBuffer");
 }
 
-void hv_cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
+void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
 {
     if (bytes)
-        hv_cl_fail(cl, clEnqueueCopyBuffer(cl->q, src, dst, 0, 0, bytes, 0, NULL, NULL),
-                   "clEnqueueCopyBuffer");
+        hv__cl_fail(cl, clEnqueueCopyBuffer(cl->q, src, dst, 0, 0, bytes, 0, NULL, NULL),
+                    "clEnqueueCopyBuffer");
 }
 
 /* Sets the arguments of kernel kk (named name, for messages). */
 static void set_args(hv_cl *cl, cl_kernel kk, const char *name, const char *fmt, va_list ap)
 {
     if (!kk) {
-        hv_cl_fail(cl, CL_INVALID_KERNEL, name);
+        hv__cl_fail(cl, CL_INVALID_KERNEL, name);
         return;
     }
     for (cl_uint i = 0; fmt[i]; i++) {
@@ -720,7 +720,7 @@ static void set_args(hv_cl *cl, cl_kernel kk, const char *name, const char *fmt,
         if (e != CL_SUCCESS) {
             char where[96];
             snprintf(where, sizeof where, "argument %u of kernel %s", i, name);
-            hv_cl_fail(cl, e, where);
+            hv__cl_fail(cl, e, where);
             break;
         }
     }
@@ -734,18 +734,18 @@ static void enqueue(hv_cl *cl, cl_kernel kk, const char *name, int dims, const s
         if (global[d] == 0)
             return;
     if (!kk) {
-        hv_cl_fail(cl, CL_INVALID_KERNEL, name);
+        hv__cl_fail(cl, CL_INVALID_KERNEL, name);
         return;
     }
     cl_int e = clEnqueueNDRangeKernel(cl->q, kk, (cl_uint)dims, NULL, global, local, 0, NULL, NULL);
     if (e != CL_SUCCESS) {
         char where[96];
         snprintf(where, sizeof where, "kernel %s", name);
-        hv_cl_fail(cl, e, where);
+        hv__cl_fail(cl, e, where);
     }
 }
 
-void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
+void hv__cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -753,12 +753,12 @@ void hv_cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
     va_end(ap);
 }
 
-void hv_cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const size_t *local)
+void hv__cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const size_t *local)
 {
     enqueue(cl, cl->k[k], kernel_names[k], dims, global, local);
 }
 
-void hv_cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt, ...)
+void hv__cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt, ...)
 {
     cl_kernel kk = module_kernel(cl, m, k);
     if (!kk)
@@ -769,8 +769,8 @@ void hv_cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt,
     va_end(ap);
 }
 
-void hv_cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const size_t *global,
-                      const size_t *local)
+void hv__cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const size_t *global,
+                       const size_t *local)
 {
     for (int d = 0; d < dims; d++)
         if (global[d] == 0)
@@ -780,7 +780,7 @@ void hv_cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const s
         enqueue(cl, kk, m->kernels[k], dims, global, local);
 }
 
-size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
+size_t hv__cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
 {
     size_t kwg = 0;
     if (!cl->k[k] || clGetKernelWorkGroupInfo(cl->k[k], cl->dev, CL_KERNEL_WORK_GROUP_SIZE,
@@ -793,7 +793,7 @@ size_t hv_cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
 
 static size_t round_up(size_t n, size_t m) { return (n + m - 1) / m * m; }
 
-void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
+void hv__cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
 {
     /* One work-group shape for every level: PoCL compiles a kernel once per
      * local size, and idle items on narrow (coarse) levels cost little. */
@@ -803,13 +803,13 @@ void hv_cl_range2(size_t nx, size_t rows, size_t g[2], size_t l[2])
     g[1] = rows;
 }
 
-void hv_cl_range1(size_t n, size_t g[1], size_t l[1])
+void hv__cl_range1(size_t n, size_t g[1], size_t l[1])
 {
     l[0] = HV_CL_WG;
     g[0] = round_up(n, HV_CL_WG);
 }
 
-size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1])
+size_t hv__cl_range_red(size_t n, size_t g[1], size_t l[1])
 {
     size_t per = (size_t)HV_CL_WG * HV_CL_RED_BLOCK, groups = (n + per - 1) / per;
     if (groups == 0)
@@ -819,41 +819,41 @@ size_t hv_cl_range_red(size_t n, size_t g[1], size_t l[1])
     return groups;
 }
 
-void hv_cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
+void hv__cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
 {
-    size_t l = hv_cl_group_limit(cl, HV_K_RED_FINISH, 256);
-    hv_cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
-    hv_cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
+    size_t l = hv__cl_group_limit(cl, HV_K_RED_FINISH, 256);
+    hv__cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
+    hv__cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
 }
 
-void hv_cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot)
+void hv__cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot)
 {
     size_t g[1], l[1];
-    size_t groups = hv_cl_range_red(n, g, l);
+    size_t groups = hv__cl_range_red(n, g, l);
     if (groups > cl->part_cap) {
-        hv_cl_free(&cl->part);
+        hv__cl_free(&cl->part);
         cl->part_cap = 0;
-        if (hv_cl_alloc(cl, groups * cl->acc, NULL, &cl->part) != HV_OK) {
-            hv_cl_fail(cl, CL_MEM_OBJECT_ALLOCATION_FAILURE, "partial sums of a reduction");
+        if (hv__cl_alloc(cl, groups * cl->acc, NULL, &cl->part) != HV_OK) {
+            hv__cl_fail(cl, CL_MEM_OBJECT_ALLOCATION_FAILURE, "partial sums of a reduction");
             return;
         }
         cl->part_cap = groups;
     }
-    hv_cl_args(cl, HV_K_RED_DOT_F, "mmlm", a, b, n, cl->part);
-    hv_cl_run(cl, HV_K_RED_DOT_F, 1, g, l);
-    hv_cl_finish_sum(cl, cl->part, groups, S, slot);
+    hv__cl_args(cl, HV_K_RED_DOT_F, "mmlm", a, b, n, cl->part);
+    hv__cl_run(cl, HV_K_RED_DOT_F, 1, g, l);
+    hv__cl_finish_sum(cl, cl->part, groups, S, slot);
 }
 
-void hv_cl_read_acc(hv_cl *cl, cl_mem S, int first, int n, double *out)
+void hv__cl_read_acc(hv_cl *cl, cl_mem S, int first, int n, double *out)
 {
     if (cl->fp64) {
-        hv_cl_read(cl, S, (size_t)first * sizeof(double), (size_t)n * sizeof(double), out);
+        hv__cl_read(cl, S, (size_t)first * sizeof(double), (size_t)n * sizeof(double), out);
         return;
     }
     float tmp[64];
     for (int done = 0; done < n; done += 64) {
         int m = n - done < 64 ? n - done : 64;
-        hv_cl_read(cl, S, (size_t)(first + done) * sizeof(float), (size_t)m * sizeof(float), tmp);
+        hv__cl_read(cl, S, (size_t)(first + done) * sizeof(float), (size_t)m * sizeof(float), tmp);
         for (int i = 0; i < m; i++)
             out[done + i] = cl->err ? 0.0 : tmp[i];
     }

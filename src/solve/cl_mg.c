@@ -25,27 +25,29 @@ static hv_status upload_level(hv_clmg *m, const mg_hierarchy *H, int l)
     }
     L->N[3] = S->plain;
     L->C[3] = (cl_float)H->alpha;
-    hv_cl_range2((size_t)S->n[0], (size_t)S->n[1] * S->n[2], L->g, L->l);
+    hv__cl_range2((size_t)S->n[0], (size_t)S->n[1] * S->n[2], L->g, L->l);
     const size_t bytes = S->count * sizeof(float);
     hv_status st = HV_OK;
     if (!S->plain) {
-        if ((st = hv_cl_alloc(cl, bytes, S->a, &L->a)))
+        if ((st = hv__cl_alloc(cl, bytes, S->a, &L->a)))
             return st;
         for (int b = 0; b < H->dim; b++) {
             size_t nf = (S->count / S->n[b]) * (size_t)(S->n[b] + 1);
-            if ((st = hv_cl_alloc(cl, nf * sizeof(float), S->w[b], &L->w[b])))
+            if ((st = hv__cl_alloc(cl, nf * sizeof(float), S->w[b], &L->w[b])))
                 return st;
         }
     }
     const int jac = m->smoother != HV_SMOOTH_RBGS;
-    if ((st = hv_cl_alloc(cl, bytes, NULL, &L->u[0])) || (st = hv_cl_alloc(cl, bytes, NULL, &L->f)) ||
-        (jac && ((st = hv_cl_alloc(cl, bytes, NULL, &L->u[1])) || (st = hv_cl_alloc(cl, bytes, NULL, &L->d)))))
+    if ((st = hv__cl_alloc(cl, bytes, NULL, &L->u[0])) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &L->f)) ||
+        (jac && ((st = hv__cl_alloc(cl, bytes, NULL, &L->u[1])) ||
+                 (st = hv__cl_alloc(cl, bytes, NULL, &L->d)))))
         return st;
-    hv_cl_zero(cl, L->u[0], bytes);
-    hv_cl_zero(cl, L->f, bytes);
+    hv__cl_zero(cl, L->u[0], bytes);
+    hv__cl_zero(cl, L->f, bytes);
     if (jac) {
-        hv_cl_zero(cl, L->u[1], bytes);
-        hv_cl_zero(cl, L->d, bytes);
+        hv__cl_zero(cl, L->u[1], bytes);
+        hv__cl_zero(cl, L->d, bytes);
     }
     return HV_OK;
 }
@@ -56,14 +58,14 @@ static hv_status upload_sym(hv_clmg *m, const mg_hierarchy *H, int l)
 {
     const mg_level *F = &H->lv[l], *C = &H->lv[l + 1];
     hv_clmg_level *L = &m->lv[l];
-    hv_status st = hv_cl_alloc(m->cl, F->count * sizeof(float), NULL, &L->r);
+    hv_status st = hv__cl_alloc(m->cl, F->count * sizeof(float), NULL, &L->r);
     if (st || C->plain)
         return st;
     float *pn = hv_malloc(F->count * sizeof(float));
     if (!pn)
-        return hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for level %d weights", l);
-    mg_prolong_norm(F, C, pn);
-    st = hv_cl_alloc(m->cl, F->count * sizeof(float), pn, &L->pn); /* copies pn */
+        return hv__error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for level %d weights", l);
+    hv__mg_prolong_norm(F, C, pn);
+    st = hv__cl_alloc(m->cl, F->count * sizeof(float), pn, &L->pn); /* copies pn */
     hv_free(pn);
     return st;
 }
@@ -81,7 +83,7 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
         if (!cnt || !cntf) {
             free(cnt);
             free(cntf);
-            return hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory");
+            return hv__error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory");
         }
         for (size_t c = 0; c < S->count; c++)
             if (S->region[c] >= 0)
@@ -90,18 +92,18 @@ static hv_status upload_bottom(hv_clmg *m, const mg_hierarchy *H)
             cnt[r] = 1.0 / cnt[r];
             cntf[r] = (float)cnt[r];
         }
-        st = hv_cl_alloc(cl, S->count * sizeof(int32_t), S->region, &m->bregion);
+        st = hv__cl_alloc(cl, S->count * sizeof(int32_t), S->region, &m->bregion);
         if (!st)
-            st = hv_cl_alloc(cl, (size_t)S->nregion * cl->acc, cl->fp64 ? (void *)cnt : (void *)cntf,
-                             &m->brinv);
+            st = hv__cl_alloc(cl, (size_t)S->nregion * cl->acc,
+                              cl->fp64 ? (void *)cnt : (void *)cntf, &m->brinv);
         free(cnt);
         free(cntf);
         if (st)
             return st;
     }
-    if ((st = hv_cl_alloc(cl, (5 * S->count + (size_t)m->bnregion) * cl->acc, NULL, &m->bscr)))
+    if ((st = hv__cl_alloc(cl, (5 * S->count + (size_t)m->bnregion) * cl->acc, NULL, &m->bscr)))
         return st;
-    m->bl = hv_cl_group_limit(cl, HV_K_MG_BOTTOM_CG, BOTTOM_WG);
+    m->bl = hv__cl_group_limit(cl, HV_K_MG_BOTTOM_CG, BOTTOM_WG);
     return HV_OK;
 }
 
@@ -124,7 +126,8 @@ static hv_status copy_bottom(hv_clmg *m, const mg_hierarchy *H)
     B->plain = S->plain;
     m->host_bottom = 1;
     const size_t n = S->count;
-    int bad = !(m->hf = malloc(n * sizeof *m->hf)) || !(m->hw = malloc(MG_BOTTOM_WORK * n * sizeof *m->hw));
+    int bad = !(m->hf = malloc(n * sizeof *m->hf)) ||
+              !(m->hw = malloc(MG_BOTTOM_WORK * n * sizeof *m->hw));
     if (!S->plain) {
         bad |= !(B->a = malloc(n * sizeof(float)));
         if (B->a)
@@ -142,7 +145,8 @@ static hv_status copy_bottom(hv_clmg *m, const mg_hierarchy *H)
         if (B->region)
             memcpy(B->region, S->region, n * sizeof(int32_t));
     }
-    return bad ? hv_error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for the bottom level") : HV_OK;
+    return bad ? hv__error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for the bottom level")
+               : HV_OK;
 }
 
 static void free_bottom(hv_clmg *m)
@@ -161,8 +165,8 @@ static void free_bottom(hv_clmg *m)
     m->host_bottom = 0;
 }
 
-hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
-                         int pre, int post, int sym)
+hv_status hv__clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
+                          int pre, int post, int sym)
 {
     memset(m, 0, sizeof *m);
     m->cl = cl;
@@ -182,57 +186,58 @@ hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smooth
     if (!st)
         st = cl->fp64 ? upload_bottom(m, H) : copy_bottom(m, H);
     if (!st)
-        st = hv_cl_finish(cl);
+        st = hv__cl_finish(cl);
     if (st)
-        hv_clmg_destroy(m);
+        hv__clmg_destroy(m);
     return st;
 }
 
-void hv_clmg_destroy(hv_clmg *m)
+void hv__clmg_destroy(hv_clmg *m)
 {
     for (int l = 0; l < m->nlev; l++) {
         hv_clmg_level *L = &m->lv[l];
-        hv_cl_free(&L->a);
+        hv__cl_free(&L->a);
         for (int b = 0; b < 3; b++)
-            hv_cl_free(&L->w[b]);
-        hv_cl_free(&L->u[0]);
-        hv_cl_free(&L->u[1]);
-        hv_cl_free(&L->f);
-        hv_cl_free(&L->d);
-        hv_cl_free(&L->r);
-        hv_cl_free(&L->pn);
+            hv__cl_free(&L->w[b]);
+        hv__cl_free(&L->u[0]);
+        hv__cl_free(&L->u[1]);
+        hv__cl_free(&L->f);
+        hv__cl_free(&L->d);
+        hv__cl_free(&L->r);
+        hv__cl_free(&L->pn);
     }
-    hv_cl_free(&m->bregion);
-    hv_cl_free(&m->brinv);
-    hv_cl_free(&m->bscr);
+    hv__cl_free(&m->bregion);
+    hv__cl_free(&m->brinv);
+    hv__cl_free(&m->bscr);
     free_bottom(m);
     m->nlev = 0;
 }
 
 /* ---------- level kernels ---------- */
 
-void hv_clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y)
+void hv__clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y)
 {
     hv_clmg_level *L = &m->lv[l];
-    hv_cl_args(m->cl, HV_K_MG_APPLY, "IFmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2], u, y);
-    hv_cl_run(m->cl, HV_K_MG_APPLY, 2, L->g, L->l);
+    hv__cl_args(m->cl, HV_K_MG_APPLY, "IFmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2], u,
+                y);
+    hv__cl_run(m->cl, HV_K_MG_APPLY, 2, L->g, L->l);
 }
 
-void hv_clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r)
+void hv__clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r)
 {
     hv_clmg_level *L = &m->lv[l];
-    hv_cl_args(m->cl, HV_K_MG_RESIDUAL, "IFmmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2], u,
-               f, r);
-    hv_cl_run(m->cl, HV_K_MG_RESIDUAL, 2, L->g, L->l);
+    hv__cl_args(m->cl, HV_K_MG_RESIDUAL, "IFmmmmmmm", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2],
+                u, f, r);
+    hv__cl_run(m->cl, HV_K_MG_RESIDUAL, 2, L->g, L->l);
 }
 
 static void rbgs(hv_clmg *m, hv_clmg_level *L, int col)
 {
     size_t g[2], lw[2];
-    hv_cl_range2(((size_t)L->n[0] + 1) / 2, (size_t)L->n[1] * L->n[2], g, lw);
-    hv_cl_args(m->cl, HV_K_MG_RBGS, "IFmmmmmmi", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2],
-               L->u[L->cur], L->f, col);
-    hv_cl_run(m->cl, HV_K_MG_RBGS, 2, g, lw);
+    hv__cl_range2(((size_t)L->n[0] + 1) / 2, (size_t)L->n[1] * L->n[2], g, lw);
+    hv__cl_args(m->cl, HV_K_MG_RBGS, "IFmmmmmmi", L->N, L->C, L->a, L->w[0], L->w[1], L->w[2],
+                L->u[L->cur], L->f, col);
+    hv__cl_run(m->cl, HV_K_MG_RBGS, 2, g, lw);
 }
 
 /* d = cd d + cr D^-1 (f - A u);  u += d  (ping-pong); cd == 0 runs the
@@ -240,18 +245,18 @@ static void rbgs(hv_clmg *m, hv_clmg_level *L, int col)
 static void cheb_step(hv_clmg *m, hv_clmg_level *L, double cd, double cr)
 {
     if (cd == 0) {
-        hv_cl_args(m->cl, HV_K_MG_JACOBI, "IFmmmmmmmmf", L->N, L->C, L->a, L->w[0], L->w[1],
-                   L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cr);
-        hv_cl_run(m->cl, HV_K_MG_JACOBI, 2, L->g, L->l);
+        hv__cl_args(m->cl, HV_K_MG_JACOBI, "IFmmmmmmmmf", L->N, L->C, L->a, L->w[0], L->w[1],
+                    L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cr);
+        hv__cl_run(m->cl, HV_K_MG_JACOBI, 2, L->g, L->l);
     } else {
-        hv_cl_args(m->cl, HV_K_MG_CHEB, "IFmmmmmmmmff", L->N, L->C, L->a, L->w[0], L->w[1],
-                   L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cd, cr);
-        hv_cl_run(m->cl, HV_K_MG_CHEB, 2, L->g, L->l);
+        hv__cl_args(m->cl, HV_K_MG_CHEB, "IFmmmmmmmmff", L->N, L->C, L->a, L->w[0], L->w[1],
+                    L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cd, cr);
+        hv__cl_run(m->cl, HV_K_MG_CHEB, 2, L->g, L->l);
     }
     L->cur = 1 - L->cur;
 }
 
-void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
+void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
 {
     hv_clmg_level *L = &m->lv[l];
     if (steps <= 0)
@@ -288,56 +293,56 @@ static void coarsen_flags(const hv_clmg_level *F, cl_int co[4])
     }
 }
 
-void hv_clmg_restrict_residual(hv_clmg *m, int l)
+void hv__clmg_restrict_residual(hv_clmg *m, int l)
 {
     hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
     cl_int co[4];
     coarsen_flags(F, co);
-    hv_cl_args(m->cl, HV_K_MG_RESTRICT_RESIDUAL, "IFmmmmmmIIm", F->N, F->C, F->a, F->w[0], F->w[1],
-               F->w[2], F->u[F->cur], F->f, C->N, co, C->f);
-    hv_cl_run(m->cl, HV_K_MG_RESTRICT_RESIDUAL, 2, C->g, C->l);
+    hv__cl_args(m->cl, HV_K_MG_RESTRICT_RESIDUAL, "IFmmmmmmIIm", F->N, F->C, F->a, F->w[0], F->w[1],
+                F->w[2], F->u[F->cur], F->f, C->N, co, C->f);
+    hv__cl_run(m->cl, HV_K_MG_RESTRICT_RESIDUAL, 2, C->g, C->l);
 }
 
-void hv_clmg_restrict_transpose(hv_clmg *m, int l)
+void hv__clmg_restrict_transpose(hv_clmg *m, int l)
 {
     hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
     cl_int co[4];
     coarsen_flags(F, co);
-    hv_cl_args(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, "ImmImIm", F->N, F->r, F->pn, C->N, C->a, co,
-               C->f);
-    hv_cl_run(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, 2, C->g, C->l);
+    hv__cl_args(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, "ImmImIm", F->N, F->r, F->pn, C->N, C->a, co,
+                C->f);
+    hv__cl_run(m->cl, HV_K_MG_RESTRICT_TRANSPOSE, 2, C->g, C->l);
 }
 
-void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst)
+void hv__clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst)
 {
     hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
     cl_int co[4];
     coarsen_flags(F, co);
-    hv_cl_args(m->cl, HV_K_MG_RESTRICT, "ImIIm", F->N, src, C->N, co, dst);
-    hv_cl_run(m->cl, HV_K_MG_RESTRICT, 2, C->g, C->l);
+    hv__cl_args(m->cl, HV_K_MG_RESTRICT, "ImIIm", F->N, src, C->N, co, dst);
+    hv__cl_run(m->cl, HV_K_MG_RESTRICT, 2, C->g, C->l);
 }
 
-void hv_clmg_prolong(hv_clmg *m, int l)
+void hv__clmg_prolong(hv_clmg *m, int l)
 {
     hv_clmg_level *F = &m->lv[l], *C = &m->lv[l + 1];
     cl_int co[4];
     coarsen_flags(F, co);
     if (C->plain) {
         size_t g[2], lw[2];
-        hv_cl_range2((size_t)C->n[0], (size_t)F->n[1] * F->n[2], g, lw);
+        hv__cl_range2((size_t)C->n[0], (size_t)F->n[1] * F->n[2], g, lw);
         if (F->plain && co[0]) {
-            hv_cl_args(m->cl, HV_K_MG_PROLONG_X2, "IIImm", F->N, C->N, co, C->u[C->cur],
-                       F->u[F->cur]);
-            hv_cl_run(m->cl, HV_K_MG_PROLONG_X2, 2, g, lw);
+            hv__cl_args(m->cl, HV_K_MG_PROLONG_X2, "IIImm", F->N, C->N, co, C->u[C->cur],
+                        F->u[F->cur]);
+            hv__cl_run(m->cl, HV_K_MG_PROLONG_X2, 2, g, lw);
         } else {
-            hv_cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
-                       F->u[F->cur]);
-            hv_cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
+            hv__cl_args(m->cl, HV_K_MG_PROLONG, "ImIImm", F->N, F->a, C->N, co, C->u[C->cur],
+                        F->u[F->cur]);
+            hv__cl_run(m->cl, HV_K_MG_PROLONG, 2, g, lw);
         }
     } else {
-        hv_cl_args(m->cl, HV_K_MG_PROLONG_W, "ImImImm", F->N, F->a, C->N, C->a, co, C->u[C->cur],
-                   F->u[F->cur]);
-        hv_cl_run(m->cl, HV_K_MG_PROLONG_W, 2, F->g, F->l);
+        hv__cl_args(m->cl, HV_K_MG_PROLONG_W, "ImImImm", F->N, F->a, C->N, C->a, co, C->u[C->cur],
+                    F->u[F->cur]);
+        hv__cl_run(m->cl, HV_K_MG_PROLONG_W, 2, F->g, F->l);
     }
 }
 
@@ -348,14 +353,14 @@ static void bottom_host(hv_clmg *m)
 {
     hv_clmg_level *L = &m->lv[m->nlev - 1];
     const size_t n = m->hb.count;
-    hv_cl_read(m->cl, L->f, 0, n * sizeof(float), m->hf);
+    hv__cl_read(m->cl, L->f, 0, n * sizeof(float), m->hf);
     if (m->cl->err)
         return;
-    mg_bottom_cg(&m->hb, m->dim, m->alpha, m->hf, m->hf, m->hw);
-    hv_cl_write(m->cl, L->u[L->cur], 0, n * sizeof(float), m->hf);
+    hv__mg_bottom_cg(&m->hb, m->dim, m->alpha, m->hf, m->hf, m->hw);
+    hv__cl_write(m->cl, L->u[L->cur], 0, n * sizeof(float), m->hf);
 }
 
-void hv_clmg_bottom(hv_clmg *m)
+void hv__clmg_bottom(hv_clmg *m)
 {
     if (m->host_bottom) {
         bottom_host(m);
@@ -363,43 +368,43 @@ void hv_clmg_bottom(hv_clmg *m)
     }
     hv_clmg_level *L = &m->lv[m->nlev - 1];
     double C[4] = {L->c[0], L->c[1], L->c[2], m->alpha};
-    hv_cl_args(m->cl, HV_K_MG_BOTTOM_CG, "IAmmmmmmmmim", L->N, C, L->a, L->w[0], L->w[1], L->w[2],
-               L->f, L->u[L->cur], m->bregion, m->brinv, m->bnregion, m->bscr);
-    hv_cl_run(m->cl, HV_K_MG_BOTTOM_CG, 1, &m->bl, &m->bl);
+    hv__cl_args(m->cl, HV_K_MG_BOTTOM_CG, "IAmmmmmmmmim", L->N, C, L->a, L->w[0], L->w[1], L->w[2],
+                L->f, L->u[L->cur], m->bregion, m->brinv, m->bnregion, m->bscr);
+    hv__cl_run(m->cl, HV_K_MG_BOTTOM_CG, 1, &m->bl, &m->bl);
 }
 
 /* ---------- cycles ---------- */
 
-void hv_clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
+void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
 {
     hv_clmg_level *L = &m->lv[l];
     if (l == m->nlev - 1) {
-        hv_clmg_bottom(m);
+        hv__clmg_bottom(m);
         return;
     }
     if (!guess)
-        hv_cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
-    hv_clmg_smooth(m, l, m->pre, 0);
+        hv__cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
+    hv__clmg_smooth(m, l, m->pre, 0);
     if (sym && m->sym) {
-        hv_clmg_residual(m, l, L->u[L->cur], L->f, L->r);
-        hv_clmg_restrict_transpose(m, l);
+        hv__clmg_residual(m, l, L->u[L->cur], L->f, L->r);
+        hv__clmg_restrict_transpose(m, l);
     } else {
-        hv_clmg_restrict_residual(m, l);
+        hv__clmg_restrict_residual(m, l);
     }
-    hv_clmg_vcycle(m, l + 1, 0, sym);
-    hv_clmg_prolong(m, l);
-    hv_clmg_smooth(m, l, m->post, sym);
+    hv__clmg_vcycle(m, l + 1, 0, sym);
+    hv__clmg_prolong(m, l);
+    hv__clmg_smooth(m, l, m->post, sym);
 }
 
-void hv_clmg_fmg(hv_clmg *m)
+void hv__clmg_fmg(hv_clmg *m)
 {
     for (int l = 0; l + 1 < m->nlev; l++)
-        hv_clmg_restrict(m, l, m->lv[l].f, m->lv[l + 1].f);
-    hv_clmg_bottom(m);
+        hv__clmg_restrict(m, l, m->lv[l].f, m->lv[l + 1].f);
+    hv__clmg_bottom(m);
     for (int l = m->nlev - 2; l >= 0; l--) {
         hv_clmg_level *L = &m->lv[l];
-        hv_cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
-        hv_clmg_prolong(m, l);
-        hv_clmg_vcycle(m, l, 1, 0);
+        hv__cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
+        hv__clmg_prolong(m, l);
+        hv__clmg_vcycle(m, l, 1, 0);
     }
 }

@@ -19,16 +19,16 @@ typedef struct hv_clmg_level {
     int coarsen[3];
     double c[3];
     double lmax;
-    cl_int N[4];           /* (nx, ny, nz, plain) */
-    cl_float C[4];         /* (cx, cy, cz, alpha) */
-    cl_mem a, w[3];        /* NULL on plain levels */
-    cl_mem u[2];           /* u[cur] is the iterate; u[1] only for Jacobi/Chebyshev */
+    cl_int N[4];    /* (nx, ny, nz, plain) */
+    cl_float C[4];  /* (cx, cy, cz, alpha) */
+    cl_mem a, w[3]; /* NULL on plain levels */
+    cl_mem u[2];    /* u[cur] is the iterate; u[1] only for Jacobi/Chebyshev */
     int cur;
-    cl_mem f, d;           /* right-hand side; Chebyshev direction (not with RBGS) */
-    cl_mem r, pn;          /* symmetric cycle only (not on the bottom level): the residual,
+    cl_mem f, d;       /* right-hand side; Chebyshev direction (not with RBGS) */
+    cl_mem r, pn;      /* symmetric cycle only (not on the bottom level): the residual,
                               and 1 / prolongation weight sum per cell when the next level is
-                              weighted (NULL otherwise; mg_prolong_norm) */
-    size_t g[2], l[2];     /* range over the cells */
+                              weighted (NULL otherwise; hv__mg_prolong_norm) */
+    size_t g[2], l[2]; /* range over the cells */
 } hv_clmg_level;
 
 typedef struct hv_clmg {
@@ -39,7 +39,7 @@ typedef struct hv_clmg {
     hv_clmg_level lv[MG_MAX_LEVELS];
     hv_smoother smoother;
     int pre, post;
-    int sym;               /* r and pn are allocated: vcycle(sym) restricts with P^T */
+    int sym; /* r and pn are allocated: vcycle(sym) restricts with P^T */
     /* bottom level: regions (Poisson), 1/cells per region, CG scratch */
     int bnregion;
     cl_mem bregion, brinv, bscr;
@@ -57,35 +57,35 @@ typedef struct hv_clmg {
  * what the symmetric cycle of PCG needs (a residual vector per level and the
  * prolongation renormalization, computed on the host as mg.c does). On failure
  * m holds nothing to free. */
-hv_status hv_clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
-                         int pre, int post, int sym);
-void hv_clmg_destroy(hv_clmg *m);
+hv_status hv__clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
+                          int pre, int post, int sym);
+void hv__clmg_destroy(hv_clmg *m);
 
 /* Level kernels on level l's coefficients. */
-void hv_clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y);
-void hv_clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r);
+void hv__clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y);
+void hv__clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r);
 /* steps smoothing steps on lv[l].u[cur] for lv[l].f, as the CPU's smooth()
  * (mg_cycle.c). */
-void hv_clmg_smooth(hv_clmg *m, int l, int steps, int reverse);
+void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse);
 /* lv[l+1].f = restriction of the residual lv[l].f - A lv[l].u[cur]. */
-void hv_clmg_restrict_residual(hv_clmg *m, int l);
+void hv__clmg_restrict_residual(hv_clmg *m, int l);
 /* lv[l+1].f = P^T (pn .* lv[l].r) / 2^(coarsened axes), as
- * mg_restrict_transpose (mg_transfer.c) (needs sym at creation). */
-void hv_clmg_restrict_transpose(hv_clmg *m, int l);
+ * hv__mg_restrict_transpose (mg_transfer.c) (needs sym at creation). */
+void hv__clmg_restrict_transpose(hv_clmg *m, int l);
 /* dst (level l+1) = mean of the children of src (level l). */
-void hv_clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst);
+void hv__clmg_restrict(hv_clmg *m, int l, cl_mem src, cl_mem dst);
 /* lv[l].u[cur] += P lv[l+1].u[cur] */
-void hv_clmg_prolong(hv_clmg *m, int l);
+void hv__clmg_prolong(hv_clmg *m, int l);
 /* lv[nlev-1].u[cur] = CG solution for lv[nlev-1].f: on the device in one
  * work-group, or on devices without fp64 on the host in double (a host
  * synchronization inside the cycle). */
-void hv_clmg_bottom(hv_clmg *m);
+void hv__clmg_bottom(hv_clmg *m);
 
 /* One V-cycle on level l (u from zero unless guess; sym, for use as a CG
  * preconditioner, restricts with P^T when created with sym and reverses the
  * post-smoothing order), and full multigrid
  * for lv[0].f, as mg.c. The result is lv[0].u[lv[0].cur]. */
-void hv_clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
-void hv_clmg_fmg(hv_clmg *m);
+void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
+void hv__clmg_fmg(hv_clmg *m);
 
 #endif

@@ -8,26 +8,26 @@
 /* Cells per chunk: what one work-group of a block reduction takes. */
 #define CHUNK (HV_CL_WG * HV_CL_RED_BLOCK)
 
-void hv_cl_regions_destroy(hv_cl_regions *R)
+void hv__cl_regions_destroy(hv_cl_regions *R)
 {
-    hv_cl_free(&R->region);
-    hv_cl_free(&R->perm);
-    hv_cl_free(&R->cb);
-    hv_cl_free(&R->rc);
-    hv_cl_free(&R->rinv);
-    hv_cl_free(&R->part);
-    hv_cl_free(&R->sum);
+    hv__cl_free(&R->region);
+    hv__cl_free(&R->perm);
+    hv__cl_free(&R->cb);
+    hv__cl_free(&R->rc);
+    hv__cl_free(&R->rinv);
+    hv__cl_free(&R->part);
+    hv__cl_free(&R->sum);
 }
 
-hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const int32_t *region,
-                               int nregion)
+hv_status hv__cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const int32_t *region,
+                                int nregion)
 {
     memset(R, 0, sizeof *R);
     if (!region)
         nregion = 1;
     if (nregion <= 0 || count == 0 || count > UINT32_MAX)
-        return hv_error(HV_ERR_INVALID_ARG, "OpenCL regions: %d regions over %zu cells", nregion,
-                        count);
+        return hv__error(HV_ERR_INVALID_ARG, "OpenCL regions: %d regions over %zu cells", nregion,
+                         count);
     R->count = count;
     R->nregion = nregion;
     size_t *cells = calloc((size_t)nregion + 1, sizeof *cells);
@@ -38,7 +38,7 @@ hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const 
     uint32_t *cb = NULL;
     hv_status st = HV_OK;
     if (!cells || !rc || (region && !perm) || !rinv || !rinvf) {
-        st = hv_error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
+        st = hv__error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
         goto done;
     }
     /* counting sort of the labelled cells by region */
@@ -54,7 +54,7 @@ hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const 
     if (region) {
         size_t *pos = malloc((size_t)nregion * sizeof *pos);
         if (!pos) {
-            st = hv_error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
+            st = hv__error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
             goto done;
         }
         memcpy(pos, cells, (size_t)nregion * sizeof *pos);
@@ -71,7 +71,7 @@ hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const 
     }
     cb = malloc((R->nchunk + 1) * sizeof *cb);
     if (!cb) {
-        st = hv_error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
+        st = hv__error(HV_ERR_NOMEM, "OpenCL regions: out of memory");
         goto done;
     }
     size_t k = 0;
@@ -85,15 +85,15 @@ hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const 
     }
     rc[nregion] = (uint32_t)k;
     cb[k] = (uint32_t)cells[nregion];
-    if ((region && ((st = hv_cl_alloc(cl, count * sizeof(int32_t), region, &R->region)) ||
-                    (st = hv_cl_alloc(cl, cells[nregion] * sizeof(uint32_t), perm, &R->perm)))) ||
-        (st = hv_cl_alloc(cl, (R->nchunk + 1) * sizeof(uint32_t), cb, &R->cb)) ||
-        (st = hv_cl_alloc(cl, ((size_t)nregion + 1) * sizeof(uint32_t), rc, &R->rc)) ||
-        (st = hv_cl_alloc(cl, (size_t)nregion * cl->acc, cl->fp64 ? (void *)rinv : (void *)rinvf,
-                          &R->rinv)) ||
-        (st = hv_cl_alloc(cl, R->nchunk * cl->acc, NULL, &R->part)) ||
-        (st = hv_cl_alloc(cl, (size_t)nregion * cl->acc, NULL, &R->sum)))
-        hv_cl_regions_destroy(R);
+    if ((region && ((st = hv__cl_alloc(cl, count * sizeof(int32_t), region, &R->region)) ||
+                    (st = hv__cl_alloc(cl, cells[nregion] * sizeof(uint32_t), perm, &R->perm)))) ||
+        (st = hv__cl_alloc(cl, (R->nchunk + 1) * sizeof(uint32_t), cb, &R->cb)) ||
+        (st = hv__cl_alloc(cl, ((size_t)nregion + 1) * sizeof(uint32_t), rc, &R->rc)) ||
+        (st = hv__cl_alloc(cl, (size_t)nregion * cl->acc, cl->fp64 ? (void *)rinv : (void *)rinvf,
+                           &R->rinv)) ||
+        (st = hv__cl_alloc(cl, R->nchunk * cl->acc, NULL, &R->part)) ||
+        (st = hv__cl_alloc(cl, (size_t)nregion * cl->acc, NULL, &R->sum)))
+        hv__cl_regions_destroy(R);
 done:
     free(cells);
     free(rc);
@@ -107,40 +107,40 @@ done:
 static void region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean, hv_cl_kernel chunk)
 {
     size_t l = HV_CL_WG, g = R->nchunk * HV_CL_WG;
-    hv_cl_args(cl, chunk, "mmmm", v, R->perm, R->cb, R->part);
-    hv_cl_run(cl, chunk, 1, &g, &l);
+    hv__cl_args(cl, chunk, "mmmm", v, R->perm, R->cb, R->part);
+    hv__cl_run(cl, chunk, 1, &g, &l);
     size_t gr = (size_t)R->nregion * HV_CL_WG;
-    hv_cl_args(cl, HV_K_RED_REGION, "mmmm", R->part, R->rc, mean ? R->rinv : NULL, R->sum);
-    hv_cl_run(cl, HV_K_RED_REGION, 1, &gr, &l);
+    hv__cl_args(cl, HV_K_RED_REGION, "mmmm", R->part, R->rc, mean ? R->rinv : NULL, R->sum);
+    hv__cl_run(cl, HV_K_RED_REGION, 1, &gr, &l);
 }
 
-void hv_cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean)
+void hv__cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean)
 {
     region_sums(cl, R, v, mean, HV_K_RED_CHUNK_F);
 }
 
-void hv_cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v)
+void hv__cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v)
 {
     region_sums(cl, R, v, 1, HV_K_RED_CHUNK_F);
     size_t g[1], l[1];
-    hv_cl_range1(R->count, g, l);
-    hv_cl_args(cl, HV_K_REGION_SUB_F, "mmml", v, R->region, R->sum, R->count);
-    hv_cl_run(cl, HV_K_REGION_SUB_F, 1, g, l);
+    hv__cl_range1(R->count, g, l);
+    hv__cl_args(cl, HV_K_REGION_SUB_F, "mmml", v, R->region, R->sum, R->count);
+    hv__cl_run(cl, HV_K_REGION_SUB_F, 1, g, l);
 }
 
-void hv_cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v)
+void hv__cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v)
 {
     region_sums(cl, R, v, 1, HV_K_RED_CHUNK_D);
     size_t g[1], l[1];
-    hv_cl_range1(R->count, g, l);
-    hv_cl_args(cl, HV_K_REGION_SUB_D, "mmml", v, R->region, R->sum, R->count);
-    hv_cl_run(cl, HV_K_REGION_SUB_D, 1, g, l);
+    hv__cl_range1(R->count, g, l);
+    hv__cl_args(cl, HV_K_REGION_SUB_D, "mmml", v, R->region, R->sum, R->count);
+    hv__cl_run(cl, HV_K_REGION_SUB_D, 1, g, l);
 }
 
 static void face_range(int a, const int n[3], size_t g[2], size_t l[2])
 {
     size_t m[3] = {(size_t)n[0] + (a == 0), (size_t)n[1] + (a == 1), (size_t)n[2] + (a == 2)};
-    hv_cl_range2(m[0], m[1] * m[2], g, l);
+    hv__cl_range2(m[0], m[1] * m[2], g, l);
 }
 
 static void dims4(int dim, const int n[3], cl_int N[4])
@@ -151,58 +151,58 @@ static void dims4(int dim, const int n[3], cl_int N[4])
     N[3] = dim;
 }
 
-void hv_cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid, cl_mem u,
-                         cl_mem const g[3])
+void hv__cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid, cl_mem u,
+                          cl_mem const g[3])
 {
     cl_int N[4];
     dims4(dim, n, N);
     for (int a = 0; a < dim; a++) {
         size_t gs[2], ls[2];
         face_range(a, N, gs, ls);
-        hv_cl_args(cl, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u,
-                   g[a]);
-        hv_cl_run(cl, HV_K_FACE_GRADIENT, 2, gs, ls);
+        hv__cl_args(cl, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u,
+                    g[a]);
+        hv__cl_run(cl, HV_K_FACE_GRADIENT, 2, gs, ls);
     }
 }
 
-void hv_cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid,
-                           cl_mem const F[3], cl_mem out)
+void hv__cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid,
+                            cl_mem const F[3], cl_mem out)
 {
     cl_int N[4];
     dims4(dim, n, N);
     size_t g[2], l[2];
-    hv_cl_range2((size_t)N[0], (size_t)N[1] * N[2], g, l);
-    hv_cl_args(cl, HV_K_FACE_DIVERGENCE, "Iammmmm", N, 1.0 / h, solid, F[0], F[1],
-               dim == 3 ? F[2] : NULL, out);
-    hv_cl_run(cl, HV_K_FACE_DIVERGENCE, 2, g, l);
+    hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], g, l);
+    hv__cl_args(cl, HV_K_FACE_DIVERGENCE, "Iammmmm", N, 1.0 / h, solid, F[0], F[1],
+                dim == 3 ? F[2] : NULL, out);
+    hv__cl_run(cl, HV_K_FACE_DIVERGENCE, 2, g, l);
 }
 
-void hv_cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
-                          cl_mem const out[3], double eps)
+void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
+                           cl_mem const out[3], double eps)
 {
     cl_int N[4];
     dims4(dim, n, N);
     for (int a = 0; a < dim; a++) {
         size_t g[2], l[2];
         face_range(a, N, g, l);
-        hv_cl_args(cl, HV_K_FACE_NORMALIZE, "Iimmmmmf", N, a, solid, v[0], v[1],
-                   dim == 3 ? v[2] : NULL, out[a], eps);
-        hv_cl_run(cl, HV_K_FACE_NORMALIZE, 2, g, l);
+        hv__cl_args(cl, HV_K_FACE_NORMALIZE, "Iimmmmmf", N, a, solid, v[0], v[1],
+                    dim == 3 ? v[2] : NULL, out[a], eps);
+        hv__cl_run(cl, HV_K_FACE_NORMALIZE, 2, g, l);
     }
 }
 
-void hv_cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps)
+void hv__cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps)
 {
     size_t g[1], l[1];
-    hv_cl_range1(n, g, l);
-    hv_cl_args(cl, HV_K_PW_RATIO, "mmmfl", a, b, out, eps, n);
-    hv_cl_run(cl, HV_K_PW_RATIO, 1, g, l);
+    hv__cl_range1(n, g, l);
+    hv__cl_args(cl, HV_K_PW_RATIO, "mmmfl", a, b, out, eps, n);
+    hv__cl_run(cl, HV_K_PW_RATIO, 1, g, l);
 }
 
-void hv_cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y)
+void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y)
 {
     size_t g[1], l[1];
-    hv_cl_range1(n, g, l);
-    hv_cl_args(cl, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
-    hv_cl_run(cl, HV_K_PW_AXPY, 1, g, l);
+    hv__cl_range1(n, g, l);
+    hv__cl_args(cl, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
+    hv__cl_run(cl, HV_K_PW_AXPY, 1, g, l);
 }

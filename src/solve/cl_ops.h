@@ -7,8 +7,8 @@
  * device path in src/heat/) and build their own kernels (cl_core.h,
  * hv_cl_module).
  * Arrays are cl_mem of float unless named _d (double, fp64 devices only).
- * Everything is enqueued on cl's queue; errors surface at hv_cl_check /
- * hv_cl_finish.
+ * Everything is enqueued on cl's queue; errors surface at hv__cl_check /
+ * hv__cl_finish.
  */
 #ifndef HV_SOLVE_CL_OPS_H
 #define HV_SOLVE_CL_OPS_H
@@ -32,30 +32,30 @@ typedef struct hv_cl_regions {
 } hv_cl_regions;
 
 /* region: NULL (one region, all cells) or count labels in [0, nregion) and -1. */
-hv_status hv_cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const int32_t *region,
-                               int nregion);
-void hv_cl_regions_destroy(hv_cl_regions *R);
+hv_status hv__cl_regions_create(hv_cl *cl, hv_cl_regions *R, size_t count, const int32_t *region,
+                                int nregion);
+void hv__cl_regions_destroy(hv_cl_regions *R);
 /* R->sum[r] = sum (mean: mean) of v over region r. */
-void hv_cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean);
+void hv__cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean);
 /* v -= its region's mean; 0 outside every region. */
-void hv_cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v);
-void hv_cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v);
+void hv__cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v);
+void hv__cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v);
 
 /* g[a] (axis-a faces, a < dim) = face gradient of u; solid may be NULL (uint8 per cell). */
-void hv_cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid, cl_mem u,
-                         cl_mem const g[3]);
+void hv__cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid, cl_mem u,
+                          cl_mem const g[3]);
 /* out = divergence of the face field F (F[2] unused in 2D). */
-void hv_cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid,
-                           cl_mem const F[3], cl_mem out);
+void hv__cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem solid,
+                            cl_mem const F[3], cl_mem out);
 /* out[a] = axis-a component of the normalized mean of the cell vectors v at
  * axis-a faces (v[2] unused in 2D); 0 on walls, solid faces and where the
  * mean's largest component is <= eps. */
-void hv_cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
-                          cl_mem const out[3], double eps);
+void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
+                           cl_mem const out[3], double eps);
 /* out = b > eps ? a / b : 0 */
-void hv_cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps);
+void hv__cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps);
 /* y += alpha x */
-void hv_cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
+void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
 
 /* Solves A u = f with a solver of the opencl backend, f and u float device
  * buffers in cl's context (src/solve/opencl.c): the device keeps the fields,
@@ -63,10 +63,10 @@ void hv_cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
  * on return u is complete. Other backends: HV_ERR_UNSUPPORTED. Semantics of
  * hv_solver_solve (Poisson right-hand sides projected, u zero on solid cells,
  * nonzero_guess honoured). Devices without fp64 go through the host. */
-hv_status hv_cl_solver_solve(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
+hv_status hv__cl_solver_solve(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
 /* The same with f and u double device buffers (hv_solver_solve_d's
  * precision): fp64 devices only, else HV_ERR_UNSUPPORTED. f is zeroed on
  * solid cells as the front end does (also for heat steps). */
-hv_status hv_cl_solver_solve_d(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
+hv_status hv__cl_solver_solve_d(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
 
 #endif

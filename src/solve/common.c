@@ -4,7 +4,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-void hv_project_mean(const hv_setup *s, double *u)
+void hv__project_mean(const hv_setup *s, double *u)
 {
     if (!s->region) {
         double sum = 0;
@@ -33,7 +33,7 @@ void hv_project_mean(const hv_setup *s, double *u)
     free(acc);
 }
 
-double hv_norm2(const hv_setup *s, const double *v)
+double hv__norm2(const hv_setup *s, const double *v)
 {
     double nn = 0;
     const uint8_t *solid = s->p.solid;

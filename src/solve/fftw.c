@@ -25,7 +25,7 @@
 typedef struct fftw_state {
     const hv_setup *s;
     int dim;
-    int n[3];       /* n[2] == 1 in 2D */
+    int n[3]; /* n[2] == 1 in 2D */
     size_t count;
     int use_double;
     double *lam[3]; /* per axis: -(eigenvalue) = (4/h^2) sin^2(pi k/(2N)) >= 0 */
@@ -96,7 +96,7 @@ static void wisdom_import(const char *path)
     FILE *fp = fopen(path, "rb");
     if (!fp) {
         if (errno != ENOENT)
-            hv_log(HV_LOG_WARN, "%s: cannot read FFTW wisdom: %s", path, strerror(errno));
+            hv__log(HV_LOG_WARN, "%s: cannot read FFTW wisdom: %s", path, strerror(errno));
         return;
     }
     char *text = NULL;
@@ -104,11 +104,11 @@ static void wisdom_import(const char *path)
     if (fseek(fp, 0, SEEK_END) == 0 && (size = ftell(fp)) >= 0 && fseek(fp, 0, SEEK_SET) == 0)
         text = malloc((size_t)size + 1);
     if (!text || fread(text, 1, (size_t)size, fp) != (size_t)size) {
-        hv_log(HV_LOG_WARN, "%s: cannot read FFTW wisdom", path);
+        hv__log(HV_LOG_WARN, "%s: cannot read FFTW wisdom", path);
     } else {
         text[size] = '\0';
         if (strlen(text) != (size_t)size || !wisdom_import_text(text))
-            hv_log(HV_LOG_WARN, "%s: FFTW wisdom is corrupt or from another FFTW; ignored", path);
+            hv__log(HV_LOG_WARN, "%s: FFTW wisdom is corrupt or from another FFTW; ignored", path);
     }
     free(text);
     fclose(fp);
@@ -120,7 +120,7 @@ static void wisdom_export(const char *path)
 {
     char tmp[4096];
     if (hv_tmp_name(path, tmp, sizeof tmp) != HV_OK) {
-        hv_log(HV_LOG_WARN, "%s: cannot save FFTW wisdom: %s", path, hv_last_error());
+        hv__log(HV_LOG_WARN, "%s: cannot save FFTW wisdom: %s", path, hv_last_error());
         return;
     }
     char *wd = fftw_export_wisdom_to_string();
@@ -132,12 +132,12 @@ static void wisdom_export(const char *path)
     free(wd);
     free(wf);
     if (!ok) {
-        hv_log(HV_LOG_WARN, "%s: cannot write FFTW wisdom to %s", path, tmp);
+        hv__log(HV_LOG_WARN, "%s: cannot write FFTW wisdom to %s", path, tmp);
         hv_tmp_discard(tmp);
         return;
     }
     if (hv_tmp_commit(tmp, path) != HV_OK)
-        hv_log(HV_LOG_WARN, "%s: cannot save FFTW wisdom: %s", path, hv_last_error());
+        hv__log(HV_LOG_WARN, "%s: cannot save FFTW wisdom: %s", path, hv_last_error());
 }
 
 /* ---- create / destroy --------------------------------------------------- */
@@ -192,8 +192,8 @@ static hv_status make_plans(fftw_state *st, unsigned flags)
         st->fwd = fftw_plan_guru64_r2r(rank, dims, 0, NULL, st->bufd, st->bufd, kf, flags);
         st->inv = fftw_plan_guru64_r2r(rank, dims, 0, NULL, st->bufd, st->bufd, ki, flags);
         if (!st->fwd || !st->inv)
-            return hv_error(HV_ERR_BACKEND, "FFTW could not plan a %d x %d x %d DCT (double)",
-                            st->n[0], st->n[1], st->n[2]);
+            return hv__error(HV_ERR_BACKEND, "FFTW could not plan a %d x %d x %d DCT (double)",
+                             st->n[0], st->n[1], st->n[2]);
     } else {
         fftwf_iodim64 dimsf[3];
         for (int r = 0; r < rank; r++) {
@@ -204,8 +204,8 @@ static hv_status make_plans(fftw_state *st, unsigned flags)
         st->fwdf = fftwf_plan_guru64_r2r(rank, dimsf, 0, NULL, st->buff, st->buff, kf, flags);
         st->invf = fftwf_plan_guru64_r2r(rank, dimsf, 0, NULL, st->buff, st->buff, ki, flags);
         if (!st->fwdf || !st->invf)
-            return hv_error(HV_ERR_BACKEND, "FFTW could not plan a %d x %d x %d DCT (float)",
-                            st->n[0], st->n[1], st->n[2]);
+            return hv__error(HV_ERR_BACKEND, "FFTW could not plan a %d x %d x %d DCT (float)",
+                             st->n[0], st->n[1], st->n[2]);
     }
     return HV_OK;
 }
@@ -213,24 +213,24 @@ static hv_status make_plans(fftw_state *st, unsigned flags)
 static hv_status fftw_create(void **state, const hv_setup *s)
 {
     if (!state || !s)
-        return hv_error(HV_ERR_INVALID_ARG, "fftw backend: NULL %s", state ? "setup" : "state");
+        return hv__error(HV_ERR_INVALID_ARG, "fftw backend: NULL %s", state ? "setup" : "state");
     *state = NULL;
     const hv_problem *p = &s->p;
     if (p->solid)
-        return hv_error(HV_ERR_UNSUPPORTED,
-                        "the FFTW backend solves plain boxes only; this problem has solid cells "
-                        "(use the multigrid backend)");
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "the FFTW backend solves plain boxes only; this problem has solid cells "
+                         "(use the multigrid backend)");
     hv_status rc = hv_check_dims(p->dim, p->n, p->h, s->o.fftw_double ? 8 : 12);
     if (rc)
         return rc;
     if (!(p->alpha >= 0) || !(p->beta > 0) || !isfinite(p->alpha) || !isfinite(p->beta))
-        return hv_error(HV_ERR_INVALID_ARG,
-                        "fftw backend: need alpha >= 0 and beta > 0, got alpha = %g, beta = %g",
-                        p->alpha, p->beta);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "fftw backend: need alpha >= 0 and beta > 0, got alpha = %g, beta = %g",
+                         p->alpha, p->beta);
 
     fftw_state *st = calloc(1, sizeof *st);
     if (!st)
-        return hv_error(HV_ERR_NOMEM, "fftw backend: no memory for the state");
+        return hv__error(HV_ERR_NOMEM, "fftw backend: no memory for the state");
     st->s = s;
     st->dim = p->dim;
     st->n[0] = p->n[0];
@@ -245,7 +245,7 @@ static hv_status fftw_create(void **state, const hv_setup *s)
         st->lam[a] = hv_malloc((size_t)na * sizeof(double));
         if (!st->lam[a]) {
             fftw_destroy(st);
-            return hv_error(HV_ERR_NOMEM, "fftw backend: no memory for eigenvalues");
+            return hv__error(HV_ERR_NOMEM, "fftw backend: no memory for eigenvalues");
         }
         for (int k = 0; k < na; k++) {
             double sn = sin(M_PI * k / (2.0 * na));
@@ -262,13 +262,13 @@ static hv_status fftw_create(void **state, const hv_setup *s)
     }
     if (st->use_double ? !st->bufd : (!st->buff || !st->work)) {
         fftw_destroy(st);
-        return hv_error(HV_ERR_NOMEM, "fftw backend: no memory for a %zu-cell buffer", st->count);
+        return hv__error(HV_ERR_NOMEM, "fftw backend: no memory for a %zu-cell buffer", st->count);
     }
 
     pthread_once(&threads_once, threads_init);
     if (!threads_ok) {
         fftw_destroy(st);
-        return hv_error(HV_ERR_BACKEND, "FFTW threads could not be initialized");
+        return hv__error(HV_ERR_BACKEND, "FFTW threads could not be initialized");
     }
     unsigned flags = s->o.fftw_measure ? FFTW_MEASURE : FFTW_ESTIMATE;
     pthread_mutex_lock(&planner_lock);
@@ -329,7 +329,7 @@ static hv_status fftw_solve(void *state, const double *f, double *u, hv_solve_in
 {
     fftw_state *st = state;
     if (!st || !f || !u || !info)
-        return hv_error(HV_ERR_INVALID_ARG, "fftw backend: NULL argument to solve");
+        return hv__error(HV_ERR_INVALID_ARG, "fftw backend: NULL argument to solve");
     const hv_problem *p = &st->s->p;
     const double alpha = p->alpha, beta = p->beta;
     const ptrdiff_t count = (ptrdiff_t)st->count;
@@ -392,7 +392,7 @@ static hv_status fftw_solve(void *state, const double *f, double *u, hv_solve_in
     return HV_OK;
 }
 
-const hv_backend_ops hv_backend_fftw_ops = {
+const hv_backend_ops hv__backend_fftw_ops = {
     .name = "fftw",
     .create = fftw_create,
     .solve = fftw_solve,

@@ -15,8 +15,8 @@ static int stagnated(const hv_solve_info *info)
     return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
 }
 
-hv_status hv_iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
-                                double fn, hv_solve_info *info)
+hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
+                                 double fn, hv_solve_info *info)
 {
     double norm;
     hv_status st = ops->residual(ctx, &norm);
@@ -33,7 +33,8 @@ hv_status hv_iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solv
         info->iterations = it + 1;
         hv_info_push(info, rel);
         if (!isfinite(rel))
-            return hv_error(HV_ERR_NUMERIC, "%smultigrid diverged (residual %g)", ops->prefix, rel);
+            return hv__error(HV_ERR_NUMERIC, "%smultigrid diverged (residual %g)", ops->prefix,
+                             rel);
         if (stagnated(info) && rel > o->tol) {
             info->reason = HV_STOP_STAGNATED;
             return HV_OK;
@@ -43,8 +44,8 @@ hv_status hv_iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solv
     return HV_OK;
 }
 
-hv_status hv_iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
-                         hv_solve_info *info)
+hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
+                          hv_solve_info *info)
 {
     double norm, pq;
     hv_status st = ops->residual(ctx, &norm);
@@ -71,8 +72,8 @@ hv_status hv_iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts
         info->iterations = it + 1;
         hv_info_push(info, rel);
         if (!isfinite(rel))
-            return hv_error(HV_ERR_NUMERIC, "%spreconditioned CG diverged (residual %g)",
-                            ops->prefix, rel);
+            return hv__error(HV_ERR_NUMERIC, "%spreconditioned CG diverged (residual %g)",
+                             ops->prefix, rel);
         if (rel <= o->tol)
             break;
         /* the symmetric cycle keeps CG converging: 50 iterations without a

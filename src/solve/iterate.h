@@ -45,13 +45,13 @@ typedef struct hv_iter_ops {
  * (stagnated). fn = ||f|| > 0. Uses ops->residual (once, first) and
  * ops->correct. Fills info's reason, iterations and history; HV_ERR_NUMERIC
  * when the residual is not finite. */
-hv_status hv_iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
-                                double fn, hv_solve_info *info);
+hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
+                                 double fn, hv_solve_info *info);
 
 /* Preconditioned CG to the same tolerance; stagnated after 50 iterations
  * without a 10% gain or when p.q <= 0. Ends with x projected (ops->project)
  * and info->relres the true residual of x (not pushed to the history). */
-hv_status hv_iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
-                         hv_solve_info *info);
+hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
+                          hv_solve_info *info);
 
 #endif

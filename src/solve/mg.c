@@ -2,7 +2,7 @@
  * The CPU multigrid backend (docs/METHOD.md, "Multigrid"): matrix-free
  * geometric multigrid for (alpha I - beta Laplacian) u = f on cell-centred
  * grids with Neumann walls and solid cells. This file holds the backend's
- * entry points (hv_backend_mg_ops) and its steps of the outer iterations
+ * entry points (hv__backend_mg_ops) and its steps of the outer iterations
  * (iterate.h): the double-precision fine-level passes and the V-cycle as
  * preconditioner.
  *
@@ -30,7 +30,7 @@
 /* y = A x in double on a level (fine residuals, PCG). */
 static void level_apply_d(const mg_state *m, const mg_level *L, const double *x, double *y)
 {
-    mg_level_apply_d(L, m->dim, m->alpha, x, y);
+    hv__mg_level_apply_d(L, m->dim, m->alpha, x, y);
 }
 
 /* ---------- backend state ---------- */
@@ -43,7 +43,7 @@ static void mg_destroy(void *state)
     for (int l = 0; l < m->nlev; l++) {
         mg_level *L = &m->lv[l];
         hv_free(m->pnorm[l]);
-        mg_level_free_coeffs(L);
+        hv__mg_level_free_coeffs(L);
         hv_free(L->u);
         hv_free(L->f);
         hv_free(L->r);
@@ -63,7 +63,7 @@ static hv_status mg_create(void **state, const hv_setup *s)
 {
     mg_state *m = calloc(1, sizeof *m);
     if (!m)
-        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory");
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory");
     m->s = s;
     m->dim = s->p.dim;
     m->alpha = s->p.alpha;
@@ -75,7 +75,7 @@ static hv_status mg_create(void **state, const hv_setup *s)
 
     /* Levels and coefficients (mg_setup.c); the state takes them over. */
     mg_hierarchy H;
-    if ((st = mg_hierarchy_build(&H, s, m->smoother == HV_SMOOTH_CHEBYSHEV)))
+    if ((st = hv__mg_hierarchy_build(&H, s, m->smoother == HV_SMOOTH_CHEBYSHEV)))
         goto fail;
     m->nlev = H.nlev;
     memcpy(m->lv, H.lv, (size_t)H.nlev * sizeof H.lv[0]);
@@ -87,8 +87,8 @@ static hv_status mg_create(void **state, const hv_setup *s)
         if (m->smoother != HV_SMOOTH_RBGS)
             L->d = hv_calloc(L->count, sizeof(float));
         if (!L->u || !L->f || !L->r || (m->smoother != HV_SMOOTH_RBGS && !L->d)) {
-            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)", l,
-                          L->count);
+            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)", l,
+                           L->count);
             goto fail;
         }
     }
@@ -99,10 +99,10 @@ static hv_status mg_create(void **state, const hv_setup *s)
             continue;
         float *pn = m->pnorm[l] = hv_malloc(F->count * sizeof(float));
         if (!pn) {
-            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
+            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
             goto fail;
         }
-        mg_prolong_norm(F, C, pn);
+        hv__mg_prolong_norm(F, C, pn);
     }
     if (m->use_pcg && m->nlev > 1) {
         size_t per = 0;
@@ -115,14 +115,14 @@ static hv_status mg_create(void **state, const hv_setup *s)
         m->rt_threads = omp_get_max_threads();
 #endif
         if (!(m->rt_work = hv_malloc((size_t)m->rt_threads * per * sizeof(float)))) {
-            st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the restriction's work");
+            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the restriction's work");
             goto fail;
         }
     }
     /* Bottom: CG work. */
     mg_level *L = &m->lv[m->nlev - 1];
     if (!(L->bwork = malloc(MG_BOTTOM_WORK * L->count * sizeof(double)))) {
-        st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
+        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
         goto fail;
     }
     size_t n0 = s->count;
@@ -133,10 +133,11 @@ static hv_status mg_create(void **state, const hv_setup *s)
         m->q = hv_malloc(n0 * sizeof(double));
     }
     if (!m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
-        st = hv_error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
+        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
-    mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, &m->model);
+    hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg,
+                           &m->model);
     *state = m;
     return HV_OK;
 fail:
@@ -178,56 +179,63 @@ static double fine_residual(const mg_state *m, const double *f, const double *x)
  * cycle's next float right-hand side fo = f - A xo in double; returns the sum
  * of squares of the residual. Neighbour values are formed on the fly from x and
  * e, so xo may not alias x. */
-#define UPDATE_ROW_BODY(HASX)                                                                      \
-    do {                                                                                          \
-        const int nx = L->n[0];                                                                   \
-        const double *f_ = f + R.base;                                                            \
-        const float *e_ = e + R.base;                                                             \
-        double *xo_ = xo + R.base;                                                                \
-        float *fo_ = fo + R.base;                                                                 \
-        const double cx = L->c[0], cy = L->c[1], cz = L->c[2];                                    \
-        const double wym = R.wym, wyp = R.wyp, wzm = R.wzm, wzp = R.wzp;                          \
-        const ptrdiff_t ym = R.ym, yp = R.yp, zm = R.zm, zp = R.zp;                               \
-        const double din = R.dyz + 2 * cx;                                                        \
-        double rb[MG_ROW_BUF];                                                                    \
-        double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};                                                 \
+#define UPDATE_ROW_BODY(HASX)                                                                       \
+    do {                                                                                            \
+        const int nx = L->n[0];                                                                     \
+        const double *f_ = f + R.base;                                                              \
+        const float *e_ = e + R.base;                                                               \
+        double *xo_ = xo + R.base;                                                                  \
+        float *fo_ = fo + R.base;                                                                   \
+        const double cx = L->c[0], cy = L->c[1], cz = L->c[2];                                      \
+        const double wym = R.wym, wyp = R.wyp, wzm = R.wzm, wzp = R.wzp;                            \
+        const ptrdiff_t ym = R.ym, yp = R.yp, zm = R.zm, zp = R.zp;                                 \
+        const double din = R.dyz + 2 * cx;                                                          \
+        double rb[MG_ROW_BUF];                                                                      \
+        double acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};                                                   \
         /* the interior in chunks of MG_ROW_BUF: the residual per cell into rb without            \
-         * branches (vectorizes), then its squares in 8 partial sums (a serial sum does not) */   \
-        for (int c0 = 1; c0 < nx - 1; c0 += MG_ROW_BUF) {                                         \
-            const int c1 = nx - 1 - c0 < MG_ROW_BUF ? nx - 1 : c0 + MG_ROW_BUF;                   \
-            for (int i = c0; i < c1; i++) {                                                       \
-                double v = XE(i);                                                                 \
-                double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                           \
-                           cz * (wzm * XE(i + zm) + wzp * XE(i + zp)) + cx * (XE(i - 1) + XE(i + 1)); \
-                double r = f_[i] - (din * v - s);                                                 \
-                xo_[i] = v;                                                                       \
-                fo_[i] = (float)r;                                                                \
-                rb[i - c0] = r;                                                                   \
-            }                                                                                     \
-            int q0 = 0;                                                                           \
-            for (; q0 + 8 <= c1 - c0; q0 += 8)                                                    \
-                for (int q = 0; q < 8; q++)                                                       \
-                    acc[q] += rb[q0 + q] * rb[q0 + q];                                            \
-            for (; q0 < c1 - c0; q0++)                                                            \
-                acc[0] += rb[q0] * rb[q0];                                                        \
-        }                                                                                         \
-        for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {                                     \
-            double v = XE(i);                                                                     \
-            double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                               \
-                       cz * (wzm * XE(i + zm) + wzp * XE(i + zp));                                \
-            double d = R.dyz;                                                                     \
-            if (i > 0) { s += cx * XE(i - 1); d += cx; }                                          \
-            if (i < nx - 1) { s += cx * XE(i + 1); d += cx; }                                     \
-            double r = f_[i] - (d * v - s);                                                       \
-            xo_[i] = v;                                                                           \
-            fo_[i] = (float)r;                                                                    \
-            acc[1] += r * r;                                                                      \
-        }                                                                                         \
-        return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])); \
+         * branches (vectorizes), then its squares in 8 partial sums (a serial sum does not) */ \
+        for (int c0 = 1; c0 < nx - 1; c0 += MG_ROW_BUF) {                                           \
+            const int c1 = nx - 1 - c0 < MG_ROW_BUF ? nx - 1 : c0 + MG_ROW_BUF;                     \
+            for (int i = c0; i < c1; i++) {                                                         \
+                double v = XE(i);                                                                   \
+                double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                             \
+                           cz * (wzm * XE(i + zm) + wzp * XE(i + zp)) +                             \
+                           cx * (XE(i - 1) + XE(i + 1));                                            \
+                double r = f_[i] - (din * v - s);                                                   \
+                xo_[i] = v;                                                                         \
+                fo_[i] = (float)r;                                                                  \
+                rb[i - c0] = r;                                                                     \
+            }                                                                                       \
+            int q0 = 0;                                                                             \
+            for (; q0 + 8 <= c1 - c0; q0 += 8)                                                      \
+                for (int q = 0; q < 8; q++)                                                         \
+                    acc[q] += rb[q0 + q] * rb[q0 + q];                                              \
+            for (; q0 < c1 - c0; q0++)                                                              \
+                acc[0] += rb[q0] * rb[q0];                                                          \
+        }                                                                                           \
+        for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {                                       \
+            double v = XE(i);                                                                       \
+            double s = cy * (wym * XE(i + ym) + wyp * XE(i + yp)) +                                 \
+                       cz * (wzm * XE(i + zm) + wzp * XE(i + zp));                                  \
+            double d = R.dyz;                                                                       \
+            if (i > 0) {                                                                            \
+                s += cx * XE(i - 1);                                                                \
+                d += cx;                                                                            \
+            }                                                                                       \
+            if (i < nx - 1) {                                                                       \
+                s += cx * XE(i + 1);                                                                \
+                d += cx;                                                                            \
+            }                                                                                       \
+            double r = f_[i] - (d * v - s);                                                         \
+            xo_[i] = v;                                                                             \
+            fo_[i] = (float)r;                                                                      \
+            acc[1] += r * r;                                                                        \
+        }                                                                                           \
+        return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));   \
     } while (0)
 
-MG_KERNEL static double update_row_x(const mg_level *L, mg_plain_row R, const double *x, const float *e,
-                           const double *f, double *xo, float *fo)
+MG_KERNEL static double update_row_x(const mg_level *L, mg_plain_row R, const double *x,
+                                     const float *e, const double *f, double *xo, float *fo)
 {
     const double *x_ = x + R.base;
 #define XE(p) (x_[p] + (double)e_[p])
@@ -235,8 +243,8 @@ MG_KERNEL static double update_row_x(const mg_level *L, mg_plain_row R, const do
 #undef XE
 }
 
-MG_KERNEL static double update_row_0(const mg_level *L, mg_plain_row R, const double *x, const float *e,
-                           const double *f, double *xo, float *fo)
+MG_KERNEL static double update_row_0(const mg_level *L, mg_plain_row R, const double *x,
+                                     const float *e, const double *f, double *xo, float *fo)
 {
 #define XE(p) ((double)e_[p])
     (void)x;
@@ -282,12 +290,12 @@ static void precondition(mg_state *m, const double *r, double *z)
 #pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
     for (size_t c = 0; c < L0->count; c++)
         L0->f[c] = (float)r[c];
-    mg_vcycle(m, 0, 0, 1);
+    hv__mg_vcycle(m, 0, 0, 1);
 #pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
     for (size_t c = 0; c < L0->count; c++)
         z[c] = L0->u[c];
     if (m->alpha == 0)
-        hv_project_mean(m->s, z);
+        hv__project_mean(m->s, z);
 }
 
 static double pdot(const double *a, const double *b, size_t n)
@@ -307,12 +315,12 @@ static double pdot(const double *a, const double *b, size_t n)
 typedef struct mg_iter {
     mg_state *m;
     const double *f;
-    double fn;          /* ||f|| */
-    double *x, *alt;    /* the iterate; stationary: the other buffer */
-    int have_x;         /* x holds an iterate; else it is zero and r = f */
-    int fixed;          /* stationary: V-cycles per correction, 0: automatic */
-    double rho;         /* stationary: per-cycle factor measured so far */
-    double rz;          /* PCG: r.z */
+    double fn;       /* ||f|| */
+    double *x, *alt; /* the iterate; stationary: the other buffer */
+    int have_x;      /* x holds an iterate; else it is zero and r = f */
+    int fixed;       /* stationary: V-cycles per correction, 0: automatic */
+    double rho;      /* stationary: per-cycle factor measured so far */
+    double rz;       /* PCG: r.z */
 } mg_iter;
 
 static hv_status it_residual(void *ctx, double *norm)
@@ -345,11 +353,11 @@ static hv_status it_correct(void *ctx, int it, double rel, hv_solve_info *info, 
     }
     for (int q = 0; q < nc; q++) {
         if (q == 0 && it == 0 && !s->o.nonzero_guess) {
-            mg_fmg(m);
+            hv__mg_fmg(m);
             continue;
         }
         double t0 = hv_now();
-        mg_vcycle(m, 0, q > 0, 0);
+        hv__mg_vcycle(m, 0, q > 0, 0);
         info->cycle_seconds += hv_now() - t0;
         info->cycles_timed++;
         /* a cycle from a guess sweeps u instead of setting it: + 4 B per cell */
@@ -423,10 +431,10 @@ static void it_project(void *ctx)
 {
     mg_iter *c = ctx;
     if (c->m->alpha == 0)
-        hv_project_mean(c->m->s, c->x);
+        hv__project_mean(c->m->s, c->x);
 }
 
-static const hv_iter_ops mg_iter_ops = {"", it_residual, it_correct, it_pcg_start,
+static const hv_iter_ops mg_iter_ops = {"",          it_residual, it_correct, it_pcg_start,
                                         it_pcg_step, it_pcg_next, it_project};
 
 /* ---------- solves ---------- */
@@ -438,7 +446,7 @@ static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv
     const hv_setup *s = m->s;
     const size_t n = s->count;
     mg_iter c = {.m = m, .f = f, .x = u, .alt = m->rd, .have_x = s->o.nonzero_guess, .rho = 0.1};
-    c.fn = c.have_x ? hv_norm2(s, f) : load_rhs(m, f);
+    c.fn = c.have_x ? hv__norm2(s, f) : load_rhs(m, f);
     if (c.fn == 0) {
         memset(u, 0, n * sizeof *u);
         hv_info_push(info, 0.0);
@@ -448,7 +456,7 @@ static hv_status mg_solve_stationary(mg_state *m, const double *f, double *u, hv
     c.fixed = s->o.cycles_per_iteration;
     if (!c.fixed && m->smoother != HV_SMOOTH_RBGS)
         c.fixed = 1;
-    hv_status st = hv_iterate_stationary(&mg_iter_ops, &c, &s->o, c.fn, info);
+    hv_status st = hv__iterate_stationary(&mg_iter_ops, &c, &s->o, c.fn, info);
     double *cur = c.x;
     if (!c.have_x) { /* converged before any cycle: the zero guess */
         memset(u, 0, n * sizeof *u);
@@ -476,7 +484,7 @@ static hv_status mg_solve_pcg(mg_state *m, const double *f, double *u, hv_solve_
                               double fn)
 {
     mg_iter c = {.m = m, .f = f, .fn = fn, .x = u, .have_x = 1};
-    return hv_iterate_pcg(&mg_iter_ops, &c, &m->s->o, fn, info);
+    return hv__iterate_pcg(&mg_iter_ops, &c, &m->s->o, fn, info);
 }
 
 static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info *info)
@@ -487,7 +495,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
         return mg_solve_stationary(m, f, u, info);
     if (!s->o.nonzero_guess)
         memset(u, 0, s->count * sizeof *u);
-    double fn = hv_norm2(s, f);
+    double fn = hv__norm2(s, f);
     if (fn == 0) {
         memset(u, 0, s->count * sizeof *u);
         hv_info_push(info, 0.0);
@@ -505,7 +513,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
 static void mg_stats(const void *state, hv_solver_stats *st)
 {
     const mg_state *m = state;
-    mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, st);
+    hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, st);
 }
 
-const hv_backend_ops hv_backend_mg_ops = {"mg", mg_create, mg_solve, NULL, mg_destroy, mg_stats};
+const hv_backend_ops hv__backend_mg_ops = {"mg", mg_create, mg_solve, NULL, mg_destroy, mg_stats};

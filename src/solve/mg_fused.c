@@ -18,12 +18,12 @@ static void rb_plane_plain(const mg_state *m, const mg_level *L, int k, int col)
 {
 #if MG_AVX512
     if (mg_avx512()) {
-        mg_rb_plane_avx512(m, L, k, col);
+        hv__mg_rb_plane_avx512(m, L, k, col);
         return;
     }
 #endif
     for (int j = 0; j < L->n[1]; j++)
-        mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
+        hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
 }
 
 /* First colour of a sweep from u = 0 along one row: this colour's cells take
@@ -51,8 +51,9 @@ MG_KERNEL static void rb_row_plain_zero(const mg_state *m, const mg_level *L, in
 /* rb_row_plain_zero in whole vectors: this colour's cells take f times the
  * inverse diagonal (walls in-vector, as in rb_row_avx512), the other colour's
  * are stored as zero. */
-__attribute__((target("avx512f"))) static void rb_row_zero_avx512(const mg_state *m, const mg_level *L, int j,
-                                                                  int k, int col)
+__attribute__((target("avx512f"))) static void rb_row_zero_avx512(const mg_state *m,
+                                                                  const mg_level *L, int j, int k,
+                                                                  int col)
 {
     const int nx = L->n[0], ny = L->n[1];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
@@ -74,7 +75,8 @@ __attribute__((target("avx512f"))) static void rb_row_zero_avx512(const mg_state
             inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
         if (c + 1 == nq && last > 0)
             inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
-        _mm512_mask_storeu_ps(ur + q, valid, _mm512_maskz_mul_ps(colour, _mm512_maskz_loadu_ps(valid, fr + q), inv));
+        _mm512_mask_storeu_ps(
+            ur + q, valid, _mm512_maskz_mul_ps(colour, _mm512_maskz_loadu_ps(valid, fr + q), inv));
     }
 }
 #endif
@@ -91,7 +93,8 @@ static void rb_row_zero(const mg_state *m, const mg_level *L, int j, int k, int 
 }
 
 /* line[i] += (f - A u)[i] along row (j,p) of a plain level. */
-MG_KERNEL static void residual_row_add(const mg_state *m, const mg_level *L, int j, int p, float *line)
+MG_KERNEL static void residual_row_add(const mg_state *m, const mg_level *L, int j, int p,
+                                       float *line)
 {
     const int nx = L->n[0];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
@@ -101,13 +104,20 @@ MG_KERNEL static void residual_row_add(const mg_state *m, const mg_level *L, int
     const float wym = (float)R.wym, wyp = (float)R.wyp, wzm = (float)R.wzm, wzp = (float)R.wzp;
     const float din = (float)(R.dyz + 2 * L->c[0]);
     for (int i = 1; i < nx - 1; i++) /* branch-free: vectorizes */
-        line[i] += f[i] - (din * u[i] - (cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]) +
-                                         cx * (u[i - 1] + u[i + 1])));
+        line[i] +=
+            f[i] - (din * u[i] - (cy * (wym * ym[i] + wyp * yp[i]) +
+                                  cz * (wzm * zm[i] + wzp * zp[i]) + cx * (u[i - 1] + u[i + 1])));
     for (int i = 0; i < nx; i += (nx > 1 ? nx - 1 : 1)) {
         float s = cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]);
         float d = (float)R.dyz;
-        if (i > 0) { s += cx * u[i - 1]; d += cx; }
-        if (i < nx - 1) { s += cx * u[i + 1]; d += cx; }
+        if (i > 0) {
+            s += cx * u[i - 1];
+            d += cx;
+        }
+        if (i < nx - 1) {
+            s += cx * u[i + 1];
+            d += cx;
+        }
         line[i] += f[i] - (d * u[i] - s);
     }
 }
@@ -130,24 +140,29 @@ MG_KERNEL static void restrict_x(const float *line, int nx, int coarsen, float s
 
 #if MG_AVX512
 /* residual_row_add in 16-lane chunks, walls in-vector, as rb_row_avx512. */
-__attribute__((target("avx512f"))) static void residual_row_avx512(
-    const float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
-    int nx, float cx, float cym, float cyp, float czm, float czp, float dyz, float *line)
+__attribute__((target("avx512f"))) static void residual_row_avx512(const float *ur, const float *fr,
+                                                                   const float *ym, const float *yp,
+                                                                   const float *zm, const float *zp,
+                                                                   int nx, float cx, float cym,
+                                                                   float cyp, float czm, float czp,
+                                                                   float dyz, float *line)
 {
     const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
-                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp), vdin = _mm512_set1_ps(dyz + 2 * cx);
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp),
+                 vdin = _mm512_set1_ps(dyz + 2 * cx);
     const int nq = (nx + 15) / 16, last = nx - 1;
     const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
     __m512i prev = _mm512_setzero_si512();
     __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
     for (int c = 0, q = 0; c < nq; c++, q += 16) {
         __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next = c + 1 < nq
-                           ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                           : _mm512_setzero_si512();
+        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
+                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                                  : _mm512_setzero_si512();
         __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
         __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
-        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        __m512 sm =
+            _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
         sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
         sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
         sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
@@ -159,15 +174,16 @@ __attribute__((target("avx512f"))) static void residual_row_avx512(
             d = _mm512_mask_mov_ps(d, (__mmask16)(1u << (last - q)), _mm512_set1_ps(dyz + cx));
         __m512 r = _mm512_fnmadd_ps(d, _mm512_castsi512_ps(cur), sm);
         __m512 l = _mm512_loadu_ps(line + q);
-        _mm512_storeu_ps(line + q, _mm512_mask_add_ps(l, valid, l, r)); /* line stays zero beyond nx */
+        _mm512_storeu_ps(line + q,
+                         _mm512_mask_add_ps(l, valid, l, r)); /* line stays zero beyond nx */
         prev = cur;
         cur = next;
     }
 }
 
 /* restrict_x with x coarsened: even and odd cells of 32 split by permutes. */
-__attribute__((target("avx512f"))) static void restrict_x_avx512(const float *line, int nx, float scale,
-                                                                 float *out)
+__attribute__((target("avx512f"))) static void restrict_x_avx512(const float *line, int nx,
+                                                                 float scale, float *out)
 {
     const __m512i ev = _mm512_set_epi32(30, 28, 26, 24, 22, 20, 18, 16, 14, 12, 10, 8, 6, 4, 2, 0);
     const __m512i od = _mm512_set_epi32(31, 29, 27, 25, 23, 21, 19, 17, 15, 13, 11, 9, 7, 5, 3, 1);
@@ -176,8 +192,10 @@ __attribute__((target("avx512f"))) static void restrict_x_avx512(const float *li
     for (int I = 0; I < nc; I += 16) {
         int c = nc - I < 16 ? nc - I : 16;
         __m512 a = _mm512_loadu_ps(line + 2 * I), b = _mm512_loadu_ps(line + 2 * I + 16);
-        __m512 s = _mm512_add_ps(_mm512_permutex2var_ps(a, ev, b), _mm512_permutex2var_ps(a, od, b));
-        _mm512_mask_storeu_ps(out + I, (__mmask16)(c == 16 ? 0xFFFFu : (1u << c) - 1u), _mm512_mul_ps(s, vs));
+        __m512 s =
+            _mm512_add_ps(_mm512_permutex2var_ps(a, ev, b), _mm512_permutex2var_ps(a, od, b));
+        _mm512_mask_storeu_ps(out + I, (__mmask16)(c == 16 ? 0xFFFFu : (1u << c) - 1u),
+                              _mm512_mul_ps(s, vs));
     }
 }
 #endif
@@ -185,9 +203,10 @@ __attribute__((target("avx512f"))) static void restrict_x_avx512(const float *li
 /* Coarse row (J,K) of C->f: the mean of its children's fine residuals f - A u
  * (planes 2K, 2K+1 or K, rows 2J, 2J+1 or J, x pairs), computed from u here, so
  * the fine residual is never stored; children beyond odd edges count as zero,
- * as in mg_restrict_field. u must be final on the children's planes and the
+ * as in hv__mg_restrict_field. u must be final on the children's planes and the
  * planes beside them. */
-static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level *C, int J, int K, float scale)
+static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level *C, int J, int K,
+                                  float scale)
 {
     const int *co = L->coarsen;
     const int nx = L->n[0];
@@ -198,7 +217,8 @@ static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level
     ks[nk++] = co[2] ? 2 * K : K;
     if (co[2] && 2 * K + 1 < L->n[2])
         ks[nk++] = 2 * K + 1;
-    float line[MG_ROW_BUF + 32]; /* zero beyond nx: restrict_x_avx512 reads whole pairs of vectors */
+    float
+        line[MG_ROW_BUF + 32]; /* zero beyond nx: restrict_x_avx512 reads whole pairs of vectors */
     memset(line, 0, (size_t)(nx + 32) * sizeof(float));
     float *out = C->f + C->sy * (size_t)J + C->sz * (size_t)K;
 #if MG_AVX512
@@ -208,11 +228,12 @@ static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level
             for (int a = 0; a < nj; a++) {
                 const int j = js[a], k = ks[b];
                 const float *ur = L->u + L->sy * (size_t)j + L->sz * (size_t)k;
-                const float wym = j > 0, wyp = j < L->n[1] - 1, wzm = k > 0, wzp = k < L->n[2] - 1;
+                const float wym = j > 0, wyp = j<L->n[1] - 1, wzm = k> 0, wzp = k < L->n[2] - 1;
                 const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
-                residual_row_avx512(ur, L->f + (ur - L->u), wym ? ur - L->sy : ur, wyp ? ur + L->sy : ur,
-                                    wzm ? ur - L->sz : ur, wzp ? ur + L->sz : ur, nx, cx, cy * wym, cy * wyp,
-                                    cz * wzm, cz * wzp, dyz, line);
+                residual_row_avx512(ur, L->f + (ur - L->u), wym ? ur - L->sy : ur,
+                                    wyp ? ur + L->sy : ur, wzm ? ur - L->sz : ur,
+                                    wzp ? ur + L->sz : ur, nx, cx, cy * wym, cy * wyp, cz * wzm,
+                                    cz * wzp, dyz, line);
             }
         if (co[0])
             restrict_x_avx512(line, nx, scale, out);
@@ -228,17 +249,15 @@ static void restrict_residual_row(const mg_state *m, const mg_level *L, mg_level
 }
 
 /* The fine planes of coarse plane K: [first, last]. */
-static int coarse_first(const mg_level *L, int K)
-{
-    return L->coarsen[2] ? 2 * K : K;
-}
+static int coarse_first(const mg_level *L, int K) { return L->coarsen[2] ? 2 * K : K; }
 
 static int coarse_last(const mg_level *L, int K)
 {
     return L->coarsen[2] && 2 * K + 1 < L->n[2] ? 2 * K + 1 : coarse_first(L, K);
 }
 
-static void restrict_residual_plane(const mg_state *m, const mg_level *L, mg_level *C, int K, float scale)
+static void restrict_residual_plane(const mg_state *m, const mg_level *L, mg_level *C, int K,
+                                    float scale)
 {
     for (int J = 0; J < C->n[1]; J++)
         restrict_residual_row(m, L, C, J, K, scale);
@@ -253,8 +272,8 @@ static void restrict_residual_plane(const mg_state *m, const mg_level *L, mg_lev
  * (row j-1 of plane k was just done); colour A on row j of plane k reads the
  * colour-B cell below it before that one is updated, as a two-colour sweep
  * does. */
-static void rb_pair(const mg_state *m, mg_level *L, int k, int A, int zero, const mg_level *P, float *line,
-                    mg_level *R, int K, float scale)
+static void rb_pair(const mg_state *m, mg_level *L, int k, int A, int zero, const mg_level *P,
+                    float *line, mg_level *R, int K, float scale)
 {
     const int ny = L->n[1];
     int J = 0; /* coarse rows of plane K of R written so far */
@@ -263,15 +282,15 @@ static void rb_pair(const mg_state *m, mg_level *L, int k, int A, int zero, cons
             for (int J1 = (int)((int64_t)(j + 1) * R->n[1] / ny); J < J1; J++)
                 restrict_residual_row(m, L, R, J, K, scale);
         if (P) /* u += P u_C on row j of plane k+1 first: colour A on row j of plane k reads it */
-            mg_prolong_row_plain(L, P, j, k + 1, line, 0);
+            hv__mg_prolong_row_plain(L, P, j, k + 1, line, 0);
         if (zero)
             rb_row_zero(m, L, j, k, A);
         else
-            mg_rb_row_plain(m, L, L->u, L->f, j, k, A);
+            hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, A);
         if (j > 0)
-            mg_rb_row_plain(m, L, L->u, L->f, j - 1, k - 1, !A);
+            hv__mg_rb_row_plain(m, L, L->u, L->f, j - 1, k - 1, !A);
     }
-    mg_rb_row_plain(m, L, L->u, L->f, ny - 1, k - 1, !A);
+    hv__mg_rb_row_plain(m, L, L->u, L->f, ny - 1, k - 1, !A);
 }
 
 /* One red-black sweep of a plain 3D level in a single pass over memory, with
@@ -286,7 +305,7 @@ static void rb_pair(const mg_state *m, mg_level *L, int k, int A, int zero, cons
  * anything else and the other colour on it after everything else, so a sweep
  * has 2 to 4 barriers instead of a few per plane. Same arithmetic as two
  * colour sweeps, half the memory traffic. */
-void mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first)
+void hv__mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first)
 {
     const int nz = L->n[2], ny = L->n[1];
     float scale = 1.0f;
@@ -329,10 +348,10 @@ void mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int fi
             if (own) {
                 for (int k = k0; k <= k0 + 1 && k < k1; k++)
                     for (int j = 0; j < ny; j++)
-                        mg_prolong_row_plain(L, C, j, k, line, 0);
+                        hv__mg_prolong_row_plain(L, C, j, k, line, 0);
                 if (k1 - 1 > k0 + 1)
                     for (int j = 0; j < ny; j++)
-                        mg_prolong_row_plain(L, C, j, k1 - 1, line, 0);
+                        hv__mg_prolong_row_plain(L, C, j, k1 - 1, line, 0);
             }
 #pragma omp barrier
         }
@@ -349,13 +368,15 @@ void mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int fi
                 if (k - 1 > k0) {
                     /* u is final on planes <= k-2: residuals of planes <= k-3 */
                     int rk = -1;
-                    if (mode == MG_FS_RESTRICT && coarse_first(L, Knext) < k1 && coarse_last(L, Knext) <= k - 3)
+                    if (mode == MG_FS_RESTRICT && coarse_first(L, Knext) < k1 &&
+                        coarse_last(L, Knext) <= k - 3)
                         rk = Knext++;
-                    rb_pair(m, L, k, A, mode == MG_FS_ZERO, pro ? C : NULL, line, rk >= 0 ? C : NULL, rk, scale);
+                    rb_pair(m, L, k, A, mode == MG_FS_ZERO, pro ? C : NULL, line,
+                            rk >= 0 ? C : NULL, rk, scale);
                 } else {
                     if (pro)
                         for (int j = 0; j < ny; j++)
-                            mg_prolong_row_plain(L, C, j, k + 1, line, 0);
+                            hv__mg_prolong_row_plain(L, C, j, k + 1, line, 0);
                     if (mode == MG_FS_ZERO)
                         for (int j = 0; j < ny; j++)
                             rb_row_zero(m, L, j, k, A);
@@ -365,7 +386,8 @@ void mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int fi
             }
             if (k1 - 1 > k0)
                 rb_plane_plain(m, L, k1 - 1, B);
-            while (mode == MG_FS_RESTRICT && coarse_first(L, Knext) < k1 && coarse_last(L, Knext) <= k1 - 2)
+            while (mode == MG_FS_RESTRICT && coarse_first(L, Knext) < k1 &&
+                   coarse_last(L, Knext) <= k1 - 2)
                 restrict_residual_plane(m, L, C, Knext++, scale);
         }
 #pragma omp barrier

@@ -40,25 +40,25 @@ typedef struct mg_state {
     hv_smoother smoother;
     int pre, post;
     int use_pcg;
-    double *rd, *p, *z, *q; /* fine double work */
+    double *rd, *p, *z, *q;      /* fine double work */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
-    float *rt_work;              /* PCG: mg_restrict_transpose's work, rt_threads slices */
+    float *rt_work;              /* PCG: hv__mg_restrict_transpose's work, rt_threads slices */
     int rt_threads;
-    hv_solver_stats model;       /* traffic model (mg_model_stats_cpu) */
+    hv_solver_stats model; /* traffic model (hv__mg_model_stats_cpu) */
 } mg_state;
 
 #if MG_AVX512
 /* 1: the AVX-512 rows run, 0: they do not, -1: not asked yet (mg_rows.c). */
-extern int mg_avx512_state;
-int mg_avx512_probe(void);
+extern int hv__mg_avx512_state;
+int hv__mg_avx512_probe(void);
 
 /* The AVX-512 kernels where the CPU has them, unless HV_NO512 is set to
  * anything but empty or 0 (the tests run the other path that way). Asked once
  * per row, so inline. */
 static inline int mg_avx512(void)
 {
-    return mg_avx512_state >= 0 ? mg_avx512_state : mg_avx512_probe();
+    return hv__mg_avx512_state >= 0 ? hv__mg_avx512_state : hv__mg_avx512_probe();
 }
 #endif
 
@@ -73,7 +73,7 @@ static inline void mg_zero_f(float *v, size_t n)
 /* Neighbour rows and diagonal of a plain-level row (walls drop their faces). */
 typedef struct mg_plain_row {
     size_t base;
-    ptrdiff_t ym, yp, zm, zp; /* offsets of the neighbour rows (0 at a wall) */
+    ptrdiff_t ym, yp, zm, zp;  /* offsets of the neighbour rows (0 at a wall) */
     double wym, wyp, wzm, wzp; /* 1 for an open face, 0 at a wall */
     double dyz;                /* alpha + the y and z face coefficients */
 } mg_plain_row;
@@ -96,33 +96,40 @@ static inline mg_plain_row mg_plain_row_at(const mg_state *m, const mg_level *L,
 
 /* out = f - A u along one plain row, for float or double vectors (T); the
  * interior loop has no branches so that it vectorizes. */
-#define MG_PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUTROW, NORM)                                         \
-    do {                                                                                              \
-        const int nx_ = (L)->n[0];                                                                    \
-        const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                           \
-        TO *o_ = (OUTROW);                                                                            \
-        const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                           \
-        const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;           \
-        const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;       \
-        const T din_ = (T)((R).dyz + 2 * (L)->c[0]);                                                  \
-        for (int i_ = 0; i_ < nx_; i_++) {                                                            \
-            T s_ = cy_ * (wym_ * ym_[i_] + wyp_ * yp_[i_]) + cz_ * (wzm_ * zm_[i_] + wzp_ * zp_[i_]); \
-            T d_;                                                                                     \
-            if (i_ > 0 && i_ < nx_ - 1) {                                                             \
-                s_ += cx_ * (u_[i_ - 1] + u_[i_ + 1]);                                                \
-                d_ = din_;                                                                            \
-            } else {                                                                                  \
-                d_ = (T)(R).dyz;                                                                      \
-                if (i_ > 0) { s_ += cx_ * u_[i_ - 1]; d_ += cx_; }                                    \
-                if (i_ < nx_ - 1) { s_ += cx_ * u_[i_ + 1]; d_ += cx_; }                              \
-            }                                                                                         \
-            T r_ = f_[i_] - (d_ * u_[i_] - s_);                                                       \
-            o_[i_] = (TO)r_;                                                                          \
-            NORM += (double)r_ * (double)r_;                                                          \
-        }                                                                                             \
+#define MG_PLAIN_ROW_RESIDUAL(T, TO, L, R, U, F, OUTROW, NORM)                                     \
+    do {                                                                                           \
+        const int nx_ = (L)->n[0];                                                                 \
+        const T *u_ = (U) + (R).base, *f_ = (F) + (R).base;                                        \
+        TO *o_ = (OUTROW);                                                                         \
+        const T cx_ = (T)(L)->c[0], cy_ = (T)(L)->c[1], cz_ = (T)(L)->c[2];                        \
+        const T wym_ = (T)(R).wym, wyp_ = (T)(R).wyp, wzm_ = (T)(R).wzm, wzp_ = (T)(R).wzp;        \
+        const T *ym_ = u_ + (R).ym, *yp_ = u_ + (R).yp, *zm_ = u_ + (R).zm, *zp_ = u_ + (R).zp;    \
+        const T din_ = (T)((R).dyz + 2 * (L)->c[0]);                                               \
+        for (int i_ = 0; i_ < nx_; i_++) {                                                         \
+            T s_ =                                                                                 \
+                cy_ * (wym_ * ym_[i_] + wyp_ * yp_[i_]) + cz_ * (wzm_ * zm_[i_] + wzp_ * zp_[i_]); \
+            T d_;                                                                                  \
+            if (i_ > 0 && i_ < nx_ - 1) {                                                          \
+                s_ += cx_ * (u_[i_ - 1] + u_[i_ + 1]);                                             \
+                d_ = din_;                                                                         \
+            } else {                                                                               \
+                d_ = (T)(R).dyz;                                                                   \
+                if (i_ > 0) {                                                                      \
+                    s_ += cx_ * u_[i_ - 1];                                                        \
+                    d_ += cx_;                                                                     \
+                }                                                                                  \
+                if (i_ < nx_ - 1) {                                                                \
+                    s_ += cx_ * u_[i_ + 1];                                                        \
+                    d_ += cx_;                                                                     \
+                }                                                                                  \
+            }                                                                                      \
+            T r_ = f_[i_] - (d_ * u_[i_] - s_);                                                    \
+            o_[i_] = (TO)r_;                                                                       \
+            NORM += (double)r_ * (double)r_;                                                       \
+        }                                                                                          \
     } while (0)
 
-/* Levels whose red-black sweeps run plane by plane in one pass (mg_fused_pass). */
+/* Levels whose red-black sweeps run plane by plane in one pass (hv__mg_fused_pass). */
 static inline int mg_level_fusable(const mg_state *m, const mg_level *L)
 {
     return L->plain && m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8 && L->n[0] <= MG_ROW_BUF;
@@ -131,29 +138,29 @@ static inline int mg_level_fusable(const mg_state *m, const mg_level *L)
 /* ---------- mg_rows.c ---------- */
 
 /* One colour (col) of row (j,k) of a plain level (MG_KERNEL). */
-void mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j, int k,
-                     int col);
+void hv__mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
+                         int k, int col);
 #if MG_AVX512
 /* One colour of plane k of a plain level in AVX-512 rows. */
-__attribute__((target("avx512f"))) void mg_rb_plane_avx512(const mg_state *m, const mg_level *L,
-                                                           int k, int col);
+__attribute__((target("avx512f"))) void hv__mg_rb_plane_avx512(const mg_state *m, const mg_level *L,
+                                                               int k, int col);
 #endif
 /* One colour of a red-black Gauss-Seidel sweep over a level. */
-void mg_rb_sweep(const mg_state *m, mg_level *L, int col);
+void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col);
 /* L->r = L->f - A L->u (float). */
-void mg_level_residual(const mg_state *m, mg_level *L);
+void hv__mg_level_residual(const mg_state *m, mg_level *L);
 /* Jacobi (cd = 0) or Chebyshev step from L->r: d = cd d + cr D^-1 r, u += d. */
-void mg_level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr);
+void hv__mg_level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr);
 
 /* ---------- mg_transfer.c ---------- */
 
 /* f_C = mean of the children of src (children beyond an odd edge count as 0). */
-void mg_restrict_field(const mg_state *m, const mg_level *F, const float *src, mg_level *C);
+void hv__mg_restrict_field(const mg_state *m, const mg_level *F, const float *src, mg_level *C);
 /* Row (j,k) of u_F += P u_C (= when set) from a plain coarse level; line:
  * C->n[0] floats of work (MG_KERNEL). */
-void mg_prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line, int set);
+void hv__mg_prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line, int set);
 /* u_F += P u_C (u_F = P u_C when set). */
-void mg_prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set);
+void hv__mg_prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set);
 
 /* ---------- mg_fused.c ---------- */
 
@@ -161,13 +168,13 @@ enum { MG_FS_PLAIN, MG_FS_ZERO, MG_FS_RESTRICT, MG_FS_PROLONG };
 /* One red-black sweep of a fusable level in one pass over memory, the first
  * colour `first`; mode MG_FS_ZERO, MG_FS_RESTRICT or MG_FS_PROLONG fuses the
  * start from u = 0, the restriction of the residual to C->f or u += P u_C. */
-void mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first);
+void hv__mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, int first);
 
 /* ---------- mg_cycle.c ---------- */
 
 /* One V-cycle on level l (u from zero unless guess; sym: the symmetric cycle
  * of PCG), and full multigrid for lv[0].f. The result is in lv[0].u. */
-void mg_vcycle(const mg_state *m, int l, int guess, int sym);
-void mg_fmg(const mg_state *m);
+void hv__mg_vcycle(const mg_state *m, int l, int guess, int sym);
+void hv__mg_fmg(const mg_state *m);
 
 #endif

@@ -37,9 +37,9 @@
 typedef struct mg_level {
     int n[3];
     size_t count;
-    size_t sy, sz;        /* cell strides */
-    double c[3];          /* beta / h_b^2 (0 for axes beyond dim) */
-    int coarsen[3];       /* the next level halves this axis */
+    size_t sy, sz;  /* cell strides */
+    double c[3];    /* beta / h_b^2 (0 for axes beyond dim) */
+    int coarsen[3]; /* the next level halves this axis */
     int plain;
     int binary;           /* weighted, with a = 0/1 and w_f = a_c a_nb inside (the fine
                              level of a mask): where u stays 0 on empty cells, as the
@@ -52,7 +52,7 @@ typedef struct mg_level {
     /* bottom level only: connected regions (Poisson) and CG work */
     int nregion;
     int32_t *region;
-    double *bwork;        /* MG_BOTTOM_WORK doubles per cell for mg_bottom_cg (CPU backend) */
+    double *bwork; /* MG_BOTTOM_WORK doubles per cell for hv__mg_bottom_cg (CPU backend) */
 } mg_level;
 
 /* The host-side hierarchy that every multigrid backend (CPU, OpenCL) builds the
@@ -68,45 +68,45 @@ typedef struct mg_hierarchy {
 
 /* Builds H for setup s; with_lmax estimates lmax (Chebyshev) on every level.
  * On failure H holds nothing to free. */
-hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax);
-/* Frees what mg_hierarchy_build allocated (coefficients and bottom regions). */
-void mg_hierarchy_free(mg_hierarchy *H);
-void mg_level_free_coeffs(mg_level *L);
+hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax);
+/* Frees what hv__mg_hierarchy_build allocated (coefficients and bottom regions). */
+void hv__mg_hierarchy_free(mg_hierarchy *H);
+void hv__mg_level_free_coeffs(mg_level *L);
 
 /* Levels, sizes, a memory-traffic model of one outer iteration and memory held,
  * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
-void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
-                    int post, int pcg, hv_solver_stats *st);
+void hv__mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                        int post, int pcg, hv_solver_stats *st);
 /* The same for the CPU backend (mg.c), whose fused passes (mg_fused.c) move
  * fewer bytes on plain 3D levels and whose plain fine correction is a single
  * pass. */
-void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
-                        int post, int pcg, hv_solver_stats *st);
+void hv__mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                            int post, int pcg, hv_solver_stats *st);
 
 /* Diagonal of the operator at cell (i,j,k) (plain or weighted level). */
-double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
+double hv__mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
 /* y = A x in double on a level. */
-void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
+void hv__mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
 
-/* Doubles per bottom cell that mg_bottom_cg needs as work. */
+/* Doubles per bottom cell that hv__mg_bottom_cg needs as work. */
 #define MG_BOTTOM_WORK 5
 /* The bottom level's solve, shared by the backends: u = A^-1 f by CG to 1e-12
  * relative in double (Neumann Poisson: f and u projected mean-free per
  * connected region). work: MG_BOTTOM_WORK * L->count doubles. */
-void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u,
-                  double *work);
+void hv__mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u,
+                      double *work);
 
 /* The symmetric restriction of the PCG preconditioner (mg_transfer.c; the
  * OpenCL backend uploads pn and runs the same gather in kernels/mg.cl).
- * mg_prolong_norm: pn[fine cell] = 1 / (sum of the prolongation weights that
+ * hv__mg_prolong_norm: pn[fine cell] = 1 / (sum of the prolongation weights that
  * reach non-empty cells of the weighted coarse level C), 0 on solid fine cells
  * and where no weight reaches.
- * mg_restrict_transpose: fc = P^T (pn .* r) / 2^(coarsened axes), 0 on empty
+ * hv__mg_restrict_transpose: fc = P^T (pn .* r) / 2^(coarsened axes), 0 on empty
  * coarse cells; pn is NULL when C is plain (weights then sum to one). */
-void mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn);
-void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
-                           const float *r, float *fc, float *work, int nthreads);
-/* Floats of work per thread that mg_restrict_transpose needs for F -> C (it
+void hv__mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn);
+void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
+                               const float *r, float *fc, float *work, int nthreads);
+/* Floats of work per thread that hv__mg_restrict_transpose needs for F -> C (it
  * runs on at most nthreads threads, each with its own slice of work). */
 static inline size_t mg_restrict_transpose_work(const mg_level *F, const mg_level *C)
 {
@@ -156,19 +156,37 @@ static inline mg_wrow mg_wrow_at(const mg_level *L, int dim, int j, int k)
 /* Off-diagonal sum  sum_faces c_b w_f u_nb  and diagonal at cell (i,j,k).
  * m is anything with fields dim and alpha; the body serves float and double
  * vectors. kernels/mg.cl computes the same stencil on devices. */
-#define MG_STENCIL(L, m, U, i, j, k, c, S, D)                                                     \
+#define MG_STENCIL(L, m, U, i, j, k, c, S, D)                                                      \
     do {                                                                                           \
         if ((L)->plain) {                                                                          \
             double cx_ = (L)->c[0], cy_ = (L)->c[1], cz_ = (L)->c[2];                              \
             D = (m)->alpha;                                                                        \
             S = 0;                                                                                 \
-            if (i > 0) { S += cx_ * U[c - 1]; D += cx_; }                                          \
-            if (i < (L)->n[0] - 1) { S += cx_ * U[c + 1]; D += cx_; }                              \
-            if (j > 0) { S += cy_ * U[c - (L)->sy]; D += cy_; }                                    \
-            if (j < (L)->n[1] - 1) { S += cy_ * U[c + (L)->sy]; D += cy_; }                        \
+            if (i > 0) {                                                                           \
+                S += cx_ * U[c - 1];                                                               \
+                D += cx_;                                                                          \
+            }                                                                                      \
+            if (i < (L)->n[0] - 1) {                                                               \
+                S += cx_ * U[c + 1];                                                               \
+                D += cx_;                                                                          \
+            }                                                                                      \
+            if (j > 0) {                                                                           \
+                S += cy_ * U[c - (L)->sy];                                                         \
+                D += cy_;                                                                          \
+            }                                                                                      \
+            if (j < (L)->n[1] - 1) {                                                               \
+                S += cy_ * U[c + (L)->sy];                                                         \
+                D += cy_;                                                                          \
+            }                                                                                      \
             if ((m)->dim == 3) {                                                                   \
-                if (k > 0) { S += cz_ * U[c - (L)->sz]; D += cz_; }                                \
-                if (k < (L)->n[2] - 1) { S += cz_ * U[c + (L)->sz]; D += cz_; }                    \
+                if (k > 0) {                                                                       \
+                    S += cz_ * U[c - (L)->sz];                                                     \
+                    D += cz_;                                                                      \
+                }                                                                                  \
+                if (k < (L)->n[2] - 1) {                                                           \
+                    S += cz_ * U[c + (L)->sz];                                                     \
+                    D += cz_;                                                                      \
+                }                                                                                  \
             }                                                                                      \
         } else {                                                                                   \
             const float *wx_ = (L)->w[0], *wy_ = (L)->w[1];                                        \
@@ -176,19 +194,28 @@ static inline mg_wrow mg_wrow_at(const mg_level *L, int dim, int j, int k)
             double wl_, wh_;                                                                       \
             D = (m)->alpha * (L)->a[c];                                                            \
             S = 0;                                                                                 \
-            wl_ = wx_[fx_]; wh_ = wx_[fx_ + 1];                                                    \
-            if (wl_ != 0) S += (L)->c[0] * wl_ * U[c - 1];                                         \
-            if (wh_ != 0) S += (L)->c[0] * wh_ * U[c + 1];                                         \
+            wl_ = wx_[fx_];                                                                        \
+            wh_ = wx_[fx_ + 1];                                                                    \
+            if (wl_ != 0)                                                                          \
+                S += (L)->c[0] * wl_ * U[c - 1];                                                   \
+            if (wh_ != 0)                                                                          \
+                S += (L)->c[0] * wh_ * U[c + 1];                                                   \
             D += (L)->c[0] * (wl_ + wh_);                                                          \
-            wl_ = wy_[fy_]; wh_ = wy_[fy_ + (size_t)(L)->n[0]];                                    \
-            if (wl_ != 0) S += (L)->c[1] * wl_ * U[c - (L)->sy];                                   \
-            if (wh_ != 0) S += (L)->c[1] * wh_ * U[c + (L)->sy];                                   \
+            wl_ = wy_[fy_];                                                                        \
+            wh_ = wy_[fy_ + (size_t)(L)->n[0]];                                                    \
+            if (wl_ != 0)                                                                          \
+                S += (L)->c[1] * wl_ * U[c - (L)->sy];                                             \
+            if (wh_ != 0)                                                                          \
+                S += (L)->c[1] * wh_ * U[c + (L)->sy];                                             \
             D += (L)->c[1] * (wl_ + wh_);                                                          \
             if ((m)->dim == 3) {                                                                   \
                 size_t fz_ = mg_face_index(L, 2, i, j, k);                                         \
-                wl_ = (L)->w[2][fz_]; wh_ = (L)->w[2][fz_ + (L)->sz];                              \
-                if (wl_ != 0) S += (L)->c[2] * wl_ * U[c - (L)->sz];                               \
-                if (wh_ != 0) S += (L)->c[2] * wh_ * U[c + (L)->sz];                               \
+                wl_ = (L)->w[2][fz_];                                                              \
+                wh_ = (L)->w[2][fz_ + (L)->sz];                                                    \
+                if (wl_ != 0)                                                                      \
+                    S += (L)->c[2] * wl_ * U[c - (L)->sz];                                         \
+                if (wh_ != 0)                                                                      \
+                    S += (L)->c[2] * wh_ * U[c + (L)->sz];                                         \
                 D += (L)->c[2] * (wl_ + wh_);                                                      \
             }                                                                                      \
         }                                                                                          \

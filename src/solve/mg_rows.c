@@ -11,13 +11,13 @@
 #include <string.h>
 
 #if MG_AVX512
-int mg_avx512_state = -1;
+int hv__mg_avx512_state = -1;
 
-int mg_avx512_probe(void)
+int hv__mg_avx512_probe(void)
 {
     const char *e = getenv("HV_NO512");
-    mg_avx512_state = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0")) ? 1 : 0;
-    return mg_avx512_state;
+    hv__mg_avx512_state = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0")) ? 1 : 0;
+    return hv__mg_avx512_state;
 }
 
 /* One colour (cells of parity i0) of a plain row of nx cells, walls included,
@@ -45,12 +45,13 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(
     __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
     for (int c = 0, q = 0; c < nq; c++, q += 16) {
         __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next = c + 1 < nq
-                           ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                           : _mm512_setzero_si512();
+        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
+                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                                  : _mm512_setzero_si512();
         __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
         __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
-        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
+        __m512 sm =
+            _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
         sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
         sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
         sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
@@ -68,8 +69,8 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(
 #endif
 
 /* Plain-level interior row update: the hot loop of the smoother, branch-free. */
-MG_KERNEL void mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f, int j,
-                                int k, int col)
+MG_KERNEL void hv__mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const float *f,
+                                   int j, int k, int col)
 {
     const int nx = L->n[0];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
@@ -85,7 +86,8 @@ MG_KERNEL void mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, c
     int i0 = (j + k + col) & 1;
 #if MG_AVX512
     if (mg_avx512()) {
-        rb_row_avx512(ur, fr, ym, yp, zm, zp, nx, i0, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
+        rb_row_avx512(ur, fr, ym, yp, zm, zp, nx, i0, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp,
+                      dyz);
         return;
     }
 #endif
@@ -125,9 +127,9 @@ MG_KERNEL void mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, c
 
 #if MG_AVX512
 /* One colour of plane k of a plain level: rb_row_avx512 over its rows, inlined
- * here, without mg_rb_row_plain's call and set-up per row. */
-__attribute__((target("avx512f"))) void mg_rb_plane_avx512(const mg_state *m, const mg_level *L, int k,
-                                                           int col)
+ * here, without hv__mg_rb_row_plain's call and set-up per row. */
+__attribute__((target("avx512f"))) void hv__mg_rb_plane_avx512(const mg_state *m, const mg_level *L,
+                                                               int k, int col)
 {
     const int nx = L->n[0], ny = L->n[1];
     const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
@@ -147,8 +149,8 @@ __attribute__((target("avx512f"))) void mg_rb_plane_avx512(const mg_state *m, co
 /* Off-diagonal sum at cell q of a weighted row (float; walls and solid faces
  * have weight 0 and read a finite value). */
 #define WROW_SUM(R, u, q, cx, cy, cz)                                                              \
-    ((cx) * ((R).wx[q] * (u)[(q) - 1] + (R).wx[(q) + 1] * (u)[(q) + 1]) +                          \
-     (cy) * ((R).wyl[q] * (u)[(R).ym + (q)] + (R).wyh[q] * (u)[(R).yp + (q)]) +                     \
+    ((cx) * ((R).wx[q] * (u)[(q)-1] + (R).wx[(q) + 1] * (u)[(q) + 1]) +                            \
+     (cy) * ((R).wyl[q] * (u)[(R).ym + (q)] + (R).wyh[q] * (u)[(R).yp + (q)]) +                    \
      ((R).wzl ? (cz) * ((R).wzl[q] * (u)[(R).zm + (q)] + (R).wzh[q] * (u)[(R).zp + (q)]) : 0.0f))
 
 /* Diagonal at cell q of a weighted row. */
@@ -157,8 +159,8 @@ __attribute__((target("avx512f"))) void mg_rb_plane_avx512(const mg_state *m, co
      (cy) * ((R).wyl[q] + (R).wyh[q]) + ((R).wzl ? (cz) * ((R).wzl[q] + (R).wzh[q]) : 0.0f))
 
 /* WROW_SUM at the first or last cell q of a row of nx, without the missing x neighbour. */
-static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int nx, float cx, float cy,
-                                  float cz)
+static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int nx, float cx,
+                                  float cy, float cz)
 {
     float s = cy * (R->wyl[q] * u[R->ym + q] + R->wyh[q] * u[R->yp + q]);
     if (R->wzl)
@@ -221,7 +223,7 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
     }
 }
 
-void mg_rb_sweep(const mg_state *m, mg_level *L, int col)
+void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col)
 {
     float *u = L->u;
     const float *f = L->f;
@@ -229,7 +231,7 @@ void mg_rb_sweep(const mg_state *m, mg_level *L, int col)
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
         for (int k = 0; k < L->n[2]; k++)
             for (int j = 0; j < L->n[1]; j++)
-                mg_rb_row_plain(m, L, u, f, j, k, col);
+                hv__mg_rb_row_plain(m, L, u, f, j, k, col);
         return;
     }
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
@@ -241,29 +243,33 @@ void mg_rb_sweep(const mg_state *m, mg_level *L, int col)
 /* Row (j,k) of r = f - A u on a weighted level. */
 MG_KERNEL static void residual_row_weighted(const mg_state *m, const mg_level *L, int j, int k)
 {
-    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const float alpha = (float)m->alpha, cx = (float)L->c[0], cy = (float)L->c[1],
+                cz = (float)L->c[2];
     const int nx = L->n[0];
     const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
     const float *ur = L->u + R.base, *fr = L->f + R.base;
     float *rr = L->r + R.base;
-    for (int q = 0; q < nx; q += nx - 1 > 0 ? nx - 1 : 1) /* the first and last cells */
-        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
+    for (int q = 0; q<nx; q += nx - 1> 0 ? nx - 1 : 1) /* the first and last cells */
+        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] -
+                         wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));
     if (L->binary) { /* solid neighbours hold u = 0; D = 1 / dinv, 0 on empty rows */
         const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
         const float *ym = ur + R.ym, *yp = ur + R.yp, *zm = ur + R.zm, *zp = ur + R.zp;
         const float *dv = L->dinv + R.base;
         for (int q = 1; q < nx - 1; q++) {
-            float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) + cz * (wzm * zm[q] + wzp * zp[q]);
+            float sn = cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
+                       cz * (wzm * zm[q] + wzp * zp[q]);
             rr[q] = dv[q] > 0 ? fr[q] - (ur[q] / dv[q] - sn) : fr[q];
         }
         return;
     }
     for (int q = 1; q < nx - 1; q++)
-        rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
+        rr[q] = fr[q] -
+                (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] - WROW_SUM(R, ur, q, cx, cy, cz));
 }
 
 /* r = f - A u on a level (float). */
-void mg_level_residual(const mg_state *m, mg_level *L)
+void hv__mg_level_residual(const mg_state *m, mg_level *L)
 {
     const float *u = L->u, *f = L->f;
     float *r = L->r;
@@ -286,13 +292,14 @@ void mg_level_residual(const mg_state *m, mg_level *L)
 
 static double level_diag_at(const mg_state *m, const mg_level *L, size_t c, int i, int j, int k)
 {
-    return L->plain ? mg_level_diag(L, m->dim, m->alpha, i, j, k) : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
+    return L->plain ? hv__mg_level_diag(L, m->dim, m->alpha, i, j, k)
+                    : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
 }
 
 /* u += omega_k D^-1 r, the Jacobi-type update; with cheb != NULL the Chebyshev
  * recurrence d = rho*rho_old*d + 2 rho/delta D^-1 r (Chebyshev on D^-1 A,
  * docs/METHOD.md, "Multigrid"). */
-void mg_level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr)
+void hv__mg_level_jacobi_update(const mg_state *m, mg_level *L, double cd, double cr)
 {
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > MG_PAR_MIN)
     for (int k = 0; k < L->n[2]; k++)

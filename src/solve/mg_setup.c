@@ -30,7 +30,7 @@ static float level_a(const mg_level *L, int i, int j, int k)
     return L->plain ? 1.0f : L->a[(size_t)i + L->sy * j + L->sz * k];
 }
 
-double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k)
+double hv__mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k)
 {
     double d = alpha * level_a(L, i, j, k);
     int idx[3] = {i, j, k};
@@ -44,8 +44,8 @@ double mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int
 
 /* Row (j,k) of y = A x in double: the first and last cells through the general
  * stencil, the interior in a loop without branches. */
-MG_KERNEL static void apply_row_d(const mg_level *L, int dim, double alpha, const double *x, double *y,
-                                  int j, int k)
+MG_KERNEL static void apply_row_d(const mg_level *L, int dim, double alpha, const double *x,
+                                  double *y, int j, int k)
 {
     const struct {
         int dim;
@@ -53,7 +53,7 @@ MG_KERNEL static void apply_row_d(const mg_level *L, int dim, double alpha, cons
     } op = {dim, alpha}, *m = &op;
     const int nx = L->n[0];
     const double cx = L->c[0], cy = L->c[1], cz = L->c[2];
-    for (int i = 0; i < nx; i += nx - 1 > 0 ? nx - 1 : 1) {
+    for (int i = 0; i<nx; i += nx - 1> 0 ? nx - 1 : 1) {
         size_t c = (size_t)i + L->sy * j + L->sz * k;
         double S, D;
         MG_STENCIL(L, m, x, i, j, k, c, S, D);
@@ -71,8 +71,8 @@ MG_KERNEL static void apply_row_d(const mg_level *L, int dim, double alpha, cons
         const double d = alpha + 2 * cx + cy * (wym + wyp) + cz * (wzm + wzp);
         double *yr = y + base;
         for (int i = 1; i < nx - 1; i++)
-            yr[i] = d * xr[i] -
-                    (cx * (xr[i - 1] + xr[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) + cz * (wzm * zm[i] + wzp * zp[i]));
+            yr[i] = d * xr[i] - (cx * (xr[i - 1] + xr[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                                 cz * (wzm * zm[i] + wzp * zp[i]));
         return;
     }
     const mg_wrow R = mg_wrow_at(L, dim, j, k);
@@ -84,19 +84,21 @@ MG_KERNEL static void apply_row_d(const mg_level *L, int dim, double alpha, cons
             const double wl = R.wx[i], wh = R.wx[i + 1], yl = R.wyl[i], yh = R.wyh[i];
             const double zl = R.wzl[i], zh = R.wzh[i];
             const double d = alpha * ar[i] + cx * (wl + wh) + cy * (yl + yh) + cz * (zl + zh);
-            yr[i] = d * xr[i] - (cx * (wl * xr[i - 1] + wh * xr[i + 1]) + cy * (yl * xr[R.ym + i] + yh * xr[R.yp + i]) +
+            yr[i] = d * xr[i] - (cx * (wl * xr[i - 1] + wh * xr[i + 1]) +
+                                 cy * (yl * xr[R.ym + i] + yh * xr[R.yp + i]) +
                                  cz * (zl * xr[R.zm + i] + zh * xr[R.zp + i]));
         }
     } else {
         for (int i = 1; i < nx - 1; i++) {
             const double wl = R.wx[i], wh = R.wx[i + 1], yl = R.wyl[i], yh = R.wyh[i];
             const double d = alpha * ar[i] + cx * (wl + wh) + cy * (yl + yh);
-            yr[i] = d * xr[i] - (cx * (wl * xr[i - 1] + wh * xr[i + 1]) + cy * (yl * xr[R.ym + i] + yh * xr[R.yp + i]));
+            yr[i] = d * xr[i] - (cx * (wl * xr[i - 1] + wh * xr[i + 1]) +
+                                 cy * (yl * xr[R.ym + i] + yh * xr[R.yp + i]));
         }
     }
 }
 
-void mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y)
+void hv__mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y)
 {
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > 32768)
     for (int k = 0; k < L->n[2]; k++)
@@ -109,12 +111,12 @@ static hv_status level_alloc_coeffs(mg_level *L, int dim)
     L->a = hv_malloc(L->count * sizeof(float));
     L->dinv = hv_malloc(L->count * sizeof(float));
     if (!L->a || !L->dinv)
-        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for level coefficients");
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level coefficients");
     for (int b = 0; b < dim; b++) {
         size_t nf = (L->count / L->n[b]) * (size_t)(L->n[b] + 1);
         L->w[b] = hv_calloc(nf, sizeof(float));
         if (!L->w[b])
-            return hv_error(HV_ERR_NOMEM, "multigrid: out of memory for face weights");
+            return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for face weights");
     }
     return HV_OK;
 }
@@ -149,7 +151,8 @@ static double dot_d(const double *a, const double *b, size_t n)
     return s;
 }
 
-void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u, double *work)
+void hv__mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, float *u,
+                      double *work)
 {
     const size_t n = L->count;
     double *x = work, *b = x + n, *r = b + n, *p = r + n, *q = p + n;
@@ -165,7 +168,7 @@ void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, floa
         memcpy(p, r, n * sizeof *p);
         double rr = dot_d(r, r, n);
         for (int it = 0; it < 4 * (int)n + 50 && sqrt(rr) > 1e-12 * bn; it++) {
-            mg_level_apply_d(L, dim, alpha, p, q);
+            hv__mg_level_apply_d(L, dim, alpha, p, q);
             double pq = dot_d(p, q, n);
             if (!(pq > 0))
                 break;
@@ -187,7 +190,7 @@ void mg_bottom_cg(const mg_level *L, int dim, double alpha, const float *f, floa
         u[c] = (float)x[c];
 }
 
-void mg_level_free_coeffs(mg_level *L)
+void hv__mg_level_free_coeffs(mg_level *L)
 {
     hv_free(L->a);
     hv_free(L->dinv);
@@ -204,7 +207,7 @@ static void level_fill_dinv(const mg_hierarchy *H, mg_level *L)
     for (int k = 0; k < L->n[2]; k++)
         for (int j = 0; j < L->n[1]; j++)
             for (int i = 0; i < L->n[0]; i++) {
-                double d = mg_level_diag(L, H->dim, H->alpha, i, j, k);
+                double d = hv__mg_level_diag(L, H->dim, H->alpha, i, j, k);
                 L->dinv[(size_t)i + L->sy * j + L->sz * k] = d > 0 ? (float)(1.0 / d) : 0.0f;
             }
 }
@@ -303,7 +306,7 @@ static hv_status level_coarsen(const mg_hierarchy *H, const mg_level *F, mg_leve
                         plain = C->w[b][mg_face_index(C, b, I, J, K)] == 1.0f;
                 }
     if (plain) {
-        mg_level_free_coeffs(C);
+        hv__mg_level_free_coeffs(C);
         C->plain = 1;
     } else {
         level_fill_dinv(H, C);
@@ -318,13 +321,14 @@ static hv_status level_regions(const mg_hierarchy *H, mg_level *L)
     size_t *stack = malloc(L->count * sizeof(size_t));
     if (!L->region || !stack) {
         free(stack);
-        return hv_error(HV_ERR_NOMEM, "multigrid: out of memory labelling regions");
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory labelling regions");
     }
     for (size_t c = 0; c < L->count; c++)
         L->region[c] = -1;
     int nr = 0;
     for (size_t seed = 0; seed < L->count; seed++) {
-        int si = (int)(seed % L->n[0]), sj = (int)((seed / L->sy) % L->n[1]), sk = (int)(seed / L->sz);
+        int si = (int)(seed % L->n[0]), sj = (int)((seed / L->sy) % L->n[1]),
+            sk = (int)(seed / L->sz);
         if (L->region[seed] >= 0 || level_a(L, si, sj, sk) == 0.0f)
             continue;
         size_t top = 0;
@@ -370,7 +374,7 @@ static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < n; c++) {
         int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
-        dg[c] = L->plain ? mg_level_diag(L, H->dim, H->alpha, i, j, k)
+        dg[c] = L->plain ? hv__mg_level_diag(L, H->dim, H->alpha, i, j, k)
                          : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
     }
     unsigned s = 12345u;
@@ -380,7 +384,7 @@ static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
     }
     double lam = 2.0;
     for (int it = 0; it < 12; it++) {
-        mg_level_apply_d(L, H->dim, H->alpha, x, y);
+        hv__mg_level_apply_d(L, H->dim, H->alpha, x, y);
         double nrm = 0, dot = 0, xx = 0;
         for (size_t c = 0; c < n; c++) {
             y[c] = dg[c] > 0 ? y[c] / dg[c] : 0;
@@ -403,17 +407,17 @@ static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
     return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
 }
 
-void mg_hierarchy_free(mg_hierarchy *H)
+void hv__mg_hierarchy_free(mg_hierarchy *H)
 {
     for (int l = 0; l < H->nlev; l++) {
-        mg_level_free_coeffs(&H->lv[l]);
+        hv__mg_level_free_coeffs(&H->lv[l]);
         free(H->lv[l].region);
         H->lv[l].region = NULL;
     }
     H->nlev = 0;
 }
 
-hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax)
+hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax)
 {
     memset(H, 0, sizeof *H);
     H->dim = s->p.dim;
@@ -469,7 +473,7 @@ hv_status mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax)
         goto fail;
     return HV_OK;
 fail:
-    mg_hierarchy_free(H);
+    hv__mg_hierarchy_free(H);
     return st;
 }
 
@@ -544,14 +548,14 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
     st->memory_bytes = mem;
 }
 
-void mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
-                    int post, int pcg, hv_solver_stats *st)
+void hv__mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                        int post, int pcg, hv_solver_stats *st)
 {
     model(lv, nlev, dim, smoother, pre, post, pcg, 0, st);
 }
 
-void mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
-                        int post, int pcg, hv_solver_stats *st)
+void hv__mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
+                            int post, int pcg, hv_solver_stats *st)
 {
     model(lv, nlev, dim, smoother, pre, post, pcg, 1, st);
 }

@@ -3,7 +3,7 @@
  * mean-of-children restriction, cell-centred (bi/tri)linear prolongation with
  * its renormalization on weighted coarse levels (rows in AVX-512 and in AVX2
  * and baseline clones), and the PCG preconditioner's symmetric restriction
- * P^T with its weight sums (mg_restrict_transpose, mg_prolong_norm, declared
+ * P^T with its weight sums (hv__mg_restrict_transpose, hv__mg_prolong_norm, declared
  * in mg_level.h for the OpenCL backend and the tests).
  */
 #include "mg_internal.h"
@@ -14,7 +14,7 @@
 #endif
 
 /* f_C = mean of the children of r_F (children beyond an odd edge count as 0). */
-void mg_restrict_field(const mg_state *m, const mg_level *F, const float *src, mg_level *C)
+void hv__mg_restrict_field(const mg_state *m, const mg_level *F, const float *src, mg_level *C)
 {
     const int *co = F->coarsen;
     int nchild = 1;
@@ -59,7 +59,7 @@ static inline void prolong_axis(int coarsen, int nc, int i, int *I0, int *I1, fl
 }
 
 /* Sum of the prolongation weights that reach non-empty coarse cells from fine
- * cell (i,j,k): the renormalization of mg_prolong_add on weighted coarse levels. */
+ * cell (i,j,k): the renormalization of hv__mg_prolong_add on weighted coarse levels. */
 static float prolong_weight_sum(const mg_level *F, const mg_level *C, int i, int j, int k)
 {
     const int *co = F->coarsen;
@@ -79,7 +79,7 @@ static float prolong_weight_sum(const mg_level *F, const mg_level *C, int i, int
     return ws;
 }
 
-void mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn)
+void hv__mg_prolong_norm(const mg_level *F, const mg_level *C, float *pn)
 {
 #pragma omp parallel for collapse(2) schedule(static) if (F->count > MG_PAR_MIN)
     for (int k = 0; k < F->n[2]; k++)
@@ -105,8 +105,8 @@ static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
  * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
  * corridors stalled near 3e-2). Coarse cell I takes fine cells 2I-1 .. 2I+2
  * along each coarsened axis, weighted as prolong_axis weights them. */
-void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
-                           const float *r, float *fcoarse, float *work, int nthreads)
+void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
+                               const float *r, float *fcoarse, float *work, int nthreads)
 {
     const int *co = F->coarsen;
     int nchild = 1;
@@ -206,23 +206,24 @@ void mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const 
  * alone at the walls), their neighbours come by lane shifts of the chunks
  * beside, and the two results are interleaved by permutes so that the fine
  * row is read and written in whole vectors. */
-__attribute__((target("avx512f"))) static void prolong_row_avx512(float *uf, int nf, const float *r00,
-                                                                  const float *r01, const float *r10,
-                                                                  const float *r11, float a00, float a01,
-                                                                  float a10, float a11, int nc, int set)
+__attribute__((target("avx512f"))) static void prolong_row_avx512(
+    float *uf, int nf, const float *r00, const float *r01, const float *r10, const float *r11,
+    float a00, float a01, float a10, float a11, int nc, int set)
 {
     const __m512 q3 = _mm512_set1_ps(0.75f), q1 = _mm512_set1_ps(0.25f);
     const __m512 w00 = _mm512_set1_ps(a00), w01 = _mm512_set1_ps(a01), w10 = _mm512_set1_ps(a10),
                  w11 = _mm512_set1_ps(a11);
     const __m512i lo = _mm512_set_epi32(23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
-    const __m512i hi = _mm512_set_epi32(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8);
+    const __m512i hi =
+        _mm512_set_epi32(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8);
     const int nq = (nc + 15) / 16;
-#define PROLONG_LINE(I_, M_)                                                                          \
-    _mm512_castps_si512(_mm512_fmadd_ps(                                                              \
-        w11, _mm512_maskz_loadu_ps(M_, r11 + (I_)),                                                   \
-        _mm512_fmadd_ps(w10, _mm512_maskz_loadu_ps(M_, r10 + (I_)),                                   \
-                        _mm512_fmadd_ps(w01, _mm512_maskz_loadu_ps(M_, r01 + (I_)),                   \
-                                        _mm512_mul_ps(w00, _mm512_maskz_loadu_ps(M_, r00 + (I_)))))))
+#define PROLONG_LINE(I_, M_)                                                                       \
+    _mm512_castps_si512(_mm512_fmadd_ps(                                                           \
+        w11, _mm512_maskz_loadu_ps(M_, r11 + (I_)),                                                \
+        _mm512_fmadd_ps(                                                                           \
+            w10, _mm512_maskz_loadu_ps(M_, r10 + (I_)),                                            \
+            _mm512_fmadd_ps(w01, _mm512_maskz_loadu_ps(M_, r01 + (I_)),                            \
+                            _mm512_mul_ps(w00, _mm512_maskz_loadu_ps(M_, r00 + (I_)))))))
     const __mmask16 tail = (__mmask16)(nc % 16 ? (1u << (nc % 16)) - 1u : 0xFFFFu);
     __m512i prev = _mm512_setzero_si512();
     __m512i cur = PROLONG_LINE(0, nq > 1 ? (__mmask16)0xFFFF : tail);
@@ -259,7 +260,8 @@ __attribute__((target("avx512f"))) static void prolong_row_avx512(float *uf, int
 /* Row (j,k) of u_F += P u_C from a plain coarse level: blend the (up to) four
  * coarse rows in y and z into one line (C->n[0] floats of work), then
  * interpolate along x: 4 + 2 flops per fine cell instead of 8 products. */
-MG_KERNEL void mg_prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line, int set)
+MG_KERNEL void hv__mg_prolong_row_plain(mg_level *F, const mg_level *C, int j, int k, float *line,
+                                        int set)
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
@@ -350,7 +352,7 @@ MG_KERNEL static void prolong_row_weighted(mg_level *F, const mg_level *C, int j
 
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
  * levels empty coarse cells are left out and the weights renormalized. */
-void mg_prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set)
+void hv__mg_prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set)
 {
     const int *co = F->coarsen;
     const float *uc = C->u;
@@ -359,7 +361,7 @@ void mg_prolong_add(const mg_state *m, mg_level *F, const mg_level *C, int set)
         for (int k = 0; k < F->n[2]; k++)
             for (int j = 0; j < F->n[1]; j++) {
                 float line[MG_ROW_BUF];
-                mg_prolong_row_plain(F, C, j, k, line, set);
+                hv__mg_prolong_row_plain(F, C, j, k, line, set);
             }
         return;
     }

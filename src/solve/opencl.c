@@ -12,7 +12,7 @@
  * on the host and each cycle moves the fine residual and correction across.
  * The outer iterations are iterate.c's, as on the CPU; this file provides
  * their steps. It also tells HV_BACKEND_AUTO whether there is a device to
- * take (hv_opencl_auto_device).
+ * take (hv__opencl_auto_device).
  */
 #include "backend.h"
 #include "cl_mg.h"
@@ -33,17 +33,17 @@ typedef struct ocl_state {
     const hv_setup *s;
     hv_cl *cl;
     hv_clmg mg;
-    mg_hierarchy H;     /* host copy; level 0 kept for the host path only */
-    int dev64;          /* double defect correction on the device */
+    mg_hierarchy H; /* host copy; level 0 kept for the host path only */
+    int dev64;      /* double defect correction on the device */
     int use_pcg;
     /* device path */
-    cl_mem v[NVEC];     /* double fine vectors */
-    cl_mem S;           /* double scalars */
-    cl_mem part;        /* double partial sums */
-    hv_cl_regions reg;  /* Poisson projections */
+    cl_mem v[NVEC];    /* double fine vectors */
+    cl_mem S;          /* double scalars */
+    cl_mem part;       /* double partial sums */
+    hv_cl_regions reg; /* Poisson projections */
     /* host path */
-    double *h[NVEC];    /* h[VX] and h[VF] point at the caller's arrays during a solve */
-    float *stage;       /* fine float vector on its way to or from the device */
+    double *h[NVEC]; /* h[VX] and h[VF] point at the caller's arrays during a solve */
+    float *stage;    /* fine float vector on its way to or from the device */
     double hs[NSLOT];
 } ocl_state;
 
@@ -53,69 +53,71 @@ static void ocl_destroy(void *state)
     if (!o)
         return;
     for (int i = 0; i < NVEC; i++)
-        hv_cl_free(&o->v[i]);
-    hv_cl_free(&o->S);
-    hv_cl_free(&o->part);
-    hv_cl_regions_destroy(&o->reg);
+        hv__cl_free(&o->v[i]);
+    hv__cl_free(&o->S);
+    hv__cl_free(&o->part);
+    hv__cl_regions_destroy(&o->reg);
     if (o->mg.cl)
-        hv_clmg_destroy(&o->mg);
-    mg_hierarchy_free(&o->H);
+        hv__clmg_destroy(&o->mg);
+    hv__mg_hierarchy_free(&o->H);
     for (int i = VR; i < NVEC; i++)
         hv_free(o->h[i]);
     hv_free(o->stage);
-    hv_cl_close(&o->cl);
+    hv__cl_close(&o->cl);
     free(o);
 }
 
 static hv_status ocl_create(void **state, const hv_setup *s)
 {
     if (s->count > (size_t)INT32_MAX)
-        return hv_error(HV_ERR_UNSUPPORTED, "OpenCL backend: %zu cells exceed its 2^31 limit", s->count);
+        return hv__error(HV_ERR_UNSUPPORTED, "OpenCL backend: %zu cells exceed its 2^31 limit",
+                         s->count);
     ocl_state *o = calloc(1, sizeof *o);
     if (!o)
-        return hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory");
+        return hv__error(HV_ERR_NOMEM, "OpenCL backend: out of memory");
     o->s = s;
     o->use_pcg = s->p.solid != NULL;
-    hv_status st = hv_cl_open(&o->cl);
+    hv_status st = hv__cl_open(&o->cl);
     if (st) {
         free(o);
         return st;
     }
     hv_cl *cl = o->cl;
     o->dev64 = cl->fp64;
-    if ((st = mg_hierarchy_build(&o->H, s, s->o.smoother == HV_SMOOTH_CHEBYSHEV)) ||
-        (st = hv_clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth,
-                                 o->use_pcg)))
+    if ((st = hv__mg_hierarchy_build(&o->H, s, s->o.smoother == HV_SMOOTH_CHEBYSHEV)) ||
+        (st = hv__clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth,
+                              o->use_pcg)))
         goto fail;
     const size_t n = s->count;
     if (o->dev64) {
-        size_t g, l, np = hv_cl_range_red(n, &g, &l);
+        size_t g, l, np = hv__cl_range_red(n, &g, &l);
         for (int i = 0; i < NVEC && !st; i++)
             if (i <= VR || o->use_pcg)
-                st = hv_cl_alloc(cl, n * sizeof(double), NULL, &o->v[i]);
-        if (st || (st = hv_cl_alloc(cl, NSLOT * sizeof(double), NULL, &o->S)) ||
-            (st = hv_cl_alloc(cl, np * sizeof(double), NULL, &o->part)))
+                st = hv__cl_alloc(cl, n * sizeof(double), NULL, &o->v[i]);
+        if (st || (st = hv__cl_alloc(cl, NSLOT * sizeof(double), NULL, &o->S)) ||
+            (st = hv__cl_alloc(cl, np * sizeof(double), NULL, &o->part)))
             goto fail;
-        if (s->p.alpha == 0 && (st = hv_cl_regions_create(cl, &o->reg, n, s->region, s->nregion)))
+        if (s->p.alpha == 0 && (st = hv__cl_regions_create(cl, &o->reg, n, s->region, s->nregion)))
             goto fail;
-        mg_hierarchy_free(&o->H);
+        hv__mg_hierarchy_free(&o->H);
     } else {
         for (int i = VR; i < NVEC && !st; i++)
             if (i == VR || o->use_pcg)
                 if (!(o->h[i] = hv_malloc(n * sizeof(double))))
-                    st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+                    st = hv__error(HV_ERR_NOMEM,
+                                   "OpenCL backend: out of memory for %zu-cell vectors", n);
         if (!st && !(o->stage = hv_malloc(n * sizeof(float))))
-            st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+            st = hv__error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
         if (st)
             goto fail;
         /* the host residual needs level 0 only */
         for (int l = 1; l < o->H.nlev; l++) {
-            mg_level_free_coeffs(&o->H.lv[l]);
+            hv__mg_level_free_coeffs(&o->H.lv[l]);
             free(o->H.lv[l].region);
             o->H.lv[l].region = NULL;
         }
     }
-    if ((st = hv_cl_finish(cl)))
+    if ((st = hv__cl_finish(cl)))
         goto fail;
     *state = o;
     return HV_OK;
@@ -131,7 +133,7 @@ static void fv_dot(ocl_state *o, int a, int b, int slot);
 static void host_project(ocl_state *o, double *v)
 {
     if (o->s->p.alpha == 0)
-        hv_project_mean(o->s, v);
+        hv__project_mean(o->s, v);
 }
 
 /* R = F - A X on fluid cells; level-0 f = (float)R; slot RR = R.R */
@@ -141,16 +143,16 @@ static void fv_residual(ocl_state *o)
     hv_clmg_level *L0 = &o->mg.lv[0];
     if (o->dev64) {
         const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
-        hv_cl_args(cl, HV_K_FINE_RESIDUAL, "IAmmmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
-                   L0->w[2], o->v[VX], o->v[VF], o->v[VR], L0->f);
-        hv_cl_run(cl, HV_K_FINE_RESIDUAL, 2, L0->g, L0->l);
+        hv__cl_args(cl, HV_K_FINE_RESIDUAL, "IAmmmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
+                    L0->w[2], o->v[VX], o->v[VF], o->v[VR], L0->f);
+        hv__cl_run(cl, HV_K_FINE_RESIDUAL, 2, L0->g, L0->l);
         fv_dot(o, VR, VR, S_RR);
         return;
     }
     const mg_level *H0 = &o->H.lv[0];
     const double *x = o->h[VX], *f = o->h[VF];
     double *r = o->h[VR], nn = 0;
-    mg_level_apply_d(H0, o->H.dim, o->H.alpha, x, r);
+    hv__mg_level_apply_d(H0, o->H.dim, o->H.alpha, x, r);
 #pragma omp parallel for reduction(+ : nn) schedule(static)
     for (size_t c = 0; c < H0->count; c++) {
         double v = (H0->plain || H0->a[c] != 0.0f) ? f[c] - r[c] : 0.0;
@@ -165,12 +167,12 @@ static void fv_residual(ocl_state *o)
 static void host_cycle(ocl_state *o, int fmg, int sym)
 {
     hv_clmg_level *L0 = &o->mg.lv[0];
-    hv_cl_write(o->cl, L0->f, 0, L0->count * sizeof(float), o->stage);
+    hv__cl_write(o->cl, L0->f, 0, L0->count * sizeof(float), o->stage);
     if (fmg)
-        hv_clmg_fmg(&o->mg);
+        hv__clmg_fmg(&o->mg);
     else
-        hv_clmg_vcycle(&o->mg, 0, 0, sym);
-    hv_cl_read(o->cl, L0->u[L0->cur], 0, L0->count * sizeof(float), o->stage);
+        hv__clmg_vcycle(&o->mg, 0, 0, sym);
+    hv__cl_read(o->cl, L0->u[L0->cur], 0, L0->count * sizeof(float), o->stage);
 }
 
 /* One cycle on the residual in level-0 f, added to X (then projected). */
@@ -181,15 +183,15 @@ static void fv_correct(ocl_state *o, int fmg)
     const size_t n = o->s->count;
     if (o->dev64) {
         if (fmg)
-            hv_clmg_fmg(&o->mg);
+            hv__clmg_fmg(&o->mg);
         else
-            hv_clmg_vcycle(&o->mg, 0, 0, 0);
+            hv__clmg_vcycle(&o->mg, 0, 0, 0);
         size_t g[1], l[1];
-        hv_cl_range1(n, g, l);
-        hv_cl_args(cl, HV_K_FINE_ADD, "mml", o->v[VX], L0->u[L0->cur], n);
-        hv_cl_run(cl, HV_K_FINE_ADD, 1, g, l);
+        hv__cl_range1(n, g, l);
+        hv__cl_args(cl, HV_K_FINE_ADD, "mml", o->v[VX], L0->u[L0->cur], n);
+        hv__cl_run(cl, HV_K_FINE_ADD, 1, g, l);
         if (o->s->p.alpha == 0)
-            hv_cl_project_d(cl, &o->reg, o->v[VX]);
+            hv__cl_project_d(cl, &o->reg, o->v[VX]);
         return;
     }
     host_cycle(o, fmg, 0);
@@ -207,13 +209,13 @@ static void fv_precondition(ocl_state *o)
     hv_clmg_level *L0 = &o->mg.lv[0];
     const size_t n = o->s->count;
     if (o->dev64) {
-        hv_clmg_vcycle(&o->mg, 0, 0, 1);
+        hv__clmg_vcycle(&o->mg, 0, 0, 1);
         size_t g[1], l[1];
-        hv_cl_range1(n, g, l);
-        hv_cl_args(cl, HV_K_FINE_F2D, "mml", L0->u[L0->cur], o->v[VZ], n);
-        hv_cl_run(cl, HV_K_FINE_F2D, 1, g, l);
+        hv__cl_range1(n, g, l);
+        hv__cl_args(cl, HV_K_FINE_F2D, "mml", L0->u[L0->cur], o->v[VZ], n);
+        hv__cl_run(cl, HV_K_FINE_F2D, 1, g, l);
         if (o->s->p.alpha == 0)
-            hv_cl_project_d(cl, &o->reg, o->v[VZ]);
+            hv__cl_project_d(cl, &o->reg, o->v[VZ]);
         return;
     }
     host_cycle(o, 0, 1);
@@ -241,10 +243,10 @@ static void fv_dot(ocl_state *o, int a, int b, int slot)
         o->hs[slot] = host_dot(o->h[a], o->h[b], n);
         return;
     }
-    size_t g, l, groups = hv_cl_range_red(n, &g, &l);
-    hv_cl_args(o->cl, HV_K_FINE_DOT, "mmlm", o->v[a], o->v[b], n, o->part);
-    hv_cl_run(o->cl, HV_K_FINE_DOT, 1, &g, &l);
-    hv_cl_finish_sum(o->cl, o->part, groups, o->S, slot);
+    size_t g, l, groups = hv__cl_range_red(n, &g, &l);
+    hv__cl_args(o->cl, HV_K_FINE_DOT, "mmlm", o->v[a], o->v[b], n, o->part);
+    hv__cl_run(o->cl, HV_K_FINE_DOT, 1, &g, &l);
+    hv__cl_finish_sum(o->cl, o->part, groups, o->S, slot);
 }
 
 /* Q = A P; slot PQ = P.Q */
@@ -253,13 +255,13 @@ static void fv_apply_dot(ocl_state *o)
     hv_clmg_level *L0 = &o->mg.lv[0];
     if (o->dev64) {
         const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
-        hv_cl_args(o->cl, HV_K_FINE_APPLY, "IAmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
-                   L0->w[2], o->v[VP], o->v[VQ]);
-        hv_cl_run(o->cl, HV_K_FINE_APPLY, 2, L0->g, L0->l);
+        hv__cl_args(o->cl, HV_K_FINE_APPLY, "IAmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
+                    L0->w[2], o->v[VP], o->v[VQ]);
+        hv__cl_run(o->cl, HV_K_FINE_APPLY, 2, L0->g, L0->l);
         fv_dot(o, VP, VQ, S_PQ);
         return;
     }
-    mg_level_apply_d(&o->H.lv[0], o->H.dim, o->H.alpha, o->h[VP], o->h[VQ]);
+    hv__mg_level_apply_d(&o->H.lv[0], o->H.dim, o->H.alpha, o->h[VP], o->h[VQ]);
     o->hs[S_PQ] = host_dot(o->h[VP], o->h[VQ], o->s->count);
 }
 
@@ -269,11 +271,11 @@ static void fv_pcg_update(ocl_state *o, int irz)
 {
     const size_t n = o->s->count;
     if (o->dev64) {
-        size_t g, l, groups = hv_cl_range_red(n, &g, &l);
-        hv_cl_args(o->cl, HV_K_FINE_PCG_UPDATE, "mmmmmiimlm", o->v[VX], o->v[VR], o->v[VP], o->v[VQ],
-                   o->S, irz, (int)S_PQ, o->mg.lv[0].f, n, o->part);
-        hv_cl_run(o->cl, HV_K_FINE_PCG_UPDATE, 1, &g, &l);
-        hv_cl_finish_sum(o->cl, o->part, groups, o->S, S_RR);
+        size_t g, l, groups = hv__cl_range_red(n, &g, &l);
+        hv__cl_args(o->cl, HV_K_FINE_PCG_UPDATE, "mmmmmiimlm", o->v[VX], o->v[VR], o->v[VP],
+                    o->v[VQ], o->S, irz, (int)S_PQ, o->mg.lv[0].f, n, o->part);
+        hv__cl_run(o->cl, HV_K_FINE_PCG_UPDATE, 1, &g, &l);
+        hv__cl_finish_sum(o->cl, o->part, groups, o->S, S_RR);
         return;
     }
     double pq = o->hs[S_PQ], al = pq > 0 ? o->hs[irz] / pq : 0.0, nn = 0;
@@ -295,9 +297,9 @@ static void fv_xpay(ocl_state *o, int inew, int iold)
     const size_t n = o->s->count;
     if (o->dev64) {
         size_t g[1], l[1];
-        hv_cl_range1(n, g, l);
-        hv_cl_args(o->cl, HV_K_FINE_XPAY, "mmmiil", o->v[VP], o->v[VZ], o->S, inew, iold, n);
-        hv_cl_run(o->cl, HV_K_FINE_XPAY, 1, g, l);
+        hv__cl_range1(n, g, l);
+        hv__cl_args(o->cl, HV_K_FINE_XPAY, "mmmiil", o->v[VP], o->v[VZ], o->S, inew, iold, n);
+        hv__cl_run(o->cl, HV_K_FINE_XPAY, 1, g, l);
         return;
     }
     double be = o->hs[iold] != 0 ? o->hs[inew] / o->hs[iold] : 0.0, *p = o->h[VP];
@@ -310,7 +312,7 @@ static void fv_xpay(ocl_state *o, int inew, int iold)
 static void fv_copy(ocl_state *o, int dst, int src)
 {
     if (o->dev64)
-        hv_cl_copy(o->cl, o->v[src], o->v[dst], o->s->count * sizeof(double));
+        hv__cl_copy(o->cl, o->v[src], o->v[dst], o->s->count * sizeof(double));
     else
         memcpy(o->h[dst], o->h[src], o->s->count * sizeof(double));
 }
@@ -319,10 +321,10 @@ static void fv_copy(ocl_state *o, int dst, int src)
 static hv_status fv_sync(ocl_state *o, double out[NSLOT])
 {
     if (o->dev64)
-        hv_cl_read_acc(o->cl, o->S, 0, NSLOT, out);
+        hv__cl_read_acc(o->cl, o->S, 0, NSLOT, out);
     else
         memcpy(out, o->hs, sizeof o->hs);
-    return hv_cl_check(o->cl);
+    return hv__cl_check(o->cl);
 }
 
 /* ---------- the outer iterations' steps (iterate.h) ---------- */
@@ -394,13 +396,13 @@ static void it_project(void *ctx)
     ocl_state *o = ((ocl_iter *)ctx)->o;
     if (o->s->p.alpha == 0) {
         if (o->dev64)
-            hv_cl_project_d(o->cl, &o->reg, o->v[VX]);
+            hv__cl_project_d(o->cl, &o->reg, o->v[VX]);
         else
             host_project(o, o->h[VX]);
     }
 }
 
-static const hv_iter_ops ocl_iter_ops = {"OpenCL ", it_residual, it_correct, it_pcg_start,
+static const hv_iter_ops ocl_iter_ops = {"OpenCL ",   it_residual, it_correct, it_pcg_start,
                                          it_pcg_step, it_pcg_next, it_project};
 
 /* The solve once X holds the initial guess and F the right-hand side (on the
@@ -409,8 +411,8 @@ static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
 {
     ocl_iter c = {o, S_RZ0};
     const hv_solver_opts *opts = &o->s->o;
-    return o->use_pcg ? hv_iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
-                      : hv_iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
+    return o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
+                      : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
 }
 
 static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_info *info)
@@ -420,7 +422,7 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
     const size_t n = s->count;
     if (!s->o.nonzero_guess)
         memset(u, 0, n * sizeof *u);
-    double fn = hv_norm2(s, f);
+    double fn = hv__norm2(s, f);
     if (fn == 0) {
         memset(u, 0, n * sizeof *u);
         hv_info_push(info, 0.0);
@@ -429,16 +431,16 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
     }
     hv_status st;
     if (o->dev64) {
-        hv_cl_write(o->cl, o->v[VF], 0, n * sizeof(double), f);
-        hv_cl_write(o->cl, o->v[VX], 0, n * sizeof(double), u);
+        hv__cl_write(o->cl, o->v[VF], 0, n * sizeof(double), f);
+        hv__cl_write(o->cl, o->v[VX], 0, n * sizeof(double), u);
     } else {
         o->h[VX] = u;
         o->h[VF] = (double *)f;
     }
     st = solve_iterate(o, info, fn);
     if (o->dev64) {
-        hv_cl_read(o->cl, o->v[VX], 0, n * sizeof(double), u);
-        hv_status st2 = hv_cl_check(o->cl);
+        hv__cl_read(o->cl, o->v[VX], 0, n * sizeof(double), u);
+        hv_status st2 = hv__cl_check(o->cl);
         if (!st)
             st = st2;
     }
@@ -453,12 +455,12 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
 static void ocl_stats(const void *state, hv_solver_stats *st)
 {
     const ocl_state *o = state;
-    mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post, o->use_pcg,
-                   st);
+    hv__mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post,
+                       o->use_pcg, st);
 }
 
-const hv_backend_ops hv_backend_opencl_ops = {"opencl", ocl_create, ocl_solve, NULL, ocl_destroy,
-                                              ocl_stats};
+const hv_backend_ops hv__backend_opencl_ops = {"opencl", ocl_create,  ocl_solve,
+                                               NULL,     ocl_destroy, ocl_stats};
 
 /* ---------- the device AUTO may take (backend.h) ---------- */
 
@@ -473,11 +475,11 @@ static void auto_probe(void)
     if (hv_opencl_probe(&d) == HV_OK)
         auto_device = d.gpu;
     else
-        hv_log(HV_LOG_WARN, "backend auto: %s; solving on the CPU", hv_last_error());
+        hv__log(HV_LOG_WARN, "backend auto: %s; solving on the CPU", hv_last_error());
     hv_clear_error();
 }
 
-int hv_opencl_auto_device(void)
+int hv__opencl_auto_device(void)
 {
     pthread_once(&auto_once, auto_probe);
     return auto_device;
@@ -488,9 +490,9 @@ int hv_opencl_auto_device(void)
 static void cl_convert(hv_cl *cl, hv_cl_kernel k, cl_mem src, cl_mem dst, size_t n)
 {
     size_t g[1], l[1];
-    hv_cl_range1(n, g, l);
-    hv_cl_args(cl, k, "mml", src, dst, n);
-    hv_cl_run(cl, k, 1, g, l);
+    hv__cl_range1(n, g, l);
+    hv__cl_args(cl, k, "mml", src, dst, n);
+    hv__cl_run(cl, k, 1, g, l);
 }
 
 /* Devices without fp64, and masked heat steps (whose right-hand side would
@@ -502,38 +504,38 @@ static hv_status solve_cl_via_host(hv_solver *sv, ocl_state *o, cl_mem f, cl_mem
     float *hf = hv_malloc(n * sizeof *hf), *hu = hv_malloc(n * sizeof *hu);
     hv_status st;
     if (!hf || !hu) {
-        st = hv_error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
+        st = hv__error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
         goto out;
     }
-    hv_cl_read(o->cl, f, 0, n * sizeof *hf, hf);
+    hv__cl_read(o->cl, f, 0, n * sizeof *hf, hf);
     if (o->s->o.nonzero_guess)
-        hv_cl_read(o->cl, u, 0, n * sizeof *hu, hu);
-    if ((st = hv_cl_check(o->cl)) || (st = hv_solver_solve(sv, hf, hu, info)))
+        hv__cl_read(o->cl, u, 0, n * sizeof *hu, hu);
+    if ((st = hv__cl_check(o->cl)) || (st = hv_solver_solve(sv, hf, hu, info)))
         goto out;
-    hv_cl_write(o->cl, u, 0, n * sizeof *hu, hu);
-    st = hv_cl_finish(o->cl);
+    hv__cl_write(o->cl, u, 0, n * sizeof *hu, hu);
+    st = hv__cl_finish(o->cl);
 out:
     hv_free(hf);
     hv_free(hu);
     return st;
 }
 
-/* The checks shared by hv_cl_solver_solve(_d): *o is the solver's state. */
+/* The checks shared by hv__cl_solver_solve(_d): *o is the solver's state. */
 static hv_status device_entry(const char *who, hv_solver *sv, cl_mem f, cl_mem u,
                               hv_solve_info *info, ocl_state **o)
 {
     memset(info, 0, sizeof *info);
     info->backend = HV_BACKEND_OPENCL;
     if (!sv || !f || !u)
-        return hv_error(HV_ERR_INVALID_ARG, "%s: NULL argument", who);
-    if (hv_solver_ops(sv) != &hv_backend_opencl_ops)
-        return hv_error(HV_ERR_UNSUPPORTED, "%s: the solver runs on the %s backend, not opencl", who,
-                        hv_backend_name(hv_solver_backend(sv)));
-    *o = hv_solver_state(sv);
+        return hv__error(HV_ERR_INVALID_ARG, "%s: NULL argument", who);
+    if (hv__solver_ops(sv) != &hv__backend_opencl_ops)
+        return hv__error(HV_ERR_UNSUPPORTED, "%s: the solver runs on the %s backend, not opencl",
+                         who, hv_backend_name(hv_solver_backend(sv)));
+    *o = hv__solver_state(sv);
     return HV_OK;
 }
 
-/* The solve of hv_cl_solver_solve(_d) once v[VF] holds f (zero on solid
+/* The solve of hv__cl_solver_solve(_d) once v[VF] holds f (zero on solid
  * cells) and v[VX] the guess when the options say there is one; the result is
  * left in v[VX]. As the front end: Poisson right-hand sides projected per
  * region, then ||f|| over the fluid. */
@@ -543,16 +545,17 @@ static hv_status device_solve(ocl_state *o, hv_solve_info *info)
     hv_cl *cl = o->cl;
     double S[NSLOT];
     if (s->p.alpha == 0)
-        hv_cl_project_d(cl, &o->reg, o->v[VF]);
+        hv__cl_project_d(cl, &o->reg, o->v[VF]);
     fv_dot(o, VF, VF, S_RR);
     hv_status st = fv_sync(o, S);
     if (st)
         return st;
     const double fn = sqrt(S[S_RR]);
     if (!isfinite(fn))
-        return hv_error(HV_ERR_NUMERIC, "the right-hand side on the device holds NaN or Inf (norm %g)", fn);
+        return hv__error(HV_ERR_NUMERIC,
+                         "the right-hand side on the device holds NaN or Inf (norm %g)", fn);
     if (fn == 0 || !s->o.nonzero_guess)
-        hv_cl_zero(cl, o->v[VX], s->count * sizeof(double));
+        hv__cl_zero(cl, o->v[VX], s->count * sizeof(double));
     if (fn == 0) {
         hv_info_push(info, 0.0);
         info->reason = HV_STOP_CONVERGED;
@@ -561,13 +564,13 @@ static hv_status device_solve(ocl_state *o, hv_solve_info *info)
     return solve_iterate(o, info, fn);
 }
 
-hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+hv_status hv__cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
 {
     hv_solve_info local;
     if (!info)
         info = &local;
     ocl_state *o = NULL;
-    hv_status st = device_entry("hv_cl_solver_solve", sv, f, u, info, &o);
+    hv_status st = device_entry("hv__cl_solver_solve", sv, f, u, info, &o);
     if (st)
         return st;
     const hv_setup *s = o->s;
@@ -582,7 +585,7 @@ hv_status hv_cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *i
     st = device_solve(o, info);
     if (!st)
         cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
-    hv_status st2 = hv_cl_finish(cl);
+    hv_status st2 = hv__cl_finish(cl);
     info->seconds = hv_now() - t0;
     info->backend = HV_BACKEND_OPENCL;
     return st ? st : st2;
@@ -595,35 +598,36 @@ static void fine_mask(ocl_state *o, cl_mem v)
     if (L0->plain || !L0->a)
         return;
     size_t g[1], l[1];
-    hv_cl_range1(o->s->count, g, l);
-    hv_cl_args(o->cl, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
-    hv_cl_run(o->cl, HV_K_FINE_MASK, 1, g, l);
+    hv__cl_range1(o->s->count, g, l);
+    hv__cl_args(o->cl, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
+    hv__cl_run(o->cl, HV_K_FINE_MASK, 1, g, l);
 }
 
-hv_status hv_cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
 {
     hv_solve_info local;
     if (!info)
         info = &local;
     ocl_state *o = NULL;
-    hv_status st = device_entry("hv_cl_solver_solve_d", sv, f, u, info, &o);
+    hv_status st = device_entry("hv__cl_solver_solve_d", sv, f, u, info, &o);
     if (st)
         return st;
     if (!o->dev64)
-        return hv_error(HV_ERR_UNSUPPORTED, "hv_cl_solver_solve_d: the OpenCL device has no fp64");
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "hv__cl_solver_solve_d: the OpenCL device has no fp64");
     hv_cl *cl = o->cl;
     const size_t bytes = o->s->count * sizeof(double);
     double t0 = hv_now();
-    hv_cl_copy(cl, f, o->v[VF], bytes);
+    hv__cl_copy(cl, f, o->v[VF], bytes);
     fine_mask(o, o->v[VF]);
     if (o->s->o.nonzero_guess)
-        hv_cl_copy(cl, u, o->v[VX], bytes);
+        hv__cl_copy(cl, u, o->v[VX], bytes);
     st = device_solve(o, info);
     if (!st) {
         fine_mask(o, o->v[VX]);
-        hv_cl_copy(cl, o->v[VX], u, bytes);
+        hv__cl_copy(cl, o->v[VX], u, bytes);
     }
-    hv_status st2 = hv_cl_finish(cl);
+    hv_status st2 = hv__cl_finish(cl);
     info->seconds = hv_now() - t0;
     info->backend = HV_BACKEND_OPENCL;
     return st ? st : st2;

@@ -15,9 +15,9 @@ struct hv_solver {
     const hv_backend_ops *ops;
     void *state;
     hv_backend backend;
-    uint8_t *solid;   /* owned copy of the mask */
-    int32_t *region;  /* owned region labels */
-    double *fd, *ud;  /* double buffers for the float interface */
+    uint8_t *solid;  /* owned copy of the mask */
+    int32_t *region; /* owned region labels */
+    double *fd, *ud; /* double buffers for the float interface */
 };
 
 hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid)
@@ -29,7 +29,7 @@ hv_backend hv_backend_resolve(hv_backend b, size_t cells, int solid)
     const int mode = env && *env ? atoi(env) : -1; /* -1: GPUs on large grids */
     if (mode == 0)
         return cpu;
-    const int device = hv_opencl_auto_device();
+    const int device = hv__opencl_auto_device();
     if (mode > 0)
         return device >= 0 ? HV_BACKEND_OPENCL : cpu;
     return device == 1 && cells >= HV_AUTO_DEVICE_MIN_CELLS ? HV_BACKEND_OPENCL : cpu;
@@ -48,14 +48,15 @@ const char *hv_backend_name(hv_backend b)
 
 hv_status hv_backend_parse(const char *s, hv_backend *out)
 {
-    static const hv_backend all[] = {HV_BACKEND_AUTO, HV_BACKEND_MG, HV_BACKEND_FFTW, HV_BACKEND_OPENCL};
+    static const hv_backend all[] = {HV_BACKEND_AUTO, HV_BACKEND_MG, HV_BACKEND_FFTW,
+                                     HV_BACKEND_OPENCL};
     for (size_t i = 0; s && i < sizeof all / sizeof all[0]; i++)
         if (!strcmp(s, hv_backend_name(all[i]))) {
             *out = all[i];
             return HV_OK;
         }
-    return hv_error(HV_ERR_INVALID_ARG, "unknown backend '%s' (expected auto, mg, fftw or opencl)",
-                    s ? s : "(null)");
+    return hv__error(HV_ERR_INVALID_ARG, "unknown backend '%s' (expected auto, mg, fftw or opencl)",
+                     s ? s : "(null)");
 }
 
 const char *hv_stop_reason_str(hv_stop_reason r)
@@ -92,7 +93,7 @@ static hv_status label_regions(hv_solver *sv)
     size_t *stack = malloc(s->count * sizeof(size_t));
     if (!sv->region || !stack) {
         free(stack);
-        return hv_error(HV_ERR_NOMEM, "solver: out of memory labelling fluid regions");
+        return hv__error(HV_ERR_NOMEM, "solver: out of memory labelling fluid regions");
     }
     for (size_t c = 0; c < s->count; c++)
         sv->region[c] = -1;
@@ -108,12 +109,18 @@ static hv_status label_regions(hv_solver *sv)
             size_t i = c % sy, j = (c / sy) % (size_t)n[1], k = c / sz;
             size_t nb[6];
             int m = 0;
-            if (i > 0) nb[m++] = c - 1;
-            if (i + 1 < (size_t)n[0]) nb[m++] = c + 1;
-            if (j > 0) nb[m++] = c - sy;
-            if (j + 1 < (size_t)n[1]) nb[m++] = c + sy;
-            if (s->p.dim == 3 && k > 0) nb[m++] = c - sz;
-            if (s->p.dim == 3 && k + 1 < (size_t)n[2]) nb[m++] = c + sz;
+            if (i > 0)
+                nb[m++] = c - 1;
+            if (i + 1 < (size_t)n[0])
+                nb[m++] = c + 1;
+            if (j > 0)
+                nb[m++] = c - sy;
+            if (j + 1 < (size_t)n[1])
+                nb[m++] = c + sy;
+            if (s->p.dim == 3 && k > 0)
+                nb[m++] = c - sz;
+            if (s->p.dim == 3 && k + 1 < (size_t)n[2])
+                nb[m++] = c + sz;
             for (int q = 0; q < m; q++)
                 if (!sv->solid[nb[q]] && sv->region[nb[q]] < 0) {
                     sv->region[nb[q]] = nr;
@@ -131,9 +138,9 @@ static hv_status label_regions(hv_solver *sv)
 static const hv_backend_ops *backend_ops(hv_backend b)
 {
     switch (b) {
-    case HV_BACKEND_MG: return &hv_backend_mg_ops;
-    case HV_BACKEND_FFTW: return &hv_backend_fftw_ops;
-    case HV_BACKEND_OPENCL: return &hv_backend_opencl_ops;
+    case HV_BACKEND_MG: return &hv__backend_mg_ops;
+    case HV_BACKEND_FFTW: return &hv__backend_fftw_ops;
+    case HV_BACKEND_OPENCL: return &hv__backend_opencl_ops;
     default: return NULL;
     }
 }
@@ -141,32 +148,39 @@ static const hv_backend_ops *backend_ops(hv_backend b)
 hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts)
 {
     if (!out || !p)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_create: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_solver_create: NULL argument");
     *out = NULL;
     hv_status st = hv_check_dims(p->dim, p->n, p->h, 40);
     if (st)
         return st;
     if (!(p->alpha >= 0) || !isfinite(p->alpha))
-        return hv_error(HV_ERR_INVALID_ARG, "solver: alpha must be finite and >= 0, got %g", p->alpha);
+        return hv__error(HV_ERR_INVALID_ARG, "solver: alpha must be finite and >= 0, got %g",
+                         p->alpha);
     if (!(p->beta > 0) || !isfinite(p->beta))
-        return hv_error(HV_ERR_INVALID_ARG, "solver: beta must be finite and > 0, got %g", p->beta);
+        return hv__error(HV_ERR_INVALID_ARG, "solver: beta must be finite and > 0, got %g",
+                         p->beta);
     hv_solver_opts o;
     if (opts)
         o = *opts;
     else
         hv_solver_opts_default(&o);
     if (!(o.tol >= 1e-12) || !(o.tol < 1))
-        return hv_error(HV_ERR_INVALID_ARG, "solver: tolerance must be in [1e-12, 1), got %g", o.tol);
-    if (o.max_iter <= 0 || o.pre_smooth < 0 || o.post_smooth < 0 || o.pre_smooth + o.post_smooth == 0)
-        return hv_error(HV_ERR_INVALID_ARG, "solver: max_iter must be positive and smoothing steps non-negative (not both zero)");
+        return hv__error(HV_ERR_INVALID_ARG, "solver: tolerance must be in [1e-12, 1), got %g",
+                         o.tol);
+    if (o.max_iter <= 0 || o.pre_smooth < 0 || o.post_smooth < 0 ||
+        o.pre_smooth + o.post_smooth == 0)
+        return hv__error(
+            HV_ERR_INVALID_ARG,
+            "solver: max_iter must be positive and smoothing steps non-negative (not both zero)");
 
     if (o.cycles_per_iteration < 0 || o.cycles_per_iteration > 8)
-        return hv_error(HV_ERR_INVALID_ARG, "solver: cycles_per_iteration must be 0 (auto) to 8, got %d",
-                        o.cycles_per_iteration);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "solver: cycles_per_iteration must be 0 (auto) to 8, got %d",
+                         o.cycles_per_iteration);
 
     hv_solver *sv = calloc(1, sizeof *sv);
     if (!sv)
-        return hv_error(HV_ERR_NOMEM, "solver: out of memory");
+        return hv__error(HV_ERR_NOMEM, "solver: out of memory");
     hv_setup *s = &sv->setup;
     s->p = *p;
     if (p->dim == 2)
@@ -180,13 +194,13 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
             nsolid += p->solid[c] != 0;
         if (nsolid == s->count) {
             free(sv);
-            return hv_error(HV_ERR_INVALID_ARG, "solver: every cell of the mask is solid");
+            return hv__error(HV_ERR_INVALID_ARG, "solver: every cell of the mask is solid");
         }
         if (nsolid) { /* an all-fluid mask is a plain box */
             sv->solid = malloc(s->count);
             if (!sv->solid) {
                 hv_solver_destroy(&sv);
-                return hv_error(HV_ERR_NOMEM, "solver: out of memory copying the mask");
+                return hv__error(HV_ERR_NOMEM, "solver: out of memory copying the mask");
             }
             for (size_t c = 0; c < s->count; c++)
                 sv->solid[c] = p->solid[c] != 0;
@@ -200,7 +214,9 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
     hv_backend b = hv_backend_resolve(o.backend, s->count, s->p.solid != NULL);
     if (b == HV_BACKEND_FFTW && s->p.solid) {
         hv_solver_destroy(&sv);
-        return hv_error(HV_ERR_UNSUPPORTED, "the FFTW backend solves plain boxes only; this grid has solid cells (use mg)");
+        return hv__error(
+            HV_ERR_UNSUPPORTED,
+            "the FFTW backend solves plain boxes only; this grid has solid cells (use mg)");
     }
     if (o.smoother == HV_SMOOTH_AUTO)
         o.smoother = b == HV_BACKEND_OPENCL ? HV_SMOOTH_CHEBYSHEV : HV_SMOOTH_RBGS;
@@ -209,7 +225,7 @@ hv_status hv_solver_create(hv_solver **out, const hv_problem *p, const hv_solver
     sv->ops = backend_ops(b);
     if (!sv->ops) {
         hv_solver_destroy(&sv);
-        return hv_error(HV_ERR_INVALID_ARG, "solver: unknown backend %d", (int)b);
+        return hv__error(HV_ERR_INVALID_ARG, "solver: unknown backend %d", (int)b);
     }
     if ((st = sv->ops->create(&sv->state, s))) {
         sv->state = NULL;
@@ -233,7 +249,7 @@ static hv_status solve_prepared(hv_solver *sv, double *f, double *u, hv_solve_in
             if (s->p.solid[c])
                 f[c] = 0;
     if (s->p.alpha == 0)
-        hv_project_mean(s, f);
+        hv__project_mean(s, f);
     double t0 = hv_now();
     hv_status st = sv->ops->solve(sv->state, f, u, info);
     info->seconds = hv_now() - t0;
@@ -248,14 +264,15 @@ static hv_status ensure_buffers(hv_solver *sv)
     sv->fd = hv_malloc(sv->setup.count * sizeof(double));
     sv->ud = hv_malloc(sv->setup.count * sizeof(double));
     if (!sv->fd || !sv->ud)
-        return hv_error(HV_ERR_NOMEM, "solver: out of memory for %zu-cell buffers", sv->setup.count);
+        return hv__error(HV_ERR_NOMEM, "solver: out of memory for %zu-cell buffers",
+                         sv->setup.count);
     return HV_OK;
 }
 
 hv_status hv_solver_solve_d(hv_solver *sv, const double *f, double *u, hv_solve_info *info)
 {
     if (!sv || !f || !u)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve_d: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_solver_solve_d: NULL argument");
     hv_status st = hv_check_finite_d(f, sv->setup.count, "the right-hand side");
     if (st || (st = ensure_buffers(sv)))
         return st;
@@ -266,7 +283,7 @@ hv_status hv_solver_solve_d(hv_solver *sv, const double *f, double *u, hv_solve_
 hv_status hv_solver_solve(hv_solver *sv, const float *f, float *u, hv_solve_info *info)
 {
     if (!sv || !f || !u)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_solver_solve: NULL argument");
     size_t n = sv->setup.count;
     hv_status st = hv_check_finite(f, n, "the right-hand side");
     if (st || (st = ensure_buffers(sv)))
@@ -293,7 +310,7 @@ hv_status hv_solver_solve_many(hv_solver *sv, int k, const float *const *f, floa
                                hv_solve_info *info)
 {
     if (!sv || k < 0 || (k > 0 && (!f || !u)))
-        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_solve_many: bad arguments");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_solver_solve_many: bad arguments");
     for (int i = 0; i < k; i++) {
         hv_status st = hv_solver_solve(sv, f[i], u[i], info ? &info[i] : NULL);
         if (st)
@@ -305,7 +322,7 @@ hv_status hv_solver_solve_many(hv_solver *sv, int k, const float *const *f, floa
 hv_status hv_solver_get_stats(const hv_solver *sv, hv_solver_stats *st)
 {
     if (!sv || !st)
-        return hv_error(HV_ERR_INVALID_ARG, "hv_solver_get_stats: NULL argument");
+        return hv__error(HV_ERR_INVALID_ARG, "hv_solver_get_stats: NULL argument");
     memset(st, 0, sizeof *st);
     st->levels = 1;
     memcpy(st->n[0], sv->setup.p.n, sizeof st->n[0]);
@@ -317,9 +334,9 @@ hv_status hv_solver_get_stats(const hv_solver *sv, hv_solver_stats *st)
 
 hv_backend hv_solver_backend(const hv_solver *sv) { return sv->backend; }
 
-const hv_backend_ops *hv_solver_ops(const hv_solver *sv) { return sv->ops; }
+const hv_backend_ops *hv__solver_ops(const hv_solver *sv) { return sv->ops; }
 
-void *hv_solver_state(hv_solver *sv) { return sv->state; }
+void *hv__solver_state(hv_solver *sv) { return sv->state; }
 
 const hv_problem *hv_solver_problem(const hv_solver *sv) { return &sv->setup.p; }
 

@@ -25,7 +25,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
             if (vox <= 0 || vox > FZ_MAX_VOXELS)
                 continue;
-            hv_vdb_read_opts o = {1, {d->bbox_lo[0], d->bbox_lo[1], d->bbox_lo[2]},
+            hv_vdb_read_opts o = {1,
+                                  {d->bbox_lo[0], d->bbox_lo[1], d->bbox_lo[2]},
                                   {d->bbox_hi[0], d->bbox_hi[1], d->bbox_hi[2]}};
             hv_grid *g = NULL, *gy = NULL, *gz = NULL;
             int cls;

@@ -100,7 +100,8 @@ static void seeds_obj(void)
     put("obj", "cube_quads.obj", b.p, b.n);
     b.n = 0;
     /* relative indices, triangles, CRLF, a face before its vertices */
-    b_printf(&b, "\xEF\xBB\xBF" "f 1 2 3\r\n");
+    b_printf(&b, "\xEF\xBB\xBF"
+                 "f 1 2 3\r\n");
     for (int i = 0; i < 8; i++)
         b_printf(&b, "v %.17g %.17g %.17g 1.0\r\n", cube_v[i][0], cube_v[i][1], cube_v[i][2]);
     for (int f = 0; f < 6; f++)
@@ -118,11 +119,12 @@ static void seeds_ply(void)
     const char *names[3] = {"ascii", "binary_little_endian", "binary_big_endian"};
     for (int fmt = 0; fmt < 3; fmt++) {
         buf b = {0};
-        b_printf(&b, "ply\nformat %s 1.0\ncomment seed\nelement vertex 8\nproperty float x\n"
-                     "property float y\nproperty float z\nproperty uchar red\n"
-                     "element face 6\nproperty list uchar int vertex_indices\n"
-                     "property int flags\nelement extra 1\nproperty list ushort double data\n"
-                     "end_header\n",
+        b_printf(&b,
+                 "ply\nformat %s 1.0\ncomment seed\nelement vertex 8\nproperty float x\n"
+                 "property float y\nproperty float z\nproperty uchar red\n"
+                 "element face 6\nproperty list uchar int vertex_indices\n"
+                 "property int flags\nelement extra 1\nproperty list ushort double data\n"
+                 "end_header\n",
                  names[fmt]);
         for (int i = 0; i < 8; i++) {
             if (fmt == 0) {
@@ -219,8 +221,7 @@ static void seeds_off(void)
     b.n = 0;
     b_printf(&b, "COFF 8 12 0\n");
     for (int i = 0; i < 8; i++)
-        b_printf(&b, "%g %g %g 255 0 0 255 # colour\n", cube_v[i][0], cube_v[i][1],
-                 cube_v[i][2]);
+        b_printf(&b, "%g %g %g 255 0 0 255 # colour\n", cube_v[i][0], cube_v[i][1], cube_v[i][2]);
     for (int f = 0; f < 6; f++)
         b_printf(&b, "3 %d %d %d 1 2 3\n3 %d %d %d\n", cube_q[f][0], cube_q[f][1], cube_q[f][2],
                  cube_q[f][0], cube_q[f][2], cube_q[f][3]);
