@@ -10,7 +10,7 @@
  *                 across manifold edges, orient components outward by winding
  *                 number (cavities inward), close boundary loops with domed caps
  *   2. splat      area-weighted normals (areas, unsigned) onto cell centres,
- *                 triangles split until sub-edges are <= h/2, trilinear weights
+ *                 triangles split until sub-edges are <= h, trilinear weights
  *   3. diffuse    one backward-Euler step per component, (I - t Lap) Y = Y0,
  *                 t = (t_scale h)^2, the three components sharing one solver
  *   4. normalize  X = Y/|Y| on cell faces (MAC: the two cells' mean, normalized

@@ -6,7 +6,7 @@
 
 #include <string.h>
 
-/* Surface quadrature: triangles subdivided until sub-edges are <= h/2; one
+/* Surface quadrature: triangles subdivided until sub-edges are <= h; one
  * point per sub-triangle at its centroid. Points outside the box [lo, hi]
  * (the voxel block) are dropped. */
 typedef struct hv_quad {
