@@ -27,8 +27,12 @@ int hv__mg_avx512_probe(void)
  * a wall cell's missing x-neighbour is a zero lane and its lane takes its own
  * diagonal (dyz + cx, or dyz alone when nx = 1). Every lane is computed and a
  * masked store keeps this colour's cells, so the other colour's (which this
- * row reads) are never written. cym..czp are the face coefficients, 0 at a
- * y or z wall; dyz = alpha + the open y and z faces. */
+ * row reads) are never written. The neighbour rows are read under the colour
+ * mask: their cells of the other parity belong to the colour that other
+ * threads are writing in this sweep, and a masked-off lane is not read (a
+ * full load would be a data race, harmless on the hardware but undefined in
+ * C11's memory model and reported by ThreadSanitizer). cym..czp are the face
+ * coefficients, 0 at a y or z wall; dyz = alpha + the open y and z faces. */
 __attribute__((target("avx512f"))) static void rb_row_avx512(
     float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
     int nx, int i0, float cx, float cym, float cyp, float czm, float czp, float dyz)
@@ -50,18 +54,18 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(
                                   : _mm512_setzero_si512();
         __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
         __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
-        __m512 sm =
-            _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
-        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
-        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
-        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
-        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+        const __mmask16 own = colour & valid;
+        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(own, fr + q));
+        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(own, ym + q), sm);
+        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(own, yp + q), sm);
+        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(own, zm + q), sm);
+        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(own, zp + q), sm);
         __m512 inv = vinv;
         if (c == 0)
             inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
         if (c + 1 == nq && last > 0)
             inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
-        _mm512_mask_storeu_ps(ur + q, colour & valid, _mm512_mul_ps(sm, inv));
+        _mm512_mask_storeu_ps(ur + q, own, _mm512_mul_ps(sm, inv));
         prev = cur;
         cur = next;
     }
@@ -100,23 +104,12 @@ MG_KERNEL void hv__mg_rb_row_plain(const mg_state *m, const mg_level *L, float *
         i = 2;
     }
     int last = nx - 1;
-    if (nx <= MG_ROW_BUF) {
-        /* Update every interior cell into a buffer (contiguous, so it vectorizes;
-         * the other colour's values are not changed by this colour), then keep
-         * this colour's cells: twice the flops, a fraction of the time. */
-        float buf[MG_ROW_BUF];
-        for (int q = 1; q < last; q++)
-            buf[q] = (fr[q] + cx * (ur[q - 1] + ur[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
-                      cz * (wzm * zm[q] + wzp * zp[q])) *
-                     inv_in;
-        for (; i < last; i += 2)
-            ur[i] = buf[i];
-    } else {
-        for (; i < last; i += 2)
-            ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
-                     cz * (wzm * zm[i] + wzp * zp[i])) *
-                    inv_in;
-    }
+    /* This colour's cells alone: the neighbour rows' cells of the other parity
+     * are being written by other threads in this sweep (see rb_row_avx512). */
+    for (; i < last; i += 2)
+        ur[i] = (fr[i] + cx * (ur[i - 1] + ur[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                 cz * (wzm * zm[i] + wzp * zp[i])) *
+                inv_in;
     if (i == last && last > 0) {
         float d = dyz + cx;
         float s = fr[i] + cx * ur[i - 1] + cy * (wym * ym[i] + wyp * yp[i]) +
@@ -174,8 +167,8 @@ static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int n
 
 /* One colour of row (j,k) of a weighted level: u = (f + S) / D, 0 where the row
  * of A is empty (dinv = 0). The first and last cells are done apart (their
- * missing x neighbour lies outside the row); the interior is computed for both
- * colours into a buffer, a loop without branches, and this colour kept. */
+ * missing x neighbour lies outside the row). Only this colour's cells are
+ * read in the neighbour rows (see rb_row_avx512). */
 MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int j, int k, int col)
 {
     const int nx = L->n[0];
@@ -190,33 +183,14 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
         u[nx - 1] = (f[nx - 1] + wrow_edge_sum(&R, u, nx - 1, nx, cx, cy, cz)) * dinv[nx - 1];
     if (i == 0)
         i = 2;
-    if (L->binary && nx <= MG_ROW_BUF) {
+    if (L->binary) {
         /* solid neighbours hold u = 0: the plain stencil, with this cell's dinv */
         const float wym = R.ym != 0, wyp = R.yp != 0, wzm = R.zm != 0, wzp = R.zp != 0;
         const float *ym = u + R.ym, *yp = u + R.yp, *zm = u + R.zm, *zp = u + R.zp;
-        float buf[MG_ROW_BUF];
-        for (int q = 1; q < nx - 1; q++)
-            buf[q] = (f[q] + cx * (u[q - 1] + u[q + 1]) + cy * (wym * ym[q] + wyp * yp[q]) +
-                      cz * (wzm * zm[q] + wzp * zp[q])) *
-                     dinv[q];
         for (; i < nx - 1; i += 2)
-            u[i] = buf[i];
-    } else if (nx <= MG_ROW_BUF) {
-        float buf[MG_ROW_BUF];
-        if (R.wzl) {
-            for (int q = 1; q < nx - 1; q++)
-                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
-                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q]) +
-                          cz * (R.wzl[q] * u[R.zm + q] + R.wzh[q] * u[R.zp + q])) *
-                         dinv[q];
-        } else {
-            for (int q = 1; q < nx - 1; q++)
-                buf[q] = (f[q] + cx * (R.wx[q] * u[q - 1] + R.wx[q + 1] * u[q + 1]) +
-                          cy * (R.wyl[q] * u[R.ym + q] + R.wyh[q] * u[R.yp + q])) *
-                         dinv[q];
-        }
-        for (; i < nx - 1; i += 2)
-            u[i] = buf[i];
+            u[i] = (f[i] + cx * (u[i - 1] + u[i + 1]) + cy * (wym * ym[i] + wyp * yp[i]) +
+                    cz * (wzm * zm[i] + wzp * zp[i])) *
+                   dinv[i];
     } else {
         for (; i < nx - 1; i += 2)
             u[i] = (f[i] + WROW_SUM(R, u, i, cx, cy, cz)) * dinv[i];
