@@ -42,6 +42,14 @@ TESTS   := $(patsubst tests/%.c,$(BUILD)/tests/%,$(sort $(wildcard tests/check_*
 TESTLIB := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/testlib.c))
 STAMP   := $(BUILD)/.deps-ok
 
+# The Python package (python/heatvox) goes beside the library, into Debian
+# python3's site directory under PREFIX (for /usr/local one that Debian's
+# Python searches); without python3 `make install` leaves it out.
+PYTHON  ?= /usr/bin/python3
+PY_SRC  := $(sort $(wildcard python/heatvox/*.py))
+PYVER   := $(shell $(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)
+PYDIR   := $(PREFIX)/lib/python$(PYVER)/dist-packages
+
 VERSION := $(shell sed -n 's/^\#define HV_VERSION_STRING "\(.*\)"/\1/p' include/heatvox/core.h)
 SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 LIB_A   := $(BUILD)/libheatvox.a
@@ -160,7 +168,7 @@ CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS))) \
 # program linked shared and static against an installed copy: make check
 # stages `make install` into $(BUILD)/stage first.
 STAGE := $(BUILD)/stage
-$(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) heatvox.pc.in Makefile
+$(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) $(PY_SRC) heatvox.pc.in Makefile
 	@mkdir -p $(STAGE)
 	+@$(MAKE) --no-print-directory install PREFIX=$(CURDIR)/$(STAGE) DESTDIR= > $(STAGE)/install.log 2>&1 \
 	  || { cat $(STAGE)/install.log; exit 1; }
@@ -208,11 +216,22 @@ install: all
 	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/
 	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' \
 	  heatvox.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc
+ifneq ($(PYVER),)
+	install -d $(DESTDIR)$(PYDIR)/heatvox
+	install -m 644 $(PY_SRC) $(DESTDIR)$(PYDIR)/heatvox/
+	printf '# Written by make install: the library this package loads.\nLIBDIR = "%s"\nSONAME = "%s"\n' \
+	  '$(PREFIX)/lib' 'libheatvox.so.$(SOMAJOR)' > $(DESTDIR)$(PYDIR)/heatvox/_install.py
+endif
 	@echo "heatvox $(VERSION) installed in $(DESTDIR)$(PREFIX):"
 	@echo "  library  $(DESTDIR)$(PREFIX)/lib/libheatvox.so.$(VERSION) (soname libheatvox.so.$(SOMAJOR)) and libheatvox.a"
 	@echo "  headers  $(DESTDIR)$(PREFIX)/include/heatvox/"
 	@echo "  command  $(DESTDIR)$(PREFIX)/bin/heatvox"
 	@echo "  pkg-config file $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc"
+ifneq ($(PYVER),)
+	@echo "  python   $(DESTDIR)$(PYDIR)/heatvox (import heatvox; PYTHONPATH=$(PYDIR) where $(PYTHON) does not search it)"
+else
+	@echo "  python   not installed: no $(PYTHON)"
+endif
 	@case "$(PREFIX)" in /usr|/usr/local) echo "Run ldconfig (as root) once so that programs find the shared library.";; \
 	  *) echo "Build with PKG_CONFIG_PATH=$(PREFIX)/lib/pkgconfig and link with -Wl,-rpath,$(PREFIX)/lib (or add $(PREFIX)/lib to /etc/ld.so.conf.d/ and run ldconfig).";; esac
 

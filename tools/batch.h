@@ -11,14 +11,18 @@
 #include <stdio.h>
 
 enum { BATCH_VDB = 0, BATCH_EXR = 1 };
+/* Formats of the zero level set mesh beside the volume (--mesh-out-format). */
+enum { BATCH_MESH_NONE = 0, BATCH_MESH_OBJ, BATCH_MESH_PLY, BATCH_MESH_STL };
 
 /* The options of one job: the signed-distance options plus output choices. */
 typedef struct batch_opts {
     hv_sdf_opts sdf;
-    int format;  /* BATCH_VDB or BATCH_EXR */
-    int preview; /* also write <output>.png: the three middle slices */
-    double band; /* VDB narrow band half width in voxels */
-    int dense;   /* VDB: every voxel active */
+    int format;        /* BATCH_VDB or BATCH_EXR */
+    int preview;       /* also write <output>.png: the three middle slices */
+    double band;       /* VDB narrow band half width in voxels */
+    int dense;         /* VDB: every voxel active */
+    int mesh_format;   /* BATCH_MESH_*: also write the zero level set as a mesh */
+    double adaptivity; /* of that mesh (hv_grid_to_mesh), 0..1 */
 } batch_opts;
 
 void batch_opts_default(batch_opts *o);
@@ -29,6 +33,9 @@ int batch_opt_arity(const char *name);
 /* Applies argv[0..argc) (job options only) to o; on error writes a message to
  * err and returns -1. */
 int batch_opts_parse(int argc, char **argv, batch_opts *o, char *err, size_t errsize);
+/* Checks the combination of options once all are parsed (a mesh needs a signed
+ * distance); on error writes a message to err and returns -1. */
+int batch_opts_check(const batch_opts *o, char *err, size_t errsize);
 
 /* The options that change the output, as text ("res=128 pad=4 ..."), and its
  * 64-bit FNV-1a hash as 16 hex digits. threads is left out. */
@@ -42,9 +49,12 @@ const char *batch_ext(int format);
 void batch_sidecar_path(const char *output, char *buf, size_t size);
 /* Preview next to an output: "<output without extension>.png". */
 void batch_preview_path(const char *output, char *buf, size_t size);
+/* Mesh next to an output: "<output without extension>.obj" (.ply, .stl). */
+void batch_mesh_path(const char *output, int mesh_format, char *buf, size_t size);
 
 /* True when output exists, is not older than input, and its sidecar records the
- * same input path and options hash (and the preview exists when asked for). */
+ * same input path and options hash (and the preview and mesh exist, not older
+ * than the input, when asked for). */
 int batch_up_to_date(const char *input, const char *output, const batch_opts *o, const char *hash);
 
 /* mkdir -p; 0 or -1 with errno. */

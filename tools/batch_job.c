@@ -99,8 +99,11 @@ static const struct {
     {"--round-to", 1},    {"--unsigned", 0},    {"--heat", 0},      {"--exact", 0},
     {"--t-scale", 1},     {"--far-levels", 1},  {"--no-repair", 0}, {"--backend", 1},
     {"--diffuse-tol", 1}, {"--poisson-tol", 1}, {"--threads", 1},   {"--band", 1},
-    {"--dense", 0},       {"--format", 1},      {"--preview", 0},
+    {"--dense", 0},       {"--format", 1},      {"--preview", 0},   {"--mesh-out-format", 1},
+    {"--adaptivity", 1},
 };
+
+static const char *const mesh_exts[] = {NULL, "obj", "ply", "stl"};
 
 void batch_opts_default(batch_opts *o)
 {
@@ -210,8 +213,29 @@ int batch_opts_parse(int argc, char **argv, batch_opts *o, char *err, size_t err
                 return bad(err, errsize, "--format must be vdb or exr, got '%s'", v[0]);
         } else if (!strcmp(a, "--preview")) {
             o->preview = 1;
+        } else if (!strcmp(a, "--mesh-out-format")) {
+            o->mesh_format = BATCH_MESH_NONE;
+            for (int f = BATCH_MESH_OBJ; f <= BATCH_MESH_STL; f++)
+                if (!strcmp(v[0], mesh_exts[f]))
+                    o->mesh_format = f;
+            if (o->mesh_format == BATCH_MESH_NONE)
+                return bad(err, errsize, "--mesh-out-format must be obj, ply or stl, got '%s'",
+                           v[0]);
+        } else if (!strcmp(a, "--adaptivity")) {
+            if (cli_parse_double(v[0], &dv) || dv < 0 || dv > 1)
+                return bad(err, errsize, "--adaptivity must be in [0, 1], got '%s'", v[0]);
+            o->adaptivity = dv;
         }
     }
+    return 0;
+}
+
+int batch_opts_check(const batch_opts *o, char *err, size_t errsize)
+{
+    if (o->mesh_format != BATCH_MESH_NONE && o->sdf.unsigned_distance)
+        return bad(err, errsize,
+                   "--mesh-out-format needs a signed distance: an unsigned one has no zero "
+                   "level set (drop --unsigned)");
     return 0;
 }
 
@@ -230,7 +254,11 @@ void batch_opts_canonical(const batch_opts *o, char *buf, size_t size)
         n += snprintf(buf + n, size - (size_t)n, " bbox=%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
                       s->bbox[0], s->bbox[1], s->bbox[2], s->bbox[3], s->bbox[4], s->bbox[5]);
     if (n > 0 && (size_t)n < size && o->format == BATCH_VDB)
-        snprintf(buf + n, size - (size_t)n, " band=%.17g dense=%d", o->band, o->dense);
+        n += snprintf(buf + n, size - (size_t)n, " band=%.17g dense=%d", o->band, o->dense);
+    /* Only with a mesh, so that the hashes of outputs without one stay as they were. */
+    if (n > 0 && (size_t)n < size && o->mesh_format != BATCH_MESH_NONE)
+        snprintf(buf + n, size - (size_t)n, " mesh=%s adaptivity=%.17g", mesh_exts[o->mesh_format],
+                 o->adaptivity);
 }
 
 void batch_hash(const char *text, char hex[17])
@@ -254,6 +282,16 @@ void batch_preview_path(const char *output, char *buf, size_t size)
     const char *dot = strrchr(output, '.');
     int len = dot && (!slash || dot > slash) ? (int)(dot - output) : (int)strlen(output);
     snprintf(buf, size, "%.*s.png", len, output);
+}
+
+void batch_mesh_path(const char *output, int mesh_format, char *buf, size_t size)
+{
+    const char *slash = strrchr(output, '/');
+    const char *dot = strrchr(output, '.');
+    int len = dot && (!slash || dot > slash) ? (int)(dot - output) : (int)strlen(output);
+    snprintf(buf, size, "%.*s.%s", len, output,
+             mesh_format > BATCH_MESH_NONE && mesh_format <= BATCH_MESH_STL ? mesh_exts[mesh_format]
+                                                                            : "mesh");
 }
 
 /* ---- resume ---- */
@@ -301,6 +339,12 @@ int batch_up_to_date(const char *input, const char *output, const batch_opts *o,
         struct stat sp;
         batch_preview_path(output, png, sizeof png);
         ok = stat(png, &sp) == 0 && newer_or_same(&sp, &si);
+    }
+    if (ok && o->mesh_format != BATCH_MESH_NONE) {
+        char mesh[4200];
+        struct stat sm;
+        batch_mesh_path(output, o->mesh_format, mesh, sizeof mesh);
+        ok = stat(mesh, &sm) == 0 && newer_or_same(&sm, &si);
     }
     return ok;
 }
@@ -428,14 +472,18 @@ int batch_job_main(int argc, char **argv)
             rest[nrest++] = argv[i];
     char err[1024] = "", canon[1024], hash[17];
     const char *stage = "options";
-    double t_read = 0, t_report = 0, t_write = 0, t_preview = 0;
+    double t_read = 0, t_report = 0, t_write = 0, t_preview = 0, t_mesh = 0;
+    char mesh_path[4200] = "";
+    size_t mesh_tris = 0;
+    int have_mesh = 0;
     hv_mesh *m = NULL;
     hv_grid *g = NULL;
     hv_mesh_report rep;
     hv_sdf_stats stats;
     int have_rep = 0, have_stats = 0;
     memset(&stats, 0, sizeof stats);
-    int parsed = batch_opts_parse(nrest, rest, &o, err, sizeof err) == 0;
+    int parsed = batch_opts_parse(nrest, rest, &o, err, sizeof err) == 0 &&
+                 batch_opts_check(&o, err, sizeof err) == 0;
     free(rest);
     batch_opts_canonical(&o, canon, sizeof canon);
     batch_hash(canon, hash);
@@ -483,6 +531,26 @@ int batch_job_main(int argc, char **argv)
             goto report;
         }
     }
+    if (o.mesh_format != BATCH_MESH_NONE) {
+        stage = "mesh";
+        batch_mesh_path(output, o.mesh_format, mesh_path, sizeof mesh_path);
+        t = hv_now();
+        hv_mesh *iso = NULL;
+        st = hv_grid_to_mesh(g, 0.0, o.adaptivity, &iso);
+        if (!st) {
+            mesh_tris = iso->ntris;
+            st = hv_mesh_write(iso, mesh_path);
+        }
+        hv_mesh_destroy(&iso);
+        t_mesh = hv_now() - t;
+        if (st) {
+            error_text(st, mesh_path, err, sizeof err);
+            goto report;
+        }
+        have_mesh = 1;
+    }
+    /* Last, so that an output whose preview or mesh failed is not taken as
+     * up to date. */
     stage = "sidecar";
     if (write_sidecar(input, output, canon, hash, hv_now() - t0, err, sizeof err))
         goto report;
@@ -516,8 +584,15 @@ report:;
                   ",\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,\"sdf\":%.4f",
                   stats.t_repair, stats.t_splat, stats.t_diffuse, stats.t_normalize,
                   stats.t_poisson, stats.t_shift, stats.t_redistance, stats.t_total);
-    bb_printf(&b, ",\"write\":%.4f,\"preview\":%.4f,\"total\":%.4f}", t_write, t_preview,
-              hv_now() - t0);
+    bb_printf(&b, ",\"write\":%.4f,\"preview\":%.4f,\"mesh\":%.4f,\"total\":%.4f}", t_write,
+              t_preview, t_mesh, hv_now() - t0);
+    if (have_mesh) {
+        bb_printf(&b, ",\"mesh\":{\"output\":");
+        bb_json_string(&b, mesh_path);
+        bb_printf(&b, ",\"triangles\":%zu,\"adaptivity\":%.17g}", mesh_tris, o.adaptivity);
+    } else {
+        bb_printf(&b, ",\"mesh\":null");
+    }
     if (have_rep)
         bb_printf(&b,
                   ",\"defects\":{\"vertices\":%zu,\"triangles\":%zu,\"boundary_edges\":%zu"

@@ -17,7 +17,8 @@ void batch_plan(batch_joblist *l, int gargc, char **gargv, int force)
         batch_opts_default(&j->opts);
         char err[512];
         if (!j->error && (batch_opts_parse(gargc, gargv, &j->opts, err, sizeof err) ||
-                          batch_opts_parse(j->nargs, j->args, &j->opts, err, sizeof err)))
+                          batch_opts_parse(j->nargs, j->args, &j->opts, err, sizeof err) ||
+                          batch_opts_check(&j->opts, err, sizeof err)))
             j->error = batch_xprintf("%s: %s", j->input, err);
         char canon[1024];
         batch_opts_canonical(&j->opts, canon, sizeof canon);
@@ -45,6 +46,18 @@ void batch_plan(batch_joblist *l, int gargc, char **gargv, int force)
             j->error = batch_xprintf("%s: cannot open: %s", j->input, strerror(errno));
         else if (!j->error && !S_ISREG(sb.st_mode))
             j->error = batch_xprintf("%s: not a regular file", j->input);
+        if (!j->error && j->opts.mesh_format != BATCH_MESH_NONE) {
+            /* A mesh output has an input's extension: never let it replace one
+             * (e.g. -o the input directory with --mesh-out-format obj). */
+            char mesh[4200];
+            struct stat sm, si;
+            batch_mesh_path(j->output, j->opts.mesh_format, mesh, sizeof mesh);
+            for (size_t k = 0; k < l->n && !j->error; k++)
+                if (stat(mesh, &sm) == 0 && stat(l->v[k].input, &si) == 0 &&
+                    sm.st_dev == si.st_dev && sm.st_ino == si.st_ino)
+                    j->error = batch_xprintf("%s: its mesh output %s would replace the input %s",
+                                             j->input, mesh, l->v[k].input);
+        }
         if (!j->error && !force && batch_up_to_date(j->input, j->output, &j->opts, j->hash))
             j->skip = 1;
     }

@@ -154,6 +154,10 @@ static void remove_job_temps(const batch_job *j, pid_t pid)
     remove_worker_temps(path, pid);
     batch_preview_path(j->output, path, sizeof path);
     remove_worker_temps(path, pid);
+    if (j->opts.mesh_format != BATCH_MESH_NONE) {
+        batch_mesh_path(j->output, j->opts.mesh_format, path, sizeof path);
+        remove_worker_temps(path, pid);
+    }
 }
 
 /* The value of "key":"..." in a JSON line written by the job (unescaped). */

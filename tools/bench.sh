@@ -36,8 +36,10 @@ if [ -f "$bunny" ]; then
   for n in 128 256; do
     "$hv" bench sdf "$bunny" --n $n
   done
+  # The zero level set as a mesh (sdf --mesh-out), against the distance itself.
+  "$hv" bench mesh "$bunny" --n 256
 else
-  echo "bench: $bunny not found, sdf rows skipped" >&2
+  echo "bench: $bunny not found, sdf and mesh rows skipped" >&2
 fi
 
 # 2D curves: 1M small closed paths (some nested), the repair against
@@ -61,3 +63,4 @@ if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
 else
   echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
 fi
+if [ -x /usr/bin/python3 ]; then /usr/bin/python3 "$(dirname "$0")/bench_python.py" "$hv"; else echo "bench: no /usr/bin/python3, python rows skipped" >&2; fi

@@ -36,7 +36,8 @@ static void help(void)
            "  --report FILE   JSON lines, one per input, written as inputs finish: file,\n"
            "                  output, status (ok, failed, skipped, interrupted), error, stage,\n"
            "                  grid, voxel_size, seconds per stage, defects (mesh report before\n"
-           "                  repair), repair and solver counts, options and options_hash\n"
+           "                  repair), repair and solver counts, options and options_hash,\n"
+           "                  mesh (output and triangles; null without --mesh-out-format)\n"
            "  --dry-run       list what would run or be skipped; compute nothing\n"
            "  --force         recompute outputs that are up to date\n"
            "  -q / -v         quiet (failures and the summary only) / one line per file\n"
@@ -62,11 +63,21 @@ static void help(void)
            "  --band N           VDB narrow band half width in voxels (default 3)\n"
            "  --dense            VDB: every voxel active\n"
            "  --preview          also write OUTDIR/<name>.png: middle x, y, z slices\n"
+           "  --mesh-out-format obj|ply|stl\n"
+           "                     also write the zero level set as a closed, outward-oriented\n"
+           "                     triangle mesh OUTDIR/<name>.obj (.ply, .stl) beside the volume\n"
+           "                     (not with --unsigned); a mesh output that is one of the\n"
+           "                     inputs fails that input\n"
+           "  --adaptivity A     that mesh's adaptivity in [0, 1] (default 0: one vertex per\n"
+           "                     crossed voxel; larger: fewer triangles where the surface is\n"
+           "                     flat, none straying more than A/2 voxels)\n"
            "\n"
            "Resume: an output is skipped when it exists, is not older than its input, and\n"
            "its sidecar <output>.heatvox.json records the same input and options hash (the\n"
-           "options above except --threads); --force recomputes. Outputs, previews and\n"
-           "sidecars are written to temporary names and renamed when complete; Ctrl-C stops\n"
+           "options above except --threads), and its preview and mesh, when asked for,\n"
+           "exist and are not older than the input; --force recomputes. Outputs, previews,\n"
+           "meshes and sidecars are written to temporary names and renamed when complete;\n"
+           "the sidecar comes last, so an output whose mesh failed is recomputed. Ctrl-C stops\n"
            "the workers and removes their temporaries. The report is appended line by line\n"
            "as files finish.\n"
            "\n"
@@ -149,7 +160,8 @@ int cmd_batch(int argc, char **argv)
     batch_opts check;
     batch_opts_default(&check);
     char err[512];
-    if (batch_opts_parse(gargc, gargv, &check, err, sizeof err)) {
+    if (batch_opts_parse(gargc, gargv, &check, err, sizeof err) ||
+        batch_opts_check(&check, err, sizeof err)) {
         free(inputs);
         free(gargv);
         return cli_usage_error("batch", "%s", err);

@@ -339,14 +339,16 @@ int cmd_bench(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *out = argc < 2 ? stderr : stdout;
-        fprintf(out, "usage: heatvox bench <solve|sdf|sdf2d|extend> [options]   (heatvox bench "
-                     "<name> --help)\n");
+        fprintf(out, "usage: heatvox bench <solve|sdf|mesh|sdf2d|extend> [options]   (heatvox "
+                     "bench <name> --help)\n");
         return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
     }
     if (!strcmp(argv[1], "solve"))
         return bench_solve(argc - 1, argv + 1);
     if (!strcmp(argv[1], "sdf"))
         return cmd_bench_sdf(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "mesh"))
+        return cmd_bench_mesh(argc - 1, argv + 1);
     if (!strcmp(argv[1], "sdf2d"))
         return cmd_bench_sdf2d(argc - 1, argv + 1);
     if (!strcmp(argv[1], "extend"))

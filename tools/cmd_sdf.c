@@ -1,5 +1,6 @@
 /* heatvox sdf: signed (or unsigned) distance volume of a triangle mesh, written
- * as an OpenVDB level set (and optionally a dense .npy array). */
+ * as an OpenVDB level set, a dense .npy array, and/or the zero level set as a
+ * closed triangle mesh. */
 #include "cli.h"
 
 #include <errno.h>
@@ -7,16 +8,20 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <unistd.h>
 
 static void help(void)
 {
-    printf("usage: heatvox sdf MESH -o OUT.vdb [options]\n"
+    printf("usage: heatvox sdf MESH [-o OUT.vdb] [--npy FILE] [--mesh-out OUT.obj|.ply|.stl]\n"
+           "                   [options]\n"
            "\n"
            "Computes the signed distance field of a triangle mesh (OBJ, PLY, STL, OFF) with\n"
            "the signed heat method on a regular grid, robust to holes, flipped faces,\n"
            "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
-           "level set (negative inside). Prints one summary line on stdout.\n"
+           "level set (negative inside), a dense .npy array, and/or its zero level set as a\n"
+           "closed, manifold, outward-oriented triangle mesh (at least one of the three).\n"
+           "Prints one summary line on stdout.\n"
            "\n"
            "grid (cell-centred; sample (i,j,k) at corner + (i+1/2, j+1/2, k+1/2) h):\n"
            "  --res N            cells along the longest axis of the padded box (default 128)\n"
@@ -26,7 +31,7 @@ static void help(void)
            "                     outer boundary of the voxel block (with --res N: h = longest\n"
            "                     side / N); --pad is ignored\n"
            "output:\n"
-           "  -o, --output FILE  the .vdb file (required; written to a temporary, then renamed)\n"
+           "  -o, --output FILE  the .vdb file\n"
            "  --band W           narrow band half width in voxels (default 3)\n"
            "  --dense            store every voxel of the block as active\n"
            "                     (--unsigned always writes a dense float grid, class unknown)\n"
@@ -34,6 +39,14 @@ static void help(void)
            "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
            "                     (blue inside, red outside, black zero contour)\n"
            "  --name NAME        grid name in the .vdb (default \"sdf\")\n"
+           "  --mesh-out FILE    also write the zero level set as a triangle mesh, OBJ, PLY\n"
+           "                     (binary, double) or STL (binary) by the extension; closed at\n"
+           "                     the walls of the block where the inside reaches them\n"
+           "  --adaptivity A     with --mesh-out: 0 (default) one vertex per crossed voxel;\n"
+           "                     up to 1: fewer, larger triangles where the surface is flat,\n"
+           "                     none straying more than A/2 voxels from the zero set\n"
+           "  Every output is written to a temporary name, and all are renamed together once\n"
+           "  complete: when one fails, none is replaced.\n"
            "method:\n"
            "  --unsigned         unsigned distance to the mesh (no inside)\n"
            "  --heat             keep the heat method's own |phi| instead of the exact distance\n"
@@ -63,6 +76,26 @@ static int on_progress(double fraction, const char *stage, void *user)
     return 0;
 }
 
+/* The extensions hv_mesh_write knows: .obj, .ply, .stl, any case. */
+static int mesh_ext_ok(const char *path)
+{
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (!dot || (slash && dot < slash))
+        return 0;
+    return !strcasecmp(dot, ".obj") || !strcasecmp(dot, ".ply") || !strcasecmp(dot, ".stl");
+}
+
+/* Writes m to path (a staged temporary) in the format final's extension names. */
+static hv_status write_mesh_as(const hv_mesh *m, const char *final, const char *path)
+{
+    const char *dot = strrchr(final, '.');
+    if (!strcasecmp(dot, ".ply"))
+        return hv_mesh_write_ply(m, path);
+    if (!strcasecmp(dot, ".stl"))
+        return hv_mesh_write_stl(m, path);
+    return hv_mesh_write_obj(m, path);
+}
+
 /* Fails early, before any computing, when the output cannot be created. */
 static int check_writable(const char *path)
 {
@@ -85,7 +118,9 @@ static int check_writable(const char *path)
 int cmd_sdf(int argc, char **argv)
 {
     const char *mesh_path = NULL, *out = NULL, *npy = NULL, *name = "sdf", *preview = NULL;
-    double band = 3.0;
+    const char *mesh_out = NULL;
+    double band = 3.0, adaptivity = 0;
+    int have_adaptivity = 0;
     int dense = 0, have_res = 0, have_h = 0, threads = 0;
     hv_sdf_opts o;
     hv_sdf_opts_default(&o);
@@ -109,6 +144,15 @@ int cmd_sdf(int argc, char **argv)
         } else if (!strcmp(a, "--preview")) {
             NEED(1);
             preview = argv[++i];
+        } else if (!strcmp(a, "--mesh-out")) {
+            NEED(1);
+            mesh_out = argv[++i];
+        } else if (!strcmp(a, "--adaptivity")) {
+            NEED(1);
+            if (cli_parse_double(argv[++i], &adaptivity) || adaptivity < 0 || adaptivity > 1)
+                return cli_usage_error("sdf", "--adaptivity needs a number in [0, 1], got '%s'",
+                                       argv[i]);
+            have_adaptivity = 1;
         } else if (!strcmp(a, "--name")) {
             NEED(1);
             name = argv[++i];
@@ -188,8 +232,17 @@ int cmd_sdf(int argc, char **argv)
     }
     if (!mesh_path)
         return cli_usage_error("sdf", "no mesh given");
-    if (!out)
-        return cli_usage_error("sdf", "no output given (-o OUT.vdb)");
+    if (!out && !npy && !mesh_out)
+        return cli_usage_error("sdf",
+                               "no output given (-o OUT.vdb, --npy FILE or --mesh-out FILE)");
+    if (mesh_out && o.unsigned_distance)
+        return cli_usage_error("sdf", "--mesh-out needs a signed distance: an unsigned one has no "
+                                      "zero level set (drop --unsigned)");
+    if (mesh_out && !mesh_ext_ok(mesh_out))
+        return cli_usage_error("sdf", "--mesh-out %s: the extension must be .obj, .ply or .stl",
+                               mesh_out);
+    if (have_adaptivity && !mesh_out)
+        return cli_usage_error("sdf", "--adaptivity applies to --mesh-out, which is not given");
     if (have_res && have_h)
         return cli_usage_error("sdf", "give either --res or --voxel-size, not both");
     if (!have_h)
@@ -199,11 +252,12 @@ int cmd_sdf(int argc, char **argv)
      * rest is the background with the heat method's sign): skip the sweeps. */
     if (!dense && !npy && !preview && !o.unsigned_distance && o.magnitude == HV_SDF_EXACT)
         o.band_only = band;
-    const char *outs[] = {out, npy, preview};
-    if (cli_check_outputs("sdf", outs, 3, &mesh_path, 1))
+    const char *outs[] = {out, npy, preview, mesh_out};
+    if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;
-    if (check_writable(out) || (npy && check_writable(npy)) || (preview && check_writable(preview)))
-        return HV_EXIT_FAIL;
+    for (int k = 0; k < 4; k++)
+        if (outs[k] && check_writable(outs[k]))
+            return HV_EXIT_FAIL;
     static int tty;
     tty = isatty(2);
     if (cli_verbose >= 1 || (cli_verbose >= 0 && tty))
@@ -240,42 +294,65 @@ int cmd_sdf(int argc, char **argv)
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
              band, S.heat_coarsen, dense ? " dense" : "");
+    /* Every output is staged; they are renamed together once all are written. */
     cli_outputs co = {0};
-    const char *t_out = cli_stage("sdf", &co, out);
-    const char *t_npy = npy && t_out ? cli_stage("sdf", &co, npy) : NULL;
-    const char *t_prev =
-        preview && t_out && (!npy || t_npy) ? cli_stage("sdf", &co, preview) : NULL;
-    if (!t_out || (npy && !t_npy) || (preview && !t_prev)) {
-        cli_discard(&co);
-        hv_grid_destroy(&g);
-        return HV_EXIT_FAIL;
+    const char *tmp[4] = {NULL, NULL, NULL, NULL};
+    for (int k = 0; k < 4; k++)
+        if (outs[k] && !(tmp[k] = cli_stage("sdf", &co, outs[k]))) {
+            cli_discard(&co);
+            hv_grid_destroy(&g);
+            return HV_EXIT_FAIL;
+        }
+    const char *failed = NULL;
+    if (out) {
+        hv_vdb_writer *w = NULL;
+        /* An unsigned distance is no level set (no inside): a plain float grid. */
+        if (!(st = hv_vdb_writer_create(&w)) &&
+            !(st = o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
+                                       : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
+            !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&
+            !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
+            !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&
+            !(st = hv_vdb_writer_set_meta(w, "parameters", params)))
+            st = hv_vdb_writer_write(w, tmp[0]);
+        hv_vdb_writer_destroy(&w);
+        if (st)
+            failed = out;
     }
-    hv_vdb_writer *w = NULL;
-    /* An unsigned distance is no level set (no inside): a plain float grid. */
-    if (!(st = hv_vdb_writer_create(&w)) &&
-        !(st = o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
-                                   : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
-        !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&
-        !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
-        !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&
-        !(st = hv_vdb_writer_set_meta(w, "parameters", params)))
-        st = hv_vdb_writer_write(w, t_out);
-    hv_vdb_writer_destroy(&w);
-    const char *failed = st ? out : NULL;
-    if (!st && npy && (st = hv_write_npy(t_npy, g)))
+    if (!st && npy && (st = hv_write_npy(tmp[1], g)))
         failed = npy;
-    if (!st && preview && (st = hv_png_write_preview(t_prev, g, 0)))
+    if (!st && preview && (st = hv_png_write_preview(tmp[2], g, 0)))
         failed = preview;
+    double t_mesh = hv_now();
+    size_t mesh_tris = 0;
+    if (!st && mesh_out) {
+        hv_mesh *iso = NULL;
+        if (!(st = hv_grid_to_mesh(g, 0.0, adaptivity, &iso))) {
+            mesh_tris = iso->ntris;
+            st = write_mesh_as(iso, mesh_out, tmp[3]);
+        }
+        hv_mesh_destroy(&iso);
+        if (st)
+            failed = mesh_out;
+    }
+    t_mesh = hv_now() - t_mesh;
     hv_grid_destroy(&g);
     if (st) {
+        cli_fail("sdf", failed, st);
+        if (co.n > 1)
+            fprintf(stderr,
+                    "heatvox sdf: no output was written: the outputs land together or not at "
+                    "all, and %s failed\n",
+                    failed);
         cli_discard(&co);
-        return cli_fail("sdf", failed, st);
+        return HV_EXIT_FAIL;
     }
     if (cli_commit("sdf", &co))
         return HV_EXIT_FAIL;
-    tw = hv_now() - tw;
+    tw = hv_now() - tw - t_mesh;
 
     const hv_sdf_repair_report *R = &S.repair;
+    char mesh_note[4200] = "";
     if (cli_verbose >= 1)
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
@@ -284,18 +361,25 @@ int cmd_sdf(int argc, char **argv)
                 tris, R->triangles_out, hv_backend_name(S.backend), S.diffuse_iterations,
                 S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
                 S.surface_rms_after, S.dead_faces, S.near_sign_cells, S.near_sign_changed);
+    if (cli_verbose >= 0 && mesh_out)
+        snprintf(mesh_note, sizeof mesh_note, " | mesh %s: %zu triangles, adaptivity %g", mesh_out,
+                 mesh_tris, adaptivity);
     if (cli_verbose >= 0)
         printf(
             "sdf %s -> %s: grid %dx%dx%d h=%.6g | s: read %.2f repair %.2f splat %.2f diffuse %.2f "
-            "normalize %.2f poisson %.2f shift %.2f redistance %.2f write %.2f total %.2f | "
-            "peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
+            "normalize %.2f poisson %.2f shift %.2f redistance %.2f mesh %.2f write %.2f total "
+            "%.2f | peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
             "flipped %zu holes %zu/%zu filled, boundary %zu nonmanifold %zu inconsistent "
-            "%zu->%zu\n",
-            mesh_path, out, S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat, S.t_diffuse,
-            S.t_normalize, S.t_poisson, S.t_shift, S.t_redistance, tw, hv_now() - t0,
-            hv_peak_rss() / 1e6, R->triangles_in, R->triangles_out, R->vertices_welded,
-            R->degenerate_removed, R->duplicates_removed, R->faces_flipped, R->holes_filled,
+            "%zu->%zu%s\n",
+            mesh_path,
+            out   ? out
+            : npy ? npy
+                  : mesh_out,
+            S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat, S.t_diffuse, S.t_normalize,
+            S.t_poisson, S.t_shift, S.t_redistance, t_mesh, tw, hv_now() - t0, hv_peak_rss() / 1e6,
+            R->triangles_in, R->triangles_out, R->vertices_welded, R->degenerate_removed,
+            R->duplicates_removed, R->faces_flipped, R->holes_filled,
             R->holes_filled + R->holes_left_open, R->boundary_edges, R->nonmanifold_edges,
-            R->inconsistent_before, R->inconsistent_after);
+            R->inconsistent_before, R->inconsistent_after, mesh_note);
     return HV_EXIT_OK;
 }

@@ -104,7 +104,10 @@ HV_API void hv_distance_opts_default(hv_distance_opts *o);
  * clamped); fluid cells in a region no source reaches get o->unreachable and
  * solid cells o->solid_value. opts and stats may be NULL.
  * Fails with HV_ERR_INVALID_ARG when no source lands on a fluid cell, a voxel
- * index is out of range or a mesh source is given for a 2D grid. */
+ * index is out of range or a mesh source is given for a 2D grid. Reports
+ * progress through hv_set_progress before each stage ("diffuse") and the
+ * Poisson solve ("poisson"); a cancel returns HV_ERR_CANCELLED (the opencl
+ * path reports none). */
 HV_API hv_status hv_distance_compute(hv_grid *dist, const hv_distance_sources *src,
                                      const hv_distance_opts *opts, hv_distance_stats *stats);
 
@@ -186,7 +189,10 @@ HV_API void hv_extender_destroy(hv_extender **e);
  * extender's shape). All right-hand sides (the weights, and per field its
  * components, plus the magnitude of vectors) are solved with the same solver.
  * Constant fields come back unchanged to float rounding. stats may be NULL.
- * Fails with HV_ERR_INVALID_ARG when no cell has |phi| < band*h. */
+ * Fails with HV_ERR_INVALID_ARG when no cell has |phi| < band*h. Reports
+ * progress through hv_set_progress before each diffusion level ("extend"); a
+ * cancel returns HV_ERR_CANCELLED with the outputs partly written (the
+ * opencl path reports none). */
 HV_API hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields,
                                 const hv_extend_field *fields, hv_extend_stats *stats);
 

@@ -82,6 +82,19 @@ HV_API hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r);
 /* Writes the mesh as OBJ (temporary file then rename). Coordinates are written
  * with 17 significant digits, so reading the file back gives the same doubles. */
 HV_API hv_status hv_mesh_write_obj(const hv_mesh *m, const char *path);
+/* Writes the mesh as binary little-endian PLY: vertex x, y, z as double (read
+ * back bit for bit), faces as "property list uchar uint vertex_indices";
+ * temporary file then rename. */
+HV_API hv_status hv_mesh_write_ply(const hv_mesh *m, const char *path);
+/* Writes the mesh as binary STL (float32 coordinates and unit facet normals, as
+ * the format has them; the zero normal for a degenerate facet), temporary file
+ * then rename. STL has no shared vertices: readers weld them back by position,
+ * so vertices that round to the same float32 point come back as one. */
+HV_API hv_status hv_mesh_write_stl(const hv_mesh *m, const char *path);
+/* Writes the mesh in the format its extension names: .obj, .ply or .stl (any
+ * case). Another extension is HV_ERR_INVALID_ARG naming the path. Write
+ * failures are HV_ERR_IO naming the file, and leave no file behind. */
+HV_API hv_status hv_mesh_write(const hv_mesh *m, const char *path);
 
 /* ---- Generators (pure functions; the caller owns *out) ---- */
 

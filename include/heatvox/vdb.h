@@ -20,6 +20,7 @@
 #define HEATVOX_VDB_H
 
 #include "grid.h"
+#include "mesh.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -156,6 +157,31 @@ HV_API hv_status hv_vdb_common_box(const char *path, const char *const *names, s
  * grid's) as text into buf. Missing key: HV_ERR_INVALID_ARG naming it. */
 HV_API hv_status hv_vdb_read_meta(const char *path, const char *grid_name, const char *key,
                                   char *buf, size_t bufsize);
+
+/* ---- Mesh extraction ---------------------------------------------------- */
+/* Extracts the isosurface {value == isovalue} of a 3D grid (a signed distance
+ * field: negative inside) as a closed, manifold, consistently oriented
+ * triangle mesh (outward normals, positive signed volume), with OpenVDB's
+ * tools::volumeToMesh; its quads are split into triangles along their shorter
+ * diagonal. Cells outside the block count as outside, so a surface that
+ * reaches the block's walls is closed there by caps on the walls (the outer
+ * faces of the boundary cells); a grid entirely below isovalue gives the
+ * block's box. Vertices lie on the zero set of the grid's trilinear
+ * interpolant (Newton steps from OpenVDB's points, at most half a voxel), and
+ * every vertex has its own position (readers that weld by position, in double
+ * or in float32, keep the topology).
+ * adaptivity in [0, 1]: 0 keeps one vertex per crossed voxel (more where a
+ * voxel is crossed by several sheets); larger values merge regions of up to
+ * 8^3 voxels whose normals differ by 1 - cos(angle) <= adaptivity into fewer,
+ * larger triangles, but no merged triangle strays more than half a voxel from
+ * the isosurface (checked on the trilinear field at points at most a voxel
+ * apart; regions that do are split again). Vertices are in world coordinates
+ * (the grid's origin and h). Errors: HV_ERR_INVALID_ARG for a grid that is not
+ * 3D, adaptivity outside [0, 1], a non-finite isovalue, or a grid with no value
+ * below isovalue (no surface); HV_ERR_NUMERIC for NaN or Inf values. The
+ * caller owns *out (hv_mesh_destroy). */
+HV_API hv_status hv_grid_to_mesh(const hv_grid *g, double isovalue, double adaptivity,
+                                 hv_mesh **out);
 
 #ifdef __cplusplus
 }

@@ -392,6 +392,9 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     d.tau[1] = 1.0 / (o.t_scale * T_RATIO);
     int idle = 0;
     for (int l = 0; l < o.max_stages && left > 0; l++) {
+        /* the share of open faces with a direction: how far the stages have got */
+        if ((st = hv__progress(0.05 + 0.6 * (double)(open - left) / (double)open, "diffuse")))
+            goto done;
         t0 = hv_now();
         hv_solve_info info[2];
         for (int q = 0; q < 2; q++) {
@@ -439,6 +442,8 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     t0 = hv_now();
     hv_solver_destroy(&sv[0]);
     hv_solver_destroy(&sv[1]);
+    if ((st = hv__progress(0.7, "poisson")))
+        goto done;
     double *rhs = hv_malloc(d.count * sizeof *rhs);
     if (!rhs) {
         st = hv__error(HV_ERR_NOMEM, "distance: out of memory for the Poisson right-hand side");

@@ -205,6 +205,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     S->t_solve = hv_now() - t0;
 
     for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
+        /* most calls need one level; later ones only reach the far cells */
+        if ((st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
+            break;
         double thr;
         int lo[3], bn[3];
         hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);

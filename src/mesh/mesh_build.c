@@ -340,6 +340,34 @@ hv_status hv_mesh_from_arrays(hv_mesh **out, const double *verts, size_t nverts,
     return HV_OK;
 }
 
+hv_status hv__mesh_from_arrays_as_is(hv_mesh **out, const double *verts, size_t nverts,
+                                     const uint32_t *tris, size_t ntris)
+{
+    *out = NULL;
+    if (ntris == 0 || nverts == 0 || nverts > MESH_MAX_COUNT || ntris > MESH_MAX_COUNT)
+        return hv__error(HV_ERR_INVALID_ARG, "mesh: %zu vertices, %zu triangles: need 1..%zu each",
+                         nverts, ntris, MESH_MAX_COUNT);
+    for (size_t i = 0; i < 3 * ntris; i++)
+        if (tris[i] >= nverts)
+            return hv__error(HV_ERR_INTERNAL, "mesh: triangle %zu uses vertex %u of %zu", i / 3,
+                             tris[i], nverts);
+    hv_mesh *m = calloc(1, sizeof *m);
+    if (m) {
+        m->verts = malloc(nverts * 3 * sizeof *m->verts);
+        m->tris = malloc(ntris * 3 * sizeof *m->tris);
+    }
+    if (!m || !m->verts || !m->tris) {
+        hv_mesh_destroy(&m);
+        return hv__error(HV_ERR_NOMEM, "mesh: out of memory for %zu triangles", ntris);
+    }
+    memcpy(m->verts, verts, nverts * 3 * sizeof *m->verts);
+    memcpy(m->tris, tris, ntris * 3 * sizeof *m->tris);
+    m->nverts = nverts;
+    m->ntris = ntris;
+    *out = m;
+    return HV_OK;
+}
+
 hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out)
 {
     if (!out)
