@@ -282,7 +282,7 @@ FZ_RUNENV    := ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
 # (alignment), and OpenVDB 10's RootNode::readTopology reads a tile's
 # "active" flag straight from the file into a bool (bool; a corrupt byte is
 # UB there). Neither is heatvox's code.
-$(FZ)/obj/src/io/vdb_read.o $(FZ)/obj/src/io/vdb_write.o $(FZ)/obj/tools/bench_ref_vdb.o: CXXFLAGS += -fno-sanitize=alignment,bool
+$(CXX_SRC:%.cpp=$(FZ)/obj/%.o) $(FZ)/obj/tools/bench_ref_vdb.o: CXXFLAGS += -fno-sanitize=alignment,bool
 
 .PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
 fuzz-build:
