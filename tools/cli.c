@@ -155,3 +155,44 @@ int cli_parse_double(const char *s, double *out)
     *out = v;
     return 0;
 }
+
+int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
+                              cli_bench_mesh_args *out)
+{
+    cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO};
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
+            return usage(stdout);
+        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
+            continue;
+        if (a[0] != '-') {
+            if (A.path)
+                return cli_usage_error(cmd, "only one mesh, got '%s' and '%s'", A.path, a);
+            A.path = a;
+            continue;
+        }
+        if (!v)
+            return cli_usage_error(cmd, "option %s needs a value", a);
+        i++;
+        if (!strcmp(a, "--n")) {
+            if (cli_parse_int(v, &A.n) || A.n < 8)
+                return cli_usage_error(cmd, "--n must be an integer >= 8, got '%s'", v);
+        } else if (!strcmp(a, "--repeat")) {
+            if (cli_parse_int(v, &A.repeat) || A.repeat < 1)
+                return cli_usage_error(cmd, "--repeat must be >= 1, got '%s'", v);
+        } else if (!strcmp(a, "--threads")) {
+            if (cli_parse_threads(v, 1, &A.threads))
+                return cli_usage_error(cmd, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
+        } else if (!strcmp(a, "--backend")) {
+            if (hv_backend_parse(v, &A.backend))
+                return cli_usage_error(cmd, "%s", hv_last_error());
+        } else {
+            return cli_usage_error(cmd, "unknown option '%s'", a);
+        }
+    }
+    if (!A.path || !A.n)
+        return cli_usage_error(cmd, "a mesh and --n are required");
+    *out = A;
+    return -1;
+}

@@ -4,6 +4,7 @@
 #define HV_TOOLS_CLI_H
 
 #include "heatvox/heatvox.h"
+#include <stdio.h>
 
 /* Exit codes (documented in README.md). */
 enum { HV_EXIT_OK = 0, HV_EXIT_FAIL = 1, HV_EXIT_USAGE = 2 };
@@ -42,6 +43,17 @@ void cli_discard(cli_outputs *o);
 /* Parses a --threads value: an integer in [lo, HV_MAX_THREADS]; 0 on success. */
 int cli_parse_threads(const char *s, int lo, int *out);
 int cli_parse_double(const char *s, double *out);
+/* The arguments of the mesh benchmarks (bench sdf, bench mesh): MESH --n N
+ * [--backend B] [--repeat R] [--threads T], -q and -v ignored. Returns -1 when
+ * the command should go on, else the exit code (after --help, printed by
+ * usage, or a usage error naming cmd). */
+typedef struct cli_bench_mesh_args {
+    const char *path;
+    int n, repeat, threads;
+    hv_backend backend;
+} cli_bench_mesh_args;
+int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
+                              cli_bench_mesh_args *out);
 /* With -v: prints the message on stderr (no newline added). Returns 0. */
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 

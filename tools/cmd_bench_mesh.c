@@ -24,43 +24,13 @@ static int usage(FILE *out)
 
 int cmd_bench_mesh(int argc, char **argv)
 {
-    const char *path = NULL;
-    int n = 0, repeat = 1, threads = 0;
-    hv_backend backend = HV_BACKEND_AUTO;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (a[0] != '-') {
-            if (path)
-                return cli_usage_error("bench mesh", "only one mesh, got '%s' and '%s'", path, a);
-            path = a;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error("bench mesh", "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 8)
-                return cli_usage_error("bench mesh", "--n must be an integer >= 8, got '%s'", v);
-        } else if (!strcmp(a, "--repeat")) {
-            if (cli_parse_int(v, &repeat) || repeat < 1)
-                return cli_usage_error("bench mesh", "--repeat must be >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &threads))
-                return cli_usage_error("bench mesh", "--threads must be 1..%d, got '%s'",
-                                       HV_MAX_THREADS, v);
-        } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &backend))
-                return cli_usage_error("bench mesh", "%s", hv_last_error());
-        } else {
-            return cli_usage_error("bench mesh", "unknown option '%s'", a);
-        }
-    }
-    if (!path || !n)
-        return cli_usage_error("bench mesh", "a mesh and --n are required");
+    cli_bench_mesh_args A;
+    int rc = cli_bench_mesh_args_parse("bench mesh", argc, argv, usage, &A);
+    if (rc >= 0)
+        return rc;
+    const char *path = A.path;
+    const int n = A.n, repeat = A.repeat, threads = A.threads;
+    const hv_backend backend = A.backend;
     hv_set_threads(threads);
 
     hv_mesh *m = NULL;
