@@ -402,8 +402,17 @@ START_TEST(open_tube_should_be_capped_at_its_rims)
      * at tight tolerances it reaches it. */
     o.diffuse_tol = 1e-10;
     o.poisson_tol = 1e-8;
+    o.sign = HV_SDF_SIGN_HEAT;
     ck_assert_int_eq(hv_sdf_compute(m, &o, &g, NULL), HV_OK);
     ck_assert_double_lt(phi_at(g, beyond), 0); /* the failure the caps prevent */
+    hv_grid_destroy(&g);
+    /* Left open, the tube is signed by its winding number by default, which
+     * does not leak either (tests/check_sdf_box.c). */
+    o.sign = HV_SDF_SIGN_AUTO;
+    ck_assert_int_eq(hv_sdf_compute(m, &o, &g, &S), HV_OK);
+    ck_assert_int_eq(S.sign, HV_SDF_SIGN_WINDING);
+    ck_assert_double_lt(phi_at(g, mid), -0.15);
+    ck_assert_double_gt(phi_at(g, beyond), 0.2);
     hv_grid_destroy(&g);
     hv_mesh_destroy(&m);
 }

@@ -54,6 +54,10 @@ static void help(void)
            "  --t-scale S        diffusion time t = (S h)^2 (default 1)\n"
            "  --heat-coarsen F   run the heat method (which then only decides the sign) on a\n"
            "                     grid F = 1..4 times coarser; default: 2 above 2^22 cells, else 1\n"
+           "  --sign S           where the sign comes from: auto (default: the winding number\n"
+           "                     of the repaired mesh when it stays open or the block cuts it,\n"
+           "                     so that the answer does not depend on the block; the heat\n"
+           "                     method otherwise), heat, or winding\n"
            "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
            "  --domed-caps       close holes with caps that bulge like the wall around them\n"
            "                     (default: planar caps)\n"
@@ -64,6 +68,11 @@ static void help(void)
            "  --help             this text\n"
            "\n"
            "exit: 0 success, 1 failure (unreadable mesh, bad geometry, I/O), 2 usage error\n");
+}
+
+static const char *sign_name(hv_sdf_sign s)
+{
+    return s == HV_SDF_SIGN_WINDING ? "winding" : s == HV_SDF_SIGN_HEAT ? "heat" : "none";
 }
 
 /* One line rewritten in place on a terminal, one line per stage otherwise. */
@@ -207,6 +216,17 @@ int cmd_sdf(int argc, char **argv)
                 o.heat_coarsen > 4)
                 return cli_usage_error("sdf", "--heat-coarsen needs an integer in 1..4, got '%s'",
                                        argv[i]);
+        } else if (!strcmp(a, "--sign")) {
+            NEED(1);
+            const char *v = argv[++i];
+            if (!strcmp(v, "auto"))
+                o.sign = HV_SDF_SIGN_AUTO;
+            else if (!strcmp(v, "heat"))
+                o.sign = HV_SDF_SIGN_HEAT;
+            else if (!strcmp(v, "winding"))
+                o.sign = HV_SDF_SIGN_WINDING;
+            else
+                return cli_usage_error("sdf", "--sign needs auto, heat or winding, got '%s'", v);
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--domed-caps")) {
@@ -289,11 +309,11 @@ int cmd_sdf(int argc, char **argv)
     char params[512];
     snprintf(params, sizeof params,
              "grid=%dx%dx%d voxel_size=%.9g origin=%.9g,%.9g,%.9g t_scale=%g mode=%s magnitude=%s "
-             "repair=0x%x backend=%s band=%g heat_coarsen=%d%s",
+             "repair=0x%x backend=%s band=%g heat_coarsen=%d sign=%s%s",
              S.n[0], S.n[1], S.n[2], S.h, S.origin[0], S.origin[1], S.origin[2], o.t_scale,
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
-             band, S.heat_coarsen, dense ? " dense" : "");
+             band, S.heat_coarsen, sign_name(S.sign), dense ? " dense" : "");
     /* Every output is staged; they are renamed together once all are written. */
     cli_outputs co = {0};
     const char *tmp[4] = {NULL, NULL, NULL, NULL};
@@ -357,10 +377,12 @@ int cmd_sdf(int argc, char **argv)
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
                 "(relres %.1e), poisson %d (relres %.1e); surface rms %.3f -> %.3f voxels; "
-                "%zu dead faces; %zu cells signed by pseudonormals (%zu changed)\n",
+                "%zu dead faces; sign from %s (%zu winding-number evaluations, %.2f s); %zu "
+                "cells signed by pseudonormals (%zu changed)\n",
                 tris, R->triangles_out, hv_backend_name(S.backend), S.diffuse_iterations,
                 S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
-                S.surface_rms_after, S.dead_faces, S.near_sign_cells, S.near_sign_changed);
+                S.surface_rms_after, S.dead_faces, sign_name(S.sign), S.winding_evals, S.t_sign,
+                S.near_sign_cells, S.near_sign_changed);
     if (cli_verbose >= 0 && mesh_out)
         snprintf(mesh_note, sizeof mesh_note, " | mesh %s: %zu triangles, adaptivity %g", mesh_out,
                  mesh_tris, adaptivity);

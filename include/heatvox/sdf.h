@@ -24,7 +24,11 @@
  *                 repaired triangles (rasterized near them, propagated by
  *                 closest-triangle sweeps elsewhere); the sign is the heat
  *                 method's, except within a voxel of clean closed surface
- *                 where the angle-weighted pseudonormal decides
+ *                 where the angle-weighted pseudonormal decides. Where the
+ *                 heat method's sign would depend on the block (the repaired
+ *                 mesh stays open, or the block cuts it), the generalized
+ *                 winding number of the repaired mesh signs instead and
+ *                 stages 2-6 do not run (hv_sdf_sign)
  * Values are negative inside. The grid is cell-centred (grid.h).
  *
  * Why the exact magnitude: the heat method's own phi is right near the
@@ -57,6 +61,15 @@ enum {
     HV_SDF_REPAIR_DOMED_CAPS = 1u << 6 /* with FILL_HOLES: caps that bulge like the wall
                                             around the hole instead of planar ones (not in ALL) */
 };
+
+/* Where the sign comes from (HV_SDF_EXACT, signed). */
+typedef enum hv_sdf_sign {
+    HV_SDF_SIGN_AUTO = 0, /* the winding number where the heat method's sign would depend on the
+                             block: the repaired mesh is still open, or the block cuts the mesh;
+                             the heat method otherwise (default) */
+    HV_SDF_SIGN_HEAT,     /* the signed heat method on the block */
+    HV_SDF_SIGN_WINDING   /* the generalized winding number of the repaired mesh above 1/2 */
+} hv_sdf_sign;
 
 /* How |phi| is obtained. */
 typedef enum hv_sdf_magnitude {
@@ -109,6 +122,10 @@ typedef struct hv_sdf_opts {
                              2 on grids above 2^22 cells (about 160^3), else 1 */
     int threads;        /* > 0: calls hv_set_threads(threads) (process-wide) first;
                              0 (default) leaves the current setting */
+    hv_sdf_sign sign;   /* HV_SDF_EXACT, signed: the sign's source; default HV_SDF_SIGN_AUTO.
+                             The winding number needs the repair's orientation steps
+                             (HV_SDF_REPAIR_ORIENT and HV_SDF_REPAIR_OUTWARD); AUTO uses the
+                             heat method without them */
 } hv_sdf_opts;
 
 typedef struct hv_sdf_repair_report {
@@ -155,6 +172,10 @@ typedef struct hv_sdf_stats {
                                     sign counts even where its face's trust was not tested) */
     size_t near_sign_changed; /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
+    hv_sdf_sign sign;     /* the sign's source that ran: HV_SDF_SIGN_HEAT or HV_SDF_SIGN_WINDING
+                             (HV_SDF_SIGN_AUTO for unsigned distance and HV_SDF_HEAT) */
+    size_t winding_evals; /* winding-number evaluations of the sign */
+    double t_sign;        /* seconds of the winding-number sign (within t_redistance) */
 } hv_sdf_stats;
 
 HV_API void hv_sdf_opts_default(hv_sdf_opts *o);

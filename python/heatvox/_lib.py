@@ -247,6 +247,7 @@ class hv_sdf_opts(Structure):
         ("poisson_tol", c_double),
         ("heat_coarsen", c_int),
         ("threads", c_int),
+        ("sign", c_int),
     ]
 
 
@@ -306,6 +307,9 @@ class hv_sdf_stats(Structure):
         ("near_sign_cells", c_size_t),
         ("near_sign_changed", c_size_t),
         ("repair", hv_sdf_repair_report),
+        ("sign", c_int),
+        ("winding_evals", c_size_t),
+        ("t_sign", c_double),
     ]
 
 

@@ -50,6 +50,7 @@ def sdf(
     heat=False,
     t_scale=1.0,
     heat_coarsen=0,
+    sign="auto",
     repair=True,
     domed_caps=False,
     threads=0,
@@ -89,6 +90,10 @@ def sdf(
       t_scale      diffusion time t = (t_scale h)^2 (default 1)
       heat_coarsen run the heat method (which then only decides the sign) on
                    a grid 1..4 times coarser; 0: 2 above 2^22 cells, else 1
+      sign         where the sign comes from: "auto" (the winding number of
+                   the repaired mesh when it stays open or the block cuts it,
+                   so that the answer does not depend on the block; the heat
+                   method otherwise), "heat" or "winding" (``--sign``)
       repair       True (default): weld, drop degenerate and duplicate faces,
                    orient, fill holes, turn outward; False: none
                    (``--no-repair``); or an int of HV_SDF_REPAIR_* flags
@@ -137,6 +142,10 @@ def sdf(
     o.magnitude = HV_SDF_HEAT if heat else HV_SDF_EXACT
     o.t_scale = _arrays.positive(t_scale, "t_scale")
     o.heat_coarsen = _arrays.integer(heat_coarsen, "heat_coarsen", 0, 4)
+    signs = {"auto": 0, "heat": 1, "winding": 2}
+    if sign not in signs:
+        raise ValueError("sign must be one of 'auto', 'heat', 'winding', got %r" % (sign,))
+    o.sign = signs[sign]
     if repair is True:
         flags = HV_SDF_REPAIR_ALL
     elif repair is False:
@@ -157,4 +166,5 @@ def sdf(
         fn.hv_sdf_compute(mesh, ctypes.byref(o), ctypes.byref(out), ctypes.byref(st))
     stats = struct_dict(st)
     stats["backend"] = backend_name(st.backend)
+    stats["sign"] = {0: None, 1: "heat", 2: "winding"}.get(st.sign)
     return Grid._adopt(out, levelset=not unsigned, band=band, name="sdf", stats=stats)

@@ -131,6 +131,15 @@ static hv_status check_opts(const hv_sdf_opts *o)
     if (!(o->near_sign >= 0) || o->near_sign > 16)
         return hv__error(HV_ERR_INVALID_ARG,
                          "sdf: near-sign width must be in [0, 16] voxels, got %g", o->near_sign);
+    if (o->sign != HV_SDF_SIGN_AUTO && o->sign != HV_SDF_SIGN_HEAT &&
+        o->sign != HV_SDF_SIGN_WINDING)
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: unknown sign source %d", (int)o->sign);
+    if (o->sign == HV_SDF_SIGN_WINDING && o->magnitude == HV_SDF_EXACT && !o->unsigned_distance &&
+        (o->repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
+            (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: the winding-number sign needs the repair's orientation steps "
+                         "(a mesh as given may be oriented any way)");
     if (o->threads < 0 || o->threads > HV_MAX_THREADS)
         return hv__error(HV_ERR_INVALID_ARG, "sdf: thread count must be in [0, %d], got %d",
                          HV_MAX_THREADS, o->threads);
@@ -638,6 +647,28 @@ out:
     return st;
 }
 
+/* HV_SDF_SIGN_AUTO: the heat method's sign depends on where the block ends
+ * when the repaired mesh is still open (its inside runs out of a wide opening
+ * to the nearest walls) or when the block cuts the mesh (the heat method sees
+ * only the part inside); the winding number of the repaired mesh is the same
+ * in any block. It needs the repair's orientation. lo, hi: the input mesh's
+ * bounds (repair moves no vertex). */
+static int wants_winding(const hv_sdf_opts *o, const hv_sdf_repair_report *r, const double lo[3],
+                         const double hi[3], const int n[3], double h, const double origin[3])
+{
+    if (o->sign != HV_SDF_SIGN_AUTO)
+        return o->sign == HV_SDF_SIGN_WINDING;
+    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
+    if ((o->repair & orient) != orient)
+        return 0;
+    if (r->boundary_edges > 0)
+        return 1;
+    for (int a = 0; a < 3; a++)
+        if (lo[a] < origin[a] || hi[a] > origin[a] + n[a] * h)
+            return 1;
+    return 0;
+}
+
 hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
                          hv_sdf_stats *stats)
 {
@@ -694,12 +725,16 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     memcpy(S.n, n, sizeof S.n);
     S.h = h;
     memcpy(S.origin, origin, sizeof S.origin);
-    const int need_heat = !(unsig && exact);
     /* With the exact magnitude (signed) only the heat method's sign is used,
      * and it may run on a grid f times coarser. */
     const int sign_only = exact && !unsig;
+    /* Where the heat method's sign would depend on the block, the winding
+     * number of the repaired mesh decides instead (sign_winding.c). */
+    const int wn_sign = sign_only && wants_winding(&o, &S.repair, lo, hi, n, h, origin);
+    S.sign = !sign_only ? HV_SDF_SIGN_AUTO : wn_sign ? HV_SDF_SIGN_WINDING : HV_SDF_SIGN_HEAT;
+    const int need_heat = !(unsig && exact) && !wn_sign;
     const int f = heat_factor(&o, n);
-    S.heat_coarsen = f;
+    S.heat_coarsen = need_heat ? f : 0;
     int nh[3];
     double hh = f * h;
     for (int a = 0; a < 3; a++)
@@ -920,18 +955,32 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             for (size_t c = 0; c < count; c++)
                 res[c] = isinf(dist[c]) ? far : dist[c];
         } else {
-            /* The heat sign on the output grid. */
-            if (gh != w.g && (st = upsample(gh, phi, w.g, res)))
-                goto done;
             /* Near the surface, where the heat sign is least sure, the clean
              * nearest feature's pseudonormal decides. */
             const uint32_t *tri = w.tri;
             hv_pseudo ps;
-            const int use_ps = o.near_sign > 0;
-            if (use_ps && (st = hv__pseudo_build(M, &ps)))
+            const int have_ps = o.near_sign > 0 || wn_sign;
+            if (have_ps && (st = hv__pseudo_build(M, &ps)))
                 goto done;
             const float dlim = (float)(o.near_sign * h), hlim = (float)(1.5 * o.near_sign * h);
             size_t changed = 0, used = 0;
+            if (wn_sign) {
+                /* The winding number's sign, pseudonormals included. */
+                double ts = hv_now();
+                st = hv__winding_sign(M, w.g, dist, tri, &ps, o.near_sign * h, res,
+                                      &S.winding_evals, &used);
+                S.t_sign = hv_now() - ts;
+                if (st) {
+                    hv__pseudo_free(&ps);
+                    goto done;
+                }
+            } else if (gh != w.g && (st = upsample(gh, phi, w.g, res))) {
+                /* The heat sign on the output grid. */
+                if (have_ps)
+                    hv__pseudo_free(&ps);
+                goto done;
+            }
+            const int use_ps = o.near_sign > 0 && !wn_sign;
 #pragma omp parallel for collapse(2) schedule(dynamic, 16) reduction(+ : changed, used)
             for (int k = 0; k < n[2]; k++)
                 for (int j = 0; j < n[1]; j++)
@@ -955,7 +1004,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
                     }
             S.near_sign_cells = used;
             S.near_sign_changed = changed;
-            if (use_ps)
+            if (have_ps)
                 hv__pseudo_free(&ps);
         }
         S.t_redistance = hv_now() - tt;

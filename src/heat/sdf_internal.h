@@ -154,4 +154,16 @@ void hv__pseudo_free(hv_pseudo *ps);
  * a solid (tested on demand; thread-safe). */
 int hv__pseudo_sign(hv_pseudo *ps, const hv_mesh *m, uint32_t tri, const double p[3], int current);
 
+/* The sign of each cell of g from the generalized winding number of m (inside
+ * above 1/2; ps->W), evaluated hierarchically (sign_winding.c): cubes far from
+ * the surface (dist: the exact distance, INFINITY where not computed) whose
+ * corners agree take one sign; cells within dlim of their nearest triangle
+ * tri[c] (tri may be NULL) take its pseudonormal's sign where that feature
+ * is clean and bounds a solid. out[c] = -1e-6 h inside, +1e-6 h outside.
+ * evals counts winding-number evaluations, ps_used cells signed by
+ * pseudonormals (either may be NULL). */
+hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist,
+                           const uint32_t *tri, hv_pseudo *ps, double dlim, float *out,
+                           size_t *evals, size_t *ps_used);
+
 #endif

@@ -60,6 +60,15 @@ class SameAsCommand(unittest.TestCase):
         self.check("meshes/sphere_half_flipped.obj", ["--res", "32", "--heat", "--t-scale", "2"], res=32, heat=True, t_scale=2)
         self.check("meshes/torus_holes.obj", ["--res", "32", "--no-repair", "--domed-caps"], res=32, repair=False, domed_caps=True)
 
+    def test_sign_should_equal_command_npy_and_be_reported(self):
+        g = self.check("meshes/torus_holes.obj", ["--res", "32", "--sign", "winding"], res=32, sign="winding")
+        self.assertEqual(g.stats["sign"], "winding")
+        self.assertGreater(g.stats["winding_evals"], 0)
+        g = self.check("meshes/torus_holes.obj", ["--res", "32", "--sign", "heat"], res=32, sign="heat")
+        self.assertEqual(g.stats["sign"], "heat")
+        self.assertEqual(g.stats["winding_evals"], 0)
+        self.assertIsNone(heatvox.sdf(hvtest.scene("meshes/torus_holes.obj"), res=16, unsigned=True).stats["sign"])
+
     def test_path_form_should_equal_array_form(self):
         path = hvtest.scene("meshes/sphere_holes_flips.obj")
         a = heatvox.sdf(path, res=24)
@@ -164,6 +173,7 @@ class Arguments(unittest.TestCase):
             (dict(band=0), ValueError),
             (dict(backend="cuda"), ValueError),
             (dict(heat_coarsen=5), ValueError),
+            (dict(sign="parity"), ValueError),
             (dict(threads=-1), ValueError),
             (dict(no_such_option=1), TypeError),
         ]:

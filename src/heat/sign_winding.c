@@ -1,0 +1,246 @@
+/*
+ * The sign of a distance field from the generalized winding number of the
+ * repaired mesh (inside where it exceeds 1/2; Jacobson et al. 2013), for the
+ * cases where the heat method's sign depends on where the block ends: a mesh
+ * that stays open after repair (its inside leaks out of a wide opening to the
+ * nearest walls) and a block that cuts the mesh (the heat method sees only the
+ * part inside). The winding number is a function of position alone, so the
+ * sign is the same in any block on the same lattice (docs/METHOD.md, "Sign
+ * from the winding number").
+ *
+ * Evaluated hierarchically on the block's lattice, as in fast sweeping of
+ * octrees: cubes of 8, 4, 2 cells anchored to the lattice (not the block, so
+ * two blocks on one lattice decide alike) take one sign when no surface is
+ * near them and the winding number at their eight corners lies on one side of
+ * 1/2 by a margin; the other cubes split, down to single cells. Those take
+ * the pseudonormal of a clean nearest feature within dlim of them (exact
+ * there, as in the heat-method path) or the winding number at their centres.
+ * Only cells near broken parts of the surface or near the winding number's
+ * own 1/2 crossings (across openings) pay an evaluation.
+ */
+#include "sdf_internal.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Clusters beyond this many radii count as dipoles (hv__wn_eval: 2.5): errors
+ * of a few 0.01, knot at 128^3 1.5x faster. Where a cell's value comes out
+ * within WS_FLAT of 1/2 (open space across openings, where the winding number
+ * is flat: inside an open tube near its ends) it is evaluated again with
+ * WS_BETA_FINE, whose errors are a few 0.001. */
+#define WS_BETA 2.0
+#define WS_BETA_FINE 4.0
+#define WS_FLAT 0.08
+/* Cube edge of the first level, in cells. */
+#define WS_TOP 8
+/* A cube takes one sign only when the winding number at its corners is this
+ * far from 1/2 ... */
+#define WS_MARGIN 0.1
+/* ... and no cell of it is nearer the surface than max(WS_NEAR, WS_NEAR_REL
+ * times its edge) voxels: beyond sqrt(3)/2 voxels no surface crosses a
+ * cell, and larger cubes keep more room from rims, near which the winding
+ * number varies fastest. */
+#define WS_NEAR 1.0
+#define WS_NEAR_REL 0.5
+
+static inline long floordiv(long a, long b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+typedef struct ws_level {
+    int s;        /* cube edge in cells */
+    long r0[3];   /* lattice index of the first cube along each axis */
+    int nr[3];    /* cubes along each axis covering the block */
+    uint8_t *act; /* per cube: 1 to be decided at this level */
+    float *w;     /* (nr + 1)^3 corner values, NAN where not needed */
+} ws_level;
+
+/* Winding number at the lattice point with global index G. */
+static double wn_at(const hv_wn_tree *W, const hv_grid *g, const long base[3], const long G[3])
+{
+    double p[3];
+    for (int a = 0; a < 3; a++)
+        p[a] = g->origin[a] + ((double)(G[a] - base[a]) + 0.5) * g->h;
+    return hv__wn_eval_beta(W, p, UINT32_MAX, WS_BETA);
+}
+
+hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist,
+                           const uint32_t *tri, hv_pseudo *ps, double dlim, float *out,
+                           size_t *evals_out, size_t *ps_used)
+{
+    const int *n = g->n;
+    const double h = g->h;
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    /* Global lattice index of cell 0: blocks on one lattice differ by whole cells. */
+    long base[3];
+    for (int a = 0; a < 3; a++) {
+        double q = g->origin[a] / h;
+        /* Beyond 2^40 cells from the origin the block anchors its own cubes. */
+        base[a] = fabs(q) < 0x1p40 ? lround(q) : 0;
+    }
+    const hv_wn_tree *W = &ps->W;
+    hv_status st = HV_OK;
+
+    /* Sign marker: 0 undecided, else +1 outside / -1 inside. */
+    int8_t *sg = hv_calloc(hv_grid_count(g), 1);
+    ws_level L[4];
+    memset(L, 0, sizeof L);
+    size_t evals = 0;
+    if (!sg) {
+        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the winding-number sign");
+        goto out;
+    }
+    int nlev = 0;
+    for (int s = WS_TOP; s >= 2; s /= 2, nlev++) {
+        ws_level *lv = &L[nlev];
+        lv->s = s;
+        size_t nc = 1, nw = 1;
+        for (int a = 0; a < 3; a++) {
+            lv->r0[a] = floordiv(base[a], s);
+            lv->nr[a] = (int)(floordiv(base[a] + n[a] - 1, s) - lv->r0[a] + 1);
+            nc *= (size_t)lv->nr[a];
+            nw *= (size_t)lv->nr[a] + 1;
+        }
+        lv->act = hv_calloc(nc, 1);
+        lv->w = hv_malloc(nw * sizeof(float));
+        if (!lv->act || !lv->w) {
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the winding-number sign");
+            goto out;
+        }
+    }
+    /* Every cube of the first level is to be decided. */
+    {
+        ws_level *lv = &L[0];
+        memset(lv->act, 1, (size_t)lv->nr[0] * lv->nr[1] * lv->nr[2]);
+    }
+    for (int l = 0; l < nlev; l++) {
+        ws_level *lv = &L[l];
+        const int s = lv->s;
+        const int nr0 = lv->nr[0], nr1 = lv->nr[1], nr2 = lv->nr[2];
+        const int nw0 = nr0 + 1, nw1 = nr1 + 1, nw2 = nr2 + 1;
+        /* Corners of active cubes. */
+#pragma omp parallel for collapse(2) schedule(dynamic, 4) reduction(+ : evals)
+        for (int cz = 0; cz < nw2; cz++)
+            for (int cy = 0; cy < nw1; cy++)
+                for (int cx = 0; cx < nw0; cx++) {
+                    int need = 0;
+                    for (int q = 0; q < 8 && !need; q++) {
+                        int rx = cx - (q & 1), ry = cy - (q >> 1 & 1), rz = cz - (q >> 2 & 1);
+                        if (rx >= 0 && ry >= 0 && rz >= 0 && rx < nr0 && ry < nr1 && rz < nr2)
+                            need = lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)];
+                    }
+                    float v = NAN;
+                    if (need) {
+                        long G[3] = {(lv->r0[0] + cx) * s, (lv->r0[1] + cy) * s,
+                                     (lv->r0[2] + cz) * s};
+                        v = (float)wn_at(W, g, base, G);
+                        evals++;
+                    }
+                    lv->w[cx + (size_t)nw0 * (cy + (size_t)nw1 * cz)] = v;
+                }
+        /* Decide or split each active cube. */
+        const float dnear = (float)(fmax(WS_NEAR, WS_NEAR_REL * s) * h);
+        ws_level *next = l + 1 < nlev ? &L[l + 1] : NULL;
+#pragma omp parallel for collapse(2) schedule(dynamic, 4)
+        for (int rz = 0; rz < nr2; rz++)
+            for (int ry = 0; ry < nr1; ry++)
+                for (int rx = 0; rx < nr0; rx++) {
+                    if (!lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)])
+                        continue;
+                    int lo[3], hi[3];
+                    const int r[3] = {rx, ry, rz};
+                    for (int a = 0; a < 3; a++) {
+                        long c0 = (lv->r0[a] + r[a]) * s - base[a];
+                        lo[a] = c0 < 0 ? 0 : (int)c0;
+                        hi[a] = c0 + s > n[a] ? n[a] : (int)(c0 + s);
+                    }
+                    int side = 0;
+                    for (int q = 0; q < 8; q++) {
+                        float v = lv->w[(rx + (q & 1)) +
+                                        (size_t)nw0 * ((ry + (q >> 1 & 1)) +
+                                                       (size_t)nw1 * (rz + (q >> 2 & 1)))];
+                        int sd = v > 0.5 + WS_MARGIN ? -1 : v < 0.5 - WS_MARGIN ? 1 : 0;
+                        if (!sd || (side && sd != side)) {
+                            side = 0;
+                            break;
+                        }
+                        side = sd;
+                    }
+                    for (int k = lo[2]; k < hi[2] && side; k++)
+                        for (int j = lo[1]; j < hi[1] && side; j++)
+                            for (int i = lo[0]; i < hi[0]; i++)
+                                if (dist[i + sy * j + sz * k] < dnear) {
+                                    side = 0;
+                                    break;
+                                }
+                    if (side) {
+                        for (int k = lo[2]; k < hi[2]; k++)
+                            for (int j = lo[1]; j < hi[1]; j++)
+                                memset(sg + lo[0] + sy * j + sz * k, side, (size_t)(hi[0] - lo[0]));
+                        continue;
+                    }
+                    if (next) {
+                        /* The 8 children of this cube at the next level. */
+                        for (int q = 0; q < 8; q++) {
+                            long cr[3];
+                            int ok = 1;
+                            for (int a = 0; a < 3; a++) {
+                                cr[a] = (lv->r0[a] + r[a]) * 2 + (q >> a & 1) - next->r0[a];
+                                ok &= cr[a] >= 0 && cr[a] < next->nr[a];
+                            }
+                            if (ok)
+                                next->act[cr[0] + (size_t)next->nr[0] *
+                                                      (cr[1] + (size_t)next->nr[1] * cr[2])] = 1;
+                        }
+                    }
+                }
+    }
+    /* Cells left undecided: within dlim of a clean feature whose faces bound a
+     * solid, its pseudonormal (exact there, and no evaluation); elsewhere the
+     * winding number at the centre. */
+    size_t used = 0;
+    const float dl = (float)dlim;
+#pragma omp parallel for collapse(2) schedule(dynamic, 4) reduction(+ : evals, used)
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++) {
+            int8_t *row = sg + sy * j + sz * k;
+            for (int i = 0; i < n[0]; i++) {
+                if (row[i])
+                    continue;
+                const size_t c = (size_t)i + sy * j + sz * k;
+                double p[3];
+                hv_grid_cell_center(g, i, j, k, p);
+                if (tri && dist[c] < dl && tri[c] != UINT32_MAX) {
+                    int s = hv__pseudo_sign(ps, m, tri[c], p, 0);
+                    if (s) {
+                        row[i] = (int8_t)s;
+                        used++;
+                        continue;
+                    }
+                }
+                double wv = hv__wn_eval_beta(W, p, UINT32_MAX, WS_BETA);
+                evals++;
+                if (fabs(wv - 0.5) < WS_FLAT) {
+                    wv = hv__wn_eval_beta(W, p, UINT32_MAX, WS_BETA_FINE);
+                    evals++;
+                }
+                row[i] = wv > 0.5 ? -1 : 1;
+            }
+        }
+    if (ps_used)
+        *ps_used = used;
+    /* The sign as a value below any distance the pseudonormal test looks at. */
+    const float tiny = (float)(1e-6 * h);
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < hv_grid_count(g); c++)
+        out[c] = sg[c] < 0 ? -tiny : tiny;
+out:
+    for (int l = 0; l < 4; l++) {
+        hv_free(L[l].act);
+        hv_free(L[l].w);
+    }
+    hv_free(sg);
+    if (evals_out)
+        *evals_out = evals;
+    return st;
+}
