@@ -910,6 +910,175 @@ START_TEST(sdf2d_command_should_write_the_library_result_as_exr_and_png)
 }
 END_TEST
 
+/* ---- a sign that does not depend on the block ---- */
+
+/* Generalized winding number of polyline xy[0..m) at (x, y), brute force. */
+static double direct_winding(const double *xy, int m, double x, double y)
+{
+    double w = 0;
+    for (int k = 0; k + 1 < m; k++) {
+        double ax = xy[2 * k] - x, ay = xy[2 * k + 1] - y, bx = xy[2 * k + 2] - x,
+               by = xy[2 * k + 3] - y;
+        w += atan2(ax * by - ay * bx, ax * bx + ay * by);
+    }
+    return w / (2 * M_PI);
+}
+
+static float at2(const hv_grid *g, int i, int j) { return g->v[i + (size_t)g->n[0] * j]; }
+
+/* An open polyline (an arc of 300 degrees, a U) at pads 2, 8 and 40 on one
+ * lattice: the same inside, none on the outer layer, and the inside of the
+ * winding number (the heat method's inside leaked out of the opening). A
+ * window through it equals the full run's values. */
+static void check_open_curve(const char *what, const double *xy, int m)
+{
+    size_t st[2] = {0, (size_t)m};
+    hv_curves *c = NULL;
+    TL_ASSERT_OK(hv_curves_from_arrays(&c, xy, (size_t)m, st, 1, NULL));
+    const int pads[3] = {2, 8, 40};
+    hv_grid *g[3];
+    hv_sdf2d_stats S;
+    for (int q = 0; q < 3; q++) {
+        hv_sdf2d_opts o;
+        hv_sdf2d_opts_default(&o);
+        o.voxel_size = 0.02;
+        o.pad = pads[q];
+        TL_ASSERT_OK(hv_curves_sdf(c, &o, &g[q], &S));
+        ck_assert_int_eq(S.sign, 2);
+        ck_assert_uint_eq(S.open_ends, 2);
+    }
+    for (int q = 0; q < 3; q++) {
+        const hv_grid *a = g[0], *b = g[q];
+        int off[2];
+        for (int d = 0; d < 2; d++)
+            off[d] = (int)lround((a->origin[d] - b->origin[d]) / a->h);
+        size_t I = 0, U = 0, outer = 0, WI = 0, WU = 0;
+        for (int j = 0; j < a->n[1]; j++)
+            for (int i = 0; i < a->n[0]; i++) {
+                int x = at2(a, i, j) < 0, y = at2(b, i + off[0], j + off[1]) < 0;
+                I += x && y;
+                U += x || y;
+            }
+        for (int j = 0; j < b->n[1]; j++)
+            for (int i = 0; i < b->n[0]; i++) {
+                int in = at2(b, i, j) < 0;
+                if (i == 0 || j == 0 || i == b->n[0] - 1 || j == b->n[1] - 1)
+                    outer += in;
+                double px = b->origin[0] + (i + 0.5) * b->h, py = b->origin[1] + (j + 0.5) * b->h;
+                int w = direct_winding(xy, m, px, py) > 0.5;
+                WI += w && in;
+                WU += w || in;
+            }
+        double iou = (double)I / (double)U, wiou = (double)WI / (double)WU;
+        printf("%-44s pad %2d: IoU %.5f against pad 2, %zu inside on the outer layer, %.5f "
+               "against the winding number\n",
+               what, pads[q], iou, outer, wiou);
+        ck_assert_msg(iou >= 0.995 && outer == 0 && wiou >= 0.98, "%s, pad %d", what, pads[q]);
+    }
+    /* A window through the curve: the full run's signs, and its values bit for
+     * bit within 2 cells of the curve (beyond, the distance is passed on from
+     * the segments in the block, as the 3D path does outside its band). */
+    hv_sdf2d_opts o;
+    hv_sdf2d_opts_default(&o);
+    o.voxel_size = 0.02;
+    o.use_bbox = 1;
+    const hv_grid *f = g[1];
+    int i0 = f->n[0] / 3, j0 = f->n[1] / 4;
+    o.bbox[0] = f->origin[0] + i0 * f->h;
+    o.bbox[1] = f->origin[1] + j0 * f->h;
+    o.bbox[2] = f->origin[0] + (f->n[0] - 2) * f->h;
+    o.bbox[3] = f->origin[1] + (3 * f->n[1] / 4) * f->h;
+    hv_grid *w = NULL;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &w, &S));
+    ck_assert_int_eq(S.sign, 2);
+    size_t diff = 0, sdiff = 0, band = 0;
+    for (int j = 0; j < w->n[1]; j++)
+        for (int i = 0; i < w->n[0]; i++) {
+            float a = at2(w, i, j), b = at2(f, i + i0, j + j0);
+            sdiff += (a < 0) != (b < 0);
+            if (fabsf(b) <= 2 * f->h) {
+                band++;
+                diff += a != b;
+            }
+        }
+    ck_assert_msg(sdiff == 0 && diff == 0 && band > 100,
+                  "%s: %zu signs and %zu of %zu band values of the window differ from the full run",
+                  what, sdiff, diff, band);
+    /* On request, the heat method: its inside reaches the walls. */
+    hv_sdf2d_opts_default(&o);
+    o.voxel_size = 0.02;
+    o.pad = 8;
+    o.sign = 1;
+    hv_grid *hg = NULL;
+    TL_ASSERT_OK(hv_curves_sdf(c, &o, &hg, &S));
+    ck_assert_int_eq(S.sign, 1);
+    size_t outer = 0;
+    for (int j = 0; j < hg->n[1]; j++)
+        for (int i = 0; i < hg->n[0]; i++)
+            if (i == 0 || j == 0 || i == hg->n[0] - 1 || j == hg->n[1] - 1)
+                outer += at2(hg, i, j) < 0;
+    ck_assert_uint_gt(outer, 0);
+    hv_grid_destroy(&hg);
+    hv_grid_destroy(&w);
+    for (int q = 0; q < 3; q++)
+        hv_grid_destroy(&g[q]);
+    hv_curves_destroy(&c);
+}
+
+START_TEST(open_curves_should_not_depend_on_the_block)
+{
+    double arc[2 * 101];
+    for (int k = 0; k <= 100; k++) {
+        double a = (120 + 3.0 * k) * M_PI / 180;
+        arc[2 * k] = cos(a), arc[2 * k + 1] = sin(a);
+    }
+    check_open_curve("arc of 300 degrees", arc, 101);
+    const double u[8] = {-1, 1, -1, -1, 1, -1, 1, 1};
+    check_open_curve("U", u, 4);
+}
+END_TEST
+
+START_TEST(sign_options_should_be_checked)
+{
+    const double u[8] = {-1, 1, -1, -1, 1, -1, 1, 1};
+    size_t st[2] = {0, 4};
+    hv_curves *c = NULL;
+    TL_ASSERT_OK(hv_curves_from_arrays(&c, u, 4, st, 1, NULL));
+    hv_sdf2d_opts o;
+    hv_sdf2d_opts_default(&o);
+    o.res = 32;
+    hv_grid *g = NULL;
+    o.sign = 3;
+    ck_assert_int_eq(hv_curves_sdf(c, &o, &g, NULL), HV_ERR_INVALID_ARG);
+    o.sign = 2;
+    o.repair = 0;
+    ck_assert_int_eq(hv_curves_sdf(c, &o, &g, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "orientation"));
+    ck_assert_ptr_null(g);
+    hv_curves_destroy(&c);
+    char dir[] = "/tmp/hv_check_sdf2d_sign_XXXXXX";
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char in[128], exr[128];
+    snprintf(in, sizeof in, "%s/u.txt", dir);
+    snprintf(exr, sizeof exr, "%s/u.exr", dir);
+    FILE *f = fopen(in, "w");
+    fputs("M -1 1\nL -1 -1\nL 1 -1\nL 1 1\n", f);
+    fclose(f);
+    ck_assert_int_eq(run_cmd("'%s' sdf2d '%s' -o '%s' --sign sideways 2>/dev/null%s", in, exr, ""),
+                     2);
+    ck_assert_int_eq(
+        run_cmd("'%s' sdf2d '%s' -o '%s' --sign winding --no-repair 2>/dev/null%s", in, exr, ""),
+        1);
+    ck_assert_int_eq(
+        run_cmd("'%s' sdf2d '%s' -o '%s' --res 32 | grep -q 'sign from the winding number%s'", in,
+                exr, ""),
+        0);
+    unlink(in);
+    unlink(exr);
+    rmdir(dir);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("sdf2d");
@@ -925,6 +1094,8 @@ int main(void)
     tcase_add_test(tc, broken_shapes_side_by_side_and_nested_should_each_find_their_inside);
     tcase_add_test(tc, without_repair_a_duplicate_drawn_backwards_should_break_the_sign);
     tcase_add_test(tc, heat_magnitude_should_approximate_the_distance);
+    tcase_add_test(tc, open_curves_should_not_depend_on_the_block);
+    tcase_add_test(tc, sign_options_should_be_checked);
     tcase_add_test(tc, grid_should_follow_res_and_pad_around_the_curves);
     suite_add_tcase(s, tc);
     tc = tcase_create("nesting index");

@@ -28,6 +28,10 @@ static void help(void)
            "  --heat           |distance| from the heat method (default: exact distance to\n"
            "                   the segments, with the heat method's sign)\n"
            "  --t-scale S      diffusion time (S h)^2 (default 1)\n"
+           "  --sign S         auto (default: the winding number of the repaired curves\n"
+           "                   where they stay open or the block cuts them, so that the\n"
+           "                   answer does not depend on the block; the heat method\n"
+           "                   otherwise), heat, or winding\n"
            "  --no-repair      no welding, duplicate removal or orientation repair\n"
            "  --backend B      auto, mg, fftw, opencl\n"
            "  -q / -v          no summary / more detail\n"
@@ -80,6 +84,17 @@ int cmd_sdf2d(int argc, char **argv)
             i += 4;
         } else if (!strcmp(a, "--heat")) {
             o.heat_magnitude = 1;
+        } else if (!strcmp(a, "--sign")) {
+            const char *v = more ? argv[i + 1] : "";
+            if (!strcmp(v, "auto"))
+                o.sign = 0;
+            else if (!strcmp(v, "heat"))
+                o.sign = 1;
+            else if (!strcmp(v, "winding"))
+                o.sign = 2;
+            else
+                return cli_usage_error("sdf2d", "--sign needs auto, heat or winding, got '%s'", v);
+            i++;
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--backend")) {
@@ -140,9 +155,14 @@ int cmd_sdf2d(int argc, char **argv)
                "duplicates dropped; %zu reversed; %zu chains, %zu closed)\n",
                S.segments_in, S.segments_out, S.points_welded, S.zero_length_removed,
                S.duplicates_removed, S.segments_flipped, S.chains, S.cycles);
-        printf("  %d diffusion level%s on %s, %zu decayed faces; %.3f s (+ %.3f s writing)\n",
-               S.levels, S.levels == 1 ? "" : "s", hv_backend_name(S.backend), S.dead_faces,
-               S.t_total, t_write);
+        if (S.sign == 2)
+            printf("  sign from the winding number (%zu open ends, %zu evaluations); %.3f s (+ "
+                   "%.3f s writing)\n",
+                   S.open_ends, S.winding_evals, S.t_total, t_write);
+        else
+            printf("  %d diffusion level%s on %s, %zu decayed faces; %.3f s (+ %.3f s writing)\n",
+                   S.levels, S.levels == 1 ? "" : "s", hv_backend_name(S.backend), S.dead_faces,
+                   S.t_total, t_write);
         if (out)
             printf("  wrote %s\n", out);
         if (png)

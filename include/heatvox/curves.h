@@ -79,6 +79,11 @@ typedef struct hv_sdf2d_opts {
     double weld_tol;    /* endpoints closer than weld_tol * h are one point; default 1e-3 */
     hv_backend backend; /* default AUTO */
     double tol;         /* solver relative residual; default 1e-10 */
+    int sign;           /* where the sign comes from (exact magnitude): 0 auto (default: the
+                           generalized winding number of the repaired curves where they stay
+                           open or the block cuts them, the heat method otherwise), 1 the heat
+                           method, 2 the winding number (needs repair); the values of
+                           hv_sdf_sign in sdf.h */
 } hv_sdf2d_opts;
 
 /*
@@ -114,6 +119,9 @@ typedef struct hv_sdf2d_stats {
     size_t dead_faces;
     hv_backend backend;
     double t_repair, t_splat, t_diffuse, t_normalize, t_poisson, t_distance, t_total;
+    int sign;             /* the sign that ran: 1 heat method, 2 winding number */
+    size_t open_ends;     /* points at the end of an open chain after repair */
+    size_t winding_evals; /* winding-number evaluations of the sign */
 } hv_sdf2d_stats;
 
 HV_API void hv_sdf2d_opts_default(hv_sdf2d_opts *o);

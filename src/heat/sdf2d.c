@@ -61,6 +61,12 @@ static hv_status check_opts(const hv_sdf2d_opts *o)
     if (!(o->weld_tol >= 0) || !(o->weld_tol < 1))
         return hv__error(HV_ERR_INVALID_ARG, "sdf2d: weld tolerance must be in [0, 1), got %g",
                          o->weld_tol);
+    if (o->sign < 0 || o->sign > 2)
+        return hv__error(HV_ERR_INVALID_ARG, "sdf2d: unknown sign source %d", o->sign);
+    if (o->sign == 2 && !o->repair && !o->heat_magnitude)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf2d: the winding-number sign needs the repair's orientation "
+                         "(curves as given may run any way)");
     if (!(o->tol >= 1e-12 && o->tol < 1))
         return hv__error(HV_ERR_INVALID_ARG, "sdf2d: tolerance must be in [1e-12, 1), got %g",
                          o->tol);
@@ -164,6 +170,24 @@ static hv_status solver_create(hv_solver **s, const hv_problem *p, const hv_solv
 
 /* ---- the method ---- */
 
+/* Points at the end of an open chain: used by exactly one segment. */
+static hv_status open_ends(size_t np, const sdf2d_seg *S, size_t ns, size_t *ends)
+{
+    uint8_t *deg = calloc(np ? np : 1, 1);
+    if (!deg)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for %zu points", np);
+    for (size_t k = 0; k < ns; k++) {
+        deg[S[k].a] += deg[S[k].a] < 2;
+        deg[S[k].b] += deg[S[k].b] < 2;
+    }
+    size_t e = 0;
+    for (size_t k = 0; k < np; k++)
+        e += deg[k] == 1;
+    free(deg);
+    *ends = e;
+    return HV_OK;
+}
+
 hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid **out,
                         hv_sdf2d_stats *stats)
 {
@@ -231,6 +255,23 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
         st = hv__error(HV_ERR_INVALID_ARG, "sdf2d: no segment of non-zero length");
         goto done;
     }
+
+    /* The sign: the winding number of the repaired curves where the heat
+     * method's would depend on the block (open chains, or curves beyond the
+     * block); sdf2d_winding.c. */
+    int wn_sign = 0;
+    if (!o.heat_magnitude) {
+        if ((st = open_ends(c->npoints, Sg, ns, &S.open_ends)))
+            goto done;
+        int cut = 0;
+        for (size_t k = 0; k < c->npoints && !cut; k++)
+            for (int a = 0; a < 2; a++)
+                cut |= P[2 * k + a] < org[a] || P[2 * k + a] > org[a] + n[a] * h;
+        wn_sign = o.sign == 2 || (o.sign == 0 && o.repair && (S.open_ends > 0 || cut));
+    }
+    S.sign = wn_sign ? 2 : 1;
+    if (wn_sign)
+        goto output;
 
     /* 2. Splat length-weighted normals (right-hand side of each segment). */
     if ((st = hv__progress(0.05, "splat")))
@@ -381,6 +422,7 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
     S.t_poisson = hv_now() - tt;
 
     /* 7. Output, with the exact distance unless asked for the heat magnitude. */
+output:;
     double org3[3] = {org[0], org[1], 0};
     int n3[3] = {n[0], n[1], 1};
     if ((st = hv_grid_create(&g, 2, n3, h, org3)))
@@ -389,10 +431,28 @@ hv_status hv_curves_sdf(const hv_curves *c, const hv_sdf2d_opts *opts, hv_grid *
         if ((st = hv__progress(0.85, "distance")))
             goto done;
         tt = hv_now();
+        if (!rhs && !(rhs = malloc(count * sizeof *rhs))) {
+            st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the distance");
+            goto done;
+        }
         if ((st = hv__sdf2d_exact_distance(P, Sg, ns, n, h, org, rhs)))
             goto done;
-        for (size_t i = 0; i < count; i++)
-            g->v[i] = (float)(phi[i] < 0 ? -rhs[i] : rhs[i]);
+        if (wn_sign) {
+            int8_t *sg = malloc(count);
+            if (!sg) {
+                st = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the sign");
+                goto done;
+            }
+            st = hv__sdf2d_winding_sign(P, Sg, ns, n, h, org, rhs, sg, &S.winding_evals);
+            for (size_t i = 0; i < count && !st; i++)
+                g->v[i] = (float)(sg[i] < 0 ? -rhs[i] : rhs[i]);
+            free(sg);
+            if (st)
+                goto done;
+        } else {
+            for (size_t i = 0; i < count; i++)
+                g->v[i] = (float)(phi[i] < 0 ? -rhs[i] : rhs[i]);
+        }
         S.t_distance = hv_now() - tt;
     } else {
         for (size_t i = 0; i < count; i++)

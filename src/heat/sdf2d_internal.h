@@ -61,4 +61,12 @@ hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t 
 hv_status hv__sdf2d_exact_distance(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
                                    double h, const double org[2], double *dist);
 
+/* sg[c] = -1 inside, +1 outside: the generalized winding number of the ns
+ * segments above 1/2 at cell centre c, evaluated hierarchically (dist: the
+ * exact distance of each cell). evals (may be NULL) counts evaluations.
+ * sdf2d_winding.c. */
+hv_status hv__sdf2d_winding_sign(const double *P, const sdf2d_seg *S, size_t ns, const int n[2],
+                                 double h, const double org[2], const double *dist, int8_t *sg,
+                                 size_t *evals);
+
 #endif
