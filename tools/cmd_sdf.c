@@ -75,12 +75,13 @@ static const char *sign_name(hv_sdf_sign s)
     return s == HV_SDF_SIGN_WINDING ? "winding" : s == HV_SDF_SIGN_HEAT ? "heat" : "none";
 }
 
-/* One line rewritten in place on a terminal, one line per stage otherwise. */
+/* One line rewritten in place on a terminal, one line per stage otherwise,
+ * with the peak memory so far: a stage's own peak shows at the next line. */
 static int on_progress(double fraction, const char *stage, void *user)
 {
     int tty = *(const int *)user;
-    fprintf(stderr, "%sheatvox sdf: %-10s %3d%%%s", tty ? "\r" : "", stage,
-            (int)(100 * fraction + 0.5), tty && fraction < 1 ? "" : "\n");
+    fprintf(stderr, "%sheatvox sdf: %-10s %3d%%  peak %6.0f MB%s", tty ? "\r" : "", stage,
+            (int)(100 * fraction + 0.5), hv_peak_rss() / 1e6, tty && fraction < 1 ? "" : "\n");
     fflush(stderr);
     return 0;
 }

@@ -15,7 +15,7 @@
  * repeat until nothing changes. Until 2025 narrow bands also ran the sweeps over the whole
  * grid: 1.2 s of 6 for the bunny at 256^3.
  */
-#include "sdf_internal.h"
+#include "exact.h"
 #include "core/error.h"
 
 #include <math.h>

@@ -9,7 +9,8 @@
  * faces bound a solid by their winding number, so open sheets, faces buried
  * in other parts, non-manifold fans and leftover flips keep the heat sign.
  */
-#include "sdf_internal.h"
+#include "exact.h"
+#include "pseudonormal.h"
 #include "core/error.h"
 
 #include <math.h>

@@ -7,7 +7,8 @@
  * component outward by its generalized winding number (inward for shells
  * nested inside an odd number of others, e.g. the inner wall of a hollow ball).
  */
-#include "sdf_internal.h"
+#include "heatvox/sdf.h"
+#include "winding.h"
 #include "core/error.h"
 
 #include <math.h>

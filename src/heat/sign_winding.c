@@ -28,10 +28,10 @@
 /* Clusters beyond this many radii count as dipoles (hv__wn_eval: 2.5): errors
  * of a few 0.01, knot at 128^3 1.5x faster. Where a cell's value comes out
  * within WS_FLAT of 1/2 (open space across openings, where the winding number
- * is flat: inside an open tube near its ends) it is evaluated again with
- * WS_BETA_FINE, whose errors are a few 0.001. */
+ * is flat: inside an open tube near its ends) it is evaluated again with the
+ * dipoles twice as far, whose errors are about a quarter, until it is clear
+ * of 1/2 by twice that (or they start beyond 32 radii). */
 #define WS_BETA 2.0
-#define WS_BETA_FINE 4.0
 #define WS_FLAT 0.08
 /* Cube edge of the first level, in cells. */
 #define WS_TOP 8
@@ -218,10 +218,13 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
                         continue;
                     }
                 }
-                double wv = hv__wn_eval_beta(W, p, UINT32_MAX, WS_BETA);
+                double beta = WS_BETA, flat = WS_FLAT;
+                double wv = hv__wn_eval_beta(W, p, UINT32_MAX, beta);
                 evals++;
-                if (fabs(wv - 0.5) < WS_FLAT) {
-                    wv = hv__wn_eval_beta(W, p, UINT32_MAX, WS_BETA_FINE);
+                while (fabs(wv - 0.5) < flat && beta < 32) {
+                    beta *= 2;
+                    flat /= 4;
+                    wv = hv__wn_eval_beta(W, p, UINT32_MAX, beta);
                     evals++;
                 }
                 row[i] = wv > 0.5 ? -1 : 1;

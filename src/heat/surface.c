@@ -11,7 +11,8 @@
  * larger than a voxel are first split 1-to-4 with culling against the block,
  * so that a huge triangle mostly outside it costs little.
  */
-#include "sdf_internal.h"
+#include "exact.h"
+#include "surface.h"
 #include "core/error.h"
 
 #include <math.h>

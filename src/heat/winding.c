@@ -5,7 +5,7 @@
  * term, (sum of vector areas) . (c - p) / (4 pi |c - p|^3); near leaves sum
  * exact solid angles (Van Oosterom & Strackee 1983).
  */
-#include "sdf_internal.h"
+#include "winding.h"
 #include "core/error.h"
 
 #include <math.h>
