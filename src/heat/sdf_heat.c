@@ -407,161 +407,144 @@ hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const
     memset(w, 0, sizeof *w);
     w->q = q;
     hv_status st = HV_OK;
-    const int need_heat = 1;
     const size_t hcount = hv_grid_count(gh);
     const int nh[3] = {gh->n[0], gh->n[1], gh->n[2]};
     const double hh = gh->h;
     double tt = hv_now();
     const int ncomp = unsig ? 1 : 3;
     /* Backend opencl: stages 2-6 keep their fields on the device (sdf_cl.c). */
-    const int on_device = need_heat && o->backend == HV_BACKEND_OPENCL;
-    if (on_device) {
-        S->t_splat += hv_now() - tt;
-        if ((st = hv__sdf_heat_cl(w->q, gh, nlev, unsig, o, S)))
+    if (o->backend == HV_BACKEND_OPENCL) {
+        st = hv__sdf_heat_cl(q, gh, nlev, unsig, o, S);
+        goto out;
+    }
+    for (int b = 0; b < ncomp; b++)
+        if (!(w->Y0[b] = hv_calloc(hcount, sizeof(float)))) {
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
+                           hcount);
             goto out;
-    }
-    if (need_heat && !on_device) {
-        for (int b = 0; b < ncomp; b++)
-            if (!(w->Y0[b] = hv_calloc(hcount, sizeof(float)))) {
-                st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
-                               hcount);
-                goto out;
-            }
-        if (unsig)
-            splat(gh, w->q, 1, NULL, 1, w->Y0);
-        else
-            splat(gh, w->q, 3, w->q->w, 3, w->Y0);
-    }
-    if (!on_device)
-        S->t_splat += hv_now() - tt;
+        }
+    if (unsig)
+        splat(gh, w->q, 1, NULL, 1, w->Y0);
+    else
+        splat(gh, w->q, 3, w->q->w, 3, w->Y0);
+    S->t_splat += hv_now() - tt;
 
     /* 3. Diffuse: one backward-Euler step per level, the components sharing a solver. */
     tt = hv_now();
     double tau[9] = {0};
-    const int keep_heat = need_heat && !unsig && o->local_shift;
-    if (need_heat && !on_device) {
-        w->Ybuf = hv_malloc((size_t)nlev * ncomp * hcount * sizeof(float));
-        if (!w->Ybuf) {
-            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells",
-                           nlev * ncomp, hcount);
-            goto out;
-        }
-        double f2 = 0;
-        for (int b = 0; b < ncomp; b++)
-            f2 += norm2(w->Y0[b], hcount);
-        hv_solver_opts so;
-        hv_solver_opts_default(&so);
-        so.backend = o->backend;
-        so.tol = o->diffuse_tol;
-        so.max_iter = 100;
-        for (int k = 0; k < nlev; k++) {
-            if (!(w->Y[k] = malloc(3 * sizeof(float *)))) {
-                st = hv__error(HV_ERR_NOMEM, "sdf: out of memory");
-                goto out;
-            }
-            for (int b = 0; b < ncomp; b++)
-                w->Y[k][b] = w->Ybuf + ((size_t)k * ncomp + b) * hcount;
-            double t = S->t * pow(16.0, k);
-            hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 1.0, t};
-            if ((st = stage(0.1 + 0.5 * k / nlev, "diffuse")))
-                goto out;
-            if ((st = solver_create(&w->solver, &pb, &so)))
-                goto out;
-            for (int b = 0; b < ncomp; b++) {
-                hv_solve_info info;
-                if ((st = hv_solver_solve(w->solver, w->Y0[b], w->Y[k][b], &info)))
-                    goto out;
-                S->diffuse_iterations += info.iterations;
-                S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
-                S->backend = info.backend;
-            }
-            if (k == 0 && keep_heat) {
-                w->heat = w->solver;
-                w->solver = NULL;
-            } else {
-                hv_solver_destroy(&w->solver);
-            }
-            /* ||e||_2 <= ||r||_2 <= relres ||f||_2 since (I - t Lap) >= I; for the
-             * unsigned gradient the bound grows by 2/h per component. */
-            double bound = fmax(S->diffuse_relres, o->diffuse_tol) * sqrt(f2);
-            tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / hh : 1.0);
-        }
+    const int keep_heat = !unsig && o->local_shift;
+    w->Ybuf = hv_malloc((size_t)nlev * ncomp * hcount * sizeof(float));
+    if (!w->Ybuf) {
+        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells",
+                       nlev * ncomp, hcount);
+        goto out;
     }
-    if (!on_device)
-        S->t_diffuse = hv_now() - tt;
-
-    float *phi = gh->v;
-    if (need_heat && !on_device) {
-        /* 4. Normalize on faces, divergence. */
-        if ((st = stage(0.6, "normalize")))
-            goto out;
-        tt = hv_now();
-        if (!(w->rhs = hv_malloc(hcount * sizeof(float)))) {
-            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)",
-                           hcount);
+    double f2 = 0;
+    for (int b = 0; b < ncomp; b++)
+        f2 += norm2(w->Y0[b], hcount);
+    hv_solver_opts so;
+    hv_solver_opts_default(&so);
+    so.backend = o->backend;
+    so.tol = o->diffuse_tol;
+    so.max_iter = 100;
+    for (int k = 0; k < nlev; k++) {
+        if (!(w->Y[k] = malloc(3 * sizeof(float *)))) {
+            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory");
             goto out;
         }
-        if (nlev == 1 && !unsig)
-            S->dead_faces = build_rhs1(w->Y[0], tau[0], gh, w->Y0, w->rhs);
-        else
-            S->dead_faces = build_rhs(w->Y, nlev, tau, unsig, gh, w->rhs);
-        for (int b = 0; b < ncomp; b++) {
-            hv_free(w->Y0[b]);
-            w->Y0[b] = NULL;
-        }
-        hv_free(w->Ybuf);
-        w->Ybuf = NULL;
-        S->t_normalize = hv_now() - tt;
-
-        /* 5. Poisson. */
-        if ((st = stage(0.65, "poisson")))
+        for (int b = 0; b < ncomp; b++)
+            w->Y[k][b] = w->Ybuf + ((size_t)k * ncomp + b) * hcount;
+        double t = S->t * pow(16.0, k);
+        hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 1.0, t};
+        if ((st = stage(0.1 + 0.5 * k / nlev, "diffuse")))
             goto out;
-        tt = hv_now();
-        hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 0.0, 1.0};
-        hv_solver_opts so;
-        hv_solver_opts_default(&so);
-        so.backend = o->backend;
-        so.tol = o->poisson_tol;
-        so.max_iter = 100;
         if ((st = solver_create(&w->solver, &pb, &so)))
             goto out;
-        hv_solve_info info;
-        if ((st = hv_solver_solve(w->solver, w->rhs, phi, &info)))
-            goto out;
-        S->poisson_iterations = info.iterations;
-        S->poisson_relres = info.relres;
-        S->backend = info.backend;
-        hv_solver_destroy(&w->solver);
-        hv_free(w->rhs);
-        w->rhs = NULL;
-        S->t_poisson = hv_now() - tt;
-    }
-    if (need_heat && !on_device) {
-        /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
-        if ((st = stage(0.8, "shift")))
-            goto out;
-        tt = hv_now();
-        double num = 0, den = 0, rms = 0;
-#pragma omp parallel for reduction(+ : num, den, rms) schedule(static)
-        for (size_t p = 0; p < w->q->count; p++) {
-            double val = interp(gh, phi, w->q->x + 3 * p);
-            num += w->q->area[p] * val;
-            den += w->q->area[p];
-            rms += w->q->area[p] * val * val;
-        }
-        S->shift = den > 0 ? num / den : 0;
-        S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / hh;
-        const float sh = (float)S->shift;
-#pragma omp parallel for schedule(static)
-        for (size_t c = 0; c < hcount; c++)
-            phi[c] -= sh;
-        S->surface_rms_after = S->surface_rms_before;
-        if (o->local_shift && !unsig) {
-            if ((st = local_shift(w, gh, o, S)))
+        for (int b = 0; b < ncomp; b++) {
+            hv_solve_info info;
+            if ((st = hv_solver_solve(w->solver, w->Y0[b], w->Y[k][b], &info)))
                 goto out;
+            S->diffuse_iterations += info.iterations;
+            S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
+            S->backend = info.backend;
         }
-        S->t_shift = hv_now() - tt;
+        if (k == 0 && keep_heat) {
+            w->heat = w->solver;
+            w->solver = NULL;
+        } else {
+            hv_solver_destroy(&w->solver);
+        }
+        /* ||e||_2 <= ||r||_2 <= relres ||f||_2 since (I - t Lap) >= I; for the
+         * unsigned gradient the bound grows by 2/h per component. */
+        double bound = fmax(S->diffuse_relres, o->diffuse_tol) * sqrt(f2);
+        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / hh : 1.0);
     }
+    S->t_diffuse = hv_now() - tt;
+
+    /* 4. Normalize on faces, divergence. */
+    if ((st = stage(0.6, "normalize")))
+        goto out;
+    tt = hv_now();
+    if (!(w->rhs = hv_malloc(hcount * sizeof(float)))) {
+        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)", hcount);
+        goto out;
+    }
+    if (nlev == 1 && !unsig)
+        S->dead_faces = build_rhs1(w->Y[0], tau[0], gh, w->Y0, w->rhs);
+    else
+        S->dead_faces = build_rhs(w->Y, nlev, tau, unsig, gh, w->rhs);
+    for (int b = 0; b < ncomp; b++) {
+        hv_free(w->Y0[b]);
+        w->Y0[b] = NULL;
+    }
+    hv_free(w->Ybuf);
+    w->Ybuf = NULL;
+    S->t_normalize = hv_now() - tt;
+
+    /* 5. Poisson. */
+    float *phi = gh->v;
+    if ((st = stage(0.65, "poisson")))
+        goto out;
+    tt = hv_now();
+    hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 0.0, 1.0};
+    so.tol = o->poisson_tol; /* the diffusion's options otherwise */
+    if ((st = solver_create(&w->solver, &pb, &so)))
+        goto out;
+    hv_solve_info info;
+    if ((st = hv_solver_solve(w->solver, w->rhs, phi, &info)))
+        goto out;
+    S->poisson_iterations = info.iterations;
+    S->poisson_relres = info.relres;
+    S->backend = info.backend;
+    hv_solver_destroy(&w->solver);
+    hv_free(w->rhs);
+    w->rhs = NULL;
+    S->t_poisson = hv_now() - tt;
+
+    /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
+    if ((st = stage(0.8, "shift")))
+        goto out;
+    tt = hv_now();
+    double num = 0, den = 0, rms = 0;
+#pragma omp parallel for reduction(+ : num, den, rms) schedule(static)
+    for (size_t p = 0; p < w->q->count; p++) {
+        double val = interp(gh, phi, w->q->x + 3 * p);
+        num += w->q->area[p] * val;
+        den += w->q->area[p];
+        rms += w->q->area[p] * val * val;
+    }
+    S->shift = den > 0 ? num / den : 0;
+    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / hh;
+    const float sh = (float)S->shift;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < hcount; c++)
+        phi[c] -= sh;
+    S->surface_rms_after = S->surface_rms_before;
+    if (o->local_shift && !unsig) {
+        if ((st = local_shift(w, gh, o, S)))
+            goto out;
+    }
+    S->t_shift = hv_now() - tt;
 
 out:
     heat_work_free(w);
