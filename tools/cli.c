@@ -156,10 +156,26 @@ int cli_parse_double(const char *s, double *out)
     return 0;
 }
 
+int cli_parse_sign(const char *s, hv_sdf_sign *out)
+{
+    static const char *names[] = {"auto", "heat", "winding"};
+    for (int k = 0; k < 3; k++)
+        if (!strcmp(s, names[k])) {
+            *out = (hv_sdf_sign)k;
+            return 0;
+        }
+    return -1;
+}
+
+const char *cli_sign_name(hv_sdf_sign s)
+{
+    return s == HV_SDF_SIGN_WINDING ? "winding" : s == HV_SDF_SIGN_HEAT ? "heat" : "none";
+}
+
 int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
                               cli_bench_mesh_args *out)
 {
-    cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO};
+    cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO, HV_SDF_SIGN_AUTO};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--help") || !strcmp(a, "-h"))
@@ -187,6 +203,9 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &A.backend))
                 return cli_usage_error(cmd, "%s", hv_last_error());
+        } else if (!strcmp(a, "--sign")) {
+            if (cli_parse_sign(v, &A.sign))
+                return cli_usage_error(cmd, "--sign needs auto, heat or winding, got '%s'", v);
         } else {
             return cli_usage_error(cmd, "unknown option '%s'", a);
         }

@@ -42,6 +42,10 @@ int cli_commit(const char *cmd, cli_outputs *o);
 void cli_discard(cli_outputs *o);
 /* Parses a --threads value: an integer in [lo, HV_MAX_THREADS]; 0 on success. */
 int cli_parse_threads(const char *s, int lo, int *out);
+/* --sign's values: "auto", "heat", "winding" (hv_sdf_sign). Returns 0 on success. */
+int cli_parse_sign(const char *s, hv_sdf_sign *out);
+/* The name of a sign source as the commands print it ("none" for AUTO). */
+const char *cli_sign_name(hv_sdf_sign s);
 int cli_parse_double(const char *s, double *out);
 /* The arguments of the mesh benchmarks (bench sdf, bench mesh): MESH --n N
  * [--backend B] [--repeat R] [--threads T], -q and -v ignored. Returns -1 when
@@ -51,6 +55,7 @@ typedef struct cli_bench_mesh_args {
     const char *path;
     int n, repeat, threads;
     hv_backend backend;
+    hv_sdf_sign sign; /* --sign */
 } cli_bench_mesh_args;
 int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
                               cli_bench_mesh_args *out);

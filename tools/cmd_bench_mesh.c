@@ -11,7 +11,7 @@ static int usage(FILE *out)
 {
     fprintf(out,
             "usage: heatvox bench mesh MESH --n N [--backend auto|mg|fftw|opencl] [--repeat R]\n"
-            "                          [--threads T]\n"
+            "                          [--threads T] [--sign auto|heat|winding]\n"
             "Computes the signed distance of MESH at N voxels along the longest axis (the\n"
             "3-voxel narrow band that heatvox sdf --mesh-out computes), then extracts its zero\n"
             "level set as a triangle mesh at adaptivity 0 and 0.5 (best of R runs after a\n"
@@ -41,6 +41,7 @@ int cmd_bench_mesh(int argc, char **argv)
     hv_sdf_opts_default(&o);
     o.res = n;
     o.backend = backend;
+    o.sign = A.sign;
     o.band_only = 3.0;
     hv_grid *phi = NULL;
     hv_sdf_stats stt;

@@ -11,14 +11,15 @@ static int usage(FILE *out)
 {
     fprintf(out,
             "usage: heatvox bench sdf MESH --n N [--backend auto|mg|fftw|opencl] [--repeat R]\n"
-            "                         [--threads T]\n"
+            "                         [--threads T] [--sign auto|heat|winding]\n"
             "Runs heatvox sdf on MESH at N voxels along the longest axis (best of R runs after\n"
             "a warm-up) and OpenVDB's meshToLevelSet (3-voxel band) on the same grid, and\n"
             "prints one JSON line: bench, n, backend, seconds and the seconds of each stage\n"
             "for a 3-voxel narrow band (what heatvox sdf -o X.vdb computes), dense_seconds\n"
             "for the exact distance on the whole grid, peak_rss_mb, ref \"openvdb\",\n"
             "ref_seconds, ratio = seconds / ref_seconds, ratio_dense, and inside_agreement\n"
-            "(fraction of voxels where both put the same sign).\n");
+            "(fraction of voxels where both put the same sign); sign, sign_seconds and\n"
+            "winding_evals tell where the sign came from (--sign as for heatvox sdf).\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -41,6 +42,7 @@ int cmd_bench_sdf(int argc, char **argv)
     hv_sdf_opts_default(&o);
     o.res = n;
     o.backend = backend;
+    o.sign = A.sign;
     /* Two runs: the whole grid exact (dense output, --npy) and the narrow band
      * that `heatvox sdf -o X.vdb` computes by default (3 voxels, like the
      * OpenVDB reference). */
@@ -90,11 +92,13 @@ int cmd_bench_sdf(int argc, char **argv)
         "{\"bench\":\"sdf\",\"mesh\":\"%s\",\"n\":%d,\"grid\":[%d,%d,%d],\"triangles\":%zu,"
         "\"backend\":\"%s\",\"threads\":%d,\"seconds\":%.4f,\"repair\":%.4f,\"splat\":%.4f,"
         "\"diffuse\":%.4f,\"normalize\":%.4f,\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,"
-        "\"dense_seconds\":%.4f,\"dense_redistance\":%.4f,\"peak_rss_mb\":%.1f",
+        "\"dense_seconds\":%.4f,\"dense_redistance\":%.4f,\"sign\":\"%s\",\"sign_seconds\":%.4f,"
+        "\"winding_evals\":%zu,\"peak_rss_mb\":%.1f",
         path, n, phi->n[0], phi->n[1], phi->n[2], m->ntris, hv_backend_name(band_best.backend),
         hv_get_threads(), band_best.t_total, band_best.t_repair, band_best.t_splat,
         band_best.t_diffuse, band_best.t_normalize, band_best.t_poisson, band_best.t_shift,
-        band_best.t_redistance, best.t_total, best.t_redistance, peak);
+        band_best.t_redistance, best.t_total, best.t_redistance, cli_sign_name(band_best.sign),
+        band_best.t_sign, band_best.winding_evals, peak);
     if (ok)
         printf(",\"ref\":\"openvdb\",\"ref_seconds\":%.4f,\"ratio\":%.3f,\"ratio_dense\":%.3f,"
                "\"inside_agreement\":%.5f",

@@ -70,11 +70,6 @@ static void help(void)
            "exit: 0 success, 1 failure (unreadable mesh, bad geometry, I/O), 2 usage error\n");
 }
 
-static const char *sign_name(hv_sdf_sign s)
-{
-    return s == HV_SDF_SIGN_WINDING ? "winding" : s == HV_SDF_SIGN_HEAT ? "heat" : "none";
-}
-
 /* One line rewritten in place on a terminal, one line per stage otherwise,
  * with the peak memory so far: a stage's own peak shows at the next line. */
 static int on_progress(double fraction, const char *stage, void *user)
@@ -219,15 +214,9 @@ int cmd_sdf(int argc, char **argv)
                                        argv[i]);
         } else if (!strcmp(a, "--sign")) {
             NEED(1);
-            const char *v = argv[++i];
-            if (!strcmp(v, "auto"))
-                o.sign = HV_SDF_SIGN_AUTO;
-            else if (!strcmp(v, "heat"))
-                o.sign = HV_SDF_SIGN_HEAT;
-            else if (!strcmp(v, "winding"))
-                o.sign = HV_SDF_SIGN_WINDING;
-            else
-                return cli_usage_error("sdf", "--sign needs auto, heat or winding, got '%s'", v);
+            if (cli_parse_sign(argv[++i], &o.sign))
+                return cli_usage_error("sdf", "--sign needs auto, heat or winding, got '%s'",
+                                       argv[i]);
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--domed-caps")) {
@@ -314,7 +303,7 @@ int cmd_sdf(int argc, char **argv)
              S.n[0], S.n[1], S.n[2], S.h, S.origin[0], S.origin[1], S.origin[2], o.t_scale,
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
-             band, S.heat_coarsen, sign_name(S.sign), dense ? " dense" : "");
+             band, S.heat_coarsen, cli_sign_name(S.sign), dense ? " dense" : "");
     /* Every output is staged; they are renamed together once all are written. */
     cli_outputs co = {0};
     const char *tmp[4] = {NULL, NULL, NULL, NULL};
@@ -382,7 +371,7 @@ int cmd_sdf(int argc, char **argv)
                 "cells signed by pseudonormals (%zu changed)\n",
                 tris, R->triangles_out, hv_backend_name(S.backend), S.diffuse_iterations,
                 S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
-                S.surface_rms_after, S.dead_faces, sign_name(S.sign), S.winding_evals, S.t_sign,
+                S.surface_rms_after, S.dead_faces, cli_sign_name(S.sign), S.winding_evals, S.t_sign,
                 S.near_sign_cells, S.near_sign_changed);
     if (cli_verbose >= 0 && mesh_out)
         snprintf(mesh_note, sizeof mesh_note, " | mesh %s: %zu triangles, adaptivity %g", mesh_out,

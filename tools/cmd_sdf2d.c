@@ -86,14 +86,10 @@ int cmd_sdf2d(int argc, char **argv)
             o.heat_magnitude = 1;
         } else if (!strcmp(a, "--sign")) {
             const char *v = more ? argv[i + 1] : "";
-            if (!strcmp(v, "auto"))
-                o.sign = 0;
-            else if (!strcmp(v, "heat"))
-                o.sign = 1;
-            else if (!strcmp(v, "winding"))
-                o.sign = 2;
-            else
+            hv_sdf_sign sg;
+            if (cli_parse_sign(v, &sg))
                 return cli_usage_error("sdf2d", "--sign needs auto, heat or winding, got '%s'", v);
+            o.sign = (int)sg;
             i++;
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;

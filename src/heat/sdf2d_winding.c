@@ -22,8 +22,8 @@
 #include <string.h>
 
 #define W2_LEAF 8
-#define W2_BETA 2.0
-#define W2_FLAT 0.08
+#define W2_BETA 1.0
+#define W2_FLAT 0.25
 #define W2_TOP 8
 #define W2_MARGIN 0.1
 #define W2_NEAR 1.0
