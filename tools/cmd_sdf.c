@@ -34,6 +34,11 @@ static void help(void)
            "  -o, --output FILE  the .vdb file\n"
            "  --band W           narrow band half width in voxels (default 3)\n"
            "  --dense            store every voxel of the block as active\n"
+           "  A narrow band alone (-o without --dense, --npy, --preview, --mesh-out) is\n"
+           "  computed in 8^3 tiles near the surface, never as the whole block: memory and\n"
+           "  time follow the surface. Its sign is the winding number's (--sign heat, --heat\n"
+           "  and --no-repair take the dense path).\n"
+           "  --no-tiles         compute a narrow band on the dense block all the same\n"
            "                     (--unsigned always writes a dense float grid, class unknown)\n"
            "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
            "  --preview FILE     also write a PNG of the middle x, y and z slices side by side\n"
@@ -126,7 +131,7 @@ int cmd_sdf(int argc, char **argv)
     const char *mesh_out = NULL;
     double band = 3.0, adaptivity = 0;
     int have_adaptivity = 0;
-    int dense = 0, have_res = 0, have_h = 0, threads = 0;
+    int dense = 0, have_res = 0, have_h = 0, threads = 0, no_tiles = 0;
     hv_sdf_opts o;
     hv_sdf_opts_default(&o);
     for (int i = 1; i < argc; i++) {
@@ -197,6 +202,8 @@ int cmd_sdf(int argc, char **argv)
                                        argv[i]);
         } else if (!strcmp(a, "--dense")) {
             dense = 1;
+        } else if (!strcmp(a, "--no-tiles")) {
+            no_tiles = 1;
         } else if (!strcmp(a, "--unsigned")) {
             o.unsigned_distance = 1;
         } else if (!strcmp(a, "--heat")) {
@@ -262,6 +269,11 @@ int cmd_sdf(int argc, char **argv)
      * rest is the background with the heat method's sign): skip the sweeps. */
     if (!dense && !npy && !preview && !o.unsigned_distance && o.magnitude == HV_SDF_EXACT)
         o.band_only = band;
+    /* A narrow band alone, with the winding-number sign: tiles. */
+    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
+    const int tiles = out && !dense && !npy && !preview && !mesh_out && !no_tiles &&
+                      !o.unsigned_distance && o.magnitude == HV_SDF_EXACT &&
+                      o.sign != HV_SDF_SIGN_HEAT && (o.repair & orient) == orient;
     const char *outs[] = {out, npy, preview, mesh_out};
     if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;
@@ -282,8 +294,9 @@ int cmd_sdf(int argc, char **argv)
     }
     double t_read = hv_now() - t0;
     hv_grid *g = NULL;
+    hv_tiles *T = NULL;
     hv_sdf_stats S;
-    st = hv_sdf_compute(m, &o, &g, &S);
+    st = tiles ? hv_sdf_compute_tiles(m, &o, band, &T, &S) : hv_sdf_compute(m, &o, &g, &S);
     hv_set_progress(NULL, NULL);
     if (st) {
         if (st == HV_ERR_CANCELLED)
@@ -299,11 +312,12 @@ int cmd_sdf(int argc, char **argv)
     char params[512];
     snprintf(params, sizeof params,
              "grid=%dx%dx%d voxel_size=%.9g origin=%.9g,%.9g,%.9g t_scale=%g mode=%s magnitude=%s "
-             "repair=0x%x backend=%s band=%g heat_coarsen=%d sign=%s%s",
+             "repair=0x%x backend=%s band=%g heat_coarsen=%d sign=%s%s%s",
              S.n[0], S.n[1], S.n[2], S.h, S.origin[0], S.origin[1], S.origin[2], o.t_scale,
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
-             band, S.heat_coarsen, cli_sign_name(S.sign), dense ? " dense" : "");
+             band, S.heat_coarsen, cli_sign_name(S.sign), dense ? " dense" : "",
+             tiles ? " tiles" : "");
     /* Every output is staged; they are renamed together once all are written. */
     cli_outputs co = {0};
     const char *tmp[4] = {NULL, NULL, NULL, NULL};
@@ -311,6 +325,7 @@ int cmd_sdf(int argc, char **argv)
         if (outs[k] && !(tmp[k] = cli_stage("sdf", &co, outs[k]))) {
             cli_discard(&co);
             hv_grid_destroy(&g);
+            hv_tiles_destroy(&T);
             return HV_EXIT_FAIL;
         }
     const char *failed = NULL;
@@ -318,14 +333,16 @@ int cmd_sdf(int argc, char **argv)
         hv_vdb_writer *w = NULL;
         /* An unsigned distance is no level set (no inside): a plain float grid. */
         if (!(st = hv_vdb_writer_create(&w)) &&
-            !(st = o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
-                                       : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
+            !(st = T                   ? hv_vdb_writer_add_levelset_tiles(w, T, name, band)
+                   : o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
+                                         : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
             !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&
             !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
             !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&
             !(st = hv_vdb_writer_set_meta(w, "parameters", params)))
             st = hv_vdb_writer_write(w, tmp[0]);
         hv_vdb_writer_destroy(&w);
+        hv_tiles_destroy(&T);
         if (st)
             failed = out;
     }
@@ -363,7 +380,14 @@ int cmd_sdf(int argc, char **argv)
 
     const hv_sdf_repair_report *R = &S.repair;
     char mesh_note[4200] = "";
-    if (cli_verbose >= 1)
+    if (cli_verbose >= 1 && tiles)
+        fprintf(stderr,
+                "heatvox sdf: %zu triangles in, %zu after repair; narrow band of %g voxels in "
+                "%zu tiles of 8^3 (%zu active voxels, %zu rasterized); sign from %s: %zu cells "
+                "by pseudonormals, %zu winding-number evaluations (%.2f s)\n",
+                tris, R->triangles_out, band, S.tiles, S.active_voxels, S.band_cells,
+                cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign);
+    else if (cli_verbose >= 1)
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
                 "(relres %.1e), poisson %d (relres %.1e); surface rms %.3f -> %.3f voxels; "

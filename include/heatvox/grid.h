@@ -25,6 +25,25 @@ typedef struct hv_grid {
     uint8_t *solid;   /* NULL, or one byte per cell (non-zero = solid), owned */
 } hv_grid;
 
+/* A sparse block: the 8^3 tiles of an hv_grid's block that hold data (a
+ * narrow band), each at a multiple of HV_TILE cells, the rest of the block
+ * implied (hv_sdf_compute_tiles). Tiles are in order of their z, y, x. */
+#define HV_TILE 8
+typedef struct hv_tiles {
+    int n[3];         /* the block, as an hv_grid's: cells per axis */
+    double h;         /* voxel size */
+    double origin[3]; /* world position of the block's lower corner */
+    size_t count;     /* tiles */
+    int32_t *ijk;     /* 3 * count: block index of each tile's first cell */
+    float *v;         /* HV_TILE^3 * count: values, v[t * 512 + i + 8 j + 64 k] */
+    uint64_t *on;     /* 8 * count: active voxels, bit i + 8 j of word k (cells beyond
+                           the block are never active) */
+    size_t active;    /* active voxels in all */
+} hv_tiles;
+
+/* Frees the tiles and sets *t to NULL. Accepts NULL and *t == NULL. */
+HV_API void hv_tiles_destroy(hv_tiles **t);
+
 /* Allocates a zeroed grid. n[2] is ignored (taken as 1) when dim == 2.
  * origin may be NULL (zero). Fails with HV_ERR_INVALID_ARG for sizes <= 0 or
  * h <= 0, HV_ERR_NOMEM when the grid would not fit in memory.

@@ -176,6 +176,8 @@ typedef struct hv_sdf_stats {
                              (HV_SDF_SIGN_AUTO for unsigned distance and HV_SDF_HEAT) */
     size_t winding_evals; /* winding-number evaluations of the sign */
     double t_sign;        /* seconds of the winding-number sign (within t_redistance) */
+    size_t tiles;         /* hv_sdf_compute_tiles: tiles with an active voxel */
+    size_t active_voxels; /* hv_sdf_compute_tiles: voxels within the band */
 } hv_sdf_stats;
 
 HV_API void hv_sdf_opts_default(hv_sdf_opts *o);
@@ -197,6 +199,24 @@ HV_API hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hol
  * hv_set_progress between stages; a cancel returns HV_ERR_CANCELLED. */
 HV_API hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
                                 hv_sdf_stats *stats);
+
+/* The narrow band of m's signed (or, with unsigned_distance, unsigned)
+ * distance as 8^3 tiles, without the dense grid: memory and time follow the
+ * surface, not the block. The block is hv_sdf_compute's (the same placement
+ * options), band is the half width in voxels: a voxel is active where its
+ * exact distance is below band * h, and holds the same value as the dense
+ * result there. Other voxels of a tile hold +band * h; the sign of what is
+ * not active is for a flood fill from the active voxels (as
+ * hv_vdb_writer_add_levelset_tiles does). The sign is the winding number's
+ * (HV_SDF_SIGN_AUTO and HV_SDF_SIGN_WINDING alike): the pseudonormal of the
+ * nearest feature where it is clean and bounds a solid, else the generalized
+ * winding number of the repaired mesh above 1/2, so that it does not depend on
+ * the block. Fails for HV_SDF_HEAT and HV_SDF_SIGN_HEAT (they need the dense
+ * grid), and when no band voxel lies in the block. The caller owns *out
+ * (hv_tiles_destroy). stats: repair, grid, tiles, active_voxels, band_cells,
+ * winding_evals, near_sign_cells, t_repair, t_redistance, t_sign, t_total. */
+HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
+                                      hv_tiles **out, hv_sdf_stats *stats);
 
 #ifdef __cplusplus
 }

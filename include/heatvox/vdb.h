@@ -55,6 +55,12 @@ HV_API void hv_vdb_writer_destroy(hv_vdb_writer **w);
 HV_API hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const char *name,
                                             double band_voxels, int dense);
 
+/* Adds a narrow-band level set from tiles (hv_sdf_compute_tiles): voxels
+ * active in t with |value| < band_voxels * h are active; every other voxel
+ * and tile takes -background or +background by OpenVDB's signed flood fill
+ * from the active voxels. No dense grid is made. The tiles are copied. */
+HV_API hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t,
+                                                  const char *name, double band_voxels);
 /* Adds a scalar float grid of class unknown, every voxel active, background 0. */
 HV_API hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
 

@@ -113,6 +113,17 @@ void hv_grid_destroy(hv_grid **g)
     *g = NULL;
 }
 
+void hv_tiles_destroy(hv_tiles **t)
+{
+    if (!t || !*t)
+        return;
+    hv_free((*t)->ijk);
+    hv_free((*t)->v);
+    hv_free((*t)->on);
+    free(*t);
+    *t = NULL;
+}
+
 hv_status hv_grid_add_mask(hv_grid *g)
 {
     if (!g)

@@ -99,23 +99,26 @@ static inline double d2_at(const double p[3], const double *a, const double *b, 
  * distances), the cells of the slab |n.(p - a)| <= W whose distance is within
  * W. The squared distance is convex along a column, and so is the sequence of
  * its samples: the walk goes downhill from the middle of the slab to a sample
- * within W, then out both ways until the samples leave it. */
-static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, double W,
-                            _Atomic uint64_t *best)
+ * within W, then out both ways until the samples leave it. Only the cells of
+ * the box [blo, bhi] (block indices, inclusive) are written, cell blo at
+ * index 0 with the given strides: atomically into abest (threads share the
+ * grid), or into pbest (one thread owns the box, a tile). */
+static inline void raster_box(const hv_mesh *m, const double origin[3], double h, const int blo[3],
+                              const int bhi[3], const size_t stride[3], uint32_t t, double W,
+                              _Atomic uint64_t *abest, uint64_t *pbest)
 {
     const uint32_t *v = m->tris + 3 * (size_t)t;
     const double *a = m->verts + 3 * (size_t)v[0], *b = m->verts + 3 * (size_t)v[1],
                  *c = m->verts + 3 * (size_t)v[2];
-    const double h = g->h, ih = 1.0 / h;
+    const double ih = 1.0 / h;
     int lo[3], hi[3];
     for (int ax = 0; ax < 3; ax++) {
         double mn = fmin(a[ax], fmin(b[ax], c[ax])) - W, mx = fmax(a[ax], fmax(b[ax], c[ax])) + W;
-        double l = ceil((mn - g->origin[ax]) * ih - 0.5),
-               u = floor((mx - g->origin[ax]) * ih - 0.5);
-        if (u < 0 || l > g->n[ax] - 1)
+        double l = ceil((mn - origin[ax]) * ih - 0.5), u = floor((mx - origin[ax]) * ih - 0.5);
+        if (u < blo[ax] || l > bhi[ax])
             return;
-        lo[ax] = l < 0 ? 0 : (int)l;
-        hi[ax] = u > g->n[ax] - 1 ? g->n[ax] - 1 : (int)u;
+        lo[ax] = l < blo[ax] ? blo[ax] : (int)l;
+        hi[ax] = u > bhi[ax] ? bhi[ax] : (int)u;
     }
     double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
            w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
@@ -129,15 +132,14 @@ static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, doub
                                      : (fabs(n[1]) >= fabs(n[2]) ? 1 : 2);
     }
     int e1 = (d + 1) % 3, e2 = (d + 2) % 3;
-    const size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
-    const double W2 = W * W, od = g->origin[d];
+    const double W2 = W * W, od = origin[d];
     const double P[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
     const double ind = nl > 0 ? 1.0 / n[d] : 0;
     for (int j = lo[e1]; j <= hi[e1]; j++)
         for (int k = lo[e2]; k <= hi[e2]; k++) {
             double p[3];
-            p[e1] = g->origin[e1] + (j + 0.5) * h;
-            p[e2] = g->origin[e2] + (k + 0.5) * h;
+            p[e1] = origin[e1] + (j + 0.5) * h;
+            p[e2] = origin[e2] + (k + 0.5) * h;
             const double q2[2] = {p[e1], p[e2]};
             if (tri2(q2, P) > W2)
                 continue;
@@ -156,7 +158,16 @@ static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, doub
             }
             if (i0 > i1)
                 continue;
-            size_t base = (size_t)j * stride[e1] + (size_t)k * stride[e2];
+            size_t base = (size_t)(j - blo[e1]) * stride[e1] + (size_t)(k - blo[e2]) * stride[e2];
+#define PUT(i, dd)                                                                                 \
+    do {                                                                                           \
+        size_t at_ = base + (size_t)((i)-blo[d]) * stride[d];                                      \
+        uint64_t v_ = pack((float)sqrt(dd), t);                                                    \
+        if (abest)                                                                                 \
+            atomic_min_u64(&abest[at_], v_);                                                       \
+        else if (v_ < pbest[at_])                                                                  \
+            pbest[at_] = v_;                                                                       \
+    } while (0)
             int ic = (i0 + i1) / 2;
             p[d] = od + (ic + 0.5) * h;
             double dc = d2_at(p, a, b, c);
@@ -189,16 +200,25 @@ static void raster_triangle(const hv_mesh *m, const hv_grid *g, uint32_t t, doub
                 if (dc > W2)
                     continue;
             }
-            atomic_min_u64(&best[base + (size_t)ic * stride[d]], pack((float)sqrt(dc), t));
+            PUT(ic, dc);
             for (int sgn = -1; sgn <= 1; sgn += 2)
                 for (int i = ic + sgn; i >= i0 && i <= i1; i += sgn) {
                     p[d] = od + (i + 0.5) * h;
                     double d2 = d2_at(p, a, b, c);
                     if (d2 > W2)
                         break;
-                    atomic_min_u64(&best[base + (size_t)i * stride[d]], pack((float)sqrt(d2), t));
+                    PUT(i, d2);
                 }
+#undef PUT
         }
+}
+
+void hv__exact_raster_tile(const hv_mesh *m, const double origin[3], double h, const int blo[3],
+                           const int bhi[3], uint32_t t, double W, uint64_t *best)
+{
+    const size_t stride[3] = {1, (size_t)(bhi[0] - blo[0] + 1),
+                              (size_t)(bhi[0] - blo[0] + 1) * (size_t)(bhi[1] - blo[1] + 1)};
+    raster_box(m, origin, h, blo, bhi, stride, t, W, NULL, best);
 }
 
 /* For each triangle, the other triangles sharing a vertex with it, each once
@@ -688,9 +708,11 @@ hv_status hv__exact_distance(const hv_mesh *m, const hv_grid *g, double band, do
         order[t] = code << 32 | t; /* ntris < 2^32 */
     }
     qsort(order, m->ntris, sizeof *order, cmp_u64);
+    const int zero[3] = {0, 0, 0}, last[3] = {g->n[0] - 1, g->n[1] - 1, g->n[2] - 1};
+    const size_t stride[3] = {1, (size_t)g->n[0], (size_t)g->n[0] * g->n[1]};
 #pragma omp parallel for schedule(dynamic, 64)
     for (size_t q = 0; q < m->ntris; q++)
-        raster_triangle(m, g, (uint32_t)order[q], W, best);
+        raster_box(m, g->origin, g->h, zero, last, stride, (uint32_t)order[q], W, best, NULL);
     free(order);
     size_t nb = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nb)

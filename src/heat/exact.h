@@ -82,6 +82,14 @@ double hv__point_triangle_d2(const double p[3], const double a[3], const double 
 double hv__point_triangle_region(const double p[3], const double a[3], const double b[3],
                                  const double c[3], double diff[3], int *region);
 
+/* The distance of triangle t written into the cells of one box [blo, bhi]
+ * (indices of the block with the given origin and h, inclusive) within W of
+ * it, as the grid raster of hv__exact_distance does: best[] over the box (x
+ * fastest, cell blo first) keeps the least (float distance bits << 32 | t),
+ * UINT64_MAX where none. Not thread-safe on one box. */
+void hv__exact_raster_tile(const hv_mesh *m, const double origin[3], double h, const int blo[3],
+                           const int bhi[3], uint32_t t, double W, uint64_t *best);
+
 /* Exact unsigned distance from every cell centre of g to the triangles of m:
  * rasterized within `band` cells of each triangle, then carried to the rest of
  * the grid by closest-triangle sweeps, up to the distance `cap` (world units;

@@ -200,20 +200,10 @@ static int levels_for(const hv_sdf_opts *oin, const int n[3])
     return L;
 }
 
-hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[3], double *h,
-                               double origin[3])
+/* The block for mesh bounds lo, hi: cell counts, voxel size, origin. */
+static hv_status grid_place(const hv_sdf_opts *opts, const double lo[3], const double hi[3],
+                            int n[3], double *h, double origin[3])
 {
-    hv_sdf_opts def;
-    if (!opts) {
-        hv_sdf_opts_default(&def);
-        opts = &def;
-    }
-    if (!n || !h || !origin)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
-    hv_status st = check_opts(opts);
-    double lo[3], hi[3];
-    if (st || (st = used_bounds(m, lo, hi)))
-        return st;
     if (opts->use_bbox) {
         const double *b = opts->bbox;
         double L = fmax(b[3] - b[0], fmax(b[4] - b[1], b[5] - b[2]));
@@ -250,6 +240,23 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
             origin[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * *h;
         }
     }
+    return HV_OK;
+}
+
+hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[3], double *h,
+                               double origin[3])
+{
+    hv_sdf_opts def;
+    if (!opts) {
+        hv_sdf_opts_default(&def);
+        opts = &def;
+    }
+    if (!n || !h || !origin)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
+    hv_status st = check_opts(opts);
+    double lo[3], hi[3];
+    if (st || (st = used_bounds(m, lo, hi)) || (st = grid_place(opts, lo, hi, n, h, origin)))
+        return st;
     int L = levels_for(opts, n);
     return hv_check_dims(3, n, *h, SDF_BYTES_PER_CELL + 12 * (size_t)L);
 }
@@ -542,6 +549,74 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     S.t_total = hv_now() - t0;
     *out = w.g;
     w.g = NULL;
+done:
+    work_free(&w);
+    if (stats)
+        *stats = S;
+    return st;
+}
+
+hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
+                               hv_tiles **out, hv_sdf_stats *stats)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute_tiles: out is NULL");
+    *out = NULL;
+    hv_sdf_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_sdf_opts_default(&o);
+    hv_sdf_stats S;
+    memset(&S, 0, sizeof S);
+    sdf_work w;
+    memset(&w, 0, sizeof w);
+    hv_status st = check_opts(&o);
+    double lo[3], hi[3];
+    if (st || (st = used_bounds(m, lo, hi)))
+        return st;
+    if (!(band > 0) || band > 64)
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: band half width must be in (0, 64] voxels, got %g",
+                         band);
+    if (o.magnitude != HV_SDF_EXACT)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles has the exact distance only (the heat "
+                         "method's own values need the dense grid)");
+    const int unsig = o.unsigned_distance != 0;
+    if (!unsig && o.sign == HV_SDF_SIGN_HEAT)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles takes its sign from the winding number "
+                         "(the heat method's sign needs the dense grid)");
+    if (!unsig && (o.repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
+                      (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles takes its sign from the winding number, "
+                         "which needs the repair's orientation steps");
+    if (o.threads > 0)
+        hv_set_threads(o.threads);
+    const double t0 = hv_now();
+    const hv_mesh *M = m;
+    int n[3];
+    double h, origin[3];
+    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) ||
+        (st = grid_place(&o, lo, hi, n, &h, origin)))
+        goto done;
+    memcpy(S.n, n, sizeof S.n);
+    S.h = h;
+    memcpy(S.origin, origin, sizeof S.origin);
+    S.sign = unsig ? HV_SDF_SIGN_AUTO : HV_SDF_SIGN_WINDING;
+    S.backend = HV_BACKEND_AUTO;
+    if ((st = stage(0.1, "tiles")))
+        goto done;
+    double tt = hv_now();
+    if ((st = hv__sdf_tiles(M, n, h, origin, band, unsig, o.near_sign, out, &S)))
+        goto done;
+    S.t_redistance = hv_now() - tt;
+    if ((st = stage(1.0, "done"))) {
+        hv_tiles_destroy(out);
+        goto done;
+    }
+    S.t_total = hv_now() - t0;
 done:
     work_free(&w);
     if (stats)

@@ -29,4 +29,19 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
                            const uint32_t *tri, hv_pseudo *ps, double dlim, float *out,
                            size_t *evals, size_t *ps_used);
 
+/* The winding number of W at p, as precise as its distance from 1/2 needs
+ * (dipoles refined near 1/2; sign_winding.c); ++*evals per evaluation. */
+double hv__wn_sure(const hv_wn_tree *W, const double p[3], size_t *evals);
+
+/* The narrow band of M (already repaired) on the block (n, h, origin) as
+ * tiles (sdf_tiles.c): exact distance where it is below band * h, signed
+ * within a voxel by the nearest clean feature's pseudonormal (within
+ * near_sign voxels) or the winding number, and beyond by the winding number
+ * (flooded from nearer cells where M is closed); *out is
+ * new. Counts into S (tiles, active_voxels, band_cells, winding_evals,
+ * near_sign_cells, t_sign). */
+hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
+                        double band, int unsig, double near_sign, hv_tiles **out,
+                        hv_sdf_stats *S);
+
 #endif

@@ -57,8 +57,7 @@ typedef struct ws_level {
     float *w;     /* (nr + 1)^3 corner values, NAN where not needed */
 } ws_level;
 
-/* Winding number at p, as precise as its distance from 1/2 needs. */
-static double wn_sure(const hv_wn_tree *W, const double p[3], size_t *evals)
+double hv__wn_sure(const hv_wn_tree *W, const double p[3], size_t *evals)
 {
     double beta = WS_BETA, flat = WS_FLAT;
     double w = hv__wn_eval_beta(W, p, UINT32_MAX, beta);
@@ -79,7 +78,7 @@ static double wn_at(const hv_wn_tree *W, const hv_grid *g, const long base[3], c
     double p[3];
     for (int a = 0; a < 3; a++)
         p[a] = g->origin[a] + ((double)(G[a] - base[a]) + 0.5) * g->h;
-    return wn_sure(W, p, evals);
+    return hv__wn_sure(W, p, evals);
 }
 
 hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist,
@@ -235,7 +234,7 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
                         continue;
                     }
                 }
-                row[i] = wn_sure(W, p, &evals) > 0.5 ? -1 : 1;
+                row[i] = hv__wn_sure(W, p, &evals) > 0.5 ? -1 : 1;
             }
         }
     if (ps_used)

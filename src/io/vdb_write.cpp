@@ -8,6 +8,7 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/io/Archive.h>
 #include <openvdb/tools/Prune.h>
+#include <openvdb/tools/SignedFloodFill.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -312,6 +313,101 @@ hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, const c
         Placement pl = placement(w, g, name);
         auto grid = levelset_from(g, band_voxels, dense != 0, true, pl);
         finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, const char *name,
+                                           double band_voxels)
+{
+    return guarded("hv_vdb_writer_add_levelset_tiles", [&] {
+        check_new_name(w, name);
+        if (!t || (t->count && (!t->ijk || !t->v || !t->on)))
+            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name + "': tiles are NULL");
+        hv_grid hdr = {};
+        hdr.dim = 3;
+        hdr.h = t->h;
+        for (int a = 0; a < 3; a++) {
+            hdr.n[a] = t->n[a];
+            hdr.origin[a] = t->origin[a];
+        }
+        hdr.v = t->v; // check_grid looks at it, nothing reads it
+        float dummy = 0;
+        if (!hdr.v)
+            hdr.v = &dummy;
+        check_grid(&hdr, "level set tiles");
+        if (!(band_voxels > 0) || !std::isfinite(band_voxels))
+            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
+                                         "': band width must be positive, got " +
+                                         std::to_string(band_voxels));
+        hv_status st = hv_check_finite(t->v, t->count * (size_t)(HV_TILE * HV_TILE * HV_TILE),
+                                       name);
+        if (st)
+            return st;
+        for (size_t q = 0; q < t->count; q++)
+            for (int a = 0; a < 3; a++)
+                if (t->ijk[3 * q + a] % HV_TILE || t->ijk[3 * q + a] < 0 ||
+                    t->ijk[3 * q + a] >= t->n[a])
+                    fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
+                                                 "': a tile is not on the block's 8^3 lattice");
+        Placement pl = placement(w, &hdr, name);
+        const float bg = (float)(band_voxels * t->h);
+        auto grid = openvdb::FloatGrid::create(bg);
+        using LeafT = openvdb::FloatTree::LeafNodeType;
+        std::vector<std::unique_ptr<LeafT>> leaves(t->count);
+        // A tile of the block at a multiple of 8 lands on one leaf when the
+        // index offset is a multiple of 8 too; otherwise it spans up to 8.
+        const bool aligned = pl.off[0] % 8 == 0 && pl.off[1] % 8 == 0 && pl.off[2] % 8 == 0;
+        auto voxel = [&](size_t q, int i, int j, int k, float *val) {
+            const int o = i + HV_TILE * (j + HV_TILE * k);
+            *val = t->v[q * HV_TILE * HV_TILE * HV_TILE + o];
+            bool on = t->on[8 * q + k] >> (i + HV_TILE * j) & 1;
+            return on && std::fabs(*val) < bg;
+        };
+        if (aligned) {
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, t->count),
+                              [&](const tbb::blocked_range<size_t> &r) {
+                                  for (size_t q = r.begin(); q != r.end(); q++) {
+                                      const int32_t *c = t->ijk + 3 * q;
+                                      Coord o(c[0] + pl.off[0], c[1] + pl.off[1], c[2] + pl.off[2]);
+                                      auto leaf = std::make_unique<LeafT>(o, bg, false);
+                                      for (int k = 0; k < HV_TILE; k++)
+                                          for (int j = 0; j < HV_TILE; j++)
+                                              for (int i = 0; i < HV_TILE; i++) {
+                                                  float val;
+                                                  Coord x = o.offsetBy(i, j, k);
+                                                  if (voxel(q, i, j, k, &val))
+                                                      leaf->setValueOn(x, val);
+                                                  else
+                                                      leaf->setValueOff(x, bg);
+                                              }
+                                      leaves[q] = std::move(leaf);
+                                  }
+                              });
+            auto &tree = grid->tree();
+            for (auto &l : leaves)
+                tree.addLeaf(l.release());
+        } else {
+            auto acc = grid->getAccessor();
+            for (size_t q = 0; q < t->count; q++) {
+                const int32_t *c = t->ijk + 3 * q;
+                for (int k = 0; k < HV_TILE; k++)
+                    for (int j = 0; j < HV_TILE; j++)
+                        for (int i = 0; i < HV_TILE; i++) {
+                            float val;
+                            if (voxel(q, i, j, k, &val))
+                                acc.setValueOn(Coord(c[0] + i + pl.off[0], c[1] + j + pl.off[1],
+                                                     c[2] + k + pl.off[2]),
+                                               val);
+                        }
+            }
+        }
+        // Inactive voxels and tiles take the sign of the active voxels
+        // around them, as in OpenVDB's own mesh-to-level-set conversion.
+        openvdb::tools::signedFloodFill(grid->tree());
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_LEVEL_SET);
+        finish_grid(w, grid, &hdr, name, pl);
         return HV_OK;
     });
 }
