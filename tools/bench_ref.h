@@ -25,6 +25,13 @@ extern "C" {
 hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
                                    double band_voxels, hv_grid *out, double *seconds);
 
+/* The same as a whole job, as a user of OpenVDB runs it: meshToLevelSet on
+ * the index lattice with voxel size h whose index (0,0,0) lies at
+ * index0_world, written to path as grid "sdf" (32-bit floats, OpenVDB's
+ * default compression). */
+hv_status ref_vdb_mesh_to_vdb_file(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                   double h, const double index0_world[3], double band_voxels,
+                                   const char *path);
 /* Extends a scalar field off the zero level set of phi by
  * openvdb::tools::sdfToExt (fast sweeping): on the surface the value is field
  * sampled trilinearly at the crossing points; elsewhere it is constant along

@@ -390,6 +390,42 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
     });
 }
 
+hv_status ref_vdb_mesh_to_vdb_file(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+                                   double h, const double index0_world[3], double band_voxels,
+                                   const char *path)
+{
+    return guarded("ref_vdb_mesh_to_vdb_file", [&] {
+        init_vdb();
+        if (!verts || !tris || nv == 0 || nt == 0)
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: empty mesh");
+        if (!(h > 0) || !(band_voxels >= 1) || !std::isfinite(band_voxels))
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: bad voxel size or band");
+        std::vector<openvdb::Vec3s> pts(nv);
+        for (size_t i = 0; i < nv; i++)
+            pts[i] = openvdb::Vec3s((float)verts[3 * i], (float)verts[3 * i + 1],
+                                    (float)verts[3 * i + 2]);
+        std::vector<openvdb::Vec3I> tri(nt);
+        for (size_t t = 0; t < nt; t++) {
+            for (int c = 0; c < 3; c++)
+                if (tris[3 * t + c] >= nv)
+                    fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: vertex out of range");
+            tri[t] = openvdb::Vec3I(tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]);
+        }
+        auto xf = openvdb::math::Transform::createLinearTransform(h);
+        xf->postTranslate(openvdb::Vec3d(index0_world[0], index0_world[1], index0_world[2]));
+        auto grid =
+            openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, tri, (float)band_voxels);
+        pts = std::vector<openvdb::Vec3s>();
+        tri = std::vector<openvdb::Vec3I>();
+        grid->setName("sdf");
+        grid->setSaveFloatAsHalf(false);
+        openvdb::io::File file(path);
+        file.write({grid});
+        file.close();
+        return HV_OK;
+    });
+}
+
 hv_status ref_vdb_sdf_to_ext(const hv_grid *phi, const hv_grid *field, double band_voxels,
                              int n_iter, float background, hv_grid *out, double *seconds)
 {

@@ -339,7 +339,7 @@ int cmd_bench(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *out = argc < 2 ? stderr : stdout;
-        fprintf(out, "usage: heatvox bench <solve|sdf|mesh|sdf2d|extend> [options]   (heatvox "
+        fprintf(out, "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend> [options]   (heatvox "
                      "bench <name> --help)\n");
         return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
     }
@@ -351,6 +351,8 @@ int cmd_bench(int argc, char **argv)
         return cmd_bench_mesh(argc - 1, argv + 1);
     if (!strcmp(argv[1], "sdf2d"))
         return cmd_bench_sdf2d(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "band"))
+        return cmd_bench_band(argc - 1, argv + 1);
     if (!strcmp(argv[1], "extend"))
         return bench_extend(argc - 1, argv + 1);
     return cli_usage_error("bench", "unknown benchmark '%s'", argv[1]);
