@@ -17,66 +17,6 @@
 
 /* ---- generated open meshes ---- */
 
-/* An icosphere (radius 1 at the origin, 4 subdivisions) without the faces
- * whose centroid lies within cap_deg of direction d. */
-static hv_mesh *open_sphere(const double d[3], double cap_deg)
-{
-    const double c[3] = {0, 0, 0};
-    hv_mesh *s = NULL;
-    TL_ASSERT_OK(hv_mesh_make_sphere(&s, c, 1.0, 4));
-    double dl = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), cosc = cos(cap_deg * M_PI / 180);
-    uint32_t *T = malloc(3 * s->ntris * sizeof *T);
-    size_t nt = 0;
-    for (size_t f = 0; f < s->ntris; f++) {
-        double m[3];
-        tu_centroid(s, f, m);
-        double ml = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-        if ((m[0] * d[0] + m[1] * d[1] + m[2] * d[2]) / (ml * dl) > cosc)
-            continue;
-        memcpy(T + 3 * nt++, s->tris + 3 * f, 3 * sizeof *T);
-    }
-    hv_mesh *o = NULL;
-    TL_ASSERT_OK(hv_mesh_from_arrays(&o, s->verts, s->nverts, T, nt));
-    free(T);
-    hv_mesh_destroy(&s);
-    return o;
-}
-
-/* Appends an open tube of radius r around the z axis from z0 to z1 (nu
- * segments around, nz along), outward, to (V, nv, T, nt). */
-static void tube(double *V, size_t *nv, uint32_t *T, size_t *nt, double r, double z0, double z1,
-                 int nu, int nz)
-{
-    size_t b = *nv;
-    for (int i = 0; i <= nz; i++)
-        for (int j = 0; j < nu; j++) {
-            double a = 2 * M_PI * j / nu;
-            double *x = V + 3 * (*nv)++;
-            x[0] = r * cos(a), x[1] = r * sin(a), x[2] = z0 + (z1 - z0) * i / nz;
-        }
-    for (int i = 0; i < nz; i++)
-        for (int j = 0; j < nu; j++) {
-            uint32_t p = (uint32_t)(b + (size_t)i * nu + j),
-                     q = (uint32_t)(b + (size_t)i * nu + (j + 1) % nu), u = p + (uint32_t)nu,
-                     w = q + (uint32_t)nu;
-            uint32_t *t = T + 3 * *nt;
-            t[0] = p, t[1] = q, t[2] = u, t[3] = q, t[4] = w, t[5] = u;
-            *nt += 2;
-        }
-}
-
-static hv_mesh *open_cylinder(void)
-{
-    double *V = malloc(3 * 64 * 33 * sizeof *V);
-    uint32_t *T = malloc(3 * 2 * 64 * 32 * sizeof *T);
-    size_t nv = 0, nt = 0;
-    tube(V, &nv, T, &nt, 0.5, -1.0, 1.0, 64, 32);
-    hv_mesh *m = NULL;
-    TL_ASSERT_OK(hv_mesh_from_arrays(&m, V, nv, T, nt));
-    free(V);
-    free(T);
-    return m;
-}
 
 /* A "bust": a ball of radius 1 centred at z = 1.6 on an open neck (radius
  * 0.4, z from 0 to 1.0, its top inside the ball), cut open at the bottom. */
@@ -90,7 +30,7 @@ static hv_mesh *bust(void)
     uint32_t *T = malloc(3 * (nt + 2 * 48 * 20) * sizeof *T);
     memcpy(V, ball->verts, 3 * nv * sizeof *V);
     memcpy(T, ball->tris, 3 * nt * sizeof *T);
-    tube(V, &nv, T, &nt, 0.4, 0.0, 1.0, 48, 20);
+    tu_tube(V, &nv, T, &nt, 0.4, 0.0, 1.0, 48, 20);
     hv_mesh *m = NULL;
     TL_ASSERT_OK(hv_mesh_from_arrays(&m, V, nv, T, nt));
     free(V);
@@ -206,7 +146,7 @@ START_TEST(sphere_with_a_cap_cut_off_should_not_depend_on_the_block)
     const double up[3] = {0, 0, 1};
     char name[64];
     for (int c = 0; c < 3; c++) {
-        hv_mesh *m = open_sphere(up, caps[c]);
+        hv_mesh *m = tu_open_sphere(up, caps[c]);
         snprintf(name, sizeof name, "sphere, %.0f deg cap off", caps[c]);
         check_box_independent(name, m);
         hv_mesh_destroy(&m);
@@ -216,7 +156,7 @@ END_TEST
 
 START_TEST(open_cylinder_should_not_depend_on_the_block)
 {
-    hv_mesh *m = open_cylinder();
+    hv_mesh *m = tu_open_cylinder();
     check_box_independent("open cylinder", m);
     hv_mesh_destroy(&m);
 }
@@ -233,7 +173,7 @@ END_TEST
 START_TEST(opening_towards_a_corner_should_not_depend_on_the_block)
 {
     const double d[3] = {1, 1, 1};
-    hv_mesh *m = open_sphere(d, 50);
+    hv_mesh *m = tu_open_sphere(d, 50);
     check_box_independent("opening to a corner", m);
     hv_mesh_destroy(&m);
 }
@@ -309,7 +249,7 @@ START_TEST(window_through_a_mesh_should_equal_the_full_run)
     check_window("torus", torus, HV_SDF_SIGN_WINDING);
     hv_mesh_destroy(&torus);
     const double up[3] = {0, 0, 1};
-    hv_mesh *m = open_sphere(up, 60);
+    hv_mesh *m = tu_open_sphere(up, 60);
     check_window("sphere, 60 deg cap off", m, HV_SDF_SIGN_AUTO);
     hv_mesh_destroy(&m);
 }
@@ -319,7 +259,7 @@ END_TEST
 START_TEST(sign_option_should_pick_and_check_its_source)
 {
     const double c[3] = {0, 0, 0}, up[3] = {0, 0, 1};
-    hv_mesh *ball = NULL, *cut = open_sphere(up, 60);
+    hv_mesh *ball = NULL, *cut = tu_open_sphere(up, 60);
     TL_ASSERT_OK(hv_mesh_make_sphere(&ball, c, 1.0, 3));
     hv_sdf_opts o;
     hv_sdf_opts_default(&o);
@@ -380,7 +320,7 @@ START_TEST(command_should_take_and_report_the_sign)
     char dir[] = "/tmp/hv_check_sdf_box_XXXXXX";
     ck_assert_ptr_nonnull(mkdtemp(dir));
     const double up[3] = {0, 0, 1};
-    hv_mesh *m = open_sphere(up, 60);
+    hv_mesh *m = tu_open_sphere(up, 60);
     char path[600], cmd[2400], err[4096];
     snprintf(path, sizeof path, "%s/cut.obj", dir);
     TL_ASSERT_OK(hv_mesh_write_obj(m, path));

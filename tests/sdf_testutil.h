@@ -22,7 +22,7 @@
 /* Reads <test data>/<name> (tl_test_data: $HEATVOX_TEST_DATA, default
  * ../shared/meshes). A mesh that is not there skips the test (NULL); one that
  * is there and does not read fails it. */
-static hv_mesh *tu_load_shared(const char *name)
+__attribute__((unused)) static hv_mesh *tu_load_shared(const char *name)
 {
     const char *dir = tl_test_data();
     char path[4096];
@@ -38,7 +38,7 @@ static hv_mesh *tu_load_shared(const char *name)
     return m;
 }
 
-static void tu_centroid(const hv_mesh *m, size_t f, double c[3])
+__attribute__((unused)) static void tu_centroid(const hv_mesh *m, size_t f, double c[3])
 {
     for (int d = 0; d < 3; d++)
         c[d] = (m->verts[3 * (size_t)m->tris[3 * f] + d] +
@@ -51,7 +51,7 @@ static void tu_centroid(const hv_mesh *m, size_t f, double c[3])
 
 /* 2D edge sign with symbolic perturbation p + (eps, eps^2): never zero for a
  * non-degenerate edge, and the same for every triangle sharing the edge. */
-static int tu_edge_sign(double au, double av, double bu, double bv, double pu, double pv)
+__attribute__((unused)) static int tu_edge_sign(double au, double av, double bu, double bv, double pu, double pv)
 {
     double e = (bu - au) * (pv - av) - (bv - av) * (pu - au);
     if (e != 0)
@@ -66,7 +66,7 @@ typedef struct tu_hit {
     double x;
 } tu_hit;
 
-static int tu_cmp_hit(const void *pa, const void *pb)
+__attribute__((unused)) static int tu_cmp_hit(const void *pa, const void *pb)
 {
     const tu_hit *a = pa, *b = pb;
     if (a->row != b->row)
@@ -76,7 +76,7 @@ static int tu_cmp_hit(const void *pa, const void *pb)
 
 /* inside[c] = 1 where a ray along +x from the cell centre crosses the mesh an
  * odd number of times (exact for closed meshes of any orientation). */
-static void tu_ray_parity(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
+__attribute__((unused)) static void tu_ray_parity(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
 {
     size_t cap = 1 << 16, nh = 0;
     tu_hit *H = malloc(cap * sizeof *H);
@@ -158,7 +158,7 @@ typedef struct tu_wn {
     double beta;
 } tu_wn;
 
-static double tu_solid_angle(const double *p, const double *a, const double *b, const double *c)
+__attribute__((unused)) static double tu_solid_angle(const double *p, const double *a, const double *b, const double *c)
 {
     double A[3], B[3], C[3];
     for (int d = 0; d < 3; d++)
@@ -174,7 +174,7 @@ static double tu_solid_angle(const double *p, const double *a, const double *b, 
     return 2 * atan2(det, den);
 }
 
-static int tu_wn_build(tu_wn *W, size_t first, size_t count, int axis_hint)
+__attribute__((unused)) static int tu_wn_build(tu_wn *W, size_t first, size_t count, int axis_hint)
 {
     if (W->nn == W->cap)
         W->nodes = realloc(W->nodes, (W->cap = W->cap ? 2 * W->cap : 1024) * sizeof *W->nodes);
@@ -243,7 +243,7 @@ static int tu_wn_build(tu_wn *W, size_t first, size_t count, int axis_hint)
     return id;
 }
 
-static double tu_wn_eval(const tu_wn *W, int id, const double p[3])
+__attribute__((unused)) static double tu_wn_eval(const tu_wn *W, int id, const double p[3])
 {
     const tu_node *nd = &W->nodes[id];
     double d[3] = {nd->c[0] - p[0], nd->c[1] - p[1], nd->c[2] - p[2]};
@@ -264,7 +264,7 @@ static double tu_wn_eval(const tu_wn *W, int id, const double p[3])
 }
 
 /* inside[c] = 1 where the generalized winding number of the raw mesh exceeds 1/2. */
-static void tu_winding(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
+__attribute__((unused)) static void tu_winding(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
 {
     tu_wn W;
     memset(&W, 0, sizeof W);
@@ -288,7 +288,7 @@ static void tu_winding(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
 }
 
 /* IoU of {phi < 0} against truth. */
-static double tu_iou(const hv_grid *phi, const uint8_t *inside)
+__attribute__((unused)) static double tu_iou(const hv_grid *phi, const uint8_t *inside)
 {
     size_t I = 0, U = 0, n = hv_grid_count(phi);
     for (size_t c = 0; c < n; c++) {
@@ -297,6 +297,69 @@ static double tu_iou(const hv_grid *phi, const uint8_t *inside)
         U += a || b;
     }
     return U ? (double)I / (double)U : 1.0;
+}
+
+/* ---- generated open meshes ---- */
+
+/* An icosphere (radius 1 at the origin, 4 subdivisions) without the faces
+ * whose centroid lies within cap_deg of direction d. */
+__attribute__((unused)) static hv_mesh *tu_open_sphere(const double d[3], double cap_deg)
+{
+    const double c[3] = {0, 0, 0};
+    hv_mesh *s = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&s, c, 1.0, 4));
+    double dl = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), cosc = cos(cap_deg * M_PI / 180);
+    uint32_t *T = malloc(3 * s->ntris * sizeof *T);
+    size_t nt = 0;
+    for (size_t f = 0; f < s->ntris; f++) {
+        double m[3];
+        tu_centroid(s, f, m);
+        double ml = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        if ((m[0] * d[0] + m[1] * d[1] + m[2] * d[2]) / (ml * dl) > cosc)
+            continue;
+        memcpy(T + 3 * nt++, s->tris + 3 * f, 3 * sizeof *T);
+    }
+    hv_mesh *o = NULL;
+    TL_ASSERT_OK(hv_mesh_from_arrays(&o, s->verts, s->nverts, T, nt));
+    free(T);
+    hv_mesh_destroy(&s);
+    return o;
+}
+
+/* Appends an open tube of radius r around the z axis from z0 to z1 (nu
+ * segments around, nz along), outward, to (V, nv, T, nt). */
+__attribute__((unused)) static void tu_tube(double *V, size_t *nv, uint32_t *T, size_t *nt, double r, double z0, double z1,
+                 int nu, int nz)
+{
+    size_t b = *nv;
+    for (int i = 0; i <= nz; i++)
+        for (int j = 0; j < nu; j++) {
+            double a = 2 * M_PI * j / nu;
+            double *x = V + 3 * (*nv)++;
+            x[0] = r * cos(a), x[1] = r * sin(a), x[2] = z0 + (z1 - z0) * i / nz;
+        }
+    for (int i = 0; i < nz; i++)
+        for (int j = 0; j < nu; j++) {
+            uint32_t p = (uint32_t)(b + (size_t)i * nu + j),
+                     q = (uint32_t)(b + (size_t)i * nu + (j + 1) % nu), u = p + (uint32_t)nu,
+                     w = q + (uint32_t)nu;
+            uint32_t *t = T + 3 * *nt;
+            t[0] = p, t[1] = q, t[2] = u, t[3] = q, t[4] = w, t[5] = u;
+            *nt += 2;
+        }
+}
+
+__attribute__((unused)) static hv_mesh *tu_open_cylinder(void)
+{
+    double *V = malloc(3 * 64 * 33 * sizeof *V);
+    uint32_t *T = malloc(3 * 2 * 64 * 32 * sizeof *T);
+    size_t nv = 0, nt = 0;
+    tu_tube(V, &nv, T, &nt, 0.5, -1.0, 1.0, 64, 32);
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_from_arrays(&m, V, nv, T, nt));
+    free(V);
+    free(T);
+    return m;
 }
 
 #endif
