@@ -331,8 +331,14 @@ START_TEST(default_output_should_be_a_vdb_level_set_that_slice_can_cut)
 {
     make_inputs();
     /* a directory's files land in OUTDIR under their path below that directory */
-    int rc = run_in_dir("batch in/sub -o out --res 24 --band 2");
+    int rc = run_in_dir("batch in/sub -o out --res 24 --band 2 --report rep.json");
     ck_assert_int_eq(rc, 0);
+    /* a narrow band alone is computed in tiles, which the report counts */
+    char *rep = read_text(path("rep.json"));
+    ck_assert_ptr_nonnull(rep);
+    ck_assert_msg(strstr(rep, "\"tiles\":") && strstr(rep, "\"sign\":\"winding\""),
+                  "no tiles in the report: %s", rep);
+    free(rep);
     hv_grid *g = NULL;
     int cls = -1;
     TL_ASSERT_OK(hv_vdb_read_float(path("out/torus.vdb"), "sdf", NULL, &g, &cls));

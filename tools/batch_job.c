@@ -428,8 +428,19 @@ static int write_sidecar(const char *input, const char *output, const char *cano
     return 0;
 }
 
-static int write_volume(const char *output, const hv_grid *g, const batch_opts *o,
-                        const char *input, const char *canon, char *err, size_t errsize)
+/* A narrow-band .vdb alone is computed in tiles (heatvox sdf does the same). */
+static int wants_tiles(const batch_opts *o)
+{
+    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
+    return o->format == BATCH_VDB && !o->dense && !o->preview &&
+           o->mesh_format == BATCH_MESH_NONE && !o->sdf.unsigned_distance &&
+           o->sdf.magnitude == HV_SDF_EXACT && o->sdf.sign != HV_SDF_SIGN_HEAT &&
+           (o->sdf.repair & orient) == orient;
+}
+
+static int write_volume(const char *output, const hv_grid *g, const hv_tiles *T,
+                        const batch_opts *o, const char *input, const char *canon, char *err,
+                        size_t errsize)
 {
     hv_status st;
     if (o->format == BATCH_EXR) {
@@ -438,7 +449,8 @@ static int write_volume(const char *output, const hv_grid *g, const batch_opts *
         hv_vdb_writer *w = NULL;
         st = hv_vdb_writer_create(&w);
         if (!st)
-            st = hv_vdb_writer_add_levelset(w, g, "sdf", o->band, o->dense);
+            st = T ? hv_vdb_writer_add_levelset_tiles(w, T, "sdf", o->band)
+                   : hv_vdb_writer_add_levelset(w, g, "sdf", o->band, o->dense);
         if (!st)
             st = hv_vdb_writer_set_meta(w, "source", input);
         if (!st)
@@ -478,6 +490,7 @@ int batch_job_main(int argc, char **argv)
     int have_mesh = 0;
     hv_mesh *m = NULL;
     hv_grid *g = NULL;
+    hv_tiles *T = NULL;
     hv_mesh_report rep;
     hv_sdf_stats stats;
     int have_rep = 0, have_stats = 0;
@@ -502,7 +515,8 @@ int batch_job_main(int argc, char **argv)
     have_rep = hv_mesh_report_compute(m, &rep) == HV_OK;
     t_report = hv_now() - t;
     stage = "sdf";
-    st = hv_sdf_compute(m, &o.sdf, &g, &stats);
+    st = wants_tiles(&o) ? hv_sdf_compute_tiles(m, &o.sdf, o.band, &T, &stats)
+                         : hv_sdf_compute(m, &o.sdf, &g, &stats);
     if (st) {
         error_text(st, input, err, sizeof err);
         goto report;
@@ -515,7 +529,8 @@ int batch_job_main(int argc, char **argv)
         goto report;
     }
     t = hv_now();
-    int wr = write_volume(output, g, &o, input, canon, err, sizeof err);
+    int wr = write_volume(output, g, T, &o, input, canon, err, sizeof err);
+    hv_tiles_destroy(&T);
     t_write = hv_now() - t;
     if (wr)
         goto report;
@@ -617,6 +632,10 @@ report:;
                   r->boundary_edges, r->inconsistent_after, stats.levels, stats.diffuse_iterations,
                   stats.diffuse_relres, stats.poisson_iterations, stats.poisson_relres,
                   stats.dead_faces);
+        /* A narrow band in tiles: how many, and the voxels in its band. */
+        if (stats.tiles)
+            bb_printf(&b, ",\"tiles\":%zu,\"active_voxels\":%zu,\"sign\":\"%s\"", stats.tiles,
+                      stats.active_voxels, cli_sign_name(stats.sign));
     }
     bb_printf(&b, "}\n");
     if (b.s)
@@ -624,6 +643,7 @@ report:;
     fflush(stdout);
     bb_free(&b);
     hv_grid_destroy(&g);
+    hv_tiles_destroy(&T);
     hv_mesh_destroy(&m);
     return ok ? HV_EXIT_OK : HV_EXIT_FAIL;
 }

@@ -36,6 +36,15 @@ if [ -f "$bunny" ]; then
   for n in 128 256; do
     "$hv" bench sdf "$bunny" --n $n
   done
+  # The narrow band alone (`heatvox sdf -o X.vdb`, tiles) against OpenVDB's
+  # meshToLevelSet and write, whole processes with their peak RSS; the dense
+  # block's band beside it up to 512^3.
+  for n in 256 512; do
+    "$hv" bench band "$bunny" --n $n --dense
+  done
+  for n in 1024 2048; do
+    "$hv" bench band "$bunny" --n $n
+  done
   # A mesh left open by the repair (knot): the sign from the winding number
   # (auto) and, on request, from the heat method, which leaks out of openings.
   knot="$shared/meshes/knot.obj"
