@@ -464,11 +464,27 @@ START_TEST(bad_input_should_fail_with_clear_errors)
     o.bbox[3] = -2;
     ck_assert_int_eq(hv_sdf_compute(m, &o, &g, NULL), HV_ERR_INVALID_ARG);
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "bounding box"));
-    /* A block that misses the mesh. */
+    /* A block that misses the mesh: the exact distance with the winding
+     * number's sign, outside and at least as far as the mesh's bounds; the
+     * heat method, which needs the surface in the block, refuses it. */
     o = box_opts(16);
     double far[6] = {5, 5, 5, 6, 6, 6};
     memcpy(o.bbox, far, sizeof far);
+    hv_sdf_stats fs;
+    ck_assert_int_eq(hv_sdf_compute(m, &o, &g, &fs), HV_OK);
+    ck_assert_int_eq(fs.sign, HV_SDF_SIGN_WINDING);
+    double mlo[3], mhi[3];
+    ck_assert_int_eq(hv_mesh_bounds(m, mlo, mhi), HV_OK);
+    double gap = 0;
+    for (int a = 0; a < 3; a++)
+        gap += (5 - mhi[a]) * (5 - mhi[a]);
+    for (size_t c = 0; c < hv_grid_count(g); c++)
+        ck_assert_msg(g->v[c] >= sqrt(gap) * (1 - 1e-6), "cell %zu: %g nearer than the bounds", c,
+                      g->v[c]);
+    hv_grid_destroy(&g);
+    o.sign = HV_SDF_SIGN_HEAT;
     ck_assert_int_eq(hv_sdf_compute(m, &o, &g, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "no part of the mesh"));
     ck_assert_ptr_null(g);
     /* Absurd grids are refused before allocating. */
     hv_sdf_opts_default(&o);

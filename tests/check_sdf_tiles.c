@@ -345,8 +345,9 @@ START_TEST(vdb_from_tiles_should_read_back_and_equal_the_dense_file)
 }
 END_TEST
 
-/* heatvox sdf: a narrow band alone goes through tiles (-v says so), and
- * --no-tiles writes the same values from the dense block. */
+/* heatvox sdf: a narrow band goes through tiles (-v says so), and
+ * --no-tiles writes the same values from the dense block, and the same
+ * preview. */
 START_TEST(command_should_use_tiles_for_a_narrow_band)
 {
     char dir[] = "/tmp/hv_tiles_cli_XXXXXX", cmd[4096], err[4096];
@@ -358,11 +359,13 @@ START_TEST(command_should_use_tiles_for_a_narrow_band)
     snprintf(mesh, sizeof mesh, "%s/torus.obj", dir);
     TL_ASSERT_OK(hv_mesh_write_obj(m, mesh));
     hv_mesh_destroy(&m);
-    snprintf(cmd, sizeof cmd, "cd %s && %s sdf torus.obj --res 48 -o t.vdb -v", dir,
-             tl_heatvox_bin());
+    snprintf(cmd, sizeof cmd, "cd %s && %s sdf torus.obj --res 48 -o t.vdb --preview t.png -v",
+             dir, tl_heatvox_bin());
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
     ck_assert_msg(strstr(err, "tiles of 8^3"), "-v does not report the tiles: %s", err);
-    snprintf(cmd, sizeof cmd, "cd %s && %s sdf torus.obj --res 48 -o d.vdb --no-tiles --sign winding -q",
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s sdf torus.obj --res 48 -o d.vdb --preview d.png --no-tiles --sign winding "
+             "-q",
              dir, tl_heatvox_bin());
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
     char pt[512], pd[512];
@@ -381,6 +384,22 @@ START_TEST(command_should_use_tiles_for_a_narrow_band)
     ck_assert_uint_gt(band, 1000);
     hv_grid_destroy(&a);
     hv_grid_destroy(&b);
+    /* The preview of the tiles' run (three slices computed alone) shows what
+     * the dense block holds. */
+    uint8_t *pa = NULL, *pb = NULL;
+    int wa, ha, wb, hb;
+    snprintf(pt, sizeof pt, "%s/t.png", dir);
+    snprintf(pd, sizeof pd, "%s/d.png", dir);
+    TL_ASSERT_OK(hv_png_read_rgb(pt, &pa, &wa, &ha));
+    TL_ASSERT_OK(hv_png_read_rgb(pd, &pb, &wb, &hb));
+    ck_assert_int_eq(wa, wb);
+    ck_assert_int_eq(ha, hb);
+    int worst = 0;
+    for (size_t q = 0; q < 3 * (size_t)wa * ha; q++)
+        worst = abs(pa[q] - pb[q]) > worst ? abs(pa[q] - pb[q]) : worst;
+    ck_assert_msg(worst <= 2, "previews differ by up to %d levels", worst);
+    free(pa);
+    free(pb);
     tl_rm_rf(dir);
 }
 END_TEST

@@ -34,10 +34,11 @@ static void help(void)
            "  -o, --output FILE  the .vdb file\n"
            "  --band W           narrow band half width in voxels (default 3)\n"
            "  --dense            store every voxel of the block as active\n"
-           "  A narrow band alone (-o without --dense, --npy, --preview, --mesh-out) is\n"
-           "  computed in 8^3 tiles near the surface, never as the whole block: memory and\n"
-           "  time follow the surface. Its sign is the winding number's (--sign heat, --heat\n"
-           "  and --no-repair take the dense path).\n"
+           "  A narrow band (-o without --dense, --npy, --mesh-out) is computed in 8^3\n"
+           "  tiles near the surface, never as the whole block: memory and time follow the\n"
+           "  surface (--preview then computes its three slices alone). Its sign is the\n"
+           "  winding number's (--sign heat, --heat, --unsigned and --no-repair take the\n"
+           "  dense path).\n"
            "  --no-tiles         compute a narrow band on the dense block all the same\n"
            "                     (--unsigned always writes a dense float grid, class unknown)\n"
            "  --npy FILE         also write the dense field as a float32 .npy (z, y, x)\n"
@@ -104,6 +105,38 @@ static hv_status write_mesh_as(const hv_mesh *m, const char *final, const char *
     if (!strcasecmp(dot, ".stl"))
         return hv_mesh_write_stl(m, path);
     return hv_mesh_write_obj(m, path);
+}
+
+/* The preview of a run in tiles, without its dense block: each middle slice
+ * computed as a block one cell thick on the run's lattice. Such a block cuts
+ * the mesh, so its sign is the winding number's (HV_SDF_SIGN_AUTO), as the
+ * tiles' is: the slices show what the dense block would hold there. */
+static hv_status preview_slices(const hv_mesh *m, const hv_sdf_opts *o, const hv_sdf_stats *S,
+                                const char *path)
+{
+    hv_grid *s[3] = {NULL, NULL, NULL};
+    hv_status st = HV_OK;
+    for (int a = 0; a < 3 && !st; a++) {
+        hv_sdf_opts so = *o;
+        so.use_bbox = 1;
+        so.voxel_size = S->h;
+        so.band_only = 0;
+        for (int b = 0; b < 3; b++) {
+            so.bbox[b] = S->origin[b];
+            so.bbox[3 + b] = S->origin[b] + S->n[b] * S->h;
+        }
+        so.bbox[a] = S->origin[a] + (S->n[a] / 2) * S->h;
+        so.bbox[3 + a] = so.bbox[a] + S->h;
+        hv_grid *g = NULL;
+        if (!(st = hv_sdf_compute(m, &so, &g, NULL)))
+            st = hv_grid_slice(g, a, 0, &s[a]);
+        hv_grid_destroy(&g);
+    }
+    if (!st)
+        st = hv_png_write_slices(path, (const hv_grid *const *)s, 3, 0);
+    for (int a = 0; a < 3; a++)
+        hv_grid_destroy(&s[a]);
+    return st;
 }
 
 /* Fails early, before any computing, when the output cannot be created. */
@@ -271,7 +304,7 @@ int cmd_sdf(int argc, char **argv)
         o.band_only = band;
     /* A narrow band alone, with the winding-number sign: tiles. */
     const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
-    const int tiles = out && !dense && !npy && !preview && !mesh_out && !no_tiles &&
+    const int tiles = out && !dense && !npy && !mesh_out && !no_tiles &&
                       !o.unsigned_distance && o.magnitude == HV_SDF_EXACT &&
                       o.sign != HV_SDF_SIGN_HEAT && (o.repair & orient) == orient;
     const char *outs[] = {out, npy, preview, mesh_out};
@@ -302,10 +335,17 @@ int cmd_sdf(int argc, char **argv)
         if (st == HV_ERR_CANCELLED)
             fputc('\n', stderr);
         hv_mesh_destroy(&m);
-        return cli_fail("sdf", mesh_path, st);
+        int rc = cli_fail("sdf", mesh_path, st);
+        if (st == HV_ERR_NOMEM && !tiles && out)
+            fprintf(stderr, "heatvox sdf: a narrow band alone (-o without --dense, --npy, "
+                            "--mesh-out, --no-tiles) is computed in tiles near the surface and "
+                            "needs far less\n");
+        return rc;
     }
     size_t tris = m->ntris;
-    hv_mesh_destroy(&m);
+    /* The preview of a run in tiles computes its slices from the mesh. */
+    if (!(tiles && preview))
+        hv_mesh_destroy(&m);
 
     /* Output. */
     double tw = hv_now();
@@ -326,6 +366,7 @@ int cmd_sdf(int argc, char **argv)
             cli_discard(&co);
             hv_grid_destroy(&g);
             hv_tiles_destroy(&T);
+            hv_mesh_destroy(&m);
             return HV_EXIT_FAIL;
         }
     const char *failed = NULL;
@@ -348,8 +389,10 @@ int cmd_sdf(int argc, char **argv)
     }
     if (!st && npy && (st = hv_write_npy(tmp[1], g)))
         failed = npy;
-    if (!st && preview && (st = hv_png_write_preview(tmp[2], g, 0)))
+    if (!st && preview &&
+        (st = tiles ? preview_slices(m, &o, &S, tmp[2]) : hv_png_write_preview(tmp[2], g, 0)))
         failed = preview;
+    hv_mesh_destroy(&m);
     double t_mesh = hv_now();
     size_t mesh_tris = 0;
     if (!st && mesh_out) {

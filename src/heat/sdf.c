@@ -23,8 +23,15 @@
 #include <omp.h>
 #endif
 
-/* Estimated bytes per cell of the whole pipeline, for hv_check_dims. */
-#define SDF_BYTES_PER_CELL 96
+/* Peak bytes per cell, for hv_check_dims, measured on stanford-bunny (peak
+ * RSS less the process's own 40 MB): the exact distance with the
+ * winding-number sign or unsigned, 20 at 256^3 and 512^3 (output, distance,
+ * nearest triangle, the raster's packed minimum, the sign); the heat method
+ * on its grid about 80 more per heat-grid cell plus 12 per diffusion level
+ * (98 per cell all told at 160^3 uncoarsened, 120 with --heat and its far
+ * levels at 256^3). */
+#define SDF_EXACT_BYTES 24
+#define SDF_HEAT_BYTES 80
 /* Rasterization radius of the exact distance, in voxels. */
 #define SDF_EXACT_BAND 2.0
 /* Narrow bands up to this many voxels are rasterized whole. */
@@ -257,8 +264,20 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
     double lo[3], hi[3];
     if (st || (st = used_bounds(m, lo, hi)) || (st = grid_place(opts, lo, hi, n, h, origin)))
         return st;
-    int L = levels_for(opts, n);
-    return hv_check_dims(3, n, *h, SDF_BYTES_PER_CELL + 12 * (size_t)L);
+    /* The heat method runs unless the sign is the winding number's or the
+     * distance is exact and unsigned; AUTO may run it. */
+    const int exact = opts->magnitude == HV_SDF_EXACT;
+    const int heat = !(exact && (opts->unsigned_distance || opts->sign == HV_SDF_SIGN_WINDING));
+    size_t per = exact ? SDF_EXACT_BYTES : 0;
+    if (heat) {
+        const int f = heat_factor(opts, n);
+        int nh[3];
+        for (int a = 0; a < 3; a++)
+            nh[a] = (n[a] + f - 1) / f;
+        per += (SDF_HEAT_BYTES + 12 * (size_t)levels_for(opts, nh) + (size_t)f * f * f - 1) /
+               ((size_t)f * f * f);
+    }
+    return hv_check_dims(3, n, *h, per);
 }
 
 typedef struct sdf_work {
@@ -383,8 +402,9 @@ static hv_status sdf_place(const hv_mesh *M, hv_sdf_opts *o, const double lo[3],
 }
 
 /* The surface quadrature at the heat grid's spacing (src/heat/surface.c),
- * which the heat method splats; a mesh with no part in the block is an
- * error. */
+ * which the heat method splats; for the heat method a mesh with no part in
+ * the block is an error (the exact distance and the winding number are
+ * defined in any block). */
 static hv_status sdf_surface(const hv_mesh *M, const sdf_plan *P, sdf_work *w, hv_sdf_stats *S)
 {
     hv_status st;
@@ -527,7 +547,8 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     const double t0 = hv_now();
     const hv_mesh *M = m;
     if ((st = sdf_repair(m, &o, P.unsig, &w, &M, &S)) ||
-        (st = sdf_place(M, &o, lo, hi, &w, &P, &S)) || (st = sdf_surface(M, &P, &w, &S)))
+        (st = sdf_place(M, &o, lo, hi, &w, &P, &S)) ||
+        (P.need_heat && (st = sdf_surface(M, &P, &w, &S))))
         goto done;
     /* 2-6. The signed heat method (sdf_heat.c), where it decides the sign or
      * gives the distance; phi on gh. */
