@@ -49,27 +49,45 @@ static inline double tri_cell_d(const hv_mesh *m, uint32_t t, const double p[3])
                            m->verts + 3 * (size_t)v[2], q, &region));
 }
 
-/* Squared distance from (px, py) to segment (ax, ay)-(bx, by). */
-static inline double seg2(double px, double py, double ax, double ay, double bx, double by)
+/* A triangle projected on a plane: corners P (x, y pairs), edge vectors U
+ * (P[k+1] - P[k]) and their inverse squared lengths (0 for a point). */
+typedef struct tri2d {
+    double P[6], U[6], il[3];
+} tri2d;
+
+static inline void tri2_init(tri2d *T, const double P[6])
 {
-    double ux = bx - ax, uy = by - ay, wx = px - ax, wy = py - ay;
-    double l = ux * ux + uy * uy, t = l > 0 ? (wx * ux + wy * uy) / l : 0;
+    memcpy(T->P, P, sizeof T->P);
+    for (int k = 0; k < 3; k++) {
+        int n = (k + 1) % 3;
+        T->U[2 * k] = P[2 * n] - P[2 * k];
+        T->U[2 * k + 1] = P[2 * n + 1] - P[2 * k + 1];
+        double l = T->U[2 * k] * T->U[2 * k] + T->U[2 * k + 1] * T->U[2 * k + 1];
+        T->il[k] = l > 0 ? 1.0 / l : 0;
+    }
+}
+
+/* Squared distance from q to edge k of T. */
+static inline double seg2(const double q[2], const tri2d *T, int k)
+{
+    double ux = T->U[2 * k], uy = T->U[2 * k + 1], wx = q[0] - T->P[2 * k],
+           wy = q[1] - T->P[2 * k + 1];
+    double t = (wx * ux + wy * uy) * T->il[k];
     t = t < 0 ? 0 : t > 1 ? 1 : t;
     double dx = wx - t * ux, dy = wy - t * uy;
     return dx * dx + dy * dy;
 }
 
-/* Squared distance from q to the 2D triangle P (x, y pairs); 0 inside. */
-static inline double tri2(const double q[2], const double P[6])
+/* Squared distance from q to the 2D triangle T; 0 inside. */
+static inline double tri2(const double q[2], const tri2d *T)
 {
-    double s0 = (P[2] - P[0]) * (q[1] - P[1]) - (P[3] - P[1]) * (q[0] - P[0]);
-    double s1 = (P[4] - P[2]) * (q[1] - P[3]) - (P[5] - P[3]) * (q[0] - P[2]);
-    double s2 = (P[0] - P[4]) * (q[1] - P[5]) - (P[1] - P[5]) * (q[0] - P[4]);
+    const double *P = T->P;
+    double s0 = T->U[0] * (q[1] - P[1]) - T->U[1] * (q[0] - P[0]);
+    double s1 = T->U[2] * (q[1] - P[3]) - T->U[3] * (q[0] - P[2]);
+    double s2 = T->U[4] * (q[1] - P[5]) - T->U[5] * (q[0] - P[4]);
     if ((s0 >= 0 && s1 >= 0 && s2 >= 0) || (s0 <= 0 && s1 <= 0 && s2 <= 0))
         return 0;
-    double x = seg2(q[0], q[1], P[0], P[1], P[2], P[3]),
-           y = seg2(q[0], q[1], P[2], P[3], P[4], P[5]),
-           z = seg2(q[0], q[1], P[4], P[5], P[0], P[1]);
+    double x = seg2(q, T, 0), y = seg2(q, T, 1), z = seg2(q, T, 2);
     x = y < x ? y : x;
     return z < x ? z : x;
 }
@@ -132,8 +150,25 @@ static inline void raster_box(const hv_mesh *m, const double origin[3], double h
                                      : (fabs(n[1]) >= fabs(n[2]) ? 1 : 2);
     }
     int e1 = (d + 1) % 3, e2 = (d + 2) % 3;
+    /* The triangle's bounding sphere (centroid sc, radius sr): distances to
+     * it are at least |p - sc| - sr. */
+    double sc[3], sr = 0;
+    for (int ax = 0; ax < 3; ax++)
+        sc[ax] = (a[ax] + b[ax] + c[ax]) / 3.0;
+    {
+        const double *vv[3] = {a, b, c};
+        for (int q = 0; q < 3; q++) {
+            double r2 = 0;
+            for (int ax = 0; ax < 3; ax++)
+                r2 += (vv[q][ax] - sc[ax]) * (vv[q][ax] - sc[ax]);
+            sr = fmax(sr, r2);
+        }
+        sr = sqrt(sr) * (1 + 1e-9);
+    }
     const double W2 = W * W, od = origin[d];
-    const double P[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
+    const double P6[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
+    tri2d P;
+    tri2_init(&P, P6);
     const double ind = nl > 0 ? 1.0 / n[d] : 0;
     for (int j = lo[e1]; j <= hi[e1]; j++)
         for (int k = lo[e2]; k <= hi[e2]; k++) {
@@ -141,7 +176,7 @@ static inline void raster_box(const hv_mesh *m, const double origin[3], double h
             p[e1] = origin[e1] + (j + 0.5) * h;
             p[e2] = origin[e2] + (k + 0.5) * h;
             const double q2[2] = {p[e1], p[e2]};
-            if (tri2(q2, P) > W2)
+            if (tri2(q2, &P) > W2)
                 continue;
             int i0 = lo[d], i1 = hi[d];
             if (nl > 0) {
@@ -168,6 +203,36 @@ static inline void raster_box(const hv_mesh *m, const double origin[3], double h
         else if (v_ < pbest[at_])                                                                  \
             pbest[at_] = v_;                                                                       \
     } while (0)
+            if (pbest && nl > 0) {
+                /* One thread owns the box: every cell of the slab, skipping
+                 * those whose distance so far is already below a lower
+                 * bound of this triangle's (its plane's distance, its
+                 * bounding sphere's), by enough that its packed value would
+                 * be larger whatever the rounding: the same minimum as the
+                 * walk below. */
+                const double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
+                const double q1 = p[e1] - sc[e1], q2 = p[e2] - sc[e2], lat = q1 * q1 + q2 * q2;
+                for (int i = i0; i <= i1; i++) {
+                    p[d] = od + (i + 0.5) * h;
+                    const size_t at = base + (size_t)(i - blo[d]) * stride[d];
+                    double lim = INFINITY;
+                    if (pbest[at] != UINT64_MAX) {
+                        uint32_t bits = (uint32_t)(pbest[at] >> 32);
+                        float bd;
+                        memcpy(&bd, &bits, sizeof bd);
+                        lim = bd * (1 + 1e-6);
+                        if (fabs(rest + n[d] * (p[d] - a[d])) > lim)
+                            continue;
+                        const double q0 = p[d] - sc[d];
+                        if (lat + q0 * q0 > (lim + sr) * (lim + sr))
+                            continue;
+                    }
+                    double d2 = d2_at(p, a, b, c);
+                    if (d2 <= W2 && d2 <= lim * lim) /* else its packed value is larger */
+                        PUT(i, d2);
+                }
+                continue;
+            }
             int ic = (i0 + i1) / 2;
             p[d] = od + (ic + 0.5) * h;
             double dc = d2_at(p, a, b, c);

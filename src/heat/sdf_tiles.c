@@ -86,47 +86,6 @@ static int tri_tiles(const hv_mesh *M, size_t t, const int n[3], double h, const
     return 1;
 }
 
-typedef struct tile_edge {
-    uint64_t key; /* smaller vertex << 32 | larger */
-    int dir;      /* +1 from the smaller vertex, -1 the other way */
-} tile_edge;
-
-static int cmp_edge(const void *x, const void *y)
-{
-    uint64_t a = ((const tile_edge *)x)->key, b = ((const tile_edge *)y)->key;
-    return a < b ? -1 : a > b;
-}
-
-/* Whether every edge of M is used as often in one direction as in the
- * other: then M bounds (its winding number is a whole number off the
- * surface and changes only across it). 0 when out of memory (the caller
- * then evaluates more, never less). */
-static int balanced(const hv_mesh *M)
-{
-    const size_t ne = 3 * M->ntris;
-    tile_edge *e = malloc((ne ? ne : 1) * sizeof *e);
-    if (!e)
-        return 0;
-    for (size_t f = 0; f < M->ntris; f++)
-        for (int c = 0; c < 3; c++) {
-            uint32_t a = M->tris[3 * f + c], b = M->tris[3 * f + (c + 1) % 3];
-            e[3 * f + c].key = a < b ? (uint64_t)a << 32 | b : (uint64_t)b << 32 | a;
-            e[3 * f + c].dir = a < b ? 1 : -1;
-        }
-    qsort(e, ne, sizeof *e, cmp_edge);
-    int ok = 1;
-    for (size_t i = 0; i < ne && ok;) {
-        size_t j = i;
-        int sum = 0;
-        while (j < ne && e[j].key == e[i].key)
-            sum += e[j++].dir;
-        ok = sum == 0;
-        i = j;
-    }
-    free(e);
-    return ok;
-}
-
 hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
                         double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S)
 {
@@ -232,7 +191,7 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
 
     /* 2-3. Raster and sign, tile by tile. */
     const float hf = (float)h, dlim = (float)(near_sign * h);
-    const int closed = !unsig && balanced(M);
+    const int closed = !unsig && ps.balanced;
 #define CENTRE(p, i, j, k)                                                                         \
     do {                                                                                           \
         (p)[0] = origin[0] + (blo[0] + (i) + 0.5) * h;                                             \
