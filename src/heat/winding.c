@@ -36,10 +36,11 @@ typedef struct finfo {
     double c[3], N[3], a;
 } finfo;
 
-static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
+/* Fills node nd over order[first, first + count) and, unless it is a leaf,
+ * partitions that range at the middle of its centroids' longest extent;
+ * returns the split (0 for a leaf). */
+static size_t make_node(hv_wn_tree *W, finfo *F, hv_wn_node *nd, size_t first, size_t count)
 {
-    int id = W->nnodes++;
-    hv_wn_node *nd = &W->nodes[id];
     memset(nd, 0, sizeof *nd);
     nd->first = first;
     nd->count = count;
@@ -70,7 +71,7 @@ static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
         }
     nd->r = sqrt(r2);
     if (count <= WN_LEAF)
-        return id;
+        return 0;
     int ax = 0;
     for (int k = 1; k < 3; k++)
         if (hi[k] - lo[k] > hi[ax] - lo[ax])
@@ -95,11 +96,71 @@ static int build(hv_wn_tree *W, finfo *F, size_t first, size_t count)
     }
     if (i == first || i == first + count)
         i = first + count / 2;
-    int l = build(W, F, first, i - first);
-    int r = build(W, F, i, first + count - i);
-    W->nodes[id].left = l;
-    W->nodes[id].right = r;
+    return i;
+}
+
+/* The subtree over [first, first + count) into nodes[*nn...], depth first;
+ * returns its root's index. */
+static int build(hv_wn_tree *W, finfo *F, hv_wn_node *nodes, int *nn, size_t first, size_t count)
+{
+    int id = (*nn)++;
+    size_t i = make_node(W, F, &nodes[id], first, count);
+    if (!i)
+        return id;
+    int l = build(W, F, nodes, nn, first, i - first);
+    int r = build(W, F, nodes, nn, i, first + count - i);
+    nodes[id].left = l;
+    nodes[id].right = r;
     return id;
+}
+
+/* The whole tree: the root's two subtrees are built side by side into
+ * arrays of their own, then laid out after the root, left then right, as
+ * the serial build lays them out (the same tree, node for node). */
+static hv_status build_tree(hv_wn_tree *W, finfo *F, size_t nfaces)
+{
+    W->nnodes = 1;
+    size_t i = make_node(W, F, &W->nodes[0], 0, nfaces);
+    if (!i)
+        return HV_OK;
+    const size_t nl = i, nr = nfaces - i;
+    hv_wn_node *L = malloc((2 * nl + 1) * sizeof *L), *R = malloc((2 * nr + 1) * sizeof *R);
+    if (!L || !R) {
+        free(L);
+        free(R);
+        W->nnodes = 1;
+        W->nodes[0].left = build(W, F, W->nodes, &W->nnodes, 0, nl);
+        W->nodes[0].right = build(W, F, W->nodes, &W->nnodes, i, nr);
+        return HV_OK;
+    }
+    int cl = 0, cr = 0;
+#pragma omp parallel sections num_threads(2)
+    {
+#pragma omp section
+        build(W, F, L, &cl, 0, nl);
+#pragma omp section
+        build(W, F, R, &cr, i, nr);
+    }
+    for (int k = 0; k < cl; k++) {
+        W->nodes[1 + k] = L[k];
+        if (L[k].left >= 0) {
+            W->nodes[1 + k].left += 1;
+            W->nodes[1 + k].right += 1;
+        }
+    }
+    for (int k = 0; k < cr; k++) {
+        W->nodes[1 + cl + k] = R[k];
+        if (R[k].left >= 0) {
+            W->nodes[1 + cl + k].left += 1 + cl;
+            W->nodes[1 + cl + k].right += 1 + cl;
+        }
+    }
+    W->nodes[0].left = 1;
+    W->nodes[0].right = 1 + cl;
+    W->nnodes = 1 + cl + cr;
+    free(L);
+    free(R);
+    return HV_OK;
 }
 
 hv_status hv__wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const uint32_t *faces,
@@ -123,7 +184,7 @@ hv_status hv__wn_build(hv_wn_tree *W, const double *V, const uint32_t *T, const 
         face_info(W, faces[q], F[q].c, F[q].N, &F[q].a);
     }
     if (nfaces)
-        build(W, F, 0, nfaces);
+        build_tree(W, F, nfaces);
     free(F);
     return HV_OK;
 }
