@@ -27,7 +27,8 @@ typedef struct hv_grid {
 
 /* A sparse block: the 8^3 tiles of an hv_grid's block that hold data (a
  * narrow band), each at a multiple of HV_TILE cells, the rest of the block
- * implied (hv_sdf_compute_tiles). Tiles are in order of their z, y, x. */
+ * implied (hv_sdf_compute_tiles). Each tile is listed once, in an order of
+ * the producer's (hv_sdf_compute_tiles: by 2x2x2 groups). */
 #define HV_TILE 8
 typedef struct hv_tiles {
     int n[3];         /* the block, as an hv_grid's: cells per axis */
