@@ -35,7 +35,7 @@ slows solves down on busy machines).
 from ._lib import Error, Status, fn as _fn, path as library_path
 from ._grid import Grid
 from ._mesh import mesh_report, read_mesh
-from ._sdf import sdf
+from ._sdf import sdf, sdf_vdb
 from ._heat import Extender, distance, extend, mask_from_mesh
 from ._solve import SolveInfo, Solver
 
@@ -76,6 +76,7 @@ __all__ = [
     "mesh_report",
     "read_mesh",
     "sdf",
+    "sdf_vdb",
     "set_threads",
     "__version__",
 ]

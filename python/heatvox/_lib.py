@@ -18,10 +18,12 @@ from ctypes import (
     c_double,
     c_float,
     c_int,
+    c_int32,
     c_size_t,
     c_uint,
     c_uint8,
     c_uint32,
+    c_uint64,
     c_void_p,
 )
 
@@ -143,6 +145,19 @@ class hv_grid(Structure):
         ("origin", c_double * 3),
         ("v", POINTER(c_float)),
         ("solid", POINTER(c_uint8)),
+    ]
+
+
+class hv_tiles(Structure):
+    _fields_ = [
+        ("n", c_int * 3),
+        ("h", c_double),
+        ("origin", c_double * 3),
+        ("count", c_size_t),
+        ("ijk", POINTER(c_int32)),
+        ("v", POINTER(c_float)),
+        ("on", POINTER(c_uint64)),
+        ("active", c_size_t),
     ]
 
 
@@ -310,6 +325,8 @@ class hv_sdf_stats(Structure):
         ("sign", c_int),
         ("winding_evals", c_size_t),
         ("t_sign", c_double),
+        ("tiles", c_size_t),
+        ("active_voxels", c_size_t),
     ]
 
 
@@ -401,6 +418,7 @@ class hv_extend_field(Structure):
 # Every struct above, by its C name (for tests/python/test_structs.py).
 STRUCTS = [
     hv_grid,
+    hv_tiles,
     hv_mesh,
     hv_mesh_report,
     hv_problem,
@@ -468,6 +486,11 @@ _PROTOTYPES = {
     # sdf.h
     "hv_sdf_opts_default": (None, [_P(hv_sdf_opts)]),
     "hv_sdf_compute": (_status, [_mesh_p, _P(hv_sdf_opts), _P(_grid_p), _P(hv_sdf_stats)]),
+    "hv_sdf_compute_tiles": (
+        _status,
+        [_mesh_p, _P(hv_sdf_opts), c_double, _P(_P(hv_tiles)), _P(hv_sdf_stats)],
+    ),
+    "hv_tiles_destroy": (None, [_P(_P(hv_tiles))]),
     # heat.h
     "hv_distance_opts_default": (None, [_P(hv_distance_opts)]),
     "hv_distance_compute": (
@@ -490,6 +513,7 @@ _PROTOTYPES = {
     "hv_vdb_writer_destroy": (None, [_P(_writer_p)]),
     "hv_vdb_writer_add_levelset": (_status, [_writer_p, _grid_p, c_char_p, c_double, c_int]),
     "hv_vdb_writer_add_float": (_status, [_writer_p, _grid_p, c_char_p]),
+    "hv_vdb_writer_add_levelset_tiles": (_status, [_writer_p, _P(hv_tiles), c_char_p, c_double]),
     "hv_vdb_writer_add_mask": (_status, [_writer_p, _grid_p, c_char_p]),
     "hv_vdb_writer_set_meta": (_status, [_writer_p, c_char_p, c_char_p]),
     "hv_vdb_writer_write": (_status, [_writer_p, c_char_p]),

@@ -15,13 +15,62 @@ from ._lib import (
     backend_code,
     backend_name,
     fn,
+    fspath,
     hv_grid,
     hv_sdf_opts,
+    hv_tiles,
     hv_sdf_stats,
     progress_scope,
     struct_dict,
 )
 from ._mesh import c_mesh, read_mesh
+
+def _opts(res, pad, voxel_size, bbox, band, unsigned, backend, heat, t_scale, heat_coarsen, sign,
+          repair, domed_caps, threads, more):
+    """hv_sdf_opts from sdf()'s arguments, and the band (default 3)."""
+    o = hv_sdf_opts()
+    fn.hv_sdf_opts_default(ctypes.byref(o))
+    if voxel_size is not None:
+        o.voxel_size = _arrays.positive(voxel_size, "voxel_size")
+    else:
+        o.res = _arrays.integer(res, "res", 1)
+        o.voxel_size = 0
+    o.pad = _arrays.integer(pad, "pad", 0)
+    if bbox is not None:
+        b = np.asarray(bbox, dtype=np.float64).ravel()
+        if b.size != 6 or not np.all(np.isfinite(b)):
+            raise ValueError("bbox must be 6 finite numbers (x0, y0, z0, x1, y1, z1), got %r" % (bbox,))
+        for a in range(3):
+            if not b[3 + a] > b[a]:
+                raise ValueError("bbox: %s1 (%g) must exceed %s0 (%g)" % ("xyz"[a], b[3 + a], "xyz"[a], b[a]))
+        o.use_bbox = 1
+        o.bbox[:] = list(b)
+    band = 3.0 if band is None else _arrays.positive(band, "band")
+    o.unsigned_distance = 1 if unsigned else 0
+    o.backend = backend_code(backend)
+    o.magnitude = HV_SDF_HEAT if heat else HV_SDF_EXACT
+    o.t_scale = _arrays.positive(t_scale, "t_scale")
+    o.heat_coarsen = _arrays.integer(heat_coarsen, "heat_coarsen", 0, 4)
+    signs = {"auto": 0, "heat": 1, "winding": 2}
+    if sign not in signs:
+        raise ValueError("sign must be one of 'auto', 'heat', 'winding', got %r" % (sign,))
+    o.sign = signs[sign]
+    if repair is True:
+        flags = HV_SDF_REPAIR_ALL
+    elif repair is False:
+        flags = 0
+    else:
+        flags = _arrays.integer(repair, "repair", 0, 0x7F)
+    o.repair = flags | (HV_SDF_REPAIR_DOMED_CAPS if domed_caps else 0)
+    o.threads = _arrays.integer(threads, "threads", 0, HV_MAX_THREADS)
+    for key, value in more.items():
+        check = _MORE.get(key)
+        if check is None:
+            raise TypeError("sdf() got an unexpected keyword argument %r (hv_sdf_opts fields: %s)" % (key, ", ".join(sorted(_MORE))))
+        setattr(o, key, check(value))
+
+    return o, band
+
 
 # hv_sdf_opts fields that sdf() takes through **more, with their checks.
 _MORE = {
@@ -119,47 +168,8 @@ def sdf(
         if not is_path(vertices):
             raise TypeError("sdf needs (vertices, faces) arrays or a mesh path")
         vertices, faces = read_mesh(vertices)
-    o = hv_sdf_opts()
-    fn.hv_sdf_opts_default(ctypes.byref(o))
-    if voxel_size is not None:
-        o.voxel_size = _arrays.positive(voxel_size, "voxel_size")
-    else:
-        o.res = _arrays.integer(res, "res", 1)
-        o.voxel_size = 0
-    o.pad = _arrays.integer(pad, "pad", 0)
-    if bbox is not None:
-        b = np.asarray(bbox, dtype=np.float64).ravel()
-        if b.size != 6 or not np.all(np.isfinite(b)):
-            raise ValueError("bbox must be 6 finite numbers (x0, y0, z0, x1, y1, z1), got %r" % (bbox,))
-        for a in range(3):
-            if not b[3 + a] > b[a]:
-                raise ValueError("bbox: %s1 (%g) must exceed %s0 (%g)" % ("xyz"[a], b[3 + a], "xyz"[a], b[a]))
-        o.use_bbox = 1
-        o.bbox[:] = list(b)
-    band = 3.0 if band is None else _arrays.positive(band, "band")
-    o.unsigned_distance = 1 if unsigned else 0
-    o.backend = backend_code(backend)
-    o.magnitude = HV_SDF_HEAT if heat else HV_SDF_EXACT
-    o.t_scale = _arrays.positive(t_scale, "t_scale")
-    o.heat_coarsen = _arrays.integer(heat_coarsen, "heat_coarsen", 0, 4)
-    signs = {"auto": 0, "heat": 1, "winding": 2}
-    if sign not in signs:
-        raise ValueError("sign must be one of 'auto', 'heat', 'winding', got %r" % (sign,))
-    o.sign = signs[sign]
-    if repair is True:
-        flags = HV_SDF_REPAIR_ALL
-    elif repair is False:
-        flags = 0
-    else:
-        flags = _arrays.integer(repair, "repair", 0, 0x7F)
-    o.repair = flags | (HV_SDF_REPAIR_DOMED_CAPS if domed_caps else 0)
-    o.threads = _arrays.integer(threads, "threads", 0, HV_MAX_THREADS)
-    for key, value in more.items():
-        check = _MORE.get(key)
-        if check is None:
-            raise TypeError("sdf() got an unexpected keyword argument %r (hv_sdf_opts fields: %s)" % (key, ", ".join(sorted(_MORE))))
-        setattr(o, key, check(value))
-
+    o, band = _opts(res, pad, voxel_size, bbox, band, unsigned, backend, heat, t_scale,
+                    heat_coarsen, sign, repair, domed_caps, threads, more)
     out = ctypes.POINTER(hv_grid)()
     st = hv_sdf_stats()
     with c_mesh(vertices, faces) as mesh, progress_scope(progress):
@@ -168,3 +178,78 @@ def sdf(
     stats["backend"] = backend_name(st.backend)
     stats["sign"] = {0: None, 1: "heat", 2: "winding"}.get(st.sign)
     return Grid._adopt(out, levelset=not unsigned, band=band, name="sdf", stats=stats)
+
+
+def sdf_vdb(
+    vertices,
+    faces=None,
+    path=None,
+    res=128,
+    pad=4,
+    voxel_size=None,
+    bbox=None,
+    band=None,
+    *,
+    sign="auto",
+    repair=True,
+    domed_caps=False,
+    threads=0,
+    name="sdf",
+    metadata=None,
+    progress=None,
+    **more,
+):
+    """Writes the narrow-band level set of a triangle mesh to an OpenVDB file
+    without the dense block, as ``heatvox sdf MESH -o PATH`` does: the band
+    is computed in 8^3 tiles near the surface (memory and time follow the
+    surface: a 1024^3 or 2048^3 band fits where the dense grid would not)
+    and written from them.
+
+    ``sdf_vdb(vertices, faces, path, ...)`` or ``sdf_vdb(mesh_path,
+    path=path, ...)``. Placement (``res``, ``pad``, ``voxel_size``,
+    ``bbox``), ``band`` (half width in voxels, default 3), ``repair``,
+    ``domed_caps``, ``threads``, ``progress`` and ``**more`` (``near_sign``,
+    ``max_hole``, ``round_to``) are sdf()'s; the values on the band equal
+    ``sdf(..., band_only=band, sign="winding")``'s. ``sign``: "auto" or
+    "winding" (the tiles' sign is the winding number's; "heat" needs the
+    dense block: use sdf()). ``name``: the grid's name; ``metadata``: a dict
+    of file metadata strings. The file lands through a temporary name, or
+    not at all.
+
+    Returns the stats dict (as sdf()'s, with "tiles" and "active_voxels").
+    Raises heatvox.Error naming the mesh or the file.
+    """
+    if faces is not None and path is None and is_path(faces):
+        faces, path = None, faces
+    if path is None:
+        raise TypeError("sdf_vdb needs the output path")
+    if faces is None:
+        if not is_path(vertices):
+            raise TypeError("sdf_vdb needs (vertices, faces) arrays or a mesh path")
+        vertices, faces = read_mesh(vertices)
+    if sign == "heat":
+        raise ValueError("sdf_vdb's tiles take the winding number's sign; use sdf(sign='heat')")
+    o, band = _opts(res, pad, voxel_size, bbox, band, False, "auto", False, 1.0, 0, sign,
+                    repair, domed_caps, threads, more)
+    if not str(name):
+        raise ValueError("name must not be empty")
+    tiles = ctypes.POINTER(hv_tiles)()
+    st = hv_sdf_stats()
+    w = ctypes.c_void_p()
+    try:
+        with c_mesh(vertices, faces) as mesh, progress_scope(progress):
+            fn.hv_sdf_compute_tiles(mesh, ctypes.byref(o), band, ctypes.byref(tiles), ctypes.byref(st))
+        fn.hv_vdb_writer_create(ctypes.byref(w))
+        fn.hv_vdb_writer_add_levelset_tiles(w, tiles, str(name).encode(), band)
+        fn.hv_tiles_destroy(ctypes.byref(tiles))
+        fn.hv_vdb_writer_set_meta(w, b"heatvox_version", fn.hv_version())
+        for k, v in (metadata or {}).items():
+            fn.hv_vdb_writer_set_meta(w, str(k).encode(), str(v).encode())
+        fn.hv_vdb_writer_write(w, fspath(path))
+    finally:
+        fn.hv_tiles_destroy(ctypes.byref(tiles))
+        fn.hv_vdb_writer_destroy(ctypes.byref(w))
+    stats = struct_dict(st)
+    stats["backend"] = None
+    stats["sign"] = {0: None, 1: "heat", 2: "winding"}.get(st.sign)
+    return stats

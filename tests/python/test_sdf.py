@@ -86,6 +86,50 @@ class SameAsCommand(unittest.TestCase):
         self.assertLessEqual(float(np.abs(band.values).max()), 4 * h * (1 + 1e-6))
 
 
+class Tiles(unittest.TestCase):
+    """heatvox.sdf_vdb: the narrow band in tiles, written without the dense block."""
+
+    def active(self, path):
+        vdb = hvtest.need_pyopenvdb()
+        g = vdb.read(path, "sdf")
+        return {it.min: it.value for it in g.citerOnValues() if it.count == 1}, g
+
+    def test_sdf_vdb_should_equal_the_command_and_the_dense_band(self):
+        mesh = hvtest.scene("meshes/torus_holes.obj")
+        d = hvtest.tmpdir()
+        cmd, mine = os.path.join(d, "c.vdb"), os.path.join(d, "p.vdb")
+        hvtest.run("sdf", mesh, "-o", cmd, "--res", "40", "-q")
+        stats = heatvox.sdf_vdb(mesh, path=mine, res=40, metadata={"k": "v"})
+        self.assertEqual(stats["sign"], "winding")
+        self.assertGreater(stats["tiles"], 0)
+        a, ga = self.active(cmd)
+        b, gb = self.active(mine)
+        self.assertEqual(a, b)
+        self.assertEqual(len(b), stats["active_voxels"])
+        self.assertEqual(gb.gridClass, "level set")
+        _, meta = hvtest.need_pyopenvdb().readAll(mine)
+        self.assertEqual(meta.get("k"), "v")
+        dense = heatvox.sdf(mesh, res=40, band_only=3, sign="winding")
+        v = dense.values  # (z, y, x)
+        for (i, j, k), val in b.items():
+            self.assertEqual(np.float32(val), v[k, j, i])
+        h = dense.voxel_size
+        self.assertEqual(int(np.count_nonzero(np.abs(v) < 3 * h)), len(b))
+
+    def test_sdf_vdb_should_refuse_what_needs_the_dense_block_and_leave_nothing(self):
+        mesh = hvtest.scene("meshes/torus_holes.obj")
+        d = hvtest.tmpdir()
+        with self.assertRaises(ValueError):
+            heatvox.sdf_vdb(mesh, path=os.path.join(d, "x.vdb"), sign="heat")
+        with self.assertRaises(TypeError):
+            heatvox.sdf_vdb(mesh)
+        bad = os.path.join(d, "no", "such", "dir", "x.vdb")
+        with self.assertRaises(heatvox.Error) as cm:
+            heatvox.sdf_vdb(mesh, path=bad, res=16)
+        self.assertIn(bad, str(cm.exception))
+        self.assertEqual(os.listdir(d), [])
+
+
 class ValuesView(unittest.TestCase):
     def test_values_should_be_a_view_of_the_library_buffer(self):
         g = heatvox.sdf(hvtest.scene("meshes/sphere_holes_flips.obj"), res=16)
@@ -193,7 +237,7 @@ class Arguments(unittest.TestCase):
     def test_docstrings_should_document_the_public_api(self):
         for obj in (heatvox, heatvox.sdf, heatvox.read_mesh, heatvox.mesh_report, heatvox.distance, heatvox.extend,
                     heatvox.Extender, heatvox.Solver, heatvox.Grid, heatvox.Grid.write_vdb, heatvox.Grid.to_mesh,
-                    heatvox.Grid.world_to_index, heatvox.Error, heatvox.mask_from_mesh):
+                    heatvox.Grid.world_to_index, heatvox.Error, heatvox.mask_from_mesh, heatvox.sdf_vdb):
             self.assertGreater(len(obj.__doc__ or ""), 40, obj)
         self.assertIn("band_only", heatvox.sdf.__doc__)
         self.assertRegex(heatvox.__version__, r"^\d+\.\d+\.\d+$")
