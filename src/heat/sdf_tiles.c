@@ -411,4 +411,6 @@ out:
     hv_free(keep);
     hv_tiles_destroy(&T);
     return st;
+#undef CENTRE
+#undef TKEY
 }
