@@ -17,7 +17,6 @@
 
 /* ---- generated open meshes ---- */
 
-
 /* A "bust": a ball of radius 1 centred at z = 1.6 on an open neck (radius
  * 0.4, z from 0 to 1.0, its top inside the ball), cut open at the bottom. */
 static hv_mesh *bust(void)

@@ -132,10 +132,17 @@ END_TEST
 
 START_TEST(shared_meshes_should_equal_the_dense_band)
 {
-    const char *names[] = {"stanford-bunny.obj", "bun_zipper_res4.ply", "bunny_small.obj",
-                           "armadillo_bad.obj",  "chair.obj",           "cow.obj",
-                           "igea.ply",           "knot.obj",            "polygon-bear.obj",
-                           "rocker.obj",         "spot.obj"};
+    const char *names[] = {"stanford-bunny.obj",
+                           "bun_zipper_res4.ply",
+                           "bunny_small.obj",
+                           "armadillo_bad.obj",
+                           "chair.obj",
+                           "cow.obj",
+                           "igea.ply",
+                           "knot.obj",
+                           "polygon-bear.obj",
+                           "rocker.obj",
+                           "spot.obj"};
     hv_sdf_opts o;
     hv_sdf_opts_default(&o);
     o.res = 64;
@@ -354,14 +361,15 @@ START_TEST(command_should_use_tiles_for_a_narrow_band)
     snprintf(mesh, sizeof mesh, "%s/torus.obj", dir);
     TL_ASSERT_OK(hv_mesh_write_obj(m, mesh));
     hv_mesh_destroy(&m);
-    snprintf(cmd, sizeof cmd, "cd %s && %s sdf torus.obj --res 48 -o t.vdb --preview t.png -v",
-             dir, tl_heatvox_bin());
+    snprintf(cmd, sizeof cmd, "cd %s && %s sdf torus.obj --res 48 -o t.vdb --preview t.png -v", dir,
+             tl_heatvox_bin());
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
     ck_assert_msg(strstr(err, "tiles of 8^3"), "-v does not report the tiles: %s", err);
-    snprintf(cmd, sizeof cmd,
-             "cd %s && %s sdf torus.obj --res 48 -o d.vdb --preview d.png --no-tiles --sign winding "
-             "-q",
-             dir, tl_heatvox_bin());
+    snprintf(
+        cmd, sizeof cmd,
+        "cd %s && %s sdf torus.obj --res 48 -o d.vdb --preview d.png --no-tiles --sign winding "
+        "-q",
+        dir, tl_heatvox_bin());
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
     char pt[512], pd[512];
     snprintf(pt, sizeof pt, "%s/t.vdb", dir);

@@ -51,7 +51,8 @@ __attribute__((unused)) static void tu_centroid(const hv_mesh *m, size_t f, doub
 
 /* 2D edge sign with symbolic perturbation p + (eps, eps^2): never zero for a
  * non-degenerate edge, and the same for every triangle sharing the edge. */
-__attribute__((unused)) static int tu_edge_sign(double au, double av, double bu, double bv, double pu, double pv)
+__attribute__((unused)) static int tu_edge_sign(double au, double av, double bu, double bv,
+                                                double pu, double pv)
 {
     double e = (bu - au) * (pv - av) - (bv - av) * (pu - au);
     if (e != 0)
@@ -76,7 +77,8 @@ __attribute__((unused)) static int tu_cmp_hit(const void *pa, const void *pb)
 
 /* inside[c] = 1 where a ray along +x from the cell centre crosses the mesh an
  * odd number of times (exact for closed meshes of any orientation). */
-__attribute__((unused)) static void tu_ray_parity(const hv_mesh *m, const hv_grid *g, uint8_t *inside)
+__attribute__((unused)) static void tu_ray_parity(const hv_mesh *m, const hv_grid *g,
+                                                  uint8_t *inside)
 {
     size_t cap = 1 << 16, nh = 0;
     tu_hit *H = malloc(cap * sizeof *H);
@@ -158,7 +160,8 @@ typedef struct tu_wn {
     double beta;
 } tu_wn;
 
-__attribute__((unused)) static double tu_solid_angle(const double *p, const double *a, const double *b, const double *c)
+__attribute__((unused)) static double tu_solid_angle(const double *p, const double *a,
+                                                     const double *b, const double *c)
 {
     double A[3], B[3], C[3];
     for (int d = 0; d < 3; d++)
@@ -328,8 +331,8 @@ __attribute__((unused)) static hv_mesh *tu_open_sphere(const double d[3], double
 
 /* Appends an open tube of radius r around the z axis from z0 to z1 (nu
  * segments around, nz along), outward, to (V, nv, T, nt). */
-__attribute__((unused)) static void tu_tube(double *V, size_t *nv, uint32_t *T, size_t *nt, double r, double z0, double z1,
-                 int nu, int nz)
+__attribute__((unused)) static void tu_tube(double *V, size_t *nv, uint32_t *T, size_t *nt,
+                                            double r, double z0, double z1, int nu, int nz)
 {
     size_t b = *nv;
     for (int i = 0; i <= nz; i++)

@@ -17,17 +17,17 @@
 
 static int usage(FILE *out)
 {
-    fprintf(out,
-            "usage: heatvox bench band MESH --n N [--band W] [--repeat R] [--dense]\n"
-            "\n"
-            "Times `heatvox sdf MESH --res N --band W -o OUT.vdb` (the narrow band in\n"
-            "tiles) and OpenVDB's meshToLevelSet with its .vdb write on the same lattice,\n"
-            "each as its own process, best of R runs (default 1). Prints one JSON line:\n"
-            "seconds, peak_rss_mb, active_voxels, ref \"openvdb\", ref_seconds,\n"
-            "ref_rss_mb, ref_active_voxels, ratio = seconds / ref_seconds, rss_ratio; up to\n"
-            "512^3 also band_sign_agreement and band_mean_abs_diff (of the distances, in\n"
-            "voxels) over the voxels in both bands; with --dense also dense_seconds and dense_rss_mb of the same\n"
-            "band on the dense block (--no-tiles). Files go to $TMPDIR (default /tmp).\n");
+    fprintf(out, "usage: heatvox bench band MESH --n N [--band W] [--repeat R] [--dense]\n"
+                 "\n"
+                 "Times `heatvox sdf MESH --res N --band W -o OUT.vdb` (the narrow band in\n"
+                 "tiles) and OpenVDB's meshToLevelSet with its .vdb write on the same lattice,\n"
+                 "each as its own process, best of R runs (default 1). Prints one JSON line:\n"
+                 "seconds, peak_rss_mb, active_voxels, ref \"openvdb\", ref_seconds,\n"
+                 "ref_rss_mb, ref_active_voxels, ratio = seconds / ref_seconds, rss_ratio; up to\n"
+                 "512^3 also band_sign_agreement and band_mean_abs_diff (of the distances, in\n"
+                 "voxels) over the voxels in both bands; with --dense also dense_seconds and "
+                 "dense_rss_mb of the same\n"
+                 "band on the dense block (--no-tiles). Files go to $TMPDIR (default /tmp).\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -142,7 +142,7 @@ int cmd_bench_band(int argc, char **argv)
     snprintf(bs, sizeof bs, "%.17g", band);
 
     double sec = INFINITY, rss = 0, dsec = INFINITY, drss = 0, rsec = INFINITY, rrss = 0, t, r;
-    char *hv_argv[] = {"heatvox", "sdf", (char *)path, "--res", ns,  "--band",
+    char *hv_argv[] = {"heatvox", "sdf", (char *)path, "--res", ns,   "--band",
                        bs,        "-o",  mine,         "-q",    NULL, NULL};
     for (int k = 0; k < repeat; k++) {
         if (run(hv_argv, &t, &r)) {

@@ -304,9 +304,9 @@ int cmd_sdf(int argc, char **argv)
         o.band_only = band;
     /* A narrow band alone, with the winding-number sign: tiles. */
     const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
-    const int tiles = out && !dense && !npy && !mesh_out && !no_tiles &&
-                      !o.unsigned_distance && o.magnitude == HV_SDF_EXACT &&
-                      o.sign != HV_SDF_SIGN_HEAT && (o.repair & orient) == orient;
+    const int tiles = out && !dense && !npy && !mesh_out && !no_tiles && !o.unsigned_distance &&
+                      o.magnitude == HV_SDF_EXACT && o.sign != HV_SDF_SIGN_HEAT &&
+                      (o.repair & orient) == orient;
     const char *outs[] = {out, npy, preview, mesh_out};
     if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;
@@ -374,7 +374,7 @@ int cmd_sdf(int argc, char **argv)
         hv_vdb_writer *w = NULL;
         /* An unsigned distance is no level set (no inside): a plain float grid. */
         if (!(st = hv_vdb_writer_create(&w)) &&
-            !(st = T                   ? hv_vdb_writer_add_levelset_tiles(w, T, name, band)
+            !(st = T                     ? hv_vdb_writer_add_levelset_tiles(w, T, name, band)
                    : o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
                                          : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
             !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&

@@ -15,7 +15,7 @@ typedef struct hv_pseudo {
                         about 1/2 on it), 2 not */
     hv_wn_tree W;    /* over all faces, for ftrust */
     int have_W;
-    int balanced;    /* every edge is used as often in one direction as in the other: the
+    int balanced; /* every edge is used as often in one direction as in the other: the
                         mesh bounds, and its winding number changes only across it */
 } hv_pseudo;
 

@@ -597,8 +597,8 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     if (st || (st = used_bounds(m, lo, hi)))
         return st;
     if (!(band > 0) || band > 64)
-        return hv__error(HV_ERR_INVALID_ARG, "sdf: band half width must be in (0, 64] voxels, got %g",
-                         band);
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: band half width must be in (0, 64] voxels, got %g", band);
     if (o.magnitude != HV_SDF_EXACT)
         return hv__error(HV_ERR_INVALID_ARG,
                          "sdf: a narrow band of tiles has the exact distance only (the heat "
@@ -619,8 +619,7 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     const hv_mesh *M = m;
     int n[3];
     double h, origin[3];
-    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) ||
-        (st = grid_place(&o, lo, hi, n, &h, origin)))
+    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) || (st = grid_place(&o, lo, hi, n, &h, origin)))
         goto done;
     memcpy(S.n, n, sizeof S.n);
     S.h = h;

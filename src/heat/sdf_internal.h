@@ -41,7 +41,6 @@ double hv__wn_sure(const hv_wn_tree *W, const double p[3], size_t *evals);
  * new. Counts into S (tiles, active_voxels, band_cells, winding_evals,
  * near_sign_cells, t_sign). */
 hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
-                        double band, int unsig, double near_sign, hv_tiles **out,
-                        hv_sdf_stats *S);
+                        double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S);
 
 #endif

@@ -102,8 +102,8 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
      * then by octant within it. */
     const int nb[3] = {(nt[0] + 1) / 2, (nt[1] + 1) / 2, (nt[2] + 1) / 2};
 #define TKEY(x, y, z)                                                                              \
-    ((((uint64_t)((x) >> 1) + (uint64_t)nb[0] * ((uint64_t)((y) >> 1) +                           \
-                                                (uint64_t)nb[1] * (uint64_t)((z) >> 1)))          \
+    ((((uint64_t)((x) >> 1) +                                                                      \
+       (uint64_t)nb[0] * ((uint64_t)((y) >> 1) + (uint64_t)nb[1] * (uint64_t)((z) >> 1)))          \
       << 3) |                                                                                      \
      (uint64_t)(((x)&1) | ((y)&1) << 1 | ((z)&1) << 2))
     if (8.0 * nb[0] * nb[1] * nb[2] >= 4294967295.0)
@@ -259,109 +259,112 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
             hv__exact_raster_tile(M, origin, h, glo, ghi, tl[i], W, big);
         free(tl);
         for (size_t q = gstart[gq]; q < gstart[gq + 1]; q++) {
-        uint64_t best[T3];
-        const uint64_t key = pairs[tstart[q]] >> 32;
-        const int oc = (int)(key & 7);
-        const int tc[3] = {2 * gc[0] + (oc & 1), 2 * gc[1] + (oc >> 1 & 1), 2 * gc[2] + (oc >> 2)};
-        int blo[3], bhi[3];
-        for (int a = 0; a < 3; a++) {
-            blo[a] = tc[a] * HV_TILE;
-            bhi[a] = blo[a] + HV_TILE - 1 < n[a] - 1 ? blo[a] + HV_TILE - 1 : n[a] - 1;
-            T->ijk[3 * q + a] = blo[a];
-        }
-        const int ex = bhi[0] - blo[0] + 1, ey = bhi[1] - blo[1] + 1, ez = bhi[2] - blo[2] + 1;
-        for (int k = 0; k < ez; k++)
-            for (int j = 0; j < ey; j++)
-                for (int i = 0; i < ex; i++)
-                    best[i + ex * (j + ey * k)] =
-                        big[(blo[0] - glo[0] + i) +
-                            (size_t)gx * ((blo[1] - glo[1] + j) + (size_t)gy * (blo[2] - glo[2] + k))];
-        float *v = T->v + (size_t)T3 * q;
-        uint64_t *on = T->on + 8 * q;
-        double t0 = hv_now();
-        int any = 0;
-        float d[T3];
-        int8_t sg[T3];
-        int todo = 0;
-        for (int k = 0; k < HV_TILE; k++)
-            for (int j = 0; j < HV_TILE; j++)
-                for (int i = 0; i < HV_TILE; i++) {
-                    const int o = i + HV_TILE * (j + HV_TILE * k);
-                    v[o] = bg;
-                    d[o] = INFINITY;
-                    sg[o] = 0;
-                    if (i >= ex || j >= ey || k >= ez)
-                        continue;
-                    const uint64_t b = best[i + ex * (j + ey * k)];
-                    if (b == UINT64_MAX)
-                        continue;
-                    band_cells++;
-                    uint32_t bits = (uint32_t)(b >> 32);
-                    memcpy(&d[o], &bits, sizeof d[o]);
-                    best[i + ex * (j + ey * k)] = (uint64_t)(uint32_t)b; /* the triangle */
-                    if (unsig || !(d[o] < hf)) {
-                        todo += !unsig && d[o] < bg;
-                        continue;
-                    }
-                    /* Within a voxel: the clean nearest feature's pseudonormal
+            uint64_t best[T3];
+            const uint64_t key = pairs[tstart[q]] >> 32;
+            const int oc = (int)(key & 7);
+            const int tc[3] = {2 * gc[0] + (oc & 1), 2 * gc[1] + (oc >> 1 & 1),
+                               2 * gc[2] + (oc >> 2)};
+            int blo[3], bhi[3];
+            for (int a = 0; a < 3; a++) {
+                blo[a] = tc[a] * HV_TILE;
+                bhi[a] = blo[a] + HV_TILE - 1 < n[a] - 1 ? blo[a] + HV_TILE - 1 : n[a] - 1;
+                T->ijk[3 * q + a] = blo[a];
+            }
+            const int ex = bhi[0] - blo[0] + 1, ey = bhi[1] - blo[1] + 1, ez = bhi[2] - blo[2] + 1;
+            for (int k = 0; k < ez; k++)
+                for (int j = 0; j < ey; j++)
+                    for (int i = 0; i < ex; i++)
+                        best[i + ex * (j + ey * k)] =
+                            big[(blo[0] - glo[0] + i) +
+                                (size_t)gx *
+                                    ((blo[1] - glo[1] + j) + (size_t)gy * (blo[2] - glo[2] + k))];
+            float *v = T->v + (size_t)T3 * q;
+            uint64_t *on = T->on + 8 * q;
+            double t0 = hv_now();
+            int any = 0;
+            float d[T3];
+            int8_t sg[T3];
+            int todo = 0;
+            for (int k = 0; k < HV_TILE; k++)
+                for (int j = 0; j < HV_TILE; j++)
+                    for (int i = 0; i < HV_TILE; i++) {
+                        const int o = i + HV_TILE * (j + HV_TILE * k);
+                        v[o] = bg;
+                        d[o] = INFINITY;
+                        sg[o] = 0;
+                        if (i >= ex || j >= ey || k >= ez)
+                            continue;
+                        const uint64_t b = best[i + ex * (j + ey * k)];
+                        if (b == UINT64_MAX)
+                            continue;
+                        band_cells++;
+                        uint32_t bits = (uint32_t)(b >> 32);
+                        memcpy(&d[o], &bits, sizeof d[o]);
+                        best[i + ex * (j + ey * k)] = (uint64_t)(uint32_t)b; /* the triangle */
+                        if (unsig || !(d[o] < hf)) {
+                            todo += !unsig && d[o] < bg;
+                            continue;
+                        }
+                        /* Within a voxel: the clean nearest feature's pseudonormal
                      * (within near_sign voxels), else the winding number. */
-                    double p[3];
-                    CENTRE(p, i, j, k);
-                    int s = d[o] < dlim ? hv__pseudo_sign(&ps, M, (uint32_t)b, p, 0) : 0;
-                    if (s)
-                        used++;
-                    else
-                        s = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
-                    sg[o] = (int8_t)s;
-                }
-        /* Beyond a voxel. With a closed mesh the winding number only changes
+                        double p[3];
+                        CENTRE(p, i, j, k);
+                        int s = d[o] < dlim ? hv__pseudo_sign(&ps, M, (uint32_t)b, p, 0) : 0;
+                        if (s)
+                            used++;
+                        else
+                            s = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
+                        sg[o] = (int8_t)s;
+                    }
+            /* Beyond a voxel. With a closed mesh the winding number only changes
          * across the surface, and no surface passes between two neighbours
          * of which one is a voxel or more from it: its sign floods in from
          * the neighbours, with one evaluation per part of the tile it does
          * not reach. An open mesh's winding number also crosses 1/2 in free
          * space (across openings): one evaluation per cell. */
-        while (todo > 0) {
-            int changed = 1;
-            while (closed && changed) {
-                changed = 0;
-                for (int o = 0; o < T3; o++) {
-                    if (sg[o] || !(d[o] < INFINITY))
-                        continue;
-                    const int i = o % HV_TILE, j = o / HV_TILE % HV_TILE, k = o / (HV_TILE * HV_TILE);
-                    int s = i > 0 ? sg[o - 1] : 0;
-                    s = !s && i < HV_TILE - 1 ? sg[o + 1] : s;
-                    s = !s && j > 0 ? sg[o - HV_TILE] : s;
-                    s = !s && j < HV_TILE - 1 ? sg[o + HV_TILE] : s;
-                    s = !s && k > 0 ? sg[o - HV_TILE * HV_TILE] : s;
-                    s = !s && k < HV_TILE - 1 ? sg[o + HV_TILE * HV_TILE] : s;
-                    if (s) {
-                        sg[o] = (int8_t)s;
-                        changed = 1;
-                        todo -= d[o] < bg;
+            while (todo > 0) {
+                int changed = 1;
+                while (closed && changed) {
+                    changed = 0;
+                    for (int o = 0; o < T3; o++) {
+                        if (sg[o] || !(d[o] < INFINITY))
+                            continue;
+                        const int i = o % HV_TILE, j = o / HV_TILE % HV_TILE,
+                                  k = o / (HV_TILE * HV_TILE);
+                        int s = i > 0 ? sg[o - 1] : 0;
+                        s = !s && i < HV_TILE - 1 ? sg[o + 1] : s;
+                        s = !s && j > 0 ? sg[o - HV_TILE] : s;
+                        s = !s && j < HV_TILE - 1 ? sg[o + HV_TILE] : s;
+                        s = !s && k > 0 ? sg[o - HV_TILE * HV_TILE] : s;
+                        s = !s && k < HV_TILE - 1 ? sg[o + HV_TILE * HV_TILE] : s;
+                        if (s) {
+                            sg[o] = (int8_t)s;
+                            changed = 1;
+                            todo -= d[o] < bg;
+                        }
                     }
                 }
+                for (int o = 0; o < T3 && todo > 0; o++) {
+                    if (sg[o] || !(d[o] < bg))
+                        continue;
+                    double p[3];
+                    CENTRE(p, o % HV_TILE, o / HV_TILE % HV_TILE, o / (HV_TILE * HV_TILE));
+                    sg[o] = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
+                    todo--;
+                    if (closed)
+                        break;
+                }
             }
-            for (int o = 0; o < T3 && todo > 0; o++) {
-                if (sg[o] || !(d[o] < bg))
+            for (int o = 0; o < T3; o++) {
+                if (!(d[o] < bg))
                     continue;
-                double p[3];
-                CENTRE(p, o % HV_TILE, o / HV_TILE % HV_TILE, o / (HV_TILE * HV_TILE));
-                sg[o] = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
-                todo--;
-                if (closed)
-                    break;
+                v[o] = sg[o] < 0 ? -d[o] : d[o];
+                on[o / (HV_TILE * HV_TILE)] |= (uint64_t)1 << (o % (HV_TILE * HV_TILE));
+                active++;
+                any = 1;
             }
-        }
-        for (int o = 0; o < T3; o++) {
-            if (!(d[o] < bg))
-                continue;
-            v[o] = sg[o] < 0 ? -d[o] : d[o];
-            on[o / (HV_TILE * HV_TILE)] |= (uint64_t)1 << (o % (HV_TILE * HV_TILE));
-            active++;
-            any = 1;
-        }
-        ts += hv_now() - t0;
-        keep[q] = (uint8_t)any;
+            ts += hv_now() - t0;
+            keep[q] = (uint8_t)any;
         }
         free(big);
     }

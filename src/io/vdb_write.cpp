@@ -340,8 +340,8 @@ hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, 
             fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
                                          "': band width must be positive, got " +
                                          std::to_string(band_voxels));
-        hv_status st = hv_check_finite(t->v, t->count * (size_t)(HV_TILE * HV_TILE * HV_TILE),
-                                       name);
+        hv_status st =
+            hv_check_finite(t->v, t->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), name);
         if (st)
             return st;
         for (size_t q = 0; q < t->count; q++)
