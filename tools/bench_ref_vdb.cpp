@@ -343,6 +343,28 @@ void check_ext_args(const hv_grid *phi, const hv_grid *const *in, const hv_grid 
         fail(st, hv_last_error());
 }
 
+// The mesh as meshToLevelSet takes it: float points and index triples
+// (indices checked; `where` names the caller in the error).
+void vdb_mesh(const char *where, const double *verts, size_t nv, const uint32_t *tris, size_t nt,
+              std::vector<openvdb::Vec3s> &pts, std::vector<openvdb::Vec3I> &tri)
+{
+    pts.resize(nv);
+    for (size_t i = 0; i < nv; i++)
+        pts[i] =
+            openvdb::Vec3s((float)verts[3 * i], (float)verts[3 * i + 1], (float)verts[3 * i + 2]);
+    tri.resize(nt);
+    for (size_t t = 0; t < nt; t++) {
+        for (int c = 0; c < 3; c++)
+            if (tris[3 * t + c] >= nv) {
+                char b[200];
+                snprintf(b, sizeof b, "%s: triangle %zu uses vertex %u of %zu", where, t,
+                         tris[3 * t + c], nv);
+                fail(HV_ERR_INVALID_ARG, b);
+            }
+        tri[t] = openvdb::Vec3I(tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]);
+    }
+}
+
 } // namespace
 
 extern "C" {
@@ -362,22 +384,9 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
         hv_status st = hv_check_finite_d(verts, 3 * nv, "mesh vertices");
         if (st)
             fail(st, hv_last_error());
-        std::vector<openvdb::Vec3s> pts(nv);
-        for (size_t i = 0; i < nv; i++)
-            pts[i] = openvdb::Vec3s((float)verts[3 * i], (float)verts[3 * i + 1],
-                                    (float)verts[3 * i + 2]);
-        std::vector<openvdb::Vec3I> tri(nt);
-        for (size_t t = 0; t < nt; t++) {
-            for (int c = 0; c < 3; c++)
-                if (tris[3 * t + c] >= nv) {
-                    char b[160];
-                    snprintf(b, sizeof b,
-                             "ref_vdb_mesh_to_levelset: triangle %zu uses vertex %u of %zu", t,
-                             tris[3 * t + c], nv);
-                    fail(HV_ERR_INVALID_ARG, b);
-                }
-            tri[t] = openvdb::Vec3I(tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]);
-        }
+        std::vector<openvdb::Vec3s> pts;
+        std::vector<openvdb::Vec3I> tri;
+        vdb_mesh("ref_vdb_mesh_to_levelset", verts, nv, tris, nt, pts, tri);
         auto xf = make_transform(out->h, out->origin);
         auto t0 = std::chrono::steady_clock::now();
         auto grid =
@@ -400,17 +409,9 @@ hv_status ref_vdb_mesh_to_vdb_file(const double *verts, size_t nv, const uint32_
             fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: empty mesh");
         if (!(h > 0) || !(band_voxels >= 1) || !std::isfinite(band_voxels))
             fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: bad voxel size or band");
-        std::vector<openvdb::Vec3s> pts(nv);
-        for (size_t i = 0; i < nv; i++)
-            pts[i] = openvdb::Vec3s((float)verts[3 * i], (float)verts[3 * i + 1],
-                                    (float)verts[3 * i + 2]);
-        std::vector<openvdb::Vec3I> tri(nt);
-        for (size_t t = 0; t < nt; t++) {
-            for (int c = 0; c < 3; c++)
-                if (tris[3 * t + c] >= nv)
-                    fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_vdb_file: vertex out of range");
-            tri[t] = openvdb::Vec3I(tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]);
-        }
+        std::vector<openvdb::Vec3s> pts;
+        std::vector<openvdb::Vec3I> tri;
+        vdb_mesh("ref_vdb_mesh_to_vdb_file", verts, nv, tris, nt, pts, tri);
         auto xf = openvdb::math::Transform::createLinearTransform(h);
         xf->postTranslate(openvdb::Vec3d(index0_world[0], index0_world[1], index0_world[2]));
         auto grid =

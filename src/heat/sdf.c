@@ -518,6 +518,21 @@ static hv_status sdf_sign_output(const hv_mesh *M, const hv_sdf_opts *o, const s
     return HV_OK;
 }
 
+/* What both entry points start with: the options (defaults for NULL),
+ * checked, zeroed stats and work, and the mesh's bounds (checked). */
+static hv_status sdf_begin(const hv_mesh *m, const hv_sdf_opts *opts, hv_sdf_opts *o,
+                           hv_sdf_stats *S, sdf_work *w, double lo[3], double hi[3])
+{
+    if (opts)
+        *o = *opts;
+    else
+        hv_sdf_opts_default(o);
+    memset(S, 0, sizeof *S);
+    memset(w, 0, sizeof *w);
+    hv_status st = check_opts(o);
+    return st ? st : used_bounds(m, lo, hi);
+}
+
 hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **out,
                          hv_sdf_stats *stats)
 {
@@ -525,19 +540,13 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute: out is NULL");
     *out = NULL;
     hv_sdf_opts o;
-    if (opts)
-        o = *opts;
-    else
-        hv_sdf_opts_default(&o);
     hv_sdf_stats S;
-    memset(&S, 0, sizeof S);
     sdf_work w;
-    memset(&w, 0, sizeof w);
     sdf_plan P;
     memset(&P, 0, sizeof P);
-    hv_status st = check_opts(&o);
     double lo[3], hi[3];
-    if (st || (st = used_bounds(m, lo, hi)))
+    hv_status st = sdf_begin(m, opts, &o, &S, &w, lo, hi);
+    if (st)
         return st;
     resolve_auto(&o);
     if (o.threads > 0)
@@ -584,17 +593,11 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
         return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute_tiles: out is NULL");
     *out = NULL;
     hv_sdf_opts o;
-    if (opts)
-        o = *opts;
-    else
-        hv_sdf_opts_default(&o);
     hv_sdf_stats S;
-    memset(&S, 0, sizeof S);
     sdf_work w;
-    memset(&w, 0, sizeof w);
-    hv_status st = check_opts(&o);
     double lo[3], hi[3];
-    if (st || (st = used_bounds(m, lo, hi)))
+    hv_status st = sdf_begin(m, opts, &o, &S, &w, lo, hi);
+    if (st)
         return st;
     if (!(band > 0) || band > 64)
         return hv__error(HV_ERR_INVALID_ARG,
