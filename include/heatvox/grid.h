@@ -45,6 +45,10 @@ typedef struct hv_tiles {
 /* Frees the tiles and sets *t to NULL. Accepts NULL and *t == NULL. */
 HV_API void hv_tiles_destroy(hv_tiles **t);
 
+/* New tiles on like's block, with like's tiles in like's order, every value
+ * `value` and no voxel active. HV_ERR_NOMEM when they do not fit. */
+HV_API hv_status hv_tiles_create_like(hv_tiles **out, const hv_tiles *like, float value);
+
 /* Allocates a zeroed grid. n[2] is ignored (taken as 1) when dim == 2.
  * origin may be NULL (zero). Fails with HV_ERR_INVALID_ARG for sizes <= 0 or
  * h <= 0, HV_ERR_NOMEM when the grid would not fit in memory.

@@ -72,6 +72,18 @@ HV_API hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, con
 HV_API hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
                                         const hv_grid *gz, const char *name);
 
+/* Adds a float grid (t) or a vec3s grid (tx, ty, tz: the same tiles in the
+ * same order, else HV_ERR_INVALID_ARG) of the tiles' active voxels only (for
+ * vec3s, those of tx), class unknown, background 0: inactive voxels are not
+ * stored. Placed like hv_vdb_writer_add_float's grid of the same block
+ * (transform, index offset, block metadata). A NaN or Inf on an active voxel
+ * is HV_ERR_NUMERIC naming the grid. The tiles are copied. */
+HV_API hv_status hv_vdb_writer_add_float_tiles(hv_vdb_writer *w, const hv_tiles *t,
+                                               const char *name);
+HV_API hv_status hv_vdb_writer_add_vec3_tiles(hv_vdb_writer *w, const hv_tiles *tx,
+                                              const hv_tiles *ty, const hv_tiles *tz,
+                                              const char *name);
+
 /* Adds a bool grid active (and true) where g->solid is non-zero (g->v is
  * ignored); an all-fluid grid, or one without a mask, gives an empty grid. */
 HV_API hv_status hv_vdb_writer_add_mask(hv_vdb_writer *w, const hv_grid *g, const char *name);
@@ -140,6 +152,28 @@ typedef struct hv_vdb_read_opts {
  * grids present. Wrong value type: HV_ERR_INVALID_ARG. The caller owns *out. */
 HV_API hv_status hv_vdb_read_float(const char *path, const char *name, const hv_vdb_read_opts *opts,
                                    hv_grid **out, int *grid_class);
+
+/* Reads a float or double grid as 8^3 tiles of the block [lo, hi] (index
+ * coordinates, inclusive, as hv_vdb_common_box gives them), without a dense
+ * grid: the tiles (corners at lo + multiples of 8) that hold an active voxel
+ * of the grid inside the block (every voxel of an active tile of the tree
+ * counts), in order of k, then j, then i, with every cell's value (inactive
+ * cells: the value the tree stores there, for level sets the signed
+ * background) and the active voxels (those inside the block). n, h and
+ * origin are those of the grid hv_vdb_read_float would make of the same
+ * block. Errors as hv_vdb_read_float's. The caller owns *out
+ * (hv_tiles_destroy). */
+HV_API hv_status hv_vdb_read_float_tiles(const char *path, const char *name, const int lo[3],
+                                         const int hi[3], hv_tiles **out, int *grid_class);
+
+/* Reads grid `name` (float or double: *ncomp = 1; vec3s or vec3d: 3) at every
+ * cell of like's tiles, which must come from the same file's lattice
+ * (hv_vdb_read_float_tiles): out[c] receive like's tiles, in like's order,
+ * the grid's values (its background where it stores none) and its own active
+ * voxels. Transforms must agree (HV_ERR_INVALID_ARG naming the grid). The
+ * caller owns out[0 .. *ncomp - 1]. */
+HV_API hv_status hv_vdb_read_tiles_like(const char *path, const char *name, const hv_tiles *like,
+                                        hv_tiles *out[3], int *ncomp);
 
 /* Reads a vec3s or vec3d grid into three new dense component grids. */
 HV_API hv_status hv_vdb_read_vec3(const char *path, const char *name, const hv_vdb_read_opts *opts,

@@ -124,6 +124,38 @@ void hv_tiles_destroy(hv_tiles **t)
     *t = NULL;
 }
 
+hv_status hv_tiles_create_like(hv_tiles **out, const hv_tiles *like, float value)
+{
+    if (!out || !like || (like->count && !like->ijk))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_tiles_create_like: out or like is NULL");
+    *out = NULL;
+    const size_t count = like->count, cells = (size_t)HV_TILE * HV_TILE * HV_TILE;
+    if (count > SIZE_MAX / (cells * sizeof(float)))
+        return hv__error(HV_ERR_NOMEM, "%zu tiles do not fit in memory", count);
+    hv_tiles *t = calloc(1, sizeof *t);
+    if (!t)
+        return hv__error(HV_ERR_NOMEM, "cannot allocate %zu tiles", count);
+    *t = *like;
+    t->ijk = hv_malloc(3 * count * sizeof *t->ijk);
+    t->v = hv_malloc(count * cells * sizeof *t->v);
+    t->on = hv_calloc(HV_TILE * count, sizeof *t->on);
+    t->active = 0;
+    if (!t->ijk || !t->v || !t->on) {
+        hv_tiles_destroy(&t);
+        return hv__error(HV_ERR_NOMEM, "cannot allocate %zu tiles (%.3g GB)", count,
+                         (double)count * cells * sizeof(float) / 1e9);
+    }
+    if (count)
+        memcpy(t->ijk, like->ijk, 3 * count * sizeof *t->ijk);
+    float *v = t->v;
+#pragma omp parallel for schedule(static)
+    for (size_t q = 0; q < count; q++)
+        for (size_t c = 0; c < cells; c++)
+            v[q * cells + c] = value;
+    *out = t;
+    return HV_OK;
+}
+
 hv_status hv_grid_add_mask(hv_grid *g)
 {
     if (!g)

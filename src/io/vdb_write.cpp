@@ -12,6 +12,8 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -19,6 +21,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -270,6 +273,141 @@ void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g
     w->grids.push_back(grid);
 }
 
+// ---- tiles --------------------------------------------------------------------
+
+constexpr size_t TILE_CELLS = HV_TILE * HV_TILE * HV_TILE;
+
+// Checks tiles t (`what` names them in messages) and returns their block as a
+// grid without values, for placement() and finish_grid().
+hv_grid tiles_block(const hv_tiles *t, const std::string &what)
+{
+    if (!t || (t->count && (!t->ijk || !t->v || !t->on)))
+        fail(HV_ERR_INVALID_ARG, what + ": tiles are NULL");
+    hv_grid b = {};
+    b.dim = 3;
+    b.h = t->h;
+    for (int a = 0; a < 3; a++) {
+        b.n[a] = t->n[a];
+        b.origin[a] = t->origin[a];
+    }
+    float unused = 0;
+    b.v = &unused; // check_grid requires values; nothing reads them
+    check_grid(&b, what.c_str());
+    b.v = nullptr;
+    for (size_t q = 0; q < t->count; q++)
+        for (int a = 0; a < 3; a++) {
+            const int32_t c = t->ijk[3 * q + a];
+            if (c % HV_TILE || c < 0 || c >= t->n[a])
+                fail(HV_ERR_INVALID_ARG, what + ": a tile is not on the block's 8^3 lattice");
+        }
+    return b;
+}
+
+// HV_ERR_NUMERIC naming the grid for a NaN or Inf on a voxel active in `on`
+// (inactive voxels are not written).
+void check_active_finite(const hv_tiles *on, const hv_tiles *t, const std::string &what)
+{
+    const size_t none = std::numeric_limits<size_t>::max();
+    const size_t bad = tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, t->count), none,
+        [&](const tbb::blocked_range<size_t> &r, size_t first) {
+            for (size_t q = r.begin(); q != r.end() && first == none; q++)
+                for (int k = 0; k < HV_TILE && first == none; k++)
+                    for (uint64_t m = on->on[HV_TILE * q + k]; m; m &= m - 1) {
+                        const size_t c = q * TILE_CELLS + HV_TILE * HV_TILE * (size_t)k +
+                                         (size_t)__builtin_ctzll(m);
+                        if (!std::isfinite(t->v[c])) {
+                            first = c;
+                            break;
+                        }
+                    }
+            return first;
+        },
+        [](size_t a, size_t b) { return std::min(a, b); });
+    if (bad == none)
+        return;
+    const size_t q = bad / TILE_CELLS, c = bad % TILE_CELLS;
+    char buf[160];
+    snprintf(buf, sizeof buf, " holds a non-finite value (%g) at block cell (%d, %d, %d)",
+             (double)t->v[bad], t->ijk[3 * q] + (int)(c % HV_TILE),
+             t->ijk[3 * q + 1] + (int)(c / HV_TILE % HV_TILE),
+             t->ijk[3 * q + 2] + (int)(c / (HV_TILE * HV_TILE)));
+    fail(HV_ERR_NUMERIC, what + buf);
+}
+
+// Adds the voxels active in tiles t to grid, at index = block index + off,
+// with value(index into t->v); inactive voxels hold the background and stay
+// inactive. Leaves are built in parallel. Unless off is a multiple of 8 a
+// tile meets up to 8 leaves and a leaf up to 8 tiles, so each leaf is built
+// from its (leaf, tile) pairs, sorted by leaf.
+template <class GridT, class F>
+void add_active_voxels(GridT &grid, const hv_tiles *t, const int off[3], F &&value)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    const int D = (int)LeafT::DIM;
+    struct Part {
+        Coord leaf;
+        size_t q;
+    };
+    std::vector<Part> parts;
+    for (size_t q = 0; q < t->count; q++) {
+        uint64_t any = 0;
+        for (int k = 0; k < HV_TILE; k++)
+            any |= t->on[HV_TILE * q + k];
+        if (!any)
+            continue;
+        const int32_t *c = t->ijk + 3 * q;
+        const Coord T(c[0] + off[0], c[1] + off[1], c[2] + off[2]);
+        // T & ~(D-1) rounds down to the leaf lattice, negatives included.
+        for (int lz = T[2] & ~(D - 1); lz < T[2] + HV_TILE; lz += D)
+            for (int ly = T[1] & ~(D - 1); ly < T[1] + HV_TILE; ly += D)
+                for (int lx = T[0] & ~(D - 1); lx < T[0] + HV_TILE; lx += D)
+                    parts.push_back(Part{Coord(lx, ly, lz), q});
+    }
+    tbb::parallel_sort(parts.begin(), parts.end(), [](const Part &a, const Part &b) {
+        return a.leaf < b.leaf || (a.leaf == b.leaf && a.q < b.q);
+    });
+    std::vector<size_t> first; // each leaf's first part, then parts.size()
+    for (size_t p = 0; p < parts.size(); p++)
+        if (p == 0 || parts[p].leaf != parts[p - 1].leaf)
+            first.push_back(p);
+    first.push_back(parts.size());
+    const size_t nleaf = first.size() - 1;
+    std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
+    const auto bg = grid.background();
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
+            for (size_t l = r.begin(); l != r.end(); l++) {
+                const Coord L = parts[first[l]].leaf;
+                auto leaf = std::make_unique<LeafT>(L, bg, false);
+                for (size_t p = first[l]; p < first[l + 1]; p++) {
+                    const size_t q = parts[p].q;
+                    const int32_t *c = t->ijk + 3 * q;
+                    const Coord T(c[0] + off[0], c[1] + off[1], c[2] + off[2]);
+                    int b0[3], b1[3]; // the overlap, in tile cells
+                    for (int a = 0; a < 3; a++) {
+                        b0[a] = std::max(L[a], T[a]) - T[a];
+                        b1[a] = std::min(L[a] + D, T[a] + HV_TILE) - T[a];
+                    }
+                    for (int k = b0[2]; k < b1[2]; k++)
+                        for (int j = b0[1]; j < b1[1]; j++)
+                            for (int i = b0[0]; i < b1[0]; i++)
+                                if (t->on[HV_TILE * q + k] >> (i + HV_TILE * j) & 1)
+                                    leaf->setValueOn(
+                                        LeafT::coordToOffset(T.offsetBy(i, j, k)),
+                                        value(q * TILE_CELLS +
+                                              (size_t)(i + HV_TILE * (j + HV_TILE * k))));
+                }
+                if (!leaf->isEmpty())
+                    leaves[l] = std::move(leaf);
+            }
+        });
+    auto &tree = grid.tree();
+    for (auto &l : leaves)
+        if (l)
+            tree.addLeaf(l.release());
+}
+
 } // namespace
 
 extern "C" {
@@ -322,20 +460,7 @@ hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, 
 {
     return guarded("hv_vdb_writer_add_levelset_tiles", [&] {
         check_new_name(w, name);
-        if (!t || (t->count && (!t->ijk || !t->v || !t->on)))
-            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name + "': tiles are NULL");
-        hv_grid hdr = {};
-        hdr.dim = 3;
-        hdr.h = t->h;
-        for (int a = 0; a < 3; a++) {
-            hdr.n[a] = t->n[a];
-            hdr.origin[a] = t->origin[a];
-        }
-        hdr.v = t->v; // check_grid looks at it, nothing reads it
-        float dummy = 0;
-        if (!hdr.v)
-            hdr.v = &dummy;
-        check_grid(&hdr, "level set tiles");
+        const hv_grid hdr = tiles_block(t, std::string("level set '") + name + "'");
         if (!(band_voxels > 0) || !std::isfinite(band_voxels))
             fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
                                          "': band width must be positive, got " +
@@ -344,12 +469,6 @@ hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, 
             hv_check_finite(t->v, t->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), name);
         if (st)
             return st;
-        for (size_t q = 0; q < t->count; q++)
-            for (int a = 0; a < 3; a++)
-                if (t->ijk[3 * q + a] % HV_TILE || t->ijk[3 * q + a] < 0 ||
-                    t->ijk[3 * q + a] >= t->n[a])
-                    fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
-                                                 "': a tile is not on the block's 8^3 lattice");
         Placement pl = placement(w, &hdr, name);
         const float bg = (float)(band_voxels * t->h);
         auto grid = openvdb::FloatGrid::create(bg);
@@ -457,6 +576,59 @@ hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_g
         grid->setGridClass(openvdb::GRID_UNKNOWN);
         grid->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
         finish_grid(w, grid, gx, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_float_tiles(hv_vdb_writer *w, const hv_tiles *t, const char *name)
+{
+    return guarded("hv_vdb_writer_add_float_tiles", [&] {
+        check_new_name(w, name);
+        const std::string what = std::string("float grid '") + name + "'";
+        const hv_grid b = tiles_block(t, what);
+        check_active_finite(t, t, what);
+        Placement pl = placement(w, &b, name);
+        auto grid = openvdb::FloatGrid::create(0.0f);
+        const float *v = t->v;
+        add_active_voxels(*grid, t, pl.off, [v](size_t c) { return v[c]; });
+        openvdb::tools::prune(grid->tree());
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_UNKNOWN);
+        finish_grid(w, grid, &b, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_add_vec3_tiles(hv_vdb_writer *w, const hv_tiles *tx, const hv_tiles *ty,
+                                       const hv_tiles *tz, const char *name)
+{
+    return guarded("hv_vdb_writer_add_vec3_tiles", [&] {
+        check_new_name(w, name);
+        const std::string what = std::string("vec3 grid '") + name + "'";
+        const hv_grid bx = tiles_block(tx, what + " x tiles");
+        const hv_grid by = tiles_block(ty, what + " y tiles");
+        const hv_grid bz = tiles_block(tz, what + " z tiles");
+        check_same_shape(&bx, &by, "x tiles", "y tiles");
+        check_same_shape(&bx, &bz, "x tiles", "z tiles");
+        const size_t ijk_bytes = 3 * tx->count * sizeof *tx->ijk;
+        if (ty->count != tx->count || tz->count != tx->count ||
+            (tx->count &&
+             (memcmp(ty->ijk, tx->ijk, ijk_bytes) || memcmp(tz->ijk, tx->ijk, ijk_bytes))))
+            fail(HV_ERR_INVALID_ARG,
+                 what + ": the x, y and z tiles must be the same tiles in the same order");
+        check_active_finite(tx, tx, what + " x component");
+        check_active_finite(tx, ty, what + " y component");
+        check_active_finite(tx, tz, what + " z component");
+        Placement pl = placement(w, &bx, name);
+        auto grid = openvdb::Vec3SGrid::create(Vec3f(0, 0, 0));
+        const float *x = tx->v, *y = ty->v, *z = tz->v;
+        add_active_voxels(*grid, tx, pl.off,
+                          [x, y, z](size_t c) { return Vec3f(x[c], y[c], z[c]); });
+        openvdb::tools::prune(grid->tree());
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_UNKNOWN);
+        grid->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+        finish_grid(w, grid, &bx, name, pl);
         return HV_OK;
     });
 }
