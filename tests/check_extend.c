@@ -544,8 +544,9 @@ START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
     snprintf(out, sizeof out, "%s/out.vdb", dir);
     const int n = 48;
     write_input(in, n, 0);
-    snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v --field temp -o %s -q",
-             bin, in, out);
+    snprintf(cmd, sizeof cmd,
+             "%s extend %s --levelset surface --field v --field temp -o %s -q --dense", bin, in,
+             out);
     ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "heatvox extend failed: %s", err);
 
     /* Names, value types, classes, and the input's index space. */

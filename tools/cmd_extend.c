@@ -2,6 +2,9 @@
 #include "cli.h"
 
 #include <math.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,7 +19,7 @@ static int usage(FILE *out)
     fprintf(
         out,
         "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...] -o OUT.vdb\n"
-        "                      [--band W] [--t-scale K] [--dense | --out-band W] [--plain]\n"
+        "                      [--band W] [--t-scale K] [--out-band W] [--dense] [--plain]\n"
         "                      [--backend auto|mg|fftw|opencl] [--threads T] [-q] [-v]\n"
         "\n"
         "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
@@ -26,18 +29,22 @@ static int usage(FILE *out)
         "surface where phi is a distance, at itself elsewhere (clamped narrow-band level\n"
         "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
         "direction are diffused separately (vector heat method). All fields are solved\n"
-        "together with one solver per diffusion time.\n"
+        "together.\n"
         "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
-        "  --dense       every voxel of the block (default)\n"
-        "  --out-band W  only voxels with |phi| < W voxels; the others get 0\n"
+        "  --out-band W  only voxels with |phi| < W voxels\n"
+        "  --dense       read the grids onto one dense block (their active boxes'\n"
+        "                union) and extend over every voxel of it (or --out-band W)\n"
         "  --plain       no closest points: the diffusion ratio at every voxel\n"
         "\n"
-        "The grids are read onto one dense block (the union of their active boxes, all\n"
-        "transforms must match) and OUT.vdb gets the level set (a level set again, its\n"
-        "band = its background) and the extended fields, with their names, voxel size,\n"
-        "world placement, index coordinates and classes; fields come back fully active. Other "
-        "grids of\n"
-        "IN.vdb are not copied. Prints a JSON summary on stdout (not with -q).\n"
+        "A level set (class 'level set') is read and extended as a narrow band: 8^3\n"
+        "tiles of its active voxels, never a dense block; the output voxels are its\n"
+        "active voxels (with --out-band W, those with |phi| < W voxels), and the fields\n"
+        "come back sparse, active there. Other classes, and --dense, take the dense\n"
+        "block, where fields come back fully active. All transforms must match.\n"
+        "OUT.vdb gets the level set (a level set again) and the extended fields, with\n"
+        "their names, voxel size, world placement, index coordinates and classes. Other\n"
+        "grids of IN.vdb are not copied. Prints a JSON summary on stdout (not with -q);\n"
+        "-v reports the tiles, levels and peak memory on stderr.\n"
         "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
@@ -73,6 +80,142 @@ static const hv_vdb_grid_info *find_grid(const hv_vdb_grid_info *info, size_t co
 
 static int is_scalar(const char *t) { return !strcmp(t, "float") || !strcmp(t, "double"); }
 static int is_vector(const char *t) { return !strcmp(t, "vec3s") || !strcmp(t, "vec3d"); }
+
+/* Returns the heap's free pages to the system: OpenVDB's grids, read and
+ * dropped, leave many small blocks behind that would otherwise stay resident
+ * under the extension's and the writer's memory. */
+static void release_freed(void)
+{
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
+}
+
+/* The level set and the fields as tiles of the block [lo, hi], extended on
+ * them and written from them (hv_extend_tiles): no dense block. */
+static int extend_tiles(const char *in, const char *out, const hv_vdb_grid_info *info, size_t count,
+                        const char *ls, const char *const *fields, int nfields, const int lo[3],
+                        const int hi[3], const hv_extend_opts *o, double t_start)
+{
+    hv_tiles *P = NULL, *fin[MAX_FIELDS][3];
+    hv_extend_tiles_field tf[MAX_FIELDS];
+    memset(fin, 0, sizeof fin);
+    memset(tf, 0, sizeof tf);
+    hv_extender *e = NULL;
+    hv_vdb_writer *w = NULL;
+    int rc = 0, cls;
+    hv_status st;
+    double t0 = hv_now();
+    if ((st = hv_vdb_read_float_tiles(in, ls, lo, hi, &P, &cls))) {
+        rc = cli_fail(CMD, in, st);
+        goto done;
+    }
+    for (int q = 0; q < nfields; q++) {
+        int ncomp = 0;
+        if ((st = hv_vdb_read_tiles_like(in, fields[q], P, fin[q], &ncomp))) {
+            rc = cli_fail(CMD, in, st);
+            goto done;
+        }
+        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
+        if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
+            fprintf(stderr,
+                    "heatvox extend: warning: '%s' is staggered; its components are "
+                    "extended as if they sat at voxel centres\n",
+                    fields[q]);
+        tf[q].ncomp = ncomp;
+        for (int c = 0; c < ncomp; c++)
+            tf[q].v[c] = fin[q][c];
+    }
+    const double t_read = hv_now() - t0;
+    release_freed();
+    cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields, narrow band in %zu tiles of "
+             "8^3 (%zu active voxels); read %.2f s, peak %.0f MB\n",
+             P->n[0], P->n[1], P->n[2], P->h, nfields, P->count, P->active, t_read,
+             hv_peak_rss() / 1e6);
+    t0 = hv_now();
+    if ((st = hv_extender_create(&e, 3, P->n, P->h, NULL, o))) {
+        rc = cli_fail(CMD, in, st);
+        goto done;
+    }
+    const double t_setup = hv_now() - t0;
+    hv_extend_stats es;
+    if ((st = hv_extend_tiles(e, P, nfields, tf, &es))) {
+        rc = cli_fail(CMD, in, st);
+        goto done;
+    }
+    cli_info("heatvox extend: %d levels; %zu source cells, %zu output cells (%zu at closest "
+             "points), %zu cells in the first level's solve; work %.0f MB; set-up %.3f s, "
+             "extension %.2f s (solves %.2f, evaluation %.2f), peak %.0f MB\n",
+             es.levels, es.source_cells, es.cp_cells + es.ratio_cells, es.cp_cells, es.solve_cells,
+             es.work_bytes / 1e6, t_setup, es.t_total, es.t_solve, es.t_eval, hv_peak_rss() / 1e6);
+    if (es.weak_cells && cli_verbose >= 0)
+        fprintf(stderr,
+                "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
+                "their values are unreliable\n",
+                es.weak_cells);
+    release_freed();
+    /* Output: the fields, sparse, with names and classes, and the level set
+     * (band = its background, the largest |phi| of the tiles); each set of
+     * tiles is freed once the writer holds its copy. */
+    double bg = 0;
+    for (size_t c = 0; c < P->count * (size_t)(HV_TILE * HV_TILE * HV_TILE); c++)
+        bg = fmax(bg, fabs(P->v[c]));
+    double band = bg / P->h;
+    if (!(band >= 1))
+        band = 1;
+    t0 = hv_now();
+    const hv_vdb_grid_info *lsi = find_grid(info, count, ls);
+    st = hv_vdb_writer_create(&w);
+    if (!st)
+        st = hv_vdb_writer_set_index_origin(w, lsi->index0_world);
+    for (int q = 0; q < nfields && !st; q++) {
+        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
+        hv_tiles *const *t = fin[q];
+        st = tf[q].ncomp == 3 ? hv_vdb_writer_add_vec3_tiles(w, t[0], t[1], t[2], fields[q])
+                              : hv_vdb_writer_add_float_tiles(w, t[0], fields[q]);
+        if (!st && gi->grid_class != HV_VDB_UNKNOWN)
+            st = hv_vdb_writer_set_grid_meta(w, fields[q], "class", class_name(gi->grid_class));
+        for (int c = 0; c < 3; c++)
+            hv_tiles_destroy(&fin[q][c]);
+    }
+    const int n[3] = {P->n[0], P->n[1], P->n[2]};
+    const double h = P->h;
+    const size_t ntiles = P->count, nactive = P->active;
+    if (!st)
+        st = hv_vdb_writer_add_levelset_tiles(w, P, ls, band);
+    hv_tiles_destroy(&P);
+    char buf[512];
+    snprintf(buf, sizeof buf, "heatvox extend: levelset %s, band %g, t_scale %g, narrow band%s, %s",
+             ls, o->band, o->t_scale, o->out_band > 0 ? " (out-band)" : "",
+             o->closest_point ? "closest point" : "plain");
+    if (!st)
+        st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
+    if (!st)
+        st = hv_vdb_writer_write(w, out);
+    if (st) {
+        rc = cli_fail(CMD, out, st);
+        goto done;
+    }
+    cli_info("heatvox extend: wrote %s in %.2f s, peak %.0f MB\n", out, hv_now() - t0,
+             hv_peak_rss() / 1e6);
+    if (cli_verbose >= 0)
+        printf("{\"command\":\"extend\",\"path\":\"tiles\",\"grid\":[%d,%d,%d],\"h\":%g,"
+               "\"fields\":%d,\"tiles\":%zu,\"active_voxels\":%zu,\"solves\":%d,\"levels\":%d,"
+               "\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,\"weak_cells\":%zu,"
+               "\"solve_cells\":%zu,\"work_mb\":%.1f,\"setup_seconds\":%.4f,"
+               "\"extend_seconds\":%.3f,\"seconds\":%.3f,\"peak_rss_mb\":%.1f}\n",
+               n[0], n[1], n[2], h, nfields, ntiles, nactive, es.solves, es.levels, es.source_cells,
+               es.cp_cells, es.ratio_cells, es.weak_cells, es.solve_cells, es.work_bytes / 1e6,
+               t_setup, es.t_total, hv_now() - t_start, hv_peak_rss() / 1e6);
+done:
+    hv_vdb_writer_destroy(&w);
+    hv_extender_destroy(&e);
+    hv_tiles_destroy(&P);
+    for (int q = 0; q < MAX_FIELDS; q++)
+        for (int c = 0; c < 3; c++)
+            hv_tiles_destroy(&fin[q][c]);
+    return rc;
+}
 
 int cmd_extend(int argc, char **argv)
 {
@@ -143,8 +286,6 @@ int cmd_extend(int argc, char **argv)
         return cli_usage_error(CMD, "give at least one --field NAME");
     if (!out)
         return cli_usage_error(CMD, "-o OUT.vdb is required");
-    if (dense_flag && o.out_band > 0)
-        return cli_usage_error(CMD, "--dense and --out-band exclude each other");
     for (int q = 0; q < nfields; q++)
         if (!strcmp(fields[q], ls))
             return cli_usage_error(CMD, "--field '%s' is the level set", ls);
@@ -197,6 +338,10 @@ int cmd_extend(int argc, char **argv)
     hv_vdb_read_opts ro = {1, {0, 0, 0}, {0, 0, 0}};
     if ((st = hv_vdb_common_box(in, names, (size_t)nfields + 1, ro.box_lo, ro.box_hi)))
         return cli_fail(CMD, in, st);
+    if (!dense_flag && lsi->grid_class == HV_VDB_LEVEL_SET &&
+        (o.backend == HV_BACKEND_AUTO || o.backend == HV_BACKEND_MG))
+        return extend_tiles(in, out, info, count, ls, fields, nfields, ro.box_lo, ro.box_hi, &o,
+                            t_start);
     hv_grid *phi = NULL;
     hv_grid *fin[MAX_FIELDS][3], *fout[MAX_FIELDS][3];
     memset(fin, 0, sizeof fin);
@@ -290,7 +435,8 @@ int cmd_extend(int argc, char **argv)
         goto done;
     }
     if (cli_verbose >= 0)
-        printf("{\"command\":\"extend\",\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":%d,\"solves\":%d,"
+        printf("{\"command\":\"extend\",\"path\":\"dense\",\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":"
+               "%d,\"solves\":%d,"
                "\"levels\":%d,\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
                "\"weak_cells\":%zu,\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
                phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves, es.levels,

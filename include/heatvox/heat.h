@@ -133,15 +133,18 @@ typedef struct hv_extend_opts {
                               |phi| < out_band * h, the others get `background` */
     float background;   /* default 0 */
     int max_levels;     /* diffusion times t * 16^l for cells the first has not
-                              reached reliably (plain-ratio cells only); default 6 */
+                              reached reliably (plain-ratio cells only); default 6; with
+                              out_band > 0 they stop at the first whose reach sqrt(t_l)
+                              covers out_band - band voxels */
     hv_backend backend; /* default AUTO */
     double tol;         /* relative residual of the iterative solves; default 1e-10 (the
                               band solve below runs in float to max(tol, 3e-5)) */
     int box_only;       /* 0 (default): with backend auto or mg, t_scale <= 8 and no
                               solid cells, the first diffusion time is solved only on the
                               cells near the weights and the cells read (grown by 6 sqrt(t)
-                              voxels) when those are under half the box, by Chebyshev
-                              sweeps; 1: always the box. Backends fftw and opencl always
+                              voxels) when those are under half the box (always with
+                              out_band > 0), by Chebyshev sweeps, and so are later times
+                              up to 8 h^2 on the cells left; 1: always the box. Backends fftw and opencl always
                               solve on boxes (opencl: on the device, extend_cl.c) */
 } hv_extend_opts;
 
@@ -161,6 +164,9 @@ typedef struct hv_extend_stats {
                                                    choice of evaluation points; solves (with
                                                    the band's set-up); background and
                                                    evaluation */
+    size_t tiles;                               /* hv_extend_tiles: the level set's tiles */
+    size_t work_bytes; /* hv_extend_tiles: the call's work memory at its largest (the
+                          solves' arrays, the outputs not counted) */
 } hv_extend_stats;
 
 /* One field to extend: ncomp = 1 (scalar) or 2..3 (vector, per-component
@@ -202,6 +208,38 @@ HV_API hv_status hv_extend_scalar(hv_extender *e, const hv_grid *phi, const hv_g
                                   hv_grid *out, hv_extend_stats *stats);
 HV_API hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *const in[3],
                                 hv_grid *const out[3], hv_extend_stats *stats);
+
+/* ---- Extension on narrow bands (sparse) --------------------------------- */
+
+/* One field on tiles, extended in place: ncomp = 1 (scalar) or 3 (vector),
+ * v[c] on the level set's tiles (the same tiles in the same order, as
+ * hv_vdb_read_tiles_like gives them). On entry: the field, read where the
+ * weight is positive; on return: the extension on the output cells, which
+ * become the tiles' active voxels, and `background` elsewhere. */
+typedef struct hv_extend_tiles_field {
+    int ncomp;
+    hv_tiles *v[3];
+} hv_extend_tiles_field;
+
+/* hv_extend_many on a narrow-band level set given as tiles (hv_tiles, on the
+ * extender's block and voxel size), without a dense grid: the output cells are
+ * the level set's active voxels with |phi| < out_band h (every active voxel
+ * when out_band is 0); cells of the block outside the tiles hold the level
+ * set's background, with the sign of the neighbouring cells. Each diffusion
+ * time is solved by Chebyshev sweeps on the cells near the weights and the
+ * cells read, grown by 6 sqrt(t) voxels, as hv_extend_many's band solve does
+ * (the values agree with it on the band to float rounding); the levels stop at
+ * the first whose reach covers the output band. The extender keeps its maps
+ * and work arrays between calls, so a level set that moves from call to call
+ * costs no new set-up. It runs on the CPU whatever the extender's backend;
+ * an extender with solid cells is refused (HV_ERR_INVALID_ARG). NaN/Inf in the level set or
+ * in a field where it is read: HV_ERR_NUMERIC, the fields unchanged (other
+ * failures, out of memory or a cancel, can leave them partly extended). The
+ * fields' values at the cells read are copied compactly first, so the
+ * extension needs no second copy of the tiles. stats: also tiles and
+ * work_bytes. */
+HV_API hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
+                                 hv_extend_tiles_field *f, hv_extend_stats *stats);
 
 #ifdef __cplusplus
 }

@@ -404,6 +404,8 @@ class hv_extend_stats(Structure):
         ("t_solve", c_double),
         ("t_eval", c_double),
         ("t_total", c_double),
+        ("tiles", c_size_t),
+        ("work_bytes", c_size_t),
     ]
 
 

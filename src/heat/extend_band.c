@@ -52,10 +52,6 @@
 #define BAND_KERNEL
 #endif
 
-struct xrun {
-    int j, k, x0, x1; /* row (j, k), cells x0 <= x < x1 */
-};
-
 /* Cells x0 .. x0 + len - 1 of one run (at compact cell `at`), whose neighbours
  * in rows j - 1, j + 1, k - 1, k + 1 start at compact cell nb[0..3] (the zero
  * block where that row has no band cell there or the grid ends), with one
@@ -70,6 +66,40 @@ int hv__extend_band_allowed(const hv_extender *e)
 {
     return !e->solid && !e->o.box_only && e->o.t_scale <= BAND_MAX_T_SCALE &&
            (e->o.backend == HV_BACKEND_AUTO || e->o.backend == HV_BACKEND_MG);
+}
+
+int hv__extend_band_iters(const hv_extender *e, double s)
+{
+    /* Sweeps for the error bound 2 c^k / (1 + c^2k) <= tol, c = (sqrt(K) - 1) / (sqrt(K) + 1),
+     * K = 1 + 4 d s the condition number of D^-1 A. */
+    const double K = 1 + 4 * e->dim * s, c = (sqrt(K) - 1) / (sqrt(K) + 1);
+    const double tol = fmax(e->o.tol, BAND_TOL);
+    int k = 1;
+    while (2 * pow(c, k) / (1 + pow(c, 2 * k)) > tol && k < 1000)
+        k++;
+    return k;
+}
+
+int hv__extend_band_level_allowed(const hv_extender *e, int l)
+{
+    return hv__extend_band_allowed(e) && e->o.t_scale * pow(LEVEL_FACTOR, l) <= BAND_MAX_T_SCALE;
+}
+
+int hv__extend_last_level(const hv_extender *e, double ob)
+{
+    /* An output cell lies within ob voxels of the zero set and the weights
+     * reach `band` voxels from it: level l reaches sqrt(t_scale) 4^l voxels. */
+    const double gap = ob - e->o.band;
+    int l = 0;
+    while (l + 1 < e->o.max_levels && sqrt(e->o.t_scale * pow(LEVEL_FACTOR, l)) < gap)
+        l++;
+    return l;
+}
+
+size_t hv__extend_band_bytes(const hv_extend_band *b)
+{
+    return b->nruns * (sizeof(xrun) + sizeof(size_t)) + b->nsegs * sizeof(bseg) +
+           3 * b->ncompact * (size_t)b->R * sizeof(float);
 }
 
 void hv__extend_band_free(hv_extend_band *b)
@@ -162,8 +192,10 @@ static size_t run_segments(const hv_extender *e, const hv_extend_band *b, const 
         lo[d] = hi[d] = 0;
         if (exists[d]) {
             size_t row = (size_t)j + (size_t)ny * k;
-            lo[d] = rfirst[row];
-            hi[d] = rfirst[row + 1];
+            if (row < b->row0 || row - b->row0 >= b->rows)
+                continue; /* a row of the grid beyond the band's planes: no band cell */
+            lo[d] = rfirst[row - b->row0];
+            hi[d] = rfirst[row - b->row0 + 1];
         }
     }
     /* Cut points: the run's ends, the cells next to the x walls (one neighbour
@@ -235,10 +267,10 @@ static size_t run_segments(const hv_extender *e, const hv_extend_band *b, const 
 /* Builds the band from b->need: grown, cut into x-runs and segments, laid out
  * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
  * band is not worth it (more than BAND_MAX_FRACTION of box_cells), 1 when
- * built, -1 when out of memory. */
-int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R)
+ * built, -1 when out of memory. s: the diffusion time in units of h^2. */
+int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R, double s)
 {
-    const int m = (int)lround(BOX_MARGIN * sqrt(e->o.t_scale));
+    const int m = (int)lround(BOX_MARGIN * sqrt(s));
     if (!e->bg0 && !(e->bg0 = hv_malloc(e->count)))
         return -1;
     if (!e->bg1 && !(e->bg1 = hv_malloc(e->count)))
@@ -281,10 +313,8 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
     }
     b->runs = malloc(nr * sizeof *b->runs);
     b->roff = malloc(nr * sizeof *b->roff);
-    size_t *sfirst = malloc((nr + 1) * sizeof *sfirst);
-    if (!b->runs || !b->roff || !sfirst) {
+    if (!b->runs || !b->roff) {
         free(first);
-        free(sfirst);
         return -1;
     }
 #pragma omp parallel for schedule(static)
@@ -301,7 +331,20 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
     }
     b->nruns = nr;
     b->cells = cells;
-    b->s = e->o.t_scale;
+    b->s = s;
+    b->row0 = 0;
+    b->rows = rows;
+    int rc = hv__extend_band_layout(e, b, first, R);
+    free(first);
+    return rc;
+}
+
+int hv__extend_band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R)
+{
+    const size_t nr = b->nruns, nx = (size_t)e->n[0];
+    size_t *sfirst = malloc((nr + 1) * sizeof *sfirst);
+    if (!sfirst)
+        return -1;
     b->R = R;
     /* Compact layout: each run between two ghost cells, then the zero block. */
     size_t at = 0;
@@ -323,7 +366,6 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
     for (size_t q = 0; q < nr && !oom; q++)
         sfirst[q + 1] += sfirst[q];
     if (oom || !(b->segs = malloc((sfirst[nr] ? sfirst[nr] : 1) * sizeof *b->segs))) {
-        free(first);
         free(sfirst);
         return -1;
     }
@@ -332,7 +374,6 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
         oom |= run_segments(e, b, first, q, b->segs + sfirst[q]) == (size_t)-1;
     b->nsegs = sfirst[nr];
     if (oom || !(b->kstart = malloc(((size_t)e->n[2] + 1) * sizeof *b->kstart))) {
-        free(first);
         free(sfirst);
         return -1;
     }
@@ -341,15 +382,8 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
             q++;
         b->kstart[k] = sfirst[q];
     }
-    free(first);
     free(sfirst);
-    /* Sweeps for the error bound 2 c^k / (1 + c^2k) <= tol, c = (sqrt(K) - 1) / (sqrt(K) + 1),
-     * K = 1 + 4 d s the condition number of D^-1 A. */
-    const double K = 1 + 4 * e->dim * b->s, c = (sqrt(K) - 1) / (sqrt(K) + 1);
-    const double tol = fmax(e->o.tol, BAND_TOL);
-    b->iters = 1;
-    while (2 * pow(c, b->iters) / (1 + pow(c, 2 * b->iters)) > tol && b->iters < 1000)
-        b->iters++;
+    b->iters = hv__extend_band_iters(e, b->s);
     /* Work arrays, kept by the extender across calls. */
     const size_t need = b->ncompact * (size_t)R;
     if (need > e->bcap) {
@@ -572,8 +606,27 @@ hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
                                 const hv_extend_field *f, double *thr, hv_extend_stats *S)
 {
     const int R = b->R;
-    const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
     build_rhs_band(e, b, nfields, f);
+    hv_status st = hv__extend_band_iterate(e, b, thr, S);
+    if (st)
+        return st;
+    /* The compact layout of a run is e->sol's on that run. */
+    const int nx = e->n[0];
+#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
+    for (size_t q = 0; q < b->nruns; q++) {
+        const xrun *r = &b->runs[q];
+        const size_t c0 = (size_t)nx * (r->j + (size_t)e->n[1] * r->k) + r->x0;
+        memcpy(e->sol + c0 * R, b->sol + (b->roff[q] + 1) * R,
+               (size_t)(r->x1 - r->x0) * R * sizeof(float));
+    }
+    return HV_OK;
+}
+
+hv_status hv__extend_band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
+                                  hv_extend_stats *S)
+{
+    const int R = b->R;
+    const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;
     double *nrm = malloc((3 + 3 * (size_t)omp_get_max_threads()) * R * sizeof *nrm);
     if (!nrm)
         return hv__error(HV_ERR_NOMEM, "extend: out of memory");
@@ -603,18 +656,11 @@ hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
         relmax = fmax(relmax, nrm[2 * R + r] > 0 ? nrm[r] / nrm[2 * R + r] : 0);
     const double rinf0 = nrm[R];
     free(nrm);
-    /* The compact layout of a run is e->sol's on that run. */
-    const int nx = e->n[0];
-#pragma omp parallel for if (b->cells >= BAND_PAR_MIN) schedule(static)
-    for (size_t q = 0; q < b->nruns; q++) {
-        const xrun *r = &b->runs[q];
-        const size_t c0 = (size_t)nx * (r->j + (size_t)e->n[1] * r->k) + r->x0;
-        memcpy(e->sol + c0 * R, cur + (b->roff[q] + 1) * R,
-               (size_t)(r->x1 - r->x0) * R * sizeof(float));
-    }
+    b->sol = cur;
     S->solves += R;
     S->relres = fmax(S->relres, relmax);
-    S->solve_cells = b->cells;
+    if (!S->solve_cells)
+        S->solve_cells = b->cells;
     *thr = fmax(RELIABLE * rinf0, 1e-30);
     return HV_OK;
 }

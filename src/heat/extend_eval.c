@@ -68,9 +68,10 @@ static void sample_all(const hv_extender *e, const size_t idx[8], const double w
     }
 }
 
-/* Central-difference gradient of phi at cell (i,j,k), one-sided at walls, in
- * world units. */
-static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k, double g[3])
+/* Central-difference gradient of phi at cell (i,j,k) (upwind: phi_diff2's),
+ * one-sided at walls, in world units. */
+static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k, int upwind,
+                     double g[3])
 {
     const int ijk[3] = {i, j, k};
     const size_t st[3] = {1, (size_t)e->n[0], (size_t)e->n[0] * e->n[1]};
@@ -81,7 +82,7 @@ static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k
         if (!lo && !hi)
             continue;
         double vp = hi ? phi[c + st[a]] : phi[c], vm = lo ? phi[c - st[a]] : phi[c];
-        g[a] = (vp - vm) / ((lo + hi) * e->h);
+        g[a] = lo && hi ? phi_diff2(phi[c], vm, vp, upwind) / (2 * e->h) : (vp - vm) / e->h;
     }
 }
 
@@ -103,9 +104,15 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
         /* Inside the grid, straight-line: the same central differences and
          * trilinear stencil as below (this runs once or twice per output cell). */
         const size_t sy = (size_t)nx, sz = (size_t)nx * ny;
-        const double gx = (double)phi[c + 1] - phi[c - 1], gy = (double)phi[c + sy] - phi[c - sy],
-                     gz = (double)phi[c + sz] - phi[c - sz];
-        const double gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
+        double gx = 0, gy = 0, gz = 0, gn = 0;
+        for (int up = 0; up < 2; up++) { /* central, then upwind (phi_diff2) */
+            gx = phi_diff2(phi[c], phi[c - 1], phi[c + 1], up);
+            gy = phi_diff2(phi[c], phi[c - sy], phi[c + sy], up);
+            gz = phi_diff2(phi[c], phi[c - sz], phi[c + sz], up);
+            gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
+            if (gn >= GRAD_MIN && gn <= GRAD_MAX)
+                break;
+        }
         if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
             return 0;
         const double sc = phi[c] * 0.5 / (gn * e->h * e->h);
@@ -142,10 +149,15 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
         return 1;
     }
     double g[3], gn = 0;
-    grad_phi(e, phi, i, j, k, g);
-    for (int a = 0; a < e->dim; a++)
-        gn += g[a] * g[a];
-    gn = sqrt(gn);
+    for (int up = 0; up < 2; up++) { /* central, then upwind (phi_diff2) */
+        grad_phi(e, phi, i, j, k, up, g);
+        gn = 0;
+        for (int a = 0; a < e->dim; a++)
+            gn += g[a] * g[a];
+        gn = sqrt(gn);
+        if (gn >= GRAD_MIN && gn <= GRAD_MAX)
+            break;
+    }
     if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
         return 0;
     double s = phi[c] / (gn * e->h), p[3] = {i, j, k};

@@ -45,11 +45,14 @@ struct hv_extender {
      * for all fields). */
     float *sol;
     int nsol, capsol;
-    float *bf, *bu0, *bu1;      /* band solve: right-hand sides and iterates, compact */
-    size_t bcap;                /* floats each of them holds */
-    uint8_t *bneed, *bg0, *bg1; /* band solve: cells read, growing buffers */
-    uint8_t *pending;           /* per cell: 0 done, 1 read at the closest point, 2 at itself */
-    struct hv_extend_cl *cl;    /* backend opencl: the device path's state (extend_cl.h) */
+    float *bf, *bu0, *bu1;       /* band solve: right-hand sides and iterates, compact */
+    size_t bcap;                 /* floats each of them holds */
+    uint8_t *bneed, *bg0, *bg1;  /* band solve: cells read, growing buffers */
+    uint8_t *pending;            /* per cell: 0 done, 1 read at the closest point, 2 at itself */
+    struct hv_extend_cl *cl;     /* backend opencl: the device path's state (extend_cl.h) */
+    int resolved;                /* o.backend resolved (AUTO: OPENCL on a GPU) */
+    struct hv_extend_sparse *sp; /* hv_extend_tiles: maps and marks kept between calls
+                                    (extend_tiles.c) */
 };
 
 /* ---- right-hand sides ----------------------------------------------------- */
@@ -130,6 +133,20 @@ static inline void box_union(ibox *b, const ibox *o)
     }
 }
 
+/* A difference of phi along one axis at a cell of value pc between vm and vp,
+ * over two cells (the central difference's scale): the central difference,
+ * or with upwind != 0 the one-sided difference towards the neighbour of
+ * smaller |phi|, doubled. Where a narrow-band level set is clamped, a cell
+ * next to the clamp has a neighbour that holds the background rather than a
+ * distance, and its central gradient is too short; the side towards the
+ * surface still measures the distance. */
+static inline double phi_diff2(double pc, double vm, double vp, int upwind)
+{
+    if (!upwind)
+        return vp - vm;
+    return fabs(vm) < fabs(vp) ? 2 * (pc - vm) : 2 * (vp - pc);
+}
+
 /* ---- the per-cell passes (extend_eval.c) ------------------------------------ */
 
 /* The first pass over the grid: the weights e->w (a smooth bump of
@@ -194,14 +211,19 @@ hv_status hv__extend_solve_level(hv_extender *e, int l, const int lo[3], const i
 /* The first level's cells near what is read, for the Chebyshev band solve;
  * built by hv__extend_band_build, on the stack of hv_extend_many. */
 typedef struct hv_extend_band hv_extend_band;
-typedef struct xrun xrun; /* x-runs of band cells and their segments (extend_band.c) */
-typedef struct bseg bseg;
+/* An x-run of band cells: row (j, k), cells x0 <= x < x1. */
+typedef struct xrun {
+    int j, k, x0, x1;
+} xrun;
+typedef struct bseg bseg; /* segments of the runs (extend_band.c) */
 
 struct hv_extend_band {
     xrun *runs;
     size_t nruns, cells;
-    uint8_t *need; /* the cells read (before growing): trusted at level 0 */
-    size_t *roff;  /* compact cell of run q's left ghost; its cells follow */
+    uint8_t *need;     /* the cells read (before growing): trusted at level 0 */
+    size_t *roff;      /* compact cell of run q's left ghost; its cells follow */
+    size_t row0, rows; /* first[r - row0] holds row r's runs, row0 <= r < row0 + rows
+                          (hv__extend_band_layout) */
     bseg *segs;
     size_t nsegs;
     size_t *kstart;  /* segments of plane k: kstart[k] .. kstart[k + 1] - 1 */
@@ -209,8 +231,9 @@ struct hv_extend_band {
     size_t ncompact; /* compact cells in all */
     int R;           /* right-hand sides, side by side */
     float *f, *u0, *u1;
+    float *sol; /* after hv__extend_band_iterate: the solutions (u0 or u1) */
     int iters;
-    double s;
+    double s; /* diffusion time in units of h^2 */
 };
 
 /* Whether hv_extend_many may solve the first level on a band: short times,
@@ -218,16 +241,88 @@ struct hv_extend_band {
  * own solver), box_only off. */
 int hv__extend_band_allowed(const hv_extender *e);
 
-/* Builds the band from b->need: grown, cut into x-runs and segments, laid out
- * compactly for R right-hand sides. Returns 0 (and frees nothing) when the
- * band is not worth it (more than half of box_cells), 1 when built, -1 when
- * out of memory. */
-int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R);
+/* Builds the band from b->need for the diffusion time s h^2: grown by
+ * BOX_MARGIN sqrt(s) voxels, cut into x-runs and segments, laid out compactly
+ * for R right-hand sides. Returns 0 (and frees nothing) when the band is not
+ * worth it (more than half of box_cells), 1 when built, -1 when out of
+ * memory. */
+int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R, double s);
+
+/* The second half of hv__extend_band_build, for callers that make the runs
+ * themselves (extend_tiles.c): from b->runs (sorted by row j + ny k, then x),
+ * b->nruns, b->cells, b->s, b->row0 and b->rows, with first[r - row0] ..
+ * first[r - row0 + 1] - 1 the runs of row r (rows of the planes the runs
+ * lie on and their neighbours), lays out the segments, the sweep count and the work arrays. 1 when
+ * built, -1 when out of memory. */
+int hv__extend_band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R);
+
+/* The Chebyshev sweeps of a band solve for the diffusion time s h^2. */
+int hv__extend_band_iters(const hv_extender *e, double s);
+
+/* Whether a band solve may serve diffusion level l (t_scale 16^l h^2). */
+int hv__extend_band_level_allowed(const hv_extender *e, int l);
+
+/* The last level hv_extend_many and hv_extend_tiles run when the output is a
+ * band of ob voxels (ob > 0): the first whose reach sqrt(t_l) covers the
+ * output band beyond the weights, within max_levels. */
+int hv__extend_last_level(const hv_extender *e, double ob);
 void hv__extend_band_free(hv_extend_band *b);
+
+/* Bytes the band's tables and work arrays take. */
+size_t hv__extend_band_bytes(const hv_extend_band *b);
 
 /* Level 0 on the band: every right-hand side at once; solutions stored in
  * e->sol on the band's cells; *thr as hv__extend_solve_level's. */
 hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
                                 const hv_extend_field *f, double *thr, hv_extend_stats *S);
+
+/* The sweeps alone: every right-hand side in b->f (laid out as the band's
+ * cells) solved, b->sol pointing at the solutions; *thr as above. */
+hv_status hv__extend_band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
+                                  hv_extend_stats *S);
+
+/* ---- narrow bands as tiles (extend_tiles.c, extend_wave.c) ------------------- */
+
+void hv__extend_sparse_destroy(struct hv_extend_sparse **sp);
+
+/* A set of cells as x-runs per row, on the planes k0 <= k < k1: the runs of
+ * row (j, k) are x[2 q] <= x < x[2 q + 1] for first[r] <= q < first[r + 1],
+ * r = j + ny (k - k0), sorted and apart. */
+typedef struct hv_xrows {
+    int k0, k1;
+    size_t *first;
+    int32_t *x;
+    size_t nruns;
+} hv_xrows;
+
+/* The run of row (j, k) holding x, or -1. */
+static inline long hv__xrows_find(const hv_xrows *s, int ny, int j, int k, int x)
+{
+    if (k < s->k0 || k >= s->k1)
+        return -1;
+    const size_t r = (size_t)j + (size_t)ny * (k - s->k0);
+    for (size_t q = s->first[r]; q < s->first[r + 1]; q++) {
+        if (x < s->x[2 * q])
+            return -1;
+        if (x < s->x[2 * q + 1])
+            return (long)q;
+    }
+    return -1;
+}
+
+/* The right-hand sides of cells x0 <= x < x1 of row (j, k), R per cell. */
+typedef void (*hv_extend_rhs_fn)(const void *ctx, int j, int k, int x0, int x1, float *dst);
+
+/* The band solve (hv__extend_band_iterate: the same sweeps, coefficients and
+ * arithmetic, so the same values) of R right-hand sides for the diffusion time
+ * s h^2 on the cells of dom, as a wave through its planes: sweep t of plane k
+ * runs once sweep t - 1 of planes k - 1 .. k + 1 is done, so only the planes
+ * the wave is crossing are held (about the sweep count), whatever the band's
+ * size. sol receives the solutions at the cells of need (a subset of dom), R
+ * per cell in need's order; *thr as hv__extend_band_iterate's. S: solves,
+ * relres, solve work in work_bytes (the larger). */
+hv_status hv__extend_wave_solve(const hv_extender *e, const hv_xrows *dom, const hv_xrows *need,
+                                double s, int R, hv_extend_rhs_fn rhs, const void *ctx, float *sol,
+                                double *thr, hv_extend_stats *S);
 
 #endif

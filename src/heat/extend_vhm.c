@@ -34,9 +34,16 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
     if (!out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_extender_create: out is NULL");
     *out = NULL;
-    hv_status st = hv_check_dims(dim, n, h, 2 * sizeof(double) + 6 * sizeof(float));
-    if (st)
-        return st;
+    /* The dense arrays come with the first hv_extend_many (dense_arrays): an
+     * extender for hv_extend_tiles allocates nothing of the block's size. */
+    if (dim != 2 && dim != 3)
+        return hv__error(HV_ERR_INVALID_ARG, "extend: grid dimension must be 2 or 3, got %d", dim);
+    for (int a = 0; a < dim; a++)
+        if (!n || n[a] <= 0)
+            return hv__error(HV_ERR_INVALID_ARG, "extend: grid size along %c must be positive",
+                             "xyz"[a]);
+    if (!(h > 0) || !isfinite(h))
+        return hv__error(HV_ERR_INVALID_ARG, "extend: voxel size must be positive, got %g", h);
     hv_extend_opts o;
     if (opts)
         o = *opts;
@@ -64,19 +71,13 @@ hv_status hv_extender_create(hv_extender **out, int dim, const int n[3], double 
     e->n[2] = dim == 3 ? n[2] : 1;
     e->h = h;
     e->count = (size_t)e->n[0] * e->n[1] * e->n[2];
-    /* AUTO on a GPU: the whole extension on the device (extend_cl.c). */
-    if (hv_backend_resolve(o.backend, e->count, solid != NULL) == HV_BACKEND_OPENCL)
-        o.backend = HV_BACKEND_OPENCL;
     e->o = o;
-    e->fd = hv_malloc(e->count * sizeof(double));
-    e->ud = hv_malloc(e->count * sizeof(double));
-    e->w = hv_malloc(e->count * sizeof(float));
     if (solid) {
         e->solid = malloc(e->count);
         if (e->solid)
             memcpy(e->solid, solid, e->count);
     }
-    if (!e->fd || !e->ud || !e->w || (solid && !e->solid)) {
+    if (solid && !e->solid) {
         hv_extender_destroy(&e);
         return hv__error(HV_ERR_NOMEM, "extend: out of memory for a %d x %d x %d grid", e->n[0],
                          e->n[1], e->n[2]);
@@ -104,9 +105,31 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->bg0);
     hv_free(e->bg1);
     hv__extend_cl_destroy(&e->cl);
+    hv__extend_sparse_destroy(&e->sp);
     free(e->solid);
     free(e);
     *ep = NULL;
+}
+
+/* The dense path's per-cell arrays, on first use: the weights, the box
+ * solves' right-hand side and solution (double). */
+static hv_status dense_arrays(hv_extender *e)
+{
+    if (e->w && e->fd && e->ud)
+        return HV_OK;
+    hv_status st = hv_check_dims(e->dim, e->n, e->h, 2 * sizeof(double) + 6 * sizeof(float));
+    if (st)
+        return st;
+    if (!e->fd)
+        e->fd = hv_malloc(e->count * sizeof(double));
+    if (!e->ud)
+        e->ud = hv_malloc(e->count * sizeof(double));
+    if (!e->w)
+        e->w = hv_malloc(e->count * sizeof(float));
+    if (!e->fd || !e->ud || !e->w)
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory for a %d x %d x %d grid", e->n[0],
+                         e->n[1], e->n[2]);
+    return HV_OK;
 }
 
 static hv_status ensure_solutions(hv_extender *e, int k)
@@ -120,6 +143,17 @@ static hv_status ensure_solutions(hv_extender *e, int k)
     }
     e->nsol = k;
     return HV_OK;
+}
+
+/* The box a band solve is weighed against (hv__extend_band_build takes the
+ * band when it is under half of it). An output band always takes the band:
+ * its cells are what the output needs, and hv_extend_tiles solves the same
+ * cells, so that both paths give the same values. */
+static size_t band_box_cells(const hv_extender *e, const int bn[3])
+{
+    if (e->o.out_band > 0)
+        return SIZE_MAX / 4;
+    return (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1);
 }
 
 hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
@@ -146,6 +180,14 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
     hv_status st;
+    if (!e->resolved) {
+        /* AUTO on a GPU: the whole extension on the device (extend_cl.c).
+         * Resolved on the first dense call: looking for a device loads the
+         * OpenCL platforms, which hv_extend_tiles never needs. */
+        if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
+            e->o.backend = HV_BACKEND_OPENCL;
+        e->resolved = 1;
+    }
     if (e->o.backend == HV_BACKEND_OPENCL) {
         if ((st = hv_check_finite(phi, e->count, "the level set")))
             return st;
@@ -155,6 +197,8 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         S->t_total = hv_now() - t_start;
         return st;
     }
+    if ((st = dense_arrays(e)))
+        return st;
     double t0 = hv_now();
     /* The band solve (short times, no obstacles; CPU backends only: an explicit
      * fftw or opencl backend gets its own solver): its cells start from the
@@ -193,8 +237,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         int lo[3], bn[3];
         hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
         band.need = need;
-        int built = hv__extend_band_build(e, &band,
-                                          (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1), nrhs);
+        int built = hv__extend_band_build(e, &band, band_box_cells(e, bn), nrhs, e->o.t_scale);
         if (built < 0) {
             hv__extend_band_free(&band);
             return hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
@@ -204,7 +247,10 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     }
     S->t_solve = hv_now() - t0;
 
-    for (int l = 0; l < e->o.max_levels && npend > 0; l++) {
+    /* With an output band, the levels stop at the first that reaches across it. */
+    const int last =
+        e->o.out_band > 0 ? hv__extend_last_level(e, e->o.out_band) : e->o.max_levels - 1;
+    for (int l = 0; l <= last && npend > 0; l++) {
         /* most calls need one level; later ones only reach the far cells */
         if ((st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
             break;
@@ -212,16 +258,33 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         int lo[3], bn[3];
         hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
         t0 = hv_now();
-        const uint8_t *trusted = l == 0 && band.runs ? band.need : NULL;
-        if ((st = trusted ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
+        if (l > 0 && need && hv__extend_band_level_allowed(e, l)) {
+            /* Later levels answer for the cells left, read at themselves: on a
+             * band around them too when it is small. */
+            hv__extend_band_free(&band);
+#pragma omp parallel for schedule(static)
+            for (size_t c = 0; c < e->count; c++)
+                need[c] = e->pending[c] != 0;
+            band.need = need;
+            int built = hv__extend_band_build(e, &band, band_box_cells(e, bn), nrhs,
+                                              e->o.t_scale * pow(LEVEL_FACTOR, l));
+            if (built < 0) {
+                st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+                break;
+            }
+            if (!built)
+                hv__extend_band_free(&band);
+        }
+        const int on_band = band.runs && (l == 0 || hv__extend_band_level_allowed(e, l));
+        const uint8_t *trusted = on_band ? band.need : NULL;
+        if ((st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
                           : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
         t0 = hv_now();
         hv_extend_counts k;
-        hv__extend_eval_level(e, phi, nfields, f, thr, l + 1 == e->o.max_levels, trusted,
-                              &ratio_box, &k);
+        hv__extend_eval_level(e, phi, nfields, f, thr, l == last, trusted, &ratio_box, &k);
         S->cp_cells += k.cp;
         S->ratio_cells += k.ratio;
         S->weak_cells += k.weak;
