@@ -79,4 +79,15 @@ if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
 else
   echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
 fi
+# The extension on a narrow band as whole commands (heatvox extend -o X.vdb
+# against OpenVDB sdfToExt reading and writing the same files), with peak RSS.
+if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
+  for n in 256 512 1024; do
+    "$hv" bench extend-band "$shared/meshes/stanford-bunny.obj" --n $n
+  done
+else
+  echo "bench extend-band: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
+fi
+# A simulation's loop: one extender, a moving sphere's level set as tiles.
+"$hv" bench extend-loop --n 256
 if [ -x /usr/bin/python3 ]; then /usr/bin/python3 "$(dirname "$0")/bench_python.py" "$hv"; else echo "bench: no /usr/bin/python3, python rows skipped" >&2; fi

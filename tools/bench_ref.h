@@ -51,12 +51,41 @@ hv_status ref_vdb_sdf_to_ext_vec3(const hv_grid *phi, const hv_grid *fx, const h
                                   float background, hv_grid *ox, hv_grid *oy, hv_grid *oz,
                                   double *seconds);
 
+/* The extension job as a user of OpenVDB runs it: opens in_path, reads the
+ * level set ls_name and the field field_name (float or vec3s, on the level
+ * set's index lattice), runs tools::sdfToExt over the level set's active band
+ * (background 0, isovalue 0, one iteration; the boundary values sampled
+ * trilinearly from the field with tools::BoxSampler) and writes out_path with
+ * the level set and the extension, named like the field. */
+hv_status ref_vdb_ext_file(const char *in_path, const char *ls_name, const char *field_name,
+                           const char *out_path);
+
+/* sdfToExt on a level set given as tiles (values in world units, active voxels
+ * the band, the rest of the block signed by flood fill) and ncomp (1 or 3)
+ * field tiles `in` like phi (read at their active voxels). The grids are built
+ * from the tiles first; *seconds (if not NULL) is the time inside sdfToExt
+ * alone. out: ncomp caller-made tiles like phi (hv_tiles_create_like) that
+ * receive the extension on phi's active voxels, marked active. */
+hv_status ref_vdb_sdf_to_ext_tiles(const hv_tiles *phi, int ncomp, const hv_tiles *const in[3],
+                                   hv_tiles *const out[3], double *seconds);
+
 /* Message of the last failed call above on this thread ("" when none). */
 const char *ref_vdb_last_error(void);
 
 /* cli_fail (tools/cli.h) for the calls above: prints "heatvox <cmd>: <what>:
  * <status>: <ref_vdb_last_error()>" on stderr and returns HV_EXIT_FAIL. */
 int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
+
+/* Runs argv with this executable (/proc/self/exe) as a child process and waits:
+ * wall seconds and peak RSS in MB (wait4). Returns -1 when it cannot start or
+ * exits non-zero. The caller's own resident memory at the fork counts in the
+ * child's peak (Linux keeps the high-water mark across exec): call it from a
+ * small process. (tools/cmd_bench_extend_band.c) */
+int bench_run_self(char **argv, double *seconds, double *rss_mb);
+
+/* heatvox bench extend-band and extend-loop (tools/cmd_bench_extend_band.c). */
+int cmd_bench_extend_band(int argc, char **argv);
+int cmd_bench_extend_loop(int argc, char **argv);
 
 #ifdef __cplusplus
 }

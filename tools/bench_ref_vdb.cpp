@@ -15,8 +15,10 @@ extern "C" {
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/Prune.h>
+#include <openvdb/tools/SignedFloodFill.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -25,6 +27,7 @@ extern "C" {
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -365,9 +368,222 @@ void vdb_mesh(const char *where, const double *verts, size_t nv, const uint32_t 
     }
 }
 
+// The boundary values of sdfToExt from a field grid, as a user writes them:
+// trilinear (BoxSampler) at the index-space point the callback receives (see
+// extend_off below). Copied per thread by sdfToExt, accessor and all.
+template <class TreeT> struct SampleOp {
+    openvdb::tree::ValueAccessor<const TreeT> acc;
+    explicit SampleOp(const TreeT &tree) : acc(tree) {}
+    typename TreeT::ValueType operator()(const openvdb::Vec3R &p) const
+    {
+        return openvdb::tools::BoxSampler::sample(acc, p);
+    }
+};
+
+// sdfToExt of field off sdf (same index lattice), background 0, one iteration.
+// OpenVDB 10.0.1 hands the callback index coordinates (it makes the extension
+// grid with an identity transform, upstream issue #1640, open); a release that
+// fixes it would hand world ones. The level set runs on an identity transform,
+// so that they are index coordinates either way: sdfToExt uses only ratios of
+// phi and the voxel size, so the extension is the same. The result gets the
+// level set's transform back.
+template <class FieldGridT>
+typename FieldGridT::Ptr extend_off(openvdb::FloatGrid &sdf, const FieldGridT &field,
+                                    double *seconds)
+{
+    using V = typename FieldGridT::ValueType;
+    auto xf = sdf.transformPtr();
+    sdf.setTransform(openvdb::math::Transform::createLinearTransform(1.0));
+    typename FieldGridT::Ptr ext;
+    try {
+        auto t0 = std::chrono::steady_clock::now();
+        ext = openvdb::tools::sdfToExt(sdf, SampleOp<typename FieldGridT::TreeType>(field.tree()),
+                                       openvdb::zeroVal<V>(), 0.0f, 1);
+        if (seconds)
+            *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    } catch (...) {
+        sdf.setTransform(xf);
+        throw;
+    }
+    sdf.setTransform(xf);
+    if (!ext)
+        fail(HV_ERR_BACKEND, "sdfToExt returned no grid");
+    ext->setTransform(xf->copy());
+    return ext;
+}
+
+// A grid from tiles (hv_tiles' tiles are OpenVDB leaves: 8^3, at multiples of
+// 8 in index space): one leaf per tile that has an active voxel in on (or
+// every tile with all_tiles), value(tile, cell, active) at each voxel.
+template <class GridT, class F>
+void grid_from_tiles(GridT &grid, const hv_tiles *t, const uint64_t *on, bool all_tiles, F &&value)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    static_assert(LeafT::DIM == HV_TILE, "hv_tiles are OpenVDB leaves");
+    std::vector<std::unique_ptr<LeafT>> leaves(t->count);
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, t->count), [&](const tbb::blocked_range<size_t> &r) {
+            for (size_t q = r.begin(); q != r.end(); q++) {
+                bool any = all_tiles;
+                for (int w = 0; w < HV_TILE && !any; w++)
+                    any = on[q * HV_TILE + w] != 0;
+                if (!any)
+                    continue;
+                const int32_t *o = t->ijk + 3 * q;
+                auto leaf =
+                    std::make_unique<LeafT>(Coord(o[0], o[1], o[2]), grid.background(), false);
+                for (int c = 0; c < HV_TILE * HV_TILE * HV_TILE; c++) {
+                    const bool act = on[q * HV_TILE + c / 64] >> (c % 64) & 1;
+                    const openvdb::Index off =
+                        LeafT::coordToOffset(Coord(o[0] + c % 8, o[1] + c / 8 % 8, o[2] + c / 64));
+                    leaf->setValueOnly(off, value(q, c, act));
+                    if (act)
+                        leaf->setValueOn(off);
+                }
+                leaves[q] = std::move(leaf);
+            }
+        });
+    auto &tree = grid.tree();
+    for (auto &leaf : leaves)
+        if (leaf)
+            tree.addLeaf(leaf.release());
+}
+
+template <class FieldGridT, class Get>
+void ext_tiles(const hv_tiles *phi, int ncomp, const hv_tiles *const in[3], hv_tiles *const out[3],
+               double *seconds, Get &&get)
+{
+    using V = typename FieldGridT::ValueType;
+    using LeafT = typename FieldGridT::TreeType::LeafNodeType;
+    // The level set in voxels (identity transform, see extend_off): active
+    // voxels hold phi/h, the others and the space between tiles the signed
+    // background.
+    const double h = phi->h;
+    float bg = 1;
+    const size_t cells = phi->count * HV_TILE * HV_TILE * HV_TILE;
+    for (size_t i = 0; i < cells; i++)
+        bg = std::max(bg, std::fabs(phi->v[i] / (float)h));
+    auto sdf = openvdb::FloatGrid::create(bg);
+    grid_from_tiles(*sdf, phi, phi->on, true, [&](size_t q, int c, bool act) {
+        const float p = phi->v[q * 512 + c] / (float)h;
+        return act ? p : std::copysign(bg, p);
+    });
+    openvdb::tools::signedFloodFill(sdf->tree());
+    sdf->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto field = FieldGridT::create(openvdb::zeroVal<V>());
+    grid_from_tiles(*field, in[0], in[0]->on, false, [&](size_t q, int c, bool) {
+        V v = openvdb::zeroVal<V>();
+        for (int k = 0; k < ncomp; k++)
+            get(v, k) = in[k]->v[q * 512 + c];
+        return v;
+    });
+    auto ext = extend_off(*sdf, *field, seconds);
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, phi->count), [&](const tbb::blocked_range<size_t> &r) {
+            for (size_t q = r.begin(); q != r.end(); q++) {
+                const int32_t *o = phi->ijk + 3 * q;
+                const auto *leaf = ext->tree().probeConstLeaf(Coord(o[0], o[1], o[2]));
+                for (int k = 0; k < ncomp; k++)
+                    for (int w = 0; w < HV_TILE; w++)
+                        out[k]->on[q * HV_TILE + w] = 0;
+                for (int c = 0; leaf && c < 512; c++) {
+                    const openvdb::Index off =
+                        LeafT::coordToOffset(Coord(o[0] + c % 8, o[1] + c / 8 % 8, o[2] + c / 64));
+                    if (!leaf->isValueOn(off))
+                        continue;
+                    V v = leaf->getValue(off);
+                    for (int k = 0; k < ncomp; k++) {
+                        out[k]->v[q * 512 + c] = get(v, k);
+                        out[k]->on[q * HV_TILE + c / 64] |= 1ull << (c % 64);
+                    }
+                }
+            }
+        });
+    for (int k = 0; k < ncomp; k++) {
+        size_t n = 0;
+        for (size_t w = 0; w < HV_TILE * phi->count; w++)
+            n += (size_t)__builtin_popcountll(out[k]->on[w]);
+        out[k]->active = n;
+    }
+}
+
+void check_tiles(const hv_tiles *t, const hv_tiles *phi, const char *what)
+{
+    if (!t || (t->count && (!t->ijk || !t->v || !t->on)))
+        fail(HV_ERR_INVALID_ARG, std::string("ref_vdb_sdf_to_ext_tiles: ") + what + " is NULL");
+    if (phi && (t->count != phi->count ||
+                (t->count && memcmp(t->ijk, phi->ijk, 3 * t->count * sizeof *t->ijk))))
+        fail(HV_ERR_INVALID_ARG,
+             std::string("ref_vdb_sdf_to_ext_tiles: ") + what + " must have phi's tiles");
+}
+
 } // namespace
 
 extern "C" {
+
+hv_status ref_vdb_ext_file(const char *in_path, const char *ls_name, const char *field_name,
+                           const char *out_path)
+{
+    return guarded("ref_vdb_ext_file", [&] {
+        init_vdb();
+        openvdb::io::File file(in_path);
+        file.open();
+        for (const char *name : {ls_name, field_name})
+            if (!file.hasGrid(name))
+                fail(HV_ERR_INVALID_ARG,
+                     std::string(in_path) + ": no grid '" + name + "' in the file");
+        auto sdf = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(ls_name));
+        auto field = file.readGrid(field_name);
+        file.close();
+        if (!sdf)
+            fail(HV_ERR_INVALID_ARG,
+                 std::string(in_path) + ": grid '" + ls_name + "' is not a float grid");
+        if (field->transform() != sdf->transform())
+            fail(HV_ERR_INVALID_ARG, std::string(in_path) + ": grids '" + ls_name + "' and '" +
+                                         field_name + "' have different transforms");
+        if (sdf->tree().hasActiveTiles())
+            sdf->tree().voxelizeActiveTiles(); // FastSweeping refuses active tiles
+        openvdb::GridBase::Ptr ext;
+        if (auto v = openvdb::gridPtrCast<openvdb::Vec3SGrid>(field))
+            ext = extend_off(*sdf, *v, nullptr);
+        else if (auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(field))
+            ext = extend_off(*sdf, *f, nullptr);
+        else
+            fail(HV_ERR_INVALID_ARG, std::string(in_path) + ": grid '" + field_name + "' is " +
+                                         field->valueType() + ", not float or vec3s");
+        ext->setName(field_name);
+        ext->setVectorType(field->getVectorType());
+        field.reset();
+        openvdb::io::File out(out_path);
+        out.write({sdf, ext});
+        out.close();
+        return HV_OK;
+    });
+}
+
+hv_status ref_vdb_sdf_to_ext_tiles(const hv_tiles *phi, int ncomp, const hv_tiles *const in[3],
+                                   hv_tiles *const out[3], double *seconds)
+{
+    return guarded("ref_vdb_sdf_to_ext_tiles", [&] {
+        init_vdb();
+        if (ncomp != 1 && ncomp != 3)
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_sdf_to_ext_tiles: ncomp must be 1 or 3");
+        check_tiles(phi, nullptr, "phi");
+        if (!(phi->h > 0))
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_sdf_to_ext_tiles: phi's voxel size must be positive");
+        for (int k = 0; k < ncomp; k++) {
+            check_tiles(in[k], phi, "a field");
+            check_tiles(out[k], phi, "an output");
+        }
+        if (ncomp == 3)
+            ext_tiles<openvdb::Vec3SGrid>(
+                phi, 3, in, out, seconds, [](auto &v, int k) -> auto & { return v[k]; });
+        else
+            ext_tiles<openvdb::FloatGrid>(
+                phi, 1, in, out, seconds, [](auto &v, int) -> auto & { return v; });
+        return HV_OK;
+    });
+}
 
 hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_t *tris, size_t nt,
                                    double band_voxels, hv_grid *out, double *seconds)

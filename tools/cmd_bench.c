@@ -1,6 +1,7 @@
 /* heatvox bench: benchmarks that print one JSON object per line. Ratios are
  * taken against references measured in the same process (a plain memory copy,
  * FFTW), because absolute times drift on shared machines. */
+#include "bench_ref.h"
 #include "cli.h"
 #include "commands.h"
 
@@ -339,8 +340,10 @@ int cmd_bench(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *out = argc < 2 ? stderr : stdout;
-        fprintf(out, "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend> [options]   (heatvox "
-                     "bench <name> --help)\n");
+        fprintf(out,
+                "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend|extend-band|extend-loop> "
+                "[options]   (heatvox "
+                "bench <name> --help)\n");
         return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
     }
     if (!strcmp(argv[1], "solve"))
@@ -355,5 +358,9 @@ int cmd_bench(int argc, char **argv)
         return cmd_bench_band(argc - 1, argv + 1);
     if (!strcmp(argv[1], "extend"))
         return bench_extend(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "extend-band"))
+        return cmd_bench_extend_band(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "extend-loop"))
+        return cmd_bench_extend_loop(argc - 1, argv + 1);
     return cli_usage_error("bench", "unknown benchmark '%s'", argv[1]);
 }
