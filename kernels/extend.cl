@@ -121,16 +121,31 @@ static int ext_eval_point(int4 N, __global const float *phi, acc4_t P, int i, in
     wt[0] = 1;
     *m = 1;
     acc_t g[3] = {0, 0, 0}, gn = 0;
-    for (int a = 0; a < N.w; a++) {
-        const int lo = ijk[a] > 0, hi = ijk[a] + 1 < n[a];
-        if (!lo && !hi)
-            continue;
-        const acc_t vp = hi ? phi[c + st[a]] : phi[c], vm = lo ? phi[c - st[a]] : phi[c];
-        g[a] = (vp - vm) / ((lo + hi) * h);
+    /* Central differences, then (phi_diff2 of extend_internal.h) one-sided
+     * ones towards the neighbour of smaller |phi|, on the axes where |phi|
+     * grows across the cell, where those are out of range: next to a narrow
+     * band's clamp. */
+    for (int up = 0; up < 2; up++) {
+        for (int a = 0; a < N.w; a++) {
+            const int lo = ijk[a] > 0, hi = ijk[a] + 1 < n[a];
+            g[a] = 0;
+            if (!lo && !hi)
+                continue;
+            const acc_t pc = phi[c], vp = hi ? phi[c + st[a]] : pc, vm = lo ? phi[c - st[a]] : pc;
+            if (up && lo && hi && fabs(vm) < fabs(pc) && fabs(pc) < fabs(vp))
+                g[a] = (pc - vm) / h;
+            else if (up && lo && hi && fabs(vp) < fabs(pc) && fabs(pc) < fabs(vm))
+                g[a] = (vp - pc) / h;
+            else
+                g[a] = (vp - vm) / ((lo + hi) * h);
+        }
+        gn = 0;
+        for (int a = 0; a < N.w; a++)
+            gn += g[a] * g[a];
+        gn = sqrt(gn);
+        if (gn >= P.z && gn <= P.w)
+            break;
     }
-    for (int a = 0; a < N.w; a++)
-        gn += g[a] * g[a];
-    gn = sqrt(gn);
     if (!(gn >= P.z && gn <= P.w))
         return 0;
     const acc_t s = (acc_t)phi[c] / (gn * h);

@@ -135,16 +135,21 @@ static inline void box_union(ibox *b, const ibox *o)
 
 /* A difference of phi along one axis at a cell of value pc between vm and vp,
  * over two cells (the central difference's scale): the central difference,
- * or with upwind != 0 the one-sided difference towards the neighbour of
- * smaller |phi|, doubled. Where a narrow-band level set is clamped, a cell
- * next to the clamp has a neighbour that holds the background rather than a
- * distance, and its central gradient is too short; the side towards the
- * surface still measures the distance. */
+ * or with upwind != 0, where |phi| grows across the cell along the axis, the
+ * one-sided difference towards the neighbour of smaller |phi|, doubled.
+ * Where a narrow-band level set is clamped, a cell next to the clamp has a
+ * neighbour that holds the background rather than a distance, and its
+ * central gradient is too short; the side towards the surface still
+ * measures the distance. A clamped cell (|phi| equal to a neighbour's) and
+ * a ridge (|phi| above both) keep the central difference. */
 static inline double phi_diff2(double pc, double vm, double vp, int upwind)
 {
-    if (!upwind)
-        return vp - vm;
-    return fabs(vm) < fabs(vp) ? 2 * (pc - vm) : 2 * (vp - pc);
+    const double a = fabs(pc), am = fabs(vm), ap = fabs(vp);
+    if (upwind && am < a && a < ap)
+        return 2 * (pc - vm);
+    if (upwind && ap < a && a < am)
+        return 2 * (vp - pc);
+    return vp - vm;
 }
 
 /* ---- the per-cell passes (extend_eval.c) ------------------------------------ */

@@ -29,7 +29,7 @@ class SameAsCommand(unittest.TestCase):
     def test_vector_extension_should_equal_the_command(self):
         src = hvtest.scene("levelset/sphere_velocity.vdb")
         out = os.path.join(hvtest.tmpdir(), "ext.vdb")
-        hvtest.run("extend", src, "--levelset", "sdf", "--field", "v", "-o", out, "-q")
+        hvtest.run("extend", src, "--levelset", "sdf", "--field", "v", "-o", out, "-q", "--dense")
         phi, h = read_block(src, "sdf")
         v, _ = read_block(src, "v", vec=True)
         ref, _ = read_block(out, "v", vec=True)
@@ -48,7 +48,7 @@ class SameAsCommand(unittest.TestCase):
     def test_options_should_equal_the_command(self):
         src = hvtest.scene("levelset/sphere_velocity.vdb")
         out = os.path.join(hvtest.tmpdir(), "ext.vdb")
-        hvtest.run("extend", src, "--levelset", "sdf", "--field", "v", "-o", out, "-q",
+        hvtest.run("extend", src, "--levelset", "sdf", "--field", "v", "-o", out, "-q", "--dense",
                    "--band", "2", "--out-band", "4", "--t-scale", "0.5", "--plain")
         phi, h = read_block(src, "sdf")
         v, _ = read_block(src, "v", vec=True)
