@@ -52,6 +52,14 @@
 #define BAND_KERNEL
 #endif
 
+struct xrun {
+    int j, k, x0, x1; /* row (j, k), cells x0 <= x < x1 */
+};
+
+static int band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R);
+static hv_status band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
+                              hv_extend_stats *S);
+
 /* Cells x0 .. x0 + len - 1 of one run (at compact cell `at`), whose neighbours
  * in rows j - 1, j + 1, k - 1, k + 1 start at compact cell nb[0..3] (the zero
  * block where that row has no band cell there or the grid ends), with one
@@ -94,12 +102,6 @@ int hv__extend_last_level(const hv_extender *e, double ob)
     while (l + 1 < e->o.max_levels && sqrt(e->o.t_scale * pow(LEVEL_FACTOR, l)) < gap)
         l++;
     return l;
-}
-
-size_t hv__extend_band_bytes(const hv_extend_band *b)
-{
-    return b->nruns * (sizeof(xrun) + sizeof(size_t)) + b->nsegs * sizeof(bseg) +
-           3 * b->ncompact * (size_t)b->R * sizeof(float);
 }
 
 void hv__extend_band_free(hv_extend_band *b)
@@ -192,10 +194,8 @@ static size_t run_segments(const hv_extender *e, const hv_extend_band *b, const 
         lo[d] = hi[d] = 0;
         if (exists[d]) {
             size_t row = (size_t)j + (size_t)ny * k;
-            if (row < b->row0 || row - b->row0 >= b->rows)
-                continue; /* a row of the grid beyond the band's planes: no band cell */
-            lo[d] = rfirst[row - b->row0];
-            hi[d] = rfirst[row - b->row0 + 1];
+            lo[d] = rfirst[row];
+            hi[d] = rfirst[row + 1];
         }
     }
     /* Cut points: the run's ends, the cells next to the x walls (one neighbour
@@ -332,14 +332,16 @@ int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, i
     b->nruns = nr;
     b->cells = cells;
     b->s = s;
-    b->row0 = 0;
-    b->rows = rows;
-    int rc = hv__extend_band_layout(e, b, first, R);
+    int rc = band_layout(e, b, first, R);
     free(first);
     return rc;
 }
 
-int hv__extend_band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R)
+/* The second half of hv__extend_band_build: from b->runs, b->nruns, b->cells
+ * and b->s, with first[r] .. first[r + 1] - 1 the runs of row r, lays out the
+ * segments, the sweep count and the work arrays. 1 when built, -1 when out of
+ * memory. */
+static int band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R)
 {
     const size_t nr = b->nruns, nx = (size_t)e->n[0];
     size_t *sfirst = malloc((nr + 1) * sizeof *sfirst);
@@ -607,7 +609,7 @@ hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
 {
     const int R = b->R;
     build_rhs_band(e, b, nfields, f);
-    hv_status st = hv__extend_band_iterate(e, b, thr, S);
+    hv_status st = band_iterate(e, b, thr, S);
     if (st)
         return st;
     /* The compact layout of a run is e->sol's on that run. */
@@ -622,8 +624,10 @@ hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
     return HV_OK;
 }
 
-hv_status hv__extend_band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
-                                  hv_extend_stats *S)
+/* The sweeps alone: every right-hand side in b->f solved, b->sol pointing at
+ * the solutions; *thr as hv__extend_band_solve's. */
+static hv_status band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
+                              hv_extend_stats *S)
 {
     const int R = b->R;
     const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * b->s), sigma = theta / delta;

@@ -216,19 +216,14 @@ hv_status hv__extend_solve_level(hv_extender *e, int l, const int lo[3], const i
 /* The first level's cells near what is read, for the Chebyshev band solve;
  * built by hv__extend_band_build, on the stack of hv_extend_many. */
 typedef struct hv_extend_band hv_extend_band;
-/* An x-run of band cells: row (j, k), cells x0 <= x < x1. */
-typedef struct xrun {
-    int j, k, x0, x1;
-} xrun;
-typedef struct bseg bseg; /* segments of the runs (extend_band.c) */
+typedef struct xrun xrun; /* x-runs of band cells and their segments (extend_band.c) */
+typedef struct bseg bseg;
 
 struct hv_extend_band {
     xrun *runs;
     size_t nruns, cells;
-    uint8_t *need;     /* the cells read (before growing): trusted at level 0 */
-    size_t *roff;      /* compact cell of run q's left ghost; its cells follow */
-    size_t row0, rows; /* first[r - row0] holds row r's runs, row0 <= r < row0 + rows
-                          (hv__extend_band_layout) */
+    uint8_t *need; /* the cells read (before growing): trusted at level 0 */
+    size_t *roff;  /* compact cell of run q's left ghost; its cells follow */
     bseg *segs;
     size_t nsegs;
     size_t *kstart;  /* segments of plane k: kstart[k] .. kstart[k + 1] - 1 */
@@ -236,7 +231,7 @@ struct hv_extend_band {
     size_t ncompact; /* compact cells in all */
     int R;           /* right-hand sides, side by side */
     float *f, *u0, *u1;
-    float *sol; /* after hv__extend_band_iterate: the solutions (u0 or u1) */
+    float *sol; /* after the sweeps: the solutions (u0 or u1) */
     int iters;
     double s; /* diffusion time in units of h^2 */
 };
@@ -253,14 +248,6 @@ int hv__extend_band_allowed(const hv_extender *e);
  * memory. */
 int hv__extend_band_build(hv_extender *e, hv_extend_band *b, size_t box_cells, int R, double s);
 
-/* The second half of hv__extend_band_build, for callers that make the runs
- * themselves (extend_tiles.c): from b->runs (sorted by row j + ny k, then x),
- * b->nruns, b->cells, b->s, b->row0 and b->rows, with first[r - row0] ..
- * first[r - row0 + 1] - 1 the runs of row r (rows of the planes the runs
- * lie on and their neighbours), lays out the segments, the sweep count and the work arrays. 1 when
- * built, -1 when out of memory. */
-int hv__extend_band_layout(hv_extender *e, hv_extend_band *b, const size_t *first, int R);
-
 /* The Chebyshev sweeps of a band solve for the diffusion time s h^2. */
 int hv__extend_band_iters(const hv_extender *e, double s);
 
@@ -273,18 +260,10 @@ int hv__extend_band_level_allowed(const hv_extender *e, int l);
 int hv__extend_last_level(const hv_extender *e, double ob);
 void hv__extend_band_free(hv_extend_band *b);
 
-/* Bytes the band's tables and work arrays take. */
-size_t hv__extend_band_bytes(const hv_extend_band *b);
-
 /* Level 0 on the band: every right-hand side at once; solutions stored in
  * e->sol on the band's cells; *thr as hv__extend_solve_level's. */
 hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
                                 const hv_extend_field *f, double *thr, hv_extend_stats *S);
-
-/* The sweeps alone: every right-hand side in b->f (laid out as the band's
- * cells) solved, b->sol pointing at the solutions; *thr as above. */
-hv_status hv__extend_band_iterate(const hv_extender *e, hv_extend_band *b, double *thr,
-                                  hv_extend_stats *S);
 
 /* ---- narrow bands as tiles (extend_tiles.c, extend_wave.c) ------------------- */
 
@@ -318,13 +297,13 @@ static inline long hv__xrows_find(const hv_xrows *s, int ny, int j, int k, int x
 /* The right-hand sides of cells x0 <= x < x1 of row (j, k), R per cell. */
 typedef void (*hv_extend_rhs_fn)(const void *ctx, int j, int k, int x0, int x1, float *dst);
 
-/* The band solve (hv__extend_band_iterate: the same sweeps, coefficients and
+/* The band solve (hv__extend_band_solve's sweeps: the same coefficients and
  * arithmetic, so the same values) of R right-hand sides for the diffusion time
  * s h^2 on the cells of dom, as a wave through its planes: sweep t of plane k
  * runs once sweep t - 1 of planes k - 1 .. k + 1 is done, so only the planes
  * the wave is crossing are held (about the sweep count), whatever the band's
  * size. sol receives the solutions at the cells of need (a subset of dom), R
- * per cell in need's order; *thr as hv__extend_band_iterate's. S: solves,
+ * per cell in need's order; *thr as hv__extend_band_solve's. S: solves,
  * relres, solve work in work_bytes (the larger). */
 hv_status hv__extend_wave_solve(const hv_extender *e, const hv_xrows *dom, const hv_xrows *need,
                                 double s, int R, hv_extend_rhs_fn rhs, const void *ctx, float *sol,

@@ -396,7 +396,7 @@ hv_status hv__extend_wave_solve(const hv_extender *e, const hv_xrows *dom, const
                          need->nruns * sizeof *w.nprefix;
     if (bytes > S->work_bytes)
         S->work_bytes = bytes;
-    /* The coefficients of hv__extend_band_iterate, sweep by sweep. */
+    /* The coefficients of the band solve (extend_band.c), sweep by sweep. */
     const double theta = 1, delta = 1 - 1 / (1 + 2 * e->dim * s), sigma = theta / delta;
     double rho = 1 / sigma;
     for (int t = 2; t <= w.iters; t++) {
