@@ -9,18 +9,20 @@
  *    and their neighbours.
  * 2. Per diffusion level: the marked cells as x-runs per row, grown by
  *    BOX_MARGIN sqrt(t) voxels along x, y and z (unions of runs, never a
- *    mask of the block), handed to the band solve of extend_band.c (its
- *    segments, sweeps and threshold, unchanged); the right-hand sides are
- *    built from the tiles, and the ratios read back from the band's compact
- *    layout. Cells a level does not reach go to the next, on their own band;
- *    the levels stop at the first whose reach covers the output band.
+ *    mask of the block): the cells hv_extend_many's band solve takes. They
+ *    are solved as a wave through the planes (extend_wave.c: the band
+ *    solve's sweeps, a dozen planes held at a time) with the right-hand sides
+ *    built from the tiles, and the solutions kept at the marked cells only.
+ * 3. Per tile, every output cell reads its ratios from those solutions;
+ *    cells a level does not reach go to the next, on their own band, and the
+ *    levels stop at the first whose reach covers the output band.
  *
  * With the same cells, the same sweeps and the same reads, the values are
- * those of hv_extend_many on the dense block to float rounding. Cells of the
- * block outside the tiles read as the level set's background (the largest
- * |phi| of the tiles) with the sign of the cell that looks at them: no zero
- * crossing lies between two neighbours unless both are within a voxel of it,
- * hence in a tile. */
+ * those of hv_extend_many on the dense block bit for bit (check_extend_tiles).
+ * Cells of the block outside the tiles read as the level set's background
+ * (the largest |phi| of the tiles) with the sign of the cell that looks at
+ * them: no zero crossing lies between two neighbours unless both are within
+ * a voxel of it, hence in a tile. */
 #include "extend_internal.h"
 #include "core/error.h"
 
@@ -31,7 +33,7 @@
 
 #define TS HV_TILE
 #define TCELLS (HV_TILE * HV_TILE * HV_TILE)
-/* Fewer output cells than this classify and evaluate on one thread. */
+/* Fewer tiles than this classify and evaluate on one thread. */
 #define PAR_MIN_TILES 16
 
 /* Kept by the extender between calls: the tile maps of the block. */
