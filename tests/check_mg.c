@@ -1,5 +1,6 @@
 /* Multigrid and the solver interface: convergence factors, exactness against
  * analytic solutions and the FFTW oracle, null spaces, and bad input. */
+#include "heatvox/petsc.h"
 #include "solve/backend.h"
 #include "solve/mg_level.h"
 #include "testlib.h"
@@ -164,6 +165,30 @@ START_TEST(solutions_should_converge_at_second_order)
             ck_assert_msg(e1 / e2 > 3.5 && e2 / e3 > 3.5, "dim %d poisson %d: %g %g %g", dim,
                           poisson, e1, e2, e3);
         }
+}
+END_TEST
+
+/* The petsc backend is in builds made with make mpi (tested there under
+ * mpirun by make mpi-check); elsewhere it says so and fails cleanly. */
+START_TEST(petsc_backend_without_mpi_should_fail_clearly)
+{
+    ck_assert_int_eq(hv_petsc_available(), 0);
+    hv_backend b;
+    TL_ASSERT_OK(hv_backend_parse("petsc", &b));
+    ck_assert_int_eq(b, HV_BACKEND_PETSC);
+    ck_assert_str_eq(hv_backend_name(b), "petsc");
+    const int n[3] = {8, 8, 8};
+    hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / 8, NULL, 1, 0.01};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_PETSC;
+    hv_solver *s = NULL;
+    ck_assert_int_eq(hv_solver_create(&s, &p, &o), HV_ERR_UNSUPPORTED);
+    ck_assert_ptr_null(s);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "make mpi"));
+    ck_assert_int_eq(hv_mpi_rank(), 0);
+    ck_assert_int_eq(hv_mpi_size(), 1);
+    hv_petsc_finalize(); /* nothing to end */
 }
 END_TEST
 
@@ -651,6 +676,7 @@ int main(void)
     tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);
     tcase_add_test(tc, multigrid_and_fftw_should_agree);
+    tcase_add_test(tc, petsc_backend_without_mpi_should_fail_clearly);
     tcase_add_test(tc, poisson_solution_should_be_mean_free_in_each_region);
     tcase_add_test(tc, pcg_should_converge_in_a_serpentine_corridor);
     tcase_add_test(tc, solver_should_report_max_iterations_not_fail);

@@ -90,4 +90,21 @@ else
 fi
 # A simulation's loop: one extender, a moving sphere's level set as tiles.
 "$hv" bench extend-loop --n 256
+# The petsc backend (make mpi) under mpirun on 1 and 2 ranks, against mg on
+# the same grid in the same run; skipped without build-mpi/heatvox.
+mpi_hv=$(dirname "$hv")/../build-mpi/heatvox
+if [ -x "$mpi_hv" ]; then
+  for r in 1 2; do
+    for n in 128 256; do
+      for o in none baffles; do
+        OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+          mpirun --oversubscribe -n $r "$mpi_hv" bench solve --n $n --t-scale 4 --backend petsc --obstacle $o --tol 1e-10
+        OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+          mpirun --oversubscribe -n $r "$mpi_hv" bench solve --n $n --poisson --backend petsc --obstacle $o --tol 1e-10
+      done
+    done
+  done
+else
+  echo "bench: no $mpi_hv (make mpi), petsc rows skipped" >&2
+fi
 if [ -x /usr/bin/python3 ]; then /usr/bin/python3 "$(dirname "$0")/bench_python.py" "$hv"; else echo "bench: no /usr/bin/python3, python rows skipped" >&2; fi

@@ -138,27 +138,30 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
 
 static int usage_solve(FILE *out)
 {
-    fprintf(
-        out,
-        "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
-        "                           [--backend mg|fftw|opencl] [--smoother rbgs|jacobi|chebyshev]\n"
-        "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
-        "                           [--obstacle none|ball|baffles]\n"
-        "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
-        "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
-        "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
-        "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
-        "streaming copy in the same process, best of trials run between the timed solves;\n"
-        "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
-        "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
-        "cycles_timed of them),\n"
-        "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref "
-        "\"fftw\",\n"
-        "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
-        "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
-        "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
-        "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
-        "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
+    fprintf(out,
+            "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
+            "                           [--backend mg|fftw|opencl|petsc]\n"
+            "                           [--smoother rbgs|jacobi|chebyshev]\n"
+            "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
+            "                           [--obstacle none|ball|baffles]\n"
+            "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
+            "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
+            "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
+            "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
+            "streaming copy in the same process, best of trials run between the timed solves;\n"
+            "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
+            "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
+            "cycles_timed of them),\n"
+            "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref "
+            "\"fftw\",\n"
+            "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
+            "--backend petsc (builds made with make mpi) runs under mpirun: every rank solves,\n"
+            "rank 0 prints, with ranks, and ref \"mg\" (the same grid on one process, the same\n"
+            "run: ref_seconds, ref_iterations).\n"
+            "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
+            "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
+            "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
+            "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -297,22 +300,46 @@ static int bench_solve(int argc, char **argv)
      * otherwise the whole solve's. */
     double cycle_gbs = best_cycle_gbs > 0 ? best_cycle_gbs : solve_gbs;
     hv_solver_destroy(&s);
-
+    /* Under mpirun (backend petsc) every rank solves and rank 0 reports, with
+     * mg on the same grid in the same run as the reference. */
+    const int rank = hv_mpi_rank(), ranks = hv_mpi_size();
+    double mg_seconds = 0, unused_gbs;
+    hv_solve_info mginfo = {0};
+    if (backend == HV_BACKEND_PETSC) {
+        o.backend = HV_BACKEND_MG;
+        o.smoother = HV_SMOOTH_AUTO;
+        if ((st = hv_solver_create(&s, &p, &o)) ||
+            (st = time_solve(s, f, u, repeat, NULL, &mg_seconds, &mginfo, &unused_gbs)))
+            return cli_fail("bench solve", "the mg reference", st);
+        hv_solver_destroy(&s);
+    }
+    if (rank != 0) {
+        free(solid);
+        hv_free(f);
+        hv_free(u);
+        return HV_EXIT_OK;
+    }
     printf(
-        "{\"bench\":\"solve\",\"n\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
+        "{\"bench\":\"solve\",\"n\":%d,\"ranks\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
         "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
         "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\","
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
         "\"obstacle\":\"%s\"",
-        n, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale, hv_backend_name(backend),
-        smoother == HV_SMOOTH_RBGS     ? "rbgs"
+        n, ranks, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale,
+        hv_backend_name(backend),
+        backend == HV_BACKEND_PETSC    ? "boomeramg"
+        : smoother == HV_SMOOTH_RBGS   ? "rbgs"
         : smoother == HV_SMOOTH_JACOBI ? "jacobi"
                                        : "chebyshev",
         threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
         hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
         solve_gbs, obstacle);
-    if (backend != HV_BACKEND_FFTW) {
+    if (backend == HV_BACKEND_PETSC) {
+        printf(",\"ref\":\"mg\",\"ref_seconds\":%.5f,\"ref_iterations\":%d,\"ref_relres\":%.3e,"
+               "\"ratio\":%.3f",
+               mg_seconds, mginfo.iterations, mginfo.relres, seconds / mg_seconds);
+    } else if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;
         p.solid = NULL; /* FFTW solves plain boxes: the reference is the box without it */
         double ref_seconds = 0, unused;

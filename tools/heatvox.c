@@ -95,8 +95,11 @@ int main(int argc, char **argv)
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        if (!strcmp(argv[1], commands[i].name))
-            return commands[i].run(argc - 1, argv + 1);
+        if (!strcmp(argv[1], commands[i].name)) {
+            const int rc = commands[i].run(argc - 1, argv + 1);
+            hv_petsc_finalize(); /* ends MPI where a petsc solver started it */
+            return rc;
+        }
     fprintf(stderr, "heatvox: unknown command '%s'\n", argv[1]);
     usage(stderr);
     return HV_EXIT_USAGE;

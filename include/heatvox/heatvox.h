@@ -15,5 +15,6 @@
 #include "heatvox/image.h"
 #include "heatvox/curves.h"
 #include "heatvox/heat.h"
+#include "heatvox/petsc.h"
 
 #endif

@@ -7,6 +7,8 @@
  *   HV_BACKEND_MG      matrix-free geometric multigrid on the CPU (any grid, masks)
  *   HV_BACKEND_FFTW    exact DCT-II solve (plain boxes only)
  *   HV_BACKEND_OPENCL  multigrid on an OpenCL device
+ *   HV_BACKEND_PETSC   CG + hypre BoomerAMG over MPI ranks (petsc.h; builds made
+ *                      with `make mpi`)
  *   HV_BACKEND_AUTO    FFTW for plain boxes, multigrid otherwise
  *
  * Lifecycle (PETSc-like): hv_solver_create (plans, hierarchies: expensive, once)
@@ -30,7 +32,8 @@ typedef enum hv_backend {
     HV_BACKEND_AUTO = 0,
     HV_BACKEND_MG,
     HV_BACKEND_FFTW,
-    HV_BACKEND_OPENCL
+    HV_BACKEND_OPENCL,
+    HV_BACKEND_PETSC /* distributed over MPI ranks with PETSc (petsc.h; make mpi) */
 } hv_backend;
 
 typedef enum hv_smoother {
@@ -49,7 +52,7 @@ typedef enum hv_stop_reason {
 } hv_stop_reason;
 
 HV_API const char *hv_backend_name(hv_backend b);
-/* Parses "auto", "mg", "fftw", "opencl"; HV_ERR_INVALID_ARG otherwise. */
+/* Parses "auto", "mg", "fftw", "opencl", "petsc"; HV_ERR_INVALID_ARG otherwise. */
 HV_API hv_status hv_backend_parse(const char *s, hv_backend *out);
 HV_API const char *hv_stop_reason_str(hv_stop_reason r);
 

@@ -42,6 +42,7 @@ typedef struct hv_backend_ops {
 extern const hv_backend_ops hv__backend_mg_ops;
 extern const hv_backend_ops hv__backend_fftw_ops;
 extern const hv_backend_ops hv__backend_opencl_ops;
+extern const hv_backend_ops hv__backend_petsc_ops; /* petsc.c: fails without HV_HAVE_PETSC */
 
 /* The OpenCL device that HV_BACKEND_AUTO may take (hv_backend_resolve): -1
  * none (no platform or device: logs one HV_LOG_WARN), 0 a CPU device, 1 a

@@ -42,6 +42,7 @@ const char *hv_backend_name(hv_backend b)
     case HV_BACKEND_MG: return "mg";
     case HV_BACKEND_FFTW: return "fftw";
     case HV_BACKEND_OPENCL: return "opencl";
+    case HV_BACKEND_PETSC: return "petsc";
     }
     return "unknown";
 }
@@ -49,13 +50,14 @@ const char *hv_backend_name(hv_backend b)
 hv_status hv_backend_parse(const char *s, hv_backend *out)
 {
     static const hv_backend all[] = {HV_BACKEND_AUTO, HV_BACKEND_MG, HV_BACKEND_FFTW,
-                                     HV_BACKEND_OPENCL};
+                                     HV_BACKEND_OPENCL, HV_BACKEND_PETSC};
     for (size_t i = 0; s && i < sizeof all / sizeof all[0]; i++)
         if (!strcmp(s, hv_backend_name(all[i]))) {
             *out = all[i];
             return HV_OK;
         }
-    return hv__error(HV_ERR_INVALID_ARG, "unknown backend '%s' (expected auto, mg, fftw or opencl)",
+    return hv__error(HV_ERR_INVALID_ARG,
+                     "unknown backend '%s' (expected auto, mg, fftw, opencl or petsc)",
                      s ? s : "(null)");
 }
 
@@ -141,6 +143,7 @@ static const hv_backend_ops *backend_ops(hv_backend b)
     case HV_BACKEND_MG: return &hv__backend_mg_ops;
     case HV_BACKEND_FFTW: return &hv__backend_fftw_ops;
     case HV_BACKEND_OPENCL: return &hv__backend_opencl_ops;
+    case HV_BACKEND_PETSC: return &hv__backend_petsc_ops;
     default: return NULL;
     }
 }
