@@ -280,7 +280,7 @@ format-check: | $(STAMP)
 	@clang-format --dry-run --Werror $(FORMAT_SRC) && echo "format-check: $(words $(FORMAT_SRC)) files as .clang-format lays them out"
 
 clean:
-	rm -rf build build-san out
+	rm -rf build build-san build-mpi out
 
 # ---- fuzz (tests/fuzz/): libFuzzer targets with ASan and UBSan, clang 14 ----
 # make fuzz FUZZ_SECONDS=N builds the library with clang into build-fz/ (the
