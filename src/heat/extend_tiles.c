@@ -165,7 +165,7 @@ static hv_status rowset_grow(const int n[3], const rowset *in, rowset *out, int 
                 const size_t cnt = merge_intervals(&b);
                 if (pass == 0)
                     out->first[r + 1] = cnt;
-                else
+                else if (cnt)
                     memcpy(out->x + 2 * out->first[r], b.v, 2 * cnt * sizeof *b.v);
             }
             free(b.v);
