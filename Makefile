@@ -39,11 +39,11 @@ DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboos
 # `make mpi-check` runs the distributed tests under mpirun. The default build
 # never links them.
 MPI_BUILD ?= build-mpi
-MPI_PKGS  := petsc-dev openmpi-bin
+MPI_PKGS  := petsc-dev openmpi-bin python3-h5py
 HV_PETSC  ?= 0
 ifeq ($(HV_PETSC),1)
-CPPFLAGS += -DHV_HAVE_PETSC $(shell pkg-config --cflags PETSc ompi-c 2>/dev/null)
-LDLIBS   += $(shell pkg-config --libs PETSc ompi-c 2>/dev/null)
+CPPFLAGS += -DHV_HAVE_PETSC $(shell pkg-config --cflags PETSc ompi-c hdf5-openmpi 2>/dev/null)
+LDLIBS   += $(shell pkg-config --libs PETSc ompi-c hdf5-openmpi 2>/dev/null)
 endif
 
 C_SRC   := $(sort $(wildcard src/*/*.c))
@@ -221,10 +221,12 @@ mpi-check: mpi
 	  echo "== mpirun -n $$p mpi_solve"; \
 	  $(MPI_RUN) -n $$p $(MPI_BUILD)/tests/mpi_solve || bad="$$bad mpi_solve($$p)"; \
 	done; \
+	echo "== tests/mpi/pipelines.py: distance and extend on 1 to 4 ranks, HDF5 output"; \
+	$(PYTHON) tests/mpi/pipelines.py $(MPI_BUILD)/heatvox env $(MPI_RUN) || bad="$$bad pipelines"; \
 	echo "== mpirun -n 2 heatvox bench solve --backend petsc"; \
 	$(MPI_RUN) -n 2 $(MPI_BUILD)/heatvox bench solve --n 32 --backend petsc --obstacle baffles || bad="$$bad bench"; \
 	[ -z "$$bad" ] || { echo "mpi-check: failing:$$bad"; exit 1; }; \
-	echo "mpi-check: mpi_solve on 1 to 4 ranks and bench solve on 2 passed"
+	echo "mpi-check: mpi_solve and the pipelines on 1 to 4 ranks and bench solve on 2 passed"
 $(MPI_BUILD)/tests/mpi_solve: tests/mpi/mpi_solve.c $(LIB_A) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)

@@ -1,5 +1,6 @@
 /* heatvox distance: geodesic distance around obstacles by the heat method. */
 #include "cli.h"
+#include "heatvox/petsc.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -14,11 +15,11 @@ static int usage(FILE *out)
 {
     fprintf(out,
             "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
-            "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb\n"
+            "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb|OUT.h5\n"
             "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 "
             "x1 y1 z1]\n"
             "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
-            "auto|mg|fftw|opencl]\n"
+            "auto|mg|fftw|opencl|petsc]\n"
             "                        [--unreachable V] [--threads T] [-q] [-v]\n"
             "\n"
             "Geodesic distance from the sources through free space, around obstacles, by the\n"
@@ -42,6 +43,13 @@ static int usage(FILE *out)
             "\n"
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
             "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
+            "\n"
+            "Builds made with make mpi: -o OUT.h5 writes the distance as HDF5 (dataset\n"
+            "/distance, with the attributes spacing and origin) and an XDMF sidecar\n"
+            "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, every rank\n"
+            "reads the inputs and computes, the solves are distributed over the ranks,\n"
+            "the ranks write the HDF5 file together, and rank 0 writes the VDB and .npy\n"
+            "files and prints.\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
@@ -403,8 +411,8 @@ int cmd_distance(int argc, char **argv)
                 return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'",
-                                       v);
+                return cli_usage_error(
+                    CMD, "--backend must be auto, mg, fftw, opencl or petsc, got '%s'", v);
         } else if (!strcmp(a, "--unreachable")) {
             if (parse_unreachable(v, &o.unreachable))
                 return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);
@@ -420,6 +428,16 @@ int cmd_distance(int argc, char **argv)
         return cli_usage_error(CMD, "--sources is required");
     if (!out && !npy)
         return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
+    const char *h5 = NULL;
+    if (out && strlen(out) > 3 && !strcmp(out + strlen(out) - 3, ".h5")) {
+        if (!hv_petsc_available())
+            return cli_usage_error(CMD,
+                                   "-o %s: HDF5 output needs heatvox built with MPI and "
+                                   "PETSc (make mpi)",
+                                   out);
+        h5 = out;
+        out = NULL;
+    }
     if ((mask != NULL) + (obst_mesh != NULL) + none > 1)
         return cli_usage_error(
             CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");
@@ -436,7 +454,7 @@ int cmd_distance(int argc, char **argv)
                                dim);
     if (res && vsize)
         return cli_usage_error(CMD, "give --res or --voxel-size, not both");
-    const char *outs[] = {out, npy}, *ins[] = {sources, mask, obst_mesh};
+    const char *outs[] = {out ? out : h5, npy}, *ins[] = {sources, mask, obst_mesh};
     if (cli_check_outputs(CMD, outs, 2, ins, 3))
         return HV_EXIT_FAIL;
     hv_set_threads(threads);
@@ -527,6 +545,18 @@ int cmd_distance(int argc, char **argv)
     if (st_d.unreachable_cells && cli_verbose >= 0)
         fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
                 st_d.unreachable_cells, (double)o.unreachable);
+    /* Under mpirun every rank holds the result: HDF5 is written by all
+     * together, the other files by rank 0. */
+    if (h5) {
+        const hv_grid *fields[1] = {g};
+        const char *names[1] = {"distance"};
+        if ((st = hv_petsc_write_h5(h5, 1, fields, names))) {
+            rc = cli_fail(CMD, h5, st);
+            goto done;
+        }
+    }
+    if (hv_mpi_rank() > 0)
+        npy = out = NULL;
     const char *t_npy = npy ? cli_stage(CMD, &co, npy) : NULL;
     const char *t_out = out && (!npy || t_npy) ? cli_stage(CMD, &co, out) : NULL;
     if ((npy && !t_npy) || (out && !t_out)) {

@@ -1,5 +1,6 @@
 /* heatvox extend: extends scalar and vector grids of a VDB file off a level set. */
 #include "cli.h"
+#include "heatvox/petsc.h"
 
 #include <math.h>
 #ifdef __GLIBC__
@@ -16,36 +17,43 @@ static const char *CMD = "extend";
 
 static int usage(FILE *out)
 {
-    fprintf(
-        out,
-        "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...] -o OUT.vdb\n"
-        "                      [--band W] [--t-scale K] [--out-band W] [--dense] [--plain]\n"
-        "                      [--backend auto|mg|fftw|opencl] [--threads T] [-q] [-v]\n"
-        "\n"
-        "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
-        "velocity) off the zero set of the level set by diffusion (heat.h): the values\n"
-        "on cells with |phi| < W voxels (--band, default 1.5) are diffused with their\n"
-        "weights, and every output cell takes the ratio at its closest point on the\n"
-        "surface where phi is a distance, at itself elsewhere (clamped narrow-band level\n"
-        "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
-        "direction are diffused separately (vector heat method). All fields are solved\n"
-        "together.\n"
-        "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
-        "  --out-band W  only voxels with |phi| < W voxels\n"
-        "  --dense       read the grids onto one dense block (their active boxes'\n"
-        "                union) and extend over every voxel of it (or --out-band W)\n"
-        "  --plain       no closest points: the diffusion ratio at every voxel\n"
-        "\n"
-        "A level set (class 'level set') is read and extended as a narrow band: 8^3\n"
-        "tiles of its active voxels, never a dense block; the output voxels are its\n"
-        "active voxels (with --out-band W, those with |phi| < W voxels), and the fields\n"
-        "come back sparse, active there. Other classes, and --dense, take the dense\n"
-        "block, where fields come back fully active. All transforms must match.\n"
-        "OUT.vdb gets the level set (a level set again) and the extended fields, with\n"
-        "their names, voxel size, world placement, index coordinates and classes. Other\n"
-        "grids of IN.vdb are not copied. Prints a JSON summary on stdout (not with -q);\n"
-        "-v reports the tiles, levels and peak memory on stderr.\n"
-        "Exit codes: 0 success, 1 failure, 2 usage error.\n");
+    fprintf(out,
+            "usage: heatvox extend IN.vdb --levelset NAME --field NAME [--field NAME ...]\n"
+            "                      -o OUT.vdb|OUT.h5\n"
+            "                      [--band W] [--t-scale K] [--out-band W] [--dense] [--plain]\n"
+            "                      [--backend auto|mg|fftw|opencl|petsc] [--threads T] [-q] [-v]\n"
+            "\n"
+            "Extends each --field (float/double: scalar; vec3s/vec3d: vector, e.g. a\n"
+            "velocity) off the zero set of the level set by diffusion (heat.h): the values\n"
+            "on cells with |phi| < W voxels (--band, default 1.5) are diffused with their\n"
+            "weights, and every output cell takes the ratio at its closest point on the\n"
+            "surface where phi is a distance, at itself elsewhere (clamped narrow-band level\n"
+            "sets; larger diffusion times reach far cells). Vectors: magnitude and\n"
+            "direction are diffused separately (vector heat method). All fields are solved\n"
+            "together.\n"
+            "  --t-scale K   diffusion time t = K h^2 (default 0.25)\n"
+            "  --out-band W  only voxels with |phi| < W voxels\n"
+            "  --dense       read the grids onto one dense block (their active boxes'\n"
+            "                union) and extend over every voxel of it (or --out-band W)\n"
+            "  --plain       no closest points: the diffusion ratio at every voxel\n"
+            "\n"
+            "A level set (class 'level set') is read and extended as a narrow band: 8^3\n"
+            "tiles of its active voxels, never a dense block; the output voxels are its\n"
+            "active voxels (with --out-band W, those with |phi| < W voxels), and the fields\n"
+            "come back sparse, active there. Other classes, and --dense, take the dense\n"
+            "block, where fields come back fully active. All transforms must match.\n"
+            "OUT.vdb gets the level set (a level set again) and the extended fields, with\n"
+            "their names, voxel size, world placement, index coordinates and classes. Other\n"
+            "grids of IN.vdb are not copied. Prints a JSON summary on stdout (not with -q);\n"
+            "-v reports the tiles, levels and peak memory on stderr.\n"
+            "\n"
+            "Builds made with make mpi: -o OUT.h5 writes the dense block as HDF5, one\n"
+            "dataset per grid (vectors as NAME_x, NAME_y, NAME_z) with the attributes\n"
+            "spacing and origin, and an XDMF sidecar OUT.xmf for ParaView. Under\n"
+            "mpirun -n P with --backend petsc (the dense block), every rank reads the\n"
+            "input and extends, the solves are distributed over the ranks, the ranks\n"
+            "write the HDF5 file together, and rank 0 writes a VDB file and prints.\n"
+            "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -269,8 +277,8 @@ int cmd_extend(int argc, char **argv)
                 return cli_usage_error(CMD, "--out-band must be positive (voxels), got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
             if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(CMD, "--backend must be auto, mg, fftw or opencl, got '%s'",
-                                       v);
+                return cli_usage_error(
+                    CMD, "--backend must be auto, mg, fftw, opencl or petsc, got '%s'", v);
         } else if (!strcmp(a, "--threads")) {
             if (cli_parse_threads(v, 1, &threads))
                 return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
@@ -289,6 +297,15 @@ int cmd_extend(int argc, char **argv)
     for (int q = 0; q < nfields; q++)
         if (!strcmp(fields[q], ls))
             return cli_usage_error(CMD, "--field '%s' is the level set", ls);
+    const char *h5 = NULL;
+    if (out && strlen(out) > 3 && !strcmp(out + strlen(out) - 3, ".h5")) {
+        if (!hv_petsc_available())
+            return cli_usage_error(CMD,
+                                   "-o %s: HDF5 output needs heatvox built with MPI and "
+                                   "PETSc (make mpi)",
+                                   out);
+        h5 = out;
+    }
     if (cli_check_outputs(CMD, &out, 1, &in, 1))
         return HV_EXIT_FAIL;
     hv_set_threads(threads);
@@ -338,7 +355,7 @@ int cmd_extend(int argc, char **argv)
     hv_vdb_read_opts ro = {1, {0, 0, 0}, {0, 0, 0}};
     if ((st = hv_vdb_common_box(in, names, (size_t)nfields + 1, ro.box_lo, ro.box_hi)))
         return cli_fail(CMD, in, st);
-    if (!dense_flag && lsi->grid_class == HV_VDB_LEVEL_SET &&
+    if (!dense_flag && !h5 && lsi->grid_class == HV_VDB_LEVEL_SET &&
         (o.backend == HV_BACKEND_AUTO || o.backend == HV_BACKEND_MG))
         return extend_tiles(in, out, info, count, ls, fields, nfields, ro.box_lo, ro.box_hi, &o,
                             t_start);
@@ -428,8 +445,30 @@ int cmd_extend(int argc, char **argv)
              o.closest_point ? "closest point" : "plain");
     if (!st)
         st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
-    if (!st)
+    if (h5) {
+        /* Every rank holds the result and writes its box (petsc.h). */
+        const hv_grid *hg[1 + 3 * MAX_FIELDS];
+        char hname[1 + 3 * MAX_FIELDS][300];
+        const char *hn[1 + 3 * MAX_FIELDS];
+        int nh = 0;
+        hg[nh] = phi;
+        snprintf(hname[nh], sizeof hname[0], "%s", ls);
+        nh++;
+        for (int q = 0; q < nfields; q++)
+            for (int c = 0; c < ef[q].ncomp; c++, nh++) {
+                hg[nh] = fout[q][c];
+                if (ef[q].ncomp == 1)
+                    snprintf(hname[nh], sizeof hname[0], "%s", fields[q]);
+                else
+                    snprintf(hname[nh], sizeof hname[0], "%s_%c", fields[q], "xyz"[c]);
+            }
+        for (int q = 0; q < nh; q++)
+            hn[q] = hname[q];
+        if (!st)
+            st = hv_petsc_write_h5(out, nh, hg, hn);
+    } else if (!st && hv_mpi_rank() == 0) { /* under mpirun, rank 0 writes */
         st = hv_vdb_writer_write(w, out);
+    }
     if (st) {
         rc = cli_fail(CMD, out, st);
         goto done;

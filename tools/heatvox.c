@@ -70,6 +70,30 @@ static void tame_openmp_spinning(char **argv)
     /* exec failed: carry on with the default policy */
 }
 
+/* --backend petsc: MPI is started before the command runs, so that ranks
+ * other than 0 know to stay quiet (the JSON summaries and reports come from
+ * rank 0; every rank still reports its own errors). */
+static int mpi_start(int argc, char **argv)
+{
+    int petsc = 0;
+    for (int i = 2; i + 1 < argc; i++)
+        if (!strcmp(argv[i], "--backend") && !strcmp(argv[i + 1], "petsc"))
+            petsc = 1;
+    if (!petsc || !hv_petsc_available())
+        return 0; /* the backend's own error says what is missing */
+    hv_status st = hv_petsc_init();
+    if (st) {
+        fprintf(stderr, "heatvox: %s\n", hv_last_error());
+        return 1;
+    }
+    if (hv_mpi_rank() > 0) {
+        cli_verbose = -1;
+        if (!freopen("/dev/null", "w", stdout))
+            return 1;
+    }
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     tame_openmp_spinning(argv);
@@ -96,6 +120,8 @@ int main(int argc, char **argv)
     signal(SIGTERM, on_signal);
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         if (!strcmp(argv[1], commands[i].name)) {
+            if (mpi_start(argc, argv))
+                return HV_EXIT_FAIL;
             const int rc = commands[i].run(argc - 1, argv + 1);
             hv_petsc_finalize(); /* ends MPI where a petsc solver started it */
             return rc;

@@ -233,8 +233,10 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
         if ((st = hv__cl_check(cl)))
             goto done;
         const double wn = sqrt(sum_parts(k.hpart, ngroups, 1, 0));
-        const double lthr = hv__dist_trust_log(info[0].relres, wn, o->t_scale);
-        const double lthr2 = hv__dist_trust_log(info[1].relres, wn, o->t_scale * T_RATIO);
+        const double lthr =
+            hv__dist_trust_log(fmax(info[0].relres, o->diffuse_tol), wn, o->t_scale);
+        const double lthr2 =
+            hv__dist_trust_log(fmax(info[1].relres, o->diffuse_tol), wn, o->t_scale * T_RATIO);
         hv__cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok,
                            lthr, lthr2);
         hv__cl_module_run(cl, &dist_module, DK_LOG, 1, g1, l1);

@@ -410,8 +410,9 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
         S->t_diffuse += hv_now() - t0;
         t0 = hv_now();
         double wn = norm2(w, d.count);
-        double lthr = hv__dist_trust_log(info[0].relres, wn, o.t_scale);
-        double lthr2 = hv__dist_trust_log(info[1].relres, wn, o.t_scale * T_RATIO);
+        double lthr = hv__dist_trust_log(fmax(info[0].relres, o.diffuse_tol), wn, o.t_scale);
+        double lthr2 =
+            hv__dist_trust_log(fmax(info[1].relres, o.diffuse_tol), wn, o.t_scale * T_RATIO);
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < d.count; c++) {
             double l1 = u[c] > 0 ? log(u[c]) : -INFINITY, l2 = u2[c] > 0 ? log(u2[c]) : -INFINITY;

@@ -35,7 +35,11 @@ double hv__dist_lattice_kappa(const double nu[3], int dim, double tau);
 /* The trust bound on ln u of a diffusion for t_scale h^2 (t_scale itself, or
  * times T_RATIO): ln(RELIABLE * relres * ||w||_2 * sqrt(t_scale)), relres
  * floored at 1e-14, for the solve's relative residual relres and the norm wn
- * of the front weights w. */
+ * of the front weights w. Callers pass the larger of the achieved residual
+ * and the requested tolerance: the trusted faces then depend on what every
+ * backend guarantees, not on how far below it one happened to stop, so the
+ * backends (and the petsc backend on any number of ranks) trust the same
+ * faces and give the same distances. */
 double hv__dist_trust_log(double relres, double wn, double t_scale);
 
 /* Voxels from the current front to the next: where ln u(t) (lu0 on the

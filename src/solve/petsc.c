@@ -185,14 +185,9 @@ static hv_status null_space(petsc_state *P)
 
 static hv_status petsc_create(void **state, const hv_setup *s)
 {
-    PetscBool up = PETSC_FALSE;
-    PetscInitialized(&up);
-    if (!up) {
-        /* hv_petsc_finalize (petsc.h) ends it. */
-        PetscErrorCode ierr = PetscInitializeNoArguments();
-        if (ierr)
-            return petsc_fail(ierr, "PetscInitialize");
-    }
+    hv_status ist = hv_petsc_init();
+    if (ist)
+        return ist;
     petsc_state *P = calloc(1, sizeof *P);
     if (!P)
         return hv__error(HV_ERR_NOMEM, "petsc: out of memory");
@@ -324,6 +319,19 @@ const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solv
 
 int hv_petsc_available(void) { return 1; }
 
+hv_status hv_petsc_init(void)
+{
+    PetscBool up = PETSC_FALSE;
+    PetscInitialized(&up);
+    if (!up) {
+        /* hv_petsc_finalize ends it. */
+        PetscErrorCode ierr = PetscInitializeNoArguments();
+        if (ierr)
+            return petsc_fail(ierr, "PetscInitialize");
+    }
+    return HV_OK;
+}
+
 void hv_petsc_finalize(void)
 {
     PetscBool up = PETSC_FALSE, done = PETSC_FALSE;
@@ -376,6 +384,10 @@ const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solv
                                               NULL,    petsc_destroy, NULL};
 
 int hv_petsc_available(void) { return 0; }
+hv_status hv_petsc_init(void)
+{
+    return hv__error(HV_ERR_UNSUPPORTED, "PETSc needs heatvox built with MPI and PETSc (make mpi)");
+}
 void hv_petsc_finalize(void) {}
 int hv_mpi_rank(void) { return 0; }
 int hv_mpi_size(void) { return 1; }

@@ -1,0 +1,182 @@
+#!/usr/bin/env python3
+"""The distributed pipelines (make mpi-check): heatvox distance and heatvox
+extend under mpirun -n 1..4 with --backend petsc against the single-process
+commands, against exact answers, and their HDF5 output read back with h5py.
+
+usage: pipelines.py HEATVOX MPIRUN...   (run from any directory; works in a
+temporary one)"""
+import os
+import subprocess
+import sys
+import tempfile
+
+import h5py
+import numpy as np
+import pyopenvdb as vdb
+
+HEATVOX = os.path.abspath(sys.argv[1])
+MPIRUN = sys.argv[2:]
+RANKS = (1, 2, 3, 4)
+failures = []
+
+
+def check(ok, what):
+    print(("ok   " if ok else "FAIL ") + what, flush=True)
+    if not ok:
+        failures.append(what)
+
+
+def run(args, ranks=0):
+    cmd = ([*MPIRUN, "-n", str(ranks)] if ranks else []) + [HEATVOX, *args]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode:
+        sys.exit("command failed (%d): %s\n%s%s" % (r.returncode, " ".join(cmd), r.stdout, r.stderr))
+    return r.stdout
+
+
+def read_dense(path, name, n):
+    """Grid `name` of a VDB file on the block 0..n-1 (background elsewhere)."""
+    g = vdb.read(path, name)
+    vec = "Vec3" in type(g).__name__
+    a = np.zeros(tuple(n) + ((3,) if vec else ()), dtype=np.float32)
+    g.copyToArray(a, ijk=(0, 0, 0))
+    return a  # indexed [i, j, k]
+
+
+# ---- distance: a point source in a box with a wall, and no obstacles ----------
+
+def distance_case(tmp, label, args, n, h, exact=None):
+    ref = os.path.join(tmp, label + "-mg.vdb")
+    run(["distance", *args, "-o", ref, "--backend", "mg", "-q"])
+    a = read_dense(ref, "distance", n)
+    fin = np.isfinite(a)
+    for p in RANKS:
+        out = os.path.join(tmp, "%s-%d.vdb" % (label, p))
+        h5 = os.path.join(tmp, "%s-%d.h5" % (label, p))
+        run(["distance", *args, "-o", out, "--backend", "petsc", "-q"], p)
+        run(["distance", *args, "-o", h5, "--backend", "petsc", "-q"], p)
+        b = read_dense(out, "distance", n)
+        same_inf = np.array_equal(fin, np.isfinite(b))
+        dv = np.abs(a[fin] - b[fin]).max() / h if same_inf else np.inf
+        rel = (np.abs(a[fin] - b[fin]) / np.maximum(np.abs(a[fin]), h)).max() if same_inf else np.inf
+        check(same_inf and dv <= 1e-3 and rel <= 1e-5,
+              "distance %s, %d ranks: equals the single-process mg result: %.2g voxel, %.2g "
+              "relative (<= 1e-3, 1e-5)" % (label, p, dv, rel))
+        with h5py.File(h5, "r") as f:
+            d = f["distance"]
+            c = d[...].transpose(2, 1, 0)  # (z, y, x) -> [i, j, k]
+            ok = (d.shape == (n[2], n[1], n[0]) and np.allclose(d.attrs["spacing"], [h] * 3)
+                  and np.array_equal(np.isfinite(c), fin)
+                  and np.abs(c[fin] - b[fin]).max() <= 1e-6 * max(1, np.abs(b[fin]).max()))
+            org = d.attrs["origin"]
+        xmf = open(h5[:-3] + ".xmf").read()
+        ok = ok and ('Dimensions="%d %d %d"' % (n[2] + 1, n[1] + 1, n[0] + 1)) in xmf \
+            and os.path.basename(h5) + ":/distance" in xmf
+        check(ok, "distance %s, %d ranks: HDF5 reads back with h5py (shape %s, spacing, values) "
+              "and the XDMF sidecar names it" % (label, p, d.shape))
+        if exact is not None:
+            e = exact(org)
+            err = np.abs(b - e)[fin].mean() / h
+            check(err < 0.5, "distance %s, %d ranks: mean error against the exact distance %.3f "
+                  "voxels (< 0.5)" % (label, p, err))
+
+
+# ---- extension: a velocity off a sphere and a torus ---------------------------
+
+N, H = 48, 1.0 / 48
+
+
+def centres():
+    x = (np.arange(N) + 0.5) * H
+    return np.meshgrid(x, x, x, indexing="ij")
+
+
+def sphere(X, Y, Z):
+    c = np.stack([X - 0.5, Y - 0.5, Z - 0.5], -1)
+    r = np.linalg.norm(c, axis=-1)
+    phi = r - 0.3
+    cp = 0.5 + c * (0.3 / np.maximum(r, 1e-12))[..., None]
+    return phi, cp
+
+
+def torus(X, Y, Z):
+    R, r0 = 0.28, 0.1
+    x, y, z = X - 0.5, Y - 0.5, Z - 0.5
+    q = np.sqrt(x * x + y * y)
+    ring = np.stack([x * R / q, y * R / q, np.zeros_like(q)], -1)
+    d = np.stack([x, y, z], -1) - ring
+    dn = np.linalg.norm(d, axis=-1)
+    phi = dn - r0
+    cp = 0.5 + ring + d * (r0 / np.maximum(dn, 1e-12))[..., None]
+    return phi, cp
+
+
+def velocity(p):
+    """A smooth field on the surface, read at the closest point."""
+    return np.stack([np.sin(3 * p[..., 0]) + p[..., 2], np.cos(2 * p[..., 1]),
+                     p[..., 0] * p[..., 1] - 0.5 * p[..., 2]], -1)
+
+
+def extend_case(tmp, label, shape):
+    phi, cp = shape(*centres())
+    exact = velocity(cp).astype(np.float32)
+    near = np.abs(phi) < 1.5 * H
+    v0 = np.where(near[..., None], exact, 5.0).astype(np.float32)  # wrong away from the surface
+    inp = os.path.join(tmp, label + ".vdb")
+    tr = vdb.createLinearTransform(voxelSize=H)
+    ls = vdb.FloatGrid(background=3 * H)
+    ls.copyFromArray(phi.astype(np.float32), ijk=(0, 0, 0))
+    ls.name, ls.transform = "phi", tr
+    ls.gridClass = vdb.GridClass.LEVEL_SET
+    vg = vdb.Vec3SGrid()
+    vg.copyFromArray(v0, ijk=(0, 0, 0))
+    vg.name, vg.transform = "v", tr
+    vdb.write(inp, grids=[ls, vg])
+    args = ["extend", inp, "--levelset", "phi", "--field", "v", "--dense", "--out-band", "4"]
+    band = np.abs(phi) < 4 * H
+    mg = os.path.join(tmp, label + "-mg.vdb")
+    run([*args, "-o", mg, "--backend", "mg", "-q"])
+    err_mg = np.abs(read_dense(mg, "v", (N, N, N)) - exact)[band].max()
+    ref = os.path.join(tmp, label + "-single.vdb")
+    run([*args, "-o", ref, "--backend", "petsc", "-q"])  # one process, no mpirun
+    a = read_dense(ref, "v", (N, N, N))
+    for p in RANKS:
+        out = os.path.join(tmp, "%s-%d.vdb" % (label, p))
+        run([*args, "-o", out, "--backend", "petsc", "-q"], p)
+        b = read_dense(out, "v", (N, N, N))
+        d = np.abs(a - b)[band].max()
+        rel = d / np.abs(a[band]).max()
+        check(rel <= 1e-5, "extend %s, %d ranks: equals the single-process result: %.2g relative "
+              "(<= 1e-5)" % (label, p, rel))
+        err = np.abs(b - exact)[band].max()
+        check(err <= 0.03, "extend %s, %d ranks: max error against the exact extension %.4f "
+              "(<= 0.03; single-process mg: %.4f)" % (label, p, err, err_mg))
+
+
+def main():
+    with tempfile.TemporaryDirectory() as tmp:
+        src = os.path.join(tmp, "src.txt")
+        with open(src, "w") as f:
+            f.write("0.31 0.52 0.47\n")
+        n, h = (40, 40, 40), 1.0 / 40
+        bbox = ["--bbox", "0", "0", "0", "1", "1", "1", "--res", "40"]
+
+        def exact(org):
+            x = org[0] + (np.arange(40) + 0.5) * h
+            X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+            return np.sqrt((X - 0.31) ** 2 + (Y - 0.52) ** 2 + (Z - 0.47) ** 2)
+
+        distance_case(tmp, "point", ["--sources", src, *bbox, "--obstacles", "none"], n, h, exact)
+        walls = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes",
+                             "distance")
+        distance_case(tmp, "walls", ["--sources", os.path.join(walls, "sources.txt"),
+                                     "--obstacles", os.path.join(walls, "walls.vdb")],
+                      (64, 48, 16), 0.0625)
+        extend_case(tmp, "sphere", sphere)
+        extend_case(tmp, "torus", torus)
+    if failures:
+        sys.exit("pipelines: %d failed" % len(failures))
+    print("pipelines: all passed")
+
+
+main()
