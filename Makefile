@@ -215,11 +215,13 @@ MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rm
 .PHONY: mpi mpi-check
 mpi:
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
-	  all $(MPI_BUILD)/tests/mpi_solve
+	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda
 mpi-check: mpi
 	@bad=""; for p in 1 2 3 4; do \
 	  echo "== mpirun -n $$p mpi_solve"; \
 	  $(MPI_RUN) -n $$p $(MPI_BUILD)/tests/mpi_solve || bad="$$bad mpi_solve($$p)"; \
+	  echo "== mpirun -n $$p mpi_dmda"; \
+	  $(MPI_RUN) -n $$p $(MPI_BUILD)/tests/mpi_dmda || bad="$$bad mpi_dmda($$p)"; \
 	done; \
 	echo "== tests/mpi/pipelines.py: distance and extend on 1 to 4 ranks, HDF5 output"; \
 	$(PYTHON) tests/mpi/pipelines.py $(MPI_BUILD)/heatvox env $(MPI_RUN) || bad="$$bad pipelines"; \
@@ -227,7 +229,7 @@ mpi-check: mpi
 	$(MPI_RUN) -n 2 $(MPI_BUILD)/heatvox bench solve --n 32 --backend petsc --obstacle baffles || bad="$$bad bench"; \
 	[ -z "$$bad" ] || { echo "mpi-check: failing:$$bad"; exit 1; }; \
 	echo "mpi-check: mpi_solve and the pipelines on 1 to 4 ranks and bench solve on 2 passed"
-$(MPI_BUILD)/tests/mpi_solve: tests/mpi/mpi_solve.c $(LIB_A) | $(STAMP)
+$(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c $(LIB_A) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 

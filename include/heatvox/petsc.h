@@ -14,6 +14,8 @@
 
 #include "core.h"
 #include "grid.h"
+#include "heat.h"
+#include "solve.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -53,6 +55,69 @@ HV_API int hv_mpi_size(void);
  * is not up; HV_ERR_UNSUPPORTED without PETSc. */
 HV_API hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const *g,
                                    const char *const *names);
+
+/* ---- on the caller's DMDA ------------------------------------------------
+ *
+ * For simulations that keep their fields in PETSc: the solves and the
+ * extension on the caller's DMDA and Vecs, called every time step, with the
+ * set-up made once. PETSc's own handles, declared as petscdmda.h declares
+ * them (this header needs no PETSc headers). The DMDA: 2D or 3D, one degree
+ * of freedom, no periodic boundaries, cell-centred cells of size h (the
+ * cell (i, j, k) centred at origin + (i + 1/2) h); any ownership ranges and
+ * stencil. Every call is collective over the DMDA's communicator. Builds
+ * without PETSc have these functions; they fail with HV_ERR_UNSUPPORTED. */
+typedef struct _p_DM *DM;
+typedef struct _p_Vec *Vec;
+
+/* (alpha I - beta Lap) u = f on the DMDA's cells: Neumann walls at the grid's
+ * faces, and at solid cells (solid: NULL, or a global vector of the DMDA,
+ * non-zero = solid; read once, at create), whose rows are the identity. For
+ * alpha = 0 the null space is one constant per connected fluid region,
+ * labelled across the ranks at create (the solution has zero mean on each).
+ * Conjugate gradients preconditioned by hypre's BoomerAMG, to opts->tol (the
+ * true residual relative to ||f||) within opts->max_iter iterations; the
+ * other fields of opts are ignored; NULL = the defaults. The matrix, the
+ * preconditioner and the work vectors are made here and reused by every
+ * solve. */
+typedef struct hv_dmda_solver hv_dmda_solver;
+HV_API hv_status hv_dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha,
+                                       double beta, Vec solid, const hv_solver_opts *opts);
+
+/* u = the solution for f (both global vectors of the DMDA; u holds the
+ * initial guess when opts->nonzero_guess was set). info (may be NULL): the
+ * iterations, the residual history and the reason, the same on every rank.
+ * hv_dmda_solver_regions: the fluid regions found at create (alpha = 0),
+ * else 0. */
+HV_API hv_status hv_dmda_solver_solve(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info);
+HV_API int hv_dmda_solver_regions(const hv_dmda_solver *s);
+HV_API void hv_dmda_solver_destroy(hv_dmda_solver **s);
+
+/* The extension off a level set (hv_extend_many, heat.h) on the DMDA's
+ * cells, without gathering the grid: each rank classifies and evaluates its
+ * own box with a ghost layer as wide as the closest points reach, the
+ * diffusion levels are solved over all ranks on the whole grid, and the
+ * solutions are exchanged into the ghost layers. opts->out_band must be > 0
+ * (the cells written: |phi| < out_band h; the ghost layer is
+ * ceil(1.5 out_band) + 2 cells); there are no obstacles; opts->backend is
+ * ignored. The solvers of the levels are made on first use and kept. */
+typedef struct hv_dmda_extender hv_dmda_extender;
+typedef struct hv_dmda_field {
+    int ncomp; /* 1 (scalar) to 3 (vector) */
+    Vec v[3];  /* global vectors of the DMDA, extended in place */
+} hv_dmda_field;
+HV_API hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
+                                         const hv_extend_opts *opts);
+
+/* Extends the fields in place off the zero set of phi (a global vector of
+ * the DMDA, a signed distance near its zero set): cells with |phi| < out_band
+ * h get the values carried from the surface, the others keep theirs. stats
+ * (may be NULL): the counts are this rank's box with its ghost layer; levels,
+ * solves and relres are the same on every rank. HV_ERR_NUMERIC (on every
+ * rank) for a non-finite phi, or a field where it is read, on any rank; the
+ * fields are then unchanged. */
+HV_API hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields,
+                                const hv_dmda_field *fields, hv_extend_stats *stats);
+HV_API void hv_dmda_extender_destroy(hv_dmda_extender **e);
 
 #ifdef __cplusplus
 }

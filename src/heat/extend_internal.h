@@ -29,6 +29,20 @@
 #define GRAD_MIN 0.5
 #define GRAD_MAX 1.5
 
+/* A distributed extension (extend_dmda.c): the extender works on one rank's
+ * box with its ghost layer, and these make its decisions over all ranks and
+ * solve its levels on the whole grid. */
+typedef struct hv_extend_dist {
+    void *user;
+    /* The sum of v over the ranks (collective). */
+    size_t (*sum)(void *user, size_t v);
+    /* Level l's solves of every right-hand side (the weights and the fields'
+     * values on the box's cells) over all ranks; the solutions into e->sol on
+     * every cell of the box, *thr as hv__extend_solve_level's (collective). */
+    hv_status (*solve)(void *user, hv_extender *e, int l, int nrhs, int nfields,
+                       const hv_extend_field *f, double *thr, hv_extend_stats *S);
+} hv_extend_dist;
+
 struct hv_extender {
     int dim, n[3];
     double h;
@@ -53,6 +67,7 @@ struct hv_extender {
     int resolved;                /* o.backend resolved (AUTO: OPENCL on a GPU) */
     struct hv_extend_sparse *sp; /* hv_extend_tiles: maps and marks kept between calls
                                     (extend_tiles.c) */
+    const hv_extend_dist *dist;  /* NULL, or the distributed extension's hooks */
 };
 
 /* ---- right-hand sides ----------------------------------------------------- */

@@ -164,7 +164,10 @@ hv_status hv__extend_solve_level(hv_extender *e, int l, const int lo[3], const i
     S->relres = fmax(S->relres, relmax);
     if (l == 0)
         S->solve_cells = bcount;
-    /* Float storage caps the range too: trust W only well above float's smallest normal. */
-    *thr = fmax(RELIABLE * fmax(relmax, 1e-14) * wn, 1e-30);
+    /* The bound is the larger of the achieved residual and the requested one,
+     * so that every backend (and the extension on a DMDA, on any number of
+     * ranks) trusts the same cells. Float storage caps the range too: trust
+     * W only well above float's smallest normal. */
+    *thr = fmax(RELIABLE * fmax(fmax(relmax, e->o.tol), 1e-14) * wn, 1e-30);
     return HV_OK;
 }

@@ -215,10 +215,16 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         return hv__error(HV_ERR_NOMEM, "extend: out of memory");
     size_t nsrc, npend;
     ibox band_box, ratio_box;
-    if ((st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box)))
+    st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box);
+    /* Distributed: every rank stops when one does, and the counts are global. */
+    const hv_extend_dist *D = e->dist;
+    if (D && D->sum(D->user, st != HV_OK) && !st)
+        st = hv__error(HV_ERR_NUMERIC, "extend: another rank's part of the grid failed");
+    if (st)
         return st;
     S->source_cells = nsrc;
-    if (!nsrc)
+    size_t npend_all = D ? D->sum(D->user, npend) : npend;
+    if (D ? !D->sum(D->user, nsrc) : !nsrc)
         return hv__error(HV_ERR_INVALID_ARG,
                          "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
                          "zero crossing in the grid, or the band is too thin)",
@@ -250,9 +256,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     /* With an output band, the levels stop at the first that reaches across it. */
     const int last =
         e->o.out_band > 0 ? hv__extend_last_level(e, e->o.out_band) : e->o.max_levels - 1;
-    for (int l = 0; l <= last && npend > 0; l++) {
+    for (int l = 0; l <= last && npend_all > 0; l++) {
         /* most calls need one level; later ones only reach the far cells */
-        if ((st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
+        if (!D && (st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
             break;
         double thr;
         int lo[3], bn[3];
@@ -277,8 +283,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         }
         const int on_band = band.runs && (l == 0 || hv__extend_band_level_allowed(e, l));
         const uint8_t *trusted = on_band ? band.need : NULL;
-        if ((st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
-                          : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
+        if ((st = D         ? D->solve(D->user, e, l, nrhs, nfields, f, &thr, S)
+                  : on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
+                            : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
             break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
@@ -289,6 +296,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         S->ratio_cells += k.ratio;
         S->weak_cells += k.weak;
         npend = k.left;
+        npend_all = D ? D->sum(D->user, npend) : npend;
         S->t_eval += hv_now() - t0;
     }
     hv__extend_band_free(&band);

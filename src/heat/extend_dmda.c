@@ -1,0 +1,325 @@
+/* The extension on the caller's DMDA (petsc.h), in builds with HV_HAVE_PETSC.
+ *
+ * No rank holds more than its box: each rank runs hv_extend_many's pipeline
+ * (extend_vhm.c) on its own cells plus a ghost layer as wide as a closest
+ * point can reach (out_band voxels times GRAD_MAX, plus the interpolation's
+ * stencil), with the hooks of hv_extend_dist: the counts that decide when to
+ * stop are summed over the ranks, and every diffusion level is solved on the
+ * whole grid by a solver on the caller's layout (dmda.c), from the
+ * right-hand sides of the ranks' own cells; its solution comes back into the
+ * ghost layer by the DMDA's ghost exchange. What a rank evaluates for its own
+ * cells then reads the same solutions as a single process would, and the
+ * trust threshold is computed from global norms and the requested tolerance,
+ * so the ranks agree with one process up to the solves' tolerance.
+ *
+ * Communication per call: per right-hand side and level, one solve over the
+ * ranks and one ghost exchange of width `ghost`; per level, three sums. */
+#include "heatvox/petsc.h"
+#include "extend_internal.h"
+#include "solve/dmda.h"
+#include "core/error.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef HV_HAVE_PETSC
+#include <petscdmda.h>
+
+struct hv_dmda_extender {
+    DM user;                        /* the caller's, referenced */
+    DM dag;                         /* the caller's layout with the ghost layer (box stencil) */
+    Vec gg, gl;                     /* dag's global and local vectors */
+    Vec x;                          /* a level's solution */
+    hv_dmda_solver *sv[MAX_LEVELS]; /* level l: I - t 16^l Lap, made on first use */
+    hv_extender *e;                 /* on this rank's ghosted box */
+    hv_extend_dist dist;
+    MPI_Comm comm;
+    int dim, ghost;
+    double h;
+    PetscInt xs[3], xm[3], gs[3], gm[3]; /* owned and ghosted corners and sizes */
+    size_t nloc, nown;
+};
+
+static hv_status fail(PetscErrorCode ierr, const char *what)
+{
+    const char *text = NULL;
+    PetscErrorMessage(ierr, &text, NULL);
+    return hv__error(HV_ERR_BACKEND, "petsc: %s failed (PETSc error %d: %s)", what, (int)ierr,
+                     text ? text : "?");
+}
+
+#define CHK(call, what)                                                                            \
+    do {                                                                                           \
+        PetscErrorCode ierr_ = (call);                                                             \
+        if (ierr_)                                                                                 \
+            return fail(ierr_, what);                                                              \
+    } while (0)
+
+static size_t dist_sum(void *user, size_t v)
+{
+    hv_dmda_extender *X = user;
+    unsigned long long a = v, s = 0;
+    MPI_Allreduce(&a, &s, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, X->comm);
+    return (size_t)s;
+}
+
+/* The ghosted box's cell of owned cell (i, j, k) (global indices). */
+static size_t local_cell(const hv_dmda_extender *X, PetscInt i, PetscInt j, PetscInt k)
+{
+    return (size_t)(i - X->gs[0]) +
+           (size_t)X->gm[0] * ((size_t)(j - X->gs[1]) + (size_t)X->gm[1] * (size_t)(k - X->gs[2]));
+}
+
+/* A global vector of the caller's layout onto the ghosted box, as floats. */
+static hv_status to_local(hv_dmda_extender *X, Vec v, float *out)
+{
+    CHK(VecCopy(v, X->gg), "VecCopy (is it a global vector of the DMDA?)");
+    CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+    CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+    const PetscScalar *a;
+    CHK(VecGetArrayRead(X->gl, &a), "VecGetArrayRead");
+    for (size_t c = 0; c < X->nloc; c++)
+        out[c] = (float)a[c];
+    VecRestoreArrayRead(X->gl, &a);
+    return HV_OK;
+}
+
+static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfields,
+                            const hv_extend_field *f, double *thr, hv_extend_stats *S)
+{
+    hv_dmda_extender *X = user;
+    hv_status st;
+    if (!X->sv[l]) {
+        hv_solver_opts so;
+        hv_solver_opts_default(&so);
+        so.tol = e->o.tol;
+        so.max_iter = 500;
+        const double t = e->o.t_scale * X->h * X->h * pow(LEVEL_FACTOR, l);
+        if ((st = hv_dmda_solver_create(&X->sv[l], X->user, X->h, 1.0, t, NULL, &so)))
+            return st;
+    }
+    Vec b = hv__dmda_rhs(X->sv[l]);
+    const size_t k = (size_t)e->nsol;
+    double relmax = 0, wn = 0;
+    for (int r = 0; r < nrhs; r++) {
+        const rhs_part p = rhs_locate(r, nfields, f);
+        PetscScalar *a;
+        CHK(VecGetArray(b, &a), "VecGetArray");
+        size_t q = 0;
+        for (PetscInt kk = X->xs[2]; kk < X->xs[2] + X->xm[2]; kk++)
+            for (PetscInt j = X->xs[1]; j < X->xs[1] + X->xm[1]; j++)
+                for (PetscInt i = X->xs[0]; i < X->xs[0] + X->xm[0]; i++, q++)
+                    a[q] = rhs_value(e, f, p, local_cell(X, i, j, kk));
+        VecRestoreArray(b, &a);
+        if (r == 0) {
+            PetscReal n2;
+            CHK(VecNorm(b, NORM_2, &n2), "VecNorm");
+            wn = n2;
+        }
+        hv_solve_info info;
+        if ((st = hv__dmda_solve(X->sv[l], X->x, &info)))
+            return st;
+        relmax = fmax(relmax, info.relres);
+        /* The solution on the ghosted box. */
+        CHK(VecCopy(X->x, X->gg), "VecCopy");
+        CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        const PetscScalar *u;
+        CHK(VecGetArrayRead(X->gl, &u), "VecGetArrayRead");
+        for (size_t c = 0; c < X->nloc; c++)
+            e->sol[c * k + (size_t)r] = (float)u[c];
+        VecRestoreArrayRead(X->gl, &u);
+        S->solves++;
+    }
+    S->relres = fmax(S->relres, relmax);
+    if (l == 0)
+        S->solve_cells = X->nown;
+    *thr = fmax(RELIABLE * fmax(fmax(relmax, e->o.tol), 1e-14) * wn, 1e-30);
+    return HV_OK;
+}
+
+static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_opts *o)
+{
+    CHK(PetscObjectReference((PetscObject)da), "PetscObjectReference");
+    X->user = da;
+    X->comm = PetscObjectComm((PetscObject)da);
+    X->h = h;
+    X->ghost = (int)ceil(GRAD_MAX * o->out_band) + 2;
+    hv_status st = hv__dmda_like(da, X->ghost, 1, &X->dag, &X->dim);
+    if (st)
+        return st;
+    CHK(DMCreateGlobalVector(X->dag, &X->gg), "DMCreateGlobalVector");
+    CHK(DMCreateLocalVector(X->dag, &X->gl), "DMCreateLocalVector");
+    CHK(VecDuplicate(X->gg, &X->x), "VecDuplicate");
+    DMDAGetCorners(X->dag, &X->xs[0], &X->xs[1], &X->xs[2], &X->xm[0], &X->xm[1], &X->xm[2]);
+    DMDAGetGhostCorners(X->dag, &X->gs[0], &X->gs[1], &X->gs[2], &X->gm[0], &X->gm[1], &X->gm[2]);
+    if (X->dim == 2) {
+        X->xs[2] = X->gs[2] = 0;
+        X->xm[2] = X->gm[2] = 1;
+    }
+    X->nloc = (size_t)X->gm[0] * X->gm[1] * X->gm[2];
+    X->nown = (size_t)X->xm[0] * X->xm[1] * X->xm[2];
+    hv_extend_opts eo = *o;
+    eo.backend = HV_BACKEND_PETSC; /* no band solve: the levels are the hook's */
+    const int n[3] = {(int)X->gm[0], (int)X->gm[1], (int)X->gm[2]};
+    if ((st = hv_extender_create(&X->e, X->dim, n, h, NULL, &eo)))
+        return st;
+    X->dist.user = X;
+    X->dist.sum = dist_sum;
+    X->dist.solve = dist_solve;
+    X->e->dist = &X->dist;
+    return HV_OK;
+}
+
+hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
+                                  const hv_extend_opts *opts)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extender_create: out is NULL");
+    *out = NULL;
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    if (opts)
+        o = *opts;
+    if (!(h > 0) || !isfinite(h))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extender_create: h must be > 0, got %g", h);
+    if (!(o.out_band > 0) || o.out_band > 64)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_dmda_extender_create: out_band must lie in (0, 64] voxels (the "
+                         "ghost layer grows with it), got %g",
+                         o.out_band);
+    hv_status st = hv_petsc_init();
+    if (st)
+        return st;
+    hv_dmda_extender *X = calloc(1, sizeof *X);
+    if (!X)
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    if ((st = create(X, da, h, &o))) {
+        hv_dmda_extender_destroy(&X);
+        return st;
+    }
+    *out = X;
+    return HV_OK;
+}
+
+static hv_status extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda_field *fields,
+                        hv_extend_stats *stats, float *work)
+{
+    hv_status st;
+    float *lphi = work;
+    hv_extend_field ef[MAX_FIELDS_PER_CALL];
+    float *w = work + X->nloc;
+    if ((st = to_local(X, phi, lphi)))
+        return st;
+    for (int i = 0; i < nfields; i++) {
+        ef[i].ncomp = fields[i].ncomp;
+        for (int c = 0; c < 3; c++) {
+            ef[i].in[c] = NULL;
+            ef[i].out[c] = NULL;
+        }
+        for (int c = 0; c < fields[i].ncomp; c++) {
+            if ((st = to_local(X, fields[i].v[c], w)))
+                return st;
+            ef[i].in[c] = w;
+            ef[i].out[c] = w + X->nloc;
+            w += 2 * X->nloc;
+        }
+    }
+    if ((st = hv_extend_many(X->e, lphi, nfields, ef, stats)))
+        return st;
+    /* Back into the caller's vectors: this rank's cells inside the output band. */
+    const double ob = X->e->o.out_band * X->h;
+    for (int i = 0; i < nfields; i++)
+        for (int c = 0; c < fields[i].ncomp; c++) {
+            PetscScalar *a;
+            CHK(VecGetArray(fields[i].v[c], &a), "VecGetArray");
+            size_t q = 0;
+            for (PetscInt k = X->xs[2]; k < X->xs[2] + X->xm[2]; k++)
+                for (PetscInt j = X->xs[1]; j < X->xs[1] + X->xm[1]; j++)
+                    for (PetscInt ii = X->xs[0]; ii < X->xs[0] + X->xm[0]; ii++, q++) {
+                        const size_t lc = local_cell(X, ii, j, k);
+                        if (fabs(lphi[lc]) < ob)
+                            a[q] = ef[i].out[c][lc];
+                    }
+            VecRestoreArray(fields[i].v[c], &a);
+        }
+    return HV_OK;
+}
+
+hv_status hv_dmda_extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda_field *fields,
+                         hv_extend_stats *stats)
+{
+    if (!X || !phi || nfields < 0 || nfields > MAX_FIELDS_PER_CALL || (nfields && !fields))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extend: bad arguments");
+    size_t ncomp = 0;
+    for (int i = 0; i < nfields; i++) {
+        if (fields[i].ncomp < 1 || fields[i].ncomp > 3)
+            return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extend: field %d has %d components", i,
+                             fields[i].ncomp);
+        for (int c = 0; c < fields[i].ncomp; c++)
+            if (!fields[i].v[c])
+                return hv__error(HV_ERR_INVALID_ARG,
+                                 "hv_dmda_extend: field %d component %d has no vector", i, c);
+        ncomp += (size_t)fields[i].ncomp;
+    }
+    float *work = malloc((1 + 2 * ncomp) * X->nloc * sizeof *work);
+    hv_status st = work ? HV_OK : hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    /* Every rank must reach the collective calls, or none. */
+    if (dist_sum(X, st != HV_OK)) {
+        free(work);
+        return st ? st : hv__error(HV_ERR_NOMEM, "extend: out of memory on another rank");
+    }
+    st = extend(X, phi, nfields, fields, stats, work);
+    free(work);
+    return st;
+}
+
+void hv_dmda_extender_destroy(hv_dmda_extender **xp)
+{
+    if (!xp || !*xp)
+        return;
+    hv_dmda_extender *X = *xp;
+    for (int l = 0; l < MAX_LEVELS; l++)
+        hv_dmda_solver_destroy(&X->sv[l]);
+    hv_extender_destroy(&X->e);
+    VecDestroy(&X->x);
+    VecDestroy(&X->gg);
+    VecDestroy(&X->gl);
+    DMDestroy(&X->dag);
+    DMDestroy(&X->user);
+    free(X);
+    *xp = NULL;
+}
+
+#else /* without PETSc */
+
+hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
+                                  const hv_extend_opts *opts)
+{
+    (void)da;
+    (void)h;
+    (void)opts;
+    if (out)
+        *out = NULL;
+    return hv__error(HV_ERR_UNSUPPORTED,
+                     "the extension on a DMDA needs heatvox built with MPI and PETSc (make mpi)");
+}
+
+hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields, const hv_dmda_field *fields,
+                         hv_extend_stats *stats)
+{
+    (void)e;
+    (void)phi;
+    (void)nfields;
+    (void)fields;
+    (void)stats;
+    return hv__error(HV_ERR_UNSUPPORTED, "the extension on a DMDA is not in this build");
+}
+
+void hv_dmda_extender_destroy(hv_dmda_extender **e)
+{
+    if (e)
+        *e = NULL;
+}
+
+#endif

@@ -1,0 +1,397 @@
+/* The solver and the extension on a caller's DMDA (petsc.h) under mpirun
+ * (make mpi-check runs it on 1 to 4 ranks). Every rank also computes the
+ * single-process answer on the whole grid (mg for the solves, fftw box solves
+ * for the extension) and compares its own cells:
+ *   - solves: heat steps and Neumann Poisson, 2D and 3D, odd sizes, solids
+ *     crossing rank boundaries, a box cut in two by a wall (two regions,
+ *     labelled across the ranks), to 1e-6 relative;
+ *   - the extension off a sphere and a torus, a sphere moved between two
+ *     calls of one extender, to 1e-5 relative on the output band, within 0.02
+ *     of the exact extension, the cells outside the band untouched;
+ *   - a NaN in the level set on one rank: HV_ERR_NUMERIC on every rank, the
+ *     fields unchanged.
+ * Rank 0 prints one line per case; the exit status is 0 only when every case
+ * passes on every rank. */
+#include "heatvox/heatvox.h"
+
+#include <petscdmda.h>
+
+#include <math.h>
+#include <mpi.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int rank;
+
+/* 1 when every rank says ok; rank 0 prints the line. */
+static int report(int ok, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int report(int ok, const char *fmt, ...)
+{
+    int all = 0;
+    MPI_Allreduce(&ok, &all, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+    if (rank == 0) {
+        va_list ap;
+        va_start(ap, fmt);
+        printf("  ");
+        vprintf(fmt, ap);
+        printf("%s\n", all ? "" : "  FAILED");
+        va_end(ap);
+    }
+    return all;
+}
+
+static DM make_da(int dim, const int n[3])
+{
+    DM da;
+    if (dim == 3)
+        DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                     DMDA_STENCIL_STAR, n[0], n[1], n[2], PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE,
+                     1, 1, NULL, NULL, NULL, &da);
+    else
+        DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR, n[0],
+                     n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &da);
+    DMSetUp(da);
+    return da;
+}
+
+/* Calls fn(c, q) for this rank's cells: c the whole grid's index, q the
+ * global vector's local index. */
+#define FOR_OWNED(da, dim, n, body)                                                                \
+    do {                                                                                           \
+        PetscInt xs_, ys_, zs_, xm_, ym_, zm_;                                                     \
+        DMDAGetCorners(da, &xs_, &ys_, &zs_, &xm_, &ym_, &zm_);                                    \
+        if ((dim) == 2) {                                                                          \
+            zs_ = 0;                                                                               \
+            zm_ = 1;                                                                               \
+        }                                                                                          \
+        size_t q = 0;                                                                              \
+        for (PetscInt k_ = zs_; k_ < zs_ + zm_; k_++)                                              \
+            for (PetscInt j_ = ys_; j_ < ys_ + ym_; j_++)                                          \
+                for (PetscInt i_ = xs_; i_ < xs_ + xm_; i_++, q++) {                               \
+                    const size_t c = i_ + (size_t)(n)[0] * (j_ + (size_t)(n)[1] * k_);             \
+                    body;                                                                          \
+                }                                                                                  \
+    } while (0)
+
+static double rnd(unsigned *s)
+{
+    *s = *s * 1664525u + 1013904223u;
+    return (*s >> 8) / 16777216.0 - 0.5;
+}
+
+typedef struct {
+    const char *name;
+    int dim, n[3];
+    double alpha, beta;
+    int solid; /* 0 none, 1 a ball and baffles, 2 a wall splitting the box */
+    int regions;
+} scase;
+
+static int solve_case(const scase *k)
+{
+    const int nz = k->dim == 3 ? k->n[2] : 1;
+    const size_t count = (size_t)k->n[0] * k->n[1] * nz;
+    double *f = malloc(count * sizeof *f), *b = malloc(count * sizeof *b);
+    uint8_t *solid = calloc(count, 1);
+    unsigned seed = 777;
+    for (int z = 0; z < nz; z++)
+        for (int y = 0; y < k->n[1]; y++)
+            for (int x = 0; x < k->n[0]; x++) {
+                const size_t c = x + (size_t)k->n[0] * (y + (size_t)k->n[1] * z);
+                f[c] = rnd(&seed);
+                if (k->solid == 1) {
+                    const double dx = x - 0.5 * k->n[0], dy = y - 0.5 * k->n[1],
+                                 dz = k->dim == 3 ? z - 0.5 * nz : 0, r = 0.25 * k->n[1];
+                    solid[c] = dx * dx + dy * dy + dz * dz < r * r ||
+                               (x == k->n[0] / 4 && y > k->n[1] / 5) ||
+                               (y == k->n[1] / 3 && x > k->n[0] / 2);
+                } else if (k->solid == 2) {
+                    solid[c] = x == k->n[0] / 2;
+                }
+            }
+    const double h = 1.0 / k->n[0];
+    hv_problem p = {k->dim, {k->n[0], k->n[1], k->n[2]}, h, k->solid ? solid : NULL, k->alpha,
+                    k->beta};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.tol = 1e-10;
+    o.max_iter = 500;
+    o.backend = HV_BACKEND_MG;
+    hv_solver *sm = NULL;
+    hv_solve_info im, id;
+    if (hv_solver_create(&sm, &p, &o) || hv_solver_solve_d(sm, f, b, &im)) {
+        fprintf(stderr, "mpi_dmda: %s: mg: %s\n", k->name, hv_last_error());
+        return 0;
+    }
+    hv_solver_destroy(&sm);
+    DM da = make_da(k->dim, k->n);
+    Vec vf, vu, vs;
+    DMCreateGlobalVector(da, &vf);
+    VecDuplicate(vf, &vu);
+    VecDuplicate(vf, &vs);
+    PetscScalar *af, *as;
+    VecGetArray(vf, &af);
+    VecGetArray(vs, &as);
+    FOR_OWNED(da, k->dim, k->n, {
+        af[q] = f[c];
+        as[q] = solid[c];
+    });
+    VecRestoreArray(vf, &af);
+    VecRestoreArray(vs, &as);
+    hv_dmda_solver *s = NULL;
+    hv_status st = hv_dmda_solver_create(&s, da, h, k->alpha, k->beta, k->solid ? vs : NULL, &o);
+    if (!st)
+        st = hv_dmda_solver_solve(s, vf, vu, &id);
+    if (st)
+        fprintf(stderr, "mpi_dmda: %s: %s\n", k->name, hv_last_error());
+    double dmax = 0, umax = 0;
+    if (!st) {
+        const PetscScalar *au;
+        VecGetArrayRead(vu, &au);
+        FOR_OWNED(da, k->dim, k->n, {
+            dmax = fmax(dmax, fabs(au[q] - b[c]));
+            umax = fmax(umax, fabs(b[c]));
+        });
+        VecRestoreArrayRead(vu, &au);
+    }
+    double worst = 0, um = 0;
+    MPI_Allreduce(&dmax, &worst, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    MPI_Allreduce(&umax, &um, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    const int regions = hv_dmda_solver_regions(s);
+    const int ok = report(!st && worst / um <= 1e-6 && id.reason == HV_STOP_CONVERGED &&
+                              (k->alpha > 0 || regions == k->regions),
+                          "solver on a DMDA, %-38s %d ranks: %3d iterations (mg %2d), %d "
+                          "regions, max relative difference to mg %.2e",
+                          k->name, hv_mpi_size(), id.iterations, im.iterations, regions,
+                          worst / um);
+    hv_dmda_solver_destroy(&s);
+    VecDestroy(&vf);
+    VecDestroy(&vu);
+    VecDestroy(&vs);
+    DMDestroy(&da);
+    free(f);
+    free(b);
+    free(solid);
+    return ok;
+}
+
+/* ---- the extension ---------------------------------------------------------- */
+
+enum { SPHERE, TORUS };
+
+/* phi and the closest point of cell centre x (box [0, 1]^3). */
+static double shape(int which, const double c0[3], const double x[3], double cp[3])
+{
+    if (which == SPHERE) {
+        const double d[3] = {x[0] - c0[0], x[1] - c0[1], x[2] - c0[2]};
+        const double r = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), R = 0.3;
+        for (int a = 0; a < 3; a++)
+            cp[a] = c0[a] + d[a] * R / fmax(r, 1e-12);
+        return r - R;
+    }
+    const double R = 0.28, r0 = 0.1, px = x[0] - c0[0], py = x[1] - c0[1], pz = x[2] - c0[2];
+    const double q = sqrt(px * px + py * py);
+    const double ring[3] = {px * R / q, py * R / q, 0};
+    const double d[3] = {px - ring[0], py - ring[1], pz - ring[2]};
+    const double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (int a = 0; a < 3; a++)
+        cp[a] = c0[a] + ring[a] + d[a] * r0 / fmax(dn, 1e-12);
+    return dn - r0;
+}
+
+static void velocity(const double p[3], double v[3])
+{
+    v[0] = sin(3 * p[0]) + p[2];
+    v[1] = cos(2 * p[1]);
+    v[2] = p[0] * p[1] - 0.5 * p[2];
+}
+
+typedef struct {
+    int n;
+    float *phi, *in[3], *ref[3];
+    double *exact[3];
+} ext_data;
+
+static void ext_make(ext_data *D, int which, const double c0[3])
+{
+    const int n = D->n;
+    const size_t count = (size_t)n * n * n;
+    const double h = 1.0 / n;
+    for (size_t c = 0; c < count; c++) {
+        const double x[3] = {(c % n + 0.5) * h, (c / n % n + 0.5) * h, (c / n / n + 0.5) * h};
+        double cp[3], v[3];
+        const double phi = shape(which, c0, x, cp);
+        velocity(cp, v);
+        D->phi[c] = (float)phi;
+        for (int a = 0; a < 3; a++) {
+            D->exact[a][c] = v[a];
+            D->in[a][c] = fabs(phi) < 1.5 * h ? (float)v[a] : 5.0f;
+        }
+    }
+}
+
+/* The single-process answer: fftw box solves on the whole grid. */
+static int ext_reference(ext_data *D, const hv_extend_opts *o)
+{
+    const int n3[3] = {D->n, D->n, D->n};
+    hv_extend_opts so = *o;
+    so.backend = HV_BACKEND_FFTW;
+    hv_extender *e = NULL;
+    hv_extend_field f = {3, {D->in[0], D->in[1], D->in[2]}, {D->ref[0], D->ref[1], D->ref[2]}};
+    if (hv_extender_create(&e, 3, n3, 1.0 / D->n, NULL, &so) || hv_extend_many(e, D->phi, 1, &f, NULL)) {
+        fprintf(stderr, "mpi_dmda: reference: %s\n", hv_last_error());
+        hv_extender_destroy(&e);
+        return 0;
+    }
+    hv_extender_destroy(&e);
+    return 1;
+}
+
+/* One call of X on D's input; compares with D's reference. */
+static int ext_check(hv_dmda_extender *X, DM da, ext_data *D, const hv_extend_opts *o,
+                     const char *name)
+{
+    const int n3[3] = {D->n, D->n, D->n};
+    const double h = 1.0 / D->n, ob = o->out_band * h;
+    Vec phi, v[3];
+    DMCreateGlobalVector(da, &phi);
+    for (int a = 0; a < 3; a++)
+        VecDuplicate(phi, &v[a]);
+    PetscScalar *p;
+    VecGetArray(phi, &p);
+    FOR_OWNED(da, 3, n3, p[q] = D->phi[c]);
+    VecRestoreArray(phi, &p);
+    for (int a = 0; a < 3; a++) {
+        VecGetArray(v[a], &p);
+        FOR_OWNED(da, 3, n3, p[q] = D->in[a][c]);
+        VecRestoreArray(v[a], &p);
+    }
+    hv_dmda_field f = {3, {v[0], v[1], v[2]}};
+    hv_extend_stats S;
+    hv_status st = hv_dmda_extend(X, phi, 1, &f, &S);
+    if (st)
+        fprintf(stderr, "mpi_dmda: %s: %s\n", name, hv_last_error());
+    double dmax = 0, rmax = 0, emax = 0, eref = 0;
+    int untouched = 1;
+    for (int a = 0; a < 3 && !st; a++) {
+        const PetscScalar *r;
+        VecGetArrayRead(v[a], &r);
+        FOR_OWNED(da, 3, n3, {
+            if (fabs(D->phi[c]) < ob) {
+                dmax = fmax(dmax, fabs(r[q] - D->ref[a][c]));
+                rmax = fmax(rmax, fabs(D->ref[a][c]));
+                emax = fmax(emax, fabs(r[q] - D->exact[a][c]));
+                eref = fmax(eref, fabs(D->ref[a][c] - D->exact[a][c]));
+            } else if (r[q] != D->in[a][c]) {
+                untouched = 0;
+            }
+        });
+        VecRestoreArrayRead(v[a], &r);
+    }
+    double g[4] = {dmax, rmax, emax, eref}, G[4];
+    MPI_Allreduce(g, G, 4, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    const int ok = report(!st && untouched && G[0] <= 1e-5 * G[1] && G[2] <= 0.02,
+                          "extension on a DMDA, %-28s %d ranks: %d levels, %d solves; max "
+                          "relative difference to one process %.1e; max error %.4f (one "
+                          "process %.4f)",
+                          name, hv_mpi_size(), S.levels, S.solves, G[0] / G[1], G[2], G[3]);
+    for (int a = 0; a < 3; a++)
+        VecDestroy(&v[a]);
+    VecDestroy(&phi);
+    return ok;
+}
+
+static int extend_cases(void)
+{
+    ext_data D = {40, NULL, {NULL}, {NULL}, {NULL}};
+    const size_t count = (size_t)D.n * D.n * D.n;
+    D.phi = malloc(count * sizeof *D.phi);
+    for (int a = 0; a < 3; a++) {
+        D.in[a] = malloc(count * sizeof *D.in[a]);
+        D.ref[a] = malloc(count * sizeof *D.ref[a]);
+        D.exact[a] = malloc(count * sizeof *D.exact[a]);
+    }
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.out_band = 3;
+    const int n3[3] = {D.n, D.n, D.n};
+    DM da = make_da(3, n3);
+    hv_dmda_extender *X = NULL;
+    int ok = 1;
+    if (hv_dmda_extender_create(&X, da, 1.0 / D.n, &o)) {
+        fprintf(stderr, "mpi_dmda: extender: %s\n", hv_last_error());
+        return 0;
+    }
+    static const struct {
+        const char *name;
+        int which;
+        double c[3];
+    } cases[] = {{"sphere 40^3", SPHERE, {0.5, 0.5, 0.5}},
+                 {"torus 40^3", TORUS, {0.5, 0.5, 0.5}},
+                 {"sphere moved, same extender", SPHERE, {0.45, 0.53, 0.56}}};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        ext_make(&D, cases[i].which, cases[i].c);
+        ok &= ext_reference(&D, &o);
+        ok &= ext_check(X, da, &D, &o, cases[i].name);
+    }
+
+    /* A NaN on the last rank's first cell: every rank fails, nothing changes. */
+    ext_make(&D, SPHERE, cases[0].c);
+    Vec phi, v;
+    DMCreateGlobalVector(da, &phi);
+    VecDuplicate(phi, &v);
+    PetscScalar *p;
+    VecGetArray(phi, &p);
+    FOR_OWNED(da, 3, n3, p[q] = D.phi[c]);
+    if (rank == hv_mpi_size() - 1)
+        p[0] = NAN;
+    VecRestoreArray(phi, &p);
+    VecSet(v, 2.5);
+    hv_dmda_field f = {1, {v, NULL, NULL}};
+    hv_status st = hv_dmda_extend(X, phi, 1, &f, NULL);
+    PetscReal vmin, vmax;
+    VecMin(v, NULL, &vmin);
+    VecMax(v, NULL, &vmax);
+    ok &= report(st == HV_ERR_NUMERIC && vmin == 2.5 && vmax == 2.5,
+                 "extension on a DMDA, NaN on rank %d: %s on rank %d, fields unchanged",
+                 hv_mpi_size() - 1, hv_status_str(st), rank);
+    VecDestroy(&v);
+    VecDestroy(&phi);
+
+    hv_dmda_extender_destroy(&X);
+    DMDestroy(&da);
+    free(D.phi);
+    for (int a = 0; a < 3; a++) {
+        free(D.in[a]);
+        free(D.ref[a]);
+        free(D.exact[a]);
+    }
+    return ok;
+}
+
+int main(int argc, char **argv)
+{
+    MPI_Init(&argc, &argv);
+    hv_petsc_init();
+    rank = hv_mpi_rank();
+    static const scase cases[] = {
+        {"heat step, 3D 17x13x11", 3, {17, 13, 11}, 1, 4.0 / (17 * 17), 0, 0},
+        {"Poisson, 3D 20x18x16", 3, {20, 18, 16}, 0, 1, 0, 1},
+        {"heat step, 2D 33x27", 2, {33, 27, 1}, 1, 4.0 / (33 * 33), 0, 0},
+        {"heat step, 3D ball and baffles 24^3", 3, {24, 24, 24}, 1, 4.0 / (24 * 24), 1, 0},
+        {"Poisson, 3D ball and baffles 23x21x19", 3, {23, 21, 19}, 0, 1, 1, 1},
+        {"Poisson, 3D cut in two 22x14x12", 3, {22, 14, 12}, 0, 1, 2, 2},
+        {"Poisson, 2D cut in two 30x20", 2, {30, 20, 1}, 0, 1, 2, 2},
+    };
+    int ok = 1;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        ok &= solve_case(&cases[i]);
+    ok &= extend_cases();
+    if (rank == 0)
+        printf("mpi_dmda: %d ranks, %s\n", hv_mpi_size(), ok ? "all cases passed" : "FAILED");
+    hv_petsc_finalize();
+    MPI_Finalize();
+    return ok ? 0 : 1;
+}
