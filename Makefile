@@ -215,7 +215,7 @@ MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rm
 .PHONY: mpi mpi-check
 mpi:
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
-	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda
+	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda
 mpi-check: mpi
 	@bad=""; for p in 1 2 3 4; do \
 	  echo "== mpirun -n $$p mpi_solve"; \
@@ -225,10 +225,16 @@ mpi-check: mpi
 	done; \
 	echo "== tests/mpi/pipelines.py: distance and extend on 1 to 4 ranks, HDF5 output"; \
 	$(PYTHON) tests/mpi/pipelines.py $(MPI_BUILD)/heatvox env $(MPI_RUN) || bad="$$bad pipelines"; \
+	echo "== mpirun -n 3 advect_dmda"; \
+	$(MPI_RUN) -n 3 $(MPI_BUILD)/advect_dmda --n 40 --steps 30 || bad="$$bad advect_dmda"; \
 	echo "== mpirun -n 2 heatvox bench solve --backend petsc"; \
 	$(MPI_RUN) -n 2 $(MPI_BUILD)/heatvox bench solve --n 32 --backend petsc --obstacle baffles || bad="$$bad bench"; \
 	[ -z "$$bad" ] || { echo "mpi-check: failing:$$bad"; exit 1; }; \
-	echo "mpi-check: mpi_solve and the pipelines on 1 to 4 ranks and bench solve on 2 passed"
+	echo "mpi-check: mpi_solve, mpi_dmda and the pipelines on 1 to 4 ranks, advect_dmda on 3 and bench solve on 2 passed"
+# The example simulation (tools/examples/advect_dmda.c), built as a user
+# would: the installed-style include path and the library.
+$(MPI_BUILD)/advect_dmda: tools/examples/advect_dmda.c $(LIB_A) | $(STAMP)
+	$(CC) $(TOOL_CPPFLAGS) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 $(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c $(LIB_A) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)

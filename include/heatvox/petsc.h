@@ -110,7 +110,8 @@ HV_API hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h
 
 /* Extends the fields in place off the zero set of phi (a global vector of
  * the DMDA, a signed distance near its zero set): cells with |phi| < out_band
- * h get the values carried from the surface, the others keep theirs. stats
+ * h (phi rounded to float, as the extension reads it) get the values carried
+ * from the surface, the others keep theirs. stats
  * (may be NULL): the counts are this rank's box with its ghost layer; levels,
  * solves and relres are the same on every rank. HV_ERR_NUMERIC (on every
  * rank) for a non-finite phi, or a field where it is read, on any rank; the
