@@ -30,6 +30,17 @@ HV_API int hv_petsc_available(void);
  * PETSc. */
 HV_API hv_status hv_petsc_init(void);
 
+/* Sets a PETSc option (as -name value on PETSc's command line; value may be
+ * NULL), starting PETSc if it is not up. heatvox's own option:
+ *   -hv_petsc_pc boomeramg|pfmg|gamg   the preconditioner of the petsc
+ *        backend and of the solvers on a DMDA: hypre's BoomerAMG (the
+ *        default), hypre's structured PFMG (3D grids; it breaks down on
+ *        Poisson problems with more than one fluid region: the solve then
+ *        reports HV_STOP_STAGNATED) or PETSc's GAMG;
+ * PETSc's own (-ksp_*, -pc_hypre_*, -pc_gamg_*) tune them further. Read when
+ * a solver is created. HV_ERR_UNSUPPORTED without PETSc. */
+HV_API hv_status hv_petsc_option(const char *name, const char *value);
+
 /* Ends PETSc (and MPI, when PETSc started it) if a petsc solver started it
  * and it is still up; does nothing otherwise. Call once, at the end. */
 HV_API void hv_petsc_finalize(void);

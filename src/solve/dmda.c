@@ -51,6 +51,43 @@ static hv_status fail(PetscErrorCode ierr, const char *what)
             return fail(ierr_, what);                                                              \
     } while (0)
 
+hv_status hv__petsc_pc_kind(int dim, int *kind)
+{
+    char name[32] = "boomeramg";
+    PetscBool set = PETSC_FALSE;
+    CHK(PetscOptionsGetString(NULL, NULL, "-hv_petsc_pc", name, sizeof name, &set),
+        "PetscOptionsGetString");
+    if (!strcmp(name, "boomeramg"))
+        *kind = HV_PC_BOOMERAMG;
+    else if (!strcmp(name, "pfmg"))
+        *kind = HV_PC_PFMG;
+    else if (!strcmp(name, "gamg"))
+        *kind = HV_PC_GAMG;
+    else
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "petsc: -hv_petsc_pc %s: the preconditioners are boomeramg, pfmg and gamg",
+                         name);
+    if (*kind == HV_PC_PFMG && dim != 3)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "petsc: -hv_petsc_pc pfmg: hypre's structured matrices need a 3D grid");
+    return HV_OK;
+}
+
+hv_status hv__petsc_pc_set(PC pc, int kind)
+{
+    if (kind == HV_PC_GAMG) {
+        CHK(PCSetType(pc, PCGAMG), "PCSetType (gamg)");
+        return HV_OK;
+    }
+    if (kind == HV_PC_PFMG) {
+        CHK(PCSetType(pc, PCPFMG), "PCSetType (pfmg)");
+        return HV_OK;
+    }
+    CHK(PCSetType(pc, PCHYPRE), "PCSetType (hypre)");
+    CHK(PCHYPRESetType(pc, "boomeramg"), "PCHYPRESetType");
+    return HV_OK;
+}
+
 hv_status hv__dmda_like(DM user, int width, int box, DM *out, int *dim)
 {
     PetscInt d, M, N, P, m, n, p, dof, sw;
@@ -307,6 +344,11 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     s->tol = o->tol;
     s->max_iter = o->max_iter;
     s->nonzero_guess = o->nonzero_guess;
+    int pck = HV_PC_BOOMERAMG;
+    if ((st = hv__petsc_pc_kind(dim, &pck)))
+        return st;
+    if (pck == HV_PC_PFMG)
+        CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
     CHK(DMCreateMatrix(s->da, &s->A), "DMCreateMatrix");
     CHK(DMCreateGlobalVector(s->da, &s->b), "DMCreateGlobalVector");
     CHK(VecDuplicate(s->b, &s->r), "VecDuplicate");
@@ -355,8 +397,8 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     CHK(KSPSetTolerances(s->ksp, s->tol, 1e-300, PETSC_DEFAULT, s->max_iter), "KSPSetTolerances");
     CHK(KSPSetResidualHistory(s->ksp, NULL, HV_MAX_HISTORY, PETSC_TRUE), "KSPSetResidualHistory");
     CHK(KSPGetPC(s->ksp, &pc), "KSPGetPC");
-    CHK(PCSetType(pc, PCHYPRE), "PCSetType");
-    CHK(PCHYPRESetType(pc, "boomeramg"), "PCHYPRESetType");
+    if ((st = hv__petsc_pc_set(pc, pck)))
+        return st;
     CHK(KSPSetFromOptions(s->ksp), "KSPSetFromOptions");
     CHK(KSPSetUp(s->ksp), "KSPSetUp (hypre BoomerAMG)");
     return HV_OK;

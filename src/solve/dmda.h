@@ -6,6 +6,15 @@
 #include "heatvox/petsc.h"
 
 #ifdef HV_HAVE_PETSC
+#include <petscksp.h>
+
+/* The preconditioner, from the PETSc option -hv_petsc_pc (petsc.h):
+ * BoomerAMG (the default), hypre's PFMG (3D; the matrix must then be
+ * MATHYPRESTRUCT) or PETSc's GAMG. */
+enum { HV_PC_BOOMERAMG, HV_PC_PFMG, HV_PC_GAMG };
+hv_status hv__petsc_pc_kind(int dim, int *kind);
+hv_status hv__petsc_pc_set(PC pc, int kind);
+
 /* A DMDA with the layout of user's (sizes, ownership ranges) and one degree
  * of freedom, stencil width `width`, box (1) or star (0) stencil; *dim its
  * dimension. Refuses what the solvers do not handle (dof > 1, periodic). */

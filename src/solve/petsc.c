@@ -13,6 +13,7 @@
  * with HV_ERR_UNSUPPORTED. */
 #include "heatvox/petsc.h"
 #include "solve/backend.h"
+#include "solve/dmda.h"
 #include "core/error.h"
 
 #include <stdlib.h>
@@ -202,7 +203,15 @@ static hv_status petsc_create(void **state, const hv_setup *s)
     else
         ierr = DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR,
                             n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &P->da);
+    int pck = HV_PC_BOOMERAMG;
     hv_status st = HV_OK;
+    if (!ierr && (st = hv__petsc_pc_kind(s->p.dim, &pck))) {
+        petsc_destroy(P);
+        *state = NULL;
+        return st;
+    }
+    if (!ierr && pck == HV_PC_PFMG)
+        ierr = DMSetMatType(P->da, MATHYPRESTRUCT);
     if (ierr || (ierr = DMSetUp(P->da)) || (ierr = DMCreateMatrix(P->da, &P->A)) ||
         (ierr = DMCreateGlobalVector(P->da, &P->b)) || (ierr = VecDuplicate(P->b, &P->x)) ||
         (ierr = DMDACreateNaturalVector(P->da, &P->natural)) ||
@@ -222,10 +231,12 @@ static hv_status petsc_create(void **state, const hv_setup *s)
     }
     if (!st) {
         PC pc;
-        if ((ierr = KSPGetPC(P->ksp, &pc)) || (ierr = PCSetType(pc, PCHYPRE)) ||
-            (ierr = PCHYPRESetType(pc, "boomeramg")) || (ierr = KSPSetFromOptions(P->ksp)) ||
-            (ierr = KSPSetUp(P->ksp)))
-            st = petsc_fail(ierr, "setting up hypre BoomerAMG");
+        if ((ierr = KSPGetPC(P->ksp, &pc)))
+            st = petsc_fail(ierr, "KSPGetPC");
+        if (!st)
+            st = hv__petsc_pc_set(pc, pck);
+        if (!st && ((ierr = KSPSetFromOptions(P->ksp)) || (ierr = KSPSetUp(P->ksp))))
+            st = petsc_fail(ierr, "setting up the preconditioner");
     }
     if (st) {
         petsc_destroy(P);
@@ -319,6 +330,17 @@ const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solv
 
 int hv_petsc_available(void) { return 1; }
 
+hv_status hv_petsc_option(const char *name, const char *value)
+{
+    if (!name || name[0] != '-')
+        return hv__error(HV_ERR_INVALID_ARG, "petsc: an option name starts with '-'");
+    hv_status st = hv_petsc_init();
+    if (st)
+        return st;
+    PetscErrorCode ierr = PetscOptionsSetValue(NULL, name, value);
+    return ierr ? petsc_fail(ierr, "PetscOptionsSetValue") : HV_OK;
+}
+
 hv_status hv_petsc_init(void)
 {
     PetscBool up = PETSC_FALSE;
@@ -328,6 +350,9 @@ hv_status hv_petsc_init(void)
         PetscErrorCode ierr = PetscInitializeNoArguments();
         if (ierr)
             return petsc_fail(ierr, "PetscInitialize");
+        /* The library never prints: PETSc's errors come back as codes, and
+         * hv_last_error says what failed. */
+        PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
     }
     return HV_OK;
 }
@@ -384,6 +409,12 @@ const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solv
                                               NULL,    petsc_destroy, NULL};
 
 int hv_petsc_available(void) { return 0; }
+hv_status hv_petsc_option(const char *name, const char *value)
+{
+    (void)name;
+    (void)value;
+    return hv__error(HV_ERR_UNSUPPORTED, "PETSc needs heatvox built with MPI and PETSc (make mpi)");
+}
 hv_status hv_petsc_init(void)
 {
     return hv__error(HV_ERR_UNSUPPORTED, "PETSc needs heatvox built with MPI and PETSc (make mpi)");
