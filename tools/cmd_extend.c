@@ -50,9 +50,12 @@ static int usage(FILE *out)
             "Builds made with make mpi: -o OUT.h5 writes the dense block as HDF5, one\n"
             "dataset per grid (vectors as NAME_x, NAME_y, NAME_z) with the attributes\n"
             "spacing and origin, and an XDMF sidecar OUT.xmf for ParaView. Under\n"
-            "mpirun -n P with --backend petsc (the dense block), every rank reads the\n"
-            "input and extends, the solves are distributed over the ranks, the ranks\n"
-            "write the HDF5 file together, and rank 0 writes a VDB file and prints.\n"
+            "mpirun -n P with --backend petsc (the dense block) and --out-band W, rank 0\n"
+            "reads the block, each rank extends its own box with a ghost layer (the\n"
+            "diffusion solved over all ranks), and rank 0 gathers and writes the result.\n"
+            "Without --out-band, or with -o OUT.h5, every rank reads the input and\n"
+            "extends, the solves are distributed over the ranks, the ranks write the\n"
+            "HDF5 file together, and rank 0 writes a VDB file and prints.\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
@@ -367,6 +370,26 @@ int cmd_extend(int argc, char **argv)
     hv_extender *e = NULL;
     hv_vdb_writer *w = NULL;
     int rc = 0, cls;
+    /* --backend petsc --out-band W: the block is read by rank 0, extended on
+     * the ranks' boxes (hv_petsc_extend_block) and written by rank 0. */
+    const int spread = o.backend == HV_BACKEND_PETSC && o.out_band > 0 && !h5;
+    const int reader = !spread || hv_mpi_rank() == 0;
+    hv_extend_stats es;
+    if (!reader) {
+        for (int q = 0; q < nfields; q++) {
+            ef[q].ncomp = is_vector(find_grid(info, count, fields[q])->value_type) ? 3 : 1;
+            for (int c = 0; c < 3; c++) {
+                ef[q].in[c] = NULL;
+                ef[q].out[c] = NULL;
+            }
+        }
+        int n[3];
+        for (int a = 0; a < 3; a++)
+            n[a] = ro.box_hi[a] - ro.box_lo[a] + 1;
+        if ((st = hv_petsc_extend_block(3, n, lsi->voxel_size[0], &o, NULL, nfields, ef, &es)))
+            rc = cli_fail(CMD, in, st);
+        goto done;
+    }
     if ((st = hv_vdb_read_float(in, ls, &ro, &phi, &cls))) {
         rc = cli_fail(CMD, in, st);
         goto done;
@@ -402,9 +425,13 @@ int cmd_extend(int argc, char **argv)
     cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields\n", phi->n[0], phi->n[1],
              phi->n[2], phi->h, nfields);
 
-    hv_extend_stats es;
-    if ((st = hv_extender_create(&e, 3, phi->n, phi->h, NULL, &o)) ||
-        (st = hv_extend_many(e, phi->v, nfields, ef, &es))) {
+    if (spread) {
+        if ((st = hv_petsc_extend_block(3, phi->n, phi->h, &o, phi->v, nfields, ef, &es))) {
+            rc = cli_fail(CMD, in, st);
+            goto done;
+        }
+    } else if ((st = hv_extender_create(&e, 3, phi->n, phi->h, NULL, &o)) ||
+               (st = hv_extend_many(e, phi->v, nfields, ef, &es))) {
         rc = cli_fail(CMD, in, st);
         goto done;
     }
@@ -474,13 +501,13 @@ int cmd_extend(int argc, char **argv)
         goto done;
     }
     if (cli_verbose >= 0)
-        printf("{\"command\":\"extend\",\"path\":\"dense\",\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":"
-               "%d,\"solves\":%d,"
+        printf("{\"command\":\"extend\",\"path\":\"%s\",\"grid\":[%d,%d,%d],\"h\":%g,"
+               "\"fields\":%d,\"solves\":%d,"
                "\"levels\":%d,\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
                "\"weak_cells\":%zu,\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
-               phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves, es.levels,
-               es.source_cells, es.cp_cells, es.ratio_cells, es.weak_cells, es.t_total,
-               hv_now() - t_start);
+               spread ? "dense-distributed" : "dense", phi->n[0], phi->n[1], phi->n[2], phi->h,
+               nfields, es.solves, es.levels, es.source_cells, es.cp_cells, es.ratio_cells,
+               es.weak_cells, es.t_total, hv_now() - t_start);
 done:
     hv_vdb_writer_destroy(&w);
     hv_extender_destroy(&e);

@@ -131,6 +131,19 @@ HV_API hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields,
                                 const hv_dmda_field *fields, hv_extend_stats *stats);
 HV_API void hv_dmda_extender_destroy(hv_dmda_extender **e);
 
+/* The extension of a whole block held by rank 0, distributed over the ranks
+ * of PETSC_COMM_WORLD (heatvox extend --backend petsc --out-band W under
+ * mpirun): the block (dim, n, h, the options and the fields' component
+ * counts the same on every rank) becomes a DMDA, rank 0's phi and fields are
+ * scattered to the ranks' boxes, each rank extends its box (hv_dmda_extend),
+ * and the results are gathered into rank 0's outputs: the extended values
+ * where |phi| < opts->out_band h (> 0 required), opts->background elsewhere.
+ * Only rank 0 passes arrays (phi, f[i].in, f[i].out); the other ranks pass
+ * NULL for them. Collective; the same status on every rank. */
+HV_API hv_status hv_petsc_extend_block(int dim, const int n[3], double h,
+                                       const hv_extend_opts *opts, const float *phi, int nfields,
+                                       const hv_extend_field *f, hv_extend_stats *stats);
+
 #ifdef __cplusplus
 }
 #endif

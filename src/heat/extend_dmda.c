@@ -291,7 +291,143 @@ void hv_dmda_extender_destroy(hv_dmda_extender **xp)
     *xp = NULL;
 }
 
+/* Rank 0's block <-> the DMDA's global vectors, through the natural
+ * (x-fastest) ordering. */
+typedef struct {
+    DM da;
+    Vec nat, zero; /* natural vector; its whole on rank 0 */
+    VecScatter toz;
+    size_t count;
+} block_io;
+
+static hv_status block_in(block_io *B, const float *a, Vec g)
+{
+    if (a) { /* rank 0 */
+        PetscScalar *z;
+        CHK(VecGetArray(B->zero, &z), "VecGetArray");
+        for (size_t c = 0; c < B->count; c++)
+            z[c] = a[c];
+        VecRestoreArray(B->zero, &z);
+    }
+    CHK(VecScatterBegin(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE), "VecScatter");
+    CHK(VecScatterEnd(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE), "VecScatter");
+    CHK(DMDANaturalToGlobalBegin(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    CHK(DMDANaturalToGlobalEnd(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    return HV_OK;
+}
+
+static hv_status block_out(block_io *B, Vec g, const float *phi, double ob, float bg, float *out)
+{
+    CHK(DMDAGlobalToNaturalBegin(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    CHK(DMDAGlobalToNaturalEnd(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    CHK(VecScatterBegin(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD), "VecScatter");
+    CHK(VecScatterEnd(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD), "VecScatter");
+    if (out) {
+        const PetscScalar *z;
+        CHK(VecGetArrayRead(B->zero, &z), "VecGetArrayRead");
+        for (size_t c = 0; c < B->count; c++)
+            out[c] = fabs(phi[c]) < ob ? (float)z[c] : bg;
+        VecRestoreArrayRead(B->zero, &z);
+    }
+    return HV_OK;
+}
+
+static hv_status extend_block(block_io *B, int dim, const int n[3], double h,
+                              const hv_extend_opts *o, const float *phi, int nfields,
+                              const hv_extend_field *f, hv_extend_stats *stats, Vec *v)
+{
+    PetscErrorCode ierr;
+    if (dim == 3)
+        ierr = DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                            DMDA_STENCIL_STAR, n[0], n[1], n[2], PETSC_DECIDE, PETSC_DECIDE,
+                            PETSC_DECIDE, 1, 1, NULL, NULL, NULL, &B->da);
+    else
+        ierr = DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR,
+                            n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &B->da);
+    if (ierr || (ierr = DMSetUp(B->da)) || (ierr = DMDACreateNaturalVector(B->da, &B->nat)) ||
+        (ierr = VecScatterCreateToZero(B->nat, &B->toz, &B->zero)))
+        return fail(ierr, "setting up the distributed block");
+    for (int i = 0, q = 0; i < nfields; i++)
+        for (int c = 0; c < f[i].ncomp; c++, q++)
+            CHK(DMCreateGlobalVector(B->da, &v[q]), "DMCreateGlobalVector");
+    Vec gphi;
+    CHK(DMCreateGlobalVector(B->da, &gphi), "DMCreateGlobalVector");
+    hv_status st = block_in(B, phi, gphi);
+    hv_dmda_field df[MAX_FIELDS_PER_CALL];
+    for (int i = 0, q = 0; i < nfields && !st; i++) {
+        df[i].ncomp = f[i].ncomp;
+        for (int c = 0; c < 3; c++)
+            df[i].v[c] = c < f[i].ncomp ? v[q + c] : NULL;
+        for (int c = 0; c < f[i].ncomp && !st; c++)
+            st = block_in(B, phi ? f[i].in[c] : NULL, v[q + c]);
+        q += f[i].ncomp;
+    }
+    hv_dmda_extender *X = NULL;
+    if (!st)
+        st = hv_dmda_extender_create(&X, B->da, h, o);
+    if (!st)
+        st = hv_dmda_extend(X, gphi, nfields, df, stats);
+    hv_dmda_extender_destroy(&X);
+    const double ob = o->out_band * h;
+    for (int i = 0, q = 0; i < nfields && !st; i++)
+        for (int c = 0; c < f[i].ncomp && !st; c++, q++)
+            st = block_out(B, v[q], phi, ob, o->background, phi ? f[i].out[c] : NULL);
+    VecDestroy(&gphi);
+    return st;
+}
+
+hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_extend_opts *opts,
+                                const float *phi, int nfields, const hv_extend_field *f,
+                                hv_extend_stats *stats)
+{
+    if ((dim != 2 && dim != 3) || !n || !opts || nfields < 1 || nfields > MAX_FIELDS_PER_CALL || !f)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: bad arguments");
+    int ncomp = 0;
+    for (int i = 0; i < nfields; i++) {
+        if (f[i].ncomp < 1 || f[i].ncomp > 3)
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "hv_petsc_extend_block: field %d has %d components", i, f[i].ncomp);
+        ncomp += f[i].ncomp;
+    }
+    hv_status st = hv_petsc_init();
+    if (st)
+        return st;
+    int rank = 0;
+    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+    if (!rank && !phi)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: rank 0 passes no level set");
+    block_io B = {NULL, NULL, NULL, NULL, (size_t)n[0] * n[1] * (dim == 3 ? n[2] : 1)};
+    Vec *v = calloc((size_t)ncomp, sizeof *v);
+    if (!v)
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    st = extend_block(&B, dim, n, h, opts, rank ? NULL : phi, nfields, f, stats, v);
+    for (int q = 0; q < ncomp; q++)
+        VecDestroy(&v[q]);
+    free(v);
+    VecScatterDestroy(&B.toz);
+    VecDestroy(&B.zero);
+    VecDestroy(&B.nat);
+    DMDestroy(&B.da);
+    return st;
+}
+
 #else /* without PETSc */
+
+hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_extend_opts *opts,
+                                const float *phi, int nfields, const hv_extend_field *f,
+                                hv_extend_stats *stats)
+{
+    (void)dim;
+    (void)n;
+    (void)h;
+    (void)opts;
+    (void)phi;
+    (void)nfields;
+    (void)f;
+    (void)stats;
+    return hv__error(HV_ERR_UNSUPPORTED,
+                     "the distributed extension needs heatvox built with MPI and PETSc (make mpi)");
+}
 
 hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
                                   const hv_extend_opts *opts)

@@ -132,25 +132,38 @@ def extend_case(tmp, label, shape):
     vg.copyFromArray(v0, ijk=(0, 0, 0))
     vg.name, vg.transform = "v", tr
     vdb.write(inp, grids=[ls, vg])
-    args = ["extend", inp, "--levelset", "phi", "--field", "v", "--dense", "--out-band", "4"]
+    args = ["extend", inp, "--levelset", "phi", "--field", "v", "--dense"]
     band = np.abs(phi) < 4 * H
     mg = os.path.join(tmp, label + "-mg.vdb")
-    run([*args, "-o", mg, "--backend", "mg", "-q"])
+    run([*args, "--out-band", "4", "-o", mg, "--backend", "mg", "-q"])
     err_mg = np.abs(read_dense(mg, "v", (N, N, N)) - exact)[band].max()
-    ref = os.path.join(tmp, label + "-single.vdb")
-    run([*args, "-o", ref, "--backend", "petsc", "-q"])  # one process, no mpirun
+    # The distributed path (--out-band): rank 0 reads, each rank extends its
+    # box, rank 0 writes; against fftw's box solves in one process.
+    ref = os.path.join(tmp, label + "-fftw.vdb")
+    run([*args, "--out-band", "4", "-o", ref, "--backend", "fftw", "-q"])
     a = read_dense(ref, "v", (N, N, N))
     for p in RANKS:
         out = os.path.join(tmp, "%s-%d.vdb" % (label, p))
-        run([*args, "-o", out, "--backend", "petsc", "-q"], p)
+        js = run([*args, "--out-band", "4", "-o", out, "--backend", "petsc"], p)
         b = read_dense(out, "v", (N, N, N))
-        d = np.abs(a - b)[band].max()
-        rel = d / np.abs(a[band]).max()
-        check(rel <= 1e-5, "extend %s, %d ranks: equals the single-process result: %.2g relative "
-              "(<= 1e-5)" % (label, p, rel))
+        rel = np.abs(a - b).max() / np.abs(a[band]).max()
+        check('"dense-distributed"' in js and rel <= 1e-5,
+              "extend %s, %d ranks, each on its box: equals the single-process result: %.2g "
+              "relative (<= 1e-5)" % (label, p, rel))
         err = np.abs(b - exact)[band].max()
         check(err <= 0.03, "extend %s, %d ranks: max error against the exact extension %.4f "
               "(<= 0.03; single-process mg: %.4f)" % (label, p, err, err_mg))
+    # Without --out-band every rank extends the whole block, the solves distributed.
+    one = os.path.join(tmp, label + "-whole-1.vdb")
+    run([*args, "-o", one, "--backend", "petsc", "-q"])
+    a = read_dense(one, "v", (N, N, N))
+    for p in (2, 3):
+        out = os.path.join(tmp, "%s-whole-%d.vdb" % (label, p))
+        run([*args, "-o", out, "--backend", "petsc", "-q"], p)
+        b = read_dense(out, "v", (N, N, N))
+        rel = np.abs(a - b)[band].max() / np.abs(a[band]).max()
+        check(rel <= 1e-5, "extend %s, %d ranks, whole block on every rank: equals the "
+              "single-process result: %.2g relative (<= 1e-5)" % (label, p, rel))
 
 
 def main():
