@@ -215,7 +215,8 @@ MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rm
 .PHONY: mpi mpi-check
 mpi:
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
-	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda
+	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda \
+	  $(MPI_BUILD)/bench_mpi
 mpi-check: mpi
 	@bad=""; for p in 1 2 3 4; do \
 	  echo "== mpirun -n $$p mpi_solve"; \
@@ -234,6 +235,8 @@ mpi-check: mpi
 # The example simulation (tools/examples/advect_dmda.c), built as a user
 # would: the installed-style include path and the library.
 $(MPI_BUILD)/advect_dmda: tools/examples/advect_dmda.c $(LIB_A) | $(STAMP)
+	$(CC) $(TOOL_CPPFLAGS) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
+$(MPI_BUILD)/bench_mpi: tools/mpi/bench_mpi.c $(LIB_A) | $(STAMP)
 	$(CC) $(TOOL_CPPFLAGS) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 $(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c $(LIB_A) | $(STAMP)
 	@mkdir -p $(dir $@)

@@ -38,7 +38,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define BAND_MAX_T_SCALE 8.0  /* longer times: the box solve (more sweeps than a V-cycle) */
 #define BAND_MAX_FRACTION 0.5 /* a band larger than this part of the box: the box solve */
 #define BAND_TOL 3e-5
 /* Smaller bands sweep on one thread (a barrier per sweep costs more). */

@@ -94,8 +94,11 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
         hv_solver_opts_default(&so);
         so.tol = e->o.tol;
         so.max_iter = 500;
-        const double t = e->o.t_scale * X->h * X->h * pow(LEVEL_FACTOR, l);
-        if ((st = hv_dmda_solver_create(&X->sv[l], X->user, X->h, 1.0, t, NULL, &so)))
+        /* Short times (those the band solve takes in one process) are well
+         * conditioned: Jacobi-preconditioned CG, nothing to set up. */
+        const double ts = e->o.t_scale * pow(LEVEL_FACTOR, l), t = ts * X->h * X->h;
+        if ((st = hv__dmda_solver_create(&X->sv[l], X->user, X->h, 1.0, t, NULL, &so,
+                                         ts <= BAND_MAX_T_SCALE ? HV_PC_JACOBI : -1)))
             return st;
     }
     Vec b = hv__dmda_rhs(X->sv[l]);

@@ -26,6 +26,11 @@
  * norm <= 1). */
 #define RELIABLE 1e3
 /* |grad phi| must lie in this range for phi to be taken as a distance. */
+/* Diffusion times up to BAND_MAX_T_SCALE h^2 are solved on the band in one
+ * process (extend_band.c; longer ones by the box solve, which needs fewer
+ * sweeps through a V-cycle), and with Jacobi-preconditioned CG on a DMDA
+ * (extend_dmda.c). */
+#define BAND_MAX_T_SCALE 8.0
 #define GRAD_MIN 0.5
 #define GRAD_MAX 1.5
 

@@ -75,6 +75,10 @@ hv_status hv__petsc_pc_kind(int dim, int *kind)
 
 hv_status hv__petsc_pc_set(PC pc, int kind)
 {
+    if (kind == HV_PC_JACOBI) {
+        CHK(PCSetType(pc, PCJACOBI), "PCSetType (jacobi)");
+        return HV_OK;
+    }
     if (kind == HV_PC_GAMG) {
         CHK(PCSetType(pc, PCGAMG), "PCSetType (gamg)");
         return HV_OK;
@@ -335,7 +339,7 @@ static hv_status regions(hv_dmda_solver *s, int dim)
 }
 
 static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, double beta, Vec solid,
-                        const hv_solver_opts *o)
+                        const hv_solver_opts *o, int pck)
 {
     int dim = 3;
     hv_status st = hv__dmda_like(user, 1, 0, &s->da, &dim);
@@ -344,8 +348,7 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     s->tol = o->tol;
     s->max_iter = o->max_iter;
     s->nonzero_guess = o->nonzero_guess;
-    int pck = HV_PC_BOOMERAMG;
-    if ((st = hv__petsc_pc_kind(dim, &pck)))
+    if (pck < 0 && (st = hv__petsc_pc_kind(dim, &pck)))
         return st;
     if (pck == HV_PC_PFMG)
         CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
@@ -407,6 +410,12 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
 hv_status hv_dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
                                 Vec solid, const hv_solver_opts *opts)
 {
+    return hv__dmda_solver_create(out, da, h, alpha, beta, solid, opts, -1);
+}
+
+hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
+                                 Vec solid, const hv_solver_opts *opts, int pc)
+{
     if (!out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_solver_create: out is NULL");
     *out = NULL;
@@ -428,7 +437,7 @@ hv_status hv_dmda_solver_create(hv_dmda_solver **out, DM da, double h, double al
     hv_dmda_solver *s = calloc(1, sizeof *s);
     if (!s)
         return hv__error(HV_ERR_NOMEM, "petsc: out of memory");
-    if ((st = create(s, da, h, alpha, beta, solid, &o))) {
+    if ((st = create(s, da, h, alpha, beta, solid, &o, pc))) {
         hv_dmda_solver_destroy(&s);
         return st;
     }

@@ -11,7 +11,7 @@
 /* The preconditioner, from the PETSc option -hv_petsc_pc (petsc.h):
  * BoomerAMG (the default), hypre's PFMG (3D; the matrix must then be
  * MATHYPRESTRUCT) or PETSc's GAMG. */
-enum { HV_PC_BOOMERAMG, HV_PC_PFMG, HV_PC_GAMG };
+enum { HV_PC_BOOMERAMG, HV_PC_PFMG, HV_PC_GAMG, HV_PC_JACOBI };
 hv_status hv__petsc_pc_kind(int dim, int *kind);
 hv_status hv__petsc_pc_set(PC pc, int kind);
 
@@ -19,6 +19,13 @@ hv_status hv__petsc_pc_set(PC pc, int kind);
  * of freedom, stencil width `width`, box (1) or star (0) stencil; *dim its
  * dimension. Refuses what the solvers do not handle (dof > 1, periodic). */
 hv_status hv__dmda_like(DM user, int width, int box, DM *out, int *dim);
+
+/* hv_dmda_solver_create with the preconditioner pc (HV_PC_*; -1: the
+ * option's). HV_PC_JACOBI suits short heat steps, whose operator is
+ * conditioned like 1 + 4 dim t / h^2: CG converges in a few dozen sweeps
+ * with nothing to set up. */
+hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
+                                 Vec solid, const hv_solver_opts *opts, int pc);
 
 /* The solver's right-hand side vector: fill it, then hv__dmda_solve. */
 Vec hv__dmda_rhs(hv_dmda_solver *s);

@@ -1,0 +1,285 @@
+/* bench_mpi: the distributed distance and extension (builds made with make
+ * mpi), one JSON line per run on rank 0, with the single-process answer on
+ * the same grid in the same run as the reference.
+ *
+ *   mpirun -n P build-mpi/bench_mpi extend --n N [--repeat R]
+ *   mpirun -n P build-mpi/bench_mpi distance --n N
+ *
+ * extend: a velocity g(closest point) given within 1.5 voxels of a sphere
+ * (radius 0.3 in the unit box) extended to |phi| < 3 voxels on a DMDA
+ * (hv_dmda_extend; every rank fills only its own cells, so peak_rss_mb, the
+ * largest over the ranks, is the distributed run's). seconds: best of R calls
+ * after the first (setup_seconds: the extender's creation and the first
+ * call, which makes the levels' solvers). ref "mg-one-process": rank 0 alone
+ * runs hv_extend_many (the band solve) on the whole grid afterwards, best of
+ * R; err and ref_err are the largest errors against the exact extension on
+ * the band.
+ *
+ * distance: the heat-method distance from a point in an N^3 box with two
+ * baffles (walls one cell thick with gaps at opposite ends), the whole grid
+ * on every rank, the solves distributed (backend petsc); ref "mg-one-process"
+ * is rank 0 with mg afterwards; max_diff_voxels the largest difference. */
+#include <heatvox/heatvox.h>
+#include <petscdmda.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+
+static int rank, ranks;
+
+static double peak_mb(void)
+{
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    double mb = ru.ru_maxrss / 1024.0, all = mb;
+    MPI_Allreduce(&mb, &all, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+    return all;
+}
+
+static void velocity(const double p[3], double v[3])
+{
+    v[0] = sin(3 * p[0]) + p[2];
+    v[1] = cos(2 * p[1]);
+    v[2] = p[0] * p[1] - 0.5 * p[2];
+}
+
+/* phi, the exact extension and the input (exact near the surface, 5 off it)
+ * at cell c of an n^3 unit box. */
+static double sphere_at(int n, PetscInt i, PetscInt j, PetscInt k, double ex[3], double in[3])
+{
+    const double h = 1.0 / n, x[3] = {(i + 0.5) * h - 0.5, (j + 0.5) * h - 0.5, (k + 0.5) * h - 0.5};
+    const double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), R = 0.3;
+    double cp[3];
+    for (int a = 0; a < 3; a++)
+        cp[a] = 0.5 + x[a] * R / fmax(r, 1e-12);
+    velocity(cp, ex);
+    for (int a = 0; a < 3; a++)
+        in[a] = fabs(r - R) < 1.5 * h ? ex[a] : 5.0;
+    return r - R;
+}
+
+static int bench_extend(int n, int repeat)
+{
+    const double h = 1.0 / n, ob = 3;
+    DM da;
+    DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                 DMDA_STENCIL_STAR, n, n, n, PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL,
+                 NULL, NULL, &da);
+    DMSetUp(da);
+    Vec phi, v[3], v0[3];
+    DMCreateGlobalVector(da, &phi);
+    for (int a = 0; a < 3; a++) {
+        VecDuplicate(phi, &v[a]);
+        VecDuplicate(phi, &v0[a]);
+    }
+    PetscInt xs, ys, zs, xm, ym, zm;
+    DMDAGetCorners(da, &xs, &ys, &zs, &xm, &ym, &zm);
+    PetscScalar ***P, ***V[3];
+    DMDAVecGetArray(da, phi, &P);
+    for (int a = 0; a < 3; a++)
+        DMDAVecGetArray(da, v0[a], &V[a]);
+    for (PetscInt k = zs; k < zs + zm; k++)
+        for (PetscInt j = ys; j < ys + ym; j++)
+            for (PetscInt i = xs; i < xs + xm; i++) {
+                double ex[3], in[3];
+                P[k][j][i] = sphere_at(n, i, j, k, ex, in);
+                for (int a = 0; a < 3; a++)
+                    V[a][k][j][i] = in[a];
+            }
+    DMDAVecRestoreArray(da, phi, &P);
+    for (int a = 0; a < 3; a++)
+        DMDAVecRestoreArray(da, v0[a], &V[a]);
+
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.out_band = ob;
+    hv_dmda_extender *X = NULL;
+    hv_dmda_field f = {3, {v[0], v[1], v[2]}};
+    hv_extend_stats S;
+    MPI_Barrier(PETSC_COMM_WORLD);
+    double t0 = MPI_Wtime(), best = INFINITY, setup = 0;
+    for (int r = 0; r <= repeat; r++) {
+        for (int a = 0; a < 3; a++)
+            VecCopy(v0[a], v[a]);
+        MPI_Barrier(PETSC_COMM_WORLD);
+        const double t1 = MPI_Wtime();
+        if ((!X && hv_dmda_extender_create(&X, da, h, &o)) || hv_dmda_extend(X, phi, 1, &f, &S)) {
+            fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+            return 1;
+        }
+        MPI_Barrier(PETSC_COMM_WORLD);
+        if (r == 0)
+            setup = MPI_Wtime() - t0;
+        else
+            best = fmin(best, MPI_Wtime() - t1);
+    }
+    /* The error on the band. */
+    double err = 0;
+    const PetscScalar ***R[3];
+    for (int a = 0; a < 3; a++)
+        DMDAVecGetArrayRead(da, v[a], &R[a]);
+    for (PetscInt k = zs; k < zs + zm; k++)
+        for (PetscInt j = ys; j < ys + ym; j++)
+            for (PetscInt i = xs; i < xs + xm; i++) {
+                double ex[3], in[3];
+                if (fabs(sphere_at(n, i, j, k, ex, in)) < ob * h)
+                    for (int a = 0; a < 3; a++)
+                        err = fmax(err, fabs(R[a][k][j][i] - ex[a]));
+            }
+    for (int a = 0; a < 3; a++)
+        DMDAVecRestoreArrayRead(da, v[a], &R[a]);
+    double errall = 0;
+    MPI_Allreduce(&err, &errall, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+    const double peak = peak_mb();
+    hv_dmda_extender_destroy(&X);
+
+    /* The reference: rank 0 alone, the whole grid. */
+    if (rank == 0) {
+        const size_t count = (size_t)n * n * n;
+        float *phi1 = malloc(count * sizeof *phi1), *in1[3], *out1[3];
+        double *ex1[3];
+        for (int a = 0; a < 3; a++) {
+            in1[a] = malloc(count * sizeof **in1);
+            out1[a] = malloc(count * sizeof **out1);
+            ex1[a] = malloc(count * sizeof **ex1);
+        }
+        for (size_t c = 0; c < count; c++) {
+            double ex[3], in[3];
+            phi1[c] = (float)sphere_at(n, c % n, c / n % n, c / n / n, ex, in);
+            for (int a = 0; a < 3; a++) {
+                in1[a][c] = (float)in[a];
+                ex1[a][c] = ex[a];
+            }
+        }
+        const int n3[3] = {n, n, n};
+        hv_extend_opts so = o;
+        so.backend = HV_BACKEND_MG;
+        hv_extender *e = NULL;
+        hv_extend_field ef = {3, {in1[0], in1[1], in1[2]}, {out1[0], out1[1], out1[2]}};
+        double rbest = INFINITY;
+        if (hv_extender_create(&e, 3, n3, h, NULL, &so)) {
+            fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+            return 1;
+        }
+        for (int r = 0; r <= repeat; r++) {
+            const double t1 = MPI_Wtime();
+            if (hv_extend_many(e, phi1, 1, &ef, NULL)) {
+                fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+                return 1;
+            }
+            if (r)
+                rbest = fmin(rbest, MPI_Wtime() - t1);
+        }
+        hv_extender_destroy(&e);
+        double rerr = 0;
+        for (size_t c = 0; c < count; c++)
+            if (fabs(phi1[c]) < ob * h)
+                for (int a = 0; a < 3; a++)
+                    rerr = fmax(rerr, fabs(out1[a][c] - ex1[a][c]));
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
+        printf("{\"bench\":\"extend-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\",\"out_band\":%g,"
+               "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"levels\":%d,\"solves\":%d,\"err\":%.5f,"
+               "\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\",\"ref_seconds\":%.4f,"
+               "\"ref_err\":%.5f,\"ref_peak_rss_mb\":%.1f,\"ratio\":%.3f}\n",
+               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, rbest, rerr,
+               ru.ru_maxrss / 1024.0, best / rbest);
+        fflush(stdout);
+        free(phi1);
+        for (int a = 0; a < 3; a++) {
+            free(in1[a]);
+            free(out1[a]);
+            free(ex1[a]);
+        }
+    }
+    for (int a = 0; a < 3; a++) {
+        VecDestroy(&v[a]);
+        VecDestroy(&v0[a]);
+    }
+    VecDestroy(&phi);
+    DMDestroy(&da);
+    return 0;
+}
+
+static hv_grid *baffles(int n)
+{
+    const int nn[3] = {n, n, n};
+    const double org[3] = {0, 0, 0};
+    hv_grid *g = NULL;
+    if (hv_grid_create(&g, 3, nn, 1.0 / n, org) || !(g->solid = calloc((size_t)n * n * n, 1)))
+        return NULL;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++)
+                g->solid[i + (size_t)n * (j + (size_t)n * k)] =
+                    (i == n / 3 && j < n - n / 8) || (i == 2 * n / 3 && j >= n / 8);
+    return g;
+}
+
+static int bench_distance(int n)
+{
+    const double src[3] = {0.1, 0.5, 0.5};
+    hv_distance_sources s = {NULL, 0, src, 1, NULL};
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.backend = HV_BACKEND_PETSC;
+    hv_grid *g = baffles(n);
+    hv_distance_stats S, R;
+    MPI_Barrier(PETSC_COMM_WORLD);
+    double t0 = MPI_Wtime();
+    if (!g || hv_distance_compute(g, &s, &o, &S)) {
+        fprintf(stderr, "bench_mpi: %s\n", g ? hv_last_error() : "out of memory");
+        return 1;
+    }
+    MPI_Barrier(PETSC_COMM_WORLD);
+    const double seconds = MPI_Wtime() - t0, peak = peak_mb();
+    if (rank == 0) {
+        o.backend = HV_BACKEND_MG;
+        hv_grid *r = baffles(n);
+        t0 = MPI_Wtime();
+        if (!r || hv_distance_compute(r, &s, &o, &R)) {
+            fprintf(stderr, "bench_mpi: %s\n", r ? hv_last_error() : "out of memory");
+            return 1;
+        }
+        const double rs = MPI_Wtime() - t0;
+        double d = 0;
+        for (size_t c = 0; c < (size_t)n * n * n; c++)
+            if (isfinite(r->v[c]) && isfinite(g->v[c]))
+                d = fmax(d, fabs(r->v[c] - g->v[c]) * n);
+        printf("{\"bench\":\"distance-petsc\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\","
+               "\"obstacle\":\"baffles\",\"seconds\":%.3f,\"stages\":%d,\"diffuse_iterations\":%d,"
+               "\"poisson_iterations\":%d,\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\","
+               "\"ref_seconds\":%.3f,\"ref_stages\":%d,\"max_diff_voxels\":%.2e,\"ratio\":%.3f}\n",
+               n, ranks, seconds, S.stages, S.diffuse_iterations, S.poisson_iterations, peak, rs,
+               R.stages, d, seconds / rs);
+        fflush(stdout);
+        hv_grid_destroy(&r);
+    }
+    hv_grid_destroy(&g);
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    int n = 0, repeat = 3;
+    const char *what = argc > 1 ? argv[1] : "";
+    for (int i = 2; i + 1 < argc; i += 2) {
+        if (!strcmp(argv[i], "--n"))
+            n = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--repeat"))
+            repeat = atoi(argv[i + 1]);
+    }
+    if ((strcmp(what, "extend") && strcmp(what, "distance")) || n < 16 || repeat < 1) {
+        fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R]\n");
+        return 2;
+    }
+    PetscInitialize(&argc, &argv, NULL, NULL);
+    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+    MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
+    const int rc = !strcmp(what, "extend") ? bench_extend(n, repeat) : bench_distance(n);
+    PetscFinalize();
+    return rc;
+}
