@@ -131,6 +131,12 @@ HV_API hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields,
                                 const hv_dmda_field *fields, hv_extend_stats *stats);
 HV_API void hv_dmda_extender_destroy(hv_dmda_extender **e);
 
+/* The extender's ghost layer in cells, and whether its level 0 takes the
+ * band solve on each rank's box (*band0 = 1: no communication for it; the
+ * layer is then wide enough for the band solve, which needs every rank's box
+ * at least that wide) or is solved over all ranks (*band0 = 0). */
+HV_API int hv_dmda_extender_ghost(const hv_dmda_extender *e, int *band0);
+
 /* The extension of a whole block held by rank 0, distributed over the ranks
  * of PETSC_COMM_WORLD (heatvox extend --backend petsc --out-band W under
  * mpirun): the block (dim, n, h, the options and the fields' component

@@ -12,8 +12,10 @@
  * trust threshold is computed from global norms and the requested tolerance,
  * so the ranks agree with one process up to the solves' tolerance.
  *
- * Communication per call: per right-hand side and level, one solve over the
- * ranks and one ghost exchange of width `ghost`; per level, three sums. */
+ * Communication per call: one ghost exchange of phi and of each field
+ * component, of width `ghost`; per level, three sums or maxima; per
+ * right-hand side of a level past 0, one solve over the ranks and one ghost
+ * exchange. */
 #include "heatvox/petsc.h"
 #include "extend_internal.h"
 #include "solve/dmda.h"
@@ -24,6 +26,9 @@
 
 #ifdef HV_HAVE_PETSC
 #include <petscdmda.h>
+
+/* The widest ghost layer the band solve of level 0 may ask for. */
+#define MAX_GHOST 48
 
 struct hv_dmda_extender {
     DM user;                        /* the caller's, referenced */
@@ -141,13 +146,59 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
     return HV_OK;
 }
 
+static double dist_max(void *user, double v)
+{
+    hv_dmda_extender *X = user;
+    double m = v;
+    MPI_Allreduce(&v, &m, 1, MPI_DOUBLE, MPI_MAX, X->comm);
+    return m;
+}
+
 static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_opts *o)
 {
     CHK(PetscObjectReference((PetscObject)da), "PetscObjectReference");
     X->user = da;
     X->comm = PetscObjectComm((PetscObject)da);
     X->h = h;
-    X->ghost = (int)ceil(GRAD_MAX * o->out_band) + 2;
+    PetscInt dim = 3;
+    CHK(DMDAGetInfo(da, &dim, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+                    NULL),
+        "DMDAGetInfo (is it a DMDA?)");
+    /* The ghost layer: what a cell's closest point reaches (out_band voxels
+     * along a gradient up to GRAD_MAX, its interpolation stencil and the
+     * gradient's), plus, for level 0 on the band, what the band solve of
+     * those cells depends on: its sweeps reach one cell each, from a band
+     * grown by BOX_MARGIN sqrt(t) around the cells read, whose marks come
+     * from closest points as far again. The band solve takes it when the
+     * layer stays under MAX_GHOST cells; else level 0 is solved over all
+     * ranks as the others are. */
+    hv_extender probe;
+    memset(&probe, 0, sizeof probe);
+    probe.dim = (int)dim;
+    probe.o = *o;
+    const int reach = (int)ceil(GRAD_MAX * o->out_band) + 2;
+    const int band_ghost = 2 * reach + hv__extend_band_iters(&probe, o->t_scale) + 2 +
+                           (int)lround(BOX_MARGIN * sqrt(o->t_scale));
+    /* A DMDA's ghost layer comes from the next rank only: no wider than the
+     * narrowest box. */
+    PetscInt m[3] = {1, 1, 1}, narrow = PETSC_MAX_INT;
+    const PetscInt *l[3] = {NULL, NULL, NULL};
+    CHK(DMDAGetInfo(da, NULL, NULL, NULL, NULL, &m[0], &m[1], &m[2], NULL, NULL, NULL, NULL, NULL,
+                    NULL),
+        "DMDAGetInfo");
+    CHK(DMDAGetOwnershipRanges(da, &l[0], &l[1], &l[2]), "DMDAGetOwnershipRanges");
+    for (int a = 0; a < dim; a++)
+        for (PetscInt r = 0; r < m[a]; r++)
+            if (m[a] > 1 && l[a][r] < narrow)
+                narrow = l[a][r];
+    X->dist.band0 = o->t_scale <= BAND_MAX_T_SCALE && !o->box_only && band_ghost <= MAX_GHOST &&
+                    band_ghost <= narrow;
+    X->ghost = X->dist.band0 ? band_ghost : reach;
+    if (X->ghost > narrow)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: out_band %g needs a ghost layer of %d cells, and the narrowest "
+                         "rank's box is %d cells wide (fewer ranks, or a narrower band)",
+                         o->out_band, X->ghost, (int)narrow);
     hv_status st = hv__dmda_like(da, X->ghost, 1, &X->dag, &X->dim);
     if (st)
         return st;
@@ -163,19 +214,24 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
     X->nloc = (size_t)X->gm[0] * X->gm[1] * X->gm[2];
     X->nown = (size_t)X->xm[0] * X->xm[1] * X->xm[2];
     hv_extend_opts eo = *o;
-    eo.backend = HV_BACKEND_PETSC; /* no band solve: the levels are the hook's */
+    eo.backend = HV_BACKEND_MG; /* the band solve on level 0; the others are the hook's */
     const int n[3] = {(int)X->gm[0], (int)X->gm[1], (int)X->gm[2]};
     if ((st = hv_extender_create(&X->e, X->dim, n, h, NULL, &eo)))
         return st;
     X->dist.user = X;
     X->dist.sum = dist_sum;
+    X->dist.max = dist_max;
+    for (int a = 0; a < 3; a++) {
+        X->dist.own_lo[a] = (int)(X->xs[a] - X->gs[a]);
+        X->dist.own_hi[a] = (int)(X->xs[a] - X->gs[a] + X->xm[a] - 1);
+    }
     X->dist.solve = dist_solve;
     X->e->dist = &X->dist;
     return HV_OK;
 }
 
-hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
-                                  const hv_extend_opts *opts)
+static hv_status hv_dmda_extender_create_body(hv_dmda_extender **out, DM da, double h,
+                                              const hv_extend_opts *opts)
 {
     if (!out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extender_create: out is NULL");
@@ -249,8 +305,8 @@ static hv_status extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda
     return HV_OK;
 }
 
-hv_status hv_dmda_extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda_field *fields,
-                         hv_extend_stats *stats)
+static hv_status hv_dmda_extend_body(hv_dmda_extender *X, Vec phi, int nfields,
+                                     const hv_dmda_field *fields, hv_extend_stats *stats)
 {
     if (!X || !phi || nfields < 0 || nfields > MAX_FIELDS_PER_CALL || (nfields && !fields))
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extend: bad arguments");
@@ -275,6 +331,13 @@ hv_status hv_dmda_extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmd
     st = extend(X, phi, nfields, fields, stats, work);
     free(work);
     return st;
+}
+
+int hv_dmda_extender_ghost(const hv_dmda_extender *X, int *band0)
+{
+    if (band0)
+        *band0 = X ? X->dist.band0 : 0;
+    return X ? X->ghost : 0;
 }
 
 void hv_dmda_extender_destroy(hv_dmda_extender **xp)
@@ -379,9 +442,10 @@ static hv_status extend_block(block_io *B, int dim, const int n[3], double h,
     return st;
 }
 
-hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_extend_opts *opts,
-                                const float *phi, int nfields, const hv_extend_field *f,
-                                hv_extend_stats *stats)
+static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
+                                            const hv_extend_opts *opts, const float *phi,
+                                            int nfields, const hv_extend_field *f,
+                                            hv_extend_stats *stats)
 {
     if ((dim != 2 && dim != 3) || !n || !opts || nfields < 1 || nfields > MAX_FIELDS_PER_CALL || !f)
         return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: bad arguments");
@@ -411,6 +475,43 @@ hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_exte
     VecDestroy(&B.zero);
     VecDestroy(&B.nat);
     DMDestroy(&B.da);
+    return st;
+}
+
+hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
+                                  const hv_extend_opts *opts)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv_dmda_extender_create_body(out, da, h, opts);
+    PetscPopErrorHandler();
+    return st;
+}
+
+hv_status hv_dmda_extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda_field *fields,
+                         hv_extend_stats *stats)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv_dmda_extend_body(X, phi, nfields, fields, stats);
+    PetscPopErrorHandler();
+    return st;
+}
+
+hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_extend_opts *opts,
+                                const float *phi, int nfields, const hv_extend_field *f,
+                                hv_extend_stats *stats)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv_petsc_extend_block_body(dim, n, h, opts, phi, nfields, f, stats);
+    PetscPopErrorHandler();
     return st;
 }
 
@@ -453,6 +554,14 @@ hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields, const hv_dmd
     (void)fields;
     (void)stats;
     return hv__error(HV_ERR_UNSUPPORTED, "the extension on a DMDA is not in this build");
+}
+
+int hv_dmda_extender_ghost(const hv_dmda_extender *e, int *band0)
+{
+    (void)e;
+    if (band0)
+        *band0 = 0;
+    return 0;
 }
 
 void hv_dmda_extender_destroy(hv_dmda_extender **e)

@@ -39,13 +39,20 @@
  * solve its levels on the whole grid. */
 typedef struct hv_extend_dist {
     void *user;
-    /* The sum of v over the ranks (collective). */
+    /* The sum of v over the ranks, and the largest v (collective). */
     size_t (*sum)(void *user, size_t v);
+    double (*max)(void *user, double v);
+    /* 1: level 0 takes the band solve on this rank's box, whose ghost layer
+     * holds everything the band solve of its own cells depends on. */
+    int band0;
     /* Level l's solves of every right-hand side (the weights and the fields'
      * values on the box's cells) over all ranks; the solutions into e->sol on
      * every cell of the box, *thr as hv__extend_solve_level's (collective). */
     hv_status (*solve)(void *user, hv_extender *e, int l, int nrhs, int nfields,
                        const hv_extend_field *f, double *thr, hv_extend_stats *S);
+    /* This rank's own cells in the box, inclusive: only they count as left
+     * for a next level (the ghost layer's are other ranks'). */
+    int own_lo[3], own_hi[3];
 } hv_extend_dist;
 
 struct hv_extender {

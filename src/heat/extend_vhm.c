@@ -156,6 +156,19 @@ static size_t band_box_cells(const hv_extender *e, const int bn[3])
     return (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1);
 }
 
+/* Distributed: the output cells left on this rank's own cells, over all ranks. */
+static size_t left_everywhere(const hv_extender *e, const hv_extend_dist *D)
+{
+    size_t left = 0;
+    for (int k = D->own_lo[2]; k <= D->own_hi[2]; k++)
+        for (int j = D->own_lo[1]; j <= D->own_hi[1]; j++) {
+            const uint8_t *p = e->pending + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
+            for (int i = D->own_lo[0]; i <= D->own_hi[0]; i++)
+                left += p[i] != 0;
+        }
+    return D->sum(D->user, left);
+}
+
 hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
                          hv_extend_stats *stats)
 {
@@ -206,7 +219,8 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     hv_extend_band band;
     memset(&band, 0, sizeof band);
     uint8_t *need = NULL;
-    if (hv__extend_band_allowed(e) && (e->bneed || (e->bneed = hv_malloc(e->count))))
+    if (hv__extend_band_allowed(e) && (!e->dist || e->dist->band0) &&
+        (e->bneed || (e->bneed = hv_malloc(e->count))))
         need = e->bneed;
 
     /* One pass over the grid: the weights, the checks, where each output cell
@@ -223,7 +237,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     if (st)
         return st;
     S->source_cells = nsrc;
-    size_t npend_all = D ? D->sum(D->user, npend) : npend;
+    size_t npend_all = D ? left_everywhere(e, D) : npend;
     if (D ? !D->sum(D->user, nsrc) : !nsrc)
         return hv__error(HV_ERR_INVALID_ARG,
                          "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
@@ -264,7 +278,10 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         int lo[3], bn[3];
         hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
         t0 = hv_now();
-        if (l > 0 && need && hv__extend_band_level_allowed(e, l)) {
+        /* Distributed: the band solve on level 0 only (its reach is what the
+         * ghost layer holds); later levels over all ranks. */
+        const int band_l = D ? l == 0 && D->band0 : l == 0 || hv__extend_band_level_allowed(e, l);
+        if (l > 0 && need && band_l) {
             /* Later levels answer for the cells left, read at themselves: on a
              * band around them too when it is small. */
             hv__extend_band_free(&band);
@@ -281,12 +298,21 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
             if (!built)
                 hv__extend_band_free(&band);
         }
-        const int on_band = band.runs && (l == 0 || hv__extend_band_level_allowed(e, l));
+        const int on_band = band.runs && band_l;
         const uint8_t *trusted = on_band ? band.need : NULL;
-        if ((st = D         ? D->solve(D->user, e, l, nrhs, nfields, f, &thr, S)
-                  : on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
-                            : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S)))
+        if (D && band_l) {
+            /* A rank without band cells reads nothing at this level; the
+             * bound is the worst rank's residual's, as one process's. */
+            thr = 0;
+            st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S) : HV_OK;
+            thr = D->max(D->user, thr);
+            if (st)
+                break;
+        } else if ((st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
+                         : D     ? D->solve(D->user, e, l, nrhs, nfields, f, &thr, S)
+                             : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S))) {
             break;
+        }
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
         t0 = hv_now();
@@ -296,7 +322,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         S->ratio_cells += k.ratio;
         S->weak_cells += k.weak;
         npend = k.left;
-        npend_all = D ? D->sum(D->user, npend) : npend;
+        npend_all = D ? left_everywhere(e, D) : npend;
         S->t_eval += hv_now() - t0;
     }
     hv__extend_band_free(&band);

@@ -167,8 +167,8 @@ static hv_status write_fields(const char *tmp, const char *path, int nfields,
     return st;
 }
 
-hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const *g,
-                            const char *const *names)
+static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_grid *const *g,
+                                        const char *const *names)
 {
     if (!path || nfields < 1 || !g || !names)
         return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_write_h5: bad arguments");
@@ -217,6 +217,18 @@ hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const 
     MPI_Bcast(&bad, 1, MPI_INT, 0, PETSC_COMM_WORLD);
     if (bad && !st)
         st = hv__error(HV_ERR_IO, "%s: rank 0 could not complete the file", path);
+    return st;
+}
+
+hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const *g,
+                            const char *const *names)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv_petsc_write_h5_body(path, nfields, g, names);
+    PetscPopErrorHandler();
     return st;
 }
 

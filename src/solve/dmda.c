@@ -413,8 +413,9 @@ hv_status hv_dmda_solver_create(hv_dmda_solver **out, DM da, double h, double al
     return hv__dmda_solver_create(out, da, h, alpha, beta, solid, opts, -1);
 }
 
-hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
-                                 Vec solid, const hv_solver_opts *opts, int pc)
+static hv_status hv__dmda_solver_create_body(hv_dmda_solver **out, DM da, double h, double alpha,
+                                             double beta, Vec solid, const hv_solver_opts *opts,
+                                             int pc)
 {
     if (!out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_solver_create: out is NULL");
@@ -498,7 +499,7 @@ hv_status hv__dmda_solve(hv_dmda_solver *s, Vec u, hv_solve_info *info)
 
 Vec hv__dmda_rhs(hv_dmda_solver *s) { return s->b; }
 
-hv_status hv_dmda_solver_solve(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
+static hv_status hv_dmda_solver_solve_body(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
 {
     if (!s || !f || !u)
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_solver_solve: bad arguments");
@@ -532,6 +533,29 @@ void hv_dmda_solver_destroy(hv_dmda_solver **sp)
     free(s->solid);
     free(s);
     *sp = NULL;
+}
+
+hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
+                                 Vec solid, const hv_solver_opts *opts, int pc)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv__dmda_solver_create_body(out, da, h, alpha, beta, solid, opts, pc);
+    PetscPopErrorHandler();
+    return st;
+}
+
+hv_status hv_dmda_solver_solve(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
+{
+    /* PETSc's errors come back as codes here, never printed. */
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = hv_dmda_solver_solve_body(s, f, u, info);
+    PetscPopErrorHandler();
+    return st;
 }
 
 #else /* without PETSc */

@@ -184,7 +184,7 @@ static hv_status null_space(petsc_state *P)
     return HV_OK;
 }
 
-static hv_status petsc_create(void **state, const hv_setup *s)
+static hv_status petsc_create_body(void **state, const hv_setup *s)
 {
     hv_status ist = hv_petsc_init();
     if (ist)
@@ -265,7 +265,7 @@ static void scatter_in(petsc_state *P, const double *f, Vec v)
     VecRestoreArray(v, &a);
 }
 
-static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_info *info)
+static hv_status petsc_solve_body(void *state, const double *f, double *u, hv_solve_info *info)
 {
     petsc_state *P = state;
     const hv_setup *s = P->s;
@@ -323,6 +323,28 @@ static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_i
     if (s->p.alpha == 0)
         hv__project_mean(s, u);
     return HV_OK;
+}
+
+/* PETSc's errors come back as codes, never printed. */
+static hv_status petsc_create(void **state, const hv_setup *s)
+{
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = petsc_create_body(state, s);
+    PetscPopErrorHandler();
+    return st;
+}
+
+/* PETSc's errors come back as codes, never printed. */
+static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_info *info)
+{
+    if (hv_petsc_init())
+        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
+    const hv_status st = petsc_solve_body(state, f, u, info);
+    PetscPopErrorHandler();
+    return st;
 }
 
 const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solve,

@@ -1,7 +1,6 @@
 /* The solver and the extension on a caller's DMDA (petsc.h) under mpirun
  * (make mpi-check runs it on 1 to 4 ranks). Every rank also computes the
- * single-process answer on the whole grid (mg for the solves, fftw box solves
- * for the extension) and compares its own cells:
+ * single-process answer on the whole grid (mg) and compares its own cells:
  *   - solves: heat steps and Neumann Poisson, 2D and 3D, odd sizes, solids
  *     crossing rank boundaries, a box cut in two by a wall (two regions,
  *     labelled across the ranks), to 1e-6 relative; with BoomerAMG, and the
@@ -233,12 +232,12 @@ static void ext_make(ext_data *D, int which, const double c0[3])
     }
 }
 
-/* The single-process answer: fftw box solves on the whole grid. */
+/* The single-process answer: hv_extend_many with mg (the band solve). */
 static int ext_reference(ext_data *D, const hv_extend_opts *o)
 {
     const int n3[3] = {D->n, D->n, D->n};
     hv_extend_opts so = *o;
-    so.backend = HV_BACKEND_FFTW;
+    so.backend = HV_BACKEND_MG;
     hv_extender *e = NULL;
     hv_extend_field f = {3, {D->in[0], D->in[1], D->in[2]}, {D->ref[0], D->ref[1], D->ref[2]}};
     if (hv_extender_create(&e, 3, n3, 1.0 / D->n, NULL, &so) || hv_extend_many(e, D->phi, 1, &f, NULL)) {
@@ -304,9 +303,9 @@ static int ext_check(hv_dmda_extender *X, DM da, ext_data *D, const hv_extend_op
     return ok;
 }
 
-static int extend_cases(void)
+static int extend_cases(int n, int split)
 {
-    ext_data D = {40, NULL, {NULL}, {NULL}, {NULL}};
+    ext_data D = {n, NULL, {NULL}, {NULL}, {NULL}};
     const size_t count = (size_t)D.n * D.n * D.n;
     D.phi = malloc(count * sizeof *D.phi);
     for (int a = 0; a < 3; a++) {
@@ -319,25 +318,43 @@ static int extend_cases(void)
     o.out_band = 3;
     const int n3[3] = {D.n, D.n, D.n};
     DM da = make_da(3, n3);
+    if (split) {
+        /* Boxes split along x and y only, wide enough for the band solve. */
+        const int P = hv_mpi_size(), mx = P == 4 ? 2 : P, my = P == 4 ? 2 : 1;
+        DMDestroy(&da);
+        DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                     DMDA_STENCIL_STAR, n, n, n, mx, my, 1, 1, 1, NULL, NULL, NULL, &da);
+        DMSetUp(da);
+    }
     hv_dmda_extender *X = NULL;
-    int ok = 1;
+    int ok = 1, band0 = 0;
     if (hv_dmda_extender_create(&X, da, 1.0 / D.n, &o)) {
         fprintf(stderr, "mpi_dmda: extender: %s\n", hv_last_error());
         return 0;
     }
+    const int ghost = hv_dmda_extender_ghost(X, &band0);
+    if (rank == 0)
+        printf("  extension on a DMDA, %d^3: ghost layer %d cells, level 0 %s\n", n, ghost,
+               band0 ? "on each rank's band" : "over all ranks");
+    if (split)
+        ok &= report(band0, "extension on a DMDA, %d^3 split along x and y: the band solve on "
+                            "each box",
+                     n);
     static const struct {
         const char *name;
         int which;
         double c[3];
-    } cases[] = {{"sphere 40^3", SPHERE, {0.5, 0.5, 0.5}},
-                 {"torus 40^3", TORUS, {0.5, 0.5, 0.5}},
+    } cases[] = {{"sphere", SPHERE, {0.5, 0.5, 0.5}},
+                 {"torus", TORUS, {0.5, 0.5, 0.5}},
                  {"sphere moved, same extender", SPHERE, {0.45, 0.53, 0.56}}};
-    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    for (size_t i = 0; i < (split ? 2u : 3u); i++) {
         ext_make(&D, cases[i].which, cases[i].c);
         ok &= ext_reference(&D, &o);
         ok &= ext_check(X, da, &D, &o, cases[i].name);
     }
 
+    if (split)
+        goto done;
     /* A NaN on the last rank's first cell: every rank fails, nothing changes. */
     ext_make(&D, SPHERE, cases[0].c);
     Vec phi, v;
@@ -360,7 +377,7 @@ static int extend_cases(void)
                  hv_mpi_size() - 1, hv_status_str(st), rank);
     VecDestroy(&v);
     VecDestroy(&phi);
-
+done:
     hv_dmda_extender_destroy(&X);
     DMDestroy(&da);
     free(D.phi);
@@ -401,7 +418,8 @@ int main(int argc, char **argv)
             ok &= solve_case(&cases[i]);
     }
     hv_petsc_option("-hv_petsc_pc", "boomeramg");
-    ok &= extend_cases();
+    ok &= extend_cases(40, 0);
+    ok &= extend_cases(90, 1);
     if (rank == 0)
         printf("mpi_dmda: %d ranks, %s\n", hv_mpi_size(), ok ? "all cases passed" : "FAILED");
     hv_petsc_finalize();
