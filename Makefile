@@ -226,12 +226,15 @@ mpi-check: mpi
 	done; \
 	echo "== tests/mpi/pipelines.py: distance and extend on 1 to 4 ranks, HDF5 output"; \
 	$(PYTHON) tests/mpi/pipelines.py $(MPI_BUILD)/heatvox env $(MPI_RUN) || bad="$$bad pipelines"; \
-	echo "== mpirun -n 3 advect_dmda"; \
-	$(MPI_RUN) -n 3 $(MPI_BUILD)/advect_dmda --n 40 --steps 30 || bad="$$bad advect_dmda"; \
-	echo "== mpirun -n 2 heatvox bench solve --backend petsc"; \
-	$(MPI_RUN) -n 2 $(MPI_BUILD)/heatvox bench solve --n 32 --backend petsc --obstacle baffles || bad="$$bad bench"; \
+	echo "== README.md: the Distributed runs examples"; \
+	mkdir -p out; \
+	sed -n '/^## Distributed runs/,/^## Library/p' README.md | \
+	  awk '/^```sh/{f=1;next} /^```/{f=0} f' | \
+	  sed -e 's|^mpirun --oversubscribe |$(MPI_RUN) |' -e '/^make mpi$$/d' -e '/^export /d' > $(MPI_BUILD)/readme_mpi.sh; \
+	bash -e -x $(MPI_BUILD)/readme_mpi.sh > $(MPI_BUILD)/readme_mpi.log 2>&1 || \
+	  { tail -30 $(MPI_BUILD)/readme_mpi.log; bad="$$bad README"; }; \
 	[ -z "$$bad" ] || { echo "mpi-check: failing:$$bad"; exit 1; }; \
-	echo "mpi-check: mpi_solve, mpi_dmda and the pipelines on 1 to 4 ranks, advect_dmda on 3 and bench solve on 2 passed"
+	echo "mpi-check: mpi_solve, mpi_dmda and the pipelines on 1 to 4 ranks, and the README's distributed examples passed"
 # The example simulation (tools/examples/advect_dmda.c), built as a user
 # would: the installed-style include path and the library.
 $(MPI_BUILD)/advect_dmda: tools/examples/advect_dmda.c $(LIB_A) | $(STAMP)

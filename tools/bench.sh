@@ -103,6 +103,20 @@ if [ -x "$mpi_hv" ]; then
           mpirun --oversubscribe -n $r "$mpi_hv" bench solve --n $n --poisson --backend petsc --obstacle $o --tol 1e-10
       done
     done
+    # The other preconditioners on the thin walls.
+    for pc in pfmg gamg; do
+      for p in "--t-scale 4" "--poisson"; do
+        OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+          mpirun --oversubscribe -n $r "$mpi_hv" bench solve --n 128 $p --backend petsc --pc $pc --obstacle baffles --tol 1e-10 --repeat 1
+      done
+    done
+    # The extension on a DMDA and the distance, against one process in the same run.
+    for n in 128 256; do
+      OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+        mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" extend --n $n
+    done
+    OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+      mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" distance --n 128
   done
 else
   echo "bench: no $mpi_hv (make mpi), petsc rows skipped" >&2

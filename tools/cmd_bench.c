@@ -142,7 +142,7 @@ static int usage_solve(FILE *out)
             "usage: heatvox bench solve --n N [--dim 2|3] [--t-scale K] [--poisson]\n"
             "                           [--backend mg|fftw|opencl|petsc]\n"
             "                           [--smoother rbgs|jacobi|chebyshev] [--pc "
-            "boomeramg|pfmg|gamg]\n"
+            "auto|boomeramg|pfmg|gamg]\n"
             "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
             "                           [--obstacle none|ball|baffles]\n"
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
@@ -159,7 +159,8 @@ static int usage_solve(FILE *out)
             "--backend petsc (builds made with make mpi) runs under mpirun: every rank solves,\n"
             "rank 0 prints, with ranks, and ref \"mg\" (the same grid on one process, the same\n"
             "run: ref_seconds, ref_iterations); --pc its preconditioner (smoother in the JSON):\n"
-            "hypre's BoomerAMG (default) or PFMG (3D), or PETSc's GAMG.\n"
+            "auto (default: hypre's PFMG in 3D, BoomerAMG in 2D), hypre's BoomerAMG or PFMG\n"
+            "(3D), or PETSc's GAMG.\n"
             "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
             "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
             "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
@@ -174,7 +175,7 @@ static int bench_solve(int argc, char **argv)
     hv_backend backend = HV_BACKEND_MG;
     hv_smoother smoother = HV_SMOOTH_RBGS;
     int smoother_set = 0;
-    const char *pc = "boomeramg"; /* backend petsc: its preconditioner */
+    const char *pc = "auto"; /* backend petsc: its preconditioner */
     const char *wisdom = NULL, *obstacle = "none";
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -224,9 +225,10 @@ static int bench_solve(int argc, char **argv)
             else
                 return cli_usage_error("bench solve", "unknown smoother '%s'", v);
         } else if (!strcmp(a, "--pc")) {
-            if (strcmp(v, "boomeramg") && strcmp(v, "pfmg") && strcmp(v, "gamg"))
+            if (strcmp(v, "auto") && strcmp(v, "boomeramg") && strcmp(v, "pfmg") &&
+                strcmp(v, "gamg"))
                 return cli_usage_error("bench solve",
-                                       "--pc must be boomeramg, pfmg or gamg, got '%s'", v);
+                                       "--pc must be auto, boomeramg, pfmg or gamg, got '%s'", v);
             pc = v;
         } else if (!strcmp(a, "--wisdom")) {
             wisdom = v;
@@ -243,7 +245,7 @@ static int bench_solve(int argc, char **argv)
         return cli_usage_error("bench solve", "--n is required");
     if (backend == HV_BACKEND_OPENCL && !smoother_set)
         smoother = HV_SMOOTH_CHEBYSHEV;
-    if (strcmp(pc, "boomeramg") && backend != HV_BACKEND_PETSC)
+    if (strcmp(pc, "auto") && backend != HV_BACKEND_PETSC)
         return cli_usage_error("bench solve", "--pc needs --backend petsc");
     if (backend == HV_BACKEND_PETSC) {
         hv_status pst = hv_petsc_option("-hv_petsc_pc", pc);
@@ -343,7 +345,9 @@ static int bench_solve(int argc, char **argv)
         "\"obstacle\":\"%s\"",
         n, ranks, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale,
         hv_backend_name(backend),
-        backend == HV_BACKEND_PETSC    ? pc
+        backend == HV_BACKEND_PETSC    ? (strcmp(pc, "auto") ? pc
+                                          : dim == 3         ? "auto:pfmg" /* one fluid region */
+                                                             : "auto:boomeramg")
         : smoother == HV_SMOOTH_RBGS   ? "rbgs"
         : smoother == HV_SMOOTH_JACOBI ? "jacobi"
                                        : "chebyshev",

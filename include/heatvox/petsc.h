@@ -3,7 +3,7 @@
  * builds made with `make mpi`. Programs run SPMD under mpirun: every rank
  * makes the same hv_solver calls with the same whole grid, the solve is
  * distributed over the ranks of PETSC_COMM_WORLD (a DMDA box per rank, CG with
- * hypre's BoomerAMG), and every rank gets the whole solution. The first petsc
+ * hypre's PFMG or BoomerAMG), and every rank gets the whole solution. The first petsc
  * solver initializes PETSc (and MPI) when the program has not;
  * hv_petsc_finalize ends them before the program exits. In builds without
  * PETSc these functions exist, hv_petsc_available returns 0 and the backend's
@@ -32,11 +32,13 @@ HV_API hv_status hv_petsc_init(void);
 
 /* Sets a PETSc option (as -name value on PETSc's command line; value may be
  * NULL), starting PETSc if it is not up. heatvox's own option:
- *   -hv_petsc_pc boomeramg|pfmg|gamg   the preconditioner of the petsc
- *        backend and of the solvers on a DMDA: hypre's BoomerAMG (the
- *        default), hypre's structured PFMG (3D grids; it breaks down on
- *        Poisson problems with more than one fluid region: the solve then
- *        reports HV_STOP_STAGNATED) or PETSc's GAMG;
+ *   -hv_petsc_pc auto|boomeramg|pfmg|gamg   the preconditioner of the
+ *        petsc backend and of the solvers on a DMDA: auto (the default)
+ *        takes hypre's structured PFMG on 3D grids, the fastest on thin
+ *        walls, except for Poisson problems with more than one fluid region,
+ *        where PFMG breaks down (the solve reports HV_STOP_STAGNATED), and on
+ *        2D grids, which take hypre's BoomerAMG; or BoomerAMG, PFMG or
+ *        PETSc's GAMG;
  * PETSc's own (-ksp_*, -pc_hypre_*, -pc_gamg_*) tune them further. Read when
  * a solver is created. HV_ERR_UNSUPPORTED without PETSc. */
 HV_API hv_status hv_petsc_option(const char *name, const char *value);
@@ -85,7 +87,8 @@ typedef struct _p_Vec *Vec;
  * non-zero = solid; read once, at create), whose rows are the identity. For
  * alpha = 0 the null space is one constant per connected fluid region,
  * labelled across the ranks at create (the solution has zero mean on each).
- * Conjugate gradients preconditioned by hypre's BoomerAMG, to opts->tol (the
+ * Conjugate gradients preconditioned by hypre's PFMG or BoomerAMG
+ * (-hv_petsc_pc, hv_petsc_option), to opts->tol (the
  * true residual relative to ||f||) within opts->max_iter iterations; the
  * other fields of opts are ignored; NULL = the defaults. The matrix, the
  * preconditioner and the work vectors are made here and reused by every

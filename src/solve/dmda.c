@@ -51,22 +51,28 @@ static hv_status fail(PetscErrorCode ierr, const char *what)
             return fail(ierr_, what);                                                              \
     } while (0)
 
-hv_status hv__petsc_pc_kind(int dim, int *kind)
+hv_status hv__petsc_pc_kind(int dim, double alpha, int regions, int *kind)
 {
-    char name[32] = "boomeramg";
+    char name[32] = "auto";
     PetscBool set = PETSC_FALSE;
     CHK(PetscOptionsGetString(NULL, NULL, "-hv_petsc_pc", name, sizeof name, &set),
         "PetscOptionsGetString");
-    if (!strcmp(name, "boomeramg"))
+    if (!strcmp(name, "auto"))
+        /* The fastest where it works (docs/PERFORMANCE.md): PFMG in 3D, but
+         * not on a Poisson problem with several regions. */
+        *kind = dim == 3 && (alpha > 0 || regions <= 1) ? HV_PC_PFMG : HV_PC_BOOMERAMG;
+    else if (!strcmp(name, "boomeramg"))
         *kind = HV_PC_BOOMERAMG;
     else if (!strcmp(name, "pfmg"))
         *kind = HV_PC_PFMG;
     else if (!strcmp(name, "gamg"))
         *kind = HV_PC_GAMG;
     else
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "petsc: -hv_petsc_pc %s: the preconditioners are boomeramg, pfmg and gamg",
-                         name);
+        return hv__error(
+            HV_ERR_INVALID_ARG,
+            "petsc: -hv_petsc_pc %s: the preconditioners are auto, boomeramg, pfmg and "
+            "gamg",
+            name);
     if (*kind == HV_PC_PFMG && dim != 3)
         return hv__error(HV_ERR_INVALID_ARG,
                          "petsc: -hv_petsc_pc pfmg: hypre's structured matrices need a 3D grid");
@@ -333,8 +339,6 @@ static hv_status regions(hv_dmda_solver *s, int dim)
         return HV_OK; /* all solid: the identity */
     CHK(MatNullSpaceCreate(comm, PETSC_FALSE, s->regions, s->basis, &s->null),
         "MatNullSpaceCreate");
-    CHK(MatSetNullSpace(s->A, s->null), "MatSetNullSpace");
-    CHK(MatSetTransposeNullSpace(s->A, s->null), "MatSetTransposeNullSpace");
     return HV_OK;
 }
 
@@ -348,11 +352,6 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     s->tol = o->tol;
     s->max_iter = o->max_iter;
     s->nonzero_guess = o->nonzero_guess;
-    if (pck < 0 && (st = hv__petsc_pc_kind(dim, &pck)))
-        return st;
-    if (pck == HV_PC_PFMG)
-        CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
-    CHK(DMCreateMatrix(s->da, &s->A), "DMCreateMatrix");
     CHK(DMCreateGlobalVector(s->da, &s->b), "DMCreateGlobalVector");
     CHK(VecDuplicate(s->b, &s->r), "VecDuplicate");
     PetscInt nown;
@@ -375,6 +374,16 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
         for (size_t c = 0; c < s->nown; c++)
             s->solid[c] = a[c] != 0;
         VecRestoreArrayRead(solid, &a);
+    }
+    /* The regions first: the preconditioner depends on how many there are. */
+    if (alpha == 0 && (st = regions(s, dim)))
+        return st;
+    if (pck < 0 && (st = hv__petsc_pc_kind(dim, alpha, s->regions, &pck)))
+        return st;
+    if (pck == HV_PC_PFMG)
+        CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
+    CHK(DMCreateMatrix(s->da, &s->A), "DMCreateMatrix");
+    if (solid) {
         /* Its ghost layer, for the neighbours' walls. */
         CHK(DMCreateLocalVector(s->da, &sl), "DMCreateLocalVector");
         CHK(VecCopy(solid, s->r), "VecCopy");
@@ -387,10 +396,12 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
         VecRestoreArrayRead(sl, &sla);
         VecDestroy(&sl);
     }
-    if (!st && alpha == 0)
-        st = regions(s, dim);
     if (st)
         return st;
+    if (s->null) {
+        CHK(MatSetNullSpace(s->A, s->null), "MatSetNullSpace");
+        CHK(MatSetTransposeNullSpace(s->A, s->null), "MatSetTransposeNullSpace");
+    }
     MPI_Comm comm = PetscObjectComm((PetscObject)s->da);
     PC pc;
     CHK(KSPCreate(comm, &s->ksp), "KSPCreate");

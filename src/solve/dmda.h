@@ -8,11 +8,12 @@
 #ifdef HV_HAVE_PETSC
 #include <petscksp.h>
 
-/* The preconditioner, from the PETSc option -hv_petsc_pc (petsc.h):
- * BoomerAMG (the default), hypre's PFMG (3D; the matrix must then be
- * MATHYPRESTRUCT) or PETSc's GAMG. */
+/* The preconditioner, from the PETSc option -hv_petsc_pc (petsc.h): auto
+ * (the default: hypre's PFMG in 3D unless alpha = 0 and the fluid has
+ * several regions, else BoomerAMG), BoomerAMG, PFMG (3D; the matrix must
+ * then be MATHYPRESTRUCT) or PETSc's GAMG. */
 enum { HV_PC_BOOMERAMG, HV_PC_PFMG, HV_PC_GAMG, HV_PC_JACOBI };
-hv_status hv__petsc_pc_kind(int dim, int *kind);
+hv_status hv__petsc_pc_kind(int dim, double alpha, int regions, int *kind);
 hv_status hv__petsc_pc_set(PC pc, int kind);
 
 /* A DMDA with the layout of user's (sizes, ownership ranges) and one degree

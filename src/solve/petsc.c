@@ -3,8 +3,8 @@
  * HV_HAVE_PETSC (make mpi). Every rank calls the front end with the same
  * whole grid (the programs run SPMD): each rank owns a box of a DMDA (star
  * stencil, one ghost layer), assembles its rows and takes its part of the
- * right-hand side; conjugate gradients preconditioned by hypre's BoomerAMG
- * (PCHYPRE) solve on all ranks together, and every rank gets the whole
+ * right-hand side; conjugate gradients preconditioned by hypre's PFMG or
+ * BoomerAMG (-hv_petsc_pc, dmda.h) solve on all ranks together, and every rank gets the whole
  * solution back. Neumann walls and solid cells are in the rows (a fluid
  * cell's diagonal counts its fluid neighbours; a solid cell's row is the
  * identity); for alpha = 0 the null space is one constant per connected fluid
@@ -205,7 +205,7 @@ static hv_status petsc_create_body(void **state, const hv_setup *s)
                             n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &P->da);
     int pck = HV_PC_BOOMERAMG;
     hv_status st = HV_OK;
-    if (!ierr && (st = hv__petsc_pc_kind(s->p.dim, &pck))) {
+    if (!ierr && (st = hv__petsc_pc_kind(s->p.dim, s->p.alpha, s->nregion, &pck))) {
         petsc_destroy(P);
         *state = NULL;
         return st;

@@ -3,8 +3,9 @@
  * single-process answer on the whole grid (mg) and compares its own cells:
  *   - solves: heat steps and Neumann Poisson, 2D and 3D, odd sizes, solids
  *     crossing rank boundaries, a box cut in two by a wall (two regions,
- *     labelled across the ranks), to 1e-6 relative; with BoomerAMG, and the
- *     3D cases with solids with GAMG and (one region) PFMG too (-hv_petsc_pc);
+ *     labelled across the ranks), to 1e-6 relative; with the automatic choice
+ *     (PFMG in 3D unless Poisson has several regions, else BoomerAMG), and the
+ *     3D cases with solids with BoomerAMG, GAMG and (one region) PFMG too;
  *   - the extension off a sphere and a torus, a sphere moved between two
  *     calls of one extender, to 1e-5 relative on the output band, within 0.02
  *     of the exact extension, the cells outside the band untouched;
@@ -409,15 +410,15 @@ int main(int argc, char **argv)
     /* The other preconditioners (-hv_petsc_pc) on the 3D cases with solids.
      * PFMG breaks down on a Poisson problem with two separate regions (its
      * coarse grids do not see the null space), so not the box cut in two. */
-    static const char *const pcs[] = {"pfmg", "gamg"};
-    for (int q = 0; q < 2; q++) {
+    static const char *const pcs[] = {"boomeramg", "pfmg", "gamg"};
+    for (int q = 0; q < 3; q++) {
         hv_petsc_option("-hv_petsc_pc", pcs[q]);
         if (rank == 0)
             printf("  -hv_petsc_pc %s:\n", pcs[q]);
-        for (size_t i = 3; i < (q ? 6u : 5u); i++)
+        for (size_t i = 3; i < (q == 1 ? 5u : 6u); i++)
             ok &= solve_case(&cases[i]);
     }
-    hv_petsc_option("-hv_petsc_pc", "boomeramg");
+    hv_petsc_option("-hv_petsc_pc", "auto");
     ok &= extend_cases(40, 0);
     ok &= extend_cases(90, 1);
     if (rank == 0)

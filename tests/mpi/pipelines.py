@@ -183,6 +183,16 @@ def main():
         distance_case(tmp, "walls", ["--sources", os.path.join(walls, "sources.txt"),
                                      "--obstacles", os.path.join(walls, "walls.vdb")],
                       (64, 48, 16), 0.0625)
+        # A bad output: every rank fails, the message names the file, nothing is left.
+        bad = os.path.join(tmp, "no-such-dir", "d.h5")
+        r = subprocess.run([*MPIRUN, "-n", "2", HEATVOX, "distance", "--sources", src, *bbox,
+                            "--obstacles", "none", "-o", bad, "--backend", "petsc", "-q"],
+                           capture_output=True, text=True)
+        check(r.returncode != 0 and bad in r.stderr and not os.path.exists(os.path.dirname(bad)),
+              "distance -o into a missing directory, 2 ranks: fails (exit %d) naming the file"
+              % r.returncode)
+        leftovers = [x for x in os.listdir(tmp) if ".tmp-" in x]
+        check(not leftovers, "no temporary files left behind: %s" % leftovers)
         extend_case(tmp, "sphere", sphere)
         extend_case(tmp, "torus", torus)
     if failures:
