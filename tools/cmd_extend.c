@@ -383,16 +383,14 @@ int cmd_extend(int argc, char **argv)
                 ef[q].out[c] = NULL;
             }
         }
-        int n[3];
-        for (int a = 0; a < 3; a++)
-            n[a] = ro.box_hi[a] - ro.box_lo[a] + 1;
-        if ((st = hv_petsc_extend_block(3, n, lsi->voxel_size[0], &o, NULL, nfields, ef, &es)))
+        const int n1[3] = {1, 1, 1}; /* rank 0's block is the block */
+        if ((st = hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, ef, &es)))
             rc = cli_fail(CMD, in, st);
         goto done;
     }
     if ((st = hv_vdb_read_float(in, ls, &ro, &phi, &cls))) {
         rc = cli_fail(CMD, in, st);
-        goto done;
+        goto read_failed;
     }
     for (int q = 0; q < nfields; q++) {
         const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
@@ -401,7 +399,7 @@ int cmd_extend(int argc, char **argv)
                  : hv_vdb_read_float(in, fields[q], &ro, &fin[q][0], NULL);
         if (st) {
             rc = cli_fail(CMD, in, st);
-            goto done;
+            goto read_failed;
         }
         if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
             fprintf(stderr,
@@ -416,7 +414,7 @@ int cmd_extend(int argc, char **argv)
         for (int c = 0; c < ef[q].ncomp; c++) {
             if ((st = hv_grid_create(&fout[q][c], 3, phi->n, phi->h, phi->origin))) {
                 rc = cli_fail(CMD, "allocating outputs", st);
-                goto done;
+                goto read_failed;
             }
             ef[q].in[c] = fin[q][c]->v;
             ef[q].out[c] = fout[q][c]->v;
@@ -435,7 +433,7 @@ int cmd_extend(int argc, char **argv)
         rc = cli_fail(CMD, in, st);
         goto done;
     }
-    if (es.weak_cells && cli_verbose >= 0)
+    if (es.weak_cells && !spread && cli_verbose >= 0)
         fprintf(stderr,
                 "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
                 "their values are unreliable\n",
@@ -500,14 +498,31 @@ int cmd_extend(int argc, char **argv)
         rc = cli_fail(CMD, out, st);
         goto done;
     }
-    if (cli_verbose >= 0)
-        printf("{\"command\":\"extend\",\"path\":\"%s\",\"grid\":[%d,%d,%d],\"h\":%g,"
+    if (cli_verbose >= 0 && spread) /* the cell counts would be rank 0's box's */
+        printf("{\"command\":\"extend\",\"path\":\"dense-distributed\",\"ranks\":%d,"
+               "\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":%d,\"solves\":%d,\"levels\":%d,"
+               "\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
+               hv_mpi_size(), phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves,
+               es.levels, es.t_total, hv_now() - t_start);
+    else if (cli_verbose >= 0)
+        printf("{\"command\":\"extend\",\"path\":\"dense\",\"grid\":[%d,%d,%d],\"h\":%g,"
                "\"fields\":%d,\"solves\":%d,"
                "\"levels\":%d,\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
                "\"weak_cells\":%zu,\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
-               spread ? "dense-distributed" : "dense", phi->n[0], phi->n[1], phi->n[2], phi->h,
-               nfields, es.solves, es.levels, es.source_cells, es.cp_cells, es.ratio_cells,
-               es.weak_cells, es.t_total, hv_now() - t_start);
+               phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves, es.levels,
+               es.source_cells, es.cp_cells, es.ratio_cells, es.weak_cells, es.t_total,
+               hv_now() - t_start);
+    goto done;
+read_failed:
+    if (spread) { /* the other ranks wait in hv_petsc_extend_block: release them */
+        hv_extend_field none[MAX_FIELDS];
+        const int n1[3] = {1, 1, 1};
+        for (int q = 0; q < nfields; q++) {
+            memset(&none[q], 0, sizeof none[q]);
+            none[q].ncomp = is_vector(find_grid(info, count, fields[q])->value_type) ? 3 : 1;
+        }
+        hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, none, &es);
+    }
 done:
     hv_vdb_writer_destroy(&w);
     hv_extender_destroy(&e);

@@ -40,7 +40,9 @@ HV_API hv_status hv_petsc_init(void);
  *        2D grids, which take hypre's BoomerAMG; or BoomerAMG, PFMG or
  *        PETSc's GAMG;
  * PETSc's own (-ksp_*, -pc_hypre_*, -pc_gamg_*) tune them further. Read when
- * a solver is created. HV_ERR_UNSUPPORTED without PETSc. */
+ * a solver is created. PETSc's options are per process: set them alike on
+ * every rank (ranks that chose different preconditioners would fail or
+ * hang). HV_ERR_UNSUPPORTED without PETSc. */
 HV_API hv_status hv_petsc_option(const char *name, const char *value);
 
 /* Ends PETSc (and MPI, when PETSc started it) if a petsc solver started it
@@ -108,12 +110,16 @@ HV_API void hv_dmda_solver_destroy(hv_dmda_solver **s);
 
 /* The extension off a level set (hv_extend_many, heat.h) on the DMDA's
  * cells, without gathering the grid: each rank classifies and evaluates its
- * own box with a ghost layer as wide as the closest points reach, the
- * diffusion levels are solved over all ranks on the whole grid, and the
- * solutions are exchanged into the ghost layers. opts->out_band must be > 0
- * (the cells written: |phi| < out_band h; the ghost layer is
- * ceil(1.5 out_band) + 2 cells); there are no obstacles; opts->backend is
- * ignored. The solvers of the levels are made on first use and kept. */
+ * own box with a ghost layer as wide as the closest points reach; the first
+ * diffusion level runs on each rank's box where the boxes are wide enough
+ * for the ghost layer to hold all it depends on, and otherwise, like later
+ * levels, over all ranks on the whole grid, its solutions exchanged into the
+ * ghost layers. opts->out_band must be > 0 (the cells written: |phi| <
+ * out_band h); there are no obstacles; opts->backend is ignored. The ghost
+ * layer (hv_dmda_extender_ghost) is ceil(1.5 out_band) + 2 cells, or the
+ * wider layer of the first level on each box (29 cells at out_band 3); every
+ * rank's box must be at least that wide. The solvers of the levels are made
+ * on first use and kept. */
 typedef struct hv_dmda_extender hv_dmda_extender;
 typedef struct hv_dmda_field {
     int ncomp; /* 1 (scalar) to 3 (vector) */
@@ -147,8 +153,11 @@ HV_API int hv_dmda_extender_ghost(const hv_dmda_extender *e, int *band0);
  * scattered to the ranks' boxes, each rank extends its box (hv_dmda_extend),
  * and the results are gathered into rank 0's outputs: the extended values
  * where |phi| < opts->out_band h (> 0 required), opts->background elsewhere.
- * Only rank 0 passes arrays (phi, f[i].in, f[i].out); the other ranks pass
- * NULL for them. Collective; the same status on every rank. */
+ * Only rank 0 passes arrays (phi, f[i].in, f[i].out), and its n and h are
+ * the block's; the other ranks pass NULL arrays. Rank 0 passing phi = NULL
+ * (it could not read the block) makes every rank return an error. stats:
+ * levels, solves and relres are the run's; the cell counts are rank 0's box
+ * with its ghost layer. Collective; the same status on every rank. */
 HV_API hv_status hv_petsc_extend_block(int dim, const int n[3], double h,
                                        const hv_extend_opts *opts, const float *phi, int nfields,
                                        const hv_extend_field *f, hv_extend_stats *stats);

@@ -321,8 +321,21 @@ static hv_status hv_dmda_extend_body(hv_dmda_extender *X, Vec phi, int nfields,
                                  "hv_dmda_extend: field %d component %d has no vector", i, c);
         ncomp += (size_t)fields[i].ncomp;
     }
-    float *work = malloc((1 + 2 * ncomp) * X->nloc * sizeof *work);
-    hv_status st = work ? HV_OK : hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    /* The vectors must be global vectors of the DMDA on every rank. */
+    hv_status st = HV_OK;
+    PetscInt nl = -1;
+    VecGetLocalSize(phi, &nl);
+    for (int i = 0; i < nfields && (size_t)nl == X->nown; i++)
+        for (int c = 0; c < fields[i].ncomp && (size_t)nl == X->nown; c++)
+            VecGetLocalSize(fields[i].v[c], &nl);
+    if ((size_t)nl != X->nown)
+        st = hv__error(HV_ERR_INVALID_ARG,
+                       "hv_dmda_extend: phi and the fields must be global vectors of the "
+                       "extender's DMDA (%d cells on this rank, not %d)",
+                       (int)nl, (int)X->nown);
+    float *work = st ? NULL : malloc((1 + 2 * ncomp) * X->nloc * sizeof *work);
+    if (!st && !work)
+        st = hv__error(HV_ERR_NOMEM, "extend: out of memory");
     /* Every rank must reach the collective calls, or none. */
     if (dist_sum(X, st != HV_OK)) {
         free(work);
@@ -459,15 +472,28 @@ static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
     hv_status st = hv_petsc_init();
     if (st)
         return st;
+    /* Rank 0's block is the block: its shape and voxel size go to every rank,
+     * and with them whether rank 0 has one (no level set: it failed to read
+     * it, and every rank returns). */
     int rank = 0;
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-    if (!rank && !phi)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: rank 0 passes no level set");
-    block_io B = {NULL, NULL, NULL, NULL, (size_t)n[0] * n[1] * (dim == 3 ? n[2] : 1)};
+    double hdr[5] = {phi != NULL, n[0], n[1], n[2], h};
+    MPI_Bcast(hdr, 5, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    if (!hdr[0])
+        return rank ? hv__error(HV_ERR_INVALID_ARG, "extend: rank 0 has no block to extend")
+                    : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: no level set");
+    const int nb[3] = {(int)hdr[1], (int)hdr[2], (int)hdr[3]};
+    h = hdr[4];
+    block_io B = {NULL, NULL, NULL, NULL, (size_t)nb[0] * nb[1] * (dim == 3 ? nb[2] : 1)};
     Vec *v = calloc((size_t)ncomp, sizeof *v);
-    if (!v)
-        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
-    st = extend_block(&B, dim, n, h, opts, rank ? NULL : phi, nfields, f, stats, v);
+    st = v ? HV_OK : hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    int bad = st != HV_OK, anybad = 0;
+    MPI_Allreduce(&bad, &anybad, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+    if (anybad) {
+        free(v);
+        return st ? st : hv__error(HV_ERR_NOMEM, "extend: out of memory on another rank");
+    }
+    st = extend_block(&B, dim, nb, h, opts, rank ? NULL : phi, nfields, f, stats, v);
     for (int q = 0; q < ncomp; q++)
         VecDestroy(&v[q]);
     free(v);

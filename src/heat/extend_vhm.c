@@ -156,6 +156,15 @@ static size_t band_box_cells(const hv_extender *e, const int bn[3])
     return (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1);
 }
 
+/* Distributed: st, or when another rank failed, an error saying so; every
+ * rank calls it at the same points (not distributed: st). */
+static hv_status agree(const hv_extend_dist *D, hv_status st)
+{
+    if (D && D->sum(D->user, st != HV_OK) && !st)
+        return hv__error(HV_ERR_NUMERIC, "extend: another rank's part of the grid failed");
+    return st;
+}
+
 /* Distributed: the output cells left on this rank's own cells, over all ranks. */
 static size_t left_everywhere(const hv_extender *e, const hv_extend_dist *D)
 {
@@ -210,8 +219,10 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         S->t_total = hv_now() - t_start;
         return st;
     }
-    if ((st = dense_arrays(e)))
-        return st;
+    /* Distributed: a rank that fails tells the others before the next
+     * collective call, and every rank returns (agree). */
+    const hv_extend_dist *D = e->dist;
+    st = dense_arrays(e);
     double t0 = hv_now();
     /* The band solve (short times, no obstacles; CPU backends only: an explicit
      * fftw or opencl backend gets its own solver): its cells start from the
@@ -219,22 +230,24 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     hv_extend_band band;
     memset(&band, 0, sizeof band);
     uint8_t *need = NULL;
-    if (hv__extend_band_allowed(e) && (!e->dist || e->dist->band0) &&
-        (e->bneed || (e->bneed = hv_malloc(e->count))))
-        need = e->bneed;
+    if (!st && hv__extend_band_allowed(e) && (!D || D->band0)) {
+        if (e->bneed || (e->bneed = hv_malloc(e->count)))
+            need = e->bneed;
+        else if (D) /* its band solve is every rank's level 0 */
+            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+    }
 
     /* One pass over the grid: the weights, the checks, where each output cell
      * is read, the boxes, the band solve's cells. */
-    if (!e->pending && !(e->pending = hv_malloc(e->count)))
-        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
-    size_t nsrc, npend;
+    if (!st && !e->pending && !(e->pending = hv_malloc(e->count)))
+        st = hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    size_t nsrc = 0, npend = 0;
     ibox band_box, ratio_box;
-    st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box);
-    /* Distributed: every rank stops when one does, and the counts are global. */
-    const hv_extend_dist *D = e->dist;
-    if (D && D->sum(D->user, st != HV_OK) && !st)
-        st = hv__error(HV_ERR_NUMERIC, "extend: another rank's part of the grid failed");
-    if (st)
+    if (!st)
+        st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box);
+    if (!st)
+        st = ensure_solutions(e, nrhs);
+    if ((st = agree(D, st)))
         return st;
     S->source_cells = nsrc;
     size_t npend_all = D ? left_everywhere(e, D) : npend;
@@ -243,8 +256,6 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
                          "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
                          "zero crossing in the grid, or the band is too thin)",
                          e->o.band * e->h);
-    if ((st = ensure_solutions(e, nrhs)))
-        return st;
     S->t_weights = hv_now() - t0;
 
     /* The background, on the cells no level will write: runs of each row. */
@@ -258,13 +269,13 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
         band.need = need;
         int built = hv__extend_band_build(e, &band, band_box_cells(e, bn), nrhs, e->o.t_scale);
-        if (built < 0) {
-            hv__extend_band_free(&band);
-            return hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
-        }
-        if (!built)
+        if (built < 0)
+            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+        if (built <= 0)
             hv__extend_band_free(&band);
     }
+    if ((st = agree(D, st)))
+        return st;
     S->t_solve = hv_now() - t0;
 
     /* With an output band, the levels stop at the first that reaches across it. */
@@ -306,7 +317,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
             thr = 0;
             st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S) : HV_OK;
             thr = D->max(D->user, thr);
-            if (st)
+            if ((st = agree(D, st)))
                 break;
         } else if ((st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
                          : D     ? D->solve(D->user, e, l, nrhs, nfields, f, &thr, S)

@@ -12,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #ifdef HV_HAVE_PETSC
 #include <petscdmda.h>
@@ -176,6 +177,9 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
         if (!g[f] || !g[f]->v || !names[f] || !names[f][0] || strlen(names[f]) > 200 ||
             strpbrk(names[f], "/<>&\"'"))
             return hv__error(HV_ERR_INVALID_ARG, "%s: field %d has no grid or a bad name", path, f);
+        for (int q = 0; q < f; q++)
+            if (!strcmp(names[q], names[f]))
+                return hv__error(HV_ERR_INVALID_ARG, "%s: two fields named '%s'", path, names[f]);
         if (g[f]->dim != g[0]->dim || memcmp(g[f]->n, g[0]->n, sizeof g[0]->n) ||
             g[f]->h != g[0]->h || memcmp(g[f]->origin, g[0]->origin, sizeof g[0]->origin))
             return hv__error(HV_ERR_INVALID_ARG, "%s: field '%s' is on another block than '%s'",
@@ -191,8 +195,13 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
     int rank = 0;
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     int ok = 1;
-    if (!rank)
-        ok = !hv_tmp_name(path, tmp, sizeof tmp) && !hv_tmp_name(xmf, xtmp, sizeof xtmp);
+    if (!rank) {
+        ok = !hv_tmp_name(path, tmp, sizeof tmp);
+        if (ok && hv_tmp_name(xmf, xtmp, sizeof xtmp)) {
+            hv_tmp_discard(tmp);
+            ok = 0;
+        }
+    }
     MPI_Bcast(&ok, 1, MPI_INT, 0, PETSC_COMM_WORLD);
     if (!ok)
         return rank ? hv__error(HV_ERR_IO, "%s: rank 0 could not name a temporary", path)
@@ -203,12 +212,19 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
     int fail = st != HV_OK;
     MPI_Allreduce(MPI_IN_PLACE, &fail, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
     if (!rank) {
+        /* The sidecar first: if the data file's rename then fails, the
+         * sidecar is removed again, and neither is left. */
+        int xmf_in_place = 0;
         if (!fail && !(st = write_xmf(xtmp, path, nfields, g[0], names)) &&
-            !(st = hv_tmp_commit(tmp, path)))
-            st = hv_tmp_commit(xtmp, xmf);
+            !(st = hv_tmp_commit(xtmp, xmf))) {
+            xmf_in_place = 1;
+            if ((st = hv_tmp_commit(tmp, path)))
+                unlink(xmf);
+        }
         if (fail || st) {
             hv_tmp_discard(tmp);
-            hv_tmp_discard(xtmp);
+            if (!xmf_in_place)
+                hv_tmp_discard(xtmp);
             if (!st)
                 st = hv__error(HV_ERR_IO, "%s: another rank failed to write its part", path);
         }

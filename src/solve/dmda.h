@@ -8,6 +8,10 @@
 #ifdef HV_HAVE_PETSC
 #include <petscksp.h>
 
+/* st, or an error when st failed on another rank of da's communicator
+ * (collective: every rank calls it at the same point). */
+hv_status hv__petsc_agree(DM da, hv_status st);
+
 /* The preconditioner, from the PETSc option -hv_petsc_pc (petsc.h): auto
  * (the default: hypre's PFMG in 3D unless alpha = 0 and the fluid has
  * several regions, else BoomerAMG), BoomerAMG, PFMG (3D; the matrix must

@@ -31,6 +31,7 @@ typedef struct {
     Mat A;
     KSP ksp;
     Vec b, x, all;     /* right-hand side, solution (distributed), whole solution per rank */
+    Vec r;             /* the true residual, made on the first solve */
     VecScatter toall;  /* x (natural ordering) -> all */
     Vec natural;       /* x in the natural (i fastest) ordering */
     MatNullSpace null; /* alpha = 0 */
@@ -67,6 +68,7 @@ static void petsc_destroy(void *state)
     VecDestroy(&P->natural);
     VecDestroy(&P->b);
     VecDestroy(&P->x);
+    VecDestroy(&P->r);
     KSPDestroy(&P->ksp);
     MatDestroy(&P->A);
     DMDestroy(&P->da);
@@ -297,13 +299,12 @@ static hv_status petsc_solve_body(void *state, const double *f, double *u, hv_so
     for (PetscInt q = 0; q < nh; q++)
         hv_info_push(info, hist[q] / bnorm);
     /* The true residual, as the other backends report it. */
-    Vec r;
     PetscReal rnorm;
-    CHK(VecDuplicate(P->b, &r), "VecDuplicate");
-    CHK(MatMult(P->A, P->x, r), "MatMult");
-    CHK(VecAYPX(r, -1, P->b), "VecAYPX");
-    CHK(VecNorm(r, NORM_2, &rnorm), "VecNorm");
-    VecDestroy(&r);
+    if (!P->r)
+        CHK(VecDuplicate(P->b, &P->r), "VecDuplicate");
+    CHK(MatMult(P->A, P->x, P->r), "MatMult");
+    CHK(VecAYPX(P->r, -1, P->b), "VecAYPX");
+    CHK(VecNorm(P->r, NORM_2, &rnorm), "VecNorm");
     info->relres = rnorm / bnorm;
     info->iterations = (int)its;
     info->reason = why > 0                   ? HV_STOP_CONVERGED
@@ -359,7 +360,9 @@ hv_status hv_petsc_option(const char *name, const char *value)
     hv_status st = hv_petsc_init();
     if (st)
         return st;
+    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
     PetscErrorCode ierr = PetscOptionsSetValue(NULL, name, value);
+    PetscPopErrorHandler();
     return ierr ? petsc_fail(ierr, "PetscOptionsSetValue") : HV_OK;
 }
 

@@ -151,6 +151,29 @@ def extend_case(tmp, label, shape):
         err = np.abs(b - exact)[band].max()
         check(err <= 0.03, "extend %s, %d ranks: max error against the exact extension %.4f "
               "(<= 0.03; single-process mg: %.4f)" % (label, p, err, err_mg))
+    # A NaN in the field where it is read: every rank stops (no hang), exit 1,
+    # the message names the file, nothing written.
+    if label == "sphere":
+        bad_in = os.path.join(tmp, "nan.vdb")
+        vn = v0.copy()
+        i, j, k = np.argwhere(near)[len(np.argwhere(near)) // 2]
+        vn[i, j, k, 0] = np.nan
+        vg2 = vdb.Vec3SGrid()
+        vg2.copyFromArray(vn, ijk=(0, 0, 0))
+        vg2.name, vg2.transform = "v", tr
+        vdb.write(bad_in, grids=[ls, vg2])
+        bad_out = os.path.join(tmp, "nan-out.vdb")
+        try:
+            r = subprocess.run([*MPIRUN, "-n", "3", HEATVOX, "extend", bad_in, "--levelset", "phi",
+                                "--field", "v", "--dense", "--out-band", "4", "-o", bad_out,
+                                "--backend", "petsc", "-q"], capture_output=True, text=True,
+                               timeout=120)
+            ok = r.returncode != 0 and "nan.vdb" in r.stderr and not os.path.exists(bad_out)
+            what = "exit %d" % r.returncode
+        except subprocess.TimeoutExpired:
+            ok, what = False, "hung"
+        check(ok, "extend, 3 ranks, a NaN in the field: every rank fails (%s), names the file, "
+              "writes nothing" % what)
     # Without --out-band every rank extends the whole block, the solves distributed.
     one = os.path.join(tmp, label + "-whole-1.vdb")
     run([*args, "-o", one, "--backend", "petsc", "-q"])

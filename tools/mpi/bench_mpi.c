@@ -10,10 +10,11 @@
  * (hv_dmda_extend; every rank fills only its own cells, so peak_rss_mb, the
  * largest over the ranks, is the distributed run's). seconds: best of R calls
  * after the first (setup_seconds: the extender's creation and the first
- * call, which makes the levels' solvers). ref "mg-one-process": rank 0 alone
- * runs hv_extend_many (the band solve) on the whole grid afterwards, best of
- * R; err and ref_err are the largest errors against the exact extension on
- * the band.
+ * call, which makes the levels' solvers). ref "mg-one-process": rank 0 then
+ * spawns `bench_mpi extend-ref`, a fresh process that runs hv_extend_many
+ * (the band solve) on the whole grid, best of R, with its own peak memory
+ * (ref_peak_rss_mb); err and ref_err are the largest errors against the
+ * exact extension on the band.
  *
  * distance: the heat-method distance from a point in an N^3 box with two
  * baffles (walls one cell thick with gaps at opposite ends), the whole grid
@@ -26,7 +27,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <spawn.h>
 #include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+extern char **environ;
 
 static int rank, ranks;
 
@@ -59,6 +65,104 @@ static double sphere_at(int n, PetscInt i, PetscInt j, PetscInt k, double ex[3],
     for (int a = 0; a < 3; a++)
         in[a] = fabs(r - R) < 1.5 * h ? ex[a] : 5.0;
     return r - R;
+}
+
+/* The single-process reference, run as `bench_mpi extend-ref`: the whole
+ * grid, hv_extend_many with mg (the band solve), best of R calls after the
+ * first; prints "seconds err" on stdout. */
+static int extend_reference(int n, int repeat)
+{
+    const double h = 1.0 / n, ob = 3;
+    const size_t count = (size_t)n * n * n;
+    float *phi = malloc(count * sizeof *phi), *in[3], *out[3];
+    for (int a = 0; a < 3; a++) {
+        in[a] = malloc(count * sizeof **in);
+        out[a] = malloc(count * sizeof **out);
+        if (!phi || !in[a] || !out[a])
+            return 1;
+    }
+    for (size_t c = 0; c < count; c++) {
+        double ex[3], v[3];
+        phi[c] = (float)sphere_at(n, c % n, c / n % n, c / n / n, ex, v);
+        for (int a = 0; a < 3; a++)
+            in[a][c] = (float)v[a];
+    }
+    const int n3[3] = {n, n, n};
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.out_band = ob;
+    o.backend = HV_BACKEND_MG;
+    hv_extender *e = NULL;
+    hv_extend_field ef = {3, {in[0], in[1], in[2]}, {out[0], out[1], out[2]}};
+    double best = INFINITY;
+    if (hv_extender_create(&e, 3, n3, h, NULL, &o)) {
+        fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+        return 1;
+    }
+    for (int r = 0; r <= repeat; r++) {
+        const double t0 = hv_now();
+        if (hv_extend_many(e, phi, 1, &ef, NULL)) {
+            fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+            return 1;
+        }
+        if (r)
+            best = fmin(best, hv_now() - t0);
+    }
+    hv_extender_destroy(&e);
+    double err = 0;
+    for (size_t c = 0; c < count; c++) {
+        double ex[3], v[3];
+        if (fabs(sphere_at(n, c % n, c / n % n, c / n / n, ex, v)) < ob * h)
+            for (int a = 0; a < 3; a++)
+                err = fmax(err, fabs(out[a][c] - ex[a]));
+    }
+    printf("%.6f %.6f\n", best, err);
+    return 0;
+}
+
+typedef struct {
+    double seconds, err, peak_mb;
+} ref_result;
+
+static char self_path[4096];
+
+static int spawn_reference(int n, int repeat, ref_result *R)
+{
+    int fd[2];
+    if (pipe(fd))
+        return 1;
+    char ns[32], rs[32];
+    snprintf(ns, sizeof ns, "%d", n);
+    snprintf(rs, sizeof rs, "%d", repeat);
+    char *const args[] = {self_path, "extend-ref", "--n", ns, "--repeat", rs, NULL};
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, fd[1], 1);
+    posix_spawn_file_actions_addclose(&fa, fd[0]);
+    pid_t pid;
+    const int bad = posix_spawn(&pid, self_path, &fa, NULL, args, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fd[1]);
+    if (bad) {
+        close(fd[0]);
+        fprintf(stderr, "bench_mpi: cannot run %s\n", self_path);
+        return 1;
+    }
+    char buf[256] = {0};
+    size_t got = 0;
+    ssize_t k;
+    while (got + 1 < sizeof buf && (k = read(fd[0], buf + got, sizeof buf - 1 - got)) > 0)
+        got += (size_t)k;
+    close(fd[0]);
+    int status = 0;
+    struct rusage ru;
+    if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status) ||
+        sscanf(buf, "%lf %lf", &R->seconds, &R->err) != 2) {
+        fprintf(stderr, "bench_mpi: the single-process reference failed\n");
+        return 1;
+    }
+    R->peak_mb = ru.ru_maxrss / 1024.0;
+    return 0;
 }
 
 static int bench_extend(int n, int repeat)
@@ -136,64 +240,19 @@ static int bench_extend(int n, int repeat)
     const double peak = peak_mb();
     hv_dmda_extender_destroy(&X);
 
-    /* The reference: rank 0 alone, the whole grid. */
+    /* The reference: one process on the whole grid, spawned by rank 0 (a
+     * fresh process, so that its peak memory is its own). */
     if (rank == 0) {
-        const size_t count = (size_t)n * n * n;
-        float *phi1 = malloc(count * sizeof *phi1), *in1[3], *out1[3];
-        double *ex1[3];
-        for (int a = 0; a < 3; a++) {
-            in1[a] = malloc(count * sizeof **in1);
-            out1[a] = malloc(count * sizeof **out1);
-            ex1[a] = malloc(count * sizeof **ex1);
-        }
-        for (size_t c = 0; c < count; c++) {
-            double ex[3], in[3];
-            phi1[c] = (float)sphere_at(n, c % n, c / n % n, c / n / n, ex, in);
-            for (int a = 0; a < 3; a++) {
-                in1[a][c] = (float)in[a];
-                ex1[a][c] = ex[a];
-            }
-        }
-        const int n3[3] = {n, n, n};
-        hv_extend_opts so = o;
-        so.backend = HV_BACKEND_MG;
-        hv_extender *e = NULL;
-        hv_extend_field ef = {3, {in1[0], in1[1], in1[2]}, {out1[0], out1[1], out1[2]}};
-        double rbest = INFINITY;
-        if (hv_extender_create(&e, 3, n3, h, NULL, &so)) {
-            fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+        ref_result R;
+        if (spawn_reference(n, repeat, &R))
             return 1;
-        }
-        for (int r = 0; r <= repeat; r++) {
-            const double t1 = MPI_Wtime();
-            if (hv_extend_many(e, phi1, 1, &ef, NULL)) {
-                fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
-                return 1;
-            }
-            if (r)
-                rbest = fmin(rbest, MPI_Wtime() - t1);
-        }
-        hv_extender_destroy(&e);
-        double rerr = 0;
-        for (size_t c = 0; c < count; c++)
-            if (fabs(phi1[c]) < ob * h)
-                for (int a = 0; a < 3; a++)
-                    rerr = fmax(rerr, fabs(out1[a][c] - ex1[a][c]));
-        struct rusage ru;
-        getrusage(RUSAGE_SELF, &ru);
         printf("{\"bench\":\"extend-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\",\"out_band\":%g,"
                "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"levels\":%d,\"solves\":%d,\"err\":%.5f,"
                "\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\",\"ref_seconds\":%.4f,"
                "\"ref_err\":%.5f,\"ref_peak_rss_mb\":%.1f,\"ratio\":%.3f}\n",
-               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, rbest, rerr,
-               ru.ru_maxrss / 1024.0, best / rbest);
+               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, R.seconds, R.err,
+               R.peak_mb, best / R.seconds);
         fflush(stdout);
-        free(phi1);
-        for (int a = 0; a < 3; a++) {
-            free(in1[a]);
-            free(out1[a]);
-            free(ex1[a]);
-        }
     }
     for (int a = 0; a < 3; a++) {
         VecDestroy(&v[a]);
@@ -272,9 +331,16 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--repeat"))
             repeat = atoi(argv[i + 1]);
     }
-    if ((strcmp(what, "extend") && strcmp(what, "distance")) || n < 16 || repeat < 1) {
+    if ((strcmp(what, "extend") && strcmp(what, "distance") && strcmp(what, "extend-ref")) ||
+        n < 16 || repeat < 1) {
         fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R]\n");
         return 2;
+    }
+    if (!strcmp(what, "extend-ref")) /* the spawned reference: no MPI */
+        return extend_reference(n, repeat);
+    if (!realpath("/proc/self/exe", self_path)) {
+        fprintf(stderr, "bench_mpi: cannot find its own executable\n");
+        return 1;
     }
     PetscInitialize(&argc, &argv, NULL, NULL);
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
