@@ -45,21 +45,6 @@ struct hv_dmda_extender {
     size_t nloc, nown;
 };
 
-static hv_status fail(PetscErrorCode ierr, const char *what)
-{
-    const char *text = NULL;
-    PetscErrorMessage(ierr, &text, NULL);
-    return hv__error(HV_ERR_BACKEND, "petsc: %s failed (PETSc error %d: %s)", what, (int)ierr,
-                     text ? text : "?");
-}
-
-#define CHK(call, what)                                                                            \
-    do {                                                                                           \
-        PetscErrorCode ierr_ = (call);                                                             \
-        if (ierr_)                                                                                 \
-            return fail(ierr_, what);                                                              \
-    } while (0)
-
 static size_t dist_sum(void *user, size_t v)
 {
     hv_dmda_extender *X = user;
@@ -78,11 +63,11 @@ static size_t local_cell(const hv_dmda_extender *X, PetscInt i, PetscInt j, Pets
 /* A global vector of the caller's layout onto the ghosted box, as floats. */
 static hv_status to_local(hv_dmda_extender *X, Vec v, float *out)
 {
-    CHK(VecCopy(v, X->gg), "VecCopy (is it a global vector of the DMDA?)");
-    CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
-    CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+    HV_PETSC_CHK(VecCopy(v, X->gg), "VecCopy (is it a global vector of the DMDA?)");
+    HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+    HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
     const PetscScalar *a;
-    CHK(VecGetArrayRead(X->gl, &a), "VecGetArrayRead");
+    HV_PETSC_CHK(VecGetArrayRead(X->gl, &a), "VecGetArrayRead");
     for (size_t c = 0; c < X->nloc; c++)
         out[c] = (float)a[c];
     VecRestoreArrayRead(X->gl, &a);
@@ -112,7 +97,7 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
     for (int r = 0; r < nrhs; r++) {
         const rhs_part p = rhs_locate(r, nfields, f);
         PetscScalar *a;
-        CHK(VecGetArray(b, &a), "VecGetArray");
+        HV_PETSC_CHK(VecGetArray(b, &a), "VecGetArray");
         size_t q = 0;
         for (PetscInt kk = X->xs[2]; kk < X->xs[2] + X->xm[2]; kk++)
             for (PetscInt j = X->xs[1]; j < X->xs[1] + X->xm[1]; j++)
@@ -121,7 +106,7 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
         VecRestoreArray(b, &a);
         if (r == 0) {
             PetscReal n2;
-            CHK(VecNorm(b, NORM_2, &n2), "VecNorm");
+            HV_PETSC_CHK(VecNorm(b, NORM_2, &n2), "VecNorm");
             wn = n2;
         }
         hv_solve_info info;
@@ -129,11 +114,11 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
             return st;
         relmax = fmax(relmax, info.relres);
         /* The solution on the ghosted box. */
-        CHK(VecCopy(X->x, X->gg), "VecCopy");
-        CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
-        CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        HV_PETSC_CHK(VecCopy(X->x, X->gg), "VecCopy");
+        HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
         const PetscScalar *u;
-        CHK(VecGetArrayRead(X->gl, &u), "VecGetArrayRead");
+        HV_PETSC_CHK(VecGetArrayRead(X->gl, &u), "VecGetArrayRead");
         for (size_t c = 0; c < X->nloc; c++)
             e->sol[c * k + (size_t)r] = (float)u[c];
         VecRestoreArrayRead(X->gl, &u);
@@ -156,14 +141,14 @@ static double dist_max(void *user, double v)
 
 static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_opts *o)
 {
-    CHK(PetscObjectReference((PetscObject)da), "PetscObjectReference");
+    HV_PETSC_CHK(PetscObjectReference((PetscObject)da), "PetscObjectReference");
     X->user = da;
     X->comm = PetscObjectComm((PetscObject)da);
     X->h = h;
     PetscInt dim = 3;
-    CHK(DMDAGetInfo(da, &dim, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL,
-                    NULL),
-        "DMDAGetInfo (is it a DMDA?)");
+    HV_PETSC_CHK(DMDAGetInfo(da, &dim, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+                             NULL, NULL),
+                 "DMDAGetInfo (is it a DMDA?)");
     /* The ghost layer: what a cell's closest point reaches (out_band voxels
      * along a gradient up to GRAD_MAX, its interpolation stencil and the
      * gradient's), plus, for level 0 on the band, what the band solve of
@@ -183,10 +168,10 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
      * narrowest box. */
     PetscInt m[3] = {1, 1, 1}, narrow = PETSC_MAX_INT;
     const PetscInt *l[3] = {NULL, NULL, NULL};
-    CHK(DMDAGetInfo(da, NULL, NULL, NULL, NULL, &m[0], &m[1], &m[2], NULL, NULL, NULL, NULL, NULL,
-                    NULL),
-        "DMDAGetInfo");
-    CHK(DMDAGetOwnershipRanges(da, &l[0], &l[1], &l[2]), "DMDAGetOwnershipRanges");
+    HV_PETSC_CHK(DMDAGetInfo(da, NULL, NULL, NULL, NULL, &m[0], &m[1], &m[2], NULL, NULL, NULL,
+                             NULL, NULL, NULL),
+                 "DMDAGetInfo");
+    HV_PETSC_CHK(DMDAGetOwnershipRanges(da, &l[0], &l[1], &l[2]), "DMDAGetOwnershipRanges");
     for (int a = 0; a < dim; a++)
         for (PetscInt r = 0; r < m[a]; r++)
             if (m[a] > 1 && l[a][r] < narrow)
@@ -202,9 +187,9 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
     hv_status st = hv__dmda_like(da, X->ghost, 1, &X->dag, &X->dim);
     if (st)
         return st;
-    CHK(DMCreateGlobalVector(X->dag, &X->gg), "DMCreateGlobalVector");
-    CHK(DMCreateLocalVector(X->dag, &X->gl), "DMCreateLocalVector");
-    CHK(VecDuplicate(X->gg, &X->x), "VecDuplicate");
+    HV_PETSC_CHK(DMCreateGlobalVector(X->dag, &X->gg), "DMCreateGlobalVector");
+    HV_PETSC_CHK(DMCreateLocalVector(X->dag, &X->gl), "DMCreateLocalVector");
+    HV_PETSC_CHK(VecDuplicate(X->gg, &X->x), "VecDuplicate");
     DMDAGetCorners(X->dag, &X->xs[0], &X->xs[1], &X->xs[2], &X->xm[0], &X->xm[1], &X->xm[2]);
     DMDAGetGhostCorners(X->dag, &X->gs[0], &X->gs[1], &X->gs[2], &X->gm[0], &X->gm[1], &X->gm[2]);
     if (X->dim == 2) {
@@ -291,7 +276,7 @@ static hv_status extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda
     for (int i = 0; i < nfields; i++)
         for (int c = 0; c < fields[i].ncomp; c++) {
             PetscScalar *a;
-            CHK(VecGetArray(fields[i].v[c], &a), "VecGetArray");
+            HV_PETSC_CHK(VecGetArray(fields[i].v[c], &a), "VecGetArray");
             size_t q = 0;
             for (PetscInt k = X->xs[2]; k < X->xs[2] + X->xm[2]; k++)
                 for (PetscInt j = X->xs[1]; j < X->xs[1] + X->xm[1]; j++)
@@ -383,27 +368,31 @@ static hv_status block_in(block_io *B, const float *a, Vec g)
 {
     if (a) { /* rank 0 */
         PetscScalar *z;
-        CHK(VecGetArray(B->zero, &z), "VecGetArray");
+        HV_PETSC_CHK(VecGetArray(B->zero, &z), "VecGetArray");
         for (size_t c = 0; c < B->count; c++)
             z[c] = a[c];
         VecRestoreArray(B->zero, &z);
     }
-    CHK(VecScatterBegin(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE), "VecScatter");
-    CHK(VecScatterEnd(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE), "VecScatter");
-    CHK(DMDANaturalToGlobalBegin(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
-    CHK(DMDANaturalToGlobalEnd(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    HV_PETSC_CHK(VecScatterBegin(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
+                 "VecScatter");
+    HV_PETSC_CHK(VecScatterEnd(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
+                 "VecScatter");
+    HV_PETSC_CHK(DMDANaturalToGlobalBegin(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    HV_PETSC_CHK(DMDANaturalToGlobalEnd(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
     return HV_OK;
 }
 
 static hv_status block_out(block_io *B, Vec g, const float *phi, double ob, float bg, float *out)
 {
-    CHK(DMDAGlobalToNaturalBegin(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
-    CHK(DMDAGlobalToNaturalEnd(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
-    CHK(VecScatterBegin(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD), "VecScatter");
-    CHK(VecScatterEnd(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD), "VecScatter");
+    HV_PETSC_CHK(DMDAGlobalToNaturalBegin(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    HV_PETSC_CHK(DMDAGlobalToNaturalEnd(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    HV_PETSC_CHK(VecScatterBegin(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
+    HV_PETSC_CHK(VecScatterEnd(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
     if (out) {
         const PetscScalar *z;
-        CHK(VecGetArrayRead(B->zero, &z), "VecGetArrayRead");
+        HV_PETSC_CHK(VecGetArrayRead(B->zero, &z), "VecGetArrayRead");
         for (size_t c = 0; c < B->count; c++)
             out[c] = fabs(phi[c]) < ob ? (float)z[c] : bg;
         VecRestoreArrayRead(B->zero, &z);
@@ -425,12 +414,12 @@ static hv_status extend_block(block_io *B, int dim, const int n[3], double h,
                             n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &B->da);
     if (ierr || (ierr = DMSetUp(B->da)) || (ierr = DMDACreateNaturalVector(B->da, &B->nat)) ||
         (ierr = VecScatterCreateToZero(B->nat, &B->toz, &B->zero)))
-        return fail(ierr, "setting up the distributed block");
+        return hv__petsc_fail(ierr, "setting up the distributed block");
     for (int i = 0, q = 0; i < nfields; i++)
         for (int c = 0; c < f[i].ncomp; c++, q++)
-            CHK(DMCreateGlobalVector(B->da, &v[q]), "DMCreateGlobalVector");
+            HV_PETSC_CHK(DMCreateGlobalVector(B->da, &v[q]), "DMCreateGlobalVector");
     Vec gphi;
-    CHK(DMCreateGlobalVector(B->da, &gphi), "DMCreateGlobalVector");
+    HV_PETSC_CHK(DMCreateGlobalVector(B->da, &gphi), "DMCreateGlobalVector");
     hv_status st = block_in(B, phi, gphi);
     hv_dmda_field df[MAX_FIELDS_PER_CALL];
     for (int i = 0, q = 0; i < nfields && !st; i++) {
@@ -507,38 +496,20 @@ static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
 hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h,
                                   const hv_extend_opts *opts)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv_dmda_extender_create_body(out, da, h, opts);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv_dmda_extender_create_body(out, da, h, opts));
 }
 
 hv_status hv_dmda_extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda_field *fields,
                          hv_extend_stats *stats)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv_dmda_extend_body(X, phi, nfields, fields, stats);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv_dmda_extend_body(X, phi, nfields, fields, stats));
 }
 
 hv_status hv_petsc_extend_block(int dim, const int n[3], double h, const hv_extend_opts *opts,
                                 const float *phi, int nfields, const hv_extend_field *f,
                                 hv_extend_stats *stats)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv_petsc_extend_block_body(dim, n, h, opts, phi, nfields, f, stats);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv_petsc_extend_block_body(dim, n, h, opts, phi, nfields, f, stats));
 }
 
 #else /* without PETSc */

@@ -8,6 +8,7 @@
  * fields as cell-centred attributes. */
 #include "heatvox/petsc.h"
 #include "core/error.h"
+#include "solve/dmda.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -239,13 +240,7 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
 hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const *g,
                             const char *const *names)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv_petsc_write_h5_body(path, nfields, g, names);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv_petsc_write_h5_body(path, nfields, g, names));
 }
 
 #else /* without PETSc */

@@ -36,27 +36,12 @@ struct hv_dmda_solver {
     int max_iter, nonzero_guess;
 };
 
-static hv_status fail(PetscErrorCode ierr, const char *what)
-{
-    const char *text = NULL;
-    PetscErrorMessage(ierr, &text, NULL);
-    return hv__error(HV_ERR_BACKEND, "petsc: %s failed (PETSc error %d: %s)", what, (int)ierr,
-                     text ? text : "?");
-}
-
-#define CHK(call, what)                                                                            \
-    do {                                                                                           \
-        PetscErrorCode ierr_ = (call);                                                             \
-        if (ierr_)                                                                                 \
-            return fail(ierr_, what);                                                              \
-    } while (0)
-
 hv_status hv__petsc_pc_kind(int dim, double alpha, int regions, int *kind)
 {
     char name[32] = "auto";
     PetscBool set = PETSC_FALSE;
-    CHK(PetscOptionsGetString(NULL, NULL, "-hv_petsc_pc", name, sizeof name, &set),
-        "PetscOptionsGetString");
+    HV_PETSC_CHK(PetscOptionsGetString(NULL, NULL, "-hv_petsc_pc", name, sizeof name, &set),
+                 "PetscOptionsGetString");
     if (!strcmp(name, "auto"))
         /* The fastest where it works (docs/PERFORMANCE.md): PFMG in 3D, but
          * not on a Poisson problem with several regions. */
@@ -82,19 +67,19 @@ hv_status hv__petsc_pc_kind(int dim, double alpha, int regions, int *kind)
 hv_status hv__petsc_pc_set(PC pc, int kind)
 {
     if (kind == HV_PC_JACOBI) {
-        CHK(PCSetType(pc, PCJACOBI), "PCSetType (jacobi)");
+        HV_PETSC_CHK(PCSetType(pc, PCJACOBI), "PCSetType (jacobi)");
         return HV_OK;
     }
     if (kind == HV_PC_GAMG) {
-        CHK(PCSetType(pc, PCGAMG), "PCSetType (gamg)");
+        HV_PETSC_CHK(PCSetType(pc, PCGAMG), "PCSetType (gamg)");
         return HV_OK;
     }
     if (kind == HV_PC_PFMG) {
-        CHK(PCSetType(pc, PCPFMG), "PCSetType (pfmg)");
+        HV_PETSC_CHK(PCSetType(pc, PCPFMG), "PCSetType (pfmg)");
         return HV_OK;
     }
-    CHK(PCSetType(pc, PCHYPRE), "PCSetType (hypre)");
-    CHK(PCHYPRESetType(pc, "boomeramg"), "PCHYPRESetType");
+    HV_PETSC_CHK(PCSetType(pc, PCHYPRE), "PCSetType (hypre)");
+    HV_PETSC_CHK(PCHYPRESetType(pc, "boomeramg"), "PCHYPRESetType");
     return HV_OK;
 }
 
@@ -107,8 +92,8 @@ hv_status hv__dmda_like(DM user, int width, int box, DM *out, int *dim)
     *out = NULL;
     if (!user)
         return hv__error(HV_ERR_INVALID_ARG, "dmda: no DMDA");
-    CHK(DMDAGetInfo(user, &d, &M, &N, &P, &m, &n, &p, &dof, &sw, &bx, &by, &bz, &stype),
-        "DMDAGetInfo (is it a DMDA?)");
+    HV_PETSC_CHK(DMDAGetInfo(user, &d, &M, &N, &P, &m, &n, &p, &dof, &sw, &bx, &by, &bz, &stype),
+                 "DMDAGetInfo (is it a DMDA?)");
     if (d != 2 && d != 3)
         return hv__error(HV_ERR_INVALID_ARG, "dmda: a %dD DMDA; 2D or 3D only", (int)d);
     if (dof != 1)
@@ -117,7 +102,7 @@ hv_status hv__dmda_like(DM user, int width, int box, DM *out, int *dim)
     if (bx != DM_BOUNDARY_NONE || by != DM_BOUNDARY_NONE || (d == 3 && bz != DM_BOUNDARY_NONE))
         return hv__error(HV_ERR_INVALID_ARG,
                          "dmda: periodic or ghosted boundaries; the grid's faces are walls");
-    CHK(DMDAGetOwnershipRanges(user, &lx, &ly, &lz), "DMDAGetOwnershipRanges");
+    HV_PETSC_CHK(DMDAGetOwnershipRanges(user, &lx, &ly, &lz), "DMDAGetOwnershipRanges");
     MPI_Comm comm = PetscObjectComm((PetscObject)user);
     const DMDAStencilType st = box ? DMDA_STENCIL_BOX : DMDA_STENCIL_STAR;
     PetscErrorCode ierr;
@@ -131,7 +116,7 @@ hv_status hv__dmda_like(DM user, int width, int box, DM *out, int *dim)
         ierr = DMSetUp(*out);
     if (ierr) {
         DMDestroy(out);
-        return fail(ierr, "creating a DMDA on the caller's layout");
+        return hv__petsc_fail(ierr, "creating a DMDA on the caller's layout");
     }
     *dim = (int)d;
     return HV_OK;
@@ -143,7 +128,8 @@ static hv_status assemble(hv_dmda_solver *s, int dim, double h, double alpha, do
                           const PetscScalar *sl)
 {
     PetscInt M, N, P, xs, ys, zs, xm, ym, zm, gxs, gys, gzs, gxm, gym, gzm;
-    CHK(DMDAGetInfo(s->da, NULL, &M, &N, &P, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL),
+    HV_PETSC_CHK(
+        DMDAGetInfo(s->da, NULL, &M, &N, &P, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL),
         "DMDAGetInfo");
     DMDAGetCorners(s->da, &xs, &ys, &zs, &xm, &ym, &zm);
     DMDAGetGhostCorners(s->da, &gxs, &gys, &gzs, &gxm, &gym, &gzm);
@@ -163,8 +149,8 @@ static hv_status assemble(hv_dmda_solver *s, int dim, double h, double alpha, do
                 if (GSOLID(i, j, k)) {
                     col[0] = row;
                     v[0] = 1;
-                    CHK(MatSetValuesStencil(s->A, 1, &row, 1, col, v, INSERT_VALUES),
-                        "MatSetValuesStencil");
+                    HV_PETSC_CHK(MatSetValuesStencil(s->A, 1, &row, 1, col, v, INSERT_VALUES),
+                                 "MatSetValuesStencil");
                     continue;
                 }
                 int nf = 0;
@@ -180,12 +166,12 @@ static hv_status assemble(hv_dmda_solver *s, int dim, double h, double alpha, do
                     }
                 col[m] = row;
                 v[m++] = alpha + beta * nf / (h * h);
-                CHK(MatSetValuesStencil(s->A, 1, &row, m, col, v, INSERT_VALUES),
-                    "MatSetValuesStencil");
+                HV_PETSC_CHK(MatSetValuesStencil(s->A, 1, &row, m, col, v, INSERT_VALUES),
+                             "MatSetValuesStencil");
             }
 #undef GSOLID
-    CHK(MatAssemblyBegin(s->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
-    CHK(MatAssemblyEnd(s->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    HV_PETSC_CHK(MatAssemblyBegin(s->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+    HV_PETSC_CHK(MatAssemblyEnd(s->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
     return HV_OK;
 }
 
@@ -199,9 +185,9 @@ static int cmp_label(const void *a, const void *b)
 static hv_status regions(hv_dmda_solver *s, int dim)
 {
     PetscInt M, N, xs, ys, zs, xm, ym, zm, gxs, gys, gzs, gxm, gym, gzm;
-    CHK(DMDAGetInfo(s->da, NULL, &M, &N, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL,
-                    NULL),
-        "DMDAGetInfo");
+    HV_PETSC_CHK(DMDAGetInfo(s->da, NULL, &M, &N, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+                             NULL, NULL),
+                 "DMDAGetInfo");
     DMDAGetCorners(s->da, &xs, &ys, &zs, &xm, &ym, &zm);
     DMDAGetGhostCorners(s->da, &gxs, &gys, &gzs, &gxm, &gym, &gzm);
     if (dim == 2) {
@@ -210,8 +196,8 @@ static hv_status regions(hv_dmda_solver *s, int dim)
     }
     MPI_Comm comm = PetscObjectComm((PetscObject)s->da);
     Vec lab, loc;
-    CHK(DMCreateGlobalVector(s->da, &lab), "DMCreateGlobalVector");
-    CHK(DMCreateLocalVector(s->da, &loc), "DMCreateLocalVector");
+    HV_PETSC_CHK(DMCreateGlobalVector(s->da, &lab), "DMCreateGlobalVector");
+    HV_PETSC_CHK(DMCreateLocalVector(s->da, &loc), "DMCreateLocalVector");
     PetscScalar *a;
     VecGetArray(lab, &a);
     size_t q = 0;
@@ -319,7 +305,7 @@ static hv_status regions(hv_dmda_solver *s, int dim)
     for (int r = 0; !st && r < s->regions; r++) {
         PetscErrorCode ierr = DMCreateGlobalVector(s->da, &s->basis[r]);
         if (ierr) {
-            st = fail(ierr, "DMCreateGlobalVector");
+            st = hv__petsc_fail(ierr, "DMCreateGlobalVector");
             break;
         }
         s->nbasis = r + 1;
@@ -337,8 +323,8 @@ static hv_status regions(hv_dmda_solver *s, int dim)
         return st;
     if (s->regions == 0)
         return HV_OK; /* all solid: the identity */
-    CHK(MatNullSpaceCreate(comm, PETSC_FALSE, s->regions, s->basis, &s->null),
-        "MatNullSpaceCreate");
+    HV_PETSC_CHK(MatNullSpaceCreate(comm, PETSC_FALSE, s->regions, s->basis, &s->null),
+                 "MatNullSpaceCreate");
     return HV_OK;
 }
 
@@ -352,16 +338,16 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     s->tol = o->tol;
     s->max_iter = o->max_iter;
     s->nonzero_guess = o->nonzero_guess;
-    CHK(DMCreateGlobalVector(s->da, &s->b), "DMCreateGlobalVector");
-    CHK(VecDuplicate(s->b, &s->r), "VecDuplicate");
+    HV_PETSC_CHK(DMCreateGlobalVector(s->da, &s->b), "DMCreateGlobalVector");
+    HV_PETSC_CHK(VecDuplicate(s->b, &s->r), "VecDuplicate");
     PetscInt nown;
-    CHK(VecGetLocalSize(s->b, &nown), "VecGetLocalSize");
+    HV_PETSC_CHK(VecGetLocalSize(s->b, &nown), "VecGetLocalSize");
     s->nown = (size_t)nown;
     Vec sl = NULL;
     const PetscScalar *sla = NULL;
     if (solid) {
         PetscInt ns;
-        CHK(VecGetLocalSize(solid, &ns), "VecGetLocalSize");
+        HV_PETSC_CHK(VecGetLocalSize(solid, &ns), "VecGetLocalSize");
         if (ns != nown)
             return hv__error(HV_ERR_INVALID_ARG,
                              "dmda: the solid vector is not a global vector of the DMDA (%d cells "
@@ -370,7 +356,7 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
         if (!(s->solid = malloc(s->nown ? s->nown : 1)))
             return hv__error(HV_ERR_NOMEM, "petsc: out of memory");
         const PetscScalar *a;
-        CHK(VecGetArrayRead(solid, &a), "VecGetArrayRead");
+        HV_PETSC_CHK(VecGetArrayRead(solid, &a), "VecGetArrayRead");
         for (size_t c = 0; c < s->nown; c++)
             s->solid[c] = a[c] != 0;
         VecRestoreArrayRead(solid, &a);
@@ -381,15 +367,15 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     if (pck < 0 && (st = hv__petsc_pc_kind(dim, alpha, s->regions, &pck)))
         return st;
     if (pck == HV_PC_PFMG)
-        CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
-    CHK(DMCreateMatrix(s->da, &s->A), "DMCreateMatrix");
+        HV_PETSC_CHK(DMSetMatType(s->da, MATHYPRESTRUCT), "DMSetMatType (hypre struct)");
+    HV_PETSC_CHK(DMCreateMatrix(s->da, &s->A), "DMCreateMatrix");
     if (solid) {
         /* Its ghost layer, for the neighbours' walls. */
-        CHK(DMCreateLocalVector(s->da, &sl), "DMCreateLocalVector");
-        CHK(VecCopy(solid, s->r), "VecCopy");
-        CHK(DMGlobalToLocalBegin(s->da, s->r, INSERT_VALUES, sl), "DMGlobalToLocal");
-        CHK(DMGlobalToLocalEnd(s->da, s->r, INSERT_VALUES, sl), "DMGlobalToLocal");
-        CHK(VecGetArrayRead(sl, &sla), "VecGetArrayRead");
+        HV_PETSC_CHK(DMCreateLocalVector(s->da, &sl), "DMCreateLocalVector");
+        HV_PETSC_CHK(VecCopy(solid, s->r), "VecCopy");
+        HV_PETSC_CHK(DMGlobalToLocalBegin(s->da, s->r, INSERT_VALUES, sl), "DMGlobalToLocal");
+        HV_PETSC_CHK(DMGlobalToLocalEnd(s->da, s->r, INSERT_VALUES, sl), "DMGlobalToLocal");
+        HV_PETSC_CHK(VecGetArrayRead(sl, &sla), "VecGetArrayRead");
     }
     st = assemble(s, dim, h, alpha, beta, sla);
     if (sl) {
@@ -399,22 +385,24 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     if (st)
         return st;
     if (s->null) {
-        CHK(MatSetNullSpace(s->A, s->null), "MatSetNullSpace");
-        CHK(MatSetTransposeNullSpace(s->A, s->null), "MatSetTransposeNullSpace");
+        HV_PETSC_CHK(MatSetNullSpace(s->A, s->null), "MatSetNullSpace");
+        HV_PETSC_CHK(MatSetTransposeNullSpace(s->A, s->null), "MatSetTransposeNullSpace");
     }
     MPI_Comm comm = PetscObjectComm((PetscObject)s->da);
     PC pc;
-    CHK(KSPCreate(comm, &s->ksp), "KSPCreate");
-    CHK(KSPSetOperators(s->ksp, s->A, s->A), "KSPSetOperators");
-    CHK(KSPSetType(s->ksp, KSPCG), "KSPSetType");
-    CHK(KSPSetNormType(s->ksp, KSP_NORM_UNPRECONDITIONED), "KSPSetNormType");
-    CHK(KSPSetTolerances(s->ksp, s->tol, 1e-300, PETSC_DEFAULT, s->max_iter), "KSPSetTolerances");
-    CHK(KSPSetResidualHistory(s->ksp, NULL, HV_MAX_HISTORY, PETSC_TRUE), "KSPSetResidualHistory");
-    CHK(KSPGetPC(s->ksp, &pc), "KSPGetPC");
+    HV_PETSC_CHK(KSPCreate(comm, &s->ksp), "KSPCreate");
+    HV_PETSC_CHK(KSPSetOperators(s->ksp, s->A, s->A), "KSPSetOperators");
+    HV_PETSC_CHK(KSPSetType(s->ksp, KSPCG), "KSPSetType");
+    HV_PETSC_CHK(KSPSetNormType(s->ksp, KSP_NORM_UNPRECONDITIONED), "KSPSetNormType");
+    HV_PETSC_CHK(KSPSetTolerances(s->ksp, s->tol, 1e-300, PETSC_DEFAULT, s->max_iter),
+                 "KSPSetTolerances");
+    HV_PETSC_CHK(KSPSetResidualHistory(s->ksp, NULL, HV_MAX_HISTORY, PETSC_TRUE),
+                 "KSPSetResidualHistory");
+    HV_PETSC_CHK(KSPGetPC(s->ksp, &pc), "KSPGetPC");
     if ((st = hv__petsc_pc_set(pc, pck)))
         return st;
-    CHK(KSPSetFromOptions(s->ksp), "KSPSetFromOptions");
-    CHK(KSPSetUp(s->ksp), "KSPSetUp (hypre BoomerAMG)");
+    HV_PETSC_CHK(KSPSetFromOptions(s->ksp), "KSPSetFromOptions");
+    HV_PETSC_CHK(KSPSetUp(s->ksp), "KSPSetUp (hypre BoomerAMG)");
     return HV_OK;
 }
 
@@ -471,34 +459,34 @@ hv_status hv__dmda_solve(hv_dmda_solver *s, Vec u, hv_solve_info *info)
         VecRestoreArray(s->b, &a);
     }
     if (s->null)
-        CHK(MatNullSpaceRemove(s->null, s->b), "MatNullSpaceRemove");
+        HV_PETSC_CHK(MatNullSpaceRemove(s->null, s->b), "MatNullSpaceRemove");
     PetscReal bnorm;
-    CHK(VecNorm(s->b, NORM_2, &bnorm), "VecNorm");
+    HV_PETSC_CHK(VecNorm(s->b, NORM_2, &bnorm), "VecNorm");
     if (bnorm == 0) {
-        CHK(VecSet(u, 0), "VecSet");
+        HV_PETSC_CHK(VecSet(u, 0), "VecSet");
         info->reason = HV_STOP_CONVERGED;
         hv_info_push(info, 0);
         info->seconds = hv_now() - t0;
         return HV_OK;
     }
-    CHK(KSPSetInitialGuessNonzero(s->ksp, s->nonzero_guess ? PETSC_TRUE : PETSC_FALSE),
-        "KSPSetInitialGuessNonzero");
-    CHK(KSPSolve(s->ksp, s->b, u), "KSPSolve");
+    HV_PETSC_CHK(KSPSetInitialGuessNonzero(s->ksp, s->nonzero_guess ? PETSC_TRUE : PETSC_FALSE),
+                 "KSPSetInitialGuessNonzero");
+    HV_PETSC_CHK(KSPSolve(s->ksp, s->b, u), "KSPSolve");
     PetscInt its, nh;
     const PetscReal *hist;
     KSPConvergedReason why;
-    CHK(KSPGetIterationNumber(s->ksp, &its), "KSPGetIterationNumber");
-    CHK(KSPGetResidualHistory(s->ksp, &hist, &nh), "KSPGetResidualHistory");
-    CHK(KSPGetConvergedReason(s->ksp, &why), "KSPGetConvergedReason");
+    HV_PETSC_CHK(KSPGetIterationNumber(s->ksp, &its), "KSPGetIterationNumber");
+    HV_PETSC_CHK(KSPGetResidualHistory(s->ksp, &hist, &nh), "KSPGetResidualHistory");
+    HV_PETSC_CHK(KSPGetConvergedReason(s->ksp, &why), "KSPGetConvergedReason");
     for (PetscInt q = 0; q < nh; q++)
         hv_info_push(info, hist[q] / bnorm);
     if (s->null)
-        CHK(MatNullSpaceRemove(s->null, u), "MatNullSpaceRemove");
+        HV_PETSC_CHK(MatNullSpaceRemove(s->null, u), "MatNullSpaceRemove");
     /* The true residual, as the other backends report it. */
     PetscReal rnorm;
-    CHK(MatMult(s->A, u, s->r), "MatMult");
-    CHK(VecAYPX(s->r, -1, s->b), "VecAYPX");
-    CHK(VecNorm(s->r, NORM_2, &rnorm), "VecNorm");
+    HV_PETSC_CHK(MatMult(s->A, u, s->r), "MatMult");
+    HV_PETSC_CHK(VecAYPX(s->r, -1, s->b), "VecAYPX");
+    HV_PETSC_CHK(VecNorm(s->r, NORM_2, &rnorm), "VecNorm");
     info->relres = rnorm / bnorm;
     info->iterations = (int)its;
     info->reason = why > 0                   ? HV_STOP_CONVERGED
@@ -515,13 +503,13 @@ static hv_status hv_dmda_solver_solve_body(hv_dmda_solver *s, Vec f, Vec u, hv_s
     if (!s || !f || !u)
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_solver_solve: bad arguments");
     PetscInt nf, nu;
-    CHK(VecGetLocalSize(f, &nf), "VecGetLocalSize");
-    CHK(VecGetLocalSize(u, &nu), "VecGetLocalSize");
+    HV_PETSC_CHK(VecGetLocalSize(f, &nf), "VecGetLocalSize");
+    HV_PETSC_CHK(VecGetLocalSize(u, &nu), "VecGetLocalSize");
     if ((size_t)nf != s->nown || (size_t)nu != s->nown)
         return hv__error(HV_ERR_INVALID_ARG,
                          "hv_dmda_solver_solve: f and u must be global vectors of the DMDA");
     hv_solve_info local;
-    CHK(VecCopy(f, s->b), "VecCopy");
+    HV_PETSC_CHK(VecCopy(f, s->b), "VecCopy");
     return hv__dmda_solve(s, u, info ? info : &local);
 }
 
@@ -549,24 +537,12 @@ void hv_dmda_solver_destroy(hv_dmda_solver **sp)
 hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double alpha, double beta,
                                  Vec solid, const hv_solver_opts *opts, int pc)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv__dmda_solver_create_body(out, da, h, alpha, beta, solid, opts, pc);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv__dmda_solver_create_body(out, da, h, alpha, beta, solid, opts, pc));
 }
 
 hv_status hv_dmda_solver_solve(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
 {
-    /* PETSc's errors come back as codes here, never printed. */
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = hv_dmda_solver_solve_body(s, f, u, info);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(hv_dmda_solver_solve_body(s, f, u, info));
 }
 
 #else /* without PETSc */

@@ -8,6 +8,28 @@
 #ifdef HV_HAVE_PETSC
 #include <petscksp.h>
 
+/* A failed PETSc call as heatvox's error: HV_ERR_BACKEND naming the call and
+ * PETSc's message. HV_PETSC_CHK returns it from the calling function. */
+hv_status hv__petsc_fail(PetscErrorCode ierr, const char *what);
+#define HV_PETSC_CHK(call, what)                                                                   \
+    do {                                                                                           \
+        PetscErrorCode ierr_ = (call);                                                             \
+        if (ierr_)                                                                                 \
+            return hv__petsc_fail(ierr_, what);                                                    \
+    } while (0)
+
+/* The body of a public entry point: PETSc started, its errors returned as
+ * codes rather than printed while `call` runs (the library never prints). */
+#define HV_PETSC_QUIETLY(call)                                                                     \
+    do {                                                                                           \
+        if (hv_petsc_init())                                                                       \
+            return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");                      \
+        PetscPushErrorHandler(PetscReturnErrorHandler, NULL);                                      \
+        const hv_status st_ = (call);                                                              \
+        PetscPopErrorHandler();                                                                    \
+        return st_;                                                                                \
+    } while (0)
+
 /* st, or an error when st failed on another rank of da's communicator
  * (collective: every rank calls it at the same point). */
 hv_status hv__petsc_agree(DM da, hv_status st);

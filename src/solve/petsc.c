@@ -39,20 +39,13 @@ typedef struct {
     int nbasis;
 } petsc_state;
 
-static hv_status petsc_fail(PetscErrorCode ierr, const char *what)
+hv_status hv__petsc_fail(PetscErrorCode ierr, const char *what)
 {
     const char *text = NULL;
     PetscErrorMessage(ierr, &text, NULL);
     return hv__error(HV_ERR_BACKEND, "petsc: %s failed (PETSc error %d: %s)", what, (int)ierr,
                      text ? text : "?");
 }
-
-#define CHK(call, what)                                                                            \
-    do {                                                                                           \
-        PetscErrorCode ierr_ = (call);                                                             \
-        if (ierr_)                                                                                 \
-            return petsc_fail(ierr_, what);                                                        \
-    } while (0)
 
 static void petsc_destroy(void *state)
 {
@@ -86,7 +79,7 @@ static hv_status assemble(petsc_state *P)
     const int *n = s->p.n;
     const double h2 = s->p.h * s->p.h, off = -s->p.beta / h2;
     PetscInt xs, ys, zs, xm, ym, zm;
-    CHK(DMDAGetCorners(P->da, &xs, &ys, &zs, &xm, &ym, &zm), "DMDAGetCorners");
+    HV_PETSC_CHK(DMDAGetCorners(P->da, &xs, &ys, &zs, &xm, &ym, &zm), "DMDAGetCorners");
     if (dim == 2) {
         zs = 0;
         zm = 1;
@@ -101,8 +94,8 @@ static hv_status assemble(petsc_state *P)
                 if (solid_at(s, c)) {
                     col[0] = row;
                     v[0] = 1;
-                    CHK(MatSetValuesStencil(P->A, 1, &row, 1, col, v, INSERT_VALUES),
-                        "MatSetValuesStencil");
+                    HV_PETSC_CHK(MatSetValuesStencil(P->A, 1, &row, 1, col, v, INSERT_VALUES),
+                                 "MatSetValuesStencil");
                     continue;
                 }
                 const PetscInt ijk[3] = {i, j, k};
@@ -126,11 +119,11 @@ static hv_status assemble(petsc_state *P)
                     }
                 col[m] = row;
                 v[m++] = s->p.alpha + s->p.beta * nf / h2;
-                CHK(MatSetValuesStencil(P->A, 1, &row, m, col, v, INSERT_VALUES),
-                    "MatSetValuesStencil");
+                HV_PETSC_CHK(MatSetValuesStencil(P->A, 1, &row, m, col, v, INSERT_VALUES),
+                             "MatSetValuesStencil");
             }
-    CHK(MatAssemblyBegin(P->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
-    CHK(MatAssemblyEnd(P->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    HV_PETSC_CHK(MatAssemblyBegin(P->A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+    HV_PETSC_CHK(MatAssemblyEnd(P->A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
     return HV_OK;
 }
 
@@ -159,7 +152,7 @@ static hv_status null_space(petsc_state *P)
     for (int r = 0; r < nr && !st; r++) {
         PetscErrorCode ierr = DMCreateGlobalVector(P->da, &P->basis[r]);
         if (ierr) {
-            st = petsc_fail(ierr, "DMCreateGlobalVector");
+            st = hv__petsc_fail(ierr, "DMCreateGlobalVector");
             break;
         }
         P->nbasis = r + 1;
@@ -180,9 +173,9 @@ static hv_status null_space(petsc_state *P)
     free(cells);
     if (st)
         return st;
-    CHK(MatNullSpaceCreate(PETSC_COMM_WORLD, PETSC_FALSE, nr, P->basis, &P->null),
-        "MatNullSpaceCreate");
-    CHK(MatSetNullSpace(P->A, P->null), "MatSetNullSpace");
+    HV_PETSC_CHK(MatNullSpaceCreate(PETSC_COMM_WORLD, PETSC_FALSE, nr, P->basis, &P->null),
+                 "MatNullSpaceCreate");
+    HV_PETSC_CHK(MatSetNullSpace(P->A, P->null), "MatSetNullSpace");
     return HV_OK;
 }
 
@@ -218,7 +211,7 @@ static hv_status petsc_create_body(void **state, const hv_setup *s)
         (ierr = DMCreateGlobalVector(P->da, &P->b)) || (ierr = VecDuplicate(P->b, &P->x)) ||
         (ierr = DMDACreateNaturalVector(P->da, &P->natural)) ||
         (ierr = VecScatterCreateToAll(P->natural, &P->toall, &P->all)))
-        st = petsc_fail(ierr, "setting up the distributed grid");
+        st = hv__petsc_fail(ierr, "setting up the distributed grid");
     if (!st)
         st = assemble(P);
     if (!st && s->p.alpha == 0)
@@ -229,16 +222,16 @@ static hv_status petsc_create_body(void **state, const hv_setup *s)
             (ierr = KSPSetNormType(P->ksp, KSP_NORM_UNPRECONDITIONED)) ||
             (ierr = KSPSetTolerances(P->ksp, s->o.tol, 1e-300, PETSC_DEFAULT, s->o.max_iter)) ||
             (ierr = KSPSetResidualHistory(P->ksp, NULL, HV_MAX_HISTORY, PETSC_TRUE)))
-            st = petsc_fail(ierr, "setting up the Krylov solver");
+            st = hv__petsc_fail(ierr, "setting up the Krylov solver");
     }
     if (!st) {
         PC pc;
         if ((ierr = KSPGetPC(P->ksp, &pc)))
-            st = petsc_fail(ierr, "KSPGetPC");
+            st = hv__petsc_fail(ierr, "KSPGetPC");
         if (!st)
             st = hv__petsc_pc_set(pc, pck);
         if (!st && ((ierr = KSPSetFromOptions(P->ksp)) || (ierr = KSPSetUp(P->ksp))))
-            st = petsc_fail(ierr, "setting up the preconditioner");
+            st = hv__petsc_fail(ierr, "setting up the preconditioner");
     }
     if (st) {
         petsc_destroy(P);
@@ -274,12 +267,12 @@ static hv_status petsc_solve_body(void *state, const double *f, double *u, hv_so
     scatter_in(P, f, P->b);
     if (s->o.nonzero_guess) {
         scatter_in(P, u, P->x);
-        CHK(KSPSetInitialGuessNonzero(P->ksp, PETSC_TRUE), "KSPSetInitialGuessNonzero");
+        HV_PETSC_CHK(KSPSetInitialGuessNonzero(P->ksp, PETSC_TRUE), "KSPSetInitialGuessNonzero");
     } else {
-        CHK(KSPSetInitialGuessNonzero(P->ksp, PETSC_FALSE), "KSPSetInitialGuessNonzero");
+        HV_PETSC_CHK(KSPSetInitialGuessNonzero(P->ksp, PETSC_FALSE), "KSPSetInitialGuessNonzero");
     }
     PetscReal bnorm;
-    CHK(VecNorm(P->b, NORM_2, &bnorm), "VecNorm");
+    HV_PETSC_CHK(VecNorm(P->b, NORM_2, &bnorm), "VecNorm");
     info->iterations = 0;
     info->nhistory = 0;
     info->cycles = 0;
@@ -289,35 +282,37 @@ static hv_status petsc_solve_body(void *state, const double *f, double *u, hv_so
         hv_info_push(info, 0);
         return HV_OK;
     }
-    CHK(KSPSolve(P->ksp, P->b, P->x), "KSPSolve");
+    HV_PETSC_CHK(KSPSolve(P->ksp, P->b, P->x), "KSPSolve");
     PetscInt its, nh;
     const PetscReal *hist;
     KSPConvergedReason why;
-    CHK(KSPGetIterationNumber(P->ksp, &its), "KSPGetIterationNumber");
-    CHK(KSPGetResidualHistory(P->ksp, &hist, &nh), "KSPGetResidualHistory");
-    CHK(KSPGetConvergedReason(P->ksp, &why), "KSPGetConvergedReason");
+    HV_PETSC_CHK(KSPGetIterationNumber(P->ksp, &its), "KSPGetIterationNumber");
+    HV_PETSC_CHK(KSPGetResidualHistory(P->ksp, &hist, &nh), "KSPGetResidualHistory");
+    HV_PETSC_CHK(KSPGetConvergedReason(P->ksp, &why), "KSPGetConvergedReason");
     for (PetscInt q = 0; q < nh; q++)
         hv_info_push(info, hist[q] / bnorm);
     /* The true residual, as the other backends report it. */
     PetscReal rnorm;
     if (!P->r)
-        CHK(VecDuplicate(P->b, &P->r), "VecDuplicate");
-    CHK(MatMult(P->A, P->x, P->r), "MatMult");
-    CHK(VecAYPX(P->r, -1, P->b), "VecAYPX");
-    CHK(VecNorm(P->r, NORM_2, &rnorm), "VecNorm");
+        HV_PETSC_CHK(VecDuplicate(P->b, &P->r), "VecDuplicate");
+    HV_PETSC_CHK(MatMult(P->A, P->x, P->r), "MatMult");
+    HV_PETSC_CHK(VecAYPX(P->r, -1, P->b), "VecAYPX");
+    HV_PETSC_CHK(VecNorm(P->r, NORM_2, &rnorm), "VecNorm");
     info->relres = rnorm / bnorm;
     info->iterations = (int)its;
     info->reason = why > 0                   ? HV_STOP_CONVERGED
                    : why == KSP_DIVERGED_ITS ? HV_STOP_MAX_ITER
                                              : HV_STOP_STAGNATED;
     /* The whole solution on every rank. */
-    CHK(DMDAGlobalToNaturalBegin(P->da, P->x, INSERT_VALUES, P->natural), "GlobalToNatural");
-    CHK(DMDAGlobalToNaturalEnd(P->da, P->x, INSERT_VALUES, P->natural), "GlobalToNatural");
-    CHK(VecScatterBegin(P->toall, P->natural, P->all, INSERT_VALUES, SCATTER_FORWARD),
-        "VecScatter");
-    CHK(VecScatterEnd(P->toall, P->natural, P->all, INSERT_VALUES, SCATTER_FORWARD), "VecScatter");
+    HV_PETSC_CHK(DMDAGlobalToNaturalBegin(P->da, P->x, INSERT_VALUES, P->natural),
+                 "GlobalToNatural");
+    HV_PETSC_CHK(DMDAGlobalToNaturalEnd(P->da, P->x, INSERT_VALUES, P->natural), "GlobalToNatural");
+    HV_PETSC_CHK(VecScatterBegin(P->toall, P->natural, P->all, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
+    HV_PETSC_CHK(VecScatterEnd(P->toall, P->natural, P->all, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
     const PetscScalar *a;
-    CHK(VecGetArrayRead(P->all, &a), "VecGetArrayRead");
+    HV_PETSC_CHK(VecGetArrayRead(P->all, &a), "VecGetArrayRead");
     for (size_t c = 0; c < s->count; c++)
         u[c] = solid_at(s, c) ? 0 : a[c];
     VecRestoreArrayRead(P->all, &a);
@@ -326,26 +321,14 @@ static hv_status petsc_solve_body(void *state, const double *f, double *u, hv_so
     return HV_OK;
 }
 
-/* PETSc's errors come back as codes, never printed. */
 static hv_status petsc_create(void **state, const hv_setup *s)
 {
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = petsc_create_body(state, s);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(petsc_create_body(state, s));
 }
 
-/* PETSc's errors come back as codes, never printed. */
 static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_info *info)
 {
-    if (hv_petsc_init())
-        return hv__error(HV_ERR_BACKEND, "petsc: PETSc could not start");
-    PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
-    const hv_status st = petsc_solve_body(state, f, u, info);
-    PetscPopErrorHandler();
-    return st;
+    HV_PETSC_QUIETLY(petsc_solve_body(state, f, u, info));
 }
 
 const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solve,
@@ -363,7 +346,7 @@ hv_status hv_petsc_option(const char *name, const char *value)
     PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
     PetscErrorCode ierr = PetscOptionsSetValue(NULL, name, value);
     PetscPopErrorHandler();
-    return ierr ? petsc_fail(ierr, "PetscOptionsSetValue") : HV_OK;
+    return ierr ? hv__petsc_fail(ierr, "PetscOptionsSetValue") : HV_OK;
 }
 
 hv_status hv_petsc_init(void)
@@ -374,7 +357,7 @@ hv_status hv_petsc_init(void)
         /* hv_petsc_finalize ends it. */
         PetscErrorCode ierr = PetscInitializeNoArguments();
         if (ierr)
-            return petsc_fail(ierr, "PetscInitialize");
+            return hv__petsc_fail(ierr, "PetscInitialize");
         /* The library never prints: PETSc's errors come back as codes, and
          * hv_last_error says what failed. */
         PetscPushErrorHandler(PetscReturnErrorHandler, NULL);
