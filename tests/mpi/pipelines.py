@@ -201,8 +201,8 @@ def main():
             return np.sqrt((X - 0.31) ** 2 + (Y - 0.52) ** 2 + (Z - 0.47) ** 2)
 
         distance_case(tmp, "point", ["--sources", src, *bbox, "--obstacles", "none"], n, h, exact)
-        walls = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes",
-                             "distance")
+        run(["make-scenes", os.path.join(tmp, "scenes")])  # the generated inputs
+        walls = os.path.join(tmp, "scenes", "distance")
         distance_case(tmp, "walls", ["--sources", os.path.join(walls, "sources.txt"),
                                      "--obstacles", os.path.join(walls, "walls.vdb")],
                       (64, 48, 16), 0.0625)
