@@ -188,6 +188,18 @@ START_TEST(petsc_backend_without_mpi_should_fail_clearly)
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "make mpi"));
     ck_assert_int_eq(hv_mpi_rank(), 0);
     ck_assert_int_eq(hv_mpi_size(), 1);
+    /* The distributed pipelines likewise. */
+    hv_dmda_distance *D = (hv_dmda_distance *)&s; /* not NULL: the call must clear it */
+    ck_assert_int_eq(hv_dmda_distance_create(&D, NULL, 0.1, NULL, NULL, NULL), HV_ERR_UNSUPPORTED);
+    ck_assert_ptr_null(D);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "make mpi"));
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, n, 1.0 / 8, NULL));
+    const int vox[3] = {1, 1, 1};
+    hv_distance_sources src = {vox, 1, NULL, 0, NULL};
+    ck_assert_int_eq(hv_petsc_distance_block(g, &src, NULL, NULL), HV_ERR_UNSUPPORTED);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "make mpi"));
+    hv_grid_destroy(&g);
     hv_petsc_finalize(); /* nothing to end */
 }
 END_TEST

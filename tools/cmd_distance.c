@@ -46,9 +46,10 @@ static int usage(FILE *out)
             "\n"
             "Builds made with make mpi: -o OUT.h5 writes the distance as HDF5 (dataset\n"
             "/distance, with the attributes spacing and origin) and an XDMF sidecar\n"
-            "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, every rank\n"
-            "reads the inputs and computes, the solves are distributed over the ranks,\n"
-            "the ranks write the HDF5 file together, and rank 0 writes the VDB and .npy\n"
+            "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, rank 0 reads\n"
+            "the inputs, each rank computes the distance on its own box of the grid (the\n"
+            "solves distributed over the ranks), the ranks write the HDF5 file together,\n"
+            "and rank 0 gathers the result and writes the VDB and .npy\n"
             "files and prints.\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
@@ -464,7 +465,23 @@ int cmd_distance(int argc, char **argv)
     cli_outputs co = {0};
     hv_mesh *om = NULL;
     hv_grid *g = NULL;
-    int rc = read_sources(sources, dim, &src);
+    hv_distance_stats st_d;
+    hv_status st;
+    int rc = 0;
+    /* --backend petsc under mpirun: rank 0 reads the inputs and builds the
+     * grid, every rank computes its box (hv_petsc_distance_block), and rank 0
+     * writes; the ranks write HDF5 together. */
+    const int spread = o.backend == HV_BACKEND_PETSC && hv_petsc_available();
+    int released = !spread;
+    if (spread && hv_mpi_rank() > 0) {
+        released = 1;
+        if ((st = hv_petsc_distance_block(NULL, NULL, NULL, &st_d)))
+            rc = cli_fail(CMD, sources, st);
+        else if (h5 && (st = hv_petsc_write_h5(h5, 1, NULL, (const char *const[]){"distance"})))
+            rc = cli_fail(CMD, h5, st);
+        goto done;
+    }
+    rc = read_sources(sources, dim, &src);
     if (rc)
         goto done;
     if (obst_mesh) {
@@ -532,8 +549,9 @@ int cmd_distance(int argc, char **argv)
     cli_info("heatvox distance: grid %d x %d x %d, h = %g\n", g->n[0], g->n[1], g->n[2], g->h);
 
     hv_distance_sources ds = {src.vox, src.nvox, src.pts, src.npts, src.mesh};
-    hv_distance_stats st_d;
-    hv_status st = hv_distance_compute(g, &ds, &o, &st_d);
+    released = 1;
+    st = spread ? hv_petsc_distance_block(g, &ds, &o, &st_d)
+                : hv_distance_compute(g, &ds, &o, &st_d);
     if (st) {
         rc = cli_fail(CMD, sources, st);
         goto done;
@@ -545,8 +563,8 @@ int cmd_distance(int argc, char **argv)
     if (st_d.unreachable_cells && cli_verbose >= 0)
         fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
                 st_d.unreachable_cells, (double)o.unreachable);
-    /* Under mpirun every rank holds the result: HDF5 is written by all
-     * together, the other files by rank 0. */
+    /* Under mpirun the ranks write HDF5 together (rank 0's result), and rank
+     * 0 the other files. */
     if (h5) {
         const hv_grid *fields[1] = {g};
         const char *names[1] = {"distance"};
@@ -605,6 +623,8 @@ int cmd_distance(int argc, char **argv)
                st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
                hv_now() - t_start);
 done:
+    if (!released) /* the other ranks wait in hv_petsc_distance_block: release them */
+        hv_petsc_distance_block(NULL, NULL, NULL, NULL);
     cli_discard(&co);
     free_sources(&src);
     hv_mesh_destroy(&om);

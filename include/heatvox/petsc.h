@@ -63,9 +63,10 @@ HV_API int hv_mpi_size(void);
  * of the block's lower corner, x y z; the first cell's centre is origin +
  * h / 2); the sidecar is path with ".h5" replaced by ".xmf" (or ".xmf"
  * appended): a co-rectilinear grid of the cell corners with the fields
- * centred on the cells. Collective over PETSC_COMM_WORLD: every rank passes
- * the same grids, and each writes its own box of the distributed grid into
- * the file (MPI-IO). Both files are written under temporary names and renamed
+ * centred on the cells. Collective over PETSC_COMM_WORLD: rank 0's grids
+ * are written (the other ranks pass the same nfields and names, and their g
+ * is not read: NULL will do); they are scattered over the ranks, and each
+ * writes its own box into the file (MPI-IO). Both files are written under temporary names and renamed
  * into place by rank 0; on error neither is left behind. Starts PETSc if it
  * is not up; HV_ERR_UNSUPPORTED without PETSc. */
 HV_API hv_status hv_petsc_write_h5(const char *path, int nfields, const hv_grid *const *g,
@@ -161,6 +162,44 @@ HV_API int hv_dmda_extender_ghost(const hv_dmda_extender *e, int *band0);
 HV_API hv_status hv_petsc_extend_block(int dim, const int n[3], double h,
                                        const hv_extend_opts *opts, const float *phi, int nfields,
                                        const hv_extend_field *f, hv_extend_stats *stats);
+
+/* The heat-method distance (hv_distance_compute, heat.h) on the DMDA's
+ * cells, without gathering the grid: each rank splats the sources, assigns
+ * the face directions and builds the fronts on its own box with a ghost
+ * layer of 4 cells (every rank's box must be at least that wide where the
+ * grid is split); the heat and Poisson solves run over all ranks (the heat
+ * steps by Jacobi-preconditioned CG, Poisson by -hv_petsc_pc), and the
+ * counts and the per-region shift are summed over the ranks. The result is
+ * the single process's up to the solves' tolerances. origin: the world
+ * position of the grid's lower corner (for point and mesh sources; NULL =
+ * 0); solid: NULL or a global vector of the DMDA (non-zero = solid), read
+ * once, here, where its regions are labelled; opts: as hv_distance_compute's
+ * (backend ignored; NULL = the defaults). The solvers are made here and
+ * reused by every call. */
+typedef struct hv_dmda_distance hv_dmda_distance;
+HV_API hv_status hv_dmda_distance_create(hv_dmda_distance **out, DM da, double h,
+                                         const double origin[3], Vec solid,
+                                         const hv_distance_opts *opts);
+
+/* dist (a global vector of the DMDA) = the distance from src (the same
+ * sources on every rank; world coordinates, voxel indices of the whole
+ * grid). stats (may be NULL): as hv_distance_compute's, summed over the
+ * ranks, the same on every rank; no progress is reported. Errors are those
+ * of hv_distance_compute, on every rank. */
+HV_API hv_status hv_dmda_distance_compute(hv_dmda_distance *d, const hv_distance_sources *src,
+                                          Vec dist, hv_distance_stats *stats);
+HV_API void hv_dmda_distance_destroy(hv_dmda_distance **d);
+
+/* The distance of a whole grid held by rank 0, distributed over the ranks
+ * of PETSC_COMM_WORLD (heatvox distance --backend petsc under mpirun): rank
+ * 0 passes its grid (with its solid mask, if any) and the sources, the other
+ * ranks NULL for both; the grid's shape, the mask, the sources and opts go
+ * to every rank, each computes its box (hv_dmda_distance_compute), and the result
+ * is gathered into rank 0's g->v. A NULL grid on rank 0 (it could not read
+ * its input) makes every rank return an error. Collective; the same status
+ * and stats on every rank. */
+HV_API hv_status hv_petsc_distance_block(hv_grid *g, const hv_distance_sources *src,
+                                         const hv_distance_opts *opts, hv_distance_stats *stats);
 
 #ifdef __cplusplus
 }

@@ -6,6 +6,8 @@
 
 #include "heatvox/heat.h"
 
+#include <stdint.h>
+
 #define HV_DIST_REF_RADIUS 3.0
 
 /* A cell is trusted in a stage when u (both times) is above RELIABLE * (solve
@@ -47,6 +49,19 @@ double hv__dist_trust_log(double relres, double wn, double t_scale);
  * axis-aligned lattice decay rate for tau = h^2 / t. Below 2: no progress. */
 double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
 
+/* The options' and the sources' checks of hv_distance_compute, and its error
+ * when no source landed on a fluid cell (HV_OK when one did). */
+hv_status hv__dist_check_opts(const hv_distance_opts *o, const hv_distance_sources *src);
+hv_status hv__dist_no_source(const hv_distance_stats *S);
+
+/* A window of the whole grid: g's cell (0, 0, 0) is the whole grid's cell
+ * off; own_lo..own_hi-1 (whole-grid indices) are the cells whose sources
+ * this rank counts. */
+typedef struct hv_dist_window {
+    const hv_grid *full; /* dim, n, h and origin of the whole grid */
+    int off[3], own_lo[3], own_hi[3];
+} hv_dist_window;
+
 /* Adds the source weights of src onto w (one double per cell of g, zeroed by
  * the caller): voxels weigh 1, points 1 spread trilinearly over the fluid cells
  * among their 8 neighbours, mesh samples their area / h^2 the same way.
@@ -54,8 +69,61 @@ double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
  * within HV_DIST_REF_RADIUS voxels of a source item (voxel centre, point, mesh
  * sample), the least distance from the cell centre to one: the distance those
  * cells should have (when no obstacle intervenes), used to place the zero.
- * *in_solid counts sources with no fluid cell to land on. */
-hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
-                         size_t *in_solid);
+ * *in_solid counts sources with no fluid cell to land on. win: NULL (g is
+ * the whole grid), or g is a window of win->full (a rank's box and its ghost
+ * layer, its solid mask with it): sources are checked against the whole grid,
+ * those outside the window skipped, and *in_solid counts those whose nearest
+ * cell is owned, so that the ranks' counts add up. Weights and ref are exact
+ * on the window's cells at least HV_DIST_REF_RADIUS + 1 cells inside its
+ * edges (or on the whole grid's). */
+hv_status hv__dist_splat(const hv_grid *g, const hv_dist_window *win,
+                         const hv_distance_sources *src, double *w, float *ref, size_t *in_solid);
+
+/* What the stages need from where they run: the sums over ranks and the
+ * solves. A single process (hv_distance_compute) sums nothing and solves on
+ * its grid; on a DMDA (distance_dmda.c) the box is a rank's cells with a
+ * ghost layer, sums run over the ranks and the solves over the whole grid,
+ * their solutions exchanged into the ghost layer. */
+typedef struct hv_dist_hooks {
+    void *user;
+    /* Sums v[0..n-1] over the ranks, in place. */
+    void (*sum)(void *user, double *v, int n);
+    /* u (the whole box) = the solution for f (read on the owned cells):
+     * q = 0, 1: (I - t Lap) u = f with t = t_scale h^2, T_RATIO t_scale h^2;
+     * q = 2: -Lap u = f to poisson_tol (after which q = 0 and 1 are not
+     * asked for again). */
+    hv_status (*solve)(void *user, int q, const double *f, double *u, hv_solve_info *info);
+} hv_dist_hooks;
+
+/* A box of cells the stages run on: the whole grid, or a rank's box with its
+ * ghost layer, whose owned cells are lo..hi-1 (box indices). */
+typedef struct hv_dist_box {
+    int dim, n[3];
+    size_t count, cs[3]; /* cells, cell strides */
+    double h;
+    const uint8_t *solid;
+    int lo[3], hi[3]; /* the owned cells */
+    int whole;        /* the box is the whole grid (progress is reported) */
+    double tau[2];    /* h^2 / t of the two diffusion times */
+    int32_t *region;  /* >= 0: region with a source; -1 solid; -2 fluid without source */
+    float *X[3];      /* face directions; NaN = not assigned yet */
+    size_t nface[3];
+    const hv_dist_hooks *hk;
+} hv_dist_box;
+
+/* Sets n, count, strides and the face counts of b from dim and n; the owned
+ * cells default to all. */
+void hv__dist_box_init(hv_dist_box *b, int dim, const int n[3], double h, const uint8_t *solid);
+
+/* The stages, the Poisson solve and the shift (docs/METHOD.md, "Heat method")
+ * on the box b: b->region labelled, S->regions set, b->X allocated; w (the
+ * source weights, owned cells), ref (the reference distances near the
+ * sources) as hv__dist_splat leaves them; u, u2 (doubles), inside (zeroed)
+ * and ok (bytes) work arrays of b->count. Writes the distance of every box
+ * cell into out (those of the owned cells and, where the ghost layer has
+ * what they depend on, others). S's counts are sums over the ranks. */
+hv_status hv__dist_march(hv_dist_box *b, const hv_distance_opts *o, double *w, double *u,
+                         double *u2, uint8_t *inside, uint8_t *ok, float *ref, float *out,
+                         hv_distance_stats *S);
 
 #endif

@@ -97,9 +97,37 @@ static int inside_block(const hv_grid *g, const double x[3])
     return 1;
 }
 
-static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float *ref,
-                            size_t *in_solid)
+/* Whether this rank counts a source at x as lost: its nearest cell of the
+ * whole grid (clamped to it) is owned; always without a window. */
+static int counts_here(const hv_dist_window *win, const double x[3])
 {
+    if (!win)
+        return 1;
+    const hv_grid *f = win->full;
+    for (int a = 0; a < f->dim; a++) {
+        double p = floor((x[a] - f->origin[a]) / f->h);
+        p = p < 0 ? 0 : p > f->n[a] - 1 ? f->n[a] - 1 : p;
+        if (p < win->own_lo[a] || p >= win->own_hi[a])
+            return 0;
+    }
+    return 1;
+}
+
+/* Splats a point of the whole grid's block; one outside the window is left
+ * to the rank whose window holds it. */
+static void splat_in(const hv_grid *g, const hv_dist_window *win, const double x[3], double wt,
+                     double *w, float *ref, size_t *in_solid)
+{
+    if (win && !inside_block(g, x))
+        return;
+    if (!splat_point(g, x, wt, w, ref) && counts_here(win, x))
+        (*in_solid)++;
+}
+
+static hv_status splat_mesh(const hv_grid *g, const hv_dist_window *win, const hv_mesh *m,
+                            double *w, float *ref, size_t *in_solid)
+{
+    const hv_grid *full = win ? win->full : g;
     const double h = g->h;
     for (size_t t = 0; t < m->ntris; t++) {
         const double *p[3];
@@ -150,18 +178,22 @@ static hv_status splat_mesh(const hv_grid *g, const hv_mesh *m, double *w, float
                     double x[3];
                     for (int d = 0; d < 3; d++)
                         x[d] = p[0][d] + ua * e1[d] + ub * e2[d];
-                    if (!inside_block(g, x) || !splat_point(g, x, wt, w, ref))
-                        (*in_solid)++;
+                    if (!inside_block(full, x))
+                        *in_solid += counts_here(win, x);
+                    else
+                        splat_in(g, win, x, wt, w, ref, in_solid);
                 }
     }
     return HV_OK;
 }
 
-hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, double *w, float *ref,
-                         size_t *in_solid)
+hv_status hv__dist_splat(const hv_grid *g, const hv_dist_window *win,
+                         const hv_distance_sources *src, double *w, float *ref, size_t *in_solid)
 {
     *in_solid = 0;
-    const int *n = g->n;
+    const hv_grid *full = win ? win->full : g;
+    const int *n = full->n;
+    const int zero[3] = {0, 0, 0}, *off = win ? win->off : zero;
     for (size_t s = 0; s < src->nvoxels; s++) {
         const int *v = src->voxels + 3 * s;
         int k = g->dim == 3 ? v[2] : 0;
@@ -170,13 +202,17 @@ hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, doubl
             return hv__error(HV_ERR_INVALID_ARG,
                              "source voxel %zu (%d %d %d) lies outside the %d x %d x %d grid", s,
                              v[0], v[1], v[2], n[0], n[1], n[2]);
-        size_t c = v[0] + (size_t)n[0] * (v[1] + (size_t)n[1] * k);
+        const int l[3] = {v[0] - off[0], v[1] - off[1], k - off[2]};
+        if (l[0] < 0 || l[0] >= g->n[0] || l[1] < 0 || l[1] >= g->n[1] || l[2] < 0 ||
+            l[2] >= g->n[2])
+            continue; /* another rank's */
+        size_t c = l[0] + (size_t)g->n[0] * (l[1] + (size_t)g->n[1] * l[2]);
+        double x[3];
+        hv_grid_cell_center(g, l[0], l[1], l[2], x);
         if (g->solid && g->solid[c])
-            (*in_solid)++;
+            *in_solid += counts_here(win, x);
         else {
-            double x[3];
             w[c] += 1.0;
-            hv_grid_cell_center(g, v[0], v[1], k, x);
             note_near(g, x, ref);
         }
     }
@@ -184,17 +220,16 @@ hv_status hv__dist_splat(const hv_grid *g, const hv_distance_sources *src, doubl
         const double *x = src->points + 3 * s;
         if (!isfinite(x[0]) || !isfinite(x[1]) || (g->dim == 3 && !isfinite(x[2])))
             return hv__error(HV_ERR_NUMERIC, "source point %zu has a NaN/Inf coordinate", s);
-        if (!inside_block(g, x))
+        if (!inside_block(full, x))
             return hv__error(HV_ERR_INVALID_ARG,
                              "source point %zu (%g %g %g) lies outside the grid's block", s, x[0],
                              x[1], g->dim == 3 ? x[2] : 0.0);
-        if (!splat_point(g, x, 1.0, w, ref))
-            (*in_solid)++;
+        splat_in(g, win, x, 1.0, w, ref, in_solid);
     }
     if (src->mesh) {
         if (g->dim != 3)
             return hv__error(HV_ERR_INVALID_ARG, "a mesh source needs a 3D grid");
-        hv_status st = splat_mesh(g, src->mesh, w, ref, in_solid);
+        hv_status st = splat_mesh(g, win, src->mesh, w, ref, in_solid);
         if (st)
             return st;
     }

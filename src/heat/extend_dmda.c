@@ -355,79 +355,22 @@ void hv_dmda_extender_destroy(hv_dmda_extender **xp)
     *xp = NULL;
 }
 
-/* Rank 0's block <-> the DMDA's global vectors, through the natural
- * (x-fastest) ordering. */
-typedef struct {
-    DM da;
-    Vec nat, zero; /* natural vector; its whole on rank 0 */
-    VecScatter toz;
-    size_t count;
-} block_io;
-
-static hv_status block_in(block_io *B, const float *a, Vec g)
+static hv_status extend_block(hv_block_io *B, const hv_extend_opts *o, double h, const float *phi,
+                              int nfields, const hv_extend_field *f, hv_extend_stats *stats, Vec *v)
 {
-    if (a) { /* rank 0 */
-        PetscScalar *z;
-        HV_PETSC_CHK(VecGetArray(B->zero, &z), "VecGetArray");
-        for (size_t c = 0; c < B->count; c++)
-            z[c] = a[c];
-        VecRestoreArray(B->zero, &z);
-    }
-    HV_PETSC_CHK(VecScatterBegin(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
-                 "VecScatter");
-    HV_PETSC_CHK(VecScatterEnd(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
-                 "VecScatter");
-    HV_PETSC_CHK(DMDANaturalToGlobalBegin(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
-    HV_PETSC_CHK(DMDANaturalToGlobalEnd(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
-    return HV_OK;
-}
-
-static hv_status block_out(block_io *B, Vec g, const float *phi, double ob, float bg, float *out)
-{
-    HV_PETSC_CHK(DMDAGlobalToNaturalBegin(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
-    HV_PETSC_CHK(DMDAGlobalToNaturalEnd(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
-    HV_PETSC_CHK(VecScatterBegin(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
-                 "VecScatter");
-    HV_PETSC_CHK(VecScatterEnd(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
-                 "VecScatter");
-    if (out) {
-        const PetscScalar *z;
-        HV_PETSC_CHK(VecGetArrayRead(B->zero, &z), "VecGetArrayRead");
-        for (size_t c = 0; c < B->count; c++)
-            out[c] = fabs(phi[c]) < ob ? (float)z[c] : bg;
-        VecRestoreArrayRead(B->zero, &z);
-    }
-    return HV_OK;
-}
-
-static hv_status extend_block(block_io *B, int dim, const int n[3], double h,
-                              const hv_extend_opts *o, const float *phi, int nfields,
-                              const hv_extend_field *f, hv_extend_stats *stats, Vec *v)
-{
-    PetscErrorCode ierr;
-    if (dim == 3)
-        ierr = DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
-                            DMDA_STENCIL_STAR, n[0], n[1], n[2], PETSC_DECIDE, PETSC_DECIDE,
-                            PETSC_DECIDE, 1, 1, NULL, NULL, NULL, &B->da);
-    else
-        ierr = DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR,
-                            n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &B->da);
-    if (ierr || (ierr = DMSetUp(B->da)) || (ierr = DMDACreateNaturalVector(B->da, &B->nat)) ||
-        (ierr = VecScatterCreateToZero(B->nat, &B->toz, &B->zero)))
-        return hv__petsc_fail(ierr, "setting up the distributed block");
     for (int i = 0, q = 0; i < nfields; i++)
         for (int c = 0; c < f[i].ncomp; c++, q++)
             HV_PETSC_CHK(DMCreateGlobalVector(B->da, &v[q]), "DMCreateGlobalVector");
     Vec gphi;
     HV_PETSC_CHK(DMCreateGlobalVector(B->da, &gphi), "DMCreateGlobalVector");
-    hv_status st = block_in(B, phi, gphi);
+    hv_status st = hv__block_in(B, phi, NULL, gphi);
     hv_dmda_field df[MAX_FIELDS_PER_CALL];
     for (int i = 0, q = 0; i < nfields && !st; i++) {
         df[i].ncomp = f[i].ncomp;
         for (int c = 0; c < 3; c++)
             df[i].v[c] = c < f[i].ncomp ? v[q + c] : NULL;
         for (int c = 0; c < f[i].ncomp && !st; c++)
-            st = block_in(B, phi ? f[i].in[c] : NULL, v[q + c]);
+            st = hv__block_in(B, phi ? f[i].in[c] : NULL, NULL, v[q + c]);
         q += f[i].ncomp;
     }
     hv_dmda_extender *X = NULL;
@@ -436,10 +379,16 @@ static hv_status extend_block(block_io *B, int dim, const int n[3], double h,
     if (!st)
         st = hv_dmda_extend(X, gphi, nfields, df, stats);
     hv_dmda_extender_destroy(&X);
+    /* Rank 0: the band's values, the background elsewhere. */
     const double ob = o->out_band * h;
     for (int i = 0, q = 0; i < nfields && !st; i++)
-        for (int c = 0; c < f[i].ncomp && !st; c++, q++)
-            st = block_out(B, v[q], phi, ob, o->background, phi ? f[i].out[c] : NULL);
+        for (int c = 0; c < f[i].ncomp && !st; c++, q++) {
+            float *out = phi ? f[i].out[c] : NULL;
+            st = hv__block_out(B, v[q], out);
+            for (size_t k = 0; out && k < B->count; k++)
+                if (!(fabs(phi[k]) < ob))
+                    out[k] = o->background;
+        }
     VecDestroy(&gphi);
     return st;
 }
@@ -473,7 +422,7 @@ static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
                     : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: no level set");
     const int nb[3] = {(int)hdr[1], (int)hdr[2], (int)hdr[3]};
     h = hdr[4];
-    block_io B = {NULL, NULL, NULL, NULL, (size_t)nb[0] * nb[1] * (dim == 3 ? nb[2] : 1)};
+    hv_block_io B;
     Vec *v = calloc((size_t)ncomp, sizeof *v);
     st = v ? HV_OK : hv__error(HV_ERR_NOMEM, "extend: out of memory");
     int bad = st != HV_OK, anybad = 0;
@@ -482,14 +431,12 @@ static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
         free(v);
         return st ? st : hv__error(HV_ERR_NOMEM, "extend: out of memory on another rank");
     }
-    st = extend_block(&B, dim, nb, h, opts, rank ? NULL : phi, nfields, f, stats, v);
+    if (!(st = hv__block_create(&B, dim, nb)))
+        st = extend_block(&B, opts, h, rank ? NULL : phi, nfields, f, stats, v);
     for (int q = 0; q < ncomp; q++)
         VecDestroy(&v[q]);
     free(v);
-    VecScatterDestroy(&B.toz);
-    VecDestroy(&B.zero);
-    VecDestroy(&B.nat);
-    DMDestroy(&B.da);
+    hv__block_destroy(&B);
     return st;
 }
 

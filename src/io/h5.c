@@ -1,7 +1,7 @@
 /* Dense fields as parallel HDF5 with an XDMF sidecar (petsc.h), in builds made
  * with HV_HAVE_PETSC (make mpi): the block becomes a DMDA over
- * PETSC_COMM_WORLD, each rank copies its box of every field into a global
- * vector, and PETSc's HDF5 viewer writes the boxes into one dataset per field
+ * PETSC_COMM_WORLD, rank 0's fields are scattered to the ranks' boxes, and
+ * PETSc's HDF5 viewer writes the boxes into one dataset per field
  * with MPI-IO (VecView on a DMDA vector: shape (nz, ny, nx), x fastest). The
  * grid's placement goes into attributes of each dataset and into the XDMF
  * file, which describes the cell corners as a co-rectilinear mesh and the
@@ -117,62 +117,43 @@ static hv_status write_xmf(const char *tmp, const char *h5_path, int nfields, co
     return HV_OK;
 }
 
-/* Every field into the file tmp (collective). */
+/* Every field into the file tmp (collective): rank 0's grids g, scattered
+ * to the ranks' boxes; hdr is the block's shape on every rank. */
 static hv_status write_fields(const char *tmp, const char *path, int nfields,
-                              const hv_grid *const *g, const char *const *names)
+                              const hv_grid *const *g, const hv_grid *hdr, const char *const *names)
 {
-    const hv_grid *g0 = g[0];
-    DM da = NULL;
+    hv_block_io B;
     Vec x = NULL;
     PetscViewer v = NULL;
-    PetscErrorCode ierr;
-    hv_status st = HV_OK;
-    if (g0->dim == 3)
-        ierr = DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
-                            DMDA_STENCIL_STAR, g0->n[0], g0->n[1], g0->n[2], PETSC_DECIDE,
-                            PETSC_DECIDE, PETSC_DECIDE, 1, 0, NULL, NULL, NULL, &da);
-    else
-        ierr = DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR,
-                            g0->n[0], g0->n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 0, NULL, NULL, &da);
-    if (ierr || (ierr = DMSetUp(da)) || (ierr = DMCreateGlobalVector(da, &x)))
+    PetscErrorCode ierr = 0;
+    hv_status st = hv__block_create(&B, hdr->dim, hdr->n);
+    if (!st && (ierr = DMCreateGlobalVector(B.da, &x)))
         st = h5_fail(ierr, path, "setting up the distributed grid");
     if (!st && (ierr = PetscViewerHDF5Open(PETSC_COMM_WORLD, tmp, FILE_MODE_WRITE, &v)))
         st = h5_fail(ierr, path, "creating the HDF5 file");
-    const double spacing[3] = {g0->h, g0->h, g0->h};
+    const double spacing[3] = {hdr->h, hdr->h, hdr->h};
     for (int f = 0; f < nfields && !st; f++) {
-        PetscInt xs, ys, zs, xm, ym, zm;
-        DMDAGetCorners(da, &xs, &ys, &zs, &xm, &ym, &zm);
-        if (g0->dim == 2) {
-            zs = 0;
-            zm = 1;
-        }
-        PetscScalar *a;
-        VecGetArray(x, &a);
-        size_t q = 0;
-        for (PetscInt k = zs; k < zs + zm; k++)
-            for (PetscInt j = ys; j < ys + ym; j++)
-                for (PetscInt i = xs; i < xs + xm; i++, q++)
-                    a[q] =
-                        g[f]->v[(size_t)i + (size_t)g0->n[0] * ((size_t)j + (size_t)g0->n[1] * k)];
-        VecRestoreArray(x, &a);
+        if ((st = hv__block_in(&B, g ? g[f]->v : NULL, NULL, x)))
+            break;
         if ((ierr = PetscObjectSetName((PetscObject)x, names[f])) || (ierr = VecView(x, v)))
             st = h5_fail(ierr, path, "writing a field");
         if (!st)
-            st = put_attribute(v, path, names[f], "spacing", spacing, g0->dim);
+            st = put_attribute(v, path, names[f], "spacing", spacing, hdr->dim);
         if (!st)
-            st = put_attribute(v, path, names[f], "origin", g0->origin, g0->dim);
+            st = put_attribute(v, path, names[f], "origin", hdr->origin, hdr->dim);
     }
     if (v && (ierr = PetscViewerDestroy(&v)) && !st)
         st = h5_fail(ierr, path, "closing the HDF5 file");
     VecDestroy(&x);
-    DMDestroy(&da);
+    hv__block_destroy(&B);
     return st;
 }
 
-static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_grid *const *g,
-                                        const char *const *names)
+/* Rank 0's checks of its grids and names. */
+static hv_status check_fields(const char *path, int nfields, const hv_grid *const *g,
+                              const char *const *names)
 {
-    if (!path || nfields < 1 || !g || !names)
+    if (!g)
         return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_write_h5: bad arguments");
     for (int f = 0; f < nfields; f++) {
         if (!g[f] || !g[f]->v || !names[f] || !names[f][0] || strlen(names[f]) > 200 ||
@@ -186,15 +167,46 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
             return hv__error(HV_ERR_INVALID_ARG, "%s: field '%s' is on another block than '%s'",
                              path, names[f], names[0]);
     }
+    return HV_OK;
+}
+
+static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_grid *const *g,
+                                        const char *const *names)
+{
+    if (!path || nfields < 1 || !names)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_petsc_write_h5: bad arguments");
     hv_status st = hv_petsc_init();
     if (st)
         return st;
+    int rank = 0;
+    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+    /* Rank 0's block: checked there, its shape sent to every rank. */
+    double h[9] = {0};
+    if (!rank && !(st = check_fields(path, nfields, g, names))) {
+        h[0] = 1;
+        h[1] = g[0]->dim;
+        h[2] = g[0]->h;
+        for (int a = 0; a < 3; a++) {
+            h[3 + a] = g[0]->n[a];
+            h[6 + a] = g[0]->origin[a];
+        }
+    }
+    MPI_Bcast(h, 9, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    if (!h[0])
+        return rank ? hv__error(HV_ERR_INVALID_ARG, "%s: rank 0's fields are not writable", path)
+                    : st;
+    hv_grid hdr;
+    memset(&hdr, 0, sizeof hdr);
+    hdr.dim = (int)h[1];
+    hdr.h = h[2];
+    for (int a = 0; a < 3; a++) {
+        hdr.n[a] = (int)h[3 + a];
+        hdr.origin[a] = h[6 + a];
+    }
     char xmf[4096], tmp[4096 + 64], xtmp[4096 + 64];
     if ((st = xmf_name(path, xmf, sizeof xmf)))
         return st;
     /* Rank 0 names the temporaries; every rank opens the same one. */
-    int rank = 0;
-    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     int ok = 1;
     if (!rank) {
         ok = !hv_tmp_name(path, tmp, sizeof tmp);
@@ -208,7 +220,7 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
         return rank ? hv__error(HV_ERR_IO, "%s: rank 0 could not name a temporary", path)
                     : hv__error(HV_ERR_IO, "%s: cannot name a temporary file", path);
     MPI_Bcast(tmp, (int)sizeof tmp, MPI_CHAR, 0, PETSC_COMM_WORLD);
-    st = write_fields(tmp, path, nfields, g, names);
+    st = write_fields(tmp, path, nfields, rank ? NULL : g, &hdr, names);
     /* Rank 0 writes the sidecar and renames both; the others learn how it went. */
     int fail = st != HV_OK;
     MPI_Allreduce(MPI_IN_PLACE, &fail, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);

@@ -27,6 +27,7 @@ struct hv_dmda_solver {
     Mat A;
     KSP ksp;
     Vec b, r;
+    Vec labels; /* alpha = 0: each cell's region label (-1 solid) */
     MatNullSpace null;
     Vec *basis;
     int nbasis, regions;
@@ -35,6 +36,15 @@ struct hv_dmda_solver {
     double tol;
     int max_iter, nonzero_guess;
 };
+
+hv_status hv__petsc_agree(DM da, hv_status st)
+{
+    int bad = st != HV_OK;
+    MPI_Allreduce(MPI_IN_PLACE, &bad, 1, MPI_INT, MPI_MAX, PetscObjectComm((PetscObject)da));
+    if (bad && !st)
+        return hv__error(HV_ERR_BACKEND, "petsc: another rank failed (see its error)");
+    return st;
+}
 
 hv_status hv__petsc_pc_kind(int dim, double alpha, int regions, int *kind)
 {
@@ -318,7 +328,7 @@ static hv_status regions(hv_dmda_solver *s, int dim)
     }
     free(all);
     VecRestoreArrayRead(lab, &ca);
-    VecDestroy(&lab);
+    s->labels = lab;
     if (st)
         return st;
     if (s->regions == 0)
@@ -498,6 +508,8 @@ hv_status hv__dmda_solve(hv_dmda_solver *s, Vec u, hv_solve_info *info)
 
 Vec hv__dmda_rhs(hv_dmda_solver *s) { return s->b; }
 
+Vec hv__dmda_labels(const hv_dmda_solver *s) { return s->labels; }
+
 static hv_status hv_dmda_solver_solve_body(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
 {
     if (!s || !f || !u)
@@ -526,6 +538,7 @@ void hv_dmda_solver_destroy(hv_dmda_solver **sp)
     MatNullSpaceDestroy(&s->null);
     VecDestroy(&s->b);
     VecDestroy(&s->r);
+    VecDestroy(&s->labels);
     KSPDestroy(&s->ksp);
     MatDestroy(&s->A);
     DMDestroy(&s->da);
@@ -543,6 +556,70 @@ hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double a
 hv_status hv_dmda_solver_solve(hv_dmda_solver *s, Vec f, Vec u, hv_solve_info *info)
 {
     HV_PETSC_QUIETLY(hv_dmda_solver_solve_body(s, f, u, info));
+}
+
+/* ---- a block held by rank 0 ---------------------------------------------- */
+
+hv_status hv__block_create(hv_block_io *B, int dim, const int n[3])
+{
+    memset(B, 0, sizeof *B);
+    B->count = (size_t)n[0] * n[1] * (dim == 3 ? n[2] : 1);
+    PetscErrorCode ierr;
+    if (dim == 3)
+        ierr = DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                            DMDA_STENCIL_STAR, n[0], n[1], n[2], PETSC_DECIDE, PETSC_DECIDE,
+                            PETSC_DECIDE, 1, 1, NULL, NULL, NULL, &B->da);
+    else
+        ierr = DMDACreate2d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DMDA_STENCIL_STAR,
+                            n[0], n[1], PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL, NULL, &B->da);
+    if (ierr || (ierr = DMSetUp(B->da)) || (ierr = DMDACreateNaturalVector(B->da, &B->nat)) ||
+        (ierr = VecScatterCreateToZero(B->nat, &B->toz, &B->zero)))
+        return hv__petsc_fail(ierr, "setting up the distributed block");
+    return HV_OK;
+}
+
+hv_status hv__block_in(hv_block_io *B, const float *a, const uint8_t *m, Vec g)
+{
+    if (a || m) { /* rank 0 */
+        PetscScalar *z;
+        HV_PETSC_CHK(VecGetArray(B->zero, &z), "VecGetArray");
+        for (size_t c = 0; c < B->count; c++)
+            z[c] = a ? a[c] : m[c] != 0;
+        VecRestoreArray(B->zero, &z);
+    }
+    HV_PETSC_CHK(VecScatterBegin(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
+                 "VecScatter");
+    HV_PETSC_CHK(VecScatterEnd(B->toz, B->zero, B->nat, INSERT_VALUES, SCATTER_REVERSE),
+                 "VecScatter");
+    HV_PETSC_CHK(DMDANaturalToGlobalBegin(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    HV_PETSC_CHK(DMDANaturalToGlobalEnd(B->da, B->nat, INSERT_VALUES, g), "NaturalToGlobal");
+    return HV_OK;
+}
+
+hv_status hv__block_out(hv_block_io *B, Vec g, float *out)
+{
+    HV_PETSC_CHK(DMDAGlobalToNaturalBegin(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    HV_PETSC_CHK(DMDAGlobalToNaturalEnd(B->da, g, INSERT_VALUES, B->nat), "GlobalToNatural");
+    HV_PETSC_CHK(VecScatterBegin(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
+    HV_PETSC_CHK(VecScatterEnd(B->toz, B->nat, B->zero, INSERT_VALUES, SCATTER_FORWARD),
+                 "VecScatter");
+    if (out) {
+        const PetscScalar *z;
+        HV_PETSC_CHK(VecGetArrayRead(B->zero, &z), "VecGetArrayRead");
+        for (size_t c = 0; c < B->count; c++)
+            out[c] = (float)z[c];
+        VecRestoreArrayRead(B->zero, &z);
+    }
+    return HV_OK;
+}
+
+void hv__block_destroy(hv_block_io *B)
+{
+    VecScatterDestroy(&B->toz);
+    VecDestroy(&B->zero);
+    VecDestroy(&B->nat);
+    DMDestroy(&B->da);
 }
 
 #else /* without PETSc */

@@ -57,9 +57,31 @@ hv_status hv__dmda_solver_create(hv_dmda_solver **out, DM da, double h, double a
 /* The solver's right-hand side vector: fill it, then hv__dmda_solve. */
 Vec hv__dmda_rhs(hv_dmda_solver *s);
 
+/* A Poisson solver's (alpha = 0) region labels: a global vector of its
+ * DMDA, -1 on solid cells, and on fluid cells a label shared by the cells of
+ * one connected region and by no other (NULL for alpha != 0). */
+Vec hv__dmda_labels(const hv_dmda_solver *s);
+
 /* Solves for the right-hand side in hv__dmda_rhs(s) (overwritten: solid
  * rows and the null space taken out) into u. */
 hv_status hv__dmda_solve(hv_dmda_solver *s, Vec u, hv_solve_info *info);
+
+/* A whole block held by rank 0 and a DMDA of it over PETSC_COMM_WORLD (star
+ * stencil, width 1, PETSc's partition): rank 0's arrays go to the ranks'
+ * boxes and back through the natural (x-fastest) ordering. */
+typedef struct hv_block_io {
+    DM da;
+    Vec nat, zero; /* the natural vector; its whole on rank 0 */
+    VecScatter toz;
+    size_t count; /* cells */
+} hv_block_io;
+hv_status hv__block_create(hv_block_io *B, int dim, const int n[3]);
+/* g (a global vector of B->da) = rank 0's values a, or its mask m (0 / 1);
+ * the other ranks pass NULL for both. Collective. */
+hv_status hv__block_in(hv_block_io *B, const float *a, const uint8_t *m, Vec g);
+/* Rank 0's out (the other ranks pass NULL) = g, rounded to floats. */
+hv_status hv__block_out(hv_block_io *B, Vec g, float *out);
+void hv__block_destroy(hv_block_io *B);
 #endif
 
 #endif

@@ -10,7 +10,14 @@
  *     calls of one extender, to 1e-5 relative on the output band, within 0.02
  *     of the exact extension, the cells outside the band untouched;
  *   - a NaN in the level set on one rank: HV_ERR_NUMERIC on every rank, the
- *     fields unchanged.
+ *     fields unchanged;
+ *   - the distance from points, voxels and a sphere mesh, without solids,
+ *     around a ball and baffles (2D and 3D), in a box cut in two by a wall
+ *     with a source on one side, an object reused with other sources: equal
+ *     to the single process's to 1e-3 voxel and 1e-5 relative, the same
+ *     unreachable and solid cells and the same counts (stages, regions,
+ *     source cells, sources in solid); a voxel outside the grid: the same
+ *     error on every rank.
  * Rank 0 prints one line per case; the exit status is 0 only when every case
  * passes on every rank. */
 #include "heatvox/heatvox.h"
@@ -390,6 +397,194 @@ done:
     return ok;
 }
 
+/* ---- the distance ----------------------------------------------------------- */
+
+typedef struct {
+    const char *name;
+    int dim, n[3];
+    int solid;    /* 0 none, 1 a ball and baffles, 2 a wall cutting the box in two */
+    int sources;  /* 0 a point and a voxel, 1 a point moved, 2 a sphere mesh, 3 a voxel in
+                     solid, 4 the voxel on the other side of the cut */
+    int keep;     /* 1: reuse the previous case's object (same grid and solid) */
+} dcase;
+
+/* The case's sources, in world coordinates of the block at origin, voxel
+ * size h. */
+static void dist_sources(const dcase *k, const double *org, double h, double pts[6], int vox[6],
+                         hv_mesh **mesh, hv_distance_sources *src)
+{
+    memset(src, 0, sizeof *src);
+    const double L[3] = {k->n[0] * h, k->n[1] * h, k->n[2] * h};
+    const double f[2][3] = {{0.2, 0.3, 0.4}, {0.8, 0.7, 0.35}};
+    const int m = k->sources == 1;
+    for (int a = 0; a < 3; a++)
+        pts[a] = org[a] + f[m][a] * L[a];
+    if (k->dim == 2)
+        pts[2] = 0;
+    vox[0] = k->n[0] / 8;
+    vox[1] = k->n[1] - 2;
+    vox[2] = k->dim == 3 ? k->n[2] / 2 : 0;
+    src->points = pts;
+    src->npoints = 1;
+    src->voxels = vox;
+    src->nvoxels = 1;
+    if (k->sources == 2) {
+        const double c[3] = {org[0] + 0.3 * L[0], org[1] + 0.5 * L[1], org[2] + 0.5 * L[2]};
+        hv_mesh_make_sphere(mesh, c, 0.15 * L[0], 2);
+        src->mesh = *mesh;
+        src->npoints = src->nvoxels = 0;
+    }
+    if (k->sources == 4) /* across the wall of the box cut in two */
+        vox[0] = k->n[0] - 3;
+    if (k->sources == 3) { /* the ball's centre: solid */
+        vox[0] = k->n[0] / 2;
+        vox[1] = k->n[1] / 2;
+        vox[2] = k->dim == 3 ? k->n[2] / 2 : 0;
+    }
+}
+
+static int distance_case(const dcase *k, hv_dmda_distance **keep, DM *kda, Vec *ksolid)
+{
+    const int nz = k->dim == 3 ? k->n[2] : 1;
+    const double h = 1.0 / k->n[0], org[3] = {-0.75, 0.25, k->dim == 3 ? 1.5 : -0.5 * h};
+    hv_grid *g = NULL;
+    hv_grid_create(&g, k->dim, k->n, h, org);
+    if (k->solid)
+        hv_grid_add_mask(g);
+    for (int z = 0; z < nz; z++)
+        for (int y = 0; y < k->n[1]; y++)
+            for (int x = 0; x < k->n[0]; x++) {
+                const size_t c = x + (size_t)k->n[0] * (y + (size_t)k->n[1] * z);
+                if (k->solid == 1) {
+                    const double dx = x - 0.5 * k->n[0], dy = y - 0.5 * k->n[1],
+                                 dz = k->dim == 3 ? z - 0.5 * nz : 0, r = 0.2 * k->n[1];
+                    g->solid[c] = dx * dx + dy * dy + dz * dz < r * r ||
+                                  (x == k->n[0] / 4 && y > k->n[1] / 5) ||
+                                  (y == k->n[1] / 3 && x > k->n[0] / 2 && x < k->n[0] - 3);
+                } else if (k->solid == 2) {
+                    g->solid[c] = x == k->n[0] / 2;
+                }
+            }
+    double pts[6];
+    int vox[6];
+    hv_mesh *mesh = NULL;
+    hv_distance_sources src;
+    dist_sources(k, org, h, pts, vox, &mesh, &src);
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_distance_stats sr, sd;
+    if (hv_distance_compute(g, &src, &o, &sr)) {
+        fprintf(stderr, "mpi_dmda: %s: one process: %s\n", k->name, hv_last_error());
+        return 0;
+    }
+    if (!k->keep) {
+        hv_dmda_distance_destroy(keep);
+        VecDestroy(ksolid);
+        DMDestroy(kda);
+        *kda = make_da(k->dim, k->n);
+        if (k->solid) {
+            DMCreateGlobalVector(*kda, ksolid);
+            PetscScalar *as;
+            VecGetArray(*ksolid, &as);
+            FOR_OWNED(*kda, k->dim, k->n, as[q] = g->solid[c]);
+            VecRestoreArray(*ksolid, &as);
+        }
+    }
+    hv_status st = HV_OK;
+    if (!*keep)
+        st = hv_dmda_distance_create(keep, *kda, h, org, *ksolid, &o);
+    Vec d;
+    DMCreateGlobalVector(*kda, &d);
+    if (!st)
+        st = hv_dmda_distance_compute(*keep, &src, d, &sd);
+    if (st)
+        fprintf(stderr, "mpi_dmda: %s: %s\n", k->name, hv_last_error());
+    double dmax = 0, vmax = 0;
+    int same_inf = 1;
+    if (!st) {
+        const PetscScalar *ad;
+        VecGetArrayRead(d, &ad);
+        FOR_OWNED(*kda, k->dim, k->n, {
+            const double a = g->v[c];
+            const double b = ad[q];
+            if (isfinite(a) != isfinite(b))
+                same_inf = 0;
+            else if (isfinite(a)) {
+                dmax = fmax(dmax, fabs(a - b));
+                vmax = fmax(vmax, fabs(a));
+            }
+        });
+        VecRestoreArrayRead(d, &ad);
+    }
+    MPI_Allreduce(MPI_IN_PLACE, &dmax, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    MPI_Allreduce(MPI_IN_PLACE, &vmax, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    const int same_stats = !st && sd.stages == sr.stages && sd.regions == sr.regions &&
+                           sd.source_cells == sr.source_cells &&
+                           sd.sources_in_solid == sr.sources_in_solid &&
+                           sd.unreachable_cells == sr.unreachable_cells &&
+                           sd.dead_faces == sr.dead_faces;
+    const int ok = report(!st && same_inf && same_stats && dmax / h <= 1e-3 && dmax / vmax <= 1e-5,
+                          "distance on a DMDA, %-40s %d ranks: %2d stages (one process %2d), %zu "
+                          "regions, %zu source cells, %zu in solid, %zu unreachable; max "
+                          "difference %.1e voxel, %.1e relative",
+                          k->name, hv_mpi_size(), sd.stages, sr.stages, sd.regions,
+                          sd.source_cells, sd.sources_in_solid, sd.unreachable_cells, dmax / h,
+                          dmax / vmax);
+    VecDestroy(&d);
+    hv_mesh_destroy(&mesh);
+    hv_grid_destroy(&g);
+    return ok;
+}
+
+static int distance_cases(void)
+{
+    static const dcase cases[] = {
+        {"point and voxel, 3D 29x23x19", 3, {29, 23, 19}, 0, 0, 0},
+        {"point moved, same object", 3, {29, 23, 19}, 0, 1, 1},
+        {"ball and baffles, 3D 36x30x26", 3, {36, 30, 26}, 1, 0, 0},
+        {"ball and baffles, a voxel in solid, same object", 3, {36, 30, 26}, 1, 3, 1},
+        {"cut in two, a source on one side, 3D 30x17x13", 3, {30, 17, 13}, 2, 0, 0},
+        {"cut in two, a source on each side, same object", 3, {30, 17, 13}, 2, 4, 1},
+        {"sphere mesh source, 3D 32x26x22", 3, {32, 26, 22}, 0, 2, 0},
+        {"ball and baffles, 2D 61x47", 2, {61, 47, 1}, 1, 0, 0},
+    };
+    hv_dmda_distance *D = NULL;
+    DM da = NULL;
+    Vec solid = NULL;
+    int ok = 1;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        ok &= distance_case(&cases[i], &D, &da, &solid);
+    /* A voxel outside the grid: the same error on every rank. */
+    const int bad[3] = {99, 0, 0};
+    hv_distance_sources src = {bad, 1, NULL, 0, NULL};
+    Vec d;
+    DMCreateGlobalVector(da, &d);
+    hv_status st = hv_dmda_distance_compute(D, &src, d, NULL);
+    ok &= report(st == HV_ERR_INVALID_ARG && strstr(hv_last_error(), "outside"),
+                 "distance on a DMDA, a voxel outside the grid: %s (%s)", hv_status_str(st),
+                 hv_last_error());
+    VecDestroy(&d);
+    hv_dmda_distance_destroy(&D);
+    VecDestroy(&solid);
+    DMDestroy(&da);
+    /* A box narrower than the ghost layer: refused, on every rank. */
+    const int P = hv_mpi_size();
+    if (P > 1) {
+        PetscInt lx[4] = {2, 10, 10, 10};
+        DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                     DMDA_STENCIL_STAR, 2 + 10 * (P - 1), 12, 12, P, 1, 1, 1, 1, lx, NULL, NULL,
+                     &da);
+        DMSetUp(da);
+        st = hv_dmda_distance_create(&D, da, 0.1, NULL, NULL, NULL);
+        ok &= report(st == HV_ERR_INVALID_ARG && !D,
+                     "distance on a DMDA, a box 2 cells wide: %s (%s)", hv_status_str(st),
+                     hv_last_error());
+        DMDestroy(&da);
+    }
+    return ok;
+}
+
 int main(int argc, char **argv)
 {
     MPI_Init(&argc, &argv);
@@ -421,6 +616,7 @@ int main(int argc, char **argv)
     hv_petsc_option("-hv_petsc_pc", "auto");
     ok &= extend_cases(40, 0);
     ok &= extend_cases(90, 1);
+    ok &= distance_cases();
     if (rank == 0)
         printf("mpi_dmda: %d ranks, %s\n", hv_mpi_size(), ok ? "all cases passed" : "FAILED");
     hv_petsc_finalize();
