@@ -34,17 +34,25 @@ DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboos
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
             ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format
 
-# MPI and PETSc (optional): `make mpi` installs them (Debian's petsc-dev, with
-# OpenMPI and hypre) and builds heatvox with the petsc backend into build-mpi/;
-# `make mpi-check` runs the distributed tests under mpirun. The default build
-# never links them.
+# MPI and PETSc (optional): where pkg-config finds PETSc (Debian's petsc-dev,
+# with OpenMPI, hypre and parallel HDF5), the build links it and gains the
+# petsc backend, HDF5 output and the DMDA API; HV_PETSC=0 leaves it out, and
+# HV_PETSC=1 insists. `make mpi` installs them and builds with them into
+# build-mpi/ (the MPI programs and tests too); `make mpi-check` runs the
+# distributed tests under mpirun. The sanitizer and fuzzing builds leave PETSc
+# out: MPI's own allocations would read as leaks, and mpi-check covers it.
 MPI_BUILD ?= build-mpi
 MPI_PKGS  := petsc-dev openmpi-bin python3-h5py
-HV_PETSC  ?= 0
+HV_PETSC  ?= $(shell pkg-config --exists PETSc ompi-c hdf5-openmpi 2>/dev/null && echo 1 || echo 0)
 ifeq ($(HV_PETSC),1)
 CPPFLAGS += -DHV_HAVE_PETSC $(shell pkg-config --cflags PETSc ompi-c hdf5-openmpi 2>/dev/null)
 LDLIBS   += $(shell pkg-config --libs PETSc ompi-c hdf5-openmpi 2>/dev/null)
 endif
+
+# The flags the objects were built with: when they change (PETSc found or
+# gone, another OPT), everything is rebuilt.
+FLAGS_NOW := $(CC) $(CXX) $(CPPFLAGS) $(CFLAGS) $(CXXFLAGS) $(LIBFLAGS) $(TOOL_CPPFLAGS) $(LDFLAGS) $(LDLIBS)
+FLAGS     := $(BUILD)/.flags
 
 C_SRC   := $(sort $(wildcard src/*/*.c))
 CXX_SRC := $(sort $(wildcard src/*/*.cpp))
@@ -72,6 +80,11 @@ BIN     := $(BUILD)/heatvox
 .PHONY: all deps check sanitize bench demo install format format-check clean
 .SECONDARY:
 all: $(LIB_A) $(LIB_SO) $(BIN)
+
+$(FLAGS): FORCE
+	@mkdir -p $(BUILD); [ "$$(cat $@ 2>/dev/null)" = '$(FLAGS_NOW)' ] || printf '%s' '$(FLAGS_NOW)' > $@
+.PHONY: FORCE
+FORCE:
 
 deps: $(STAMP)
 $(STAMP): Makefile
@@ -106,16 +119,16 @@ $(BUILD)/gen/kernels.c: $(CL_SRC) Makefile | $(STAMP)
 	   for f in $(CL_SRC); do echo "  \"$$(basename $$f)\","; done; \
 	   echo '  NULL};'; } > $@
 
-$(BUILD)/obj/gen/kernels.o: $(BUILD)/gen/kernels.c
+$(BUILD)/obj/gen/kernels.o: $(BUILD)/gen/kernels.c $(FLAGS)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(LIBFLAGS) -c $< -o $@
 
-$(BUILD)/obj/src/%.o: src/%.c | $(STAMP)
+$(BUILD)/obj/src/%.o: src/%.c $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $(LIBFLAGS) -MMD -MP -c $< -o $@
 
 
-$(BUILD)/obj/tools/%.o: tools/%.c | $(STAMP)
+$(BUILD)/obj/tools/%.o: tools/%.c $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(TOOL_CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
 
@@ -123,15 +136,15 @@ $(BUILD)/obj/tools/%.o: tools/%.c | $(STAMP)
 # (tools/bench_ref_vdb.cpp), not part of the library. Public headers and
 # OpenVDB's only; default visibility, like the library's OpenVDB shim.
 TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(wildcard tools/*.cpp))
-$(BUILD)/obj/tools/%.o: tools/%.cpp | $(STAMP)
+$(BUILD)/obj/tools/%.o: tools/%.cpp $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CXX) $(TOOL_CPPFLAGS) $(CXXFLAGS) -MMD -MP -c $< -o $@
 
-$(BUILD)/obj/%.o: %.c | $(STAMP)
+$(BUILD)/obj/%.o: %.c $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
 
-$(BUILD)/obj/%.o: %.cpp | $(STAMP)
+$(BUILD)/obj/%.o: %.cpp $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -MMD -MP -c $< -o $@
 
@@ -140,7 +153,7 @@ $(LIB_A): $(OBJ)
 	ar rcs $@ $^
 
 # libheatvox.so.X.Y.Z with soname libheatvox.so.X, and the two links to it.
-$(LIB_SOV): $(OBJ) src/heatvox.map
+$(LIB_SOV): $(OBJ) src/heatvox.map $(FLAGS)
 	$(CXX) -shared -Wl,-soname,libheatvox.so.$(SOMAJOR) -Wl,--no-undefined -Wl,--version-script,src/heatvox.map \
 	  -o $@ $(OBJ) $(LDFLAGS) $(LDLIBS)
 
@@ -213,7 +226,12 @@ check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
 MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1 \
            OMP_NUM_THREADS=1 mpirun --oversubscribe
 .PHONY: mpi mpi-check
+# Two passes: the packages first, then the build, whose flags come from
+# pkg-config when its Makefile is read (a fresh machine has no PETSc before).
 mpi:
+	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' deps
+	@pkg-config --exists PETSc ompi-c hdf5-openmpi || \
+	  { echo "heatvox: pkg-config finds no PETSc, OpenMPI or parallel HDF5 after installing $(MPI_PKGS)"; exit 1; }
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
 	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda \
 	  $(MPI_BUILD)/bench_mpi
@@ -246,7 +264,7 @@ $(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c $(LIB_A) | $(STAMP)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 
 sanitize:
-	$(MAKE) BUILD=build-san SAN=1 check \
+	$(MAKE) BUILD=build-san SAN=1 HV_PETSC=0 check \
 	  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp
 
@@ -265,6 +283,7 @@ install: all
 	install -m 644 include/heatvox/*.h $(DESTDIR)$(PREFIX)/include/heatvox/
 	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/
 	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' \
+	  -e 's|@REQUIRES@|$(if $(filter 1,$(HV_PETSC)),Requires.private: PETSc ompi-c hdf5-openmpi,)|' \
 	  heatvox.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc
 ifneq ($(PYVER),)
 	install -d $(DESTDIR)$(PYDIR)/heatvox
@@ -320,7 +339,7 @@ FZ_CC        := clang-14
 FZ_CXX       := clang++-14
 FZ_SAN       := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FZ_OPT       := -O1 -g -fno-omit-frame-pointer
-FZ_SUBMAKE    = $(MAKE) BUILD=$(FZ) CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='$(FZ_OPT)' \
+FZ_SUBMAKE    = $(MAKE) BUILD=$(FZ) HV_PETSC=0 CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='$(FZ_OPT)' \
                 SANFLAGS='$(FZ_SAN) -fsanitize=fuzzer-no-link' DEB_PKGS='$(DEB_PKGS) $(FUZZ_PKGS)'
 FZ_BINS      := $(patsubst %,$(FZ)/fuzz/fuzz_%,$(FUZZ_TARGETS))
 FZ_RUNENV    := ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
@@ -337,7 +356,7 @@ $(CXX_SRC:%.cpp=$(FZ)/obj/%.o) $(FZ)/obj/tools/bench_ref_vdb.o: CXXFLAGS += -fno
 .PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
 fuzz-build:
 	+@$(FZ_SUBMAKE) $(FZ)/libheatvox.a $(FZ)/heatvox
-	+@$(MAKE) --no-print-directory $(FZ_BINS) $(FZ)/fuzz/make_seeds
+	+@$(MAKE) --no-print-directory HV_PETSC=0 $(FZ_BINS) $(FZ)/fuzz/make_seeds
 
 $(FZ)/fuzz/%.o: tests/fuzz/%.c $(wildcard tests/fuzz/*.h)
 	@mkdir -p $(dir $@)
@@ -352,7 +371,7 @@ $(FZ)/fuzz/make_seeds: $(FZ)/fuzz/make_seeds.o $(FZ)/libheatvox.a
 # Seeds: `heatvox make-scenes`, the repository's curve scenes, and make_seeds
 # (small files in every format, .npy/.exr/.vdb written by the library).
 fuzz-seeds: fuzz-build
-	+@$(MAKE) --no-print-directory $(FZ)/corpus/.seeded
+	+@$(MAKE) --no-print-directory HV_PETSC=0 $(FZ)/corpus/.seeded
 $(FZ)/corpus/.seeded: $(FZ)/heatvox $(FZ)/fuzz/make_seeds $(wildcard scenes/curves/*)
 	@rm -rf $(FZ)/scenes && mkdir -p $(FZ)/corpus
 	ASAN_OPTIONS=detect_leaks=0 $(FZ)/heatvox make-scenes -q $(FZ)/scenes
@@ -404,7 +423,7 @@ TS_RUNENV   := OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so ARCHER_OPTIO
                TSAN_OPTIONS='ignore_noninstrumented_modules=1 halt_on_error=0 suppressions=$(CURDIR)/tests/tsan.supp' GOMP_SPINCOUNT=1000
 .PHONY: tsan
 tsan:
-	+@$(MAKE) --no-print-directory BUILD=$(TS) CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='-O1 -g' \
+	+@$(MAKE) --no-print-directory BUILD=$(TS) HV_PETSC=0 CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='-O1 -g' \
 	  SANFLAGS='-fsanitize=thread' DEB_PKGS='$(DEB_PKGS) $(FUZZ_PKGS)' \
 	  $(TS)/heatvox $(TSAN_SUITES:%=$(TS)/tests/%)
 	@bad=""; for t in $(TSAN_SUITES); do \

@@ -6,6 +6,7 @@
 #include "testlib.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #ifdef _OPENMP
@@ -168,15 +169,12 @@ START_TEST(solutions_should_converge_at_second_order)
 }
 END_TEST
 
-/* The petsc backend is in builds made with make mpi (tested there under
- * mpirun by make mpi-check); elsewhere it says so and fails cleanly. */
-START_TEST(petsc_backend_without_mpi_should_fail_clearly)
+/* The petsc backend is in builds with PETSc (make mpi, or make where
+ * petsc-dev is installed; tested under mpirun by make mpi-check). Without
+ * it, it says so and fails cleanly; with it, one process (MPI's singleton)
+ * solves as mg does and computes the distance as hv_distance_compute. */
+static void petsc_without_it(void)
 {
-    ck_assert_int_eq(hv_petsc_available(), 0);
-    hv_backend b;
-    TL_ASSERT_OK(hv_backend_parse("petsc", &b));
-    ck_assert_int_eq(b, HV_BACKEND_PETSC);
-    ck_assert_str_eq(hv_backend_name(b), "petsc");
     const int n[3] = {8, 8, 8};
     hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / 8, NULL, 1, 0.01};
     hv_solver_opts o;
@@ -201,6 +199,85 @@ START_TEST(petsc_backend_without_mpi_should_fail_clearly)
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "make mpi"));
     hv_grid_destroy(&g);
     hv_petsc_finalize(); /* nothing to end */
+}
+
+static void petsc_with_it(void)
+{
+    const int n[3] = {19, 14, 11};
+    const size_t count = (size_t)n[0] * n[1] * n[2];
+    shape sh = {3, {n[0], n[1], n[2]}, 1};
+    uint8_t *mask = make_mask(&sh);
+    double *f = malloc(count * sizeof *f),
+           *u[2] = {malloc(count * sizeof(double)), malloc(count * sizeof(double))};
+    uint64_t seed = 5;
+    for (size_t c = 0; c < count; c++)
+        f[c] = tl_rand(&seed);
+    hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / 19, mask, 1, 0.01};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.tol = 1e-10;
+    double umax = 0, dmax = 0;
+    for (int q = 0; q < 2; q++) {
+        o.backend = q ? HV_BACKEND_PETSC : HV_BACKEND_MG;
+        hv_solver *s = NULL;
+        hv_solve_info info;
+        TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+        TL_ASSERT_OK(hv_solver_solve_d(s, f, u[q], &info));
+        ck_assert_int_eq(info.backend, o.backend);
+        ck_assert_int_eq(info.reason, HV_STOP_CONVERGED);
+        hv_solver_destroy(&s);
+    }
+    for (size_t c = 0; c < count; c++) {
+        umax = fmax(umax, fabs(u[0][c]));
+        dmax = fmax(dmax, fabs(u[0][c] - u[1][c]));
+    }
+    ck_assert_msg(dmax <= 1e-7 * umax, "petsc against mg: %g of %g", dmax, umax);
+    const double srel = dmax / umax;
+    ck_assert_int_eq(hv_mpi_size(), 1);
+    /* The distance on one rank's "distributed" grid: hv_distance_compute's. */
+    hv_grid *g[2] = {NULL, NULL};
+    const double org[3] = {-0.2, 0.1, 0.3}, pt[3] = {-0.12, 0.2, 0.4};
+    hv_distance_sources src = {NULL, 0, pt, 1, NULL};
+    hv_distance_opts dopt;
+    hv_distance_opts_default(&dopt);
+    dopt.backend = HV_BACKEND_MG;
+    hv_distance_stats S[2];
+    for (int q = 0; q < 2; q++) {
+        TL_ASSERT_OK(hv_grid_create(&g[q], 3, n, 1.0 / 19, org));
+        TL_ASSERT_OK(hv_grid_add_mask(g[q]));
+        memcpy(g[q]->solid, mask, count);
+    }
+    TL_ASSERT_OK(hv_distance_compute(g[0], &src, &dopt, &S[0]));
+    TL_ASSERT_OK(hv_petsc_distance_block(g[1], &src, &dopt, &S[1]));
+    ck_assert_int_eq(S[1].stages, S[0].stages);
+    ck_assert_int_eq(S[1].backend, HV_BACKEND_PETSC);
+    dmax = 0;
+    for (size_t c = 0; c < count; c++) {
+        ck_assert_int_eq(isfinite(g[0]->v[c]), isfinite(g[1]->v[c]));
+        if (isfinite(g[0]->v[c]))
+            dmax = fmax(dmax, fabs(g[0]->v[c] - g[1]->v[c]) * 19);
+    }
+    ck_assert_msg(dmax <= 1e-3, "distance, petsc against mg: %g voxels", dmax);
+    printf("  petsc in one process: solve %.1e relative to mg, distance %.1e voxels\n", srel, dmax);
+    for (int q = 0; q < 2; q++) {
+        hv_grid_destroy(&g[q]);
+        free(u[q]);
+    }
+    free(f);
+    free(mask);
+    hv_petsc_finalize();
+}
+
+START_TEST(petsc_backend_should_work_or_fail_clearly)
+{
+    hv_backend b;
+    TL_ASSERT_OK(hv_backend_parse("petsc", &b));
+    ck_assert_int_eq(b, HV_BACKEND_PETSC);
+    ck_assert_str_eq(hv_backend_name(b), "petsc");
+    if (hv_petsc_available())
+        petsc_with_it();
+    else
+        petsc_without_it();
 }
 END_TEST
 
@@ -688,7 +765,7 @@ int main(void)
     tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);
     tcase_add_test(tc, multigrid_and_fftw_should_agree);
-    tcase_add_test(tc, petsc_backend_without_mpi_should_fail_clearly);
+    tcase_add_test(tc, petsc_backend_should_work_or_fail_clearly);
     tcase_add_test(tc, poisson_solution_should_be_mean_free_in_each_region);
     tcase_add_test(tc, pcg_should_converge_in_a_serpentine_corridor);
     tcase_add_test(tc, solver_should_report_max_iterations_not_fail);

@@ -156,7 +156,7 @@ static int usage_solve(FILE *out)
             "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref "
             "\"fftw\",\n"
             "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
-            "--backend petsc (builds made with make mpi) runs under mpirun: every rank solves,\n"
+            "--backend petsc (builds with PETSc: make mpi) runs under mpirun: every rank solves,\n"
             "rank 0 prints, with ranks, and ref \"mg\" (the same grid on one process, the same\n"
             "run: ref_seconds, ref_iterations); --pc its preconditioner (smoother in the JSON):\n"
             "auto (default: hypre's PFMG in 3D, BoomerAMG in 2D), hypre's BoomerAMG or PFMG\n"

@@ -44,7 +44,7 @@ static int usage(FILE *out)
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
             "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
             "\n"
-            "Builds made with make mpi: -o OUT.h5 writes the distance as HDF5 (dataset\n"
+            "Builds with PETSc (make mpi): -o OUT.h5 writes the distance as HDF5 (dataset\n"
             "/distance, with the attributes spacing and origin) and an XDMF sidecar\n"
             "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, rank 0 reads\n"
             "the inputs, each rank computes the distance on its own box of the grid (the\n"

@@ -47,17 +47,40 @@ static int usage(FILE *out)
             "grids of IN.vdb are not copied. Prints a JSON summary on stdout (not with -q);\n"
             "-v reports the tiles, levels and peak memory on stderr.\n"
             "\n"
-            "Builds made with make mpi: -o OUT.h5 writes the dense block as HDF5, one\n"
+            "Builds with PETSc (make mpi): -o OUT.h5 writes the dense block as HDF5, one\n"
             "dataset per grid (vectors as NAME_x, NAME_y, NAME_z) with the attributes\n"
             "spacing and origin, and an XDMF sidecar OUT.xmf for ParaView. Under\n"
             "mpirun -n P with --backend petsc (the dense block) and --out-band W, rank 0\n"
             "reads the block, each rank extends its own box with a ghost layer (the\n"
-            "diffusion solved over all ranks), and rank 0 gathers and writes the result.\n"
-            "Without --out-band, or with -o OUT.h5, every rank reads the input and\n"
-            "extends, the solves are distributed over the ranks, the ranks write the\n"
-            "HDF5 file together, and rank 0 writes a VDB file and prints.\n"
+            "diffusion solved over all ranks), and rank 0 gathers the result and writes\n"
+            "the VDB file (the ranks write HDF5 together). Without --out-band, every rank\n"
+            "reads the input and extends, and only the solves are distributed.\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
+}
+
+/* The HDF5 datasets of a dense extension: the level set, then each field
+ * (vector fields as NAME_x, NAME_y, NAME_z). */
+typedef struct {
+    char name[1 + 3 * MAX_FIELDS][300];
+    const char *p[1 + 3 * MAX_FIELDS];
+} h5_names;
+
+static int h5_fields(h5_names *hn, const char *ls, const char *const *fields, int nfields,
+                     const hv_extend_field *ef)
+{
+    int nh = 0;
+    snprintf(hn->name[nh++], sizeof hn->name[0], "%s", ls);
+    for (int q = 0; q < nfields; q++)
+        for (int c = 0; c < ef[q].ncomp; c++, nh++) {
+            if (ef[q].ncomp == 1)
+                snprintf(hn->name[nh], sizeof hn->name[0], "%s", fields[q]);
+            else
+                snprintf(hn->name[nh], sizeof hn->name[0], "%s_%c", fields[q], "xyz"[c]);
+        }
+    for (int q = 0; q < nh; q++)
+        hn->p[q] = hn->name[q];
+    return nh;
 }
 
 static const char *class_name(int c)
@@ -372,7 +395,7 @@ int cmd_extend(int argc, char **argv)
     int rc = 0, cls;
     /* --backend petsc --out-band W: the block is read by rank 0, extended on
      * the ranks' boxes (hv_petsc_extend_block) and written by rank 0. */
-    const int spread = o.backend == HV_BACKEND_PETSC && o.out_band > 0 && !h5;
+    const int spread = o.backend == HV_BACKEND_PETSC && o.out_band > 0;
     const int reader = !spread || hv_mpi_rank() == 0;
     hv_extend_stats es;
     if (!reader) {
@@ -384,8 +407,14 @@ int cmd_extend(int argc, char **argv)
             }
         }
         const int n1[3] = {1, 1, 1}; /* rank 0's block is the block */
-        if ((st = hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, ef, &es)))
+        if ((st = hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, ef, &es))) {
             rc = cli_fail(CMD, in, st);
+        } else if (h5) { /* with rank 0, which holds the result */
+            h5_names hn;
+            const int nh = h5_fields(&hn, ls, fields, nfields, ef);
+            if ((st = hv_petsc_write_h5(out, nh, NULL, hn.p)))
+                rc = cli_fail(CMD, out, st);
+        }
         goto done;
     }
     if ((st = hv_vdb_read_float(in, ls, &ro, &phi, &cls))) {
@@ -471,26 +500,18 @@ int cmd_extend(int argc, char **argv)
     if (!st)
         st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
     if (h5) {
-        /* Every rank holds the result and writes its box (petsc.h). */
+        /* Collective: the ranks write rank 0's result together (petsc.h); a
+         * rank 0 that failed passes no grids, which fails every rank. */
         const hv_grid *hg[1 + 3 * MAX_FIELDS];
-        char hname[1 + 3 * MAX_FIELDS][300];
-        const char *hn[1 + 3 * MAX_FIELDS];
-        int nh = 0;
-        hg[nh] = phi;
-        snprintf(hname[nh], sizeof hname[0], "%s", ls);
-        nh++;
-        for (int q = 0; q < nfields; q++)
-            for (int c = 0; c < ef[q].ncomp; c++, nh++) {
-                hg[nh] = fout[q][c];
-                if (ef[q].ncomp == 1)
-                    snprintf(hname[nh], sizeof hname[0], "%s", fields[q]);
-                else
-                    snprintf(hname[nh], sizeof hname[0], "%s_%c", fields[q], "xyz"[c]);
-            }
-        for (int q = 0; q < nh; q++)
-            hn[q] = hname[q];
+        h5_names hn;
+        const int nh = h5_fields(&hn, ls, fields, nfields, ef);
+        hg[0] = phi;
+        for (int q = 0, k = 1; q < nfields; q++)
+            for (int c = 0; c < ef[q].ncomp; c++)
+                hg[k++] = fout[q][c];
+        const hv_status hs = hv_petsc_write_h5(out, nh, st ? NULL : hg, hn.p);
         if (!st)
-            st = hv_petsc_write_h5(out, nh, hg, hn);
+            st = hs;
     } else if (!st && hv_mpi_rank() == 0) { /* under mpirun, rank 0 writes */
         st = hv_vdb_writer_write(w, out);
     }

@@ -1,6 +1,8 @@
 /*
  * MPI and PETSc: the petsc solver backend (HV_BACKEND_PETSC, solve.h) in
- * builds made with `make mpi`. Programs run SPMD under mpirun: every rank
+ * builds with PETSc (`make mpi`, or `make` where Debian's petsc-dev is
+ * installed), the distance and extension on a PETSc DMDA, and parallel HDF5.
+ * Programs run SPMD under mpirun (without it, one rank): every rank
  * makes the same hv_solver calls with the same whole grid, the solve is
  * distributed over the ranks of PETSC_COMM_WORLD (a DMDA box per rank, CG with
  * hypre's PFMG or BoomerAMG), and every rank gets the whole solution. The first petsc
@@ -167,15 +169,17 @@ HV_API hv_status hv_petsc_extend_block(int dim, const int n[3], double h,
  * cells, without gathering the grid: each rank splats the sources, assigns
  * the face directions and builds the fronts on its own box with a ghost
  * layer of 4 cells (every rank's box must be at least that wide where the
- * grid is split); the heat and Poisson solves run over all ranks (the heat
- * steps by Jacobi-preconditioned CG, Poisson by -hv_petsc_pc), and the
- * counts and the per-region shift are summed over the ranks. The result is
+ * grid is split); the heat and Poisson solves run over all ranks (CG with
+ * the preconditioner of -hv_petsc_pc), and the counts and the per-region
+ * shift are summed over the ranks. The result is
  * the single process's up to the solves' tolerances. origin: the world
  * position of the grid's lower corner (for point and mesh sources; NULL =
  * 0); solid: NULL or a global vector of the DMDA (non-zero = solid), read
- * once, here, where its regions are labelled; opts: as hv_distance_compute's
- * (backend ignored; NULL = the defaults). The solvers are made here and
- * reused by every call. */
+ * once, here, where its fluid regions are labelled across the ranks (kept
+ * with the ghost exchange for every call); opts: as hv_distance_compute's
+ * (backend ignored; NULL = the defaults). Each call makes its solvers (the
+ * two heat steps, then Poisson once they are freed: no more than two
+ * multigrid hierarchies at once, for about 3% of the call's time). */
 typedef struct hv_dmda_distance hv_dmda_distance;
 HV_API hv_status hv_dmda_distance_create(hv_dmda_distance **out, DM da, double h,
                                          const double origin[3], Vec solid,

@@ -7,8 +7,8 @@
  *   HV_BACKEND_MG      matrix-free geometric multigrid on the CPU (any grid, masks)
  *   HV_BACKEND_FFTW    exact DCT-II solve (plain boxes only)
  *   HV_BACKEND_OPENCL  multigrid on an OpenCL device
- *   HV_BACKEND_PETSC   CG + hypre BoomerAMG over MPI ranks (petsc.h; builds made
- *                      with `make mpi`)
+ *   HV_BACKEND_PETSC   CG + hypre PFMG or BoomerAMG over MPI ranks (petsc.h;
+ *                      builds with PETSc)
  *   HV_BACKEND_AUTO    FFTW for plain boxes, multigrid otherwise
  *
  * Lifecycle (PETSc-like): hv_solver_create (plans, hierarchies: expensive, once)

@@ -32,17 +32,13 @@
 /* The ghost layer: sources within HV_DIST_REF_RADIUS voxels of an owned cell
  * lie in it, with a cell to spare. */
 #define GHOST ((int)HV_DIST_REF_RADIUS + 1)
-/* Heat steps up to this t / h^2 take Jacobi-preconditioned CG: conditioned
- * like 1 + 4 dim t / h^2, they converge in a few dozen sweeps with nothing
- * to set up, faster than multigrid over the ranks. */
-#define JACOBI_MAX_T_SCALE 8.0
 
 struct hv_dmda_distance {
     DM user;                 /* the caller's, referenced */
     DM dag;                  /* the caller's layout with the ghost layer (box stencil) */
     Vec gg, gl, x;           /* dag's global and local vectors; a solution */
-    hv_dmda_solver *heat[2]; /* I - t Lap, I - T_RATIO t Lap */
-    hv_dmda_solver *poisson; /* -Lap, its regions labelled at create */
+    hv_dmda_solver *heat[2]; /* I - t Lap, I - T_RATIO t Lap, during the stages */
+    hv_dmda_solver *poisson; /* -Lap, after them */
     MPI_Comm comm;
     hv_distance_opts o;
     hv_grid full; /* the whole grid's shape (no arrays) */
@@ -79,9 +75,72 @@ static hv_status to_box(hv_dmda_distance *D, Vec v, double *out)
     return HV_OK;
 }
 
+/* The caller's solid vector again, from the box's flags (NULL: no solid). */
+static hv_status solid_vec(hv_dmda_distance *D, Vec *v)
+{
+    *v = NULL;
+    if (!D->solid)
+        return HV_OK;
+    HV_PETSC_CHK(DMCreateGlobalVector(D->user, v), "DMCreateGlobalVector");
+    PetscScalar *a;
+    HV_PETSC_CHK(VecGetArray(*v, &a), "VecGetArray");
+    size_t c = 0;
+    for (PetscInt k = D->xs[2]; k < D->xs[2] + D->xm[2]; k++)
+        for (PetscInt j = D->xs[1]; j < D->xs[1] + D->xm[1]; j++)
+            for (PetscInt i = D->xs[0]; i < D->xs[0] + D->xm[0]; i++)
+                a[c++] = D->solid[box_cell(D, i, j, k)];
+    VecRestoreArray(*v, &a);
+    return HV_OK;
+}
+
+/* The solvers a solve of kind q needs (dist_hooks): the two heat steps, or,
+ * once they are done with, Poisson. No more than two exist at once: a
+ * multigrid solver holds about 350 bytes per cell (docs/PERFORMANCE.md),
+ * and building them again takes about 3% of a call. */
+static hv_status need_solvers(hv_dmda_distance *D, int q)
+{
+    if (q < 2 ? D->heat[0] != NULL : D->poisson != NULL)
+        return HV_OK;
+    Vec solid;
+    hv_status st = solid_vec(D, &solid);
+    if (st)
+        return st;
+    hv_solver_opts so;
+    hv_solver_opts_default(&so);
+    so.max_iter = 500;
+    so.tol = D->o.diffuse_tol;
+    const double h = D->full.h, th = D->o.t_scale * h * h;
+    if (q < 2) {
+        /* The heat steps take the default preconditioner too: at 64^3 with
+         * baffles PFMG's 16 iterations per solve took half the time of
+         * Jacobi-preconditioned CG's 94 (docs/PERFORMANCE.md). */
+        for (int r = 0; r < 2 && !st; r++)
+            st = hv__dmda_solver_create(&D->heat[r], D->user, h, 1.0, th * (r ? T_RATIO : 1), solid,
+                                        &so, -1);
+    } else {
+        hv_dmda_solver_destroy(&D->heat[0]);
+        hv_dmda_solver_destroy(&D->heat[1]);
+        so.tol = D->o.poisson_tol;
+        so.max_iter = 200;
+        st = hv__dmda_solver_create(&D->poisson, D->user, h, 0.0, 1.0, solid, &so, -1);
+    }
+    VecDestroy(&solid);
+    return st;
+}
+
+static void drop_solvers(hv_dmda_distance *D)
+{
+    hv_dmda_solver_destroy(&D->heat[0]);
+    hv_dmda_solver_destroy(&D->heat[1]);
+    hv_dmda_solver_destroy(&D->poisson);
+}
+
 static hv_status dist_solve(void *user, int q, const double *f, double *u, hv_solve_info *info)
 {
     hv_dmda_distance *D = user;
+    hv_status st = need_solvers(D, q);
+    if (st)
+        return st;
     hv_dmda_solver *s = q < 2 ? D->heat[q] : D->poisson;
     PetscScalar *a;
     HV_PETSC_CHK(VecGetArray(hv__dmda_rhs(s), &a), "VecGetArray");
@@ -91,8 +150,7 @@ static hv_status dist_solve(void *user, int q, const double *f, double *u, hv_so
             for (PetscInt i = D->xs[0]; i < D->xs[0] + D->xm[0]; i++)
                 a[c++] = f[box_cell(D, i, j, k)];
     VecRestoreArray(hv__dmda_rhs(s), &a);
-    hv_status st = hv__dmda_solve(s, D->x, info);
-    if (st)
+    if ((st = hv__dmda_solve(s, D->x, info)))
         return st;
     info->backend = HV_BACKEND_PETSC;
     return to_box(D, D->x, u);
@@ -156,22 +214,11 @@ static hv_status create(hv_dmda_distance *D, DM da, double h, const double origi
         for (size_t c = 0; c < D->nloc; c++)
             D->solid[c] = s[c] != 0;
     }
-    hv_solver_opts so;
-    hv_solver_opts_default(&so);
-    so.max_iter = 500;
-    so.tol = D->o.diffuse_tol;
-    const double ts = D->o.t_scale, th = ts * h * h;
-    for (int q = 0; q < 2; q++) {
-        const double tq = q ? T_RATIO : 1;
-        if ((st = hv__dmda_solver_create(&D->heat[q], da, h, 1.0, th * tq, solid, &so,
-                                         ts * tq <= JACOBI_MAX_T_SCALE ? HV_PC_JACOBI : -1)))
-            return st;
-    }
-    so.tol = D->o.poisson_tol;
-    so.max_iter = 200;
-    if ((st = hv__dmda_solver_create(&D->poisson, da, h, 0.0, 1.0, solid, &so, -1)))
+    /* The fluid regions, labelled across the ranks by a Poisson solver. */
+    if ((st = need_solvers(D, 2)) || (st = to_box(D, hv__dmda_labels(D->poisson), D->label)))
         return st;
-    return to_box(D, hv__dmda_labels(D->poisson), D->label);
+    drop_solvers(D);
+    return HV_OK;
 }
 
 static hv_status hv_dmda_distance_create_body(hv_dmda_distance **out, DM da, double h,
@@ -238,7 +285,7 @@ static hv_status source_regions(hv_dmda_distance *D, hv_dist_box *b, const doubl
         nm = u;
     }
     if (!(st = hv__petsc_agree(D->dag, st))) {
-        MPI_Allgather(&nm, 1, MPI_INT, counts, 1, MPI_INT, D->comm);
+        (void)MPI_Allgather(&nm, 1, MPI_INT, counts, 1, MPI_INT, D->comm);
         for (int r = 0; r < size; r++) {
             displ[r] = total;
             total += counts[r];
@@ -246,7 +293,7 @@ static hv_status source_regions(hv_dmda_distance *D, hv_dist_box *b, const doubl
         if (!(all = malloc(((size_t)total + 1) * sizeof *all)))
             st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
         if (!(st = hv__petsc_agree(D->dag, st)))
-            MPI_Allgatherv(mine, nm, MPI_DOUBLE, all, counts, displ, MPI_DOUBLE, D->comm);
+            (void)MPI_Allgatherv(mine, nm, MPI_DOUBLE, all, counts, displ, MPI_DOUBLE, D->comm);
     }
     int u = 0;
     if (!st) {
@@ -369,6 +416,7 @@ static hv_status hv_dmda_distance_compute_body(hv_dmda_distance *D, const hv_dis
             st = hv__error(HV_ERR_NOMEM, "distance: out of memory for face arrays");
     if (!(st = hv__petsc_agree(D->dag, st)))
         st = distance(D, src, dist, S, &b, w, u, u2, inside, ok, ref);
+    drop_solvers(D);
     hv_free(w);
     hv_free(u);
     hv_free(u2);
@@ -387,9 +435,7 @@ void hv_dmda_distance_destroy(hv_dmda_distance **dp)
     if (!dp || !*dp)
         return;
     hv_dmda_distance *D = *dp;
-    hv_dmda_solver_destroy(&D->heat[0]);
-    hv_dmda_solver_destroy(&D->heat[1]);
-    hv_dmda_solver_destroy(&D->poisson);
+    drop_solvers(D);
     VecDestroy(&D->x);
     VecDestroy(&D->gg);
     VecDestroy(&D->gl);
@@ -428,8 +474,8 @@ static hv_status bcast_items(void **p, size_t count, size_t sz, int rank)
         return st ? st : hv__error(HV_ERR_NOMEM, "distance: out of memory on another rank");
     const size_t chunk = (size_t)1 << 30, bytes = count * sz;
     for (size_t o = 0; o < bytes; o += chunk)
-        MPI_Bcast((char *)*p + o, (int)(bytes - o < chunk ? bytes - o : chunk), MPI_BYTE, 0,
-                  PETSC_COMM_WORLD);
+        (void)MPI_Bcast((char *)*p + o, (int)(bytes - o < chunk ? bytes - o : chunk), MPI_BYTE, 0,
+                        PETSC_COMM_WORLD);
     return HV_OK;
 }
 
@@ -482,7 +528,7 @@ static hv_status hv_petsc_distance_block_body(hv_grid *g, const hv_distance_sour
         hdr[13] = src->mesh ? (double)src->mesh->nverts : 0;
         hdr[14] = src->mesh ? (double)src->mesh->ntris : 0;
     }
-    MPI_Bcast(hdr, 15, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(hdr, 15, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
     if (!hdr[0])
         return rank ? hv__error(HV_ERR_INVALID_ARG, "distance: rank 0 has no grid")
                     : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_distance_block: no grid or sources");
@@ -498,7 +544,7 @@ static hv_status hv_petsc_distance_block_body(hv_grid *g, const hv_distance_sour
     hv_distance_opts_default(&o);
     if (!rank && opts)
         o = *opts;
-    MPI_Bcast(&o, (int)sizeof o, MPI_BYTE, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(&o, (int)sizeof o, MPI_BYTE, 0, PETSC_COMM_WORLD);
     /* The sources on every rank. */
     hv_mesh mesh;
     memset(&mesh, 0, sizeof mesh);

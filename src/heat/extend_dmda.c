@@ -416,7 +416,7 @@ static hv_status hv_petsc_extend_block_body(int dim, const int n[3], double h,
     int rank = 0;
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     double hdr[5] = {phi != NULL, n[0], n[1], n[2], h};
-    MPI_Bcast(hdr, 5, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(hdr, 5, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
     if (!hdr[0])
         return rank ? hv__error(HV_ERR_INVALID_ARG, "extend: rank 0 has no block to extend")
                     : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_extend_block: no level set");

@@ -191,7 +191,7 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
             h[6 + a] = g[0]->origin[a];
         }
     }
-    MPI_Bcast(h, 9, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(h, 9, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
     if (!h[0])
         return rank ? hv__error(HV_ERR_INVALID_ARG, "%s: rank 0's fields are not writable", path)
                     : st;
@@ -215,11 +215,11 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
             ok = 0;
         }
     }
-    MPI_Bcast(&ok, 1, MPI_INT, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(&ok, 1, MPI_INT, 0, PETSC_COMM_WORLD);
     if (!ok)
         return rank ? hv__error(HV_ERR_IO, "%s: rank 0 could not name a temporary", path)
                     : hv__error(HV_ERR_IO, "%s: cannot name a temporary file", path);
-    MPI_Bcast(tmp, (int)sizeof tmp, MPI_CHAR, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(tmp, (int)sizeof tmp, MPI_CHAR, 0, PETSC_COMM_WORLD);
     st = write_fields(tmp, path, nfields, rank ? NULL : g, &hdr, names);
     /* Rank 0 writes the sidecar and renames both; the others learn how it went. */
     int fail = st != HV_OK;
@@ -243,7 +243,7 @@ static hv_status hv_petsc_write_h5_body(const char *path, int nfields, const hv_
         }
     }
     int bad = st != HV_OK;
-    MPI_Bcast(&bad, 1, MPI_INT, 0, PETSC_COMM_WORLD);
+    (void)MPI_Bcast(&bad, 1, MPI_INT, 0, PETSC_COMM_WORLD);
     if (bad && !st)
         st = hv__error(HV_ERR_IO, "%s: rank 0 could not complete the file", path);
     return st;

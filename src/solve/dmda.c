@@ -286,7 +286,7 @@ static hv_status regions(hv_dmda_solver *s, int dim)
     int *counts = calloc((size_t)size, sizeof *counts),
         *displ = calloc((size_t)size, sizeof *displ);
     double *all = NULL;
-    MPI_Allgather(&nm, 1, MPI_INT, counts, 1, MPI_INT, comm);
+    (void)MPI_Allgather(&nm, 1, MPI_INT, counts, 1, MPI_INT, comm);
     for (int r = 0; counts && displ && r < size; r++) {
         displ[r] = total;
         total += counts[r];
@@ -296,7 +296,7 @@ static hv_status regions(hv_dmda_solver *s, int dim)
     int bad = st != HV_OK, anybad = 0;
     MPI_Allreduce(&bad, &anybad, 1, MPI_INT, MPI_MAX, comm);
     if (!anybad) {
-        MPI_Allgatherv(mine, nm, MPI_DOUBLE, all, counts, displ, MPI_DOUBLE, comm);
+        (void)MPI_Allgatherv(mine, nm, MPI_DOUBLE, all, counts, displ, MPI_DOUBLE, comm);
         qsort(all, (size_t)total, sizeof *all, cmp_label);
         int u = 0;
         for (int i = 0; i < total; i++)

@@ -17,9 +17,13 @@
  * exact extension on the band.
  *
  * distance: the heat-method distance from a point in an N^3 box with two
- * baffles (walls one cell thick with gaps at opposite ends), the whole grid
- * on every rank, the solves distributed (backend petsc); ref "mg-one-process"
- * is rank 0 with mg afterwards; max_diff_voxels the largest difference. */
+ * baffles (walls one cell thick with gaps at opposite ends) on a DMDA
+ * (hv_dmda_distance_compute: every rank holds its own box; setup_seconds is
+ * the object's creation, its solvers and region labels, seconds the
+ * distance; ratio takes both). ref "mg-one-process": rank 0 then spawns
+ * `bench_mpi distance-ref`, hv_distance_compute with mg on the whole grid in
+ * a fresh process with its own peak memory, which writes its distance to a
+ * temporary file; max_diff_voxels is the largest difference over all cells. */
 #include <heatvox/heatvox.h>
 #include <petscdmda.h>
 
@@ -65,6 +69,21 @@ static double sphere_at(int n, PetscInt i, PetscInt j, PetscInt k, double ex[3],
     for (int a = 0; a < 3; a++)
         in[a] = fabs(r - R) < 1.5 * h ? ex[a] : 5.0;
     return r - R;
+}
+
+/* A spawned reference's own peak: VmHWM of this process's memory
+ * (getrusage's maxrss would carry the spawning process's over the exec). */
+static double own_peak_mb(void)
+{
+    double hwm_kb = 0;
+    FILE *st = fopen("/proc/self/status", "r");
+    char line[256];
+    while (st && fgets(line, sizeof line, st))
+        if (sscanf(line, "VmHWM: %lf", &hwm_kb) == 1)
+            break;
+    if (st)
+        fclose(st);
+    return hwm_kb / 1024;
 }
 
 /* The single-process reference, run as `bench_mpi extend-ref`: the whole
@@ -116,35 +135,19 @@ static int extend_reference(int n, int repeat)
             for (int a = 0; a < 3; a++)
                 err = fmax(err, fabs(out[a][c] - ex[a]));
     }
-    /* Its own peak: VmHWM of this process's memory (getrusage's maxrss
-     * would carry the spawning process's over the exec). */
-    double hwm_kb = 0;
-    FILE *st = fopen("/proc/self/status", "r");
-    char line[256];
-    while (st && fgets(line, sizeof line, st))
-        if (sscanf(line, "VmHWM: %lf", &hwm_kb) == 1)
-            break;
-    if (st)
-        fclose(st);
-    printf("%.6f %.6f %.1f\n", best, err, hwm_kb / 1024);
+    printf("%.6f %.6f %.1f\n", best, err, own_peak_mb());
     return 0;
 }
 
-typedef struct {
-    double seconds, err, peak_mb;
-} ref_result;
-
 static char self_path[4096];
 
-static int spawn_reference(int n, int repeat, ref_result *R)
+/* Runs `bench_mpi args...` as a fresh process (so that its peak memory is
+ * its own) and reads nv numbers from its standard output into v. */
+static int spawn_reference(char *const args[], int nv, double *v)
 {
     int fd[2];
     if (pipe(fd))
         return 1;
-    char ns[32], rs[32];
-    snprintf(ns, sizeof ns, "%d", n);
-    snprintf(rs, sizeof rs, "%d", repeat);
-    char *const args[] = {self_path, "extend-ref", "--n", ns, "--repeat", rs, NULL};
     posix_spawn_file_actions_t fa;
     posix_spawn_file_actions_init(&fa);
     posix_spawn_file_actions_adddup2(&fa, fd[1], 1);
@@ -158,20 +161,20 @@ static int spawn_reference(int n, int repeat, ref_result *R)
         fprintf(stderr, "bench_mpi: cannot run %s\n", self_path);
         return 1;
     }
-    char buf[256] = {0};
+    char buf[512] = {0};
     size_t got = 0;
     ssize_t k;
     while (got + 1 < sizeof buf && (k = read(fd[0], buf + got, sizeof buf - 1 - got)) > 0)
         got += (size_t)k;
     close(fd[0]);
-    int status = 0;
-    struct rusage ru;
-    if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status) ||
-        sscanf(buf, "%lf %lf %lf", &R->seconds, &R->err, &R->peak_mb) != 3) {
+    int status = 0, n = 0;
+    const char *p = buf;
+    for (int off = 0; n < nv && sscanf(p, "%lf%n", &v[n], &off) == 1; n++)
+        p += off;
+    if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) || n != nv) {
         fprintf(stderr, "bench_mpi: the single-process reference failed\n");
         return 1;
     }
-    (void)ru;
     return 0;
 }
 
@@ -253,15 +256,19 @@ static int bench_extend(int n, int repeat)
     /* The reference: one process on the whole grid, spawned by rank 0 (a
      * fresh process, so that its peak memory is its own). */
     if (rank == 0) {
-        ref_result R;
-        if (spawn_reference(n, repeat, &R))
+        char ns[32], rs[32];
+        snprintf(ns, sizeof ns, "%d", n);
+        snprintf(rs, sizeof rs, "%d", repeat);
+        char *const args[] = {self_path, "extend-ref", "--n", ns, "--repeat", rs, NULL};
+        double R[3]; /* seconds, err, peak */
+        if (spawn_reference(args, 3, R))
             return 1;
         printf("{\"bench\":\"extend-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\",\"out_band\":%g,"
                "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"levels\":%d,\"solves\":%d,\"err\":%.5f,"
                "\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\",\"ref_seconds\":%.4f,"
                "\"ref_err\":%.5f,\"ref_peak_rss_mb\":%.1f,\"ratio\":%.3f}\n",
-               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, R.seconds, R.err,
-               R.peak_mb, best / R.seconds);
+               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, R[0], R[1], R[2],
+               best / R[0]);
         fflush(stdout);
     }
     for (int a = 0; a < 3; a++) {
@@ -273,81 +280,169 @@ static int bench_extend(int n, int repeat)
     return 0;
 }
 
-static hv_grid *baffles(int n)
+/* The baffles: walls one cell thick across x = n/3 and 2n/3, with gaps at
+ * opposite ends of y. */
+static int baffle_at(int n, PetscInt i, PetscInt j)
+{
+    return (i == n / 3 && j < n - n / 8) || (i == 2 * n / 3 && j >= n / 8);
+}
+
+static const double dist_src[3] = {0.1, 0.5, 0.5};
+
+/* The single-process reference, run as `bench_mpi distance-ref --n N --out
+ * FILE`: mg on the whole grid; writes the distance (n^3 floats, x fastest)
+ * to FILE and prints "seconds stages peak_mb". */
+static int distance_reference(int n, const char *out)
 {
     const int nn[3] = {n, n, n};
     const double org[3] = {0, 0, 0};
     hv_grid *g = NULL;
-    if (hv_grid_create(&g, 3, nn, 1.0 / n, org) || !(g->solid = calloc((size_t)n * n * n, 1)))
-        return NULL;
+    if (hv_grid_create(&g, 3, nn, 1.0 / n, org) || hv_grid_add_mask(g))
+        return 1;
     for (int k = 0; k < n; k++)
         for (int j = 0; j < n; j++)
             for (int i = 0; i < n; i++)
-                g->solid[i + (size_t)n * (j + (size_t)n * k)] =
-                    (i == n / 3 && j < n - n / 8) || (i == 2 * n / 3 && j >= n / 8);
-    return g;
+                g->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)baffle_at(n, i, j);
+    hv_distance_sources s = {NULL, 0, dist_src, 1, NULL};
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_distance_stats S;
+    const double t0 = hv_now();
+    if (hv_distance_compute(g, &s, &o, &S)) {
+        fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+        return 1;
+    }
+    const double seconds = hv_now() - t0;
+    FILE *f = fopen(out, "wb");
+    const size_t count = (size_t)n * n * n;
+    if (!f || fwrite(g->v, sizeof(float), count, f) != count || fclose(f)) {
+        fprintf(stderr, "bench_mpi: cannot write %s\n", out);
+        return 1;
+    }
+    printf("%.6f %d %.1f\n", seconds, S.stages, own_peak_mb());
+    hv_grid_destroy(&g);
+    return 0;
 }
 
 static int bench_distance(int n)
 {
-    const double src[3] = {0.1, 0.5, 0.5};
-    hv_distance_sources s = {NULL, 0, src, 1, NULL};
-    hv_distance_opts o;
-    hv_distance_opts_default(&o);
-    o.backend = HV_BACKEND_PETSC;
-    hv_grid *g = baffles(n);
-    hv_distance_stats S, R;
+    const double h = 1.0 / n;
+    DM da;
+    DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                 DMDA_STENCIL_STAR, n, n, n, PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL,
+                 NULL, NULL, &da);
+    DMSetUp(da);
+    Vec solid, dist;
+    DMCreateGlobalVector(da, &solid);
+    VecDuplicate(solid, &dist);
+    PetscInt xs, ys, zs, xm, ym, zm;
+    DMDAGetCorners(da, &xs, &ys, &zs, &xm, &ym, &zm);
+    PetscScalar ***M;
+    DMDAVecGetArray(da, solid, &M);
+    for (PetscInt k = zs; k < zs + zm; k++)
+        for (PetscInt j = ys; j < ys + ym; j++)
+            for (PetscInt i = xs; i < xs + xm; i++)
+                M[k][j][i] = baffle_at(n, i, j);
+    DMDAVecRestoreArray(da, solid, &M);
+    hv_distance_sources s = {NULL, 0, dist_src, 1, NULL};
+    hv_dmda_distance *D = NULL;
+    hv_distance_stats S;
     MPI_Barrier(PETSC_COMM_WORLD);
-    double t0 = MPI_Wtime();
-    if (!g || hv_distance_compute(g, &s, &o, &S)) {
-        fprintf(stderr, "bench_mpi: %s\n", g ? hv_last_error() : "out of memory");
+    const double t0 = MPI_Wtime();
+    if (hv_dmda_distance_create(&D, da, h, NULL, solid, NULL)) {
+        fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
         return 1;
     }
     MPI_Barrier(PETSC_COMM_WORLD);
-    const double seconds = MPI_Wtime() - t0, peak = peak_mb();
-    if (rank == 0) {
-        o.backend = HV_BACKEND_MG;
-        hv_grid *r = baffles(n);
-        t0 = MPI_Wtime();
-        if (!r || hv_distance_compute(r, &s, &o, &R)) {
-            fprintf(stderr, "bench_mpi: %s\n", r ? hv_last_error() : "out of memory");
-            return 1;
-        }
-        const double rs = MPI_Wtime() - t0;
-        double d = 0;
-        for (size_t c = 0; c < (size_t)n * n * n; c++)
-            if (isfinite(r->v[c]) && isfinite(g->v[c]))
-                d = fmax(d, fabs(r->v[c] - g->v[c]) * n);
-        printf("{\"bench\":\"distance-petsc\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\","
-               "\"obstacle\":\"baffles\",\"seconds\":%.3f,\"stages\":%d,\"diffuse_iterations\":%d,"
-               "\"poisson_iterations\":%d,\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\","
-               "\"ref_seconds\":%.3f,\"ref_stages\":%d,\"max_diff_voxels\":%.2e,\"ratio\":%.3f}\n",
-               n, ranks, seconds, S.stages, S.diffuse_iterations, S.poisson_iterations, peak, rs,
-               R.stages, d, seconds / rs);
-        fflush(stdout);
-        hv_grid_destroy(&r);
+    const double t1 = MPI_Wtime();
+    if (hv_dmda_distance_compute(D, &s, dist, &S)) {
+        fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+        return 1;
     }
-    hv_grid_destroy(&g);
+    MPI_Barrier(PETSC_COMM_WORLD);
+    const double setup = t1 - t0, seconds = MPI_Wtime() - t1, peak = peak_mb();
+    hv_dmda_distance_destroy(&D);
+
+    /* The reference, spawned by rank 0; every rank compares its own cells. */
+    char path[64];
+    snprintf(path, sizeof path, "/tmp/bench_mpi_distance_%d.f32", (int)getpid());
+    (void)MPI_Bcast(path, (int)sizeof path, MPI_CHAR, 0, PETSC_COMM_WORLD);
+    double R[3] = {0, 0, 0}; /* seconds, stages, peak */
+    int fail = 0;
+    if (rank == 0) {
+        char ns[32];
+        snprintf(ns, sizeof ns, "%d", n);
+        char *const args[] = {self_path, "distance-ref", "--n", ns, "--out", path, NULL};
+        fail = spawn_reference(args, 3, R);
+    }
+    (void)MPI_Bcast(&fail, 1, MPI_INT, 0, PETSC_COMM_WORLD);
+    if (fail)
+        return 1;
+    double d = 0;
+    FILE *f = fopen(path, "rb");
+    float *row = malloc((size_t)xm * sizeof *row);
+    const PetscScalar ***A;
+    DMDAVecGetArrayRead(da, dist, &A);
+    for (PetscInt k = zs; f && row && k < zs + zm; k++)
+        for (PetscInt j = ys; j < ys + ym; j++) {
+            if (fseek(f, (long)(sizeof(float) * (xs + (size_t)n * (j + (size_t)n * k))), SEEK_SET) ||
+                fread(row, sizeof *row, (size_t)xm, f) != (size_t)xm) {
+                d = INFINITY;
+                break;
+            }
+            for (PetscInt i = 0; i < xm; i++)
+                if (isfinite(row[i]) && isfinite(A[k][j][xs + i]))
+                    d = fmax(d, fabs(row[i] - A[k][j][xs + i]) * n);
+        }
+    DMDAVecRestoreArrayRead(da, dist, &A);
+    if (!f || !row)
+        d = INFINITY;
+    if (f)
+        fclose(f);
+    free(row);
+    MPI_Allreduce(MPI_IN_PLACE, &d, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+    MPI_Barrier(PETSC_COMM_WORLD);
+    if (rank == 0) {
+        unlink(path);
+        printf("{\"bench\":\"distance-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\","
+               "\"obstacle\":\"baffles\",\"seconds\":%.3f,\"setup_seconds\":%.3f,\"stages\":%d,"
+               "\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,\"normalize_seconds\":%.3f,"
+               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"peak_rss_mb\":%.1f,"
+               "\"ref\":\"mg-one-process\",\"ref_seconds\":%.3f,\"ref_stages\":%d,"
+               "\"ref_peak_rss_mb\":%.1f,\"max_diff_voxels\":%.2e,\"ratio\":%.3f}\n",
+               n, ranks, seconds, setup, S.stages, S.diffuse_iterations, S.t_diffuse,
+               S.t_normalize, S.poisson_iterations, S.t_poisson, peak, R[0], (int)R[1], R[2], d, (seconds + setup) / R[0]);
+        fflush(stdout);
+    }
+    VecDestroy(&solid);
+    VecDestroy(&dist);
+    DMDestroy(&da);
     return 0;
 }
 
 int main(int argc, char **argv)
 {
     int n = 0, repeat = 3;
-    const char *what = argc > 1 ? argv[1] : "";
+    const char *what = argc > 1 ? argv[1] : "", *out = NULL;
     for (int i = 2; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--n"))
             n = atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--repeat"))
             repeat = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--out"))
+            out = argv[i + 1];
     }
-    if ((strcmp(what, "extend") && strcmp(what, "distance") && strcmp(what, "extend-ref")) ||
+    if ((strcmp(what, "extend") && strcmp(what, "distance") && strcmp(what, "extend-ref") &&
+         (strcmp(what, "distance-ref") || !out)) ||
         n < 16 || repeat < 1) {
         fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R]\n");
         return 2;
     }
-    if (!strcmp(what, "extend-ref")) /* the spawned reference: no MPI */
+    if (!strcmp(what, "extend-ref")) /* the spawned references: no MPI */
         return extend_reference(n, repeat);
+    if (!strcmp(what, "distance-ref"))
+        return distance_reference(n, out);
     if (!realpath("/proc/self/exe", self_path)) {
         fprintf(stderr, "bench_mpi: cannot find its own executable\n");
         return 1;
