@@ -259,7 +259,7 @@ $(MPI_BUILD)/advect_dmda: tools/examples/advect_dmda.c $(LIB_A) | $(STAMP)
 	$(CC) $(TOOL_CPPFLAGS) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 $(MPI_BUILD)/bench_mpi: tools/mpi/bench_mpi.c $(LIB_A) | $(STAMP)
 	$(CC) $(TOOL_CPPFLAGS) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
-$(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c $(LIB_A) | $(STAMP)
+$(MPI_BUILD)/tests/mpi_%: tests/mpi/mpi_%.c tests/mpi/mpi_cases.h $(LIB_A) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) $< -o $@ $(LIB_A) $(LDFLAGS) -lstdc++ $(LDLIBS)
 

@@ -32,6 +32,16 @@ int cli_usage_error(const char *cmd, const char *fmt, ...)
     return HV_EXIT_USAGE;
 }
 
+int cli_h5_output(const char *cmd, const char *out, int *is_h5)
+{
+    const size_t n = out ? strlen(out) : 0;
+    *is_h5 = n > 3 && !strcmp(out + n - 3, ".h5");
+    if (*is_h5 && !hv_petsc_available())
+        return cli_usage_error(
+            cmd, "-o %s: HDF5 output needs heatvox built with MPI and PETSc (make mpi)", out);
+    return 0;
+}
+
 int cli_info(const char *fmt, ...)
 {
     if (cli_verbose < 1)

@@ -16,6 +16,10 @@ extern int cli_verbose; /* -1 quiet (-q), 0 default, 1 verbose (-v) */
 int cli_fail(const char *cmd, const char *what, hv_status st);
 /* Prints "heatvox <cmd>: <message>" and a hint to --help; returns HV_EXIT_USAGE. */
 int cli_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Whether out names an HDF5 output (ends in ".h5"): *is_h5 = 1, or 0. In a
+ * build without PETSc an HDF5 output is a usage error (returns
+ * HV_EXIT_USAGE, having said so); else returns 0. */
+int cli_h5_output(const char *cmd, const char *out, int *is_h5);
 /* Parses numbers strictly (whole string, finite); 0 on success. */
 int cli_parse_int(const char *s, int *out);
 /* Checks the outputs of a command before it computes anything: an output that

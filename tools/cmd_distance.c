@@ -429,16 +429,12 @@ int cmd_distance(int argc, char **argv)
         return cli_usage_error(CMD, "--sources is required");
     if (!out && !npy)
         return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
-    const char *h5 = NULL;
-    if (out && strlen(out) > 3 && !strcmp(out + strlen(out) - 3, ".h5")) {
-        if (!hv_petsc_available())
-            return cli_usage_error(CMD,
-                                   "-o %s: HDF5 output needs heatvox built with MPI and "
-                                   "PETSc (make mpi)",
-                                   out);
-        h5 = out;
+    int is_h5;
+    if (cli_h5_output(CMD, out, &is_h5))
+        return HV_EXIT_USAGE;
+    const char *h5 = is_h5 ? out : NULL;
+    if (is_h5)
         out = NULL;
-    }
     if ((mask != NULL) + (obst_mesh != NULL) + none > 1)
         return cli_usage_error(
             CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");

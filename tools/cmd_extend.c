@@ -323,15 +323,10 @@ int cmd_extend(int argc, char **argv)
     for (int q = 0; q < nfields; q++)
         if (!strcmp(fields[q], ls))
             return cli_usage_error(CMD, "--field '%s' is the level set", ls);
-    const char *h5 = NULL;
-    if (out && strlen(out) > 3 && !strcmp(out + strlen(out) - 3, ".h5")) {
-        if (!hv_petsc_available())
-            return cli_usage_error(CMD,
-                                   "-o %s: HDF5 output needs heatvox built with MPI and "
-                                   "PETSc (make mpi)",
-                                   out);
-        h5 = out;
-    }
+    int is_h5;
+    if (cli_h5_output(CMD, out, &is_h5))
+        return HV_EXIT_USAGE;
+    const char *h5 = is_h5 ? out : NULL;
     if (cli_check_outputs(CMD, &out, 1, &in, 1))
         return HV_EXIT_FAIL;
     hv_set_threads(threads);

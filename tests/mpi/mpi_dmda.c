@@ -21,6 +21,7 @@
  * Rank 0 prints one line per case; the exit status is 0 only when every case
  * passes on every rank. */
 #include "heatvox/heatvox.h"
+#include "mpi_cases.h"
 
 #include <petscdmda.h>
 
@@ -83,17 +84,11 @@ static DM make_da(int dim, const int n[3])
                 }                                                                                  \
     } while (0)
 
-static double rnd(unsigned *s)
-{
-    *s = *s * 1664525u + 1013904223u;
-    return (*s >> 8) / 16777216.0 - 0.5;
-}
-
 typedef struct {
     const char *name;
     int dim, n[3];
     double alpha, beta;
-    int solid; /* 0 none, 1 a ball and baffles, 2 a wall splitting the box */
+    int solid; /* MPI_SOLID_* (mpi_cases.h) */
     int regions;
 } scase;
 
@@ -108,16 +103,8 @@ static int solve_case(const scase *k)
         for (int y = 0; y < k->n[1]; y++)
             for (int x = 0; x < k->n[0]; x++) {
                 const size_t c = x + (size_t)k->n[0] * (y + (size_t)k->n[1] * z);
-                f[c] = rnd(&seed);
-                if (k->solid == 1) {
-                    const double dx = x - 0.5 * k->n[0], dy = y - 0.5 * k->n[1],
-                                 dz = k->dim == 3 ? z - 0.5 * nz : 0, r = 0.25 * k->n[1];
-                    solid[c] = dx * dx + dy * dy + dz * dz < r * r ||
-                               (x == k->n[0] / 4 && y > k->n[1] / 5) ||
-                               (y == k->n[1] / 3 && x > k->n[0] / 2);
-                } else if (k->solid == 2) {
-                    solid[c] = x == k->n[0] / 2;
-                }
+                f[c] = mpi_rnd(&seed);
+                solid[c] = mpi_solid(k->solid, k->n, x, y, z);
             }
     const double h = 1.0 / k->n[0];
     hv_problem p = {k->dim, {k->n[0], k->n[1], k->n[2]}, h, k->solid ? solid : NULL, k->alpha,
@@ -402,7 +389,7 @@ done:
 typedef struct {
     const char *name;
     int dim, n[3];
-    int solid;    /* 0 none, 1 a ball and baffles, 2 a wall cutting the box in two */
+    int solid;    /* MPI_SOLID_* (mpi_cases.h) */
     int sources;  /* 0 a point and a voxel, 1 a point moved, 2 a sphere mesh, 3 a voxel in
                      solid, 4 the voxel on the other side of the cut */
     int keep;     /* 1: reuse the previous case's object (same grid and solid) */
@@ -455,15 +442,8 @@ static int distance_case(const dcase *k, hv_dmda_distance **keep, DM *kda, Vec *
         for (int y = 0; y < k->n[1]; y++)
             for (int x = 0; x < k->n[0]; x++) {
                 const size_t c = x + (size_t)k->n[0] * (y + (size_t)k->n[1] * z);
-                if (k->solid == 1) {
-                    const double dx = x - 0.5 * k->n[0], dy = y - 0.5 * k->n[1],
-                                 dz = k->dim == 3 ? z - 0.5 * nz : 0, r = 0.2 * k->n[1];
-                    g->solid[c] = dx * dx + dy * dy + dz * dz < r * r ||
-                                  (x == k->n[0] / 4 && y > k->n[1] / 5) ||
-                                  (y == k->n[1] / 3 && x > k->n[0] / 2 && x < k->n[0] - 3);
-                } else if (k->solid == 2) {
-                    g->solid[c] = x == k->n[0] / 2;
-                }
+                if (k->solid)
+                    g->solid[c] = mpi_solid(k->solid, k->n, x, y, z);
             }
     double pts[6];
     int vox[6];

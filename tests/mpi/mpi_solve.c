@@ -7,6 +7,7 @@
  * count must be the same on every rank. Rank 0 prints one line per case;
  * the exit status is 0 only when every case passes on every rank. */
 #include "heatvox/heatvox.h"
+#include "mpi_cases.h"
 
 #include <math.h>
 #include <mpi.h>
@@ -18,14 +19,8 @@ typedef struct {
     const char *name;
     int dim, n[3];
     double alpha, beta;
-    int solid; /* 0 none, 1 a ball and baffles, 2 a wall splitting the box */
+    int solid; /* MPI_SOLID_* (mpi_cases.h) */
 } mcase;
-
-static double rnd(unsigned *s)
-{
-    *s = *s * 1664525u + 1013904223u;
-    return (*s >> 8) / 16777216.0 - 0.5;
-}
 
 static int run(const mcase *k, int rank)
 {
@@ -43,17 +38,9 @@ static int run(const mcase *k, int rank)
         for (int y = 0; y < k->n[1]; y++)
             for (int x = 0; x < k->n[0]; x++) {
                 const size_t c = x + (size_t)k->n[0] * (y + (size_t)k->n[1] * z);
-                f[c] = rnd(&seed);
-                if (k->solid == 1) {
-                    const double dx = x - 0.5 * k->n[0], dy = y - 0.5 * k->n[1],
-                                 dz = k->dim == 3 ? z - 0.5 * nz : 0;
-                    const double r = 0.25 * k->n[1];
-                    solid[c] = dx * dx + dy * dy + dz * dz < r * r ||
-                               (x == k->n[0] / 4 && y > k->n[1] / 5) ||
-                               (y == k->n[1] / 3 && x > k->n[0] / 2);
-                } else if (k->solid == 2) {
-                    solid[c] = x == k->n[0] / 2;
-                }
+                f[c] = mpi_rnd(&seed);
+                if (solid)
+                    solid[c] = mpi_solid(k->solid, k->n, x, y, z);
             }
     hv_problem p = {k->dim, {k->n[0], k->n[1], k->n[2]}, 1.0 / k->n[0], solid, k->alpha, k->beta};
     hv_solver_opts o;
