@@ -36,7 +36,7 @@
 struct hv_dmda_distance {
     DM user;                 /* the caller's, referenced */
     DM dag;                  /* the caller's layout with the ghost layer (box stencil) */
-    Vec gg, gl, x;           /* dag's global and local vectors; a solution */
+    Vec gl, x;               /* dag's local vector; a solution */
     hv_dmda_solver *heat[2]; /* I - t Lap, I - T_RATIO t Lap, during the stages */
     hv_dmda_solver *poisson; /* -Lap, after them */
     MPI_Comm comm;
@@ -65,9 +65,11 @@ static size_t box_cell(const hv_dmda_distance *D, PetscInt i, PetscInt j, PetscI
 /* A global vector of the caller's layout onto the ghosted box. */
 static hv_status to_box(hv_dmda_distance *D, Vec v, double *out)
 {
-    HV_PETSC_CHK(VecCopy(v, D->gg), "VecCopy (is it a global vector of the DMDA?)");
-    HV_PETSC_CHK(DMGlobalToLocalBegin(D->dag, D->gg, INSERT_VALUES, D->gl), "DMGlobalToLocal");
-    HV_PETSC_CHK(DMGlobalToLocalEnd(D->dag, D->gg, INSERT_VALUES, D->gl), "DMGlobalToLocal");
+    /* The caller's layout is dag's: its global vectors scatter straight
+     * into dag's local one. */
+    HV_PETSC_CHK(DMGlobalToLocalBegin(D->dag, v, INSERT_VALUES, D->gl),
+                 "DMGlobalToLocal (is it a global vector of the DMDA?)");
+    HV_PETSC_CHK(DMGlobalToLocalEnd(D->dag, v, INSERT_VALUES, D->gl), "DMGlobalToLocal");
     const PetscScalar *a;
     HV_PETSC_CHK(VecGetArrayRead(D->gl, &a), "VecGetArrayRead");
     memcpy(out, a, D->nloc * sizeof *out);
@@ -189,7 +191,6 @@ static hv_status create(hv_dmda_distance *D, DM da, double h, const double origi
         D->full.n[a] = a < dim ? (int)N[a] : 1;
         D->full.origin[a] = origin ? origin[a] : 0;
     }
-    HV_PETSC_CHK(DMCreateGlobalVector(D->dag, &D->gg), "DMCreateGlobalVector");
     HV_PETSC_CHK(DMCreateLocalVector(D->dag, &D->gl), "DMCreateLocalVector");
     HV_PETSC_CHK(DMCreateGlobalVector(da, &D->x), "DMCreateGlobalVector");
     DMDAGetCorners(D->dag, &D->xs[0], &D->xs[1], &D->xs[2], &D->xm[0], &D->xm[1], &D->xm[2]);
@@ -437,7 +438,6 @@ void hv_dmda_distance_destroy(hv_dmda_distance **dp)
     hv_dmda_distance *D = *dp;
     drop_solvers(D);
     VecDestroy(&D->x);
-    VecDestroy(&D->gg);
     VecDestroy(&D->gl);
     DMDestroy(&D->dag);
     DMDestroy(&D->user);
@@ -512,7 +512,8 @@ static hv_status hv_petsc_distance_block_body(hv_grid *g, const hv_distance_sour
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     /* Rank 0's grid and sources: their shape first. */
     double hdr[15] = {0};
-    const int have = !rank && g && src && g->v;
+    const int have = !rank && g && src && g->v && (!src->nvoxels || src->voxels) &&
+                     (!src->npoints || src->points);
     if (have) {
         hdr[0] = 1;
         hdr[1] = g->dim;
@@ -531,7 +532,8 @@ static hv_status hv_petsc_distance_block_body(hv_grid *g, const hv_distance_sour
     (void)MPI_Bcast(hdr, 15, MPI_DOUBLE, 0, PETSC_COMM_WORLD);
     if (!hdr[0])
         return rank ? hv__error(HV_ERR_INVALID_ARG, "distance: rank 0 has no grid")
-                    : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_distance_block: no grid or sources");
+                    : hv__error(HV_ERR_INVALID_ARG, "hv_petsc_distance_block: no grid or sources, "
+                                                    "or source counts without arrays");
     hv_grid G;
     memset(&G, 0, sizeof G);
     G.dim = (int)hdr[1];

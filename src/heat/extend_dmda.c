@@ -33,8 +33,8 @@
 struct hv_dmda_extender {
     DM user;                        /* the caller's, referenced */
     DM dag;                         /* the caller's layout with the ghost layer (box stencil) */
-    Vec gg, gl;                     /* dag's global and local vectors */
-    Vec x;                          /* a level's solution */
+    Vec gl;                         /* dag's local vector */
+    Vec x;                          /* a level's solution (made on first use) */
     hv_dmda_solver *sv[MAX_LEVELS]; /* level l: I - t 16^l Lap, made on first use */
     hv_extender *e;                 /* on this rank's ghosted box */
     hv_extend_dist dist;
@@ -63,9 +63,11 @@ static size_t local_cell(const hv_dmda_extender *X, PetscInt i, PetscInt j, Pets
 /* A global vector of the caller's layout onto the ghosted box, as floats. */
 static hv_status to_local(hv_dmda_extender *X, Vec v, float *out)
 {
-    HV_PETSC_CHK(VecCopy(v, X->gg), "VecCopy (is it a global vector of the DMDA?)");
-    HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
-    HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+    /* The caller's layout is dag's: its global vectors scatter straight
+     * into dag's local one. */
+    HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, v, INSERT_VALUES, X->gl),
+                 "DMGlobalToLocal (is it a global vector of the DMDA?)");
+    HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, v, INSERT_VALUES, X->gl), "DMGlobalToLocal");
     const PetscScalar *a;
     HV_PETSC_CHK(VecGetArrayRead(X->gl, &a), "VecGetArrayRead");
     for (size_t c = 0; c < X->nloc; c++)
@@ -110,13 +112,14 @@ static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfi
             wn = n2;
         }
         hv_solve_info info;
+        if (!X->x) /* the solutions of levels past the band solve */
+            HV_PETSC_CHK(DMCreateGlobalVector(X->user, &X->x), "DMCreateGlobalVector");
         if ((st = hv__dmda_solve(X->sv[l], X->x, &info)))
             return st;
         relmax = fmax(relmax, info.relres);
         /* The solution on the ghosted box. */
-        HV_PETSC_CHK(VecCopy(X->x, X->gg), "VecCopy");
-        HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
-        HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, X->gg, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        HV_PETSC_CHK(DMGlobalToLocalBegin(X->dag, X->x, INSERT_VALUES, X->gl), "DMGlobalToLocal");
+        HV_PETSC_CHK(DMGlobalToLocalEnd(X->dag, X->x, INSERT_VALUES, X->gl), "DMGlobalToLocal");
         const PetscScalar *u;
         HV_PETSC_CHK(VecGetArrayRead(X->gl, &u), "VecGetArrayRead");
         for (size_t c = 0; c < X->nloc; c++)
@@ -187,9 +190,7 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
     hv_status st = hv__dmda_like(da, X->ghost, 1, &X->dag, &X->dim);
     if (st)
         return st;
-    HV_PETSC_CHK(DMCreateGlobalVector(X->dag, &X->gg), "DMCreateGlobalVector");
     HV_PETSC_CHK(DMCreateLocalVector(X->dag, &X->gl), "DMCreateLocalVector");
-    HV_PETSC_CHK(VecDuplicate(X->gg, &X->x), "VecDuplicate");
     DMDAGetCorners(X->dag, &X->xs[0], &X->xs[1], &X->xs[2], &X->xm[0], &X->xm[1], &X->xm[2]);
     DMDAGetGhostCorners(X->dag, &X->gs[0], &X->gs[1], &X->gs[2], &X->gm[0], &X->gm[1], &X->gm[2]);
     if (X->dim == 2) {
@@ -347,7 +348,6 @@ void hv_dmda_extender_destroy(hv_dmda_extender **xp)
         hv_dmda_solver_destroy(&X->sv[l]);
     hv_extender_destroy(&X->e);
     VecDestroy(&X->x);
-    VecDestroy(&X->gg);
     VecDestroy(&X->gl);
     DMDestroy(&X->dag);
     DMDestroy(&X->user);

@@ -8,7 +8,8 @@
  * extend: a velocity g(closest point) given within 1.5 voxels of a sphere
  * (radius 0.3 in the unit box) extended to |phi| < 3 voxels on a DMDA
  * (hv_dmda_extend; every rank fills only its own cells, so peak_rss_mb, the
- * largest over the ranks, is the distributed run's). seconds: best of R calls
+ * largest over the ranks, is the distributed run's: the caller's four double
+ * Vecs, phi and the velocity, and the extender's). seconds: best of R calls
  * after the first (setup_seconds: the extender's creation and the first
  * call, which makes the levels' solvers). ref "mg-one-process": rank 0 then
  * spawns `bench_mpi extend-ref`, a fresh process that runs hv_extend_many
@@ -178,26 +179,16 @@ static int spawn_reference(char *const args[], int nv, double *v)
     return 0;
 }
 
-static int bench_extend(int n, int repeat)
+/* phi and the input velocity on this rank's cells (the input again before
+ * every call: the extension works in place). */
+static void extend_fill(DM da, int n, Vec phi, Vec v[3])
 {
-    const double h = 1.0 / n, ob = 3;
-    DM da;
-    DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
-                 DMDA_STENCIL_STAR, n, n, n, PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL,
-                 NULL, NULL, &da);
-    DMSetUp(da);
-    Vec phi, v[3], v0[3];
-    DMCreateGlobalVector(da, &phi);
-    for (int a = 0; a < 3; a++) {
-        VecDuplicate(phi, &v[a]);
-        VecDuplicate(phi, &v0[a]);
-    }
     PetscInt xs, ys, zs, xm, ym, zm;
     DMDAGetCorners(da, &xs, &ys, &zs, &xm, &ym, &zm);
     PetscScalar ***P, ***V[3];
     DMDAVecGetArray(da, phi, &P);
     for (int a = 0; a < 3; a++)
-        DMDAVecGetArray(da, v0[a], &V[a]);
+        DMDAVecGetArray(da, v[a], &V[a]);
     for (PetscInt k = zs; k < zs + zm; k++)
         for (PetscInt j = ys; j < ys + ym; j++)
             for (PetscInt i = xs; i < xs + xm; i++) {
@@ -208,7 +199,23 @@ static int bench_extend(int n, int repeat)
             }
     DMDAVecRestoreArray(da, phi, &P);
     for (int a = 0; a < 3; a++)
-        DMDAVecRestoreArray(da, v0[a], &V[a]);
+        DMDAVecRestoreArray(da, v[a], &V[a]);
+}
+
+static int bench_extend(int n, int repeat)
+{
+    const double h = 1.0 / n, ob = 3;
+    DM da;
+    DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
+                 DMDA_STENCIL_STAR, n, n, n, PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL,
+                 NULL, NULL, &da);
+    DMSetUp(da);
+    Vec phi, v[3];
+    DMCreateGlobalVector(da, &phi);
+    for (int a = 0; a < 3; a++)
+        VecDuplicate(phi, &v[a]);
+    PetscInt xs, ys, zs, xm, ym, zm;
+    DMDAGetCorners(da, &xs, &ys, &zs, &xm, &ym, &zm);
 
     hv_extend_opts o;
     hv_extend_opts_default(&o);
@@ -219,8 +226,7 @@ static int bench_extend(int n, int repeat)
     MPI_Barrier(PETSC_COMM_WORLD);
     double t0 = MPI_Wtime(), best = INFINITY, setup = 0;
     for (int r = 0; r <= repeat; r++) {
-        for (int a = 0; a < 3; a++)
-            VecCopy(v0[a], v[a]);
+        extend_fill(da, n, phi, v);
         MPI_Barrier(PETSC_COMM_WORLD);
         const double t1 = MPI_Wtime();
         if ((!X && hv_dmda_extender_create(&X, da, h, &o)) || hv_dmda_extend(X, phi, 1, &f, &S)) {
@@ -271,10 +277,8 @@ static int bench_extend(int n, int repeat)
                best / R[0]);
         fflush(stdout);
     }
-    for (int a = 0; a < 3; a++) {
+    for (int a = 0; a < 3; a++)
         VecDestroy(&v[a]);
-        VecDestroy(&v0[a]);
-    }
     VecDestroy(&phi);
     DMDestroy(&da);
     return 0;
