@@ -43,16 +43,22 @@ DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboos
 # out: MPI's own allocations would read as leaks, and mpi-check covers it.
 MPI_BUILD ?= build-mpi
 MPI_PKGS  := petsc-dev openmpi-bin python3-h5py
-HV_PETSC  ?= $(shell pkg-config --exists PETSc ompi-c hdf5-openmpi 2>/dev/null && echo 1 || echo 0)
+ifeq ($(origin HV_PETSC),undefined)
+HV_PETSC  := $(shell pkg-config --exists PETSc ompi-c hdf5-openmpi 2>/dev/null && echo 1 || echo 0)
+endif
 ifeq ($(HV_PETSC),1)
 CPPFLAGS += -DHV_HAVE_PETSC $(shell pkg-config --cflags PETSc ompi-c hdf5-openmpi 2>/dev/null)
 LDLIBS   += $(shell pkg-config --libs PETSc ompi-c hdf5-openmpi 2>/dev/null)
 endif
 
-# The flags the objects were built with: when they change (PETSc found or
-# gone, another OPT), everything is rebuilt.
+# The flags the objects were built with, written when they change (PETSc
+# found or gone, another OPT): everything depending on them is rebuilt.
 FLAGS_NOW := $(CC) $(CXX) $(CPPFLAGS) $(CFLAGS) $(CXXFLAGS) $(LIBFLAGS) $(TOOL_CPPFLAGS) $(LDFLAGS) $(LDLIBS)
 FLAGS     := $(BUILD)/.flags
+ifneq ($(file <$(FLAGS)),$(FLAGS_NOW))
+$(shell mkdir -p $(BUILD))
+$(file >$(FLAGS),$(FLAGS_NOW))
+endif
 
 C_SRC   := $(sort $(wildcard src/*/*.c))
 CXX_SRC := $(sort $(wildcard src/*/*.cpp))
@@ -80,11 +86,6 @@ BIN     := $(BUILD)/heatvox
 .PHONY: all deps check sanitize bench demo install format format-check clean
 .SECONDARY:
 all: $(LIB_A) $(LIB_SO) $(BIN)
-
-$(FLAGS): FORCE
-	@mkdir -p $(BUILD); [ "$$(cat $@ 2>/dev/null)" = '$(FLAGS_NOW)' ] || printf '%s' '$(FLAGS_NOW)' > $@
-.PHONY: FORCE
-FORCE:
 
 deps: $(STAMP)
 $(STAMP): Makefile

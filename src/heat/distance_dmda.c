@@ -85,7 +85,7 @@ static hv_status solid_vec(hv_dmda_distance *D, Vec *v)
         return HV_OK;
     HV_PETSC_CHK(DMCreateGlobalVector(D->user, v), "DMCreateGlobalVector");
     PetscScalar *a;
-    HV_PETSC_CHK(VecGetArray(*v, &a), "VecGetArray");
+    HV_PETSC_CHK(VecGetArray(*v, &a), "VecGetArray"); /* the caller destroys *v */
     size_t c = 0;
     for (PetscInt k = D->xs[2]; k < D->xs[2] + D->xm[2]; k++)
         for (PetscInt j = D->xs[1]; j < D->xs[1] + D->xm[1]; j++)
@@ -104,9 +104,11 @@ static hv_status need_solvers(hv_dmda_distance *D, int q)
     if (q < 2 ? D->heat[0] != NULL : D->poisson != NULL)
         return HV_OK;
     Vec solid;
-    hv_status st = solid_vec(D, &solid);
-    if (st)
+    hv_status st = hv__petsc_agree(D->dag, solid_vec(D, &solid));
+    if (st) {
+        VecDestroy(&solid);
         return st;
+    }
     hv_solver_opts so;
     hv_solver_opts_default(&so);
     so.max_iter = 500;
@@ -127,7 +129,7 @@ static hv_status need_solvers(hv_dmda_distance *D, int q)
         st = hv__dmda_solver_create(&D->poisson, D->user, h, 0.0, 1.0, solid, &so, -1);
     }
     VecDestroy(&solid);
-    return st;
+    return hv__petsc_agree(D->dag, st);
 }
 
 static void drop_solvers(hv_dmda_distance *D)
@@ -206,6 +208,14 @@ static hv_status create(hv_dmda_distance *D, DM da, double h, const double origi
         st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
     if (!D->label)
         st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
+    PetscInt ns = (PetscInt)D->nown;
+    if (solid)
+        VecGetLocalSize(solid, &ns);
+    if (!st && (size_t)ns != D->nown)
+        st = hv__error(HV_ERR_INVALID_ARG,
+                       "distance: the solid vector is not a global vector of the DMDA (%d cells "
+                       "on this rank, not %zu)",
+                       (int)ns, D->nown);
     if ((st = hv__petsc_agree(D->dag, st)))
         return st;
     if (solid) {

@@ -133,7 +133,8 @@ static hv_status write_fields(const char *tmp, const char *path, int nfields,
         st = h5_fail(ierr, path, "creating the HDF5 file");
     const double spacing[3] = {hdr->h, hdr->h, hdr->h};
     for (int f = 0; f < nfields && !st; f++) {
-        if ((st = hv__block_in(&B, g ? g[f]->v : NULL, NULL, x)))
+        /* rank 0 alone reads its grid: agreed before the collective write */
+        if ((st = hv__petsc_agree(B.da, hv__block_in(&B, g ? g[f]->v : NULL, NULL, x))))
             break;
         if ((ierr = PetscObjectSetName((PetscObject)x, names[f])) || (ierr = VecView(x, v)))
             st = h5_fail(ierr, path, "writing a field");

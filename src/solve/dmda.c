@@ -356,15 +356,19 @@ static hv_status create(hv_dmda_solver *s, DM user, double h, double alpha, doub
     Vec sl = NULL;
     const PetscScalar *sla = NULL;
     if (solid) {
-        PetscInt ns;
-        HV_PETSC_CHK(VecGetLocalSize(solid, &ns), "VecGetLocalSize");
+        /* What one rank alone can fail at, agreed before the collective
+         * calls below. */
+        PetscInt ns = -1;
+        VecGetLocalSize(solid, &ns);
         if (ns != nown)
-            return hv__error(HV_ERR_INVALID_ARG,
-                             "dmda: the solid vector is not a global vector of the DMDA (%d cells "
-                             "on this rank, not %d)",
-                             (int)ns, (int)nown);
-        if (!(s->solid = malloc(s->nown ? s->nown : 1)))
-            return hv__error(HV_ERR_NOMEM, "petsc: out of memory");
+            st = hv__error(HV_ERR_INVALID_ARG,
+                           "dmda: the solid vector is not a global vector of the DMDA (%d cells "
+                           "on this rank, not %d)",
+                           (int)ns, (int)nown);
+        else if (!(s->solid = malloc(s->nown ? s->nown : 1)))
+            st = hv__error(HV_ERR_NOMEM, "petsc: out of memory");
+        if ((st = hv__petsc_agree(s->da, st)))
+            return st;
         const PetscScalar *a;
         HV_PETSC_CHK(VecGetArrayRead(solid, &a), "VecGetArrayRead");
         for (size_t c = 0; c < s->nown; c++)

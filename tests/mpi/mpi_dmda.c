@@ -546,6 +546,14 @@ static int distance_cases(void)
                  hv_last_error());
     VecDestroy(&d);
     hv_dmda_distance_destroy(&D);
+    /* A solid vector of another layout: refused, on every rank. */
+    Vec other;
+    VecCreateMPI(PETSC_COMM_WORLD, 5, PETSC_DETERMINE, &other);
+    st = hv_dmda_distance_create(&D, da, 0.1, NULL, other, NULL);
+    ok &= report(st == HV_ERR_INVALID_ARG && !D, "distance on a DMDA, a solid vector of 5 cells a "
+                                                 "rank: %s (%s)",
+                 hv_status_str(st), hv_last_error());
+    VecDestroy(&other);
     VecDestroy(&solid);
     DMDestroy(&da);
     /* A box narrower than the ghost layer: refused, on every rank. */
