@@ -115,6 +115,12 @@ if [ -x "$mpi_hv" ]; then
       OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
         mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" extend --n $n
     done
+    # Every cell: closest points past the ghost layer read from their owners
+    # (--corner: a small sphere in a corner, most of them).
+    for s in "" --corner; do
+      OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+        mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" extend --n 128 --out-band 0 $s
+    done
     OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
       mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" distance --n 128
   done

@@ -50,11 +50,11 @@ static int usage(FILE *out)
             "Builds with PETSc (make mpi): -o OUT.h5 writes the dense block as HDF5, one\n"
             "dataset per grid (vectors as NAME_x, NAME_y, NAME_z) with the attributes\n"
             "spacing and origin, and an XDMF sidecar OUT.xmf for ParaView. Under\n"
-            "mpirun -n P with --backend petsc (the dense block) and --out-band W, rank 0\n"
-            "reads the block, each rank extends its own box with a ghost layer (the\n"
-            "diffusion solved over all ranks), and rank 0 gathers the result and writes\n"
-            "the VDB file (the ranks write HDF5 together). Without --out-band, every rank\n"
-            "reads the input and extends, and only the solves are distributed.\n"
+            "mpirun -n P with --backend petsc (the dense block), rank 0 reads the block,\n"
+            "each rank extends its own box with a ghost layer (the diffusion solved over\n"
+            "all ranks; closest points past the layer read from the ranks that own\n"
+            "them), and rank 0 gathers the result and writes the VDB file (the ranks\n"
+            "write HDF5 together).\n"
             "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
@@ -388,9 +388,9 @@ int cmd_extend(int argc, char **argv)
     hv_extender *e = NULL;
     hv_vdb_writer *w = NULL;
     int rc = 0, cls;
-    /* --backend petsc --out-band W: the block is read by rank 0, extended on
-     * the ranks' boxes (hv_petsc_extend_block) and written by rank 0. */
-    const int spread = o.backend == HV_BACKEND_PETSC && o.out_band > 0;
+    /* --backend petsc: the block is read by rank 0, extended on the ranks'
+     * boxes (hv_petsc_extend_block) and written by rank 0. */
+    const int spread = o.backend == HV_BACKEND_PETSC;
     const int reader = !spread || hv_mpi_rank() == 0;
     hv_extend_stats es;
     if (!reader) {

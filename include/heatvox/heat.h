@@ -165,8 +165,12 @@ typedef struct hv_extend_stats {
                                                    the band's set-up); background and
                                                    evaluation */
     size_t tiles;                               /* hv_extend_tiles: the level set's tiles */
-    size_t work_bytes; /* hv_extend_tiles: the call's work memory at its largest (the
+    size_t work_bytes;   /* hv_extend_tiles: the call's work memory at its largest (the
                           solves' arrays, the outputs not counted) */
+    size_t remote_cells; /* hv_dmda_extend: this rank's output cells read at closest points
+                            whose stencils lie on other ranks' cells past what the ghost
+                            layer holds of the first level (their values fetched from
+                            those ranks) */
 } hv_extend_stats;
 
 /* One field to extend: ncomp = 1 (scalar) or 2..3 (vector, per-component

@@ -117,12 +117,24 @@ HV_API void hv_dmda_solver_destroy(hv_dmda_solver **s);
  * diffusion level runs on each rank's box where the boxes are wide enough
  * for the ghost layer to hold all it depends on, and otherwise, like later
  * levels, over all ranks on the whole grid, its solutions exchanged into the
- * ghost layers. opts->out_band must be > 0 (the cells written: |phi| <
- * out_band h); there are no obstacles; opts->backend is ignored. The ghost
- * layer (hv_dmda_extender_ghost) is ceil(1.5 out_band) + 2 cells, or the
- * wider layer of the first level on each box (29 cells at out_band 3); every
- * rank's box must be at least that wide. The solvers of the levels are made
- * on first use and kept. */
+ * ghost layers. opts->out_band (0 to 64 voxels) gives the cells written:
+ * |phi| < out_band h, or every cell with 0; there are no obstacles;
+ * opts->backend is ignored. The ghost layer (hv_dmda_extender_ghost) is
+ * ceil(1.5 W) + 2 cells (W = out_band, or the weights' band with out_band
+ * 0), or the wider layer of the first level on each box (29 cells at
+ * out_band 3, 26 with out_band 0); every rank's box must be at least that
+ * wide. A cell whose closest point's stencil lies past what the ghost layer
+ * holds of the first level (its whole width, or with the band solve on each
+ * box ceil(1.5 W) cells of it; with out_band 0, cells far from the surface)
+ * reads those cells from the ranks that own them: one exchange of the stencils' cells and their phi before
+ * the first level and one of their solutions after it, in proportion to
+ * the surface those cells see, not to the box. Cells read at themselves
+ * (where phi is no distance: medial axes, clamped narrow bands) take the
+ * first level whose weight passes its solve's trust bound; past the first
+ * level the ranks' solves are converged to opts->tol, and such cells equal
+ * those of hv_extend_many with box_only = 1 (its default solves level 1 on
+ * a band with a looser bound, so they may settle a level apart). The
+ * solvers of the levels are made on first use and kept. */
 typedef struct hv_dmda_extender hv_dmda_extender;
 typedef struct hv_dmda_field {
     int ncomp; /* 1 (scalar) to 3 (vector) */
@@ -133,10 +145,11 @@ HV_API hv_status hv_dmda_extender_create(hv_dmda_extender **out, DM da, double h
 
 /* Extends the fields in place off the zero set of phi (a global vector of
  * the DMDA, a signed distance near its zero set): cells with |phi| < out_band
- * h (phi rounded to float, as the extension reads it) get the values carried
- * from the surface, the others keep theirs. stats
- * (may be NULL): the counts are this rank's box with its ghost layer; levels,
- * solves and relres are the same on every rank. HV_ERR_NUMERIC (on every
+ * h (phi rounded to float, as the extension reads it), or every cell with
+ * out_band 0, get the values carried from the surface, the others keep
+ * theirs. stats (may be NULL): the counts are this rank's box with its ghost
+ * layer (remote_cells: this rank's own cells read past it); levels, solves
+ * and relres are the same on every rank. HV_ERR_NUMERIC (on every
  * rank) for a non-finite phi, or a field where it is read, on any rank; the
  * fields are then unchanged. */
 HV_API hv_status hv_dmda_extend(hv_dmda_extender *e, Vec phi, int nfields,
@@ -150,12 +163,13 @@ HV_API void hv_dmda_extender_destroy(hv_dmda_extender **e);
 HV_API int hv_dmda_extender_ghost(const hv_dmda_extender *e, int *band0);
 
 /* The extension of a whole block held by rank 0, distributed over the ranks
- * of PETSC_COMM_WORLD (heatvox extend --backend petsc --out-band W under
- * mpirun): the block (dim, n, h, the options and the fields' component
- * counts the same on every rank) becomes a DMDA, rank 0's phi and fields are
+ * of PETSC_COMM_WORLD (heatvox extend --backend petsc under mpirun): the
+ * block (dim, n, h, the options and the fields' component counts the same
+ * on every rank) becomes a DMDA, rank 0's phi and fields are
  * scattered to the ranks' boxes, each rank extends its box (hv_dmda_extend),
  * and the results are gathered into rank 0's outputs: the extended values
- * where |phi| < opts->out_band h (> 0 required), opts->background elsewhere.
+ * where |phi| < opts->out_band h, opts->background elsewhere (out_band 0:
+ * every cell).
  * Only rank 0 passes arrays (phi, f[i].in, f[i].out), and its n and h are
  * the block's; the other ranks pass NULL arrays. Rank 0 passing phi = NULL
  * (it could not read the block) makes every rank return an error. stats:

@@ -21,6 +21,7 @@
 #include "solve/dmda.h"
 #include "core/error.h"
 
+#include <limits.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -38,6 +39,14 @@ struct hv_dmda_extender {
     hv_dmda_solver *sv[MAX_LEVELS]; /* level l: I - t 16^l Lap, made on first use */
     hv_extender *e;                 /* on this rank's ghosted box */
     hv_extend_dist dist;
+    /* Closest points past the box: the table (extend_internal.h), the
+     * ranks' first cells along each axis (m[a] + 1 of them), its used slots
+     * by owner, the cells of this box other ranks read (in the order they
+     * asked), the counts and offsets of both directions, per rank. */
+    hv_extend_remote rem;
+    PetscInt *first[3], mr[3];
+    size_t *order, *serve, nserve;
+    int *sc, *sd, *rc, *rd;
     MPI_Comm comm;
     int dim, ghost;
     double h;
@@ -74,6 +83,177 @@ static hv_status to_local(hv_dmda_extender *X, Vec v, float *out)
         out[c] = (float)a[c];
     VecRestoreArrayRead(X->gl, &a);
     return HV_OK;
+}
+
+/* ---- closest points past the box ------------------------------------------- */
+
+/* The rank that owns global cell g, and its indices. */
+static int owner(const hv_dmda_extender *X, size_t g, PetscInt ijk[3])
+{
+    const hv_extend_remote *R = &X->rem;
+    ijk[0] = (PetscInt)(g % (size_t)R->gn[0]);
+    ijk[1] = (PetscInt)(g / (size_t)R->gn[0] % (size_t)R->gn[1]);
+    ijk[2] = (PetscInt)(g / ((size_t)R->gn[0] * (size_t)R->gn[1]));
+    int r[3] = {0, 0, 0};
+    for (int a = 0; a < 3; a++)
+        while (r[a] + 1 < X->mr[a] && X->first[a][r[a] + 1] <= ijk[a])
+            r[a]++;
+    return r[0] + (int)X->mr[0] * (r[1] + (int)X->mr[1] * r[2]);
+}
+
+/* st on every rank, or an error when another rank failed (collective). */
+static hv_status together(hv_dmda_extender *X, hv_status st)
+{
+    if (dist_sum(X, st != HV_OK) && !st)
+        return hv__error(HV_ERR_NOMEM, "extend: another rank ran out of memory");
+    return st;
+}
+
+/* The counts of the requests (sc: to each rank, rc: from each) times w,
+ * with their offsets; 0 when they exceed an int. */
+static int scaled(hv_dmda_extender *X, int w, int *sc, int *sd, int *rc, int *rd)
+{
+    int P = 0;
+    MPI_Comm_size(X->comm, &P);
+    long long s = 0, r = 0;
+    for (int q = 0; q < P; q++) {
+        sc[q] = X->sc[q] * w;
+        rc[q] = X->rc[q] * w;
+        sd[q] = (int)s;
+        rd[q] = (int)r;
+        s += sc[q];
+        r += rc[q];
+        if (s > INT_MAX || r > INT_MAX)
+            return 0;
+    }
+    return 1;
+}
+
+/* Stage 0: the corners this rank's closest points past the box read go to
+ * their owners, which answer with phi there; the points are checked, and
+ * the corners of those that pass are marked in the owners' need. Stage 1:
+ * the owners answer with the solutions of level 0 there. */
+static hv_status dist_remote(void *user, hv_extender *e, const float *phi, uint8_t *need, int stage)
+{
+    hv_dmda_extender *X = user;
+    hv_extend_remote *R = &X->rem;
+    int P = 0;
+    MPI_Comm_size(X->comm, &P);
+    const int ns = stage ? e->nsol : 1;
+    hv_status st = HV_OK;
+    void *sbuf = NULL, *rbuf = NULL;
+    int *c4 = malloc(4 * (size_t)P * sizeof *c4);
+    if (!c4)
+        st = hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    if (stage == 0) {
+        /* The corners, by owner. */
+        if (!st)
+            st = hv__extend_remote_collect(e, phi);
+        if (!st) {
+            float *fp = realloc(R->phi, (R->cap ? R->cap : 1) * sizeof *fp);
+            if (fp)
+                R->phi = fp;
+            uint8_t *rp = fp ? realloc(R->read, R->cap ? R->cap : 1) : NULL;
+            if (rp)
+                R->read = rp;
+            size_t *op = rp ? realloc(X->order, (R->used ? R->used : 1) * sizeof *op) : NULL;
+            if (op)
+                X->order = op;
+            if (!op)
+                st = hv__error(HV_ERR_NOMEM, "extend: out of memory for %zu closest-point cells",
+                               R->used);
+            else if (R->used > INT_MAX)
+                st = hv__error(HV_ERR_INVALID_ARG,
+                               "extend: this rank's closest points read %zu cells of other "
+                               "ranks, more than one MPI message holds",
+                               R->used);
+        }
+        if ((st = together(X, st)))
+            goto out;
+        memset(X->sc, 0, (size_t)P * sizeof *X->sc);
+        PetscInt ijk[3];
+        for (size_t s = 0; s < R->cap; s++)
+            if (R->key[s])
+                X->sc[owner(X, R->key[s] - 1, ijk)]++;
+        for (int q = 0, o = 0; q < P; q++) {
+            X->sd[q] = o;
+            o += X->sc[q];
+        }
+        memcpy(c4, X->sd, (size_t)P * sizeof *c4);
+        for (size_t s = 0; s < R->cap; s++)
+            if (R->key[s])
+                X->order[c4[owner(X, R->key[s] - 1, ijk)]++] = s;
+        MPI_Alltoall(X->sc, 1, MPI_INT, X->rc, 1, MPI_INT, X->comm);
+        X->nserve = 0;
+        for (int q = 0; q < P; q++) {
+            X->rd[q] = (int)X->nserve;
+            X->nserve += (size_t)X->rc[q];
+        }
+        size_t *sv = realloc(X->serve, (X->nserve ? X->nserve : 1) * sizeof *sv);
+        if (sv)
+            X->serve = sv;
+        if (X->nserve > INT_MAX)
+            st = hv__error(HV_ERR_INVALID_ARG,
+                           "extend: other ranks' closest points read %zu cells of this rank's "
+                           "box, more than one MPI message holds",
+                           X->nserve);
+        else if (!sv || !(sbuf = malloc((R->used ? R->used : 1) * sizeof(uint64_t))) ||
+                 !(rbuf = malloc((X->nserve ? X->nserve : 1) * sizeof(uint64_t))))
+            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the closest points' cells");
+        if ((st = together(X, st)))
+            goto out;
+        uint64_t *sk = sbuf, *rk = rbuf;
+        for (size_t q = 0; q < R->used; q++)
+            sk[q] = R->key[X->order[q]] - 1;
+        MPI_Alltoallv(sk, X->sc, X->sd, MPI_UINT64_T, rk, X->rc, X->rd, MPI_UINT64_T, X->comm);
+        for (size_t q = 0; q < X->nserve; q++) {
+            owner(X, (size_t)rk[q], ijk);
+            X->serve[q] = local_cell(X, ijk[0], ijk[1], ijk[2]);
+        }
+        /* phi there, back; the check; the marks, out. */
+        float *sf = rbuf, *rf = sbuf;
+        for (size_t q = 0; q < X->nserve; q++)
+            sf[q] = phi[X->serve[q]];
+        MPI_Alltoallv(sf, X->rc, X->rd, MPI_FLOAT, rf, X->sc, X->sd, MPI_FLOAT, X->comm);
+        for (size_t q = 0; q < R->used; q++)
+            R->phi[X->order[q]] = rf[q];
+        hv__extend_remote_check(e, phi, need);
+        uint8_t *sm = sbuf, *rm = rbuf;
+        for (size_t q = 0; q < R->used; q++)
+            sm[q] = R->read[X->order[q]];
+        MPI_Alltoallv(sm, X->sc, X->sd, MPI_UINT8_T, rm, X->rc, X->rd, MPI_UINT8_T, X->comm);
+        for (size_t q = 0; need && q < X->nserve; q++)
+            if (rm[q])
+                need[X->serve[q]] = 1;
+        goto out;
+    }
+    /* Stage 1: the solutions, ns per corner. */
+    int *sc = c4, *sd = c4 ? c4 + P : NULL, *rc = c4 ? c4 + 2 * P : NULL,
+        *rd = c4 ? c4 + 3 * P : NULL;
+    float *sol = NULL;
+    if (!st && !scaled(X, ns, sc, sd, rc, rd))
+        st = hv__error(HV_ERR_INVALID_ARG,
+                       "extend: the closest points past this rank's box read more values than "
+                       "one MPI message holds");
+    if (!st && (!(sol = realloc(R->sol, (R->cap ? R->cap : 1) * (size_t)ns * sizeof *sol)) ||
+                !(sbuf = malloc((X->nserve * (size_t)ns + 1) * sizeof(float))) ||
+                !(rbuf = malloc((R->used * (size_t)ns + 1) * sizeof(float)))))
+        st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the closest points' solutions");
+    if (sol)
+        R->sol = sol;
+    if ((st = together(X, st)))
+        goto out;
+    float *sf = sbuf, *rf = rbuf;
+    for (size_t q = 0; q < X->nserve; q++)
+        memcpy(sf + q * (size_t)ns, e->sol + X->serve[q] * (size_t)ns, (size_t)ns * sizeof *sf);
+    MPI_Alltoallv(sf, rc, rd, MPI_FLOAT, rf, sc, sd, MPI_FLOAT, X->comm);
+    for (size_t q = 0; q < R->used; q++)
+        memcpy(R->sol + X->order[q] * (size_t)ns, rf + q * (size_t)ns, (size_t)ns * sizeof *rf);
+out:
+    free(sbuf);
+    free(rbuf);
+    free(c4);
+    return st;
 }
 
 static hv_status dist_solve(void *user, hv_extender *e, int l, int nrhs, int nfields,
@@ -164,7 +344,10 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
     memset(&probe, 0, sizeof probe);
     probe.dim = (int)dim;
     probe.o = *o;
-    const int reach = (int)ceil(GRAD_MAX * o->out_band) + 2;
+    /* Every cell (out_band 0): the layer of the weights' closest points;
+     * closest points past it are read from their owners (dist_remote). */
+    const double ob = o->out_band > 0 ? o->out_band : fmax(o->band, 1.0);
+    const int reach = (int)ceil(GRAD_MAX * ob) + 2;
     const int band_ghost = 2 * reach + hv__extend_band_iters(&probe, o->t_scale) + 2 +
                            (int)lround(BOX_MARGIN * sqrt(o->t_scale));
     /* A DMDA's ghost layer comes from the next rank only: no wider than the
@@ -186,7 +369,7 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
         return hv__error(HV_ERR_INVALID_ARG,
                          "extend: out_band %g needs a ghost layer of %d cells, and the narrowest "
                          "rank's box is %d cells wide (fewer ranks, or a narrower band)",
-                         o->out_band, X->ghost, (int)narrow);
+                         ob, X->ghost, (int)narrow);
     hv_status st = hv__dmda_like(da, X->ghost, 1, &X->dag, &X->dim);
     if (st)
         return st;
@@ -212,6 +395,39 @@ static hv_status create(hv_dmda_extender *X, DM da, double h, const hv_extend_op
         X->dist.own_hi[a] = (int)(X->xs[a] - X->gs[a] + X->xm[a] - 1);
     }
     X->dist.solve = dist_solve;
+    /* Closest points past the box. */
+    PetscInt N[3] = {1, 1, 1};
+    HV_PETSC_CHK(DMDAGetInfo(da, NULL, &N[0], &N[1], &N[2], NULL, NULL, NULL, NULL, NULL, NULL,
+                             NULL, NULL, NULL),
+                 "DMDAGetInfo");
+    int P = 0;
+    MPI_Comm_size(X->comm, &P);
+    if (!(X->sc = malloc(4 * (size_t)P * sizeof *X->sc)))
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    X->sd = X->sc + P;
+    X->rc = X->sc + 2 * P;
+    X->rd = X->sc + 3 * P;
+    for (int a = 0; a < 3; a++) {
+        X->mr[a] = a < X->dim ? m[a] : 1;
+        if (!(X->first[a] = malloc((size_t)(X->mr[a] + 1) * sizeof *X->first[a])))
+            return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+        X->first[a][0] = 0;
+        for (PetscInt r = 0; r < X->mr[a]; r++)
+            X->first[a][r + 1] = X->first[a][r] + (a < X->dim ? l[a][r] : 1);
+        X->rem.go[a] = (int)X->gs[a];
+        X->rem.gn[a] = a < X->dim ? (int)N[a] : 1;
+        X->rem.cut[a][0] = X->gs[a] > 0;
+        X->rem.cut[a][1] = X->gs[a] + X->gm[a] < X->rem.gn[a];
+        /* Level 0 by the band solve on the box is the one process's within
+         * reach of the owned cells only (the layer's design, above): points
+         * that far read the box, so that their stencils stay within reach
+         * (as an output band's do); points past them read the owners'.
+         * Solved over all ranks, the whole layer holds the solutions. */
+        X->rem.lo[a] = X->dist.band0 ? X->dist.own_lo[a] - (reach - 2) : 0;
+        X->rem.hi[a] = X->dist.band0 ? X->dist.own_hi[a] + (reach - 2) : n[a] - 1;
+    }
+    X->dist.rem = &X->rem;
+    X->dist.remote = dist_remote;
     X->e->dist = &X->dist;
     return HV_OK;
 }
@@ -228,10 +444,10 @@ static hv_status hv_dmda_extender_create_body(hv_dmda_extender **out, DM da, dou
         o = *opts;
     if (!(h > 0) || !isfinite(h))
         return hv__error(HV_ERR_INVALID_ARG, "hv_dmda_extender_create: h must be > 0, got %g", h);
-    if (!(o.out_band > 0) || o.out_band > 64)
+    if (!(o.out_band >= 0) || o.out_band > 64)
         return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_dmda_extender_create: out_band must lie in (0, 64] voxels (the "
-                         "ghost layer grows with it), got %g",
+                         "hv_dmda_extender_create: out_band must lie in [0, 64] voxels (0: every "
+                         "cell; the ghost layer grows with it), got %g",
                          o.out_band);
     hv_status st = hv_petsc_init();
     if (st)
@@ -283,7 +499,7 @@ static hv_status extend(hv_dmda_extender *X, Vec phi, int nfields, const hv_dmda
                 for (PetscInt j = X->xs[1]; j < X->xs[1] + X->xm[1]; j++)
                     for (PetscInt ii = X->xs[0]; ii < X->xs[0] + X->xm[0]; ii++, q++) {
                         const size_t lc = local_cell(X, ii, j, k);
-                        if (fabs(lphi[lc]) < ob)
+                        if (!(ob > 0) || fabs(lphi[lc]) < ob)
                             a[q] = ef[i].out[c][lc];
                     }
             VecRestoreArray(fields[i].v[c], &a);
@@ -347,6 +563,15 @@ void hv_dmda_extender_destroy(hv_dmda_extender **xp)
     for (int l = 0; l < MAX_LEVELS; l++)
         hv_dmda_solver_destroy(&X->sv[l]);
     hv_extender_destroy(&X->e);
+    free(X->rem.key);
+    free(X->rem.phi);
+    free(X->rem.sol);
+    free(X->rem.read);
+    free(X->order);
+    free(X->serve);
+    free(X->sc);
+    for (int a = 0; a < 3; a++)
+        free(X->first[a]);
     VecDestroy(&X->x);
     VecDestroy(&X->gl);
     DMDestroy(&X->dag);
@@ -385,7 +610,7 @@ static hv_status extend_block(hv_block_io *B, const hv_extend_opts *o, double h,
         for (int c = 0; c < f[i].ncomp && !st; c++, q++) {
             float *out = phi ? f[i].out[c] : NULL;
             st = hv__block_out(B, v[q], out);
-            for (size_t k = 0; out && k < B->count; k++)
+            for (size_t k = 0; out && ob > 0 && k < B->count; k++)
                 if (!(fabs(phi[k]) < ob))
                     out[k] = o->background;
         }

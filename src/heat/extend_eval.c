@@ -14,35 +14,73 @@
 static int is_solid(const hv_extender *e, size_t c) { return e->solid && e->solid[c]; }
 
 /* Trilinear (bilinear in 2D) stencil at index-space point p (cell centres at
- * integers), clamped to the grid. Returns the number of corners. */
-static int stencil(const hv_extender *e, const double p[3], size_t idx[8], double wt[8])
+ * integers) of a grid of n cells, clamped to it. Returns the number of
+ * corners. */
+static int stencil_in(int dim, const int n[3], const double p[3], size_t idx[8], double wt[8])
 {
     int i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0};
     double fr[3] = {0, 0, 0};
-    for (int a = 0; a < e->dim; a++) {
+    for (int a = 0; a < dim; a++) {
         double q = p[a];
         if (q < 0)
             q = 0;
-        if (q > e->n[a] - 1)
-            q = e->n[a] - 1;
+        if (q > n[a] - 1)
+            q = n[a] - 1;
         int f = (int)floor(q);
-        if (f > e->n[a] - 2)
-            f = e->n[a] - 2;
+        if (f > n[a] - 2)
+            f = n[a] - 2;
         if (f < 0)
             f = 0;
         i0[a] = f;
-        i1[a] = e->n[a] > 1 ? f + 1 : f;
-        fr[a] = e->n[a] > 1 ? q - f : 0;
+        i1[a] = n[a] > 1 ? f + 1 : f;
+        fr[a] = n[a] > 1 ? q - f : 0;
     }
-    int m = e->dim == 3 ? 8 : 4;
+    int m = dim == 3 ? 8 : 4;
     for (int q = 0; q < m; q++) {
         int ii = (q & 1) ? i1[0] : i0[0], jj = (q & 2) ? i1[1] : i0[1],
             kk = (q & 4) ? i1[2] : i0[2];
-        idx[q] = ii + (size_t)e->n[0] * (jj + (size_t)e->n[1] * kk);
+        idx[q] = ii + (size_t)n[0] * (jj + (size_t)n[1] * kk);
         wt[q] = ((q & 1) ? fr[0] : 1 - fr[0]) * ((q & 2) ? fr[1] : 1 - fr[1]) *
-                (e->dim == 3 ? ((q & 4) ? fr[2] : 1 - fr[2]) : 1.0);
+                (dim == 3 ? ((q & 4) ? fr[2] : 1 - fr[2]) : 1.0);
     }
     return m;
+}
+
+static int stencil(const hv_extender *e, const double p[3], size_t idx[8], double wt[8])
+{
+    return stencil_in(e->dim, e->n, p, idx, wt);
+}
+
+/* Distributed: whether the stencil of box point p needs cells past what the
+ * box holds of level 0 (rem->lo, rem->hi) on a face that borders another
+ * rank (the same cells as the whole grid's stencil otherwise, clamped alike
+ * at the grid's own faces). */
+static int past_box(const hv_extender *e, const double p[3])
+{
+    const hv_extend_remote *R = e->dist ? e->dist->rem : NULL;
+    if (!R)
+        return 0;
+    for (int a = 0; a < e->dim; a++)
+        if ((R->cut[a][0] && p[a] < R->lo[a]) || (R->cut[a][1] && p[a] > R->hi[a]))
+            return 1;
+    return 0;
+}
+
+/* A closest point past the box at box point p: 3 with pg = p in the whole
+ * grid's index space, or 0 where that lies outside the grid (read at the
+ * cell, as in one process). */
+static int past_point(const hv_extender *e, const double p[3], double pg[3])
+{
+    const hv_extend_remote *R = e->dist->rem;
+    double q[3] = {0, 0, 0};
+    for (int a = 0; a < e->dim; a++) {
+        q[a] = p[a] + R->go[a];
+        if (q[a] < -0.5 || q[a] > R->gn[a] - 0.5)
+            return 0;
+    }
+    if (pg)
+        memcpy(pg, q, sizeof q);
+    return 3;
 }
 
 static double sample(const float *v, const size_t idx[8], const double wt[8], int m)
@@ -89,9 +127,12 @@ static void grad_phi(const hv_extender *e, const float *phi, int i, int j, int k
 /* Where the extension of cell c is read: its closest point on the zero set
  * when phi is a distance there (|grad phi| near 1, and phi interpolated at the
  * point is within half the band of 0), else the cell itself. Fills the
- * interpolation stencil and returns 1 for a closest point. */
+ * interpolation stencil and returns 1 for a closest point. Distributed, a
+ * closest point whose stencil lies partly past the box is not checked here
+ * (its phi is other ranks'): 3, with pg (may be NULL) the point in the whole
+ * grid's index space. */
 static int evaluation_point(const hv_extender *e, const float *phi, int i, int j, int k,
-                            int validate, size_t idx[8], double wt[8], int *m)
+                            int validate, size_t idx[8], double wt[8], int *m, double pg[3])
 {
     size_t c = i + (size_t)e->n[0] * (j + (size_t)e->n[1] * k);
     idx[0] = c;
@@ -117,6 +158,8 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
             return 0;
         const double sc = phi[c] * 0.5 / (gn * e->h * e->h);
         const double p[3] = {i - sc * gx, j - sc * gy, k - sc * gz};
+        if (past_box(e, p))
+            return past_point(e, p, pg);
         const int nn[3] = {nx, ny, nz};
         int f[3];
         double fr[3];
@@ -161,11 +204,13 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
     if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
         return 0;
     double s = phi[c] / (gn * e->h), p[3] = {i, j, k};
-    for (int a = 0; a < e->dim; a++) {
+    for (int a = 0; a < e->dim; a++)
         p[a] -= s * g[a];
+    if (past_box(e, p))
+        return past_point(e, p, pg);
+    for (int a = 0; a < e->dim; a++)
         if (p[a] < -0.5 || p[a] > e->n[a] - 0.5)
             return 0;
-    }
     size_t ci[8];
     double cw[8];
     int cm = stencil(e, p, ci, cw);
@@ -175,6 +220,134 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
     memcpy(wt, cw, sizeof cw);
     *m = cm;
     return 1;
+}
+
+/* ---- closest points past a distributed extender's box ---------------------- */
+
+static size_t key_hash(size_t g, size_t cap)
+{
+    return (size_t)(((uint64_t)g * 0x9E3779B97F4A7C15ull) >> 17) & (cap - 1);
+}
+
+/* The slot of global cell g: its own, or the empty one it would take. */
+static size_t key_slot(const hv_extend_remote *R, size_t g)
+{
+    size_t s = key_hash(g, R->cap);
+    while (R->key[s] && R->key[s] != g + 1)
+        s = (s + 1) & (R->cap - 1);
+    return s;
+}
+
+static hv_status key_grow(hv_extend_remote *R)
+{
+    const size_t cap = R->cap ? 2 * R->cap : 4096, old = R->cap;
+    size_t *key = calloc(cap, sizeof *key), *ok = R->key;
+    if (!key)
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory for %zu closest-point cells", cap);
+    R->key = key;
+    R->cap = cap;
+    for (size_t s = 0; s < old; s++)
+        if (ok[s])
+            R->key[key_slot(R, ok[s] - 1)] = ok[s];
+    free(ok);
+    return HV_OK;
+}
+
+/* The whole grid's stencil of the closest point of box cell (i, j, k), of
+ * pending 3: its corners as slots of the table. */
+static int remote_stencil(const hv_extender *e, const float *phi, int i, int j, int k,
+                          size_t slot[8], double wt[8])
+{
+    const hv_extend_remote *R = e->dist->rem;
+    size_t idx[8];
+    double pg[3];
+    int m;
+    evaluation_point(e, phi, i, j, k, 0, idx, wt, &m, pg);
+    m = stencil_in(e->dim, R->gn, pg, idx, wt);
+    for (int q = 0; q < m; q++)
+        slot[q] = key_slot(R, idx[q]);
+    return m;
+}
+
+static void remote_sample(const hv_extender *e, const float *phi, int i, int j, int k, double *out)
+{
+    const hv_extend_remote *R = e->dist->rem;
+    size_t slot[8];
+    double wt[8];
+    const int m = remote_stencil(e, phi, i, j, k, slot, wt), n = e->nsol;
+    for (int r = 0; r < n; r++)
+        out[r] = 0;
+    for (int q = 0; q < m; q++) {
+        const float *v = R->sol + slot[q] * (size_t)n;
+        for (int r = 0; r < n; r++)
+            out[r] += wt[q] * v[r];
+    }
+}
+
+/* Each of this rank's cells of pending 3, in order. */
+#define FOR_PAST(e, ...)                                                                           \
+    for (int k = (e)->dist->own_lo[2]; k <= (e)->dist->own_hi[2]; k++)                             \
+        for (int j = (e)->dist->own_lo[1]; j <= (e)->dist->own_hi[1]; j++)                         \
+            for (int i = (e)->dist->own_lo[0]; i <= (e)->dist->own_hi[0]; i++) {                   \
+                const size_t c = i + (size_t)(e)->n[0] * (j + (size_t)(e)->n[1] * k);              \
+                if ((e)->pending[c] == 3)                                                          \
+                    __VA_ARGS__                                                                    \
+            }
+
+hv_status hv__extend_remote_collect(hv_extender *e, const float *phi)
+{
+    hv_extend_remote *R = e->dist->rem;
+    if (R->key)
+        memset(R->key, 0, R->cap * sizeof *R->key);
+    R->used = 0;
+    hv_status st = HV_OK;
+    size_t last = SIZE_MAX; /* neighbours along a row mostly share a stencil */
+    FOR_PAST(e, {
+        size_t idx[8];
+        double wt[8], pg[3];
+        int m;
+        evaluation_point(e, phi, i, j, k, 0, idx, wt, &m, pg);
+        m = stencil_in(e->dim, R->gn, pg, idx, wt);
+        if (idx[0] == last)
+            continue;
+        last = idx[0];
+        for (int q = 0; q < m && !st; q++) {
+            if (2 * (R->used + 1) > R->cap && (st = key_grow(R)))
+                break;
+            const size_t s = key_slot(R, idx[q]);
+            if (!R->key[s]) {
+                R->key[s] = idx[q] + 1;
+                R->used++;
+            }
+        }
+        if (st)
+            return st;
+    })
+    return HV_OK;
+}
+
+void hv__extend_remote_check(hv_extender *e, const float *phi, uint8_t *need)
+{
+    hv_extend_remote *R = e->dist->rem;
+    const double lim = 0.5 * fmax(e->o.band, 1.0) * e->h;
+    memset(R->read, 0, R->cap);
+    R->cells = 0;
+    FOR_PAST(e, {
+        size_t slot[8];
+        double wt[8], v = 0;
+        const int m = remote_stencil(e, phi, i, j, k, slot, wt);
+        for (int q = 0; q < m; q++)
+            v += wt[q] * R->phi[slot[q]];
+        if (fabs(v) > lim) {
+            e->pending[c] = 2;
+            if (need)
+                need[c] = 1;
+            continue;
+        }
+        for (int q = 0; q < m; q++)
+            R->read[slot[q]] = 1;
+        R->cells++;
+    })
 }
 
 /* Writes the extension of every field at cell c from the current level's
@@ -255,7 +428,20 @@ hv_status hv__extend_classify(hv_extender *e, const float *phi, int nfields,
                     size_t idx[8];
                     double wt[8];
                     int m;
-                    pending[c] = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m) ? 1 : 2;
+                    const int at = evaluation_point(e, phi, i, j, k, 1, idx, wt, &m, NULL);
+                    if (at == 3) {
+                        /* Past the box: read from the owners (hv_extend_remote) where the
+                         * cell is this rank's; the ghost layer's cells are other ranks'
+                         * outputs. */
+                        const hv_extend_dist *D = e->dist;
+                        const int own = i >= D->own_lo[0] && i <= D->own_hi[0] &&
+                                        j >= D->own_lo[1] && j <= D->own_hi[1] &&
+                                        k >= D->own_lo[2] && k <= D->own_hi[2];
+                        pending[c] = own ? 3 : 0;
+                        npend += own;
+                        continue;
+                    }
+                    pending[c] = at ? 1 : 2;
                     npend++;
                     if (pending[c] == 2)
                         box_add(&lr, i, j, k);
@@ -338,10 +524,15 @@ void hv__extend_eval_level(hv_extender *e, const float *phi, int nfields, const 
                     size_t idx[8] = {c};
                     double wt[8] = {1};
                     int m = 1, at_cp = 0;
-                    if (pending[c] == 1)
-                        at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m);
                     double val[1 + 4 * MAX_FIELDS_PER_CALL];
-                    sample_all(e, idx, wt, m, val);
+                    if (pending[c] == 3) {
+                        remote_sample(e, phi, i, j, k, val);
+                        at_cp = 1;
+                    } else {
+                        if (pending[c] == 1)
+                            at_cp = evaluation_point(e, phi, i, j, k, 0, idx, wt, &m, NULL);
+                        sample_all(e, idx, wt, m, val);
+                    }
                     double W = val[0];
                     if (!(W > thr) && at_cp) {
                         /* Closest point but no weight there: read at the cell from now on. */

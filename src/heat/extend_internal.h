@@ -34,6 +34,26 @@
 #define GRAD_MIN 0.5
 #define GRAD_MAX 1.5
 
+/* Closest points past the box of a distributed extender (pending 3): a
+ * cell whose closest point's interpolation stencil needs cells beyond a face
+ * of its box that another rank owns reads them from their owners. The
+ * stencil's corners are keys (global cell indices) of an open-addressing
+ * table; slot s holds key[s] - 1 (0: empty), the level set there (phi[s]),
+ * whether a closest point that passed its check reads it (read[s]), and
+ * after level 0 the solutions there (sol[s * nsol + r]). */
+typedef struct hv_extend_remote {
+    int go[3], gn[3];  /* the box's first cell in the whole grid; the grid's size */
+    uint8_t cut[3][2]; /* 1: the box's low / high face on axis a borders another rank */
+    /* Where the box's level 0 is the one process's, on such a face: a point
+     * p (box index space) with lo[a] <= p[a] <= hi[a] reads the box. */
+    int lo[3], hi[3];
+    size_t *key; /* cap slots */
+    float *phi, *sol;
+    uint8_t *read;
+    size_t cap, used;
+    size_t cells; /* the cells of pending 3 that passed the check */
+} hv_extend_remote;
+
 /* A distributed extension (extend_dmda.c): the extender works on one rank's
  * box with its ghost layer, and these make its decisions over all ranks and
  * solve its levels on the whole grid. */
@@ -53,6 +73,14 @@ typedef struct hv_extend_dist {
     /* This rank's own cells in the box, inclusive: only they count as left
      * for a next level (the ghost layer's are other ranks'). */
     int own_lo[3], own_hi[3];
+    /* NULL, or the closest points past the box: stage 0 (after the first
+     * pass, before the band is built) fetches phi at their stencils from
+     * the owners, checks them as hv__extend_classify checks the others
+     * (hv__extend_remote_check), and marks the stencils of those that pass
+     * in the owners' need (may be NULL); stage 1 (after level 0's solve)
+     * fetches the solutions there into rem->sol (collective). */
+    hv_extend_remote *rem;
+    hv_status (*remote)(void *user, hv_extender *e, const float *phi, uint8_t *need, int stage);
 } hv_extend_dist;
 
 struct hv_extender {
@@ -74,7 +102,8 @@ struct hv_extender {
     float *bf, *bu0, *bu1;       /* band solve: right-hand sides and iterates, compact */
     size_t bcap;                 /* floats each of them holds */
     uint8_t *bneed, *bg0, *bg1;  /* band solve: cells read, growing buffers */
-    uint8_t *pending;            /* per cell: 0 done, 1 read at the closest point, 2 at itself */
+    uint8_t *pending;            /* per cell: 0 done, 1 read at the closest point, 2 at itself,
+                                    3 at a closest point past the box (hv_extend_remote) */
     struct hv_extend_cl *cl;     /* backend opencl: the device path's state (extend_cl.h) */
     int resolved;                /* o.backend resolved (AUTO: OPENCL on a GPU) */
     struct hv_extend_sparse *sp; /* hv_extend_tiles: maps and marks kept between calls
@@ -196,6 +225,16 @@ hv_status hv__extend_classify(hv_extender *e, const float *phi, int nfields,
 
 /* The background on the output cells that no level will write (pending 0). */
 void hv__extend_fill_background(const hv_extender *e, int nfields, const hv_extend_field *f);
+
+/* Distributed (e->dist->rem): the table of the corners that this rank's
+ * cells of pending 3 read, rebuilt (HV_ERR_NOMEM when it cannot grow). */
+hv_status hv__extend_remote_collect(hv_extender *e, const float *phi);
+
+/* Once rem->phi holds phi at every corner: a cell of pending 3 whose closest
+ * point fails the check of hv__extend_classify (|phi| there above half the
+ * band) is read at itself (pending 2, need[c] set when need is not NULL);
+ * the corners of the others are marked in rem->read. */
+void hv__extend_remote_check(hv_extender *e, const float *phi, uint8_t *need);
 
 /* Counts of one level's evaluation pass. */
 typedef struct {

@@ -58,6 +58,15 @@ void hv__extend_level_box(const hv_extender *e, const int wlo[3], const int whi[
         r.hi[a] = rhi[a];
     }
     box_union(&need, &r);
+    if (wlo[0] > whi[0] && rlo[0] > rhi[0]) {
+        /* Nothing to solve for (a rank of a distributed extension whose box
+         * holds no weight and no cell read at itself): one cell. */
+        for (int a = 0; a < 3; a++) {
+            lo[a] = 0;
+            bn[a] = 1;
+        }
+        return;
+    }
     box_grow(e, &need, (int)ceil(BOX_MARGIN * sqrt(e->o.t_scale) * pow(sqrt(LEVEL_FACTOR), l)), lo,
              bn);
     if (e->dim == 2) {

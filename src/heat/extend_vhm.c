@@ -151,7 +151,7 @@ static hv_status ensure_solutions(hv_extender *e, int k)
  * cells, so that both paths give the same values. */
 static size_t band_box_cells(const hv_extender *e, const int bn[3])
 {
-    if (e->o.out_band > 0)
+    if (e->o.out_band > 0 || e->dist) /* distributed: level 0 is every rank's band */
         return SIZE_MAX / 4;
     return (size_t)bn[0] * bn[1] * (e->dim == 3 ? bn[2] : 1);
 }
@@ -249,6 +249,11 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         st = ensure_solutions(e, nrhs);
     if ((st = agree(D, st)))
         return st;
+    /* Distributed: the closest points past the box, checked against their
+     * owners' phi, their stencils marked in the owners' band. */
+    if (D && D->rem && (st = agree(D, D->remote(D->user, e, phi, need, 0))))
+        return st;
+    S->remote_cells = D && D->rem ? D->rem->cells : 0;
     S->source_cells = nsrc;
     size_t npend_all = D ? left_everywhere(e, D) : npend;
     if (D ? !D->sum(D->user, nsrc) : !nsrc)
@@ -324,6 +329,9 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
                              : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S))) {
             break;
         }
+        /* ... and the owners' solutions there, once level 0 is solved. */
+        if (D && D->rem && l == 0 && (st = agree(D, D->remote(D->user, e, phi, NULL, 1))))
+            break;
         S->t_solve += hv_now() - t0;
         S->levels = l + 1;
         t0 = hv_now();

@@ -2,11 +2,13 @@
  * mpi), one JSON line per run on rank 0, with the single-process answer on
  * the same grid in the same run as the reference.
  *
- *   mpirun -n P build-mpi/bench_mpi extend --n N [--repeat R]
+ *   mpirun -n P build-mpi/bench_mpi extend --n N [--repeat R] [--out-band W] [--corner]
  *   mpirun -n P build-mpi/bench_mpi distance --n N
  *
  * extend: a velocity g(closest point) given within 1.5 voxels of a sphere
- * (radius 0.3 in the unit box) extended to |phi| < 3 voxels on a DMDA
+ * (radius 0.3 in the unit box) extended to |phi| < W voxels (--out-band,
+ * default 3; 0: every cell, closest points past a rank's ghost layer read
+ * from the ranks that own them) on a DMDA
  * (hv_dmda_extend; every rank fills only its own cells, so peak_rss_mb, the
  * largest over the ranks, is the distributed run's: the caller's four double
  * Vecs, phi and the velocity, and the extender's). seconds: best of R calls
@@ -15,7 +17,9 @@
  * spawns `bench_mpi extend-ref`, a fresh process that runs hv_extend_many
  * (the band solve) on the whole grid, best of R, and reports its own peak
  * memory (VmHWM: ref_peak_rss_mb); err and ref_err are the largest errors against the
- * exact extension on the band.
+ * exact extension on the output cells (every cell: but those within 3
+ * voxels of the centre, which has no closest point); remote_cells, over
+ * all ranks, the cells read at closest points past their rank's ghost layer.
  *
  * distance: the heat-method distance from a point in an N^3 box with two
  * baffles (walls one cell thick with gaps at opposite ends) on a DMDA
@@ -59,17 +63,31 @@ static void velocity(const double p[3], double v[3])
 
 /* phi, the exact extension and the input (exact near the surface, 5 off it)
  * at cell c of an n^3 unit box. */
+/* The sphere: radius 0.3 at the box's centre, or with --corner radius 0.15
+ * at (0.25, 0.25, 0.25), whose closest points the far ranks' cells read
+ * past their ghost layers. */
+static double sph_c = 0.5, sph_r = 0.3;
+
 static double sphere_at(int n, PetscInt i, PetscInt j, PetscInt k, double ex[3], double in[3])
 {
-    const double h = 1.0 / n, x[3] = {(i + 0.5) * h - 0.5, (j + 0.5) * h - 0.5, (k + 0.5) * h - 0.5};
-    const double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), R = 0.3;
+    const double h = 1.0 / n,
+                 x[3] = {(i + 0.5) * h - sph_c, (j + 0.5) * h - sph_c, (k + 0.5) * h - sph_c};
+    const double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), R = sph_r;
     double cp[3];
     for (int a = 0; a < 3; a++)
-        cp[a] = 0.5 + x[a] * R / fmax(r, 1e-12);
+        cp[a] = sph_c + x[a] * R / fmax(r, 1e-12);
     velocity(cp, ex);
     for (int a = 0; a < 3; a++)
         in[a] = fabs(r - R) < 1.5 * h ? ex[a] : 5.0;
     return r - R;
+}
+
+/* The cells whose error the benchmark reports: |phi| < ob voxels, or with
+ * ob = 0 every cell but those within 3 voxels of the sphere's centre (no
+ * closest point there). */
+static int scored(int n, double phi, double ob)
+{
+    return ob > 0 ? fabs(phi) < ob / n : phi + sph_r >= 3.0 / n;
 }
 
 /* A spawned reference's own peak: VmHWM of this process's memory
@@ -90,9 +108,9 @@ static double own_peak_mb(void)
 /* The single-process reference, run as `bench_mpi extend-ref`: the whole
  * grid, hv_extend_many with mg (the band solve), best of R calls after the
  * first; prints "seconds err" on stdout. */
-static int extend_reference(int n, int repeat)
+static int extend_reference(int n, int repeat, double ob)
 {
-    const double h = 1.0 / n, ob = 3;
+    const double h = 1.0 / n;
     const size_t count = (size_t)n * n * n;
     float *phi = malloc(count * sizeof *phi), *in[3], *out[3];
     for (int a = 0; a < 3; a++) {
@@ -132,7 +150,7 @@ static int extend_reference(int n, int repeat)
     double err = 0;
     for (size_t c = 0; c < count; c++) {
         double ex[3], v[3];
-        if (fabs(sphere_at(n, c % n, c / n % n, c / n / n, ex, v)) < ob * h)
+        if (scored(n, sphere_at(n, c % n, c / n % n, c / n / n, ex, v), ob))
             for (int a = 0; a < 3; a++)
                 err = fmax(err, fabs(out[a][c] - ex[a]));
     }
@@ -202,9 +220,9 @@ static void extend_fill(DM da, int n, Vec phi, Vec v[3])
         DMDAVecRestoreArray(da, v[a], &V[a]);
 }
 
-static int bench_extend(int n, int repeat)
+static int bench_extend(int n, int repeat, double ob)
 {
-    const double h = 1.0 / n, ob = 3;
+    const double h = 1.0 / n;
     DM da;
     DMDACreate3d(PETSC_COMM_WORLD, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE, DM_BOUNDARY_NONE,
                  DMDA_STENCIL_STAR, n, n, n, PETSC_DECIDE, PETSC_DECIDE, PETSC_DECIDE, 1, 1, NULL,
@@ -248,7 +266,7 @@ static int bench_extend(int n, int repeat)
         for (PetscInt j = ys; j < ys + ym; j++)
             for (PetscInt i = xs; i < xs + xm; i++) {
                 double ex[3], in[3];
-                if (fabs(sphere_at(n, i, j, k, ex, in)) < ob * h)
+                if (scored(n, sphere_at(n, i, j, k, ex, in), ob))
                     for (int a = 0; a < 3; a++)
                         err = fmax(err, fabs(R[a][k][j][i] - ex[a]));
             }
@@ -256,24 +274,29 @@ static int bench_extend(int n, int repeat)
         DMDAVecRestoreArrayRead(da, v[a], &R[a]);
     double errall = 0;
     MPI_Allreduce(&err, &errall, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+    unsigned long long rem = S.remote_cells, remote = 0;
+    MPI_Allreduce(&rem, &remote, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, PETSC_COMM_WORLD);
     const double peak = peak_mb();
     hv_dmda_extender_destroy(&X);
 
     /* The reference: one process on the whole grid, spawned by rank 0 (a
      * fresh process, so that its peak memory is its own). */
     if (rank == 0) {
-        char ns[32], rs[32];
+        char ns[32], rs[32], bs[32];
         snprintf(ns, sizeof ns, "%d", n);
         snprintf(rs, sizeof rs, "%d", repeat);
-        char *const args[] = {self_path, "extend-ref", "--n", ns, "--repeat", rs, NULL};
+        snprintf(bs, sizeof bs, "%g", ob);
+        char *const args[] = {self_path, "extend-ref", "--n", ns, "--repeat", rs, "--out-band", bs,
+                              sph_r < 0.3 ? "--corner" : NULL, NULL};
         double R[3]; /* seconds, err, peak */
         if (spawn_reference(args, 3, R))
             return 1;
         printf("{\"bench\":\"extend-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\",\"out_band\":%g,"
-               "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"levels\":%d,\"solves\":%d,\"err\":%.5f,"
+               "\"sphere\":\"%s\",\"seconds\":%.4f,\"setup_seconds\":%.4f,\"levels\":%d,\"solves\":%d,"
+               "\"remote_cells\":%llu,\"err\":%.5f,"
                "\"peak_rss_mb\":%.1f,\"ref\":\"mg-one-process\",\"ref_seconds\":%.4f,"
                "\"ref_err\":%.5f,\"ref_peak_rss_mb\":%.1f,\"ratio\":%.3f}\n",
-               n, ranks, ob, best, setup, S.levels, S.solves, errall, peak, R[0], R[1], R[2],
+               n, ranks, ob, sph_r < 0.3 ? "corner" : "centre", best, setup, S.levels, S.solves, remote, errall, peak, R[0], R[1], R[2],
                best / R[0]);
         fflush(stdout);
     }
@@ -428,23 +451,36 @@ static int bench_distance(int n)
 int main(int argc, char **argv)
 {
     int n = 0, repeat = 3;
+    double ob = 3;
     const char *what = argc > 1 ? argv[1] : "", *out = NULL;
-    for (int i = 2; i + 1 < argc; i += 2) {
-        if (!strcmp(argv[i], "--n"))
-            n = atoi(argv[i + 1]);
-        else if (!strcmp(argv[i], "--repeat"))
-            repeat = atoi(argv[i + 1]);
-        else if (!strcmp(argv[i], "--out"))
-            out = argv[i + 1];
+    int bad = 0;
+    for (int i = 2; i < argc; i++) {
+        if (!strcmp(argv[i], "--corner")) {
+            sph_c = 0.25;
+            sph_r = 0.15;
+        } else if (i + 1 >= argc) {
+            bad = 1;
+        } else if (!strcmp(argv[i], "--n")) {
+            n = atoi(argv[++i]);
+        } else if (!strcmp(argv[i], "--repeat")) {
+            repeat = atoi(argv[++i]);
+        } else if (!strcmp(argv[i], "--out")) {
+            out = argv[++i];
+        } else if (!strcmp(argv[i], "--out-band")) {
+            ob = atof(argv[++i]);
+        } else {
+            i++; /* a PETSc option and its value */
+        }
     }
     if ((strcmp(what, "extend") && strcmp(what, "distance") && strcmp(what, "extend-ref") &&
          (strcmp(what, "distance-ref") || !out)) ||
-        n < 16 || repeat < 1) {
-        fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R]\n");
+        n < 16 || repeat < 1 || !(ob >= 0) || bad) {
+        fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R] "
+                        "[--out-band W (extend; 0: every cell)] [--corner (extend)]\n");
         return 2;
     }
     if (!strcmp(what, "extend-ref")) /* the spawned references: no MPI */
-        return extend_reference(n, repeat);
+        return extend_reference(n, repeat, ob);
     if (!strcmp(what, "distance-ref"))
         return distance_reference(n, out);
     if (!realpath("/proc/self/exe", self_path)) {
@@ -454,7 +490,7 @@ int main(int argc, char **argv)
     PetscInitialize(&argc, &argv, NULL, NULL);
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
-    const int rc = !strcmp(what, "extend") ? bench_extend(n, repeat) : bench_distance(n);
+    const int rc = !strcmp(what, "extend") ? bench_extend(n, repeat, ob) : bench_distance(n);
     PetscFinalize();
     return rc;
 }
