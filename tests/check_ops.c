@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <string.h>
+#include <sys/mman.h>
 
 static hv_grid *make(int dim, int nx, int ny, int nz, int with_mask)
 {
@@ -178,6 +179,29 @@ START_TEST(check_finite_should_name_the_bad_cell)
 }
 END_TEST
 
+/* The peak memory sees a buffer once touched, and a reset forgets it once
+ * it is gone (mmap: no allocator keeps it). */
+START_TEST(peak_rss_should_see_a_buffer_and_forget_it_after_a_reset)
+{
+    const size_t bytes = (size_t)128 << 20;
+    const size_t before = hv_peak_rss();
+    ck_assert_uint_gt(before, 0);
+    char *b = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    ck_assert_ptr_ne(b, MAP_FAILED);
+    memset(b, 1, bytes);
+    const size_t high = hv_peak_rss();
+    ck_assert_msg(high >= before + bytes * 3 / 4 || high >= bytes, "peak %zu MB, before %zu MB",
+                  high >> 20, before >> 20);
+    munmap(b, bytes);
+    /* (Linux counts resident pages per thread and folds them in lazily: the
+     * mark may read a few pages apart from one call to the next.) */
+    ck_assert_uint_ge(hv_peak_rss(), high - bytes / 16);
+    TL_ASSERT_OK(hv_peak_rss_reset());
+    ck_assert_msg(hv_peak_rss() + bytes / 2 < high, "after the reset %zu MB, peak was %zu MB",
+                  hv_peak_rss() >> 20, high >> 20);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("ops");
@@ -189,6 +213,7 @@ int main(void)
     tcase_add_test(tc, laplacian_should_converge_at_second_order);
     tcase_add_test(tc, grid_create_should_reject_bad_sizes);
     tcase_add_test(tc, check_finite_should_name_the_bad_cell);
+    tcase_add_test(tc, peak_rss_should_see_a_buffer_and_forget_it_after_a_reset);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

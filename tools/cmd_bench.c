@@ -153,12 +153,17 @@ static int usage_solve(FILE *out)
             "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
             "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
             "cycles_timed of them),\n"
-            "solve_gbs (modelled bytes of the whole solve / its time), and for mg/opencl ref "
+            "solve_gbs (modelled bytes of the whole solve / its time), peak_rss_mb (the\n"
+            "process's peak resident memory after the timed solves: the problem's arrays, the\n"
+            "solver's and the copy reference's two buffers, copy_ref_mb), and for mg/opencl ref "
             "\"fftw\",\n"
             "ref_seconds (float DCT solve, FFTW_MEASURE) and ratio = seconds / ref_seconds.\n"
             "--backend petsc (builds with PETSc: make mpi) runs under mpirun: every rank solves,\n"
             "rank 0 prints, with ranks, and ref \"mg\" (the same grid on one process, the same\n"
-            "run: ref_seconds, ref_iterations); --pc its preconditioner (smoother in the JSON):\n"
+            "run: ref_seconds, ref_iterations, ref_peak_rss_mb counted from a reset high-water\n"
+            "mark, mem_ratio); peak_rss_mb is rank 0's (every rank holds the whole grid's f and\n"
+            "u, as the solver interface takes them; no copy reference); --pc its preconditioner "
+            "(smoother in the JSON):\n"
             "auto (default: hypre's PFMG in 3D, BoomerAMG in 2D), hypre's BoomerAMG or PFMG\n"
             "(3D), or PETSc's GAMG.\n"
             "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
@@ -275,9 +280,12 @@ static int bench_solve(int argc, char **argv)
         }
         p.solid = solid;
     }
-    copy_ref ref;
-    if (copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float)
-                                                                 : (256u << 20))) {
+    /* The copy reference (not under mpirun: ranks would share the memory
+     * bandwidth it measures, and its buffers would blur the peak memory). */
+    copy_ref ref = {0};
+    const int copy = backend != HV_BACKEND_PETSC;
+    if (copy && copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float)
+                                                                         : (256u << 20))) {
         copy_ref_free(&ref);
         free(solid);
         hv_free(f);
@@ -300,9 +308,10 @@ static int bench_solve(int argc, char **argv)
     double setup = hv_now() - t0, seconds;
     hv_solve_info info;
     double best_cycle_gbs;
-    if ((st = time_solve(s, f, u, repeat, &ref, &seconds, &info, &best_cycle_gbs)))
+    if ((st = time_solve(s, f, u, repeat, copy ? &ref : NULL, &seconds, &info, &best_cycle_gbs)))
         return cli_fail("bench solve", "solving", st);
-    double copy_gbs = ref.gbs, copy1_gbs = ref.gbs1;
+    double copy_gbs = ref.gbs, copy1_gbs = ref.gbs1,
+           copy_mb = 2.0 * ref.n * sizeof(float) / 1048576;
     copy_ref_free(&ref);
     hv_solver_stats stats;
     hv_solver_get_stats(s, &stats);
@@ -317,18 +326,23 @@ static int bench_solve(int argc, char **argv)
      * otherwise the whole solve's. */
     double cycle_gbs = best_cycle_gbs > 0 ? best_cycle_gbs : solve_gbs;
     hv_solver_destroy(&s);
+    const double peak_mb = hv_peak_rss() / 1048576.0;
     /* Under mpirun (backend petsc) every rank solves and rank 0 reports, with
-     * mg on the same grid in the same run as the reference. */
+     * mg on the same grid in the same run as the reference, its peak memory
+     * counted from a reset high-water mark. */
     const int rank = hv_mpi_rank(), ranks = hv_mpi_size();
-    double mg_seconds = 0, unused_gbs;
+    double mg_seconds = 0, unused_gbs, ref_peak_mb = -1;
     hv_solve_info mginfo = {0};
     if (backend == HV_BACKEND_PETSC) {
         o.backend = HV_BACKEND_MG;
         o.smoother = HV_SMOOTH_AUTO;
+        const int reset = hv_peak_rss_reset() == HV_OK;
         if ((st = hv_solver_create(&s, &p, &o)) ||
             (st = time_solve(s, f, u, repeat, NULL, &mg_seconds, &mginfo, &unused_gbs)))
             return cli_fail("bench solve", "the mg reference", st);
         hv_solver_destroy(&s);
+        if (reset)
+            ref_peak_mb = hv_peak_rss() / 1048576.0;
     }
     if (rank != 0) {
         free(solid);
@@ -339,7 +353,8 @@ static int bench_solve(int argc, char **argv)
     printf(
         "{\"bench\":\"solve\",\"n\":%d,\"ranks\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
         "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
-        "\"seconds\":%.5f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,\"reason\":\"%s\","
+        "\"seconds\":%.5f,\"peak_rss_mb\":%.1f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,"
+        "\"reason\":\"%s\","
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
         "\"obstacle\":\"%s\"",
@@ -351,13 +366,16 @@ static int bench_solve(int argc, char **argv)
         : smoother == HV_SMOOTH_RBGS   ? "rbgs"
         : smoother == HV_SMOOTH_JACOBI ? "jacobi"
                                        : "chebyshev",
-        threads, tol, setup, seconds, info.iterations, info.cycles, info.relres,
+        threads, tol, setup, seconds, peak_mb, info.iterations, info.cycles, info.relres,
         hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
         solve_gbs, obstacle);
     if (backend == HV_BACKEND_PETSC) {
         printf(",\"ref\":\"mg\",\"ref_seconds\":%.5f,\"ref_iterations\":%d,\"ref_relres\":%.3e,"
                "\"ratio\":%.3f",
                mg_seconds, mginfo.iterations, mginfo.relres, seconds / mg_seconds);
+        if (ref_peak_mb >= 0)
+            printf(",\"ref_peak_rss_mb\":%.1f,\"mem_ratio\":%.3f", ref_peak_mb,
+                   peak_mb / ref_peak_mb);
     } else if (backend != HV_BACKEND_FFTW) {
         o.backend = HV_BACKEND_FFTW;
         p.solid = NULL; /* FFTW solves plain boxes: the reference is the box without it */
@@ -370,7 +388,8 @@ static int bench_solve(int argc, char **argv)
                    seconds / ref_seconds);
         hv_solver_destroy(&s);
     }
-    printf(",\"copy1_gbs\":%.2f", copy1_gbs);
+    if (copy)
+        printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", copy1_gbs, copy_mb);
     if (copy_gbs > 0 && cycle_gbs > 0)
         printf(",\"cycle_vs_copy\":%.3f,\"solve_vs_copy\":%.3f", cycle_gbs / copy_gbs,
                solve_gbs / copy_gbs);

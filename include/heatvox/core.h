@@ -86,8 +86,15 @@ HV_API void hv_tmp_cleanup_all(void);
 /* Wall-clock seconds from a monotonic clock. */
 HV_API double hv_now(void);
 
-/* Peak resident memory of this process in bytes (0 if unknown). */
+/* Peak resident memory of this process in bytes (0 if unknown): Linux's
+ * high-water mark (VmHWM), which starts anew at exec and at
+ * hv_peak_rss_reset; elsewhere getrusage's maximum. */
 HV_API size_t hv_peak_rss(void);
+
+/* Starts the high-water mark of hv_peak_rss anew from the memory resident
+ * now (Linux 4.0 and later: /proc/self/clear_refs), so that a benchmark can
+ * measure two runs in one process. HV_ERR_UNSUPPORTED where it cannot. */
+HV_API hv_status hv_peak_rss_reset(void);
 
 /* Most worker threads the library runs: thread counts above it are refused by
  * the options that take one, and hv_set_threads clamps to it (libgomp crashes

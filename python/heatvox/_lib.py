@@ -406,6 +406,7 @@ class hv_extend_stats(Structure):
         ("t_total", c_double),
         ("tiles", c_size_t),
         ("work_bytes", c_size_t),
+        ("remote_cells", c_size_t),
     ]
 
 
@@ -465,6 +466,7 @@ _PROTOTYPES = {
     "hv_set_threads": (None, [c_int]),
     "hv_get_threads": (c_int, []),
     "hv_peak_rss": (c_size_t, []),
+    "hv_peak_rss_reset": (_status, []),
     # grid.h
     "hv_grid_create": (_status, [_P(_grid_p), c_int, _P(c_int), c_double, _P(c_double)]),
     "hv_grid_destroy": (None, [_P(_grid_p)]),

@@ -1,5 +1,6 @@
 #include "error.h"
 
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
@@ -88,10 +89,36 @@ double hv_now(void)
 
 size_t hv_peak_rss(void)
 {
+    /* VmHWM: getrusage's maximum carries a parent's over exec and cannot be
+     * reset. */
+    FILE *f = fopen("/proc/self/status", "r");
+    char line[256];
+    unsigned long long kb = 0;
+    int found = 0;
+    while (f && !found && fgets(line, sizeof line, f))
+        found = sscanf(line, "VmHWM: %llu", &kb) == 1;
+    if (f)
+        fclose(f);
+    if (found)
+        return (size_t)kb * 1024u;
     struct rusage ru;
     if (getrusage(RUSAGE_SELF, &ru) != 0)
         return 0;
     return (size_t)ru.ru_maxrss * 1024u;
+}
+
+hv_status hv_peak_rss_reset(void)
+{
+    /* "5" resets the high-water mark to the current resident set. */
+    FILE *f = fopen("/proc/self/clear_refs", "w");
+    if (!f)
+        return hv__error(HV_ERR_UNSUPPORTED, "hv_peak_rss_reset: /proc/self/clear_refs: %s",
+                         strerror(errno));
+    const int ok = fputs("5", f) >= 0;
+    if (fclose(f) != 0 || !ok)
+        return hv__error(HV_ERR_UNSUPPORTED, "hv_peak_rss_reset: /proc/self/clear_refs refused "
+                                             "the reset (Linux before 4.0?)");
+    return HV_OK;
 }
 
 void hv_set_threads(int n)

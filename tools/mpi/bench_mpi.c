@@ -16,7 +16,7 @@
  * call, which makes the levels' solvers). ref "mg-one-process": rank 0 then
  * spawns `bench_mpi extend-ref`, a fresh process that runs hv_extend_many
  * (the band solve) on the whole grid, best of R, and reports its own peak
- * memory (VmHWM: ref_peak_rss_mb); err and ref_err are the largest errors against the
+ * memory (hv_peak_rss, VmHWM: ref_peak_rss_mb); err and ref_err are the largest errors against the
  * exact extension on the output cells (every cell: but those within 3
  * voxels of the centre, which has no closest point); remote_cells, over
  * all ranks, the cells read at closest points past their rank's ghost layer.
@@ -45,11 +45,10 @@ extern char **environ;
 
 static int rank, ranks;
 
+/* The largest peak resident memory over the ranks. */
 static double peak_mb(void)
 {
-    struct rusage ru;
-    getrusage(RUSAGE_SELF, &ru);
-    double mb = ru.ru_maxrss / 1024.0, all = mb;
+    double mb = hv_peak_rss() / 1048576.0, all = mb;
     MPI_Allreduce(&mb, &all, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
     return all;
 }
@@ -88,21 +87,6 @@ static double sphere_at(int n, PetscInt i, PetscInt j, PetscInt k, double ex[3],
 static int scored(int n, double phi, double ob)
 {
     return ob > 0 ? fabs(phi) < ob / n : phi + sph_r >= 3.0 / n;
-}
-
-/* A spawned reference's own peak: VmHWM of this process's memory
- * (getrusage's maxrss would carry the spawning process's over the exec). */
-static double own_peak_mb(void)
-{
-    double hwm_kb = 0;
-    FILE *st = fopen("/proc/self/status", "r");
-    char line[256];
-    while (st && fgets(line, sizeof line, st))
-        if (sscanf(line, "VmHWM: %lf", &hwm_kb) == 1)
-            break;
-    if (st)
-        fclose(st);
-    return hwm_kb / 1024;
 }
 
 /* The single-process reference, run as `bench_mpi extend-ref`: the whole
@@ -154,7 +138,7 @@ static int extend_reference(int n, int repeat, double ob)
             for (int a = 0; a < 3; a++)
                 err = fmax(err, fabs(out[a][c] - ex[a]));
     }
-    printf("%.6f %.6f %.1f\n", best, err, own_peak_mb());
+    printf("%.6f %.6f %.1f\n", best, err, hv_peak_rss() / 1048576.0);
     return 0;
 }
 
@@ -347,7 +331,7 @@ static int distance_reference(int n, const char *out)
         fprintf(stderr, "bench_mpi: cannot write %s\n", out);
         return 1;
     }
-    printf("%.6f %d %.1f\n", seconds, S.stages, own_peak_mb());
+    printf("%.6f %d %.1f\n", seconds, S.stages, hv_peak_rss() / 1048576.0);
     hv_grid_destroy(&g);
     return 0;
 }
