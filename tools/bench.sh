@@ -121,8 +121,12 @@ if [ -x "$mpi_hv" ]; then
       OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
         mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" extend --n 128 --out-band 0 $s
     done
-    OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
-      mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" distance --n 128
+    # Two calls of one object: its solvers made in each call, or kept.
+    for keep in false true; do
+      OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+        mpirun --oversubscribe -n $r "$(dirname "$mpi_hv")/bench_mpi" distance --n 128 --calls 2 \
+          -hv_distance_keep_solvers $keep
+    done
   done
 else
   echo "bench: no $mpi_hv (make mpi), petsc rows skipped" >&2

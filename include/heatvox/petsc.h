@@ -193,7 +193,10 @@ HV_API hv_status hv_petsc_extend_block(int dim, const int n[3], double h,
  * with the ghost exchange for every call); opts: as hv_distance_compute's
  * (backend ignored; NULL = the defaults). Each call makes its solvers (the
  * two heat steps, then Poisson once they are freed: no more than two
- * multigrid hierarchies at once, for about 3% of the call's time). */
+ * multigrid hierarchies at once, for about 3% of the call's time). With the
+ * PETSc option -hv_distance_keep_solvers true (hv_petsc_option, read here),
+ * the object makes all three once and keeps them for every call: the
+ * memory of a third hierarchy for that time (docs/PERFORMANCE.md). */
 typedef struct hv_dmda_distance hv_dmda_distance;
 HV_API hv_status hv_dmda_distance_create(hv_dmda_distance **out, DM da, double h,
                                          const double origin[3], Vec solid,

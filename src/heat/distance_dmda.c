@@ -39,6 +39,7 @@ struct hv_dmda_distance {
     Vec gl, x;               /* dag's local vector; a solution */
     hv_dmda_solver *heat[2]; /* I - t Lap, I - T_RATIO t Lap, during the stages */
     hv_dmda_solver *poisson; /* -Lap, after them */
+    PetscBool keep;          /* -hv_distance_keep_solvers: all three kept from create */
     MPI_Comm comm;
     hv_distance_opts o;
     hv_grid full; /* the whole grid's shape (no arrays) */
@@ -98,7 +99,8 @@ static hv_status solid_vec(hv_dmda_distance *D, Vec *v)
 /* The solvers a solve of kind q needs (dist_hooks): the two heat steps, or,
  * once they are done with, Poisson. No more than two exist at once: a
  * multigrid solver holds about 350 bytes per cell (docs/PERFORMANCE.md),
- * and building them again takes about 3% of a call. */
+ * and building them again takes about 3% of a call. With D->keep, all three
+ * are made once and kept (the solid and the diffusion times never change). */
 static hv_status need_solvers(hv_dmda_distance *D, int q)
 {
     if (q < 2 ? D->heat[0] != NULL : D->poisson != NULL)
@@ -122,8 +124,10 @@ static hv_status need_solvers(hv_dmda_distance *D, int q)
             st = hv__dmda_solver_create(&D->heat[r], D->user, h, 1.0, th * (r ? T_RATIO : 1), solid,
                                         &so, -1);
     } else {
-        hv_dmda_solver_destroy(&D->heat[0]);
-        hv_dmda_solver_destroy(&D->heat[1]);
+        if (!D->keep) {
+            hv_dmda_solver_destroy(&D->heat[0]);
+            hv_dmda_solver_destroy(&D->heat[1]);
+        }
         so.tol = D->o.poisson_tol;
         so.max_iter = 200;
         st = hv__dmda_solver_create(&D->poisson, D->user, h, 0.0, 1.0, solid, &so, -1);
@@ -132,8 +136,10 @@ static hv_status need_solvers(hv_dmda_distance *D, int q)
     return hv__petsc_agree(D->dag, st);
 }
 
-static void drop_solvers(hv_dmda_distance *D)
+static void drop_solvers(hv_dmda_distance *D, int always)
 {
+    if (D->keep && !always)
+        return;
     hv_dmda_solver_destroy(&D->heat[0]);
     hv_dmda_solver_destroy(&D->heat[1]);
     hv_dmda_solver_destroy(&D->poisson);
@@ -204,6 +210,9 @@ static hv_status create(hv_dmda_distance *D, DM da, double h, const double origi
     D->nloc = (size_t)D->gm[0] * D->gm[1] * D->gm[2];
     D->nown = (size_t)D->xm[0] * D->xm[1] * D->xm[2];
     D->label = malloc(D->nloc * sizeof *D->label);
+    if (PetscOptionsGetBool(NULL, NULL, "-hv_distance_keep_solvers", &D->keep, NULL))
+        st = hv__error(HV_ERR_INVALID_ARG,
+                       "distance: -hv_distance_keep_solvers takes true or false");
     if (solid && D->label && !(D->solid = malloc(D->nloc)))
         st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
     if (!D->label)
@@ -228,7 +237,7 @@ static hv_status create(hv_dmda_distance *D, DM da, double h, const double origi
     /* The fluid regions, labelled across the ranks by a Poisson solver. */
     if ((st = need_solvers(D, 2)) || (st = to_box(D, hv__dmda_labels(D->poisson), D->label)))
         return st;
-    drop_solvers(D);
+    drop_solvers(D, 0);
     return HV_OK;
 }
 
@@ -427,7 +436,7 @@ static hv_status hv_dmda_distance_compute_body(hv_dmda_distance *D, const hv_dis
             st = hv__error(HV_ERR_NOMEM, "distance: out of memory for face arrays");
     if (!(st = hv__petsc_agree(D->dag, st)))
         st = distance(D, src, dist, S, &b, w, u, u2, inside, ok, ref);
-    drop_solvers(D);
+    drop_solvers(D, 0);
     hv_free(w);
     hv_free(u);
     hv_free(u2);
@@ -446,7 +455,7 @@ void hv_dmda_distance_destroy(hv_dmda_distance **dp)
     if (!dp || !*dp)
         return;
     hv_dmda_distance *D = *dp;
-    drop_solvers(D);
+    drop_solvers(D, 1);
     VecDestroy(&D->x);
     VecDestroy(&D->gl);
     DMDestroy(&D->dag);

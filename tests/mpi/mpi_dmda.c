@@ -574,6 +574,15 @@ static int distance_cases(void)
     int ok = 1;
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
         ok &= distance_case(&cases[i], &D, &da, &solid);
+    /* The solvers made once and kept for every call of an object. */
+    static const dcase kept[] = {
+        {"ball and baffles, solvers kept, 3D 36x30x26", 3, {36, 30, 26}, 1, 0, 0},
+        {"solvers kept, a voxel in solid, same object", 3, {36, 30, 26}, 1, 3, 1},
+    };
+    hv_petsc_option("-hv_distance_keep_solvers", "true");
+    for (size_t i = 0; i < sizeof kept / sizeof kept[0]; i++)
+        ok &= distance_case(&kept[i], &D, &da, &solid);
+    hv_petsc_option("-hv_distance_keep_solvers", "false");
     /* A voxel outside the grid: the same error on every rank. */
     const int bad[3] = {99, 0, 0};
     hv_distance_sources src = {bad, 1, NULL, 0, NULL};
@@ -593,6 +602,13 @@ static int distance_cases(void)
                                                  "rank: %s (%s)",
                  hv_status_str(st), hv_last_error());
     VecDestroy(&other);
+    /* A keep option that is no boolean: refused, on every rank. */
+    hv_petsc_option("-hv_distance_keep_solvers", "maybe");
+    st = hv_dmda_distance_create(&D, da, 0.1, NULL, solid, NULL);
+    hv_petsc_option("-hv_distance_keep_solvers", "false");
+    ok &= report(st == HV_ERR_INVALID_ARG && !D && strstr(hv_last_error(), "keep_solvers"),
+                 "distance on a DMDA, -hv_distance_keep_solvers maybe: %s (%s)",
+                 hv_status_str(st), hv_last_error());
     VecDestroy(&solid);
     DMDestroy(&da);
     /* A box narrower than the ghost layer: refused, on every rank. */

@@ -3,7 +3,7 @@
  * the same grid in the same run as the reference.
  *
  *   mpirun -n P build-mpi/bench_mpi extend --n N [--repeat R] [--out-band W] [--corner]
- *   mpirun -n P build-mpi/bench_mpi distance --n N
+ *   mpirun -n P build-mpi/bench_mpi distance --n N [--calls C] [-hv_distance_keep_solvers true]
  *
  * extend: a velocity g(closest point) given within 1.5 voxels of a sphere
  * (radius 0.3 in the unit box) extended to |phi| < W voxels (--out-band,
@@ -24,8 +24,9 @@
  * distance: the heat-method distance from a point in an N^3 box with two
  * baffles (walls one cell thick with gaps at opposite ends) on a DMDA
  * (hv_dmda_distance_compute: every rank holds its own box; setup_seconds is
- * the object's creation, its solvers and region labels, seconds the
- * distance; ratio takes both). ref "mg-one-process": rank 0 then spawns
+ * the object's creation, its solvers and region labels, seconds the last of
+ * C calls of the distance and first_seconds the first, keep_solvers the
+ * PETSc option; ratio takes setup and the last call). ref "mg-one-process": rank 0 then spawns
  * `bench_mpi distance-ref`, hv_distance_compute with mg on the whole grid in
  * a fresh process with its own peak memory, which writes its distance to a
  * temporary file; max_diff_voxels is the largest difference over all cells. */
@@ -336,7 +337,7 @@ static int distance_reference(int n, const char *out)
     return 0;
 }
 
-static int bench_distance(int n)
+static int bench_distance(int n, int calls)
 {
     const double h = 1.0 / n;
     DM da;
@@ -367,12 +368,21 @@ static int bench_distance(int n)
     }
     MPI_Barrier(PETSC_COMM_WORLD);
     const double t1 = MPI_Wtime();
-    if (hv_dmda_distance_compute(D, &s, dist, &S)) {
-        fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
-        return 1;
+    double first = 0, seconds = 0;
+    for (int c = 0; c < calls; c++) {
+        const double tc = MPI_Wtime();
+        if (hv_dmda_distance_compute(D, &s, dist, &S)) {
+            fprintf(stderr, "bench_mpi: %s\n", hv_last_error());
+            return 1;
+        }
+        MPI_Barrier(PETSC_COMM_WORLD);
+        seconds = MPI_Wtime() - tc;
+        if (c == 0)
+            first = seconds;
     }
-    MPI_Barrier(PETSC_COMM_WORLD);
-    const double setup = t1 - t0, seconds = MPI_Wtime() - t1, peak = peak_mb();
+    PetscBool keep = PETSC_FALSE;
+    PetscOptionsGetBool(NULL, NULL, "-hv_distance_keep_solvers", &keep, NULL);
+    const double setup = t1 - t0, peak = peak_mb();
     hv_dmda_distance_destroy(&D);
 
     /* The reference, spawned by rank 0; every rank compares its own cells. */
@@ -417,12 +427,13 @@ static int bench_distance(int n)
     if (rank == 0) {
         unlink(path);
         printf("{\"bench\":\"distance-dmda\",\"n\":%d,\"ranks\":%d,\"backend\":\"petsc\","
-               "\"obstacle\":\"baffles\",\"seconds\":%.3f,\"setup_seconds\":%.3f,\"stages\":%d,"
+               "\"obstacle\":\"baffles\",\"keep_solvers\":%s,\"calls\":%d,\"first_seconds\":%.3f,"
+               "\"seconds\":%.3f,\"setup_seconds\":%.3f,\"stages\":%d,"
                "\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,\"normalize_seconds\":%.3f,"
                "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"peak_rss_mb\":%.1f,"
                "\"ref\":\"mg-one-process\",\"ref_seconds\":%.3f,\"ref_stages\":%d,"
                "\"ref_peak_rss_mb\":%.1f,\"max_diff_voxels\":%.2e,\"ratio\":%.3f}\n",
-               n, ranks, seconds, setup, S.stages, S.diffuse_iterations, S.t_diffuse,
+               n, ranks, keep ? "true" : "false", calls, first, seconds, setup, S.stages, S.diffuse_iterations, S.t_diffuse,
                S.t_normalize, S.poisson_iterations, S.t_poisson, peak, R[0], (int)R[1], R[2], d, (seconds + setup) / R[0]);
         fflush(stdout);
     }
@@ -434,7 +445,7 @@ static int bench_distance(int n)
 
 int main(int argc, char **argv)
 {
-    int n = 0, repeat = 3;
+    int n = 0, repeat = 3, calls = 1;
     double ob = 3;
     const char *what = argc > 1 ? argv[1] : "", *out = NULL;
     int bad = 0;
@@ -448,6 +459,8 @@ int main(int argc, char **argv)
             n = atoi(argv[++i]);
         } else if (!strcmp(argv[i], "--repeat")) {
             repeat = atoi(argv[++i]);
+        } else if (!strcmp(argv[i], "--calls")) {
+            calls = atoi(argv[++i]);
         } else if (!strcmp(argv[i], "--out")) {
             out = argv[++i];
         } else if (!strcmp(argv[i], "--out-band")) {
@@ -458,9 +471,9 @@ int main(int argc, char **argv)
     }
     if ((strcmp(what, "extend") && strcmp(what, "distance") && strcmp(what, "extend-ref") &&
          (strcmp(what, "distance-ref") || !out)) ||
-        n < 16 || repeat < 1 || !(ob >= 0) || bad) {
+        n < 16 || repeat < 1 || calls < 1 || !(ob >= 0) || bad) {
         fprintf(stderr, "usage: mpirun -n P bench_mpi extend|distance --n N (>= 16) [--repeat R] "
-                        "[--out-band W (extend; 0: every cell)] [--corner (extend)]\n");
+                        "[--out-band W (extend; 0: every cell)] [--corner (extend)] [--calls C (distance)]\n");
         return 2;
     }
     if (!strcmp(what, "extend-ref")) /* the spawned references: no MPI */
@@ -474,7 +487,7 @@ int main(int argc, char **argv)
     PetscInitialize(&argc, &argv, NULL, NULL);
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
-    const int rc = !strcmp(what, "extend") ? bench_extend(n, repeat, ob) : bench_distance(n);
+    const int rc = !strcmp(what, "extend") ? bench_extend(n, repeat, ob) : bench_distance(n, calls);
     PetscFinalize();
     return rc;
 }
