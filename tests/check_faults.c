@@ -27,6 +27,8 @@
 extern char **environ;
 
 static char dir[256];
+static char full_mnt[300];
+static int full_mounted;
 static char bin[PATH_MAX];
 
 static const char *at(const char *name)
@@ -92,6 +94,28 @@ static int temporaries_of(const char *d, pid_t pid)
     struct dirent *e;
     while (dd && (e = readdir(dd)))
         n += e->d_name[0] == '.' && strstr(e->d_name, tag) != NULL;
+    if (dd)
+        closedir(dd);
+    return n;
+}
+
+/* Temporaries anywhere under d (outputs go to sub-directories too). */
+static int temporaries_under(const char *d)
+{
+    DIR *dd = opendir(d);
+    int n = 0;
+    struct dirent *e;
+    while (dd && (e = readdir(dd))) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, ".."))
+            continue;
+        char sub[1200];
+        snprintf(sub, sizeof sub, "%s/%s", d, e->d_name);
+        struct stat sb;
+        if (lstat(sub, &sb) == 0 && S_ISDIR(sb.st_mode))
+            n += temporaries_under(sub);
+        else
+            n += e->d_name[0] == '.' && strstr(e->d_name, ".tmp-") != NULL;
+    }
     if (dd)
         closedir(dd);
     return n;
@@ -306,54 +330,109 @@ static void assert_whole_or_absent(const char *const *outs, int n, const char *w
     }
 }
 
-static void kill_during_writes(const char *args, const char *const *outs, int n, int sig)
+/* One command that writes, and the outputs it writes. */
+typedef struct {
+    const char *args;
+    const char *outs[4];
+    int sigint; /* also interrupted by SIGINT, whose handler must clean up */
+} writer;
+
+static int count_outs(const writer *w)
 {
-    /* Delays spread over the run, so that some signals land while writing. */
-    const int delays[] = {30, 80, 150, 250, 400, 600, 900};
-    for (size_t k = 0; k < sizeof delays / sizeof delays[0]; k++) {
+    int n = 0;
+    while (n < 4 && w->outs[n])
+        n++;
+    return n;
+}
+
+static void kill_during_writes(const writer *w, int sig, double run_ms)
+{
+    const int n = count_outs(w);
+    /* Delays spread over a whole run (measured), so that some land while
+     * writing, and two fixed early ones for the reading and set-up. */
+    const double frac[] = {0.15, 0.35, 0.55, 0.7, 0.8, 0.9, 0.97};
+    for (size_t k = 0; k < 2 + sizeof frac / sizeof frac[0]; k++) {
+        int ms = k == 0 ? 5 : k == 1 ? 30 : (int)(frac[k - 2] * run_ms);
         for (int i = 0; i < n; i++)
-            unlink(at(outs[i]));
-        pid_t pid = spawn(args);
-        sleep_ms(delays[k]);
+            unlink(at(w->outs[i]));
+        pid_t pid = spawn(w->args);
+        sleep_ms(ms);
         kill(pid, sig);
         int status = 0;
         ck_assert_int_eq(waitpid(pid, &status, 0), pid);
-        char when[256];
-        snprintf(when, sizeof when, "%s after %d ms, signal %d", args, delays[k], sig);
+        char when[512];
+        snprintf(when, sizeof when, "%s after %d ms, signal %d", w->args, ms, sig);
         /* All of a command's outputs land together, or none does. */
         int present = 0;
         for (int i = 0; i < n; i++)
-            present += access(at(outs[i]), F_OK) == 0;
+            present += access(at(w->outs[i]), F_OK) == 0;
         ck_assert_msg(present == 0 || present == n, "%s: %d of %d outputs", when, present, n);
-        assert_whole_or_absent(outs, n, when);
+        assert_whole_or_absent(w->outs, n, when);
         if (sig == SIGINT && WIFSIGNALED(status))
             ck_assert_msg(temporaries_of(dir, pid) == 0, "%s: temporaries left", when);
     }
 }
 
+/* Runs w to completion: it succeeds, writes every output whole, and leaves no
+ * temporary anywhere under the scratch directory, also none that a killed run
+ * (its own or a writer's inside it) staged. Returns the run's milliseconds. */
+static double run_whole(const writer *w, const char *when)
+{
+    char err[2048];
+    double t0 = hv_now();
+    int rc = hv(err, sizeof err, "%s", w->args);
+    double ms = 1e3 * (hv_now() - t0);
+    ck_assert_msg(rc == 0, "%s: %s: exit %d (%s)", when, w->args, rc, err);
+    const int n = count_outs(w);
+    for (int i = 0; i < n; i++)
+        ck_assert_msg(is_regular(at(w->outs[i])), "%s: %s: %s missing", when, w->args, w->outs[i]);
+    assert_whole_or_absent(w->outs, n, when);
+    ck_assert_msg(temporaries_under(dir) == 0, "%s: %s: %d temporaries left", when, w->args,
+                  temporaries_under(dir));
+    return ms;
+}
+
+/* Every command that writes, every kind of output. */
+static const writer writers[] = {
+    {"sdf sc/meshes/torus_holes.obj -o o.vdb --npy o.npy --preview o.png --res 112 --dense -q",
+     {"o.vdb", "o.npy", "o.png"},
+     1},
+    {"sdf sc/meshes/torus_holes.obj -o t.vdb --preview t.png --res 160 -q", {"t.vdb", "t.png"}, 0},
+    {"sdf sc/meshes/torus_holes.obj -o m.vdb --mesh-out m.obj --res 96 -q", {"m.vdb", "m.obj"}, 0},
+    {"sdf sc/meshes/torus_holes.obj --mesh-out m.ply --res 80 -q", {"m.ply"}, 0},
+    {"sdf2d sc/curves.txt -o c.exr --png c.png --res 400 -q", {"c.exr", "c.png"}, 0},
+    {"extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o e.vdb --dense -q",
+     {"e.vdb"},
+     1},
+    {"slice sc/levelset/sphere_velocity.vdb --grid sdf --axis z -o s.exr -q", {"s.exr"}, 0},
+    {"slice sc/levelset/sphere_velocity.vdb --grid sdf --axis y -o s.png -q", {"s.png"}, 0},
+    {"distance --sources sc/distance/sources.txt --obstacles sc/distance/walls.vdb -o d.vdb "
+     "--npy d.npy -q",
+     {"d.vdb", "d.npy"},
+     1},
+    /* make-scenes writes each scene on its own: one output checked */
+    {"make-scenes sc2 -q", {"sc2/meshes/torus_holes.obj"}, 0},
+    {"batch sc/meshes/torus_holes.obj sc/meshes/torus_soup.obj -o bo --res 40 --force -j 1 -q",
+     {"bo/torus_holes.vdb"},
+     0},
+};
+
 START_TEST(sigkill_and_sigint_while_writing_should_leave_nothing_partial)
 {
     setup();
-    const char *sdf_outs[] = {"o.vdb", "o.npy", "o.png"};
-    const char *sdf_args = "sdf sc/meshes/torus_holes.obj -o o.vdb --npy o.npy --preview o.png "
-                           "--res 112 --dense -q";
-    kill_during_writes(sdf_args, sdf_outs, 3, SIGKILL);
-    kill_during_writes(sdf_args, sdf_outs, 3, SIGINT);
-    const char *ext_outs[] = {"e.vdb"};
-    const char *ext_args =
-        "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o e.vdb --dense -q";
-    kill_during_writes(ext_args, ext_outs, 1, SIGKILL);
-    kill_during_writes(ext_args, ext_outs, 1, SIGINT);
-    const char *sl_outs[] = {"s.exr"};
-    kill_during_writes("slice sc/levelset/sphere_velocity.vdb --grid sdf --axis z -o s.exr -q",
-                       sl_outs, 1, SIGKILL);
-    const char *sc_outs[] = {"sc2/meshes/torus_holes.obj"};
-    kill_during_writes("make-scenes sc2 -q", sc_outs, 1, SIGKILL);
-    /* The next run into the same place clears what SIGKILL left. */
-    char err[2048];
-    ck_assert_int_eq(hv(err, sizeof err, "%s", sdf_args), 0);
-    ck_assert_int_eq(hv(err, sizeof err, "%s", ext_args), 0);
-    ck_assert_int_eq(temporaries_in(dir), 0);
+    FILE *f = fopen(at("sc/curves.txt"), "w");
+    fputs("M 0 0\nL 4 0\nL 4 3\nL 0 3\nZ\nM 1 1\nL 2 1\nL 2 2\n", f);
+    fclose(f);
+    for (size_t c = 0; c < sizeof writers / sizeof writers[0]; c++) {
+        const writer *w = &writers[c];
+        double ms = run_whole(w, "a first run");
+        kill_during_writes(w, SIGKILL, ms);
+        run_whole(w, "the run after SIGKILL");
+        if (w->sigint) {
+            kill_during_writes(w, SIGINT, ms);
+            run_whole(w, "the run after SIGINT");
+        }
+    }
     teardown();
 }
 END_TEST
@@ -365,13 +444,16 @@ START_TEST(a_full_disk_should_fail_clearly_and_leave_nothing)
     if (geteuid() != 0)
         TL_SKIP("mounting a small tmpfs needs root");
     setup();
-    const char *mnt = at("full");
+    /* The mount point in a buffer of its own: at()'s ring is reused. */
+    const char *mnt = full_mnt;
+    snprintf(full_mnt, sizeof full_mnt, "%s/full", dir);
     ck_assert_int_eq(mkdir(mnt, 0700), 0);
     if (mount("tmpfs", mnt, "tmpfs", 0, "size=96k") != 0) {
         int e = errno;
         teardown();
         TL_SKIP("cannot mount a tmpfs: %s", strerror(e));
     }
+    full_mounted = 1;
     char err[2048];
     /* Each kind of output alone, then a small .vdb with a dense .npy that does
      * not fit: neither lands. */
@@ -386,15 +468,19 @@ START_TEST(a_full_disk_should_fail_clearly_and_leave_nothing)
     for (size_t c = 0; c < sizeof cmds / sizeof cmds[0]; c++) {
         /* Fill the disk but for 4 kB, so that even small files fail. */
         static char block[92 * 1024];
-        FILE *f = fopen(at("full/filler"), "w");
+        char filler[700];
+        snprintf(filler, sizeof filler, "%s/filler", mnt);
+        FILE *f = fopen(filler, "w");
+        ck_assert_ptr_nonnull(f);
         fwrite(block, 1, 92 * 1024, f);
         fclose(f);
         int rc = hv(err, sizeof err, "%s", cmds[c]);
         ck_assert_msg(rc == 1, "%s: exit %d (%s)", cmds[c], rc, err);
         ck_assert_msg(strstr(err, "full/") || strstr(err, "space"), "%s: %s", cmds[c], err);
         ck_assert_msg(!is_regular(at("a.vdb")), "%s: a.vdb landed without its .npy", cmds[c]);
-        unlink(at("full/filler"));
+        ck_assert_int_eq(unlink(filler), 0);
         DIR *d = opendir(mnt);
+        ck_assert_msg(d != NULL, "%s: %s", mnt, strerror(errno));
         struct dirent *e;
         int left = 0;
         char names[512] = "";
@@ -416,16 +502,30 @@ START_TEST(a_full_disk_should_fail_clearly_and_leave_nothing)
             closedir(d);
         ck_assert_msg(left == 0, "%s: left on the full disk: %s", cmds[c], names);
     }
-    umount(mnt);
+    ck_assert_int_eq(umount(mnt), 0);
+    full_mounted = 0;
     teardown();
 }
 END_TEST
+
+/* Runs after every test, passed or failed: what a failed one left mounted is
+ * unmounted, its scratch directory removed. */
+static void cleanup(void)
+{
+    if (full_mounted && umount2(full_mnt, MNT_DETACH) == 0)
+        full_mounted = 0;
+    struct stat sb;
+    if (*dir && stat(dir, &sb) == 0)
+        tl_rm_rf(dir);
+    *dir = '\0';
+}
 
 int main(void)
 {
     Suite *s = suite_create("faults");
     TCase *tc = tcase_create("outputs");
     tcase_set_timeout(tc, 300);
+    tcase_add_checked_fixture(tc, NULL, cleanup);
     tcase_add_test(tc, outputs_onto_special_files_should_be_refused_and_left_alone);
     tcase_add_test(tc, an_output_that_is_an_input_should_be_refused);
     tcase_add_test(tc, thread_counts_libgomp_cannot_start_should_be_usage_errors);

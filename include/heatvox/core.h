@@ -71,10 +71,15 @@ HV_API const char *hv_version(void);
 
 /* Fills tmp (size tmpsize) with a unique temporary name in target's directory
  * ("<dir>/.<base>.tmp-<pid>-<n>"). The temporary is registered so that
- * hv_tmp_cleanup_all() (async-signal-safe, for a SIGINT handler) can unlink it. */
+ * hv_tmp_cleanup_all() (async-signal-safe, for a SIGINT handler) can unlink it.
+ * Temporaries of base left by processes that are gone (SIGKILL, a crash) are
+ * removed first. A target that is itself a temporary this process staged is
+ * returned as it is: a writer handed a caller's temporary writes into it, and
+ * its hv_tmp_commit leaves the rename to the caller. */
 HV_API hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize);
 
-/* Renames tmp onto target and unregisters it; on failure unlinks tmp. */
+/* Renames tmp onto target and unregisters it; on failure unlinks tmp. Where
+ * tmp is target (a caller's temporary, see hv_tmp_name), does nothing. */
 HV_API hv_status hv_tmp_commit(const char *tmp, const char *target);
 
 /* Unlinks tmp and unregisters it (for error paths). */

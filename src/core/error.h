@@ -14,4 +14,8 @@ void hv__log(hv_log_level level, const char *fmt, ...) __attribute__((format(pri
 /* Calls the progress callback; returns HV_ERR_CANCELLED if it asked to stop. */
 hv_status hv__progress(double fraction, const char *stage);
 
+/* Bytes of physical memory (SIZE_MAX where unknown): what size checks such as
+ * hv_check_dims compare a run's needs against. */
+size_t hv__physical_memory(void);
+
 #endif

@@ -31,6 +31,15 @@ static void tmp_register(const char *name)
     }
 }
 
+/* Whether name is a temporary this process has staged and not yet committed. */
+static int tmp_is_ours(const char *name)
+{
+    for (int i = 0; i < HV_TMP_SLOTS; i++)
+        if (atomic_load(&tmp_used[i]) == 1 && strcmp(tmp_names[i], name) == 0)
+            return 1;
+    return 0;
+}
+
 static void tmp_unregister(const char *name)
 {
     for (int i = 0; i < HV_TMP_SLOTS; i++)
@@ -38,6 +47,24 @@ static void tmp_unregister(const char *name)
             atomic_store(&tmp_used[i], 0);
             return;
         }
+}
+
+/* The pid in a temporary's name "<dots><base>.tmp-<pid>-...", or 0 where the
+ * name is no temporary of base. One leading dot is the rule; two are what
+ * earlier versions left when a writer staged a temporary of a temporary. */
+static long stale_pid(const char *n, const char *base, size_t blen)
+{
+    for (int dots = 1; dots <= 2; dots++) {
+        if (n[dots - 1] != '.')
+            return 0;
+        const char *p = n + dots;
+        if (strncmp(p, base, blen) != 0 || strncmp(p + blen, ".tmp-", 5) != 0)
+            continue;
+        char *end = NULL;
+        long pid = strtol(p + blen + 5, &end, 10);
+        return pid > 0 && end && *end == '-' ? pid : 0;
+    }
+    return 0;
 }
 
 /* A process killed by SIGKILL (or a crash, or a power cut) leaves its
@@ -52,11 +79,8 @@ static void remove_stale(const char *dir, const char *base)
     struct dirent *e;
     while ((e = readdir(d))) {
         const char *n = e->d_name;
-        if (n[0] != '.' || strncmp(n + 1, base, blen) != 0 || strncmp(n + 1 + blen, ".tmp-", 5))
-            continue;
-        char *end = NULL;
-        long pid = strtol(n + blen + 6, &end, 10);
-        if (pid <= 0 || !end || *end != '-' || pid == (long)getpid())
+        long pid = stale_pid(n, base, blen);
+        if (pid <= 0 || pid == (long)getpid())
             continue;
         if (kill((pid_t)pid, 0) == 0 || errno != ESRCH)
             continue;
@@ -76,6 +100,15 @@ hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
     const char *base = slash ? slash + 1 : target;
     if (!*base)
         return hv__error(HV_ERR_INVALID_ARG, "output path '%s' names a directory", target);
+    /* A writer handed a temporary that a caller has staged (the command stages
+     * every output, then the writer stages its own) writes straight into it:
+     * one temporary per output, whose name the next write of that output knows. */
+    if (tmp_is_ours(target)) {
+        if (strlen(target) >= tmpsize)
+            return hv__error(HV_ERR_INVALID_ARG, "output path '%s' is too long", target);
+        memcpy(tmp, target, strlen(target) + 1);
+        return HV_OK;
+    }
     /* Renaming onto a device or FIFO would replace it (as root, /dev/null). */
     struct stat sb;
     if (stat(target, &sb) == 0 && !S_ISREG(sb.st_mode))
@@ -97,6 +130,8 @@ hv_status hv_tmp_name(const char *target, char *tmp, size_t tmpsize)
 
 hv_status hv_tmp_commit(const char *tmp, const char *target)
 {
+    if (strcmp(tmp, target) == 0)
+        return HV_OK; /* written into the caller's temporary; the caller commits it */
     if (rename(tmp, target) != 0) {
         int e = errno;
         unlink(tmp);
