@@ -205,8 +205,9 @@ check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
 	for run in $(CHECK_RUNS); do \
 	  t=$${run#*:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
 	  case $$run in fp32:*) log=$$t.fp32.log; fp64=0;; no512:*) log=$$t.no512.log; no512=1;; esac; \
-	  echo "== $$run"; \
-	  HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 900 $$t > $$log 2>&1; rc=$$?; cat $$log; \
+	  echo "== $$run"; t0=$$(date +%s.%N); \
+	  HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 900 $$t > $$log 2>&1; rc=$$?; cat $$log; \
+	  echo "TIME $$run $$(echo "$$(date +%s.%N) - $$t0" | bc)"; \
 	  line=$$(grep -E '^[0-9]+%: Checks: ' $$log | tail -n 1); \
 	  c=$$(echo "$$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/'); \
 	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \
@@ -429,7 +430,7 @@ tsan:
 	  $(TS)/heatvox $(TSAN_SUITES:%=$(TS)/tests/%)
 	@bad=""; for t in $(TSAN_SUITES); do \
 	  log=$(TS)/tests/$$t.log; echo "== tsan $$t"; \
-	  $(TS_RUNENV) HEATVOX_SHARED=$${HEATVOX_SHARED:-../shared} timeout 1200 $(TS)/tests/$$t > $$log 2>&1; rc=$$?; \
+	  $(TS_RUNENV) HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 1200 $(TS)/tests/$$t > $$log 2>&1; rc=$$?; \
 	  races=$$(grep -c '^WARNING: ThreadSanitizer' $$log); \
 	  grep -q 'Archer detected OpenMP application' $$log || { rc=1; echo "  Archer did not load"; }; \
 	  grep -E '^[0-9]+%: Checks: ' $$log || rc=1; \

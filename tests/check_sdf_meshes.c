@@ -1,5 +1,5 @@
 /*
- * hv_sdf_compute on the shared meshes ($HEATVOX_SHARED/meshes; skipped when
+ * hv_sdf_compute on the shared meshes ($HEATVOX_TEST_DATA, default ../shared/meshes; skipped when
  * absent), scored by inside-IoU of {phi < 0} against a truth computed
  * independently of the library (tests/sdf_testutil.h):
  *   - defects made from the clean closed meshes bunny_small and spot (5

@@ -21,26 +21,11 @@ void tl_fill_random(float *v, size_t n, uint64_t seed)
         v[i] = (float)tl_rand(&seed);
 }
 
-const char *tl_shared_dir(void)
-{
-    const char *d = getenv("HEATVOX_SHARED");
-    if (!d || !*d)
-        d = "../shared";
-    struct stat st;
-    if (stat(d, &st) != 0 || !S_ISDIR(st.st_mode))
-        return NULL;
-    return d;
-}
-
 const char *tl_test_data(void)
 {
-    static char buf[4096];
     const char *d = getenv("HEATVOX_TEST_DATA");
-    if (!d || !*d) {
-        const char *s = getenv("HEATVOX_SHARED");
-        snprintf(buf, sizeof buf, "%s/meshes", s && *s ? s : "../shared");
-        d = buf;
-    }
+    if (!d || !*d)
+        d = "../shared/meshes";
     struct stat st;
     if (stat(d, &st) != 0 || !S_ISDIR(st.st_mode))
         return NULL;

@@ -10,11 +10,8 @@
 double tl_rand(uint64_t *state);
 /* Fills v with tl_rand values. */
 void tl_fill_random(float *v, size_t n, uint64_t seed);
-/* Directory with the shared meshes ($HEATVOX_SHARED or ../shared), or NULL
- * when absent (the caller skips and says so). */
-const char *tl_shared_dir(void);
-/* Directory of test meshes: $HEATVOX_TEST_DATA, else $HEATVOX_SHARED/meshes,
- * else ../shared/meshes; NULL when it does not exist (the caller skips). */
+/* Directory of test meshes: $HEATVOX_TEST_DATA, else ../shared/meshes; NULL
+ * when it does not exist (the caller skips and says so). */
 const char *tl_test_data(void);
 
 /* Skips: `make check` counts the lines these print and ends with

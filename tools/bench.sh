@@ -7,7 +7,7 @@ set -e
 hv=${1:-build/heatvox}
 dir=$(dirname "$hv")
 wisdom="$dir/fftw.wisdom"
-shared=${HEATVOX_SHARED:-../shared}
+meshes=${HEATVOX_TEST_DATA:-../shared/meshes}
 export POCL_CACHE_DIR=${POCL_CACHE_DIR:-$(pwd)/$dir/pocl-cache}
 
 backends="mg fftw"
@@ -31,7 +31,7 @@ for o in ball baffles; do
 done
 "$hv" bench solve --n 256 --t-scale 4 --obstacle ball --wisdom "$wisdom"
 
-bunny="$shared/meshes/stanford-bunny.obj"
+bunny="$meshes/stanford-bunny.obj"
 if [ -f "$bunny" ]; then
   for n in 128 256; do
     "$hv" bench sdf "$bunny" --n $n
@@ -47,7 +47,7 @@ if [ -f "$bunny" ]; then
   done
   # A mesh left open by the repair (knot): the sign from the winding number
   # (auto) and, on request, from the heat method, which leaks out of openings.
-  knot="$shared/meshes/knot.obj"
+  knot="$meshes/knot.obj"
   if [ -f "$knot" ]; then
     "$hv" bench sdf "$knot" --n 256
     "$hv" bench sdf "$knot" --n 256 --sign heat
@@ -72,21 +72,21 @@ done
 case " $backends " in
   *" opencl "*) "$hv" bench extend --n 128 --shape sphere --backend opencl ;;
 esac
-if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
+if [ -f "$meshes/stanford-bunny.obj" ]; then
   for n in 128 256; do
-    "$hv" bench extend --n $n --shape "mesh:$shared/meshes/stanford-bunny.obj"
+    "$hv" bench extend --n $n --shape "mesh:$meshes/stanford-bunny.obj"
   done
 else
-  echo "bench extend: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
+  echo "bench extend: $meshes/stanford-bunny.obj not found, skipped" >&2
 fi
 # The extension on a narrow band as whole commands (heatvox extend -o X.vdb
 # against OpenVDB sdfToExt reading and writing the same files), with peak RSS.
-if [ -f "$shared/meshes/stanford-bunny.obj" ]; then
+if [ -f "$meshes/stanford-bunny.obj" ]; then
   for n in 256 512 1024; do
-    "$hv" bench extend-band "$shared/meshes/stanford-bunny.obj" --n $n
+    "$hv" bench extend-band "$meshes/stanford-bunny.obj" --n $n
   done
 else
-  echo "bench extend-band: $shared/meshes/stanford-bunny.obj not found, skipped" >&2
+  echo "bench extend-band: $meshes/stanford-bunny.obj not found, skipped" >&2
 fi
 # A simulation's loop: one extender, a moving sphere's level set as tiles.
 "$hv" bench extend-loop --n 256

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -16,6 +17,12 @@ int cli_verbose = 0;
 int cli_fail(const char *cmd, const char *what, hv_status st)
 {
     const char *detail = hv_last_error();
+    /* A message that names the file already says it all. */
+    size_t n = what ? strlen(what) : 0;
+    if (n && !strncmp(detail, what, n) && detail[n] == ':') {
+        fprintf(stderr, "heatvox %s: %s\n", cmd, detail);
+        return HV_EXIT_FAIL;
+    }
     fprintf(stderr, "heatvox %s: %s: %s%s%s\n", cmd, what, hv_status_str(st), *detail ? ": " : "",
             detail);
     return HV_EXIT_FAIL;
@@ -40,6 +47,29 @@ int cli_h5_output(const char *cmd, const char *out, int *is_h5)
         return cli_usage_error(
             cmd, "-o %s: HDF5 output needs heatvox built with MPI and PETSc (make mpi)", out);
     return 0;
+}
+
+int cli_check_ext(const char *cmd, const char *opt, const char *path, const char *exts)
+{
+    if (!path)
+        return 0;
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (dot && (!slash || dot > slash)) {
+        size_t n = strlen(dot);
+        for (const char *e = exts; *e;) {
+            size_t k = strcspn(e, " ");
+            if (k == n && !strncasecmp(e, dot, n))
+                return 0;
+            e += k + (e[k] == ' ');
+        }
+    }
+    char list[64];
+    snprintf(list, sizeof list, "%s", exts);
+    for (char *c = list; *c; c++)
+        if (*c == ' ')
+            *c = '/';
+    return cli_usage_error(cmd, "%s %s: the file name must end in %s (the format is chosen by it)",
+                           opt, path, list);
 }
 
 int cli_info(const char *fmt, ...)

@@ -20,6 +20,9 @@ int cli_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format
  * build without PETSc an HDF5 output is a usage error (returns
  * HV_EXIT_USAGE, having said so); else returns 0. */
 int cli_h5_output(const char *cmd, const char *out, int *is_h5);
+/* A usage error (printed, HV_EXIT_USAGE) unless path (option opt) ends in one
+ * of exts (space-separated, such as ".vdb .h5"; any case); 0 for NULL. */
+int cli_check_ext(const char *cmd, const char *opt, const char *path, const char *exts);
 /* Parses numbers strictly (whole string, finite); 0 on success. */
 int cli_parse_int(const char *s, int *out);
 /* Checks the outputs of a command before it computes anything: an output that

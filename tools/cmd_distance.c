@@ -429,6 +429,8 @@ int cmd_distance(int argc, char **argv)
         return cli_usage_error(CMD, "--sources is required");
     if (!out && !npy)
         return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
+    if (cli_check_ext(CMD, "-o", out, ".vdb .h5") || cli_check_ext(CMD, "--npy", npy, ".npy"))
+        return HV_EXIT_USAGE;
     int is_h5;
     if (cli_h5_output(CMD, out, &is_h5))
         return HV_EXIT_USAGE;

@@ -320,6 +320,8 @@ int cmd_extend(int argc, char **argv)
         return cli_usage_error(CMD, "give at least one --field NAME");
     if (!out)
         return cli_usage_error(CMD, "-o OUT.vdb is required");
+    if (cli_check_ext(CMD, "-o", out, ".vdb .h5"))
+        return HV_EXIT_USAGE;
     for (int q = 0; q < nfields; q++)
         if (!strcmp(fields[q], ls))
             return cli_usage_error(CMD, "--field '%s' is the level set", ls);

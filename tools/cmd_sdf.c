@@ -87,6 +87,24 @@ static int on_progress(double fraction, const char *stage, void *user)
     return 0;
 }
 
+/* A block too large for this machine is the resolution asked for, not the
+ * mesh: a usage error that names the option. */
+static int too_large(const hv_sdf_opts *o, int have_h, int tiles, const char *out)
+{
+    char opt[64];
+    if (have_h)
+        snprintf(opt, sizeof opt, "--voxel-size %g", o->voxel_size);
+    else
+        snprintf(opt, sizeof opt, "--res %d", o->res);
+    const char *msg = hv_last_error();
+    fprintf(stderr, "heatvox sdf: %s: %s\n", opt, strncmp(msg, "sdf: ", 5) ? msg : msg + 5);
+    if (!tiles && out)
+        fprintf(stderr, "heatvox sdf: a narrow band alone (-o without --dense, --npy or "
+                        "--mesh-out) is computed near the surface only and needs far less\n");
+    fprintf(stderr, "(lower --res or raise --voxel-size; see heatvox sdf --help)\n");
+    return HV_EXIT_USAGE;
+}
+
 /* The extensions hv_mesh_write knows: .obj, .ply, .stl, any case. */
 static int mesh_ext_ok(const char *path)
 {
@@ -285,6 +303,9 @@ int cmd_sdf(int argc, char **argv)
     if (!out && !npy && !mesh_out)
         return cli_usage_error("sdf",
                                "no output given (-o OUT.vdb, --npy FILE or --mesh-out FILE)");
+    if (cli_check_ext("sdf", "-o", out, ".vdb") || cli_check_ext("sdf", "--npy", npy, ".npy") ||
+        cli_check_ext("sdf", "--preview", preview, ".png"))
+        return HV_EXIT_USAGE;
     if (mesh_out && o.unsigned_distance)
         return cli_usage_error("sdf", "--mesh-out needs a signed distance: an unsigned one has no "
                                       "zero level set (drop --unsigned)");
@@ -315,7 +336,9 @@ int cmd_sdf(int argc, char **argv)
             return HV_EXIT_FAIL;
     static int tty;
     tty = isatty(2);
-    if (cli_verbose >= 1 || (cli_verbose >= 0 && tty))
+    /* Progress is for a person watching a terminal; -v adds the details at
+     * the end, never progress lines in a log. */
+    if (cli_verbose >= 0 && tty)
         hv_set_progress(on_progress, &tty);
 
     double t0 = hv_now();
@@ -335,12 +358,9 @@ int cmd_sdf(int argc, char **argv)
         if (st == HV_ERR_CANCELLED)
             fputc('\n', stderr);
         hv_mesh_destroy(&m);
-        int rc = cli_fail("sdf", mesh_path, st);
-        if (st == HV_ERR_NOMEM && !tiles && out)
-            fprintf(stderr, "heatvox sdf: a narrow band alone (-o without --dense, --npy, "
-                            "--mesh-out, --no-tiles) is computed in tiles near the surface and "
-                            "needs far less\n");
-        return rc;
+        if (st == HV_ERR_NOMEM)
+            return too_large(&o, have_h, tiles, out);
+        return cli_fail("sdf", mesh_path, st);
     }
     size_t tris = m->ntris;
     /* The preview of a run in tiles computes its slices from the mesh. */

@@ -109,6 +109,8 @@ int cmd_sdf2d(int argc, char **argv)
         return cli_usage_error("sdf2d", "no curves file given");
     if (!out && !png)
         return cli_usage_error("sdf2d", "no output: give -o OUT.exr and/or --png FILE");
+    if (cli_check_ext("sdf2d", "-o", out, ".exr") || cli_check_ext("sdf2d", "--png", png, ".png"))
+        return HV_EXIT_USAGE;
     const char *outs[] = {out, png};
     if (cli_check_outputs("sdf2d", outs, 2, &in, 1))
         return HV_EXIT_FAIL;

@@ -25,6 +25,11 @@ typedef struct hv_mesh {
     size_t input_vertices;        /* vertices in the input, before welding */
     size_t unreferenced_vertices; /* input vertices no face used; dropped */
     size_t polygons_fanned;       /* input faces with more than 3 corners */
+    /* Where the first vertex with a NaN or Inf coordinate stands in the file:
+     * its 1-based place in the file's vertex list (0: none), and the line of a
+     * text format (0: a binary format, or none). */
+    size_t nonfinite_vertex;
+    size_t nonfinite_line;
 } hv_mesh;
 
 typedef struct hv_mesh_report {

@@ -78,6 +78,20 @@ hv_status hv__progress(double fraction, const char *stage)
     return HV_OK;
 }
 
+static double span_lo, span_hi;
+
+void hv__progress_span(double lo, double hi)
+{
+    span_lo = lo;
+    span_hi = hi;
+}
+
+hv_status hv__progress_part(double part, const char *stage)
+{
+    part = part < 0 ? 0 : part > 1 ? 1 : part;
+    return hv__progress(span_lo + (span_hi - span_lo) * part, stage);
+}
+
 const char *hv_version(void) { return HV_VERSION_STRING; }
 
 double hv_now(void)

@@ -13,6 +13,11 @@ void hv__log(hv_log_level level, const char *fmt, ...) __attribute__((format(pri
 
 /* Calls the progress callback; returns HV_ERR_CANCELLED if it asked to stop. */
 hv_status hv__progress(double fraction, const char *stage);
+/* A stage that reports its own progress: hv__progress_span sets the fraction
+ * it starts and ends at, hv__progress_part(part, stage) reports part in [0,1]
+ * of it (to be called where no other thread calls the callback). */
+void hv__progress_span(double lo, double hi);
+hv_status hv__progress_part(double part, const char *stage);
 
 /* Bytes of physical memory (SIZE_MAX where unknown): what size checks such as
  * hv_check_dims compare a run's needs against. */

@@ -718,16 +718,22 @@ static hv_status sweep_all(const hv_mesh *m, const ring *r, const hv_grid *g, fl
     for (size_t c = 0; c < count; c++)
         stamp[c] = (uint16_t)period;
     int pass = period;
-    for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
+    hv_status st = HV_OK;
+    for (int round = 0; round < EXACT_MAX_ROUNDS && !st; round++) {
         size_t upd = 0;
-        for (int ax = 0; ax < g->dim; ax++) {
+        for (int ax = 0; ax < g->dim && !st; ax++) {
             upd += sweep(m, r, g, ax, +1, dist, tri, stamp, ++pass, period, INFINITY);
             upd += sweep(m, r, g, ax, -1, dist, tri, stamp, ++pass, period, INFINITY);
+            /* Two rounds are the common case; later ones change few cells. */
+            st = hv__progress_part(0.3 + 0.7 * (1 - 1 / (1 + (pass - period) / (2.0 * period))),
+                                   "redistance");
         }
         if (!upd)
             break;
     }
     hv_free(stamp);
+    if (st)
+        return st;
     return HV_OK;
 }
 
@@ -779,6 +785,13 @@ hv_status hv__exact_distance(const hv_mesh *m, const hv_grid *g, double band, do
     for (size_t q = 0; q < m->ntris; q++)
         raster_box(m, g->origin, g->h, zero, last, stride, (uint32_t)order[q], W, best, NULL);
     free(order);
+    hv_status pst = hv__progress_part(0.3, "redistance");
+    if (pst) {
+        hv_free(best);
+        if (!tri_out)
+            hv_free(tri);
+        return pst;
+    }
     size_t nb = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nb)
     for (size_t c = 0; c < count; c++) {

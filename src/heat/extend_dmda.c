@@ -183,7 +183,7 @@ static hv_status dist_remote(void *user, hv_extender *e, const float *phi, uint8
         for (size_t s = 0; s < R->cap; s++)
             if (R->key[s])
                 X->order[c4[owner(X, R->key[s] - 1, ijk)]++] = s;
-        MPI_Alltoall(X->sc, 1, MPI_INT, X->rc, 1, MPI_INT, X->comm);
+        (void)MPI_Alltoall(X->sc, 1, MPI_INT, X->rc, 1, MPI_INT, X->comm);
         X->nserve = 0;
         for (int q = 0; q < P; q++) {
             X->rd[q] = (int)X->nserve;
@@ -205,7 +205,8 @@ static hv_status dist_remote(void *user, hv_extender *e, const float *phi, uint8
         uint64_t *sk = sbuf, *rk = rbuf;
         for (size_t q = 0; q < R->used; q++)
             sk[q] = R->key[X->order[q]] - 1;
-        MPI_Alltoallv(sk, X->sc, X->sd, MPI_UINT64_T, rk, X->rc, X->rd, MPI_UINT64_T, X->comm);
+        (void)MPI_Alltoallv(sk, X->sc, X->sd, MPI_UINT64_T, rk, X->rc, X->rd, MPI_UINT64_T,
+                            X->comm);
         for (size_t q = 0; q < X->nserve; q++) {
             owner(X, (size_t)rk[q], ijk);
             X->serve[q] = local_cell(X, ijk[0], ijk[1], ijk[2]);
@@ -214,14 +215,14 @@ static hv_status dist_remote(void *user, hv_extender *e, const float *phi, uint8
         float *sf = rbuf, *rf = sbuf;
         for (size_t q = 0; q < X->nserve; q++)
             sf[q] = phi[X->serve[q]];
-        MPI_Alltoallv(sf, X->rc, X->rd, MPI_FLOAT, rf, X->sc, X->sd, MPI_FLOAT, X->comm);
+        (void)MPI_Alltoallv(sf, X->rc, X->rd, MPI_FLOAT, rf, X->sc, X->sd, MPI_FLOAT, X->comm);
         for (size_t q = 0; q < R->used; q++)
             R->phi[X->order[q]] = rf[q];
         hv__extend_remote_check(e, phi, need);
         uint8_t *sm = sbuf, *rm = rbuf;
         for (size_t q = 0; q < R->used; q++)
             sm[q] = R->read[X->order[q]];
-        MPI_Alltoallv(sm, X->sc, X->sd, MPI_UINT8_T, rm, X->rc, X->rd, MPI_UINT8_T, X->comm);
+        (void)MPI_Alltoallv(sm, X->sc, X->sd, MPI_UINT8_T, rm, X->rc, X->rd, MPI_UINT8_T, X->comm);
         for (size_t q = 0; need && q < X->nserve; q++)
             if (rm[q])
                 need[X->serve[q]] = 1;
@@ -246,7 +247,7 @@ static hv_status dist_remote(void *user, hv_extender *e, const float *phi, uint8
     float *sf = sbuf, *rf = rbuf;
     for (size_t q = 0; q < X->nserve; q++)
         memcpy(sf + q * (size_t)ns, e->sol + X->serve[q] * (size_t)ns, (size_t)ns * sizeof *sf);
-    MPI_Alltoallv(sf, rc, rd, MPI_FLOAT, rf, sc, sd, MPI_FLOAT, X->comm);
+    (void)MPI_Alltoallv(sf, rc, rd, MPI_FLOAT, rf, sc, sd, MPI_FLOAT, X->comm);
     for (size_t q = 0; q < R->used; q++)
         memcpy(R->sol + X->order[q] * (size_t)ns, rf + q * (size_t)ns, (size_t)ns * sizeof *rf);
 out:

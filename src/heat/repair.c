@@ -8,6 +8,7 @@
  * nested inside an odd number of others, e.g. the inner wall of a hollow ball).
  */
 #include "heatvox/sdf.h"
+#include "sdf_internal.h"
 #include "winding.h"
 #include "core/error.h"
 
@@ -625,6 +626,21 @@ out:
     return HV_OK;
 }
 
+hv_status hv__nonfinite_vertex_error(const hv_mesh *m, const char *who, size_t v, double x)
+{
+    if (m->nonfinite_line)
+        return hv__error(HV_ERR_NUMERIC,
+                         "%s: line %zu: vertex %zu has a non-finite coordinate (%g)", who,
+                         m->nonfinite_line, m->nonfinite_vertex, x);
+    if (m->nonfinite_vertex)
+        return hv__error(HV_ERR_NUMERIC,
+                         "%s: vertex %zu of the file has a non-finite coordinate (%g)", who,
+                         m->nonfinite_vertex, x);
+    return hv__error(HV_ERR_NUMERIC,
+                     "%s: vertex %zu (counted from 1) has a non-finite coordinate (%g)", who, v + 1,
+                     x);
+}
+
 hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
                         hv_sdf_repair_report *report)
 {
@@ -646,9 +662,7 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
                          "mesh repair: too many vertices or triangles (%zu, %zu)", nv, nt);
     for (size_t i = 0; i < 3 * nv; i++)
         if (!isfinite(in->verts[i]))
-            return hv__error(HV_ERR_NUMERIC,
-                             "mesh repair: vertex %zu has a non-finite coordinate (%g)", i / 3,
-                             in->verts[i]);
+            return hv__nonfinite_vertex_error(in, "mesh repair", i / 3, in->verts[i]);
     for (size_t i = 0; i < 3 * nt; i++)
         if (in->tris[i] >= nv)
             return hv__error(HV_ERR_INVALID_ARG, "mesh repair: triangle %zu uses vertex %u of %zu",

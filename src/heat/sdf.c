@@ -177,8 +177,7 @@ static hv_status used_bounds(const hv_mesh *m, double lo[3], double hi[3])
         const double *x = m->verts + 3 * (size_t)v;
         for (int a = 0; a < 3; a++) {
             if (!isfinite(x[a]))
-                return hv__error(HV_ERR_NUMERIC, "sdf: vertex %u has a non-finite coordinate (%g)",
-                                 v, x[a]);
+                return hv__nonfinite_vertex_error(m, "sdf", v, x[a]);
             lo[a] = x[a] < lo[a] ? x[a] : lo[a];
             hi[a] = x[a] > hi[a] ? x[a] : hi[a];
         }
@@ -476,6 +475,11 @@ static hv_status sdf_sign_output(const hv_mesh *M, const hv_sdf_opts *o, const s
         return st;
     const float dlim = (float)(o->near_sign * P->h), hlim = (float)(1.5 * o->near_sign * P->h);
     size_t changed = 0, used = 0;
+    if ((st = stage(0.95, "sign"))) {
+        if (have_ps)
+            hv__pseudo_free(&ps);
+        return st;
+    }
     if (P->wn_sign) {
         double ts = hv_now();
         st = hv__winding_sign(M, w->g, dist, tri, &ps, o->near_sign * P->h, res, &S->winding_evals,
@@ -568,6 +572,7 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
     if (P.exact) {
         if ((st = stage(0.85, "redistance")))
             goto done;
+        hv__progress_span(0.85, 0.95);
         double tt = hv_now();
         if ((st = sdf_band_distance(M, &o, &P, &w, &S)) ||
             (st = sdf_sign_output(M, &o, &P, gh, &w, &S)))

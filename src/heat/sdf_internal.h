@@ -9,6 +9,11 @@
 #include "pseudonormal.h"
 #include "surface.h"
 
+/* HV_ERR_NUMERIC for a vertex of m with a non-finite coordinate x: named by
+ * the file's line (or its 1-based place among the file's vertices) when m
+ * was read from a file, else by its 1-based index in m (repair.c). */
+hv_status hv__nonfinite_vertex_error(const hv_mesh *m, const char *who, size_t v, double x);
+
 /* Stages 2-6 of the signed heat method on gh (sdf_heat.c; on the device when
  * o->backend is HV_BACKEND_OPENCL): splat q, diffuse (nlev levels), normalize
  * on faces, Poisson, shift. phi in gh->v; times and counts into S. */

@@ -30,6 +30,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <omp.h>
+#include <stdatomic.h>
+
 #define T3 (HV_TILE * HV_TILE * HV_TILE)
 
 /* Sorts a[0..n) by their high 32 bits (stable, two 16-bit passes); tmp holds
@@ -92,6 +95,34 @@ static int tri_tiles(const hv_mesh *M, size_t t, const int n[3], double h, const
     return 1;
 }
 
+/* A lower bound on the band's memory, checked before the binning (which
+ * itself needs memory in proportion to the band): a plane cuts an 8^3 tile in
+ * at most 64 sqrt(2) voxel^2, so the surface's area bounds the band's tiles
+ * below. Blocks whose tiles cannot be numbered in 32 bits (past 2^41 cells)
+ * are refused with the same figure. */
+static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbered)
+{
+    double area = 0;
+    for (size_t t = 0; t < M->ntris; t++) {
+        const double *a = M->verts + 3 * (size_t)M->tris[3 * t],
+                     *b = M->verts + 3 * (size_t)M->tris[3 * t + 1],
+                     *c = M->verts + 3 * (size_t)M->tris[3 * t + 2];
+        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
+               z = u[0] * v[1] - u[1] * v[0];
+        area += 0.5 * sqrt(x * x + y * y + z * z);
+    }
+    double tiles = area / (h * h) / (64.0 * sqrt(2.0));
+    double need = tiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
+    if (numbered && need <= (double)hv__physical_memory())
+        return HV_OK;
+    return hv__error(HV_ERR_NOMEM,
+                     "sdf: a block of %d x %d x %d cells: its narrow band alone needs at least "
+                     "%.3g GB, more than this machine's %.3g GB",
+                     n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
+}
+
 hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
                         double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S)
 {
@@ -106,16 +137,14 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
        (uint64_t)nb[0] * ((uint64_t)((y) >> 1) + (uint64_t)nb[1] * (uint64_t)((z) >> 1)))          \
       << 3) |                                                                                      \
      (uint64_t)(((x)&1) | ((y)&1) << 1 | ((z)&1) << 2))
-    if (8.0 * nb[0] * nb[1] * nb[2] >= 4294967295.0)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a block of %d x %d x %d cells has more than 2^32 tiles", n[0], n[1],
-                         n[2]);
+    hv_status st = band_fits(M, n, h, 8.0 * nb[0] * nb[1] * nb[2] < 4294967295.0);
+    if (st)
+        return st;
     /* The raster's reach: the band, and at least the 2 voxels the dense
      * path rasterizes, so that both keep the same nearest triangles. */
     const double bandw = band * h, W = fmax(band, 2.0) * h;
     const float bg = (float)bandw;
     const size_t ntri = M->ntris;
-    hv_status st = HV_OK;
     size_t *first = hv_malloc((ntri + 1) * sizeof *first);
     uint64_t *pairs = NULL, *tmp = NULL;
     size_t *tstart = NULL, *gstart = NULL;
@@ -176,9 +205,9 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
         if (need > 1e18 || (st = hv_check_dims(3, dims, 1.0, 1048576))) {
             hv_clear_error();
             st = hv__error(HV_ERR_NOMEM,
-                           "sdf: the narrow band of %zu tiles needs about %.3g GB, more than "
-                           "this machine has",
-                           ntiles, need / 1e9);
+                           "sdf: a block of %d x %d x %d cells: its narrow band needs about "
+                           "%.3g GB, more than this machine's %.3g GB",
+                           n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
             goto out;
         }
     }
@@ -224,8 +253,19 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
             gstart[g++] = q;
     gstart[ngroups] = ntiles;
     int failed = 0;
+    /* Progress from the first thread alone, which also notes a cancel; the
+     * groups after it are skipped. */
+    _Atomic size_t groups_done = 0;
+    _Atomic int cancelled = 0;
+    hv__progress_span(0.3, 0.9);
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : band_cells, active, evals, used, ts, failed)
     for (size_t gq = 0; gq < ngroups; gq++) {
+        size_t done = atomic_fetch_add(&groups_done, 1);
+        if (atomic_load(&cancelled))
+            continue;
+        if (omp_get_thread_num() == 0 && done % 64 == 0 &&
+            hv__progress_part((double)done / ngroups, "tiles"))
+            atomic_store(&cancelled, 1);
         /* The group's triangles, each once, rasterized into its 16^3 box:
          * fewer (box, triangle) pairs than tile by tile, the same minima. */
         const size_t p0 = tstart[gstart[gq]], p1 = tstart[gstart[gq + 1]];
@@ -372,6 +412,7 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
         goto nomem;
     if ((st = hv__progress(0.9, "tiles")))
         goto out;
+    /* A cancel inside the loop is the callback's answer again here. */
 
     /* 4. Compact in place, in tile order. */
     size_t kept = 0;

@@ -102,6 +102,10 @@ hv_status hv__mb_add_vertex(mesh_builder *b, double x, double y, double z)
         if (st)
             return st;
     }
+    if (!b->nonfinite_vertex && !(isfinite(x) && isfinite(y) && isfinite(z))) {
+        b->nonfinite_vertex = b->nv + 1;
+        b->nonfinite_line = b->line;
+    }
     double *p = b->v + 3 * b->nv++;
     p[0] = x;
     p[1] = y;
@@ -280,6 +284,8 @@ hv_status hv__mb_finish(mesh_builder *b, const char *format, hv_mesh **out)
     m->input_vertices = b->nv;
     m->unreferenced_vertices = b->nv - nref;
     m->polygons_fanned = b->polygons_fanned;
+    m->nonfinite_vertex = b->nonfinite_vertex;
+    m->nonfinite_line = b->nonfinite_line;
     hv__mb_free(b);
     *out = m;
     return HV_OK;

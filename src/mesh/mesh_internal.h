@@ -27,6 +27,7 @@ typedef struct mesh_builder {
     uint32_t *t;
     size_t nt, tcap;
     size_t polygons_fanned;
+    size_t nonfinite_vertex, nonfinite_line; /* the first NaN/Inf vertex, 1-based; 0: none */
 } mesh_builder;
 
 void hv__mb_init(mesh_builder *b, const char *path);

@@ -1,0 +1,255 @@
+/* The command as a new user meets it: a resolution too large for the machine
+ * is a usage error naming the option, a broken vertex is named by its line,
+ * messages name a file once, outputs are checked by their extension, progress
+ * appears on a terminal alone and advances through the long stages. */
+#include "heatvox/heatvox.h"
+#include "testlib.h"
+
+#include <check.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static char dir[256];
+static char bin[PATH_MAX];
+
+static void setup(void)
+{
+    const char *b = tl_heatvox_bin();
+    ck_assert_msg(b != NULL, "build/heatvox not found (set HEATVOX_BIN)");
+    ck_assert_ptr_nonnull(realpath(b, bin));
+    snprintf(dir, sizeof dir, "/tmp/hv_check_cli_XXXXXX");
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char cmd[5000];
+    snprintf(cmd, sizeof cmd, "'%s' make-scenes '%s/sc' -q", bin, dir);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
+}
+
+static void teardown(void)
+{
+    tl_rm_rf(dir);
+    *dir = '\0';
+}
+
+/* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
+static int hv(char *err, size_t errsize, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static int hv(char *err, size_t errsize, const char *fmt, ...)
+{
+    char args[3000], cmd[8000];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
+    return tl_run_cmd(cmd, dir, err, errsize);
+}
+
+static int exists(const char *name)
+{
+    char p[600];
+    snprintf(p, sizeof p, "%s/%s", dir, name);
+    return access(p, F_OK) == 0;
+}
+
+static int count(const char *hay, const char *needle)
+{
+    int n = 0;
+    for (const char *p = strstr(hay, needle); p; p = strstr(p + 1, needle))
+        n++;
+    return n;
+}
+
+START_TEST(a_resolution_too_large_should_be_a_usage_error_naming_the_option)
+{
+    const char *cases[] = {
+        "sdf sc/meshes/torus_holes.obj -o t.vdb --res 100000",
+        "sdf sc/meshes/torus_holes.obj -o t.vdb --res 12000",
+        "sdf sc/meshes/torus_holes.obj -o t.vdb --res 100000 --dense",
+        "sdf sc/meshes/torus_holes.obj -o t.vdb --voxel-size 1e-6",
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char err[4096];
+        int rc = hv(err, sizeof err, "%s", cases[c]);
+        ck_assert_msg(rc == 2, "%s: exit %d (%s)", cases[c], rc, err);
+        ck_assert_msg(strstr(err, strstr(cases[c], "--res") ? "--res " : "--voxel-size "),
+                      "%s: the option is not named: %s", cases[c], err);
+        ck_assert_msg(strstr(err, " GB, more than this machine's "), "%s: %s", cases[c], err);
+        ck_assert_msg(!strstr(err, "tiles") && !strstr(err, "2^32"), "%s: jargon: %s", cases[c],
+                      err);
+        ck_assert_msg(!strstr(err, "torus_holes.obj:"), "%s: blames the mesh: %s", cases[c], err);
+        ck_assert(!exists("t.vdb"));
+    }
+}
+END_TEST
+
+START_TEST(a_non_finite_vertex_should_be_named_by_its_line)
+{
+    char path[600];
+    snprintf(path, sizeof path, "%s/nan.obj", dir);
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fputs("# a tetrahedron with one broken vertex\n"
+          "v 0 0 0\nv 1 0 0\nv 0 1 0\n\n"
+          "v 0 0 nan\n"
+          "f 1 2 3\nf 1 2 4\nf 2 3 4\nf 3 1 4\n",
+          f);
+    fclose(f);
+    /* The same in binary STL: the 1-based place among the file's vertices. */
+    snprintf(path, sizeof path, "%s/nan.stl", dir);
+    f = fopen(path, "wb");
+    ck_assert_ptr_nonnull(f);
+    char header[80] = "binary";
+    fwrite(header, 1, 80, f);
+    uint32_t nt = 2;
+    fwrite(&nt, 4, 1, f);
+    const float tri[2][12] = {{0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0},
+                              {0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, NAN}};
+    for (int t = 0; t < 2; t++) {
+        fwrite(tri[t], 4, 12, f);
+        fwrite("\0\0", 1, 2, f);
+    }
+    fclose(f);
+    char err[4096];
+    int rc = hv(err, sizeof err, "sdf nan.obj -o n.vdb --res 16");
+    ck_assert_msg(rc == 1, "exit %d (%s)", rc, err);
+    ck_assert_msg(strstr(err, "nan.obj") && strstr(err, "line 6: vertex 4 "), "%s", err);
+    rc = hv(err, sizeof err, "sdf nan.obj -o n.vdb --res 16 --no-repair --sign heat");
+    ck_assert_msg(rc == 1 && strstr(err, "line 6: vertex 4 "), "exit %d: %s", rc, err);
+    rc = hv(err, sizeof err, "sdf nan.stl -o n.vdb --res 16");
+    ck_assert_msg(rc == 1, "exit %d (%s)", rc, err);
+    ck_assert_msg(strstr(err, "vertex 6 of the file"), "%s", err);
+}
+END_TEST
+
+START_TEST(messages_should_name_a_file_once)
+{
+    char err[4096];
+    ck_assert_int_eq(hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o t.vdb --res 16 -q"), 0);
+    int rc = hv(err, sizeof err, "slice t.vdb --grid nosuch -o s.exr");
+    ck_assert_msg(rc == 1, "exit %d (%s)", rc, err);
+    ck_assert_msg(count(err, "t.vdb") == 1 && strstr(err, "no grid named 'nosuch'"), "%s", err);
+    ck_assert(!exists("s.exr"));
+}
+END_TEST
+
+START_TEST(outputs_should_be_checked_by_their_extension)
+{
+    const char *cases[] = {
+        "sdf sc/meshes/torus_holes.obj -o x.txt --res 16",
+        "sdf sc/meshes/torus_holes.obj -o x.vdb --npy x.txt --res 16",
+        "sdf sc/meshes/torus_holes.obj -o x.vdb --preview x.txt --res 16",
+        "extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o x.txt",
+        "distance --sources sc/distance/sources.txt --obstacles none --res 16 -o x.txt",
+        "distance --sources sc/distance/sources.txt --obstacles none --res 16 --npy x.txt",
+        "sdf2d sc/distance/sources_2d.txt -o x.txt",
+        "slice sc/levelset/sphere_velocity.vdb --grid sdf -o x.txt",
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char err[4096];
+        int rc = hv(err, sizeof err, "%s", cases[c]);
+        ck_assert_msg(rc == 2, "%s: exit %d (%s)", cases[c], rc, err);
+        ck_assert_msg(strstr(err, "x.txt"), "%s: %s", cases[c], err);
+        ck_assert_msg(!exists("x.txt") && !exists("x.vdb"), "%s: wrote a file", cases[c]);
+    }
+    /* Any case of the right extension is taken. */
+    char err[4096];
+    int rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o X.VDB --res 16 -q");
+    ck_assert_msg(rc == 0, "exit %d (%s)", rc, err);
+}
+END_TEST
+
+START_TEST(progress_should_not_reach_a_log_even_with_v)
+{
+    char err[8192];
+    int rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o t.vdb --res 48 --dense -v");
+    ck_assert_msg(rc == 0, "exit %d (%s)", rc, err);
+    ck_assert_msg(!strstr(err, "%  peak"), "progress in a log: %s", err);
+    ck_assert_msg(strstr(err, "repair") != NULL, "-v gave no details: %s", err);
+}
+END_TEST
+
+/* The fractions a run reports, and whether they only grow. */
+typedef struct {
+    double f[4096];
+    char stage[4096][16];
+    int n;
+} seen;
+
+static int record(double fraction, const char *stage, void *user)
+{
+    seen *s = user;
+    if (s->n < 4096) {
+        s->f[s->n] = fraction;
+        snprintf(s->stage[s->n], sizeof s->stage[0], "%s", stage);
+        s->n++;
+    }
+    return 0;
+}
+
+static int distinct_in(const seen *s, const char *stage, double lo, double hi)
+{
+    int n = 0;
+    for (int i = 0; i < s->n; i++)
+        n += !strcmp(s->stage[i], stage) && s->f[i] > lo && s->f[i] < hi &&
+             (i == 0 || s->f[i] != s->f[i - 1]);
+    return n;
+}
+
+START_TEST(long_stages_should_advance)
+{
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_torus(&m, (double[3]){0, 0, 0}, 1.0, 0.35, 96, 48));
+    static seen s;
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = 96;
+    /* Dense: the redistance between 85% and 95% reports as it goes. */
+    s.n = 0;
+    hv_set_progress(record, &s);
+    hv_grid *g = NULL;
+    hv_sdf_stats S;
+    hv_status st = hv_sdf_compute(m, &o, &g, &S);
+    hv_set_progress(NULL, NULL);
+    TL_ASSERT_OK(st);
+    hv_grid_destroy(&g);
+    for (int i = 1; i < s.n; i++)
+        ck_assert_msg(s.f[i] >= s.f[i - 1], "%s %g after %g", s.stage[i], s.f[i], s.f[i - 1]);
+    ck_assert_msg(distinct_in(&s, "redistance", 0.85, 0.95) >= 3, "redistance reported %d times",
+                  distinct_in(&s, "redistance", 0.85, 0.95));
+    /* Tiles: the raster between 30% and 90%. */
+    s.n = 0;
+    hv_set_progress(record, &s);
+    hv_tiles *T = NULL;
+    o.res = 400;
+    st = hv_sdf_compute_tiles(m, &o, 3.0, &T, &S);
+    hv_set_progress(NULL, NULL);
+    TL_ASSERT_OK(st);
+    hv_tiles_destroy(&T);
+    for (int i = 1; i < s.n; i++)
+        ck_assert_msg(s.f[i] >= s.f[i - 1], "%s %g after %g", s.stage[i], s.f[i], s.f[i - 1]);
+    ck_assert_msg(distinct_in(&s, "tiles", 0.3, 0.9) >= 3, "tiles reported %d times",
+                  distinct_in(&s, "tiles", 0.3, 0.9));
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("cli");
+    TCase *tc = tcase_create("cli");
+    tcase_set_timeout(tc, 300);
+    tcase_add_checked_fixture(tc, setup, teardown);
+    tcase_add_test(tc, a_resolution_too_large_should_be_a_usage_error_naming_the_option);
+    tcase_add_test(tc, a_non_finite_vertex_should_be_named_by_its_line);
+    tcase_add_test(tc, messages_should_name_a_file_once);
+    tcase_add_test(tc, outputs_should_be_checked_by_their_extension);
+    tcase_add_test(tc, progress_should_not_reach_a_log_even_with_v);
+    tcase_add_test(tc, long_stages_should_advance);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}
