@@ -1,6 +1,11 @@
 # heatvox: make (library + command), make check, make bench, make demo,
 # make install PREFIX=..., make sanitize, make format.
 
+# Every target builds in parallel on all CPUs unless -j is given.
+ifeq ($(filter -j%,$(MAKEFLAGS)),)
+MAKEFLAGS += -j$(shell nproc 2>/dev/null || echo 2)
+endif
+
 PREFIX  ?= /usr/local
 BUILD   ?= build
 CC      ?= cc

@@ -171,6 +171,8 @@ class hv_mesh(Structure):
         ("input_vertices", c_size_t),
         ("unreferenced_vertices", c_size_t),
         ("polygons_fanned", c_size_t),
+        ("nonfinite_vertex", c_size_t),
+        ("nonfinite_line", c_size_t),
     ]
 
 
