@@ -193,8 +193,15 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 # as on a device without fp64 (float kernels, double correction on the host):
 # the run named fp32:SUITE; the multigrid suite a second time without its
 # AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
-CHECK_RUNS := $(TESTS) $(patsubst %,fp32:%,$(filter %/check_opencl,$(TESTS))) \
-              $(patsubst %,no512:%,$(filter %/check_mg,$(TESTS)))
+# Runs: each suite, the OpenCL one again as on a device without fp64 (NAME.fp32)
+# and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
+# side by side, the longest first; tests/check_summary.sh prints each log in
+# this order, then the totals.
+CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
+CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
+              $(patsubst %,%.fp32,$(filter check_opencl,$(notdir $(TESTS)))) \
+              $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
+RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a
 # program linked shared and static against an installed copy: make check
 # stages `make install` into $(BUILD)/stage first.
@@ -206,39 +213,42 @@ $(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) $
 	@touch $@
 
 check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
-	@pass=0; fail=0; skip=0; bad=""; skips=$(BUILD)/tests/skipped.txt; : > $$skips; \
-	for run in $(CHECK_RUNS); do \
-	  t=$${run#*:}; log=$$t.log; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
-	  case $$run in fp32:*) log=$$t.fp32.log; fp64=0;; no512:*) log=$$t.no512.log; no512=1;; esac; \
-	  echo "== $$run"; t0=$$(date +%s.%N); \
-	  HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 900 $$t > $$log 2>&1; rc=$$?; cat $$log; \
-	  echo "TIME $$run $$(echo "$$(date +%s.%N) - $$t0" | bc)"; \
-	  line=$$(grep -E '^[0-9]+%: Checks: ' $$log | tail -n 1); \
-	  c=$$(echo "$$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/'); \
-	  f=$$(echo "$$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/'); \
-	  if [ -z "$$line" ]; then fail=$$((fail+1)); bad="$$bad $$run(rc=$$rc)"; continue; fi; \
-	  s=$$(grep -c '^SKIP: ' $$log); n=$$(grep -c '^NOT RUN: ' $$log); \
-	  grep -E '^(SKIP|NOT RUN): ' $$log | sed "s|^|  $$run: |" >> $$skips; \
-	  f=$$(($$f)); pass=$$((pass + c - f - s)); fail=$$((fail + f)); skip=$$((skip + s + n)); \
-	  if [ $$rc -ne 0 ] || [ $$f -ne 0 ]; then bad="$$bad $$run"; fi; \
-	done; \
-	echo; [ ! -s $$skips ] || { echo "skipped:"; cat $$skips; }; \
-	[ -z "$$bad" ] || echo "failing suites:$$bad"; \
-	echo "check: $$pass passed, $$fail failed, $$skip skipped"; \
-	[ -z "$$bad" ]
+	@rm -rf $(RES) && mkdir -p $(RES)
+	+@$(MAKE) --no-print-directory -k $(CHECK_RUNS:%=$(RES)/%.rc) || true
+	@sh tests/check_summary.sh $(RES) $(CHECK_RUNS)
+
+# Longer cases that make check shortens (HEATVOX_TEST_LONG=1): the EXR
+# volumes of check_batch at every resolution.
+.PHONY: check-long
+check-long: all $(BUILD)/tests/check_batch $(TEST_HELPERS)
+	HEATVOX_TEST_LONG=1 HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} $(BUILD)/tests/check_batch
+
+# One run: its log, exit code and seconds under $(RES).
+$(RES)/%.rc:
+	@run=$*; t=$(BUILD)/tests/$${run%%.*}; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
+	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; esac; \
+	t0=$$(date +%s%N); \
+	HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
+	  HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 900 $$t > $(RES)/$$run.log 2>&1; \
+	rc=$$?; ms=$$(( ($$(date +%s%N) - t0) / 1000000 )); \
+	echo "$$ms" > $(RES)/$$run.ms; echo $$rc > $@; \
+	printf '== %-28s exit %d, %d.%01d s\n' $$run $$rc $$((ms / 1000)) $$((ms % 1000 / 100))
 
 # ---- mpi: the petsc backend under mpirun ----
 # Ranks 1 to 4 (oversubscribed on small machines); OpenMPI refuses root
 # without the two variables.
 MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1 \
            OMP_NUM_THREADS=1 mpirun --oversubscribe
-.PHONY: mpi mpi-check
+.PHONY: mpi mpi-deps mpi-check
 # Two passes: the packages first, then the build, whose flags come from
 # pkg-config when its Makefile is read (a fresh machine has no PETSc before).
-mpi:
+# With the packages installed first (make mpi-deps), the default build links
+# PETSc too, and `make mpi-check MPI_BUILD=build` reuses it.
+mpi-deps:
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' deps
 	@pkg-config --exists PETSc ompi-c hdf5-openmpi || \
 	  { echo "heatvox: pkg-config finds no PETSc, OpenMPI or parallel HDF5 after installing $(MPI_PKGS)"; exit 1; }
+mpi: mpi-deps
 	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
 	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda \
 	  $(MPI_BUILD)/bench_mpi
@@ -358,12 +368,11 @@ FZ_RUNENV    := ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 \
 # (alignment), and OpenVDB 10's RootNode::readTopology reads a tile's
 # "active" flag straight from the file into a bool (bool; a corrupt byte is
 # UB there). Neither is heatvox's code.
-$(CXX_SRC:%.cpp=$(FZ)/obj/%.o) $(FZ)/obj/tools/bench_ref_vdb.o: CXXFLAGS += -fno-sanitize=alignment,bool
+$(CXX_SRC:%.cpp=$(FZ)/obj/%.o): CXXFLAGS += -fno-sanitize=alignment,bool
 
 .PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
 fuzz-build:
-	+@$(FZ_SUBMAKE) $(FZ)/libheatvox.a $(FZ)/heatvox
-	+@$(MAKE) --no-print-directory HV_PETSC=0 $(FZ_BINS) $(FZ)/fuzz/make_seeds
+	+@$(FZ_SUBMAKE) --no-print-directory $(FZ)/libheatvox.a $(FZ_BINS) $(FZ)/fuzz/make_seeds
 
 $(FZ)/fuzz/%.o: tests/fuzz/%.c $(wildcard tests/fuzz/*.h)
 	@mkdir -p $(dir $@)
@@ -375,13 +384,15 @@ $(FZ)/fuzz/fuzz_%: $(FZ)/fuzz/fuzz_%.o $(FZ)/libheatvox.a
 $(FZ)/fuzz/make_seeds: $(FZ)/fuzz/make_seeds.o $(FZ)/libheatvox.a
 	$(FZ_CXX) -o $@ $^ -fopenmp $(FZ_SAN) $(LDLIBS)
 
-# Seeds: `heatvox make-scenes`, the repository's curve scenes, and make_seeds
-# (small files in every format, .npy/.exr/.vdb written by the library).
-fuzz-seeds: fuzz-build
-	+@$(MAKE) --no-print-directory HV_PETSC=0 $(FZ)/corpus/.seeded
-$(FZ)/corpus/.seeded: $(FZ)/heatvox $(FZ)/fuzz/make_seeds $(wildcard scenes/curves/*)
+# Seeds: `heatvox make-scenes` (the command of the default build: the fuzz
+# build instruments the library alone), the repository's curve scenes, and
+# make_seeds (small files in every format, .npy/.exr/.vdb written by the
+# library).
+fuzz-seeds: fuzz-build $(BIN)
+	+@$(FZ_SUBMAKE) --no-print-directory SEED_BIN=$(CURDIR)/$(BIN) $(FZ)/corpus/.seeded
+$(FZ)/corpus/.seeded: $(FZ)/fuzz/make_seeds $(wildcard scenes/curves/*)
 	@rm -rf $(FZ)/scenes && mkdir -p $(FZ)/corpus
-	ASAN_OPTIONS=detect_leaks=0 $(FZ)/heatvox make-scenes -q $(FZ)/scenes
+	$(SEED_BIN) make-scenes -q $(FZ)/scenes
 	ASAN_OPTIONS=detect_leaks=0 $(FZ)/fuzz/make_seeds $(FZ)/corpus
 	cp $(FZ)/scenes/meshes/*.obj $(FZ)/corpus/obj/
 	cp $(FZ)/scenes/levelset/*.vdb $(FZ)/corpus/vdb/
@@ -391,24 +402,27 @@ $(FZ)/corpus/.seeded: $(FZ)/heatvox $(FZ)/fuzz/make_seeds $(wildcard scenes/curv
 	@touch $@
 
 fuzz: fuzz-seeds
-	@mkdir -p $(FZ)/logs; bad=""; \
-	for t in $(FUZZ_TARGETS); do \
-	  mkdir -p $(FZ)/crashes/$$t; reg=tests/fuzz/regress/$$t; [ -d $$reg ] || reg=; \
-	  before=$$(ls $(FZ)/crashes/$$t | wc -l); \
-	  echo "== fuzz $$t ($(FUZZ_SECONDS) s)"; \
-	  $(FZ_RUNENV) $(FZ)/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 \
-	    -malloc_limit_mb=2048 -timeout=10 -max_len=$(FUZZ_MAX_LEN) -print_final_stats=1 \
-	    -artifact_prefix=$(FZ)/crashes/$$t/ $(FUZZ_FLAGS) $(FZ)/corpus/$$t $$reg \
-	    > $(FZ)/logs/$$t.log 2>&1; rc=$$?; \
-	  grep -E '^#[0-9]+' $(FZ)/logs/$$t.log | tail -n 1; \
-	  [ $$(ls $(FZ)/crashes/$$t | wc -l) -eq $$before ] || rc=1; \
-	  if [ $$rc -ne 0 ]; then \
-	    bad="$$bad $$t"; grep -E '^==[0-9]+==ERROR|runtime error|^SUMMARY|Test unit written' \
-	      $(FZ)/logs/$$t.log | head -n 5; \
-	  fi; \
-	done; \
-	echo; if [ -n "$$bad" ]; then echo "fuzz: crashes in:$$bad (logs in $(FZ)/logs/)"; exit 1; fi; \
-	echo "fuzz: no crash in $(FUZZ_SECONDS) s per target"
+	@mkdir -p $(FZ)/logs; rm -f $(FZ)/logs/*.bad
+	+@$(MAKE) --no-print-directory -k $(FUZZ_TARGETS:%=fuzz-run-%) || true
+	@bad=$$(cd $(FZ)/logs && ls *.bad 2>/dev/null | sed 's/[.]bad$$//' | tr '\n' ' '); \
+	echo; if [ -n "$$bad" ]; then echo "fuzz: crashes in: $$bad(logs in $(FZ)/logs/)"; exit 1; fi; \
+	echo "fuzz: no crash in $(FUZZ_SECONDS) s per target ($(words $(FUZZ_TARGETS)) targets)"
+
+# One target for FUZZ_SECONDS (make -j runs them side by side); a crash
+# leaves $(FZ)/logs/NAME.bad.
+fuzz-run-%:
+	@t=$*; mkdir -p $(FZ)/crashes/$$t; reg=tests/fuzz/regress/$$t; [ -d $$reg ] || reg=; \
+	before=$$(ls $(FZ)/crashes/$$t | wc -l); \
+	$(FZ_RUNENV) $(FZ)/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 \
+	  -malloc_limit_mb=2048 -timeout=10 -max_len=$(FUZZ_MAX_LEN) -print_final_stats=1 \
+	  -artifact_prefix=$(FZ)/crashes/$$t/ $(FUZZ_FLAGS) $(FZ)/corpus/$$t $$reg \
+	  > $(FZ)/logs/$$t.log 2>&1; rc=$$?; \
+	[ $$(ls $(FZ)/crashes/$$t | wc -l) -eq $$before ] || rc=1; \
+	echo "== fuzz $$t ($(FUZZ_SECONDS) s): $$(grep -E '^#[0-9]+' $(FZ)/logs/$$t.log | tail -n 1)"; \
+	if [ $$rc -ne 0 ]; then \
+	  touch $(FZ)/logs/$$t.bad; grep -E '^==[0-9]+==ERROR|runtime error|^SUMMARY|Test unit written' \
+	    $(FZ)/logs/$$t.log | head -n 5; \
+	fi
 
 fuzz-clean:
 	rm -rf $(FZ)
@@ -433,19 +447,27 @@ tsan:
 	+@$(MAKE) --no-print-directory BUILD=$(TS) HV_PETSC=0 CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='-O1 -g' \
 	  SANFLAGS='-fsanitize=thread' DEB_PKGS='$(DEB_PKGS) $(FUZZ_PKGS)' \
 	  $(TS)/heatvox $(TSAN_SUITES:%=$(TS)/tests/%)
+	@rm -f $(TS)/tests/*.tsan
+	+@$(MAKE) --no-print-directory -k $(TSAN_SUITES:%=$(TS)/tests/%.tsan) || true
 	@bad=""; for t in $(TSAN_SUITES); do \
-	  log=$(TS)/tests/$$t.log; echo "== tsan $$t"; \
-	  $(TS_RUNENV) HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 1200 $(TS)/tests/$$t > $$log 2>&1; rc=$$?; \
-	  races=$$(grep -c '^WARNING: ThreadSanitizer' $$log); \
-	  grep -q 'Archer detected OpenMP application' $$log || { rc=1; echo "  Archer did not load"; }; \
-	  grep -E '^[0-9]+%: Checks: ' $$log || rc=1; \
-	  if [ $$rc -ne 0 ] || [ $$races -ne 0 ]; then \
-	    bad="$$bad $$t"; echo "  exit $$rc, $$races race reports (log: $$log)"; \
-	    grep -E '^(WARNING: ThreadSanitizer|    #[0-2] )' $$log | head -n 12; \
-	  fi; \
+	  [ "$$(cat $(TS)/tests/$$t.tsan 2>/dev/null)" = ok ] || bad="$$bad $$t"; \
 	done; \
 	echo; [ -z "$$bad" ] || { echo "tsan: failing:$$bad"; exit 1; }; \
 	echo "tsan: $(words $(TSAN_SUITES)) suites, no race reported"
+# One suite under ThreadSanitizer (make -j runs them side by side): "ok" in
+# its .tsan file, or what failed, printed with the first reports.
+$(TS)/tests/%.tsan:
+	@t=$*; log=$(TS)/tests/$$t.log; s0=$$(date +%s); \
+	$(TS_RUNENV) HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 1200 $(TS)/tests/$$t > $$log 2>&1; rc=$$?; \
+	races=$$(grep -c '^WARNING: ThreadSanitizer' $$log); msg=""; \
+	grep -q 'Archer detected OpenMP application' $$log || { rc=1; msg="Archer did not load; "; }; \
+	line=$$(grep -E '^[0-9]+%: Checks: ' $$log) || rc=1; \
+	echo "== tsan $$t ($$(( $$(date +%s) - s0 )) s): $$line"; \
+	if [ $$rc -ne 0 ] || [ $$races -ne 0 ]; then \
+	  echo "  $${msg}exit $$rc, $$races race reports (log: $$log)"; \
+	  grep -E '^(WARNING: ThreadSanitizer|    #[0-2] )' $$log | head -n 12; \
+	  echo failed > $@; \
+	else echo ok > $@; fi
 # ---- end of tsan ----
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

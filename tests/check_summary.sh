@@ -1,0 +1,40 @@
+#!/bin/sh
+# Prints the logs of make check's runs in order, the skipped tests, the
+# slowest runs and the closing line "check: N passed, M failed, K skipped";
+# exits 1 when a run failed. Usage: check_summary.sh RESULTS_DIR RUN...
+res=$1
+shift
+pass=0 fail=0 skip=0 bad=""
+skips=$res/skipped.txt
+: >"$skips"
+for run in "$@"; do
+    log=$res/$run.log
+    rc=$(cat "$res/$run.rc" 2>/dev/null || echo "?")
+    echo "== $run"
+    cat "$log" 2>/dev/null
+    line=$(grep -E '^[0-9]+%: Checks: ' "$log" 2>/dev/null | tail -n 1)
+    if [ -z "$line" ]; then
+        fail=$((fail + 1))
+        bad="$bad $run(rc=$rc)"
+        continue
+    fi
+    c=$(echo "$line" | sed -E 's/.*Checks: ([0-9]+).*/\1/')
+    f=$(echo "$line" | sed -E 's/.*Failures: ([0-9]+), Errors: ([0-9]+).*/\1+\2/')
+    f=$(($f))
+    s=$(grep -c '^SKIP: ' "$log")
+    n=$(grep -c '^NOT RUN: ' "$log")
+    grep -E '^(SKIP|NOT RUN): ' "$log" | sed "s|^|  $run: |" >>"$skips"
+    pass=$((pass + c - f - s))
+    fail=$((fail + f))
+    skip=$((skip + s + n))
+    if [ "$rc" != 0 ] || [ "$f" -ne 0 ]; then bad="$bad $run"; fi
+done
+echo
+echo "slowest runs (wall seconds, side by side):"
+for run in "$@"; do
+    printf '%s %s\n' "$(cat "$res/$run.ms" 2>/dev/null || echo 0)" "$run"
+done | sort -rn | head -n 8 | awk '{ printf "  %-28s %6.1f\n", $2, $1 / 1000 }'
+[ ! -s "$skips" ] || { echo "skipped:"; cat "$skips"; }
+[ -z "$bad" ] || echo "failing suites:$bad"
+echo "check: $pass passed, $fail failed, $skip skipped"
+[ -z "$bad" ]
