@@ -37,7 +37,8 @@ LDFLAGS  += -fopenmp $(SANFLAGS)
 # Debian 12 packages the build and tests need; installed once when missing.
 DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
-            ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format
+            ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format \
+            clang-14
 
 # MPI and PETSc (optional): where pkg-config finds PETSc (Debian's petsc-dev,
 # with OpenMPI, hypre and parallel HDF5), the build links it and gains the
@@ -193,12 +194,14 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 # as on a device without fp64 (float kernels, double correction on the host):
 # the run named fp32:SUITE; the multigrid suite a second time without its
 # AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
-# Runs: each suite, the OpenCL one again as on a device without fp64 (NAME.fp32)
+# Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
+# offline as strict OpenCL C 1.2 and 3.0), the OpenCL one again as on a device without fp64 (NAME.fp32)
 # and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
+              check_kernels \
               $(patsubst %,%.fp32,$(filter check_opencl,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
@@ -226,6 +229,7 @@ check-long: all $(BUILD)/tests/check_batch $(TEST_HELPERS)
 # One run: its log, exit code and seconds under $(RES).
 $(RES)/%.rc:
 	@run=$*; t=$(BUILD)/tests/$${run%%.*}; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
+	[ $$run != check_kernels ] || t="sh tests/check_kernels.sh $(BUILD)/kernels $(FZ_CC)"; \
 	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; esac; \
 	t0=$$(date +%s%N); \
 	HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \

@@ -15,9 +15,12 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double acc_t;
 typedef double4 acc4_t;
+#define HV_ACC(x) (x)
 #else
 typedef float acc_t;
 typedef float4 acc4_t;
+/* A literal in acc_t: a double constant is an error on a device without fp64. */
+#define HV_ACC(x) (x##f)
 #endif
 
 /* Largest work-group the reduction kernels handle (local arrays). */

@@ -152,13 +152,13 @@ static int ext_eval_point(int4 N, __global const float *phi, acc4_t P, int i, in
     acc_t p[3] = {i, j, k};
     for (int a = 0; a < N.w; a++) {
         p[a] -= s * g[a];
-        if (p[a] < (acc_t)-0.5 || p[a] > n[a] - (acc_t)0.5)
+        if (p[a] < -HV_ACC(0.5) || p[a] > n[a] - HV_ACC(0.5))
             return 0;
     }
     size_t ci[8];
     acc_t cw[8];
     const int cm = ext_stencil(N, p, ci, cw);
-    if (validate && fabs(ext_sample(phi, ci, cw, cm)) > (acc_t)0.5 * fmax(P.x, (acc_t)1) * h)
+    if (validate && fabs(ext_sample(phi, ci, cw, cm)) > HV_ACC(0.5) * fmax(P.x, (acc_t)1) * h)
         return 0;
     for (int q = 0; q < cm; q++) {
         idx[q] = ci[q];

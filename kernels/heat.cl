@@ -50,7 +50,7 @@ static void heat_face_vec(int4 N, __global const float *Y, ulong count, int ncom
     const size_t lo = c - s[a];
     if (ncomp == 3) {
         for (int b = 0; b < 3; b++)
-            v[b] = (acc_t)0.5 * ((acc_t)Y[b * count + c] + (acc_t)Y[b * count + lo]);
+            v[b] = HV_ACC(0.5) * ((acc_t)Y[b * count + c] + (acc_t)Y[b * count + lo]);
         return;
     }
     const int idx[3] = {i, j, k}, n[3] = {N.x, N.y, N.z};
@@ -62,9 +62,9 @@ static void heat_face_vec(int4 N, __global const float *Y, ulong count, int ncom
         for (int side = 0; side < 2; side++) {
             const size_t cc = side ? c : lo;
             const size_t up = idx[b] < n[b] - 1 ? cc + s[b] : cc, dn = idx[b] > 0 ? cc - s[b] : cc;
-            g += ((acc_t)Y[up] - (acc_t)Y[dn]) * ((acc_t)0.5 * inv_h);
+            g += ((acc_t)Y[up] - (acc_t)Y[dn]) * (HV_ACC(0.5) * inv_h);
         }
-        v[b] = (acc_t)0.5 * g;
+        v[b] = HV_ACC(0.5) * g;
     }
 }
 

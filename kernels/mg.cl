@@ -311,12 +311,12 @@ __kernel void mg_prolong_x2(int4 N, int4 NC, int4 co, __global const float *uc,
  * the body, and end on flags rather than break: with
  * for (c = lid; c < n; c += L), PoCL 3.1 stored past the end of a one-cell
  * level (valgrind), corrupting the heap. */
-#define HV_GROUP_LOOP(c, n, ...)                                                                  \
+#define HV_GROUP_LOOP_BEGIN(c, n)                                                                  \
     for (size_t c##0_ = 0; c##0_ < (n); c##0_ += get_local_size(0)) {                             \
         const size_t c = c##0_ + get_local_id(0);                                                 \
-        if (c < (n)) {                                                                            \
-            __VA_ARGS__                                                                           \
-        }                                                                                         \
+        if (c < (n)) {
+#define HV_GROUP_LOOP_END                                                                          \
+    }                                                                                              \
     }
 
 /* Subtracts the per-region mean (regions labelled in region, -1 = none;
@@ -334,7 +334,7 @@ static void hv_bottom_project(__global acc_t *v, size_t n, __global const int *r
             sum[r] *= rinv[r];
     }
     barrier(CLK_GLOBAL_MEM_FENCE);
-    HV_GROUP_LOOP(c, n, if (region[c] >= 0) v[c] -= sum[region[c]];)
+    HV_GROUP_LOOP_BEGIN(c, n) if (region[c] >= 0) v[c] -= sum[region[c]]; HV_GROUP_LOOP_END
     barrier(CLK_GLOBAL_MEM_FENCE);
 }
 
@@ -356,34 +356,34 @@ __kernel void hv__mg_bottom_cg(int4 N, acc4_t C, __global const float *a, __glob
 #else
     const acc_t tol = 1e-6f;
 #endif
-    HV_GROUP_LOOP(c, n, x[c] = 0; b[c] = f[c];)
+    HV_GROUP_LOOP_BEGIN(c, n) x[c] = 0; b[c] = f[c]; HV_GROUP_LOOP_END
     barrier(CLK_GLOBAL_MEM_FENCE);
     if (region)
         hv_bottom_project(b, n, region, rinv, nregion, sum);
     acc_t t = 0;
-    HV_GROUP_LOOP(c, n, r[c] = b[c]; p[c] = b[c]; t += b[c] * b[c];)
+    HV_GROUP_LOOP_BEGIN(c, n) r[c] = b[c]; p[c] = b[c]; t += b[c] * b[c]; HV_GROUP_LOOP_END
     acc_t rr = hv_group_sum(t, red), best = rr;
     const acc_t bn = sqrt(rr);
     int stall = 0, done = !(bn > 0);
     barrier(CLK_GLOBAL_MEM_FENCE);
     for (int it = 0; it < 4 * (int)n + 50 && !done; it++) {
         t = 0;
-        HV_GROUP_LOOP(c, n,
+        HV_GROUP_LOOP_BEGIN(c, n)
             const int i = c % N.x, j = (c / N.x) % N.y, k = c / ((size_t)N.x * N.y);
             acc_t S, D;
             HV_STENCIL(acc_t, p, N, C, a, w0, w1, w2, i, j, k, c, S, D);
             q[c] = D * p[c] - S;
-            t += p[c] * q[c];)
+            t += p[c] * q[c]; HV_GROUP_LOOP_END
         const acc_t pq = hv_group_sum(t, red);
         /* p.q <= 0 ends the iteration with x unchanged, as the CPU's break */
         const acc_t al = pq > 0 ? rr / pq : 0;
         t = 0;
-        HV_GROUP_LOOP(c, n, x[c] += al * p[c]; r[c] -= al * q[c]; t += r[c] * r[c];)
+        HV_GROUP_LOOP_BEGIN(c, n) x[c] += al * p[c]; r[c] -= al * q[c]; t += r[c] * r[c]; HV_GROUP_LOOP_END
         const acc_t rr2 = hv_group_sum(t, red), be = rr2 / rr;
         rr = rr2;
         /* every work-item reads p's neighbours in the next apply */
         barrier(CLK_GLOBAL_MEM_FENCE);
-        HV_GROUP_LOOP(c, n, p[c] = r[c] + be * p[c];)
+        HV_GROUP_LOOP_BEGIN(c, n) p[c] = r[c] + be * p[c]; HV_GROUP_LOOP_END
         barrier(CLK_GLOBAL_MEM_FENCE);
         done = !(pq > 0) || !(sqrt(rr) > tol * bn);
 #ifndef HV_FP64
@@ -400,5 +400,5 @@ __kernel void hv__mg_bottom_cg(int4 N, acc4_t C, __global const float *a, __glob
     barrier(CLK_GLOBAL_MEM_FENCE);
     if (region && bn > 0)
         hv_bottom_project(x, n, region, rinv, nregion, sum);
-    HV_GROUP_LOOP(c, n, u[c] = (float)x[c];)
+    HV_GROUP_LOOP_BEGIN(c, n) u[c] = (float)x[c]; HV_GROUP_LOOP_END
 }

@@ -1,0 +1,76 @@
+#!/bin/sh
+# Compiles every OpenCL program heatvox builds, assembled as the library
+# assembles it (kernels/common.cl first, then the program's sources, with its
+# build options), offline with clang as strict OpenCL C 1.2 and as OpenCL C
+# 3.0, with and without fp64: -Werror -pedantic, so that what NVIDIA's
+# compiler refuses (variadic macros, extensions) fails here, on a machine
+# without a GPU. Usage: check_kernels.sh OUTDIR [CLANG]
+set -u
+out=${1:?usage: check_kernels.sh OUTDIR [CLANG]}
+cc=${2:-clang-14}
+here=$(dirname "$0")/..
+mkdir -p "$out"
+wg=$(sed -n 's/^#define HV_CL_WG \([0-9]*\).*/\1/p' "$here/src/solve/cl_core.h")
+rb=$(sed -n 's/^#define HV_CL_RED_BLOCK \([0-9]*\).*/\1/p' "$here/src/solve/cl_core.h")
+[ -n "$wg" ] && [ -n "$rb" ] || { echo "check_kernels: HV_CL_WG or HV_CL_RED_BLOCK not found"; exit 1; }
+
+# name: sources after common.cl (as in src/solve/cl_core.c and each
+# module's hv_cl_module); "fp64" where the module is built only with fp64.
+programs="solver:mg,reduce,fine,faces,pointwise
+heat:heat
+extend:extend
+distance:mg,reduce,fine,faces,pointwise,distance:fp64"
+
+# Every kernel file is in some program.
+for f in "$here"/kernels/*.cl; do
+    k=$(basename "$f" .cl)
+    [ "$k" = common ] && continue
+    echo "$programs" | grep -Eq "[:,]$k(,|:|\$)" || {
+        echo "check_kernels: kernels/$k.cl is in no program listed here"
+        exit 1
+    }
+done
+
+n=0 bad=0
+for p in $programs; do
+    name=${p%%:*}
+    rest=${p#*:}
+    srcs=${rest%%:*}
+    only64=""
+    [ "$rest" != "$srcs" ] && only64=${rest#*:}
+    file=$out/$name.cl
+    cat "$here/kernels/common.cl" >"$file"
+    for s in $(echo "$srcs" | tr , ' '); do
+        cat "$here/kernels/$s.cl" >>"$file"
+    done
+    for prec in fp64 fp32; do
+        [ "$prec" = fp32 ] && [ "$only64" = fp64 ] && continue
+        for std in CL1.2 CL3.0; do
+            defs="-DHV_WG=$wg -DHV_RED_BLOCK=$rb"
+            ext=""
+            if [ "$prec" = fp64 ]; then
+                defs="$defs -DHV_FP64=1"
+                [ "$std" = CL3.0 ] && ext="-Xclang -cl-ext=+cl_khr_fp64,+__opencl_c_fp64"
+            else
+                ext="-Xclang -cl-ext=-cl_khr_fp64,-__opencl_c_fp64"
+            fi
+            log=$out/$name.$prec.$std.log
+            n=$((n + 1))
+            if "$cc" -x cl -cl-std="$std" -Xclang -finclude-default-header $ext $defs \
+                -Werror -pedantic -fsyntax-only "$file" >"$log" 2>&1; then
+                echo "  $name ($prec, $std): ok"
+            else
+                bad=$((bad + 1))
+                echo "  $name ($prec, $std): FAILED"
+                head -n 20 "$log" | sed 's/^/    /'
+            fi
+        done
+    done
+done
+# make check reads this line as it reads Check's.
+echo "$(((n - bad) * 100 / n))%: Checks: $n, Failures: $bad, Errors: 0"
+if [ "$bad" -ne 0 ]; then
+    echo "check_kernels: $bad of $n compiles failed (logs in $out)"
+    exit 1
+fi
+echo "check_kernels: $n compiles of 4 programs, strict OpenCL C 1.2 and 3.0"
