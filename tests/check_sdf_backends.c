@@ -1,6 +1,6 @@
 /*
  * The same signed distance from every solver backend: the mg and opencl
- * backends must agree to 1e-4 voxel (issue: OpenCL backend), and both with the
+ * backends must agree to 1e-4 voxel, and both with the
  * FFTW solve of the same plain box. The heat method's own magnitude is compared
  * (HV_SDF_HEAT), where the solves decide every value, as well as the default
  * exact magnitude, where they decide the sign.

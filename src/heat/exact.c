@@ -12,8 +12,8 @@
  * cell's own when triangles are larger than a voxel, so accepted candidates
  * are refined by a descent over the triangles sharing a vertex with them
  * (0.1-0.2 voxel errors at 3 voxels on a fine icosphere without). Passes
- * repeat until nothing changes. Until 2025 narrow bands also ran the sweeps over the whole
- * grid: 1.2 s of 6 for the bunny at 256^3.
+ * repeat until nothing changes. A narrow band needs no sweeps over the whole
+ * grid (they took 1.2 s of 6 for the bunny at 256^3).
  */
 #include "exact.h"
 #include "core/error.h"
