@@ -202,7 +202,7 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
               check_kernels \
-              $(patsubst %,%.fp32,$(filter check_opencl,$(notdir $(TESTS)))) \
+              $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a

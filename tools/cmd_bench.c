@@ -1,6 +1,7 @@
 /* heatvox bench: benchmarks that print one JSON object per line. Ratios are
  * taken against references measured in the same process (a plain memory copy,
  * FFTW), because absolute times drift on shared machines. */
+#include "bench_device.h"
 #include "bench_ref.h"
 #include "cli.h"
 #include "commands.h"
@@ -136,6 +137,29 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
     return HV_OK;
 }
 
+/* The device's own figures (tools/bench_device.c) as JSON fields: the solve
+ * with the fields on the device, the transfers apart, the device's copy
+ * bandwidth and the modelled traffic against it. */
+static void print_device(const hv_problem *p, hv_solver_opts *o, const float *f, int repeat,
+                         double traffic, double host_seconds)
+{
+    bench_device d;
+    o->backend = HV_BACKEND_OPENCL;
+    hv_status st = bench_device_solve(p, o, f, repeat, &d);
+    if (st) {
+        printf(",\"device_error\":\"%s\"", hv_status_str(st));
+        return;
+    }
+    const double gbs = d.seconds > 0 ? traffic / d.seconds / 1e9 : 0;
+    printf(",\"device\":\"%s\",\"device_setup_seconds\":%.4f,\"device_seconds\":%.5f,"
+           "\"device_event_seconds\":%.5f,\"device_iterations\":%d,\"device_relres\":%.3e,"
+           "\"transfer_seconds\":%.6g,\"host_vs_device\":%.3f,\"dev_copy_gbs\":%.2f,"
+           "\"dev_solve_gbs\":%.2f,\"dev_solve_vs_copy\":%.3f",
+           d.name, d.setup_seconds, d.seconds, d.event_seconds, d.iterations, d.relres,
+           d.transfer_seconds, d.seconds > 0 ? host_seconds / d.seconds : 0, d.copy_gbs, gbs,
+           d.copy_gbs > 0 ? gbs / d.copy_gbs : 0);
+}
+
 static int usage_solve(FILE *out)
 {
     fprintf(out,
@@ -170,7 +194,15 @@ static int usage_solve(FILE *out)
             "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
             "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
             "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
-            "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n");
+            "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n"
+            "--backend opencl adds the device's own figures, from a context and profiling\n"
+            "queue of the benchmark's: device, device_setup_seconds, device_seconds (best\n"
+            "solve with f and u already on the device, hv_opencl_solve), device_event_seconds\n"
+            "(the same between two profiled markers), transfer_seconds (f in and u out as\n"
+            "floats, which the host-array interface adds), host_vs_device (seconds /\n"
+            "device_seconds), dev_copy_gbs (clEnqueueCopyBuffer, read + write, best of five),\n"
+            "dev_solve_gbs (the solve's modelled traffic / device_seconds) and\n"
+            "dev_solve_vs_copy.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -395,6 +427,8 @@ static int bench_solve(int argc, char **argv)
     }
     if (copy)
         printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", copy1_gbs, copy_mb);
+    if (backend == HV_BACKEND_OPENCL)
+        print_device(&p, &o, f, repeat, traffic, seconds);
     if (copy_gbs > 0 && cycle_gbs > 0)
         printf(",\"cycle_vs_copy\":%.3f,\"solve_vs_copy\":%.3f", cycle_gbs / copy_gbs,
                solve_gbs / copy_gbs);

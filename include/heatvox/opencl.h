@@ -15,6 +15,12 @@
 #define HEATVOX_OPENCL_H
 
 #include "core.h"
+#include "solve.h"
+
+#ifndef CL_TARGET_OPENCL_VERSION
+#define CL_TARGET_OPENCL_VERSION 120
+#endif
+#include <CL/cl.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -46,6 +52,35 @@ HV_API hv_status hv_opencl_list_devices(hv_opencl_device *out, int max, int *cou
  * created). HV_BACKEND_AUTO uses it to take a GPU when there is one
  * (hv_backend_resolve in solve.h). */
 HV_API hv_status hv_opencl_probe(hv_opencl_device *out);
+
+/* ---- fields on the device ----
+ * A solver on the caller's OpenCL context, device and in-order command queue,
+ * whose right-hand side and solution are buffers of floats (the problem's
+ * cells, x fastest) on that context: a simulation keeps its grids on the
+ * device between steps, and only a few scalars per iteration cross to the
+ * host. Everything that does not change between solves (the hierarchy, the
+ * masks, the kernels) is made here, once; heatvox's kernels are built once
+ * per context and kept while a solver on it lives. The context and queue are
+ * retained until hv_solver_destroy. opts may be NULL (defaults); its backend
+ * is ignored. HV_ERR_INVALID_ARG for a queue of another context or device, or
+ * an out-of-order queue. */
+HV_API hv_status hv_opencl_solver_create(hv_solver **out, const hv_problem *p,
+                                         const hv_solver_opts *opts, cl_context ctx,
+                                         cl_device_id dev, cl_command_queue queue);
+
+/* Solves A u = f on the device: f and u are float buffers of at least the
+ * problem's cells on the solver's context (u holds the guess when
+ * opts->nonzero_guess). The commands go to the solver's queue after what the
+ * caller enqueued there and have finished when it returns. Also for solvers
+ * of hv_solver_create with the opencl backend, on the context that
+ * hv_opencl_solver_queue names. info may be NULL. */
+HV_API hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info);
+
+/* The context, device and queue an opencl solver's commands go to (not
+ * retained for the caller; any may be NULL). HV_ERR_UNSUPPORTED for a solver
+ * of another backend. */
+HV_API hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_device_id *dev,
+                                        cl_command_queue *queue);
 
 #ifdef __cplusplus
 }

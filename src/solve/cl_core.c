@@ -264,6 +264,7 @@ struct hv_cl_shared {
     cl_device_id dev;
     int fp64;
     cl_context ctx;
+    int adopted;     /* ctx is a caller's (retained), not one heatvox made */
     cl_program prog; /* the solver's kernels */
     modprog *mods;   /* modules' programs, built on first use */
 };
@@ -313,11 +314,13 @@ static void build_options(int fp64, char *opts, size_t size)
              fp64 ? " -DHV_FP64=1" : "");
 }
 
+/* The shared state of (context, device, precision): heatvox's own context on
+ * the device (ctx NULL), or the caller's ctx, retained. */
 static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, const char *devname,
-                            hv_cl_shared **out)
+                            cl_context ctx, hv_cl_shared **out)
 {
     for (hv_cl_shared *s = shared_list; s; s = s->next)
-        if (s->dev == dev && s->fp64 == fp64) {
+        if (s->dev == dev && s->fp64 == fp64 && (ctx ? s->ctx == ctx : !s->adopted)) {
             s->refs++;
             *out = s;
             return HV_OK;
@@ -325,13 +328,19 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
     hv_cl_shared *s = calloc(1, sizeof *s);
     if (!s)
         return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
-    cl_context_properties props[] = {CL_CONTEXT_PLATFORM, (cl_context_properties)plat, 0};
-    cl_int e;
-    s->ctx = clCreateContext(props, 1, &dev, NULL, NULL, &e);
+    cl_int e = CL_SUCCESS;
+    if (ctx) {
+        e = clRetainContext(ctx);
+        s->ctx = ctx;
+        s->adopted = 1;
+    } else {
+        cl_context_properties props[] = {CL_CONTEXT_PLATFORM, (cl_context_properties)plat, 0};
+        s->ctx = clCreateContext(props, 1, &dev, NULL, NULL, &e);
+    }
     if (e != CL_SUCCESS) {
         free(s);
-        return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a context on '%s': %s", devname,
-                         hv__cl_strerror(e));
+        return hv__error(HV_ERR_BACKEND, "OpenCL: cannot %s a context on '%s': %s",
+                         ctx ? "retain" : "create", devname, hv__cl_strerror(e));
     }
     const char *src[] = {hv__kernel_common, hv__kernel_mg,    hv__kernel_reduce,
                          hv__kernel_fine,   hv__kernel_faces, hv__kernel_pointwise};
@@ -398,10 +407,94 @@ void hv__cl_close(hv_cl **pcl)
     *pcl = NULL;
 }
 
+static hv_status open_kernels(hv_cl *cl, hv_cl **out);
+
+/* A context, device and queue of the caller's that the next hv__cl_open on
+ * this thread takes (hv__cl_adopt), instead of heatvox's own. */
+static _Thread_local struct {
+    cl_context ctx;
+    cl_device_id dev;
+    cl_command_queue q;
+} adopt;
+
+void hv__cl_adopt(cl_context ctx, cl_device_id dev, cl_command_queue q)
+{
+    adopt.ctx = ctx;
+    adopt.dev = dev;
+    adopt.q = q;
+}
+
+/* The queue must be an in-order queue of dev on ctx: heatvox's commands
+ * depend on the order they are enqueued in. */
+static hv_status check_adopted(cl_context ctx, cl_device_id dev, cl_command_queue q)
+{
+    cl_context qc = NULL;
+    cl_device_id qd = NULL;
+    cl_command_queue_properties props = 0;
+    cl_int e = clGetCommandQueueInfo(q, CL_QUEUE_CONTEXT, sizeof qc, &qc, NULL);
+    if (e == CL_SUCCESS)
+        e = clGetCommandQueueInfo(q, CL_QUEUE_DEVICE, sizeof qd, &qd, NULL);
+    if (e == CL_SUCCESS)
+        e = clGetCommandQueueInfo(q, CL_QUEUE_PROPERTIES, sizeof props, &props, NULL);
+    if (e != CL_SUCCESS)
+        return hv__error(HV_ERR_INVALID_ARG, "OpenCL: the command queue cannot be queried: %s",
+                         hv__cl_strerror(e));
+    if (qc != ctx || qd != dev)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "OpenCL: the command queue belongs to another %s than the one given",
+                         qc != ctx ? "context" : "device");
+    if (props & CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "OpenCL: the command queue runs out of order; heatvox needs an in-order "
+                         "queue");
+    return HV_OK;
+}
+
+/* hv__cl_open on the adopted context, device and queue. */
+static hv_status open_adopted(hv_cl *cl, hv_cl **out)
+{
+    cl_context ctx = adopt.ctx;
+    cl_device_id dev = adopt.dev;
+    cl_command_queue q = adopt.q;
+    hv__cl_adopt(NULL, NULL, NULL);
+    cl_platform_id plat = NULL;
+    hv_status st = check_adopted(ctx, dev, q);
+    if (!st && clGetDeviceInfo(dev, CL_DEVICE_PLATFORM, sizeof plat, &plat, NULL) != CL_SUCCESS)
+        st = hv__error(HV_ERR_INVALID_ARG, "OpenCL: the device cannot be queried");
+    if (st) {
+        free(cl);
+        return st;
+    }
+    device_info(plat, dev, &cl->info);
+    cl->info.platform = cl->info.device = -1;
+    cl->info.selected = 1;
+    const char *no64 = getenv("HEATVOX_OPENCL_FP64");
+    cl->fp64 = cl->info.fp64 && !(no64 && !strcmp(no64, "0"));
+    cl->dev = dev;
+    pthread_mutex_lock(&shared_lock);
+    st = shared_get(plat, dev, cl->fp64, cl->info.name, ctx, &cl->sh);
+    pthread_mutex_unlock(&shared_lock);
+    if (st) {
+        free(cl);
+        return st;
+    }
+    cl->ctx = ctx;
+    cl_int e = clRetainCommandQueue(q);
+    if (e != CL_SUCCESS) {
+        hv__cl_close(&cl);
+        return hv__error(HV_ERR_BACKEND, "OpenCL: cannot retain the command queue: %s",
+                         hv__cl_strerror(e));
+    }
+    cl->q = q;
+    return open_kernels(cl, out);
+}
+
 hv_status hv__cl_open(hv_cl **out)
 {
     *out = NULL;
     hv_cl *cl = calloc(1, sizeof *cl);
+    if (cl && adopt.ctx)
+        return open_adopted(cl, out);
     devlist *L = malloc(sizeof *L);
     if (!cl || !L) {
         free(cl);
@@ -419,7 +512,7 @@ hv_status hv__cl_open(hv_cl **out)
         cl->info.selected = 1;
         cl->fp64 = cl->info.fp64 && !(no64 && !strcmp(no64, "0"));
         cl->dev = L->dev[sel];
-        st = shared_get(L->plat[sel], cl->dev, cl->fp64, cl->info.name, &cl->sh);
+        st = shared_get(L->plat[sel], cl->dev, cl->fp64, cl->info.name, NULL, &cl->sh);
     }
     pthread_mutex_unlock(&shared_lock);
     free(L);
@@ -428,7 +521,6 @@ hv_status hv__cl_open(hv_cl **out)
         return st;
     }
     cl->ctx = cl->sh->ctx;
-    cl->acc = cl->fp64 ? sizeof(cl_double) : sizeof(cl_float);
     cl_int e;
     cl->q = clCreateCommandQueue(cl->ctx, cl->dev, 0, &e);
     if (e != CL_SUCCESS) {
@@ -436,6 +528,15 @@ hv_status hv__cl_open(hv_cl **out)
         return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
                          hv__cl_strerror(e));
     }
+    return open_kernels(cl, out);
+}
+
+/* The end of opening a handle on its context and queue: the solver's kernels
+ * and the device's limits. Closes cl on failure. */
+static hv_status open_kernels(hv_cl *cl, hv_cl **out)
+{
+    cl_int e;
+    cl->acc = cl->fp64 ? sizeof(cl_double) : sizeof(cl_float);
     for (int k = 0; k < HV_K_COUNT; k++) {
         if (k >= HV_K_FIRST_FP64 && !cl->fp64)
             continue;

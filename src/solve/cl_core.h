@@ -111,6 +111,10 @@ typedef struct hv_cl {
  * HEATVOX_OPENCL_FP64=0 builds without double precision even where the device
  * has it (tests use it to exercise the float-only path). */
 hv_status hv__cl_open(hv_cl **out);
+/* The next hv__cl_open on this thread opens on the caller's context, device
+ * and in-order queue (retained by the handle) instead of heatvox's own, and
+ * forgets them; NULLs forget them without an open. */
+void hv__cl_adopt(cl_context ctx, cl_device_id dev, cl_command_queue q);
 void hv__cl_close(hv_cl **cl);
 
 /* Builds a program from sources on cl's device; HV_ERR_BACKEND with the

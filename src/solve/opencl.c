@@ -632,3 +632,73 @@ hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info
     info->backend = HV_BACKEND_OPENCL;
     return st ? st : st2;
 }
+
+/* ---------- the public device entry (heatvox/opencl.h) ---------- */
+
+hv_status hv_opencl_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts,
+                                  cl_context ctx, cl_device_id dev, cl_command_queue queue)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solver_create: out is NULL");
+    *out = NULL;
+    if (!ctx || !dev || !queue)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_solver_create: the context, device and queue are required");
+    hv_solver_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    hv__cl_adopt(ctx, dev, queue);
+    hv_status st = hv_solver_create(out, p, &o);
+    hv__cl_adopt(NULL, NULL, NULL);
+    return st;
+}
+
+/* A float buffer of the solver's cells on its context, or the reason not. */
+static hv_status check_field(const ocl_state *o, cl_mem m, const char *what)
+{
+    size_t bytes = 0;
+    cl_context c = NULL;
+    if (clGetMemObjectInfo(m, CL_MEM_SIZE, sizeof bytes, &bytes, NULL) != CL_SUCCESS ||
+        clGetMemObjectInfo(m, CL_MEM_CONTEXT, sizeof c, &c, NULL) != CL_SUCCESS)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solve: %s is no OpenCL buffer", what);
+    if (c != o->cl->ctx)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_solve: %s lives on another context than the solver's", what);
+    if (bytes < o->s->count * sizeof(float))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_solve: %s holds %zu bytes; %zu cells of float need %zu", what,
+                         bytes, o->s->count, o->s->count * sizeof(float));
+    return HV_OK;
+}
+
+hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+{
+    hv_solve_info local;
+    ocl_state *o = NULL;
+    hv_status st = device_entry("hv_opencl_solve", sv, f, u, info ? info : &local, &o);
+    if (st || (st = check_field(o, f, "f")) || (st = check_field(o, u, "u")))
+        return st;
+    return hv__cl_solver_solve(sv, f, u, info);
+}
+
+hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_device_id *dev,
+                                 cl_command_queue *queue)
+{
+    if (!sv)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solver_queue: sv is NULL");
+    if (hv__solver_ops(sv) != &hv__backend_opencl_ops)
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "hv_opencl_solver_queue: the solver runs on the %s backend, not opencl",
+                         hv_backend_name(hv_solver_backend(sv)));
+    const ocl_state *o = hv__solver_state(sv);
+    if (ctx)
+        *ctx = o->cl->ctx;
+    if (dev)
+        *dev = o->cl->dev;
+    if (queue)
+        *queue = o->cl->q;
+    return HV_OK;
+}

@@ -1,0 +1,301 @@
+/* The public device entry (heatvox/opencl.h): a solver on the caller's
+ * context and queue solves float buffers that stay on the device, and gives
+ * what the host-array interface gives; wrong queues and buffers are refused. */
+#include "heatvox/heatvox.h"
+#include "testlib.h"
+
+#include <check.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static cl_platform_id plat;
+static cl_device_id dev;
+static cl_context ctx;
+static cl_command_queue queue;
+
+/* The device heatvox would take, on a context and queue of the test's own. */
+static int open_device(void)
+{
+    hv_opencl_device d;
+    if (hv_opencl_probe(&d) != HV_OK)
+        return 0;
+    cl_platform_id ps[16];
+    cl_uint np = 0;
+    if (clGetPlatformIDs(16, ps, &np) != CL_SUCCESS || d.platform >= (int)np)
+        return 0;
+    plat = ps[d.platform];
+    cl_device_id ds[16];
+    cl_uint nd = 0;
+    if (clGetDeviceIDs(plat, CL_DEVICE_TYPE_ALL, 16, ds, &nd) != CL_SUCCESS || d.device >= (int)nd)
+        return 0;
+    dev = ds[d.device];
+    cl_int e;
+    ctx = clCreateContext(NULL, 1, &dev, NULL, NULL, &e);
+    if (e != CL_SUCCESS)
+        return 0;
+    queue = clCreateCommandQueue(ctx, dev, 0, &e);
+    return e == CL_SUCCESS;
+}
+
+static cl_mem buffer(size_t n, const float *init)
+{
+    cl_int e;
+    cl_mem m = clCreateBuffer(ctx, CL_MEM_READ_WRITE | (init ? CL_MEM_COPY_HOST_PTR : 0),
+                              n * sizeof(float), (void *)init, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    return m;
+}
+
+/* A 3D problem: a heat step, or Neumann Poisson around a solid ball. */
+static void problem(hv_problem *p, int n, int poisson, uint8_t **solid)
+{
+    const double h = 1.0 / n;
+    hv_problem q = {3, {n, n, n}, h, NULL, poisson ? 0.0 : 1.0, poisson ? 1.0 : 4 * h * h};
+    *solid = NULL;
+    if (poisson) {
+        *solid = calloc((size_t)n * n * n, 1);
+        for (int k = 0; k < n; k++)
+            for (int j = 0; j < n; j++)
+                for (int i = 0; i < n; i++) {
+                    double x = i - n / 2 + 0.5, y = j - n / 2 + 0.5, z = k - n / 2 + 0.5;
+                    (*solid)[i + (size_t)n * (j + (size_t)n * k)] =
+                        x * x + y * y + z * z < n * n / 16.0;
+                }
+        q.solid = *solid;
+    }
+    *p = q;
+}
+
+static double max_rel_diff(const float *a, const float *b, size_t n)
+{
+    double d = 0, m = 0;
+    for (size_t c = 0; c < n; c++) {
+        d = fmax(d, fabs((double)a[c] - b[c]));
+        m = fmax(m, fabs((double)b[c]));
+    }
+    return m > 0 ? d / m : d;
+}
+
+START_TEST(device_fields_should_give_what_host_arrays_give)
+{
+    for (int poisson = 0; poisson <= 1; poisson++) {
+        const int n = 32;
+        const size_t count = (size_t)n * n * n;
+        hv_problem p;
+        uint8_t *solid;
+        problem(&p, n, poisson, &solid);
+        float *f = malloc(count * sizeof *f), *u_host = calloc(count, sizeof *u_host),
+              *u_dev = calloc(count, sizeof *u_dev);
+        tl_fill_random(f, count, 7 + poisson);
+        hv_solver_opts o;
+        hv_solver_opts_default(&o);
+        o.backend = HV_BACKEND_OPENCL;
+        o.tol = 1e-8;
+        hv_solver *host = NULL, *sv = NULL;
+        TL_ASSERT_OK(hv_solver_create(&host, &p, &o));
+        hv_solve_info hi, di;
+        TL_ASSERT_OK(hv_solver_solve(host, f, u_host, &hi));
+        TL_ASSERT_OK(hv_opencl_solver_create(&sv, &p, &o, ctx, dev, queue));
+        cl_context c2 = NULL;
+        cl_command_queue q2 = NULL;
+        TL_ASSERT_OK(hv_opencl_solver_queue(sv, &c2, NULL, &q2));
+        ck_assert(c2 == ctx && q2 == queue);
+        cl_mem fd = buffer(count, f), ud = buffer(count, u_dev);
+        /* Twice: the fields and the solver stay; the answer does not change. */
+        for (int rep = 0; rep < 2; rep++) {
+            TL_ASSERT_OK(hv_opencl_solve(sv, fd, ud, &di));
+            ck_assert_int_eq(di.backend, HV_BACKEND_OPENCL);
+            ck_assert_msg(di.reason == HV_STOP_CONVERGED && di.relres <= 1e-8, "relres %g",
+                          di.relres);
+            ck_assert_int_eq(clEnqueueReadBuffer(queue, ud, CL_TRUE, 0, count * sizeof(float),
+                                                 u_dev, 0, NULL, NULL),
+                             CL_SUCCESS);
+            double d = max_rel_diff(u_dev, u_host, count);
+            ck_assert_msg(d < 1e-5, "%s: device fields differ by %g (relative)",
+                          poisson ? "poisson" : "heat", d);
+            if (solid)
+                for (size_t c = 0; c < count; c++)
+                    ck_assert(!solid[c] || u_dev[c] == 0.0f);
+        }
+        clReleaseMemObject(fd);
+        clReleaseMemObject(ud);
+        hv_solver_destroy(&sv);
+        hv_solver_destroy(&host);
+        free(solid);
+        free(f);
+        free(u_host);
+        free(u_dev);
+    }
+}
+END_TEST
+
+START_TEST(a_solver_of_hv_solver_create_should_take_buffers_on_its_own_context)
+{
+    const int n = 16;
+    const size_t count = (size_t)n * n * n;
+    hv_problem p;
+    uint8_t *solid;
+    problem(&p, n, 0, &solid);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    hv_solver *sv = NULL;
+    TL_ASSERT_OK(hv_solver_create(&sv, &p, &o));
+    cl_context c = NULL;
+    cl_command_queue q = NULL;
+    TL_ASSERT_OK(hv_opencl_solver_queue(sv, &c, NULL, &q));
+    float *f = malloc(count * sizeof *f), *u = calloc(count, sizeof *u);
+    tl_fill_random(f, count, 3);
+    cl_int e;
+    cl_mem fd =
+        clCreateBuffer(c, CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, count * sizeof(float), f, &e);
+    cl_mem ud = clCreateBuffer(c, CL_MEM_READ_WRITE, count * sizeof(float), NULL, &e);
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_opencl_solve(sv, fd, ud, &info));
+    ck_assert(info.reason == HV_STOP_CONVERGED);
+    /* A buffer of another context is refused. */
+    cl_mem other = buffer(count, NULL);
+    ck_assert_int_eq(hv_opencl_solve(sv, other, ud, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "another context"));
+    clReleaseMemObject(other);
+    clReleaseMemObject(fd);
+    clReleaseMemObject(ud);
+    hv_solver_destroy(&sv);
+    free(f);
+    free(u);
+}
+END_TEST
+
+START_TEST(wrong_queues_buffers_and_backends_should_be_refused)
+{
+    const int n = 16;
+    const size_t count = (size_t)n * n * n;
+    hv_problem p;
+    uint8_t *solid;
+    problem(&p, n, 0, &solid);
+    hv_solver *sv = NULL;
+    /* A queue of another context. */
+    cl_int e;
+    cl_context other = clCreateContext(NULL, 1, &dev, NULL, NULL, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    cl_command_queue oq = clCreateCommandQueue(other, dev, 0, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    ck_assert_int_eq(hv_opencl_solver_create(&sv, &p, NULL, ctx, dev, oq), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "another context"));
+    ck_assert_ptr_null(sv);
+    clReleaseCommandQueue(oq);
+    clReleaseContext(other);
+    /* An out-of-order queue, where the device offers one. */
+    cl_command_queue ooo =
+        clCreateCommandQueue(ctx, dev, CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE, &e);
+    if (e == CL_SUCCESS) {
+        ck_assert_int_eq(hv_opencl_solver_create(&sv, &p, NULL, ctx, dev, ooo), HV_ERR_INVALID_ARG);
+        ck_assert_ptr_nonnull(strstr(hv_last_error(), "in-order"));
+        clReleaseCommandQueue(ooo);
+    }
+    ck_assert_int_eq(hv_opencl_solver_create(&sv, &p, NULL, NULL, dev, queue), HV_ERR_INVALID_ARG);
+    /* A buffer too small. */
+    TL_ASSERT_OK(hv_opencl_solver_create(&sv, &p, NULL, ctx, dev, queue));
+    cl_mem small = buffer(count - 1, NULL), ud = buffer(count, NULL);
+    ck_assert_int_eq(hv_opencl_solve(sv, small, ud, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "bytes"));
+    clReleaseMemObject(small);
+    clReleaseMemObject(ud);
+    hv_solver_destroy(&sv);
+    /* A solver of another backend. */
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    TL_ASSERT_OK(hv_solver_create(&sv, &p, &o));
+    cl_mem a = buffer(count, NULL), b = buffer(count, NULL);
+    ck_assert_int_eq(hv_opencl_solve(sv, a, b, NULL), HV_ERR_UNSUPPORTED);
+    ck_assert_int_eq(hv_opencl_solver_queue(sv, NULL, NULL, NULL), HV_ERR_UNSUPPORTED);
+    clReleaseMemObject(a);
+    clReleaseMemObject(b);
+    hv_solver_destroy(&sv);
+}
+END_TEST
+
+/* A number after "key": in a JSON line, or -1 when absent. */
+static double json_num(const char *line, const char *key)
+{
+    char pat[64];
+    snprintf(pat, sizeof pat, "\"%s\":", key);
+    const char *p = strstr(line, pat);
+    return p ? atof(p + strlen(pat)) : -1;
+}
+
+START_TEST(bench_solve_should_report_the_device_and_its_own_figures)
+{
+    const char *bin = tl_heatvox_bin();
+    ck_assert_msg(bin != NULL, "build/heatvox not found (set HEATVOX_BIN)");
+    char cmd[4200], line[8192] = "";
+    snprintf(cmd, sizeof cmd, "'%s' bench solve --n 24 --backend opencl --repeat 1", bin);
+    FILE *pp = popen(cmd, "r");
+    ck_assert_ptr_nonnull(pp);
+    ck_assert_ptr_nonnull(fgets(line, sizeof line, pp));
+    ck_assert_int_eq(pclose(pp), 0);
+    ck_assert_msg(strstr(line, "\"device\":\""), "%s", line);
+    const char *keys[] = {"device_seconds", "device_event_seconds", "transfer_seconds",
+                          "dev_copy_gbs",   "dev_solve_gbs",        "host_vs_device"};
+    for (size_t k = 0; k < sizeof keys / sizeof keys[0]; k++)
+        ck_assert_msg(json_num(line, keys[k]) > 0, "%s missing or not positive: %s", keys[k], line);
+    ck_assert_msg(json_num(line, "device_relres") <= 1e-6, "%s", line);
+    ck_assert_int_eq((int)json_num(line, "device_iterations"), (int)json_num(line, "iterations"));
+}
+END_TEST
+
+/* The whole stdout of `env ENV heatvox ARGS` into out. */
+static int run_out(const char *env, const char *args, char *out, size_t size)
+{
+    char cmd[4500];
+    snprintf(cmd, sizeof cmd, "env %s '%s' %s", env, tl_heatvox_bin(), args);
+    FILE *pp = popen(cmd, "r");
+    ck_assert_ptr_nonnull(pp);
+    size_t n = fread(out, 1, size - 1, pp);
+    out[n] = 0;
+    return pclose(pp);
+}
+
+START_TEST(devices_should_say_what_auto_takes_and_why)
+{
+    hv_opencl_device d;
+    TL_ASSERT_OK(hv_opencl_probe(&d));
+    char out[8192];
+    ck_assert_int_eq(run_out("HEATVOX_AUTO_OPENCL=", "devices", out, sizeof out), 0);
+    if (d.gpu)
+        ck_assert_msg(strstr(out, "auto: opencl") && strstr(out, "is a GPU"), "%s", out);
+    else
+        ck_assert_msg(strstr(out, "auto: the CPU") && strstr(out, "is not a GPU"), "%s", out);
+    ck_assert_int_eq(run_out("HEATVOX_AUTO_OPENCL=1", "devices", out, sizeof out), 0);
+    ck_assert_msg(strstr(out, "auto: opencl") && strstr(out, "any size"), "%s", out);
+    ck_assert_int_eq(run_out("HEATVOX_AUTO_OPENCL=0", "devices --json", out, sizeof out), 0);
+    ck_assert_msg(strstr(out, "{\"auto\":\"cpu\"") && strstr(out, "HEATVOX_AUTO_OPENCL=0"), "%s",
+                  out);
+}
+END_TEST
+
+int main(int argc, char **argv)
+{
+    (void)argc;
+    tl_pocl_cache(argv[0]);
+    Suite *s = suite_create("opencl_device");
+    TCase *tc = tcase_create("device");
+    tcase_set_timeout(tc, 300);
+    const int have = open_device();
+    const char *why = "no OpenCL device";
+    TL_ADD_IF(tc, device_fields_should_give_what_host_arrays_give, have, why);
+    TL_ADD_IF(tc, a_solver_of_hv_solver_create_should_take_buffers_on_its_own_context, have, why);
+    TL_ADD_IF(tc, wrong_queues_buffers_and_backends_should_be_refused, have, why);
+    TL_ADD_IF(tc, bench_solve_should_report_the_device_and_its_own_figures, have, why);
+    TL_ADD_IF(tc, devices_should_say_what_auto_takes_and_why, have, why);
+    suite_add_tcase(s, tc);
+    int rc = tl_run(s);
+    if (queue)
+        clReleaseCommandQueue(queue);
+    if (ctx)
+        clReleaseContext(ctx);
+    return rc;
+}

@@ -1,0 +1,178 @@
+/* The device's own figures for `heatvox bench solve --backend opencl`: the
+ * solve with its fields already on the device (hv_opencl_solve on a context
+ * and profiling queue of the benchmark's own), the transfers that the
+ * host-array interface adds, apart, and the device's copy bandwidth
+ * (clEnqueueCopyBuffer, read + write) measured in the same run, so that the
+ * solve's modelled traffic can be set against it. */
+#include "bench_device.h"
+
+#include <stdio.h>
+#include <string.h>
+
+/* Seconds between the ends of two profiled markers or commands. */
+static double event_span(cl_event a, cl_event b)
+{
+    cl_ulong t0 = 0, t1 = 0;
+    if (clGetEventProfilingInfo(a, CL_PROFILING_COMMAND_END, sizeof t0, &t0, NULL) != CL_SUCCESS ||
+        clGetEventProfilingInfo(b, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS)
+        return 0;
+    return (double)(t1 - t0) * 1e-9;
+}
+
+/* A command's own duration on the device, from its profiling event. */
+static double event_seconds(cl_event e)
+{
+    cl_ulong t0 = 0, t1 = 0;
+    clWaitForEvents(1, &e);
+    if (clGetEventProfilingInfo(e, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL) !=
+            CL_SUCCESS ||
+        clGetEventProfilingInfo(e, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS)
+        return 0;
+    return (double)(t1 - t0) * 1e-9;
+}
+
+/* The device heatvox would take, with a context and a profiling queue. */
+static hv_status open_device(bench_device *d, cl_context *ctx, cl_device_id *dev,
+                             cl_command_queue *q)
+{
+    hv_opencl_device info;
+    hv_status st = hv_opencl_probe(&info);
+    if (st)
+        return st;
+    snprintf(d->name, sizeof d->name, "%s", info.name);
+    cl_platform_id ps[64];
+    cl_device_id ds[64];
+    cl_uint np = 0, nd = 0;
+    if (clGetPlatformIDs(64, ps, &np) != CL_SUCCESS || info.platform >= (int)np ||
+        clGetDeviceIDs(ps[info.platform], CL_DEVICE_TYPE_ALL, 64, ds, &nd) != CL_SUCCESS ||
+        info.device >= (int)nd)
+        return HV_ERR_BACKEND;
+    *dev = ds[info.device];
+    cl_int e;
+    *ctx = clCreateContext(NULL, 1, dev, NULL, NULL, &e);
+    if (e != CL_SUCCESS)
+        return HV_ERR_BACKEND;
+    *q = clCreateCommandQueue(*ctx, *dev, CL_QUEUE_PROFILING_ENABLE, &e);
+    if (e != CL_SUCCESS) {
+        clReleaseContext(*ctx);
+        return HV_ERR_BACKEND;
+    }
+    return HV_OK;
+}
+
+/* Best of five device-to-device copies of `bytes`, in GB/s (read + write). */
+static double copy_gbs(cl_context ctx, cl_command_queue q, size_t bytes)
+{
+    cl_int e1, e2;
+    cl_mem a = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, NULL, &e1);
+    cl_mem b = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, NULL, &e2);
+    double best = 0;
+    if (e1 == CL_SUCCESS && e2 == CL_SUCCESS) {
+        const cl_uchar one = 1;
+        clEnqueueFillBuffer(q, a, &one, 1, 0, bytes, 0, NULL, NULL);
+        for (int t = 0; t < 6; t++) {
+            cl_event ev;
+            if (clEnqueueCopyBuffer(q, a, b, 0, 0, bytes, 0, NULL, &ev) != CL_SUCCESS)
+                break;
+            double s = event_seconds(ev);
+            clReleaseEvent(ev);
+            if (t > 0 && s > 0 && 2.0 * bytes / s / 1e9 > best)
+                best = 2.0 * bytes / s / 1e9;
+        }
+    }
+    if (e1 == CL_SUCCESS)
+        clReleaseMemObject(a);
+    if (e2 == CL_SUCCESS)
+        clReleaseMemObject(b);
+    return best;
+}
+
+/* Repeat solves with the fields on the device, after a warm-up: the best
+ * wall time (the call returns with its commands finished) and, for that run,
+ * the device time between two markers around it. */
+static hv_status time_device(hv_solver *sv, cl_command_queue q, cl_mem f, cl_mem u, int repeat,
+                             bench_device *d)
+{
+    d->seconds = 1e30;
+    for (int r = 0; r <= repeat; r++) {
+        cl_event m0, m1;
+        clEnqueueMarkerWithWaitList(q, 0, NULL, &m0);
+        clFinish(q);
+        hv_solve_info info;
+        double t0 = hv_now();
+        hv_status st = hv_opencl_solve(sv, f, u, &info);
+        double t = hv_now() - t0;
+        clEnqueueMarkerWithWaitList(q, 0, NULL, &m1);
+        clFinish(q);
+        double ev = event_span(m0, m1);
+        clReleaseEvent(m0);
+        clReleaseEvent(m1);
+        if (st)
+            return st;
+        if ((r > 0 || repeat == 0) && t < d->seconds) {
+            d->seconds = t;
+            d->event_seconds = ev;
+            d->iterations = info.iterations;
+            d->relres = info.relres;
+        }
+    }
+    return HV_OK;
+}
+
+hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const float *f,
+                             int repeat, bench_device *d)
+{
+    memset(d, 0, sizeof *d);
+    cl_context ctx;
+    cl_device_id dev;
+    cl_command_queue q;
+    hv_status st = open_device(d, &ctx, &dev, &q);
+    if (st)
+        return st;
+    size_t count = (size_t)p->n[0] * p->n[1] * (p->dim == 3 ? p->n[2] : 1);
+    const size_t bytes = count * sizeof(float);
+    cl_int e1, e2;
+    cl_mem fd = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, NULL, &e1);
+    cl_mem ud = clCreateBuffer(ctx, CL_MEM_READ_WRITE, bytes, NULL, &e2);
+    hv_solver *sv = NULL;
+    if (e1 != CL_SUCCESS || e2 != CL_SUCCESS) {
+        st = HV_ERR_NOMEM;
+        goto out;
+    }
+    /* The transfers of the host-array interface: f in, u out, as floats. */
+    cl_event w, r;
+    clEnqueueWriteBuffer(q, fd, CL_TRUE, 0, bytes, f, 0, NULL, &w);
+    float *back = hv_malloc(bytes);
+    if (!back) {
+        clReleaseEvent(w);
+        st = HV_ERR_NOMEM;
+        goto out;
+    }
+    clEnqueueReadBuffer(q, fd, CL_TRUE, 0, bytes, back, 0, NULL, &r);
+    d->transfer_seconds = event_seconds(w) + event_seconds(r);
+    clReleaseEvent(w);
+    clReleaseEvent(r);
+    hv_free(back);
+    double t0 = hv_now();
+    if ((st = hv_opencl_solver_create(&sv, p, o, ctx, dev, q)))
+        goto out;
+    d->setup_seconds = hv_now() - t0;
+    if ((st = time_device(sv, q, fd, ud, repeat, d)))
+        goto out;
+    /* The copy reference: at least 256 MiB, as the host's, where it fits. */
+    cl_ulong mem = 0;
+    clGetDeviceInfo(dev, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof mem, &mem, NULL);
+    size_t cb = bytes > (256u << 20) ? bytes : (256u << 20);
+    if (mem && cb > mem / 2)
+        cb = (size_t)(mem / 2);
+    d->copy_gbs = copy_gbs(ctx, q, cb);
+out:
+    hv_solver_destroy(&sv);
+    if (e1 == CL_SUCCESS)
+        clReleaseMemObject(fd);
+    if (e2 == CL_SUCCESS)
+        clReleaseMemObject(ud);
+    clReleaseCommandQueue(q);
+    clReleaseContext(ctx);
+    return st;
+}

@@ -1,0 +1,24 @@
+/* The device's own figures for heatvox bench solve --backend opencl
+ * (tools/bench_device.c). */
+#ifndef HV_TOOLS_BENCH_DEVICE_H
+#define HV_TOOLS_BENCH_DEVICE_H
+
+#include <heatvox/heatvox.h>
+
+typedef struct bench_device {
+    char name[128];
+    double setup_seconds;    /* hv_opencl_solver_create */
+    double seconds;          /* best solve with the fields on the device (wall) */
+    double event_seconds;    /* that solve between two profiled markers */
+    double transfer_seconds; /* f to the device and u back, as floats (events) */
+    double copy_gbs;         /* clEnqueueCopyBuffer, read + write, best of five */
+    int iterations;
+    double relres;
+} bench_device;
+
+/* Solves p (options o) on the device heatvox would take, on a context and
+ * profiling queue of its own, R times after a warm-up. */
+hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const float *f,
+                             int repeat, bench_device *d);
+
+#endif
