@@ -93,10 +93,21 @@ START_TEST(device_fields_should_give_what_host_arrays_give)
         hv_solver_opts_default(&o);
         o.backend = HV_BACKEND_OPENCL;
         o.tol = 1e-8;
-        hv_solver *host = NULL, *sv = NULL;
+        hv_solver *host = NULL, *sv = NULL, *mg = NULL;
         TL_ASSERT_OK(hv_solver_create(&host, &p, &o));
         hv_solve_info hi, di;
         TL_ASSERT_OK(hv_solver_solve(host, f, u_host, &hi));
+        /* The CPU multigrid on the same problem: an independent answer. */
+        float *u_mg = calloc(count, sizeof *u_mg);
+        hv_solver_opts om = o;
+        om.backend = HV_BACKEND_MG;
+        TL_ASSERT_OK(hv_solver_create(&mg, &p, &om));
+        TL_ASSERT_OK(hv_solver_solve(mg, f, u_mg, NULL));
+        double dm = max_rel_diff(u_host, u_mg, count);
+        ck_assert_msg(dm < 1e-5, "%s: host arrays on opencl differ from mg by %g",
+                      poisson ? "poisson" : "heat", dm);
+        hv_solver_destroy(&mg);
+        free(u_mg);
         TL_ASSERT_OK(hv_opencl_solver_create(&sv, &p, &o, ctx, dev, queue));
         cl_context c2 = NULL;
         cl_command_queue q2 = NULL;

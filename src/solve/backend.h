@@ -34,6 +34,12 @@ typedef struct hv_backend_ops {
     void (*destroy)(void *state);
     /* Fills levels, sizes, traffic model and memory; NULL: the front end reports one level. */
     void (*stats)(const void *state, hv_solver_stats *st);
+    /* The float interface straight, where the backend keeps its own copies
+     * (opencl: floats to the device and back, once each way): f as the
+     * caller gave it (finite; not projected, not zeroed on solid cells), u
+     * as solve's. HV_ERR_UNSUPPORTED, with no message, sends the front end
+     * the double way; NULL always does. */
+    hv_status (*solve_f)(void *state, const float *f, float *u, hv_solve_info *info);
 } hv_backend_ops;
 
 /* Every backend always builds and is referenced strongly: a weak undefined

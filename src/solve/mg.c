@@ -516,4 +516,5 @@ static void mg_stats(const void *state, hv_solver_stats *st)
     hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, st);
 }
 
-const hv_backend_ops hv__backend_mg_ops = {"mg", mg_create, mg_solve, NULL, mg_destroy, mg_stats};
+const hv_backend_ops hv__backend_mg_ops = {"mg",       mg_create, mg_solve, NULL,
+                                           mg_destroy, mg_stats,  NULL};

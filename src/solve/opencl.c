@@ -39,6 +39,7 @@ typedef struct ocl_state {
     /* device path */
     cl_mem v[NVEC];    /* double fine vectors */
     cl_mem S;          /* double scalars */
+    cl_mem ff, uf;     /* float f and u of the float interface, made on first use */
     cl_mem part;       /* double partial sums */
     hv_cl_regions reg; /* Poisson projections */
     /* host path */
@@ -55,6 +56,8 @@ static void ocl_destroy(void *state)
     for (int i = 0; i < NVEC; i++)
         hv__cl_free(&o->v[i]);
     hv__cl_free(&o->S);
+    hv__cl_free(&o->ff);
+    hv__cl_free(&o->uf);
     hv__cl_free(&o->part);
     hv__cl_regions_destroy(&o->reg);
     if (o->mg.cl)
@@ -459,8 +462,10 @@ static void ocl_stats(const void *state, hv_solver_stats *st)
                        o->use_pcg, st);
 }
 
-const hv_backend_ops hv__backend_opencl_ops = {"opencl", ocl_create,  ocl_solve,
-                                               NULL,     ocl_destroy, ocl_stats};
+static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_info *info);
+
+const hv_backend_ops hv__backend_opencl_ops = {"opencl",    ocl_create, ocl_solve,  NULL,
+                                               ocl_destroy, ocl_stats,  ocl_solve_f};
 
 /* ---------- the device AUTO may take (backend.h) ---------- */
 
@@ -564,6 +569,29 @@ static hv_status device_solve(ocl_state *o, hv_solve_info *info)
     return solve_iterate(o, info, fn);
 }
 
+/* Whether float fields solve on the device as they are: fp64 there, and no
+ * masked heat step (whose right-hand side needs zeroing on solid cells). */
+static int device_takes_floats(const ocl_state *o)
+{
+    return o->dev64 && !(o->s->p.solid && o->s->p.alpha != 0);
+}
+
+/* The float fields f and u on the device solved there (device_takes_floats). */
+static hv_status solve_floats(ocl_state *o, cl_mem f, cl_mem u, hv_solve_info *info)
+{
+    const hv_setup *s = o->s;
+    hv_cl *cl = o->cl;
+    const size_t n = s->count;
+    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n); /* Poisson: the projection zeroes solids */
+    if (s->o.nonzero_guess)
+        cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
+    hv_status st = device_solve(o, info);
+    if (!st)
+        cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
+    hv_status st2 = hv__cl_finish(cl);
+    return st ? st : st2;
+}
+
 hv_status hv__cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
 {
     hv_solve_info local;
@@ -573,22 +601,35 @@ hv_status hv__cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *
     hv_status st = device_entry("hv__cl_solver_solve", sv, f, u, info, &o);
     if (st)
         return st;
-    const hv_setup *s = o->s;
-    if (!o->dev64 || (s->p.solid && s->p.alpha != 0))
+    if (!device_takes_floats(o))
         return solve_cl_via_host(sv, o, f, u, info);
-    hv_cl *cl = o->cl;
-    const size_t n = s->count;
     double t0 = hv_now();
-    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n); /* Poisson: the projection zeroes solids */
-    if (s->o.nonzero_guess)
-        cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
-    st = device_solve(o, info);
-    if (!st)
-        cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
-    hv_status st2 = hv__cl_finish(cl);
+    st = solve_floats(o, f, u, info);
     info->seconds = hv_now() - t0;
     info->backend = HV_BACKEND_OPENCL;
-    return st ? st : st2;
+    return st;
+}
+
+/* The host's float interface: f to the device and u back as floats, once
+ * each way (half the bytes of the double way), solved as device fields. */
+static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_info *info)
+{
+    ocl_state *o = state;
+    if (!device_takes_floats(o))
+        return HV_ERR_UNSUPPORTED;
+    hv_cl *cl = o->cl;
+    const size_t bytes = o->s->count * sizeof(float);
+    hv_status st;
+    if ((!o->ff && (st = hv__cl_alloc(cl, bytes, NULL, &o->ff))) ||
+        (!o->uf && (st = hv__cl_alloc(cl, bytes, NULL, &o->uf))))
+        return st;
+    hv__cl_write(cl, o->ff, 0, bytes, f);
+    if (o->s->o.nonzero_guess)
+        hv__cl_write(cl, o->uf, 0, bytes, u);
+    if ((st = solve_floats(o, o->ff, o->uf, info)))
+        return st;
+    hv__cl_read(cl, o->uf, 0, bytes, u);
+    return hv__cl_check(cl);
 }
 
 /* v = 0 on solid cells (level-0 weight a == 0); nothing on plain grids. */

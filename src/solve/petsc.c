@@ -331,8 +331,8 @@ static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_i
     HV_PETSC_QUIETLY(petsc_solve_body(state, f, u, info));
 }
 
-const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solve,
-                                              NULL,    petsc_destroy, NULL};
+const hv_backend_ops hv__backend_petsc_ops = {"petsc",       petsc_create, petsc_solve, NULL,
+                                              petsc_destroy, NULL,         NULL};
 
 int hv_petsc_available(void) { return 1; }
 
@@ -413,8 +413,8 @@ static hv_status petsc_solve(void *state, const double *f, double *u, hv_solve_i
 
 static void petsc_destroy(void *state) { (void)state; }
 
-const hv_backend_ops hv__backend_petsc_ops = {"petsc", petsc_create,  petsc_solve,
-                                              NULL,    petsc_destroy, NULL};
+const hv_backend_ops hv__backend_petsc_ops = {"petsc",       petsc_create, petsc_solve, NULL,
+                                              petsc_destroy, NULL,         NULL};
 
 int hv_petsc_available(void) { return 0; }
 hv_status hv_petsc_option(const char *name, const char *value)

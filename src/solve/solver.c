@@ -289,7 +289,19 @@ hv_status hv_solver_solve(hv_solver *sv, const float *f, float *u, hv_solve_info
         return hv__error(HV_ERR_INVALID_ARG, "hv_solver_solve: NULL argument");
     size_t n = sv->setup.count;
     hv_status st = hv_check_finite(f, n, "the right-hand side");
-    if (st || (st = ensure_buffers(sv)))
+    if (st)
+        return st;
+    if (sv->ops->solve_f) {
+        hv_solve_info local, *in = info ? info : &local;
+        memset(in, 0, sizeof *in);
+        double t0 = hv_now();
+        st = sv->ops->solve_f(sv->state, f, u, in);
+        in->seconds = hv_now() - t0;
+        in->backend = sv->backend;
+        if (st != HV_ERR_UNSUPPORTED)
+            return st;
+    }
+    if ((st = ensure_buffers(sv)))
         return st;
     /* Without a guess every backend sets u itself (clearing it here would be
      * one more pass over a double array). */
