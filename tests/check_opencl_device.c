@@ -288,6 +288,36 @@ START_TEST(devices_should_say_what_auto_takes_and_why)
 }
 END_TEST
 
+START_TEST(commands_on_the_device_should_name_it)
+{
+    hv_opencl_device d;
+    TL_ASSERT_OK(hv_opencl_probe(&d));
+    char dir[] = "/tmp/hv_check_opencl_device_XXXXXX", args[600], out[8192], want[200];
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    snprintf(args, sizeof args, "%s/src.txt", dir);
+    FILE *f = fopen(args, "w");
+    fputs("0 0 0\n", f);
+    fclose(f);
+    snprintf(want, sizeof want, "\"device\":\"%s\"", d.name);
+    snprintf(
+        args, sizeof args,
+        "distance --sources %s/src.txt --obstacles none --res 16 --bbox -1 -1 -1 1 1 1 -o %s/d.vdb "
+        "--backend opencl",
+        dir, dir);
+    ck_assert_int_eq(run_out("X=", args, out, sizeof out), 0);
+    ck_assert_msg(strstr(out, want), "%s", out);
+    ck_assert_int_eq(run_out("X=", "bench extend --n 16 --backend opencl", out, sizeof out), 0);
+    ck_assert_msg(strstr(out, want), "%s", out);
+    snprintf(
+        args, sizeof args,
+        "distance --sources %s/src.txt --obstacles none --res 16 --bbox -1 -1 -1 1 1 1 -o %s/d.vdb",
+        dir, dir);
+    ck_assert_int_eq(run_out("X=", args, out, sizeof out), 0);
+    ck_assert_msg(!strstr(out, "\"device\""), "%s", out);
+    tl_rm_rf(dir);
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -302,6 +332,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, wrong_queues_buffers_and_backends_should_be_refused, have, why);
     TL_ADD_IF(tc, bench_solve_should_report_the_device_and_its_own_figures, have, why);
     TL_ADD_IF(tc, devices_should_say_what_auto_takes_and_why, have, why);
+    TL_ADD_IF(tc, commands_on_the_device_should_name_it, have, why);
     suite_add_tcase(s, tc);
     int rc = tl_run(s);
     if (queue)

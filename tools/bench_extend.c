@@ -359,6 +359,7 @@ int bench_extend(int argc, char **argv)
         printf(",\"out_band\":%g", out_band);
     if (is_mesh)
         printf(",\"sdf_seconds\":%.4f", sdf_seconds);
+    cli_json_device(backend);
     printf("}\n");
     fflush(stdout);
     for (int q = 0; q < 3; q++) {

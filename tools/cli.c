@@ -72,6 +72,20 @@ int cli_check_ext(const char *cmd, const char *opt, const char *path, const char
                            opt, path, list);
 }
 
+void cli_json_device(hv_backend b)
+{
+    hv_opencl_device d;
+    if (b != HV_BACKEND_OPENCL || hv_opencl_probe(&d) != HV_OK)
+        return;
+    printf(",\"device\":\"");
+    for (const char *s = d.name; *s; s++)
+        if (*s == '"' || *s == '\\')
+            printf("\\%c", *s);
+        else if ((unsigned char)*s >= 0x20)
+            putchar(*s);
+    printf("\",\"device_gpu\":%s", d.gpu ? "true" : "false");
+}
+
 int cli_info(const char *fmt, ...)
 {
     if (cli_verbose < 1)

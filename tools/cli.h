@@ -67,6 +67,9 @@ typedef struct cli_bench_mesh_args {
 int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
                               cli_bench_mesh_args *out);
 /* With -v: prints the message on stderr (no newline added). Returns 0. */
+/* Prints ,"device":"NAME","device_gpu":BOOL into a JSON line being written
+ * when b is the opencl backend (the device it runs on); nothing otherwise. */
+void cli_json_device(hv_backend b);
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
 #endif

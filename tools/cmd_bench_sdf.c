@@ -104,6 +104,7 @@ int cmd_bench_sdf(int argc, char **argv)
                "\"inside_agreement\":%.5f",
                ref_seconds, band_best.t_total / ref_seconds, best.t_total / ref_seconds,
                (double)agree / cells);
+    cli_json_device(band_best.backend);
     printf("}\n");
     hv_grid_destroy(&phi);
     hv_grid_destroy(&ref);

@@ -611,15 +611,18 @@ int cmd_distance(int argc, char **argv)
     }
     if ((rc = cli_commit(CMD, &co)) != 0)
         goto done;
-    if (cli_verbose >= 0)
+    if (cli_verbose >= 0) {
         printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
                "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
                "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
-               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f}\n",
+               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f",
                g->n[0], g->n[1], g->n[2], g->h, st_d.stages, st_d.source_cells, st_d.regions,
                st_d.unreachable_cells, st_d.dead_faces, hv_backend_name(st_d.backend),
                st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
                hv_now() - t_start);
+        cli_json_device(st_d.backend);
+        printf("}\n");
+    }
 done:
     if (!released) /* the other ranks wait in hv_petsc_distance_block: release them */
         hv_petsc_distance_block(NULL, NULL, NULL, NULL);
