@@ -1,8 +1,9 @@
 # heatvox: make (library + command), make check, make bench, make demo,
 # make install PREFIX=..., make sanitize, make format.
 
-# Every target builds in parallel on all CPUs unless -j is given.
-ifeq ($(filter -j%,$(MAKEFLAGS)),)
+# Every target builds in parallel on all CPUs unless -j is given (at the top
+# level only: sub-makes share its job server).
+ifeq ($(MAKELEVEL)$(filter -j%,$(MAKEFLAGS)),0)
 MAKEFLAGS += -j$(shell nproc 2>/dev/null || echo 2)
 endif
 
@@ -269,7 +270,8 @@ mpi-check: mpi
 	mkdir -p out; \
 	sed -n '/^## Distributed runs/,/^## Library/p' README.md | \
 	  awk '/^```sh/{f=1;next} /^```/{f=0} f' | \
-	  sed -e 's|^mpirun --oversubscribe |$(MPI_RUN) |' -e '/^make mpi$$/d' -e '/^export /d' > $(MPI_BUILD)/readme_mpi.sh; \
+	  sed -e 's|^mpirun --oversubscribe |$(MPI_RUN) |' -e '/^make mpi$$/d' -e '/^export /d' \
+	    -e 's|build-mpi/|$(MPI_BUILD)/|g' > $(MPI_BUILD)/readme_mpi.sh; \
 	bash -e -x $(MPI_BUILD)/readme_mpi.sh > $(MPI_BUILD)/readme_mpi.log 2>&1 || \
 	  { tail -30 $(MPI_BUILD)/readme_mpi.log; bad="$$bad README"; }; \
 	[ -z "$$bad" ] || { echo "mpi-check: failing:$$bad"; exit 1; }; \
