@@ -17,17 +17,7 @@
 static char dir[256];
 static char bin[PATH_MAX];
 
-static void setup(void)
-{
-    const char *b = tl_heatvox_bin();
-    ck_assert_msg(b != NULL, "build/heatvox not found (set HEATVOX_BIN)");
-    ck_assert_ptr_nonnull(realpath(b, bin));
-    snprintf(dir, sizeof dir, "/tmp/hv_check_cli_XXXXXX");
-    ck_assert_ptr_nonnull(mkdtemp(dir));
-    char cmd[5000];
-    snprintf(cmd, sizeof cmd, "'%s' make-scenes '%s/sc' -q", bin, dir);
-    ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
-}
+static void setup(void) { tl_scratch_scenes("check_cli", dir, sizeof dir, bin, sizeof bin); }
 
 static void teardown(void)
 {
@@ -36,18 +26,7 @@ static void teardown(void)
 }
 
 /* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
-static int hv(char *err, size_t errsize, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static int hv(char *err, size_t errsize, const char *fmt, ...)
-{
-    char args[3000], cmd[8000];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
-    return tl_run_cmd(cmd, dir, err, errsize);
-}
+#define hv(err, errsize, ...) tl_hv(dir, bin, err, errsize, __VA_ARGS__)
 
 static int exists(const char *name)
 {

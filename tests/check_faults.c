@@ -41,33 +41,12 @@ static const char *at(const char *name)
 }
 
 /* A scratch directory with the generated scenes in it. */
-static void setup(void)
-{
-    const char *b = tl_heatvox_bin();
-    ck_assert_msg(b != NULL, "build/heatvox not found (set HEATVOX_BIN)");
-    ck_assert_ptr_nonnull(realpath(b, bin));
-    snprintf(dir, sizeof dir, "/tmp/hv_check_faults_XXXXXX");
-    ck_assert_ptr_nonnull(mkdtemp(dir));
-    char cmd[5000];
-    snprintf(cmd, sizeof cmd, "'%s' make-scenes '%s/sc' -q", bin, dir);
-    ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
-}
+static void setup(void) { tl_scratch_scenes("check_faults", dir, sizeof dir, bin, sizeof bin); }
 
 static void teardown(void) { tl_rm_rf(dir); }
 
 /* Runs `heatvox ARGS` in dir; stderr lands in err. Returns the exit code. */
-static int hv(char *err, size_t errsize, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static int hv(char *err, size_t errsize, const char *fmt, ...)
-{
-    char args[3000], cmd[8000];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
-    return tl_run_cmd(cmd, dir, err, errsize);
-}
+#define hv(err, errsize, ...) tl_hv(dir, bin, err, errsize, __VA_ARGS__)
 
 /* Names in dir (not recursive) that start with `.` and hold ".tmp-". */
 static int temporaries_in(const char *d)

@@ -1,6 +1,7 @@
 #include "testlib.h"
 
 #include <dirent.h>
+#include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -137,4 +138,29 @@ void tl_pocl_cache(const char *argv0)
     snprintf(slash ? slash + 1 : dir, sizeof dir - (size_t)(slash ? slash + 1 - dir : 0),
              "../pocl-cache");
     setenv("POCL_CACHE_DIR", dir, 1);
+}
+
+void tl_scratch_scenes(const char *name, char *dir, size_t dirsize, char *bin, size_t binsize)
+{
+    const char *b = tl_heatvox_bin();
+    ck_assert_msg(b != NULL, "build/heatvox not found (set HEATVOX_BIN)");
+    char full[PATH_MAX];
+    ck_assert_ptr_nonnull(realpath(b, full));
+    ck_assert_int_lt(snprintf(bin, binsize, "%s", full), (int)binsize);
+    ck_assert_int_lt(snprintf(dir, dirsize, "/tmp/hv_%s_XXXXXX", name), (int)dirsize);
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    char cmd[2 * PATH_MAX + 64];
+    snprintf(cmd, sizeof cmd, "'%s' make-scenes '%s/sc' -q", bin, dir);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, NULL, 0), 0);
+}
+
+int tl_hv(const char *dir, const char *bin, char *err, size_t errsize, const char *fmt, ...)
+{
+    char args[3000], cmd[8000];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
+    return tl_run_cmd(cmd, dir, err, errsize);
 }

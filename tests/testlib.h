@@ -49,6 +49,15 @@ void tl_rm_rf(const char *path);
  * copied into err (may be NULL); returns its exit code (-1: no exit). */
 int tl_run_cmd(const char *cmd, const char *dir, char *err, size_t errsize);
 
+/* A scratch directory /tmp/hv_<name>_XXXXXX (into dir) holding the scenes of
+ * `heatvox make-scenes` in sc/; bin gets the command's absolute path. Fails
+ * the test when either cannot be had. */
+void tl_scratch_scenes(const char *name, char *dir, size_t dirsize, char *bin, size_t binsize);
+/* Runs `cd dir && 'bin' ARGS` (ARGS from fmt); stderr into err (may be NULL).
+ * Returns the exit code. */
+int tl_hv(const char *dir, const char *bin, char *err, size_t errsize, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+
 #define TL_ASSERT_OK(expr)                                                                         \
     do {                                                                                           \
         hv_status st_ = (expr);                                                                    \
