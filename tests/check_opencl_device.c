@@ -243,7 +243,10 @@ START_TEST(bench_solve_should_report_the_device_and_its_own_figures)
     const char *bin = tl_heatvox_bin();
     ck_assert_msg(bin != NULL, "build/heatvox not found (set HEATVOX_BIN)");
     char cmd[4200], line[8192] = "";
-    snprintf(cmd, sizeof cmd, "'%s' bench solve --n 24 --backend opencl --repeat 1", bin);
+    /* With baffles (PCG, many iterations), so that the device solves the same problem. */
+    snprintf(cmd, sizeof cmd,
+             "'%s' bench solve --n 24 --poisson --obstacle baffles --backend opencl --repeat 1",
+             bin);
     FILE *pp = popen(cmd, "r");
     ck_assert_ptr_nonnull(pp);
     ck_assert_ptr_nonnull(fgets(line, sizeof line, pp));
@@ -255,6 +258,8 @@ START_TEST(bench_solve_should_report_the_device_and_its_own_figures)
         ck_assert_msg(json_num(line, keys[k]) > 0, "%s missing or not positive: %s", keys[k], line);
     ck_assert_msg(json_num(line, "device_relres") <= 1e-6, "%s", line);
     ck_assert_int_eq((int)json_num(line, "device_iterations"), (int)json_num(line, "iterations"));
+    ck_assert_msg(json_num(line, "iterations") > 6, "baffles solved in too few iterations: %s",
+                  line);
 }
 END_TEST
 
