@@ -309,7 +309,7 @@ static void assert_whole_or_absent(const char *const *outs, int n, const char *w
             int w, h;
             st = hv_png_read_rgb(p, &rgb, &w, &h);
             free(rgb);
-        } else if (!strcmp(ext, ".obj")) {
+        } else if (!strcmp(ext, ".obj") || !strcmp(ext, ".ply") || !strcmp(ext, ".stl")) {
             hv_mesh *m = NULL;
             st = hv_mesh_read(p, &m);
             hv_mesh_destroy(&m);
@@ -389,6 +389,9 @@ static const writer writers[] = {
     {"sdf sc/meshes/torus_holes.obj -o t.vdb --preview t.png --res 160 -q", {"t.vdb", "t.png"}, 0},
     {"sdf sc/meshes/torus_holes.obj -o m.vdb --mesh-out m.obj --res 96 -q", {"m.vdb", "m.obj"}, 0},
     {"sdf sc/meshes/torus_holes.obj --mesh-out m.ply --res 80 -q", {"m.ply"}, 0},
+    {"sdf sc/meshes/torus_holes.obj --mesh-out m.stl --npy m.npy --res 64 -q",
+     {"m.stl", "m.npy"},
+     0},
     {"sdf2d sc/curves.txt -o c.exr --png c.png --res 400 -q", {"c.exr", "c.png"}, 0},
     {"extend sc/levelset/sphere_velocity.vdb --levelset sdf --field v -o e.vdb --dense -q",
      {"e.vdb"},
