@@ -229,6 +229,94 @@ START_TEST(wrong_queues_buffers_and_backends_should_be_refused)
 }
 END_TEST
 
+/* phi of a sphere (signed distance) and a vector field that varies, on n^3. */
+static void sphere_case(int n, float *phi, float *v[3])
+{
+    const double h = 1.0 / n;
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                const size_t c = i + (size_t)n * (j + (size_t)n * k);
+                const double x = (i + 0.5) * h - 0.5, y = (j + 0.5) * h - 0.45,
+                             z = (k + 0.5) * h - 0.55;
+                phi[c] = (float)(sqrt(x * x + y * y + z * z) - 0.3);
+                v[0][c] = (float)(1 + x);
+                v[1][c] = (float)(y * z);
+                v[2][c] = (float)(0.5 - x * y);
+            }
+}
+
+START_TEST(an_extender_on_the_callers_context_should_extend_fields_on_the_device)
+{
+    const int n = 32, N[3] = {n, n, n};
+    const size_t count = (size_t)n * n * n;
+    float *phi = malloc(count * sizeof *phi), *v[3], *host[3], *dev_out = malloc(count * 4);
+    for (int a = 0; a < 3; a++) {
+        v[a] = malloc(count * sizeof(float));
+        host[a] = malloc(count * sizeof(float));
+    }
+    sphere_case(n, phi, v);
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    /* The host arrays on the device path: the reference. */
+    hv_extender *he = NULL, *de = NULL;
+    TL_ASSERT_OK(hv_extender_create(&he, 3, N, 1.0 / n, NULL, &o));
+    hv_extend_field hf = {3, {v[0], v[1], v[2]}, {host[0], host[1], host[2]}};
+    TL_ASSERT_OK(hv_extend_many(he, phi, 1, &hf, NULL));
+    /* Fields on the device, on the test's context; twice, the second in place. */
+    TL_ASSERT_OK(hv_opencl_extender_create(&de, 3, N, 1.0 / n, NULL, &o, ctx, dev, queue));
+    cl_context c2 = NULL;
+    TL_ASSERT_OK(hv_opencl_extender_queue(de, &c2, NULL, NULL));
+    ck_assert(c2 == ctx);
+    cl_mem pd = buffer(count, phi), in[3], out[3];
+    for (int a = 0; a < 3; a++) {
+        in[a] = buffer(count, v[a]);
+        out[a] = buffer(count, NULL);
+    }
+    for (int rep = 0; rep < 2; rep++) {
+        hv_opencl_field df = {3, {in[0], in[1], in[2]}, {out[0], out[1], out[2]}};
+        if (rep == 1)
+            memcpy(df.out, df.in, sizeof df.in);
+        hv_extend_stats S;
+        TL_ASSERT_OK(hv_opencl_extend(de, pd, 1, &df, &S));
+        ck_assert_int_gt(S.solves, 0);
+        for (int a = 0; a < 3; a++) {
+            ck_assert_int_eq(clEnqueueReadBuffer(queue, df.out[a], CL_TRUE, 0, count * 4, dev_out,
+                                                 0, NULL, NULL),
+                             CL_SUCCESS);
+            double d = max_rel_diff(dev_out, host[a], count);
+            ck_assert_msg(d < 1e-5, "component %d (run %d): device differs by %g", a, rep, d);
+        }
+    }
+    /* A buffer of another context, an extender on the CPU. */
+    cl_int e;
+    cl_context other = clCreateContext(NULL, 1, &dev, NULL, NULL, &e);
+    cl_mem po = clCreateBuffer(other, CL_MEM_READ_WRITE, count * 4, NULL, &e);
+    hv_opencl_field df = {3, {in[0], in[1], in[2]}, {out[0], out[1], out[2]}};
+    ck_assert_int_eq(hv_opencl_extend(de, po, 1, &df, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "another context"));
+    clReleaseMemObject(po);
+    clReleaseContext(other);
+    hv_extender *ce = NULL;
+    o.backend = HV_BACKEND_MG;
+    TL_ASSERT_OK(hv_extender_create(&ce, 3, N, 1.0 / n, NULL, &o));
+    ck_assert_int_eq(hv_opencl_extend(ce, pd, 1, &df, NULL), HV_ERR_UNSUPPORTED);
+    hv_extender_destroy(&ce);
+    clReleaseMemObject(pd);
+    for (int a = 0; a < 3; a++) {
+        clReleaseMemObject(in[a]);
+        clReleaseMemObject(out[a]);
+        free(v[a]);
+        free(host[a]);
+    }
+    hv_extender_destroy(&de);
+    hv_extender_destroy(&he);
+    free(phi);
+    free(dev_out);
+}
+END_TEST
+
 /* A number after "key": in a JSON line, or -1 when absent. */
 static double json_num(const char *line, const char *key)
 {
@@ -338,6 +426,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, bench_solve_should_report_the_device_and_its_own_figures, have, why);
     TL_ADD_IF(tc, devices_should_say_what_auto_takes_and_why, have, why);
     TL_ADD_IF(tc, commands_on_the_device_should_name_it, have, why);
+    TL_ADD_IF(tc, an_extender_on_the_callers_context_should_extend_fields_on_the_device, have, why);
     suite_add_tcase(s, tc);
     int rc = tl_run(s);
     if (queue)

@@ -158,8 +158,12 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
                              double *thr, hv_extend_stats *S)
 {
     hv_cl *cl = x->cl;
+    /* The level's solver on the extender's context and queue, which may be a
+     * caller's (hv_opencl_extender_create). */
+    hv__cl_adopt(cl->ctx, cl->dev, cl->q);
     hv_status st = hv__extend_level_solver(g->dim, g->n, g->h, g->solid, g->o, HV_BACKEND_OPENCL, l,
                                            lo, bn, &x->sv[l], x->blo[l], x->bn[l]);
+    hv__cl_adopt(NULL, NULL, NULL);
     if (st)
         return st;
     const size_t bcount = (size_t)bn[0] * bn[1] * bn[2];
@@ -204,19 +208,45 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
     return hv__cl_check(cl);
 }
 
-hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
-                            int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S)
+hv_status hv__extend_cl_prepare(hv_extend_cl **state, const hv_extend_grid *g, cl_context ctx,
+                                cl_device_id dev, cl_command_queue queue)
 {
     if (g->count > (size_t)INT32_MAX)
         return hv__error(HV_ERR_UNSUPPORTED,
                          "extend: %zu cells exceed the OpenCL path's 2^31 limit", g->count);
+    if (*state)
+        return HV_OK;
+    if (ctx)
+        hv__cl_adopt(ctx, dev, queue);
+    hv_status st = state_create(state, g);
+    hv__cl_adopt(NULL, NULL, NULL);
+    return st;
+}
+
+/* Room for the fields' input and output planes and the solutions. */
+static hv_status io_planes(hv_extend_cl *x, const hv_extend_grid *g, int nfields,
+                           const hv_extend_field *f, int nrhs)
+{
+    int nout = 0;
+    for (int i = 0; i < nfields; i++)
+        nout += f[i].ncomp;
+    const size_t fb = g->count * sizeof(float);
     hv_status st;
-    if (!*state && (st = state_create(state, g)))
+    if ((st = ensure(x->cl, &x->in, &x->cap_in, (size_t)nout, fb)) ||
+        (st = ensure(x->cl, &x->out, &x->cap_out, (size_t)nout, fb)))
         return st;
-    hv_extend_cl *x = *state;
+    return ensure(x->cl, &x->sol, &x->cap_sol, (size_t)nrhs, fb);
+}
+
+/* The extension once phi is in x->phi and the fields' components in the
+ * planes of x->in (only f[i].ncomp is read): the outputs in x->out. */
+static hv_status run_loaded(hv_extend_cl *x, const hv_extend_grid *g, int nfields,
+                            const hv_extend_field *f, int nrhs, hv_extend_stats *S)
+{
     hv_cl *cl = x->cl;
     const hv_extend_opts *o = g->o;
-    const size_t count = g->count, fb = count * sizeof(float);
+    const size_t count = g->count;
+    hv_status st;
     int nout = 0;
     cl_int nc[MAX_FIELDS_PER_CALL];
     for (int i = 0; i < nfields; i++) {
@@ -224,14 +254,6 @@ hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const
         nout += f[i].ncomp;
     }
     double t0 = hv_now();
-    if ((st = ensure(cl, &x->in, &x->cap_in, (size_t)nout, fb)) ||
-        (st = ensure(cl, &x->out, &x->cap_out, (size_t)nout, fb)) ||
-        (st = ensure(cl, &x->sol, &x->cap_sol, (size_t)nrhs, fb)))
-        return st;
-    hv__cl_write(cl, x->phi, 0, fb, phi);
-    for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
-        for (int q = 0; q < f[i].ncomp; q++)
-            hv__cl_write(cl, x->in, (size_t)(q0 + q) * fb, fb, f[i].in[q]);
     hv__cl_write(cl, x->ncomp, 0, (size_t)nfields * sizeof(cl_int), nc);
     cl_int K[K_COUNT];
     for (int q = 0; q < K_COUNT; q++)
@@ -320,8 +342,28 @@ hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const
         }
         S->t_eval += hv_now() - t0;
     }
-    if (st)
+    return st;
+}
+
+hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const float *phi,
+                            int nfields, const hv_extend_field *f, int nrhs, hv_extend_stats *S)
+{
+    hv_status st;
+    if ((st = hv__extend_cl_prepare(state, g, NULL, NULL, NULL)) ||
+        (st = io_planes(*state, g, nfields, f, nrhs)))
         return st;
+    hv_extend_cl *x = *state;
+    hv_cl *cl = x->cl;
+    const size_t fb = g->count * sizeof(float);
+    double t0 = hv_now();
+    hv__cl_write(cl, x->phi, 0, fb, phi);
+    for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            hv__cl_write(cl, x->in, (size_t)(q0 + q) * fb, fb, f[i].in[q]);
+    double t_load = hv_now() - t0;
+    if ((st = run_loaded(x, g, nfields, f, nrhs, S)))
+        return st;
+    S->t_weights += t_load;
     t0 = hv_now();
     for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
         for (int q = 0; q < f[i].ncomp; q++)
@@ -329,4 +371,68 @@ hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const
     st = hv__cl_check(cl);
     S->t_eval += hv_now() - t0;
     return st;
+}
+
+/* A float buffer of count cells on the extender's context, or the reason not. */
+static hv_status check_buffer(const hv_extend_cl *x, cl_mem m, size_t count, const char *what,
+                              int i, int q)
+{
+    size_t bytes = 0;
+    cl_context c = NULL;
+    if (!m || clGetMemObjectInfo(m, CL_MEM_SIZE, sizeof bytes, &bytes, NULL) != CL_SUCCESS ||
+        clGetMemObjectInfo(m, CL_MEM_CONTEXT, sizeof c, &c, NULL) != CL_SUCCESS)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_extend: %s (field %d component %d) is no "
+                         "OpenCL buffer",
+                         what, i, q);
+    if (c != x->cl->ctx)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_extend: %s (field %d component %d) lives on another context "
+                         "than the extender's",
+                         what, i, q);
+    if (bytes < count * sizeof(float))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_extend: %s (field %d component %d) holds %zu bytes; %zu "
+                         "cells of float need %zu",
+                         what, i, q, bytes, count, count * sizeof(float));
+    return HV_OK;
+}
+
+hv_status hv__extend_cl_run_dev(hv_extend_cl *x, const hv_extend_grid *g, cl_mem phi, int nfields,
+                                const hv_opencl_field *fd, int nrhs, hv_extend_stats *S)
+{
+    hv_extend_field f[MAX_FIELDS_PER_CALL];
+    memset(f, 0, sizeof f);
+    hv_status st = check_buffer(x, phi, g->count, "phi", -1, 0);
+    for (int i = 0; i < nfields && !st; i++) {
+        f[i].ncomp = fd[i].ncomp;
+        for (int q = 0; q < fd[i].ncomp && !st; q++)
+            if (!(st = check_buffer(x, fd[i].in[q], g->count, "in", i, q)))
+                st = check_buffer(x, fd[i].out[q], g->count, "out", i, q);
+    }
+    if (st || (st = io_planes(x, g, nfields, f, nrhs)))
+        return st;
+    hv_cl *cl = x->cl;
+    const size_t fb = g->count * sizeof(float);
+    hv__cl_copy(cl, phi, x->phi, fb);
+    for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            hv__cl_copy_at(cl, fd[i].in[q], 0, x->in, (size_t)(q0 + q) * fb, fb);
+    if ((st = run_loaded(x, g, nfields, f, nrhs, S)))
+        return st;
+    for (int i = 0, q0 = 0; i < nfields; q0 += f[i].ncomp, i++)
+        for (int q = 0; q < f[i].ncomp; q++)
+            hv__cl_copy_at(cl, x->out, (size_t)(q0 + q) * fb, fd[i].out[q], 0, fb);
+    return hv__cl_finish(cl);
+}
+
+void hv__extend_cl_queue(const hv_extend_cl *x, cl_context *ctx, cl_device_id *dev,
+                         cl_command_queue *queue)
+{
+    if (ctx)
+        *ctx = x->cl->ctx;
+    if (dev)
+        *dev = x->cl->dev;
+    if (queue)
+        *queue = x->cl->q;
 }

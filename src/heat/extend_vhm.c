@@ -403,3 +403,91 @@ hv_status hv_extend_vec3(hv_extender *e, const hv_grid *phi, const hv_grid *cons
     }
     return hv_extend_many(e, phi->v, 1, &f, stats);
 }
+
+/* ---------- fields on the device (heat.h, opencl.h) ---------- */
+
+static hv_extend_grid device_grid(const hv_extender *e)
+{
+    const hv_extend_grid g = {e,        e->dim, {e->n[0], e->n[1], e->n[2]}, e->h, e->count,
+                              e->solid, &e->o};
+    return g;
+}
+
+hv_status hv_opencl_extender_create(hv_extender **out, int dim, const int n[3], double h,
+                                    const uint8_t *solid, const hv_extend_opts *opts,
+                                    cl_context ctx, cl_device_id dev, cl_command_queue queue)
+{
+    if (out)
+        *out = NULL;
+    if (!ctx || !dev || !queue)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "hv_opencl_extender_create: the context, device and queue are required");
+    hv_extend_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    hv_status st = hv_extender_create(out, dim, n, h, solid, &o);
+    if (st)
+        return st;
+    hv_extender *e = *out;
+    e->resolved = 1;
+    const hv_extend_grid g = device_grid(e);
+    st = hv__extend_cl_prepare(&e->cl, &g, ctx, dev, queue);
+    if (st)
+        hv_extender_destroy(out);
+    return st;
+}
+
+/* An extender whose work runs on the device, with its state made. */
+static hv_status device_extender(hv_extender *e, const char *who)
+{
+    if (!e)
+        return hv__error(HV_ERR_INVALID_ARG, "%s: the extender is NULL", who);
+    if (!e->resolved) {
+        if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
+            e->o.backend = HV_BACKEND_OPENCL;
+        e->resolved = 1;
+    }
+    if (e->o.backend != HV_BACKEND_OPENCL)
+        return hv__error(HV_ERR_UNSUPPORTED, "%s: the extender runs on the %s backend, not opencl",
+                         who, hv_backend_name(e->o.backend));
+    const hv_extend_grid g = device_grid(e);
+    return hv__extend_cl_prepare(&e->cl, &g, NULL, NULL, NULL);
+}
+
+hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields, const hv_opencl_field *f,
+                           hv_extend_stats *stats)
+{
+    double t_start = hv_now();
+    hv_extend_stats lst;
+    hv_extend_stats *S = stats ? stats : &lst;
+    memset(S, 0, sizeof *S);
+    hv_status st = device_extender(e, "hv_opencl_extend");
+    if (st)
+        return st;
+    if (nfields < 0 || nfields > MAX_FIELDS_PER_CALL || (nfields > 0 && !f))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_extend: %d fields (0 to %d, with an array)",
+                         nfields, MAX_FIELDS_PER_CALL);
+    int nrhs = 1;
+    for (int i = 0; i < nfields; i++) {
+        if (f[i].ncomp < 1 || f[i].ncomp > 3)
+            return hv__error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 to 3)", i,
+                             f[i].ncomp);
+        nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+    }
+    const hv_extend_grid g = device_grid(e);
+    st = hv__extend_cl_run_dev(e->cl, &g, phi, nfields, f, nrhs, S);
+    S->t_total = hv_now() - t_start;
+    return st;
+}
+
+hv_status hv_opencl_extender_queue(hv_extender *e, cl_context *ctx, cl_device_id *dev,
+                                   cl_command_queue *queue)
+{
+    hv_status st = device_extender(e, "hv_opencl_extender_queue");
+    if (!st)
+        hv__extend_cl_queue(e->cl, ctx, dev, queue);
+    return st;
+}

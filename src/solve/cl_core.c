@@ -760,6 +760,14 @@ void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
                     "clEnqueueCopyBuffer");
 }
 
+void hv__cl_copy_at(hv_cl *cl, cl_mem src, size_t src_off, cl_mem dst, size_t dst_off, size_t bytes)
+{
+    if (bytes)
+        hv__cl_fail(cl,
+                    clEnqueueCopyBuffer(cl->q, src, dst, src_off, dst_off, bytes, 0, NULL, NULL),
+                    "clEnqueueCopyBuffer");
+}
+
 /* Sets the arguments of kernel kk (named name, for messages). */
 static void set_args(hv_cl *cl, cl_kernel kk, const char *name, const char *fmt, va_list ap)
 {

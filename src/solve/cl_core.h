@@ -169,6 +169,9 @@ void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *
 void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst);
 void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes);
 void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes);
+/* The same from byte src_off of src to byte dst_off of dst. */
+void hv__cl_copy_at(hv_cl *cl, cl_mem src, size_t src_off, cl_mem dst, size_t dst_off,
+                    size_t bytes);
 
 /* Sets the arguments of kernel k from a format: m cl_mem (may be NULL),
  * i int, l size_t as ulong, f float (pass a double), a acc_t (pass a double),
