@@ -218,6 +218,7 @@ $(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) $
 
 check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
 	@rm -rf $(RES) && mkdir -p $(RES)
+	@{ ls -d /tmp/hv_* 2>/dev/null; grep -o ' /tmp/hv_[^ ]*' /proc/mounts; } | sort > $(RES)/tmp.before
 	+@$(MAKE) --no-print-directory -k $(CHECK_RUNS:%=$(RES)/%.rc) || true
 	@sh tests/check_summary.sh $(RES) $(CHECK_RUNS)
 

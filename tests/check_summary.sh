@@ -35,6 +35,18 @@ for run in "$@"; do
     printf '%s %s\n' "$(cat "$res/$run.ms" 2>/dev/null || echo 0)" "$run"
 done | sort -rn | head -n 8 | awk '{ printf "  %-28s %6.1f\n", $2, $1 / 1000 }'
 [ ! -s "$skips" ] || { echo "skipped:"; cat "$skips"; }
+# Nothing a suite made outside its scratch directory stays: no scratch
+# directory of /tmp/hv_* and no mount under one that was not there before.
+if [ -f "$res/tmp.before" ]; then
+    { ls -d /tmp/hv_* 2>/dev/null; grep -o ' /tmp/hv_[^ ]*' /proc/mounts; } | sort >"$res/tmp.after"
+    left=$(comm -13 "$res/tmp.before" "$res/tmp.after")
+    if [ -n "$left" ]; then
+        echo "left behind by the suites:"
+        echo "$left" | sed 's/^ */  /'
+        fail=$((fail + 1))
+        bad="$bad (leftovers)"
+    fi
+fi
 [ -z "$bad" ] || echo "failing suites:$bad"
 echo "check: $pass passed, $fail failed, $skip skipped"
 [ -z "$bad" ]
