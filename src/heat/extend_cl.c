@@ -15,6 +15,7 @@
 #include "solve/cl_ops.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -373,29 +374,17 @@ hv_status hv__extend_cl_run(hv_extend_cl **state, const hv_extend_grid *g, const
     return st;
 }
 
-/* A float buffer of count cells on the extender's context, or the reason not. */
+/* A float buffer of the extender's cells on its context ("in 0.2": field 0's
+ * component 2), or the reason not. */
 static hv_status check_buffer(const hv_extend_cl *x, cl_mem m, size_t count, const char *what,
                               int i, int q)
 {
-    size_t bytes = 0;
-    cl_context c = NULL;
-    if (!m || clGetMemObjectInfo(m, CL_MEM_SIZE, sizeof bytes, &bytes, NULL) != CL_SUCCESS ||
-        clGetMemObjectInfo(m, CL_MEM_CONTEXT, sizeof c, &c, NULL) != CL_SUCCESS)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_extend: %s (field %d component %d) is no "
-                         "OpenCL buffer",
-                         what, i, q);
-    if (c != x->cl->ctx)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_extend: %s (field %d component %d) lives on another context "
-                         "than the extender's",
-                         what, i, q);
-    if (bytes < count * sizeof(float))
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_extend: %s (field %d component %d) holds %zu bytes; %zu "
-                         "cells of float need %zu",
-                         what, i, q, bytes, count, count * sizeof(float));
-    return HV_OK;
+    char name[64];
+    if (i < 0)
+        snprintf(name, sizeof name, "%s", what);
+    else
+        snprintf(name, sizeof name, "%s (field %d component %d)", what, i, q);
+    return hv__cl_check_floats(x->cl, m, count, "hv_opencl_extend", name);
 }
 
 hv_status hv__extend_cl_run_dev(hv_extend_cl *x, const hv_extend_grid *g, cl_mem phi, int nfields,

@@ -760,6 +760,23 @@ void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
                     "clEnqueueCopyBuffer");
 }
 
+hv_status hv__cl_check_floats(const hv_cl *cl, cl_mem m, size_t count, const char *who,
+                              const char *what)
+{
+    size_t bytes = 0;
+    cl_context c = NULL;
+    if (!m || clGetMemObjectInfo(m, CL_MEM_SIZE, sizeof bytes, &bytes, NULL) != CL_SUCCESS ||
+        clGetMemObjectInfo(m, CL_MEM_CONTEXT, sizeof c, &c, NULL) != CL_SUCCESS)
+        return hv__error(HV_ERR_INVALID_ARG, "%s: %s is no OpenCL buffer", who, what);
+    if (c != cl->ctx)
+        return hv__error(HV_ERR_INVALID_ARG, "%s: %s lives on another context than heatvox's", who,
+                         what);
+    if (bytes < count * sizeof(float))
+        return hv__error(HV_ERR_INVALID_ARG, "%s: %s holds %zu bytes; %zu cells of float need %zu",
+                         who, what, bytes, count, count * sizeof(float));
+    return HV_OK;
+}
+
 void hv__cl_copy_at(hv_cl *cl, cl_mem src, size_t src_off, cl_mem dst, size_t dst_off, size_t bytes)
 {
     if (bytes)

@@ -169,6 +169,10 @@ void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *
 void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst);
 void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes);
 void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes);
+/* HV_OK when m is a buffer on cl's context of at least count floats, else
+ * HV_ERR_INVALID_ARG with a message "<who>: <what> ..." saying which. */
+hv_status hv__cl_check_floats(const hv_cl *cl, cl_mem m, size_t count, const char *who,
+                              const char *what);
 /* The same from byte src_off of src to byte dst_off of dst. */
 void hv__cl_copy_at(hv_cl *cl, cl_mem src, size_t src_off, cl_mem dst, size_t dst_off,
                     size_t bytes);

@@ -697,30 +697,13 @@ hv_status hv_opencl_solver_create(hv_solver **out, const hv_problem *p, const hv
     return st;
 }
 
-/* A float buffer of the solver's cells on its context, or the reason not. */
-static hv_status check_field(const ocl_state *o, cl_mem m, const char *what)
-{
-    size_t bytes = 0;
-    cl_context c = NULL;
-    if (clGetMemObjectInfo(m, CL_MEM_SIZE, sizeof bytes, &bytes, NULL) != CL_SUCCESS ||
-        clGetMemObjectInfo(m, CL_MEM_CONTEXT, sizeof c, &c, NULL) != CL_SUCCESS)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solve: %s is no OpenCL buffer", what);
-    if (c != o->cl->ctx)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_solve: %s lives on another context than the solver's", what);
-    if (bytes < o->s->count * sizeof(float))
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_solve: %s holds %zu bytes; %zu cells of float need %zu", what,
-                         bytes, o->s->count, o->s->count * sizeof(float));
-    return HV_OK;
-}
-
 hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
 {
     hv_solve_info local;
     ocl_state *o = NULL;
     hv_status st = device_entry("hv_opencl_solve", sv, f, u, info ? info : &local, &o);
-    if (st || (st = check_field(o, f, "f")) || (st = check_field(o, u, "u")))
+    if (st || (st = hv__cl_check_floats(o->cl, f, o->s->count, "hv_opencl_solve", "f")) ||
+        (st = hv__cl_check_floats(o->cl, u, o->s->count, "hv_opencl_solve", "u")))
         return st;
     return hv__cl_solver_solve(sv, f, u, info);
 }
