@@ -358,52 +358,86 @@ static hv_status level_regions(const mg_hierarchy *H, mg_level *L)
     return HV_OK;
 }
 
-/* Largest eigenvalue of D^-1 A by a few power iterations (Chebyshev bounds).
- * The diagonal is computed once, in parallel; the sums stay serial so that
- * the estimate does not depend on the thread count. */
-static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
+/* Largest eigenvalue of D^-1 A on a plain level: Gershgorin's bound, which
+ * a row of the interior attains up to O(1/n^2) (off-diagonal sum / diagonal
+ * grows with the neighbours a row has). */
+static double plain_lmax(const mg_hierarchy *H, const mg_level *L)
 {
-    size_t n = L->count;
-    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y), *dg = malloc(n * sizeof *dg);
-    if (!x || !y || !dg) {
-        free(x);
-        free(y);
-        free(dg);
-        return 2.0;
-    }
+    double off = 0;
+    for (int b = 0; b < H->dim; b++)
+        off += L->c[b] * (L->n[b] > 2 ? 2 : L->n[b] - 1);
+    double d = H->alpha + off;
+    return d > 0 ? 1.0 + off / d : 2.0;
+}
+
+/* Cells per partial sum of the power iteration: the sums add in a fixed
+ * order whatever the thread count, so the estimate does not depend on it. */
+#define LMAX_CHUNK 65536
+
+/* The power iteration's step: y = D^-1 A x, and (x.y, x.x, y.y). */
+static void lmax_step(const mg_hierarchy *H, const mg_level *L, const double *dg, const double *x,
+                      double *y, double *part, double sums[3])
+{
+    size_t n = L->count, nchunk = (n + LMAX_CHUNK - 1) / LMAX_CHUNK;
+    hv__mg_level_apply_d(L, H->dim, H->alpha, x, y);
 #pragma omp parallel for schedule(static)
-    for (size_t c = 0; c < n; c++) {
-        int i = (int)(c % L->n[0]), j = (int)((c / L->sy) % L->n[1]), k = (int)(c / L->sz);
-        dg[c] = L->plain ? hv__mg_level_diag(L, H->dim, H->alpha, i, j, k)
-                         : (L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0);
-    }
-    unsigned s = 12345u;
-    for (size_t c = 0; c < n; c++) {
-        s = s * 1664525u + 1013904223u;
-        x[c] = (double)(s >> 8) / (1u << 24) - 0.5;
-    }
-    double lam = 2.0;
-    for (int it = 0; it < 12; it++) {
-        hv__mg_level_apply_d(L, H->dim, H->alpha, x, y);
-        double nrm = 0, dot = 0, xx = 0;
-        for (size_t c = 0; c < n; c++) {
+    for (size_t q = 0; q < nchunk; q++) {
+        double dot = 0, xx = 0, yy = 0;
+        size_t end = (q + 1) * LMAX_CHUNK < n ? (q + 1) * LMAX_CHUNK : n;
+        for (size_t c = q * LMAX_CHUNK; c < end; c++) {
             y[c] = dg[c] > 0 ? y[c] / dg[c] : 0;
             dot += x[c] * y[c];
             xx += x[c] * x[c];
-            nrm += y[c] * y[c];
+            yy += y[c] * y[c];
         }
-        lam = xx > 0 ? dot / xx : 2.0;
-        nrm = sqrt(nrm);
+        part[3 * q] = dot;
+        part[3 * q + 1] = xx;
+        part[3 * q + 2] = yy;
+    }
+    sums[0] = sums[1] = sums[2] = 0;
+    for (size_t q = 0; q < nchunk; q++)
+        for (int t = 0; t < 3; t++)
+            sums[t] += part[3 * q + t];
+}
+
+/* Largest eigenvalue of D^-1 A (Chebyshev bounds): exact bound on plain
+ * levels, else a few power iterations from a hashed start vector. */
+static double estimate_lmax(const mg_hierarchy *H, const mg_level *L)
+{
+    if (L->plain)
+        return plain_lmax(H, L);
+    size_t n = L->count, nchunk = (n + LMAX_CHUNK - 1) / LMAX_CHUNK;
+    double *x = malloc(n * sizeof *x), *y = malloc(n * sizeof *y), *dg = malloc(n * sizeof *dg);
+    double *part = malloc(3 * nchunk * sizeof *part);
+    double lam = 2.0;
+    if (!x || !y || !dg || !part)
+        goto done;
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < n; c++) {
+        dg[c] = L->dinv[c] > 0 ? 1.0 / L->dinv[c] : 0.0;
+        uint64_t h = (c + 1) * 0x9E3779B97F4A7C15ull;
+        h ^= h >> 31;
+        h *= 0xBF58476D1CE4E5B9ull;
+        h ^= h >> 29;
+        x[c] = (double)(h >> 40) / (double)(1u << 24) - 0.5;
+    }
+    for (int it = 0; it < 12; it++) {
+        double sums[3];
+        lmax_step(H, L, dg, x, y, part, sums);
+        lam = sums[1] > 0 ? sums[0] / sums[1] : 2.0;
+        double nrm = sqrt(sums[2]);
         if (!(nrm > 0))
             break;
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < n; c++)
             x[c] = y[c] / nrm;
     }
+    lam *= 1.1;
+done:
     free(x);
     free(y);
     free(dg);
-    lam *= 1.1;
+    free(part);
     return lam > 2.0 ? 2.0 : (lam < 0.1 ? 0.1 : lam);
 }
 
