@@ -363,6 +363,37 @@ static int run_out(const char *env, const char *args, char *out, size_t size)
     return pclose(pp);
 }
 
+/* HEATVOX_OPENCL_PROFILE=1: one kernel line per kernel and transfer after the
+ * benchmark's line, the V-cycle's kernels among them, shares summing to 1. */
+START_TEST(bench_profile_should_time_each_kernel_on_the_device)
+{
+    char out[16384];
+    ck_assert_int_eq(run_out("HEATVOX_OPENCL_PROFILE=1",
+                             "bench solve --n 24 --backend opencl "
+                             "--repeat 1",
+                             out, sizeof out),
+                     0);
+    int lines = 0, cheb = 0;
+    double share = 0;
+    for (char *l = strstr(out, "{\"bench\":\"kernel\""); l;
+         l = strstr(l + 1, "{\"bench\":\"kernel\"")) {
+        lines++;
+        ck_assert_msg(strstr(l, "\"of\":\"solve\""), "%.200s", l);
+        ck_assert_msg(json_num(l, "launches") > 0 && json_num(l, "seconds") >= 0, "%.200s", l);
+        share += json_num(l, "share");
+        cheb += !strncmp(strstr(l, "\"name\":"), "\"name\":\"mg_cheb\"", 16);
+    }
+    ck_assert_msg(lines >= 5 && cheb == 1, "%d kernel lines, mg_cheb %d:\n%s", lines, cheb, out);
+    ck_assert_msg(fabs(share - 1) < 0.01, "shares sum to %g", share);
+    ck_assert_int_eq(run_out("HEATVOX_OPENCL_PROFILE=",
+                             "bench solve --n 24 --backend opencl "
+                             "--repeat 1",
+                             out, sizeof out),
+                     0);
+    ck_assert_msg(!strstr(out, "\"kernel\""), "%s", out);
+}
+END_TEST
+
 START_TEST(devices_should_say_what_auto_takes_and_why)
 {
     hv_opencl_device d;
@@ -424,6 +455,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, a_solver_of_hv_solver_create_should_take_buffers_on_its_own_context, have, why);
     TL_ADD_IF(tc, wrong_queues_buffers_and_backends_should_be_refused, have, why);
     TL_ADD_IF(tc, bench_solve_should_report_the_device_and_its_own_figures, have, why);
+    TL_ADD_IF(tc, bench_profile_should_time_each_kernel_on_the_device, have, why);
     TL_ADD_IF(tc, devices_should_say_what_auto_takes_and_why, have, why);
     TL_ADD_IF(tc, commands_on_the_device_should_name_it, have, why);
     TL_ADD_IF(tc, an_extender_on_the_callers_context_should_extend_fields_on_the_device, have, why);

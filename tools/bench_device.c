@@ -7,6 +7,7 @@
 #include "bench_device.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Seconds between the ends of two profiled markers or commands. */
@@ -175,4 +176,23 @@ out:
     clReleaseCommandQueue(q);
     clReleaseContext(ctx);
     return st;
+}
+
+void bench_device_profile(const char *bench)
+{
+    const char *e = getenv("HEATVOX_OPENCL_PROFILE");
+    if (!e || !*e || !strcmp(e, "0"))
+        return;
+    hv_opencl_kernel_time t[64];
+    int n = hv_opencl_profile_take(t, 64);
+    n = n < 64 ? n : 64;
+    double total = 0;
+    for (int i = 0; i < n; i++)
+        total += t[i].seconds;
+    for (int i = 0; i < n; i++)
+        printf("{\"bench\":\"kernel\",\"of\":\"%s\",\"name\":\"%s\",\"launches\":%ld,"
+               "\"seconds\":%.6f,\"share\":%.4f}\n",
+               bench, t[i].name, t[i].launches, t[i].seconds,
+               total > 0 ? t[i].seconds / total : 0.0);
+    fflush(stdout);
 }

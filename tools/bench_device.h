@@ -21,4 +21,9 @@ typedef struct bench_device {
 hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const float *f,
                              int repeat, bench_device *d);
 
+/* With HEATVOX_OPENCL_PROFILE set, prints one JSON line per kernel and
+ * transfer timed since the last call (bench "kernel", of = bench), the
+ * largest first. */
+void bench_device_profile(const char *bench);
+
 #endif

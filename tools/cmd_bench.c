@@ -443,16 +443,8 @@ static int bench_solve(int argc, char **argv)
     return HV_EXIT_OK;
 }
 
-int cmd_bench(int argc, char **argv)
+static int bench_run(int argc, char **argv)
 {
-    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
-        FILE *out = argc < 2 ? stderr : stdout;
-        fprintf(out,
-                "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend|extend-band|extend-loop> "
-                "[options]   (heatvox "
-                "bench <name> --help)\n");
-        return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
-    }
     if (!strcmp(argv[1], "solve"))
         return bench_solve(argc - 1, argv + 1);
     if (!strcmp(argv[1], "sdf"))
@@ -470,4 +462,22 @@ int cmd_bench(int argc, char **argv)
     if (!strcmp(argv[1], "extend-loop"))
         return cmd_bench_extend_loop(argc - 1, argv + 1);
     return cli_usage_error("bench", "unknown benchmark '%s'", argv[1]);
+}
+
+int cmd_bench(int argc, char **argv)
+{
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        FILE *out = argc < 2 ? stderr : stdout;
+        fprintf(out,
+                "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend|extend-band|extend-loop> "
+                "[options]   (heatvox "
+                "bench <name> --help)\n"
+                "With HEATVOX_OPENCL_PROFILE=1, one more JSON line per OpenCL kernel and transfer\n"
+                "follows: bench \"kernel\", of (the benchmark), name, launches, seconds (device\n"
+                "time over every run, warm-ups included) and share of the summed time.\n");
+        return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
+    }
+    int rc = bench_run(argc, argv);
+    bench_device_profile(argv[1]);
+    return rc;
 }

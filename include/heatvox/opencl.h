@@ -82,6 +82,22 @@ HV_API hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_inf
 HV_API hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_device_id *dev,
                                         cl_command_queue *queue);
 
+/* ---- kernel times ----
+ * With HEATVOX_OPENCL_PROFILE=1 in the environment, the queues heatvox makes
+ * time every kernel and transfer with events (a caller's queue is timed when
+ * it was made with CL_QUEUE_PROFILING_ENABLE). */
+typedef struct hv_opencl_kernel_time {
+    const char *name; /* the kernel, or "read", "write", "copy", "fill" */
+    long launches;
+    double seconds; /* device time, summed */
+} hv_opencl_kernel_time;
+
+/* The times summed since the last call, the largest first, into
+ * out[0..max); returns how many names were timed (may exceed max) and
+ * starts the sums again. Commands of handles still open are counted once
+ * their queue finishes. */
+HV_API int hv_opencl_profile_take(hv_opencl_kernel_time *out, int max);
+
 #ifdef __cplusplus
 }
 #endif

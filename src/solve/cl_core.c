@@ -389,6 +389,9 @@ void hv__cl_close(hv_cl **pcl)
     if (!pcl || !*pcl)
         return;
     hv_cl *cl = *pcl;
+    hv__cl_profile_flush(cl);
+    free(cl->ev);
+    free(cl->evname);
     hv__cl_free(&cl->part);
     for (int k = 0; k < HV_K_COUNT; k++)
         if (cl->k[k])
@@ -486,6 +489,9 @@ static hv_status open_adopted(hv_cl *cl, hv_cl **out)
                          hv__cl_strerror(e));
     }
     cl->q = q;
+    cl_command_queue_properties props = 0;
+    clGetCommandQueueInfo(q, CL_QUEUE_PROPERTIES, sizeof props, &props, NULL);
+    cl->profile = hv__cl_profiling() && (props & CL_QUEUE_PROFILING_ENABLE);
     return open_kernels(cl, out);
 }
 
@@ -522,7 +528,8 @@ hv_status hv__cl_open(hv_cl **out)
     }
     cl->ctx = cl->sh->ctx;
     cl_int e;
-    cl->q = clCreateCommandQueue(cl->ctx, cl->dev, 0, &e);
+    cl->profile = hv__cl_profiling();
+    cl->q = clCreateCommandQueue(cl->ctx, cl->dev, cl->profile ? CL_QUEUE_PROFILING_ENABLE : 0, &e);
     if (e != CL_SUCCESS) {
         hv__cl_close(&cl);
         return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
@@ -537,6 +544,14 @@ static hv_status open_kernels(hv_cl *cl, hv_cl **out)
 {
     cl_int e;
     cl->acc = cl->fp64 ? sizeof(cl_double) : sizeof(cl_float);
+    if (cl->profile) {
+        cl->ev = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->ev);
+        cl->evname = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->evname);
+        if (!cl->ev || !cl->evname) {
+            hv__cl_close(&cl);
+            return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
+        }
+    }
     for (int k = 0; k < HV_K_COUNT; k++) {
         if (k >= HV_K_FIRST_FP64 && !cl->fp64)
             continue;
@@ -702,6 +717,7 @@ hv_status hv__cl_check(hv_cl *cl)
 hv_status hv__cl_finish(hv_cl *cl)
 {
     hv__cl_fail(cl, clFinish(cl->q), "clFinish");
+    hv__cl_profile_flush(cl);
     return hv__cl_check(cl);
 }
 
@@ -733,31 +749,43 @@ void hv__cl_free(cl_mem *m)
 
 void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *src)
 {
-    if (bytes)
-        hv__cl_fail(cl, clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL, NULL),
-                    "clEnqueueWriteBuffer");
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL,
+                                    hv__cl_profile_event(cl, "write"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueWriteBuffer");
 }
 
 void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst)
 {
-    if (bytes)
-        hv__cl_fail(cl, clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL, NULL),
-                    "clEnqueueReadBuffer");
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL,
+                                   hv__cl_profile_event(cl, "read"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueReadBuffer");
 }
 
 void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes)
 {
     const cl_uchar zero = 0;
-    if (bytes)
-        hv__cl_fail(cl, clEnqueueFillBuffer(cl->q, m, &zero, 1, 0, bytes, 0, NULL, NULL),
-                    "clEnqueueFillBuffer");
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueFillBuffer(cl->q, m, &zero, 1, 0, bytes, 0, NULL,
+                                   hv__cl_profile_event(cl, "fill"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueFillBuffer");
 }
 
 void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
 {
-    if (bytes)
-        hv__cl_fail(cl, clEnqueueCopyBuffer(cl->q, src, dst, 0, 0, bytes, 0, NULL, NULL),
-                    "clEnqueueCopyBuffer");
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueCopyBuffer(cl->q, src, dst, 0, 0, bytes, 0, NULL,
+                                   hv__cl_profile_event(cl, "copy"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueCopyBuffer");
 }
 
 hv_status hv__cl_check_floats(const hv_cl *cl, cl_mem m, size_t count, const char *who,
@@ -779,10 +807,12 @@ hv_status hv__cl_check_floats(const hv_cl *cl, cl_mem m, size_t count, const cha
 
 void hv__cl_copy_at(hv_cl *cl, cl_mem src, size_t src_off, cl_mem dst, size_t dst_off, size_t bytes)
 {
-    if (bytes)
-        hv__cl_fail(cl,
-                    clEnqueueCopyBuffer(cl->q, src, dst, src_off, dst_off, bytes, 0, NULL, NULL),
-                    "clEnqueueCopyBuffer");
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueCopyBuffer(cl->q, src, dst, src_off, dst_off, bytes, 0, NULL,
+                                   hv__cl_profile_event(cl, "copy"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueCopyBuffer");
 }
 
 /* Sets the arguments of kernel kk (named name, for messages). */
@@ -863,7 +893,9 @@ static void enqueue(hv_cl *cl, cl_kernel kk, const char *name, int dims, const s
         hv__cl_fail(cl, CL_INVALID_KERNEL, name);
         return;
     }
-    cl_int e = clEnqueueNDRangeKernel(cl->q, kk, (cl_uint)dims, NULL, global, local, 0, NULL, NULL);
+    cl_int e = clEnqueueNDRangeKernel(cl->q, kk, (cl_uint)dims, NULL, global, local, 0, NULL,
+                                      hv__cl_profile_event(cl, name));
+    hv__cl_profile_done(cl, e);
     if (e != CL_SUCCESS) {
         char where[96];
         snprintf(where, sizeof where, "kernel %s", name);

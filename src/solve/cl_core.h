@@ -102,7 +102,14 @@ typedef struct hv_cl {
         cl_kernel *k;     /* one per name of m->kernels */
     } mod[HV_CL_MODULES]; /* modules' kernels made on this handle (hv__cl_module_open) */
     int nmod;
+    int profile; /* events kept for hv_opencl_profile_take (cl_profile.c) */
+    int nev;
+    cl_event *ev;
+    const char **evname;
 } hv_cl;
+
+/* Events a profiling handle holds before it reads them. */
+#define HV_CL_PROFILE_EVENTS 4096
 
 /* Opens the device chosen by HEATVOX_OPENCL_DEVICE (hv_opencl_probe) and
  * builds the solver's kernels (cached per process). HV_ERR_UNSUPPORTED
@@ -116,6 +123,15 @@ hv_status hv__cl_open(hv_cl **out);
  * forgets them; NULLs forget them without an open. */
 void hv__cl_adopt(cl_context ctx, cl_device_id dev, cl_command_queue q);
 void hv__cl_close(hv_cl **cl);
+
+/* Profiling (cl_profile.c), on with HEATVOX_OPENCL_PROFILE=1: a command
+ * enqueued with the event of hv__cl_profile_event(cl, name) (NULL when off)
+ * and then hv__cl_profile_done(cl, its status) adds its device time to name;
+ * hv__cl_profile_flush reads the handle's events. */
+int hv__cl_profiling(void);
+cl_event *hv__cl_profile_event(hv_cl *cl, const char *name);
+void hv__cl_profile_done(hv_cl *cl, cl_int e);
+void hv__cl_profile_flush(hv_cl *cl);
 
 /* Builds a program from sources on cl's device; HV_ERR_BACKEND with the
  * (truncated) build log when it fails. The caller releases *prog. */
