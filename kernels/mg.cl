@@ -87,6 +87,20 @@ __kernel void mg_jacobi(HV_LEVEL_ARGS, __global const float *uin, __global float
     HV_CHEB_BODY(cr * z);
 }
 
+/* The step from u = 0, which reads neither u nor d: d = cr D^-1 f, uout = d
+ * (the stencil runs on f for its diagonal alone). */
+__kernel void mg_jacobi0(HV_LEVEL_ARGS, __global float *uout, __global const float *f,
+                         __global float *d, float cr)
+{
+    HV_CELL_OR_RETURN(N, i, j, k, c);
+    float S, D;
+    HV_STENCIL(float, f, N, C, a, w0, w1, w2, i, j, k, c, S, D);
+    const float r = f[c];
+    const float dn = D > 0.0f ? cr * r / D : 0.0f;
+    d[c] = dn;
+    uout[c] = dn;
+}
+
 /* Children of coarse cell (I,J,K) along the coarsened axes co; children
  * beyond an odd edge are left out (they count as zero in the mean). */
 #define HV_CHILDREN(NF, co, I, J, K, i0, i1, j0, j1, k0, k1)                                       \

@@ -346,7 +346,9 @@ START_TEST(smoother_sweeps_should_match_cpu)
             hier h;
             hier_make(&h, &CFGS[ci], sms[si]);
             for (int l = 0; l < h.H.nlev; l++)
-                for (int rev = 0; rev < 2; rev++) {
+                for (int rev = 0; rev < 4; rev++) {
+                    /* rev & 2: from a zero guess, with garbage in the iterate */
+                    const int zero = rev >> 1;
                     const mg_level *L = &h.H.lv[l];
                     hv_clmg_level *D = &h.m.lv[l];
                     size_t n = L->count;
@@ -359,12 +361,14 @@ START_TEST(smoother_sweeps_should_match_cpu)
                                 u[c] = f[c] = 0;
                     upload(D->u[D->cur], u, n);
                     upload(D->f, f, n);
-                    hv__clmg_smooth(&h.m, l, 2, rev);
+                    hv__clmg_smooth(&h.m, l, 2, rev & 1, zero);
                     download(D->u[D->cur], got, n);
-                    ref_smooth(&h.H, L, sms[si], u, f, 2, rev);
+                    if (zero)
+                        memset(u, 0, n * sizeof *u);
+                    ref_smooth(&h.H, L, sms[si], u, f, 2, rev & 1);
                     double e = rel_diff_f(got, u, n);
-                    ck_assert_msg(e < 1e-5, "smoother %d, %s level %d reverse %d: %g", sms[si],
-                                  CFGS[ci].name, l, rev, e);
+                    ck_assert_msg(e < 1e-5, "smoother %d, %s level %d reverse %d zero %d: %g",
+                                  sms[si], CFGS[ci].name, l, rev & 1, zero, e);
                     free(u);
                     free(f);
                     free(got);
@@ -1103,7 +1107,7 @@ START_TEST(kernels_should_write_only_inside_tiny_levels)
             upload(L0->f, v, L0->count);
             hv__clmg_vcycle(&h.m, 0, 0, 1);
             hv__clmg_fmg(&h.m);
-            hv__clmg_smooth(&h.m, 0, 1, 0);
+            hv__clmg_smooth(&h.m, 0, 1, 0, 1);
             ck_assert_int_eq(hv__cl_finish(CL), HV_OK);
             for (int l = 0; l < h.m.nlev; l++)
                 for (int q = 0; q < NB; q++)

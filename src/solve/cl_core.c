@@ -24,6 +24,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_MG_RBGS] = "mg_rbgs",
     [HV_K_MG_CHEB] = "mg_cheb",
     [HV_K_MG_JACOBI] = "mg_jacobi",
+    [HV_K_MG_JACOBI0] = "mg_jacobi0",
     [HV_K_MG_RESTRICT_RESIDUAL] = "mg_restrict_residual",
     [HV_K_MG_RESTRICT] = "mg_restrict",
     [HV_K_MG_RESTRICT_TRANSPOSE] = "hv__mg_restrict_transpose",

@@ -44,6 +44,7 @@ typedef enum hv_cl_kernel {
     HV_K_MG_RBGS,
     HV_K_MG_CHEB,
     HV_K_MG_JACOBI,
+    HV_K_MG_JACOBI0,
     HV_K_MG_RESTRICT_RESIDUAL,
     HV_K_MG_RESTRICT,
     HV_K_MG_RESTRICT_TRANSPOSE,

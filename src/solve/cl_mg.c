@@ -241,10 +241,15 @@ static void rbgs(hv_clmg *m, hv_clmg_level *L, int col)
 }
 
 /* d = cd d + cr D^-1 (f - A u);  u += d  (ping-pong); cd == 0 runs the
- * kernel that does not read d. */
-static void cheb_step(hv_clmg *m, hv_clmg_level *L, double cd, double cr)
+ * kernel that does not read d, zero the one that reads neither d nor u (the
+ * step from u = 0, whose contents are then ignored). */
+static void cheb_step(hv_clmg *m, hv_clmg_level *L, double cd, double cr, int zero)
 {
-    if (cd == 0) {
+    if (zero) {
+        hv__cl_args(m->cl, HV_K_MG_JACOBI0, "IFmmmmmmmf", L->N, L->C, L->a, L->w[0], L->w[1],
+                    L->w[2], L->u[1 - L->cur], L->f, L->d, cr);
+        hv__cl_run(m->cl, HV_K_MG_JACOBI0, 2, L->g, L->l);
+    } else if (cd == 0) {
         hv__cl_args(m->cl, HV_K_MG_JACOBI, "IFmmmmmmmmf", L->N, L->C, L->a, L->w[0], L->w[1],
                     L->w[2], L->u[L->cur], L->u[1 - L->cur], L->f, L->d, cr);
         hv__cl_run(m->cl, HV_K_MG_JACOBI, 2, L->g, L->l);
@@ -256,9 +261,13 @@ static void cheb_step(hv_clmg *m, hv_clmg_level *L, double cd, double cr)
     L->cur = 1 - L->cur;
 }
 
-void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
+/* steps sweeps on level l (RBGS: forward and back; Chebyshev: degree
+ * 2*steps); zero: from u = 0, whatever the iterate holds. */
+void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse, int zero)
 {
     hv_clmg_level *L = &m->lv[l];
+    if (zero && (steps <= 0 || m->smoother == HV_SMOOTH_RBGS))
+        hv__cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
     if (steps <= 0)
         return;
     if (m->smoother == HV_SMOOTH_RBGS) {
@@ -269,16 +278,16 @@ void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse)
     } else if (m->smoother == HV_SMOOTH_JACOBI) {
         double omega = m->dim == 3 ? 6.0 / 7.0 : 4.0 / 5.0;
         for (int s = 0; s < steps; s++)
-            cheb_step(m, L, 0.0, omega);
+            cheb_step(m, L, 0.0, omega, zero && s == 0);
     } else {
         /* Chebyshev of degree 2*steps on [lmax/8, lmax], as the CPU (mg_cycle.c). */
         double lmax = L->lmax, lmin = lmax / 8;
         double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin);
         double sigma = theta / delta, rho_old = 1.0 / sigma;
-        cheb_step(m, L, 0.0, 1.0 / theta);
+        cheb_step(m, L, 0.0, 1.0 / theta, zero);
         for (int s = 1; s < 2 * steps; s++) {
             double rho = 1.0 / (2 * sigma - rho_old);
-            cheb_step(m, L, rho * rho_old, 2 * rho / delta);
+            cheb_step(m, L, rho * rho_old, 2 * rho / delta, 0);
             rho_old = rho;
         }
     }
@@ -382,9 +391,7 @@ void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
         hv__clmg_bottom(m);
         return;
     }
-    if (!guess)
-        hv__cl_zero(m->cl, L->u[L->cur], L->count * sizeof(float));
-    hv__clmg_smooth(m, l, m->pre, 0);
+    hv__clmg_smooth(m, l, m->pre, 0, !guess);
     if (sym && m->sym) {
         hv__clmg_residual(m, l, L->u[L->cur], L->f, L->r);
         hv__clmg_restrict_transpose(m, l);
@@ -393,7 +400,7 @@ void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
     }
     hv__clmg_vcycle(m, l + 1, 0, sym);
     hv__clmg_prolong(m, l);
-    hv__clmg_smooth(m, l, m->post, sym);
+    hv__clmg_smooth(m, l, m->post, sym, 0);
 }
 
 void hv__clmg_fmg(hv_clmg *m)

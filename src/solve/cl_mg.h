@@ -65,8 +65,9 @@ void hv__clmg_destroy(hv_clmg *m);
 void hv__clmg_apply(hv_clmg *m, int l, cl_mem u, cl_mem y);
 void hv__clmg_residual(hv_clmg *m, int l, cl_mem u, cl_mem f, cl_mem r);
 /* steps smoothing steps on lv[l].u[cur] for lv[l].f, as the CPU's smooth()
- * (mg_cycle.c). */
-void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse);
+ * (mg_cycle.c); zero: from u = 0, whatever u[cur] holds (Jacobi and
+ * Chebyshev then skip reading it). */
+void hv__clmg_smooth(hv_clmg *m, int l, int steps, int reverse, int zero);
 /* lv[l+1].f = restriction of the residual lv[l].f - A lv[l].u[cur]. */
 void hv__clmg_restrict_residual(hv_clmg *m, int l);
 /* lv[l+1].f = P^T (pn .* lv[l].r) / 2^(coarsened axes), as
