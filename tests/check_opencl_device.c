@@ -348,6 +348,11 @@ START_TEST(bench_solve_should_report_the_device_and_its_own_figures)
     ck_assert_int_eq((int)json_num(line, "device_iterations"), (int)json_num(line, "iterations"));
     ck_assert_msg(json_num(line, "iterations") > 6, "baffles solved in too few iterations: %s",
                   line);
+    /* the kernels' own time, from the benchmark's profiling queue: within the solve's */
+    const double ks = json_num(line, "dev_kernel_seconds");
+    ck_assert_msg(ks > 0 && ks <= json_num(line, "device_event_seconds") * 1.05, "%s", line);
+    ck_assert_msg(json_num(line, "dev_launches") > 10 * json_num(line, "iterations"), "%s", line);
+    ck_assert_msg(json_num(line, "dev_kernel_gbs") >= json_num(line, "dev_solve_gbs"), "%s", line);
 }
 END_TEST
 

@@ -88,6 +88,38 @@ static double copy_gbs(cl_context ctx, cl_command_queue q, size_t bytes)
     return best;
 }
 
+/* Kernel times taken from the library (hv_opencl_profile_take) before
+ * bench_device_profile prints them: the device solves' own, and those that
+ * ran before them. */
+#define PROFILE_MAX 128
+static hv_opencl_kernel_time taken[PROFILE_MAX];
+static int ntaken;
+
+/* Takes the library's kernel times into `taken`; returns their sum and sets
+ * *launches to their count. */
+static double take_profile(double *launches)
+{
+    hv_opencl_kernel_time t[PROFILE_MAX];
+    int n = hv_opencl_profile_take(t, PROFILE_MAX);
+    double sum = 0;
+    *launches = 0;
+    for (int i = 0; i < n && i < PROFILE_MAX; i++) {
+        sum += t[i].seconds;
+        *launches += (double)t[i].launches;
+        int k = 0;
+        while (k < ntaken && strcmp(taken[k].name, t[i].name) != 0)
+            k++;
+        if (k == ntaken) {
+            if (ntaken == PROFILE_MAX)
+                continue;
+            taken[ntaken++] = (hv_opencl_kernel_time){t[i].name, 0, 0.0};
+        }
+        taken[k].launches += t[i].launches;
+        taken[k].seconds += t[i].seconds;
+    }
+    return sum;
+}
+
 /* Repeat solves with the fields on the device, after a warm-up: the best
  * wall time (the call returns with its commands finished) and, for that run,
  * the device time between two markers around it. */
@@ -95,7 +127,10 @@ static hv_status time_device(hv_solver *sv, cl_command_queue q, cl_mem f, cl_mem
                              bench_device *d)
 {
     d->seconds = 1e30;
+    double launches;
     for (int r = 0; r <= repeat; r++) {
+        if (r == 1)
+            take_profile(&launches); /* the warm-up's kernels, apart */
         cl_event m0, m1;
         clEnqueueMarkerWithWaitList(q, 0, NULL, &m0);
         clFinish(q);
@@ -117,6 +152,10 @@ static hv_status time_device(hv_solver *sv, cl_command_queue q, cl_mem f, cl_mem
             d->relres = info.relres;
         }
     }
+    /* The queue profiles (open_device), so the library timed every command. */
+    const int timed = repeat > 0 ? repeat : 1;
+    d->kernel_seconds = take_profile(&launches) / timed;
+    d->launches = launches / timed;
     return HV_OK;
 }
 
@@ -178,21 +217,29 @@ out:
     return st;
 }
 
+static int by_seconds(const void *a, const void *b)
+{
+    double x = ((const hv_opencl_kernel_time *)a)->seconds;
+    double y = ((const hv_opencl_kernel_time *)b)->seconds;
+    return (x < y) - (x > y);
+}
+
 void bench_device_profile(const char *bench)
 {
+    double launches;
+    take_profile(&launches);
     const char *e = getenv("HEATVOX_OPENCL_PROFILE");
     if (!e || !*e || !strcmp(e, "0"))
         return;
-    hv_opencl_kernel_time t[64];
-    int n = hv_opencl_profile_take(t, 64);
-    n = n < 64 ? n : 64;
+    qsort(taken, (size_t)ntaken, sizeof taken[0], by_seconds);
     double total = 0;
-    for (int i = 0; i < n; i++)
-        total += t[i].seconds;
-    for (int i = 0; i < n; i++)
+    for (int i = 0; i < ntaken; i++)
+        total += taken[i].seconds;
+    for (int i = 0; i < ntaken; i++)
         printf("{\"bench\":\"kernel\",\"of\":\"%s\",\"name\":\"%s\",\"launches\":%ld,"
                "\"seconds\":%.6f,\"share\":%.4f}\n",
-               bench, t[i].name, t[i].launches, t[i].seconds,
-               total > 0 ? t[i].seconds / total : 0.0);
+               bench, taken[i].name, taken[i].launches, taken[i].seconds,
+               total > 0 ? taken[i].seconds / total : 0.0);
     fflush(stdout);
+    ntaken = 0;
 }

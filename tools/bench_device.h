@@ -14,6 +14,8 @@ typedef struct bench_device {
     double copy_gbs;         /* clEnqueueCopyBuffer, read + write, best of five */
     int iterations;
     double relres;
+    double kernel_seconds; /* device time of the kernels per timed solve (events) */
+    double launches;       /* kernels and transfers enqueued per timed solve */
 } bench_device;
 
 /* Solves p (options o) on the device heatvox would take, on a context and

@@ -158,6 +158,10 @@ static void print_device(const hv_problem *p, hv_solver_opts *o, const float *f,
            d.name, d.setup_seconds, d.seconds, d.event_seconds, d.iterations, d.relres,
            d.transfer_seconds, d.seconds > 0 ? host_seconds / d.seconds : 0, d.copy_gbs, gbs,
            d.copy_gbs > 0 ? gbs / d.copy_gbs : 0);
+    const double kgbs = d.kernel_seconds > 0 ? traffic / d.kernel_seconds / 1e9 : 0;
+    printf(",\"dev_kernel_seconds\":%.5f,\"dev_launches\":%.0f,\"dev_kernel_gbs\":%.2f,"
+           "\"dev_kernel_vs_copy\":%.3f",
+           d.kernel_seconds, d.launches, kgbs, d.copy_gbs > 0 ? kgbs / d.copy_gbs : 0);
 }
 
 static int usage_solve(FILE *out)
@@ -202,7 +206,10 @@ static int usage_solve(FILE *out)
             "floats, which the host-array interface adds), host_vs_device (seconds /\n"
             "device_seconds), dev_copy_gbs (clEnqueueCopyBuffer, read + write, best of five),\n"
             "dev_solve_gbs (the solve's modelled traffic / device_seconds) and\n"
-            "dev_solve_vs_copy.\n");
+            "dev_solve_vs_copy; dev_kernel_seconds (the solve's kernels and transfers\n"
+            "summed from their profiling events: the solve without the host's share),\n"
+            "dev_launches (commands per solve), dev_kernel_gbs and dev_kernel_vs_copy\n"
+            "(the modelled traffic over the kernels' time, against the device's copy).\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 

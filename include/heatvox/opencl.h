@@ -84,8 +84,8 @@ HV_API hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_devic
 
 /* ---- kernel times ----
  * With HEATVOX_OPENCL_PROFILE=1 in the environment, the queues heatvox makes
- * time every kernel and transfer with events (a caller's queue is timed when
- * it was made with CL_QUEUE_PROFILING_ENABLE). */
+ * time every kernel and transfer with events; a caller's queue is timed
+ * whenever it was made with CL_QUEUE_PROFILING_ENABLE. */
 typedef struct hv_opencl_kernel_time {
     const char *name; /* the kernel, or "read", "write", "copy", "fill" */
     long launches;

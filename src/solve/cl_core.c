@@ -492,7 +492,7 @@ static hv_status open_adopted(hv_cl *cl, hv_cl **out)
     cl->q = q;
     cl_command_queue_properties props = 0;
     clGetCommandQueueInfo(q, CL_QUEUE_PROPERTIES, sizeof props, &props, NULL);
-    cl->profile = hv__cl_profiling() && (props & CL_QUEUE_PROFILING_ENABLE);
+    cl->profile = (props & CL_QUEUE_PROFILING_ENABLE) != 0;
     return open_kernels(cl, out);
 }
 

@@ -34,6 +34,7 @@ typedef struct ocl_state {
     hv_cl *cl;
     hv_clmg mg;
     mg_hierarchy H; /* host copy; level 0 kept for the host path only */
+    hv_solver_stats stats; /* modelled while the whole hierarchy is at hand */
     int dev64;      /* double defect correction on the device */
     int use_pcg;
     /* device path */
@@ -91,6 +92,8 @@ static hv_status ocl_create(void **state, const hv_setup *s)
         (st = hv__clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth,
                               o->use_pcg)))
         goto fail;
+    hv__mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post,
+                       o->use_pcg, &o->stats);
     const size_t n = s->count;
     if (o->dev64) {
         size_t g, l, np = hv__cl_range_red(n, &g, &l);
@@ -458,8 +461,7 @@ static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_inf
 static void ocl_stats(const void *state, hv_solver_stats *st)
 {
     const ocl_state *o = state;
-    hv__mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post,
-                       o->use_pcg, st);
+    *st = o->stats;
 }
 
 static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_info *info);
