@@ -37,6 +37,35 @@ void hv__cl_splat_destroy(hv_cl_splat *S)
     memset(S, 0, sizeof *S);
 }
 
+/* Inclusive prefix sum of v[0..n) in place, in blocks across the threads. */
+static void prefix_sum(uint32_t *v, size_t n)
+{
+    enum { BLOCK = 1 << 20 };
+    const size_t nb = (n + BLOCK - 1) / BLOCK;
+    uint32_t *tot = malloc((nb + 1) * sizeof *tot);
+    if (!tot) {
+        for (size_t c = 1; c < n; c++)
+            v[c] += v[c - 1];
+        return;
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t b = 0; b < nb; b++) {
+        size_t end = (b + 1) * BLOCK < n ? (b + 1) * BLOCK : n;
+        for (size_t c = b * BLOCK + 1; c < end; c++)
+            v[c] += v[c - 1];
+        tot[b] = v[end - 1];
+    }
+    for (size_t b = 1; b < nb; b++)
+        tot[b] += tot[b - 1];
+#pragma omp parallel for schedule(static)
+    for (size_t b = 1; b < nb; b++) {
+        size_t end = (b + 1) * BLOCK < n ? (b + 1) * BLOCK : n;
+        for (size_t c = b * BLOCK; c < end; c++)
+            v[c] += tot[b - 1];
+    }
+    free(tot);
+}
+
 hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3], double h,
                               const double origin[3], size_t npts, const double *x)
 {
@@ -57,7 +86,7 @@ hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3]
     S->N[3] = dim;
     S->count = count;
     S->npts = npts;
-    uint32_t *start = calloc(count + 1, sizeof *start), *base = malloc((npts + 1) * sizeof *base);
+    uint32_t *start = calloc(count + 3, sizeof *start), *base = malloc((npts + 1) * sizeof *base);
     uint32_t *sbase = malloc((npts + 1) * sizeof *sbase);
     float *frac = malloc((npts + 1) * 4 * sizeof *frac), *f = malloc((npts + 1) * 4 * sizeof *f);
     S->order = malloc((npts + 1) * sizeof *S->order);
@@ -86,21 +115,20 @@ hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3]
         }
         f[4 * p + 3] = 0.0f;
         base[p] = (uint32_t)b;
-        start[b + 1]++;
+        start[b + 2]++;
     }
-    for (size_t c = 0; c < count; c++)
-        start[c + 1] += start[c];
-    /* stable counting sort: within a cell, samples keep their order */
-    for (size_t p = 0; p < npts; p++) {
-        uint32_t q = start[base[p]]++;
+    prefix_sum(start + 2, count);
+    /* Stable counting sort, last sample first: start[c + 2] ends cell c and
+     * falls to where it begins, so start + 2 is the cells' starts with the
+     * end of the last one after them. */
+    for (size_t p = npts; p-- > 0;) {
+        uint32_t q = --start[base[p] + 2];
         S->order[q] = (uint32_t)p;
         sbase[q] = base[p];
         memcpy(frac + 4 * (size_t)q, f + 4 * p, 4 * sizeof *f);
     }
-    for (size_t c = count; c > 0; c--)
-        start[c] = start[c - 1];
-    start[0] = 0;
-    if ((st = hv__cl_alloc(cl, (count + 1) * sizeof *start, start, &S->start)) ||
+    start[count + 2] = (uint32_t)npts;
+    if ((st = hv__cl_alloc(cl, (count + 1) * sizeof *start, start + 2, &S->start)) ||
         (st = hv__cl_alloc(cl, npts * 4 * sizeof *frac, npts ? frac : NULL, &S->frac)) ||
         (st = hv__cl_alloc(cl, npts * sizeof *sbase, npts ? sbase : NULL, &S->base)) ||
         (st = hv__cl_alloc(cl, npts * sizeof(float), NULL, &S->val)))
