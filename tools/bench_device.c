@@ -224,7 +224,7 @@ static int by_seconds(const void *a, const void *b)
     return (x < y) - (x > y);
 }
 
-void bench_device_profile(const char *bench)
+void bench_device_profile(const char *bench, FILE *out)
 {
     double launches;
     take_profile(&launches);
@@ -236,10 +236,11 @@ void bench_device_profile(const char *bench)
     for (int i = 0; i < ntaken; i++)
         total += taken[i].seconds;
     for (int i = 0; i < ntaken; i++)
-        printf("{\"bench\":\"kernel\",\"of\":\"%s\",\"name\":\"%s\",\"launches\":%ld,"
-               "\"seconds\":%.6f,\"share\":%.4f}\n",
-               bench, taken[i].name, taken[i].launches, taken[i].seconds,
-               total > 0 ? taken[i].seconds / total : 0.0);
-    fflush(stdout);
+        fprintf(out,
+                "{\"bench\":\"kernel\",\"of\":\"%s\",\"name\":\"%s\",\"launches\":%ld,"
+                "\"seconds\":%.6f,\"share\":%.4f}\n",
+                bench, taken[i].name, taken[i].launches, taken[i].seconds,
+                total > 0 ? taken[i].seconds / total : 0.0);
+    fflush(out);
     ntaken = 0;
 }

@@ -5,6 +5,8 @@
 
 #include <heatvox/heatvox.h>
 
+#include <stdio.h>
+
 typedef struct bench_device {
     char name[128];
     double setup_seconds;    /* hv_opencl_solver_create */
@@ -24,8 +26,8 @@ hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const
                              int repeat, bench_device *d);
 
 /* With HEATVOX_OPENCL_PROFILE set, prints one JSON line per kernel and
- * transfer timed since the last call (bench "kernel", of = bench), the
- * largest first. */
-void bench_device_profile(const char *bench);
+ * transfer timed since the last call (bench "kernel", of = bench or the
+ * command) to out, the largest first. */
+void bench_device_profile(const char *bench, FILE *out);
 
 #endif

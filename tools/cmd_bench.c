@@ -485,6 +485,6 @@ int cmd_bench(int argc, char **argv)
         return argc < 2 ? HV_EXIT_USAGE : HV_EXIT_OK;
     }
     int rc = bench_run(argc, argv);
-    bench_device_profile(argv[1]);
+    bench_device_profile(argv[1], stdout);
     return rc;
 }

@@ -1,4 +1,5 @@
 /* heatvox: the command-line driver, a thin layer over libheatvox. */
+#include "bench_device.h"
 #include "cli.h"
 #include "commands.h"
 
@@ -123,6 +124,8 @@ int main(int argc, char **argv)
             if (mpi_start(argc, argv))
                 return HV_EXIT_FAIL;
             const int rc = commands[i].run(argc - 1, argv + 1);
+            if (strcmp(argv[1], "bench") != 0)
+                bench_device_profile(argv[1], stderr); /* HEATVOX_OPENCL_PROFILE=1 */
             hv_petsc_finalize(); /* ends MPI where a petsc solver started it */
             return rc;
         }
