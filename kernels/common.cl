@@ -1,6 +1,6 @@
 /*
  * Definitions shared by every heatvox kernel file; the host prepends this file
- * to the others when it builds the program (src/solve/cl_core.c).
+ * to the others when it builds the program (src/cl/cl_core.c).
  *
  * Grids are cell-centred, x fastest: cell (i,j,k) has index i + nx*(j + ny*k).
  * Level geometry travels as int4 N = (nx, ny, nz, plain) and float4 (or
@@ -30,7 +30,7 @@ typedef float4 acc4_t;
  *     g * HV_WG * HV_RED_BLOCK + q * HV_WG + l,   q < HV_RED_BLOCK,
  * coalesced on GPUs, and a fixed trip count that CPU compilers (PoCL) unroll
  * and vectorize across work-items; then one tree per group. The host passes
- * both numbers as build options (src/solve/cl_core.h). */
+ * both numbers as build options (src/cl/cl_core.h). */
 #ifndef HV_WG
 #error "build with -DHV_WG=<work-group size> -DHV_RED_BLOCK=<elements per work-item>"
 #endif

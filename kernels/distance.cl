@@ -1,5 +1,5 @@
 /*
- * Device steps of the heat-method distance (src/heat/distance_heat.c,
+ * Device steps of the heat-method distance (src/distance/distance_heat.c,
  * distance_cl.c): the face-direction assignment from trusted log-ratios of the
  * two diffused fields, the next front's weights, the divergence of the face
  * field and the output with the per-region offsets. Double precision where

@@ -1,6 +1,6 @@
 /*
- * The extension off a level set (src/heat/extend_vhm.c) with its fields on a
- * device (src/heat/extend_cl.c): weights and the choice of where each output
+ * The extension off a level set (src/extend/extend_vhm.c) with its fields on a
+ * device (src/extend/extend_cl.c): weights and the choice of where each output
  * cell is read, the right-hand sides on a level's box, and the evaluation of
  * the ratios at the closest points. Same rules and the same order of
  * operations as the host path, in acc_t (double on fp64 devices), so that
@@ -14,7 +14,7 @@
  */
 #pragma OPENCL FP_CONTRACT OFF
 
-/* Counters (int32), as EXT_K_* in src/heat/extend_cl.c. */
+/* Counters (int32), as EXT_K_* in src/extend/extend_cl.c. */
 #define EXT_NSRC 0
 #define EXT_NPEND 1
 #define EXT_WBOX 2  /* lo xyz, hi xyz of the cells with a weight */

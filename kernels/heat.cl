@@ -1,5 +1,5 @@
 /*
- * Device steps of the signed heat method (src/heat/sdf.c, sdf_cl.c): the
+ * Device steps of the signed heat method (src/sdf/sdf.c, sdf_cl.c): the
  * trilinear splat of surface samples into the grid and the right-hand side
  * -div X of the Poisson step from the diffused fields. N = (nx, ny, nz, dim).
  */
@@ -42,7 +42,7 @@ __kernel void heat_splat(int4 N, __global const uint *start, __global const floa
  * coordinates i, j, k of c): the mean of the two cells' vectors (ncomp 3,
  * component b at Y + b * count), or for the unsigned field (ncomp 1) its
  * gradient, central differences across and one-sided (mirror) at walls, as
- * face_vec in src/heat/sdf.c. */
+ * face_vec in src/sdf/sdf.c. */
 static void heat_face_vec(int4 N, __global const float *Y, ulong count, int ncomp, acc_t inv_h,
                           int a, size_t c, int i, int j, int k, acc_t v[3])
 {
@@ -93,7 +93,7 @@ static acc_t heat_face_flux(int4 N, __global const float *Y, ulong count, int nl
     return 0;
 }
 
-/* rhs[c] = -(sum of the outward normalized fluxes of cell c) / h, the right-hand side of -Lap phi = -div X (build_rhs in src/heat/sdf.c), from
+/* rhs[c] = -(sum of the outward normalized fluxes of cell c) / h, the right-hand side of -Lap phi = -div X (build_rhs in src/sdf/sdf.c), from
  * nlev levels of ncomp diffused fields (level l, component b at
  * Y + (l * ncomp + b) * count). Counts the interior faces with no live level
  * in *dead (each face once, at its high cell). 3D grids only. */
@@ -141,7 +141,7 @@ __kernel void heat_sdf_rhs(int4 N, __global const float *Y, ulong count, int nle
 
 /* out[p] = trilinear interpolation of v at binned sample p (base cell
  * base[p], fractions frac[p]): the transpose of heat_splat, as interp() in
- * src/heat/sdf.c. Corners with zero weight are not read (clamped axes). */
+ * src/sdf/sdf.c. Corners with zero weight are not read (clamped axes). */
 __kernel void heat_sample(int4 N, __global const uint *base, __global const float4 *frac,
                           __global const float *v, __global float *out, ulong npts)
 {
@@ -163,7 +163,7 @@ __kernel void heat_sample(int4 N, __global const uint *base, __global const floa
 }
 
 /* The zero-set correction of the signed heat method (local_shift in
- * src/heat/sdf.c): phi -= shift, then phi -= taper(den) num / den where den is
+ * src/sdf/sdf.c): phi -= shift, then phi -= taper(den) num / den where den is
  * above 100 tau, the taper rising linearly to 1 at 1000 tau. */
 __kernel void heat_shift(__global float *phi, __global const float *num, __global const float *den,
                          float shift, acc_t tau, int local_shift, ulong n)

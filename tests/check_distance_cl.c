@@ -1,6 +1,6 @@
 /*
  * The heat-method distance with backend opencl (its stages on the device,
- * src/heat/distance_cl.c) against the host path with the same backend
+ * src/distance/distance_cl.c) against the host path with the same backend
  * (HEATVOX_DISTANCE_CL=0): same field to 1e-4 voxel, same stage counts (and
  * within a voxel of backend mg, whose residuals move the trust bounds), on 2D and 3D grids of odd sizes with
  * obstacles, several sources and a sealed region without a source; and the
@@ -8,7 +8,7 @@
  * only notes it.
  */
 #include "heatvox/heatvox.h"
-#include "solve/cl_core.h"
+#include "cl/cl_core.h"
 #include "testlib.h"
 
 #include <check.h>

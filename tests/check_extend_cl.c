@@ -1,6 +1,6 @@
 /*
  * The extension off a level set with backend opencl (its weights, solves and
- * closest-point evaluation on the device, src/heat/extend_cl.c) against
+ * closest-point evaluation on the device, src/extend/extend_cl.c) against
  * backend mg on the same boxes (box_only): sphere and torus, scalar and
  * vector fields, dense and with an output band, obstacles, a 2D circle and a
  * float-only device; constant fields exactly; `heatvox extend --backend

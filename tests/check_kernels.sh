@@ -10,11 +10,11 @@ out=${1:?usage: check_kernels.sh OUTDIR [CLANG]}
 cc=${2:-clang-14}
 here=$(dirname "$0")/..
 mkdir -p "$out"
-wg=$(sed -n 's/^#define HV_CL_WG \([0-9]*\).*/\1/p' "$here/src/solve/cl_core.h")
-rb=$(sed -n 's/^#define HV_CL_RED_BLOCK \([0-9]*\).*/\1/p' "$here/src/solve/cl_core.h")
+wg=$(sed -n 's/^#define HV_CL_WG \([0-9]*\).*/\1/p' "$here/src/cl/cl_core.h")
+rb=$(sed -n 's/^#define HV_CL_RED_BLOCK \([0-9]*\).*/\1/p' "$here/src/cl/cl_core.h")
 [ -n "$wg" ] && [ -n "$rb" ] || { echo "check_kernels: HV_CL_WG or HV_CL_RED_BLOCK not found"; exit 1; }
 
-# name: sources after common.cl (as in src/solve/cl_core.c and each
+# name: sources after common.cl (as in src/cl/cl_core.c and each
 # module's hv_cl_module); "fp64" where the module is built only with fp64.
 programs="solver:mg,reduce,fine,faces,pointwise
 heat:heat

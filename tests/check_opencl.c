@@ -7,7 +7,7 @@
  */
 #include "heatvox/heatvox.h"
 #include "solve/cl_mg.h"
-#include "solve/cl_ops.h"
+#include "cl/cl_ops.h"
 #include "testlib.h"
 
 #include <check.h>

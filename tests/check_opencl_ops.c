@@ -6,10 +6,10 @@
  * 2D and 3D, odd sizes, masks where the step has them. Without an OpenCL
  * platform the suite only notes it.
  */
-#include "heat/sdf_cl.h"
-#include "heat/sdf_internal.h"
+#include "sdf/sdf_cl.h"
+#include "sdf/sdf_internal.h"
 #include "heatvox/heatvox.h"
-#include "solve/cl_ops.h"
+#include "cl/cl_ops.h"
 #include "testlib.h"
 
 #include <check.h>
@@ -46,7 +46,7 @@ static void download(cl_mem m, float *v, size_t n)
 
 /* ---------- splat ---------- */
 
-/* The CPU splat of src/heat/sdf.c: hv__trilinear weights, float sums. */
+/* The CPU splat of src/sdf/sdf.c: hv__trilinear weights, float sums. */
 static void cpu_splat(const hv_grid *g, size_t npts, const double *x, const double *val,
                       size_t stride, double scale, float *out)
 {
@@ -170,7 +170,7 @@ START_TEST(splat_of_a_mesh_quadrature_should_match_the_cpu)
 }
 END_TEST
 
-/* interp() of src/heat/sdf.c */
+/* interp() of src/sdf/sdf.c */
 static double cpu_interp(const hv_grid *g, const float *v, const double x[3])
 {
     size_t c0, step[3];
@@ -251,7 +251,7 @@ END_TEST
 
 /* ---------- the signed heat method's right-hand side ---------- */
 
-/* build_rhs of src/heat/sdf.c, serial. */
+/* build_rhs of src/sdf/sdf.c, serial. */
 static void cpu_face_vec(const float *Y, size_t count, int unsig, const int n[3], const size_t s[3],
                          double h, int a, size_t c, const int idx[3], double v[3])
 {

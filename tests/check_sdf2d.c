@@ -2,7 +2,7 @@
  * with gaps, flipped segments, duplicates and the wrong winding, against their
  * analytic distances; the text and SVG readers. */
 #include "heatvox/heatvox.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d/sdf2d_internal.h"
 #include "testlib.h"
 
 #include <check.h>

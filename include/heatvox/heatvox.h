@@ -14,6 +14,7 @@
 #include "heatvox/sdf.h"
 #include "heatvox/image.h"
 #include "heatvox/curves.h"
+#include "heatvox/sdf2d.h"
 #include "heatvox/heat.h"
 #include "heatvox/petsc.h"
 

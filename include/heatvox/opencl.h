@@ -15,7 +15,6 @@
 #define HEATVOX_OPENCL_H
 
 #include "core.h"
-#include "solve.h"
 
 #ifndef CL_TARGET_OPENCL_VERSION
 #define CL_TARGET_OPENCL_VERSION 120
@@ -25,6 +24,13 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/* The solver's problem, options and results (solve.h), by pointer: the
+ * device layer sits below the solver. */
+typedef struct hv_problem hv_problem;
+typedef struct hv_solver_opts hv_solver_opts;
+typedef struct hv_solve_info hv_solve_info;
+typedef struct hv_solver hv_solver;
 
 typedef struct hv_opencl_device {
     int platform; /* P in HEATVOX_OPENCL_DEVICE="P:D" */

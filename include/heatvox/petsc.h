@@ -16,12 +16,21 @@
 
 #include "core.h"
 #include "grid.h"
-#include "heat.h"
-#include "solve.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/* The solver's and the features' options and results (solve.h, heat.h), by
+ * pointer: petsc.h sits below them. */
+typedef struct hv_solver_opts hv_solver_opts;
+typedef struct hv_solve_info hv_solve_info;
+typedef struct hv_distance_sources hv_distance_sources;
+typedef struct hv_distance_opts hv_distance_opts;
+typedef struct hv_distance_stats hv_distance_stats;
+typedef struct hv_extend_opts hv_extend_opts;
+typedef struct hv_extend_stats hv_extend_stats;
+typedef struct hv_extend_field hv_extend_field;
 
 /* 1 when this build has the petsc backend, 0 otherwise. */
 HV_API int hv_petsc_available(void);

@@ -20,7 +20,9 @@
 #define HEATVOX_VDB_H
 
 #include "grid.h"
-#include "mesh.h"
+
+/* mesh.h's mesh, for hv_grid_to_mesh below (vdb.h sits below mesh.h). */
+typedef struct hv_mesh hv_mesh;
 
 #ifdef __cplusplus
 extern "C" {

@@ -1,5 +1,5 @@
 #include "heatvox/core.h"
-#include "core/error.h"
+#include "error.h"
 
 #include <dirent.h>
 #include <errno.h>

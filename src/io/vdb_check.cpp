@@ -2,7 +2,7 @@
 // window and skips what it does not need; nothing it allocates depends on a
 // length read from the file beyond that length having been found inside the
 // file (names, and one uint16 per leaf for the leaves whose masks it read).
-#include "io/vdb_check.h"
+#include "vdb_check.h"
 
 #include <openvdb/Metadata.h>
 #include <openvdb/version.h>

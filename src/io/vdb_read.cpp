@@ -3,8 +3,8 @@
 // metadata. Files are checked against their size (vdb_check.h) before OpenVDB
 // reads them.
 #include "heatvox/vdb.h"
-#include "io/vdb_internal.h"
-#include "io/vdb_check.h"
+#include "vdb_internal.h"
+#include "vdb_check.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>

@@ -3,7 +3,7 @@
 // written with their metadata through a temporary file.
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
-#include "io/vdb_internal.h"
+#include "vdb_internal.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/Archive.h>

@@ -54,7 +54,7 @@ hv_status hv__mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size
 /* Builds a mesh from arrays exactly as given (copied): no welding, no vertex
  * dropped, so a producer that guarantees its own topology keeps it even where
  * two vertices share a position (hv_mesh_from_arrays would merge them). For
- * the isosurface extraction (src/io/vdb_mesh.cpp); indices must be < nverts. */
+ * the isosurface extraction (src/mesh/vdb_mesh.cpp); indices must be < nverts. */
 hv_status hv__mesh_from_arrays_as_is(hv_mesh **out, const double *verts, size_t nverts,
                                      const uint32_t *tris, size_t ntris);
 

@@ -9,7 +9,7 @@
 #ifndef HV_SOLVE_CL_MG_H
 #define HV_SOLVE_CL_MG_H
 
-#include "cl_core.h"
+#include "cl/cl_core.h"
 #include "mg_level.h"
 
 typedef struct hv_clmg_level {

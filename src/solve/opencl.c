@@ -16,7 +16,8 @@
  */
 #include "backend.h"
 #include "cl_mg.h"
-#include "cl_ops.h"
+#include "cl/cl_ops.h"
+#include "solve_cl.h"
 #include "core/error.h"
 #include "heatvox/opencl.h"
 #include "iterate.h"
@@ -33,9 +34,9 @@ typedef struct ocl_state {
     const hv_setup *s;
     hv_cl *cl;
     hv_clmg mg;
-    mg_hierarchy H; /* host copy; level 0 kept for the host path only */
+    mg_hierarchy H;        /* host copy; level 0 kept for the host path only */
     hv_solver_stats stats; /* modelled while the whole hierarchy is at hand */
-    int dev64;      /* double defect correction on the device */
+    int dev64;             /* double defect correction on the device */
     int use_pcg;
     /* device path */
     cl_mem v[NVEC];    /* double fine vectors */

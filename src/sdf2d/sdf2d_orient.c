@@ -6,7 +6,7 @@
  * of loops (hv__sdf2d_all_pairs, for the tests).
  */
 #include "core/error.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>

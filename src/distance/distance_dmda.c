@@ -19,7 +19,7 @@
  * per region. */
 #include "heatvox/petsc.h"
 #include "distance_internal.h"
-#include "solve/dmda.h"
+#include "petsc/dmda.h"
 #include "core/error.h"
 
 #include <math.h>

@@ -4,7 +4,7 @@
 #ifndef HV_HEAT_SDF2D_INTERNAL_H
 #define HV_HEAT_SDF2D_INTERNAL_H
 
-#include "heatvox/curves.h"
+#include "heatvox/sdf2d.h"
 
 #include <math.h>
 #include <stddef.h>

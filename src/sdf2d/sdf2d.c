@@ -16,9 +16,9 @@
  * chain runs); the exact distance in sdf2d_exact.c. This file holds the
  * options, the grid and the method itself.
  */
-#include "heatvox/curves.h"
+#include "heatvox/sdf2d.h"
 #include "core/error.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>

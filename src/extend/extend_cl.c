@@ -8,11 +8,12 @@
  * reads back the counters once per call (source cells, boxes, NaN checks),
  * per level the weights' norm, the residual norms and the level's counts, and
  * the outputs once. Its kernels are registered and built here (hv_cl_module,
- * src/solve/cl_core.h).
+ * src/cl/cl_core.h).
  */
 #include "extend_cl.h"
 #include "core/error.h"
-#include "solve/cl_ops.h"
+#include "cl/cl_ops.h"
+#include "solve/solve_cl.h"
 
 #include <math.h>
 #include <stdio.h>

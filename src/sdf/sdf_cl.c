@@ -6,11 +6,12 @@
  * dead-face count, phi at the surface samples (for the area-weighted sums)
  * and phi once. The steps of its own (the splat, the right-hand side, the
  * shift) come first, with their kernels (kernels/heat.cl), which this file
- * registers and builds (hv_cl_module, src/solve/cl_core.h).
+ * registers and builds (hv_cl_module, src/cl/cl_core.h).
  */
 #include "sdf_cl.h"
 #include "core/error.h"
-#include "solve/cl_ops.h"
+#include "cl/cl_ops.h"
+#include "solve/solve_cl.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -96,7 +97,7 @@ hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3]
         goto done;
     }
     const size_t stride[3] = {1, (size_t)nn[0], (size_t)nn[0] * nn[1]};
-    /* base cell and fractions exactly as hv__trilinear (src/heat/surface.c) */
+    /* base cell and fractions exactly as hv__trilinear (src/mesh/surface.c) */
     for (size_t p = 0; p < npts; p++) {
         size_t b = 0;
         for (int a = 0; a < 3; a++) {

@@ -4,7 +4,7 @@
 #define HV_HEAT_SDF_CL_H
 
 #include "sdf_internal.h"
-#include "solve/cl_core.h"
+#include "cl/cl_core.h"
 
 #include <stdint.h>
 
@@ -19,12 +19,12 @@ hv_status hv__sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, con
 
 /* ---- device steps (kernels/heat.cl) ----------------------------------------
  * Enqueued on cl's queue, errors at hv__cl_check / hv__cl_finish, as the grid
- * operations of src/solve/cl_ops.h. Their kernels are built on first use
+ * operations of src/cl/cl_ops.h. Their kernels are built on first use
  * (hv__cl_module_open). */
 
 /* Surface samples binned for the trilinear splat (kernels/heat.cl): sorted by
  * the base cell of their stencil, with fractional coordinates, clamped at the
- * block as hv__trilinear (src/heat/surface.c) does. Bin once, splat as many
+ * block as hv__trilinear (src/mesh/surface.c) does. Bin once, splat as many
  * value sets as needed. */
 typedef struct hv_cl_splat {
     cl_int N[4];  /* nx, ny, nz (1 in 2D), dim */
@@ -51,16 +51,16 @@ hv_status hv__cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t 
                            double scale, cl_mem out);
 
 /* out[q] (npts floats, sorted order) = trilinear interpolation of v at sorted
- * sample q, the transpose of the splat (interp in src/heat/sdf.c); S->order[q]
+ * sample q, the transpose of the splat (interp in src/sdf/sdf.c); S->order[q]
  * names the sample. */
 void hv__cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out);
 
 /* phi -= shift; then, with local_shift, phi -= taper(den) num / den, the
- * zero-set correction of src/heat/sdf.c (den above 100 tau, full at 1000 tau). */
+ * zero-set correction of src/sdf/sdf.c (den above 100 tau, full at 1000 tau). */
 void hv__cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
                       double tau, int local_shift);
 
-/* rhs = -div X / h of the signed heat method (build_rhs in src/heat/sdf.c)
+/* rhs = -div X / h of the signed heat method (build_rhs in src/sdf/sdf.c)
  * on a 3D grid: X normalized at each face from the first of nlev levels of
  * ncomp (3: vectors, 1: a scalar whose gradient is taken) diffused fields in Y
  * (level l, component b at float offset (l * ncomp + b) * count) whose face

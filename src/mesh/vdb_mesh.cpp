@@ -27,7 +27,7 @@
 #include "io/vdb_internal.h"
 
 extern "C" {
-#include "mesh/mesh_internal.h"
+#include "mesh_internal.h"
 }
 
 #include <openvdb/openvdb.h>

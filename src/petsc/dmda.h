@@ -1,7 +1,7 @@
 /* Private: the solver on a DMDA (dmda.c) as the extension on a DMDA
  * (extend_dmda.c) uses it, in builds with HV_HAVE_PETSC. */
-#ifndef HV_SOLVE_DMDA_H
-#define HV_SOLVE_DMDA_H
+#ifndef HV_PETSC_DMDA_H
+#define HV_PETSC_DMDA_H
 
 #include "heatvox/petsc.h"
 

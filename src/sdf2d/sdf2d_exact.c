@@ -3,7 +3,7 @@
  * magnitude hv_curves_sdf puts under the heat method's sign by default.
  */
 #include "core/error.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>

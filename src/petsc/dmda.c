@@ -10,7 +10,7 @@
  * changes a label. */
 #include "heatvox/petsc.h"
 #include "solve/backend.h"
-#include "solve/dmda.h"
+#include "dmda.h"
 #include "core/error.h"
 
 #include <stdlib.h>

@@ -2,19 +2,18 @@
  * Private: grid operations on an OpenCL device for the heat methods and the
  * solver: per-region sums and mean projections (one constant per connected
  * fluid region, docs/METHOD.md, "Multigrid"), face gradient and divergence
- * (as src/ops/faces.c), the heat methods' face normalization, ratio and axpy,
- * and the device-resident solve. Steps of one heat method live with it (its
- * device path in src/heat/) and build their own kernels (cl_core.h,
+ * (as src/ops/faces.c), the heat methods' face normalization, ratio and axpy.
+ * The device-resident solve is src/solve/solve_cl.h's. Steps of one heat method live with it (its
+ * device path in src/sdf/, src/distance/, src/extend/) and build their own kernels (cl_core.h,
  * hv_cl_module).
  * Arrays are cl_mem of float unless named _d (double, fp64 devices only).
  * Everything is enqueued on cl's queue; errors surface at hv__cl_check /
  * hv__cl_finish.
  */
-#ifndef HV_SOLVE_CL_OPS_H
-#define HV_SOLVE_CL_OPS_H
+#ifndef HV_CL_CL_OPS_H
+#define HV_CL_CL_OPS_H
 
 #include "cl_core.h"
-#include "heatvox/solve.h"
 
 /* Cells sorted by region and cut into chunks (one work-group each), so that
  * per-region sums take two kernels whatever the number and size of regions. */
@@ -56,17 +55,5 @@ void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_
 void hv__cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps);
 /* y += alpha x */
 void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
-
-/* Solves A u = f with a solver of the opencl backend, f and u float device
- * buffers in cl's context (src/solve/opencl.c): the device keeps the fields,
- * the host reads only residual norms. The queue that wrote f must be finished;
- * on return u is complete. Other backends: HV_ERR_UNSUPPORTED. Semantics of
- * hv_solver_solve (Poisson right-hand sides projected, u zero on solid cells,
- * nonzero_guess honoured). Devices without fp64 go through the host. */
-hv_status hv__cl_solver_solve(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
-/* The same with f and u double device buffers (hv_solver_solve_d's
- * precision): fp64 devices only, else HV_ERR_UNSUPPORTED. f is zeroed on
- * solid cells as the front end does (also for heat steps). */
-hv_status hv__cl_solver_solve_d(hv_solver *s, cl_mem f, cl_mem u, hv_solve_info *info);
 
 #endif

@@ -2,7 +2,7 @@
  * Private: the OpenCL device, context, programs and kernel launches shared by
  * the OpenCL solver backend (opencl.c, cl_mg.c), the device grid operations
  * (cl_ops.c) and the modules that bring kernels of their own (the heat
- * methods' device paths: src/heat/sdf_cl.c, distance_cl.c, extend_cl.c).
+ * methods' device paths: src/sdf/sdf_cl.c, distance_cl.c, extend_cl.c).
  * Kernels come from kernels/<name>.cl, embedded into the library at build
  * time (build/gen/kernels.c).
  *
@@ -16,8 +16,8 @@
  * is kept in the handle and hv__cl_check() turns it into HV_ERR_BACKEND naming
  * the call, so that a sequence of enqueues reads straight.
  */
-#ifndef HV_SOLVE_CL_CORE_H
-#define HV_SOLVE_CL_CORE_H
+#ifndef HV_CL_CL_CORE_H
+#define HV_CL_CL_CORE_H
 
 #include "heatvox/opencl.h"
 

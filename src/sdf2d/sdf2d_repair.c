@@ -7,7 +7,7 @@
  * sdf2d_orient.c.
  */
 #include "core/error.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>

@@ -8,12 +8,13 @@
  * double triple per work-group) and the front cell count, then phi at the
  * cells near the sources (for the offsets) and the distance once. Its
  * kernels (kernels/distance.cl, fp64 only) are registered and built here
- * (hv_cl_module, src/solve/cl_core.h).
+ * (hv_cl_module, src/cl/cl_core.h).
  */
 #include "distance_cl.h"
 #include "core/error.h"
 #include "heatvox/ops.h"
-#include "solve/cl_ops.h"
+#include "cl/cl_ops.h"
+#include "solve/solve_cl.h"
 
 #include <math.h>
 #include <stdlib.h>

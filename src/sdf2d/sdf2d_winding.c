@@ -15,7 +15,7 @@
  * at their centres.
  */
 #include "core/error.h"
-#include "heat/sdf2d_internal.h"
+#include "sdf2d_internal.h"
 
 #include <math.h>
 #include <stdlib.h>

@@ -13,7 +13,7 @@
  * with HV_ERR_UNSUPPORTED. */
 #include "heatvox/petsc.h"
 #include "solve/backend.h"
-#include "solve/dmda.h"
+#include "dmda.h"
 #include "core/error.h"
 
 #include <stdlib.h>

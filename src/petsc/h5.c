@@ -8,7 +8,7 @@
  * fields as cell-centred attributes. */
 #include "heatvox/petsc.h"
 #include "core/error.h"
-#include "solve/dmda.h"
+#include "dmda.h"
 
 #include <stdio.h>
 #include <stdlib.h>

@@ -18,7 +18,7 @@
  * exchange. */
 #include "heatvox/petsc.h"
 #include "extend_internal.h"
-#include "solve/dmda.h"
+#include "petsc/dmda.h"
 #include "core/error.h"
 
 #include <limits.h>
