@@ -196,13 +196,14 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 # the run named fp32:SUITE; the multigrid suite a second time without its
 # AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
-# offline as strict OpenCL C 1.2 and 3.0), the OpenCL one again as on a device without fp64 (NAME.fp32)
+# offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
+# include map of src/README.md), the OpenCL one again as on a device without fp64 (NAME.fp32)
 # and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
-              check_kernels \
+              check_kernels check_includes \
               $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
@@ -232,6 +233,7 @@ check-long: all $(BUILD)/tests/check_batch $(TEST_HELPERS)
 $(RES)/%.rc:
 	@run=$*; t=$(BUILD)/tests/$${run%%.*}; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
 	[ $$run != check_kernels ] || t="sh tests/check_kernels.sh $(BUILD)/kernels $(FZ_CC)"; \
+	[ $$run != check_includes ] || t="python3 tests/check_includes.py"; \
 	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; esac; \
 	t0=$$(date +%s%N); \
 	HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
