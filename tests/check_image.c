@@ -320,7 +320,7 @@ END_TEST
 START_TEST(exr_header_asking_for_gigabytes_should_fail_before_allocating)
 {
     /* Fuzzer finds: headers of a few hundred bytes whose data window asks for
-     * 5 to 19 GB; the grid used to be allocated (and touched) first. */
+     * 5 to 19 GB; the grid must not be allocated (and touched) first. */
     const char *files[] = {"tests/fuzz/regress/exr/data_window_67109377x46_in_550_bytes.exr",
                            "tests/fuzz/regress/exr/grid_allocated_before_chunk_table_check.exr",
                            "tests/fuzz/regress/exr/grid_of_19GB_in_1126_bytes.exr"};

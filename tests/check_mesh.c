@@ -798,7 +798,7 @@ static const char *ply_face_line(const char *name, const char *face)
 START_TEST(ply_integers_beyond_int64_should_fail_naming_the_file_and_line)
 {
     /* Integral values written as reals ("3.0") are accepted; one outside the
-     * range of int64 used to be converted anyway (undefined behaviour). */
+     * range of int64 is refused, not converted (undefined behaviour). */
     make_tmpdir();
     hv_mesh *m = NULL;
     ck_assert_int_eq(hv_mesh_read(ply_face_line("real.ply", "3.0 0 1 2.0"), &m), HV_OK);
@@ -830,8 +830,8 @@ static void assert_absurd(const char *path, const char *part)
 
 START_TEST(coordinates_beyond_1e100_should_fail_naming_the_file_and_the_bound)
 {
-    /* 1e308 used to load and fail much later ("voxel size inf gives -nan
-     * cells"): the bounding box's extent overflows to inf. */
+    /* 1e308 loads but the bounding box's extent overflows to inf: refused at
+     * once, not much later as "voxel size inf gives -nan cells". */
     make_tmpdir();
     assert_absurd(tmp_write_str("big.obj", "v 0 0 0\nv 1e308 0 0\nv -1e308 1 0\nf 1 2 3\n"),
                   "line 2: vertex 2: coordinate x = 1e+308");
@@ -905,7 +905,7 @@ static void *fifo_writer(void *arg)
 
 START_TEST(non_regular_inputs_should_be_refused_naming_the_file)
 {
-    /* /dev/zero used to be read until memory ran out. */
+    /* /dev/zero is refused, not read until memory runs out. */
     make_tmpdir();
     hv_mesh *m = NULL;
     double t0 = hv_now();

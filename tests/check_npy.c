@@ -248,7 +248,7 @@ END_TEST
 START_TEST(npy_reader_should_refuse_devices_directories_and_pipes)
 {
     /* The data size is checked against the file's size, which only a regular
-     * file has; /dev/zero used to be read as a (malformed) array. */
+     * file has; /dev/zero is refused, not read as a (malformed) array. */
     expect_error("/dev/zero", HV_ERR_IO, "character device");
     expect_error(dir, HV_ERR_IO, "directory");
     char p[256];

@@ -941,7 +941,7 @@ static size_t find_bytes(const unsigned char *b, size_t size, size_t from, const
 }
 
 /* A length field, and what to put there: each is a size or count that OpenVDB
- * used to allocate (and fill) before finding that the file cannot back it. */
+ * would allocate (and fill) before finding that the file cannot back it. */
 typedef struct length_patch {
     const char *what;
     size_t at;

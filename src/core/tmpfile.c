@@ -50,8 +50,8 @@ static void tmp_unregister(const char *name)
 }
 
 /* The pid in a temporary's name "<dots><base>.tmp-<pid>-...", or 0 where the
- * name is no temporary of base. One leading dot is the rule; two are what
- * earlier versions left when a writer staged a temporary of a temporary. */
+ * name is no temporary of base. One leading dot is the rule; two are the name
+ * of a temporary of a temporary, which a killed writer can leave. */
 static long stale_pid(const char *n, const char *base, size_t blen)
 {
     for (int dots = 1; dots <= 2; dots++) {

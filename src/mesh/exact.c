@@ -13,7 +13,7 @@
  * are refined by a descent over the triangles sharing a vertex with them
  * (0.1-0.2 voxel errors at 3 voxels on a fine icosphere without). Passes
  * repeat until nothing changes. A narrow band needs no sweeps over the whole
- * grid (they took 1.2 s of 6 for the bunny at 256^3).
+ * grid.
  */
 #include "exact.h"
 #include "core/error.h"

@@ -5,9 +5,8 @@
  * sub-triangle contributes its centroid with its vector area, and points are
  * spread to the eight nearest cell centres with trilinear weights. Centroids
  * are then at most 0.6 h apart along the surface, closer than the splat
- * kernel's half width h, so large triangles do not alias (a 1-to-4 split down
- * to h/2 gives 4-8 times as many points for no measurable gain: 5 M points
- * for the 70k-triangle bunny at 256^3). Triangles much
+ * kernel's half width h, so large triangles do not alias; splitting further,
+ * down to h/2, gives 4-8 times as many points and no more accuracy. Triangles much
  * larger than a voxel are first split 1-to-4 with culling against the block,
  * so that a huge triangle mostly outside it costs little.
  */
