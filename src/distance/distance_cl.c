@@ -64,18 +64,6 @@ static void work_free(dist_cl_work *k)
     hv__cl_close(&k->cl);
 }
 
-static hv_status make_solver(hv_solver **s, const hv_grid *g, double alpha, double beta, double tol)
-{
-    /* as make_solver in distance_heat.c, on the opencl backend */
-    hv_problem p = {g->dim, {g->n[0], g->n[1], g->n[2]}, g->h, g->solid, alpha, beta};
-    hv_solver_opts o;
-    hv_solver_opts_default(&o);
-    o.backend = HV_BACKEND_OPENCL;
-    o.tol = tol;
-    o.max_iter = 200;
-    return hv_solver_create(s, &p, &o);
-}
-
 /* Reads the two counters and zeroes them. */
 static hv_status read_counts(hv_cl *cl, cl_mem cnt, uint32_t out[2])
 {
@@ -217,7 +205,8 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
             goto done;
         for (int q = 0; q < 2; q++) {
             if (!k.sv[q] &&
-                (st = make_solver(&k.sv[q], g, 1.0, S->t * (q ? T_RATIO : 1), o->diffuse_tol)))
+                (st = hv__dist_solver(&k.sv[q], g->dim, g->n, g->h, g->solid, 1.0,
+                                      S->t * (q ? T_RATIO : 1), o->diffuse_tol, HV_BACKEND_OPENCL)))
                 goto done;
             if ((st = hv__cl_solver_solve_d(k.sv[q], k.w, q ? k.u2 : k.u, &info[q])))
                 goto done;
@@ -293,7 +282,9 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
     hv__cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", N, k.region, k.X[0], k.X[1],
                        dim == 3 ? k.X[2] : NULL, 1.0 / g->h, k.u2);
     hv__cl_module_run(cl, &dist_module, DK_DIV, 2, gc, lc);
-    if ((st = hv__cl_finish(cl)) || (st = make_solver(&k.sv[0], g, 0.0, 1.0, o->poisson_tol)))
+    if ((st = hv__cl_finish(cl)) ||
+        (st = hv__dist_solver(&k.sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
+                              HV_BACKEND_OPENCL)))
         goto done;
     hv_solve_info pinfo;
     if ((st = hv__cl_solver_solve_d(k.sv[0], k.u2, k.u, &pinfo)))

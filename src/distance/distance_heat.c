@@ -456,10 +456,10 @@ typedef struct local_solves {
     int restarts; /* of the Poisson solve */
 } local_solves;
 
-static hv_status make_solver(hv_solver **s, const dist_ctx *d, double alpha, double beta,
-                             double tol, hv_backend backend)
+hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
+                          double alpha, double beta, double tol, hv_backend backend)
 {
-    hv_problem p = {d->dim, {d->n[0], d->n[1], d->n[2]}, d->h, d->solid, alpha, beta};
+    hv_problem p = {dim, {n[0], n[1], n[2]}, h, solid, alpha, beta};
     hv_solver_opts o;
     hv_solver_opts_default(&o);
     o.backend = backend;
@@ -468,17 +468,18 @@ static hv_status make_solver(hv_solver **s, const dist_ctx *d, double alpha, dou
     return hv_solver_create(s, &p, &o);
 }
 
-/* Poisson, with restarts (defect correction) on the residual, a guard:
- * before the multigrid preconditioner was made symmetric (P^T restriction,
- * reversed post-smoothing) CG stalled near 3e-2 in long corridors; now every
- * test scene (serpentine and maze included) converges without one, and
- * check_distance asserts that. */
+/* Poisson, with restarts (defect correction) on the residual, a guard: CG
+ * with a preconditioner that is not symmetric stalls near 3e-2 in long
+ * corridors; with the symmetric cycle (P^T restriction, reversed
+ * post-smoothing) every test scene (serpentine and maze included) converges
+ * without one, and check_distance asserts that. */
 static hv_status local_poisson(local_solves *L, const double *rhs, double *u, hv_solve_info *info)
 {
     const dist_ctx *d = L->d;
     hv_solver_destroy(&L->sv[0]);
     hv_solver_destroy(&L->sv[1]);
-    hv_status st = make_solver(&L->sv[2], d, 0.0, 1.0, L->o->poisson_tol, L->o->backend);
+    hv_status st = hv__dist_solver(&L->sv[2], d->dim, d->n, d->h, d->solid, 0.0, 1.0,
+                                   L->o->poisson_tol, L->o->backend);
     if (st || (st = hv_solver_solve_d(L->sv[2], rhs, u, info)))
         return st;
     double fn = norm2(d, rhs), rel = info->relres;
@@ -516,8 +517,9 @@ static hv_status local_solve(void *user, int q, const double *f, double *u, hv_s
     if (q == 2)
         return local_poisson(L, f, u, info);
     hv_status st;
-    if (!L->sv[q] && (st = make_solver(&L->sv[q], L->d, 1.0, L->t * (q ? T_RATIO : 1),
-                                       L->o->diffuse_tol, L->o->backend)))
+    if (!L->sv[q] &&
+        (st = hv__dist_solver(&L->sv[q], L->d->dim, L->d->n, L->d->h, L->d->solid, 1.0,
+                              L->t * (q ? T_RATIO : 1), L->o->diffuse_tol, L->o->backend)))
         return st;
     return hv_solver_solve_d(L->sv[q], f, u, info);
 }

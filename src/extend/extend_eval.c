@@ -145,45 +145,23 @@ static int evaluation_point(const hv_extender *e, const float *phi, int i, int j
         /* Inside the grid, straight-line: the same central differences and
          * trilinear stencil as below (this runs once or twice per output cell). */
         const size_t sy = (size_t)nx, sz = (size_t)nx * ny;
-        double gx = 0, gy = 0, gz = 0, gn = 0;
-        for (int up = 0; up < 2; up++) { /* central, then upwind (phi_diff2) */
-            gx = phi_diff2(phi[c], phi[c - 1], phi[c + 1], up);
-            gy = phi_diff2(phi[c], phi[c - sy], phi[c + sy], up);
-            gz = phi_diff2(phi[c], phi[c - sz], phi[c + sz], up);
-            gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
-            if (gn >= GRAD_MIN && gn <= GRAD_MAX)
-                break;
-        }
-        if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+        const double nb[6] = {phi[c - 1],  phi[c + 1],  phi[c - sy],
+                              phi[c + sy], phi[c - sz], phi[c + sz]};
+        double p[3];
+        if (!hv__ext_closest_point(phi[c], nb, e->h, i, j, k, p))
             return 0;
-        const double sc = phi[c] * 0.5 / (gn * e->h * e->h);
-        const double p[3] = {i - sc * gx, j - sc * gy, k - sc * gz};
         if (past_box(e, p))
             return past_point(e, p, pg);
         const int nn[3] = {nx, ny, nz};
         int f[3];
-        double fr[3];
-        for (int a = 0; a < 3; a++) {
-            if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
-                return 0;
-            double q = p[a] < 0 ? 0 : p[a]; /* comparisons: fmin/fmax are libm calls here */
-            if (q > nn[a] - 1)
-                q = nn[a] - 1;
-            f[a] = (int)q;
-            if (f[a] > nn[a] - 2)
-                f[a] = nn[a] - 2;
-            fr[a] = q - f[a];
-        }
+        double cw[8], v = 0;
+        if (!hv__ext_trilinear(p, nn, f, cw))
+            return 0;
         const size_t b = f[0] + sy * f[1] + sz * f[2];
         const size_t ci[8] = {b,      b + 1,      b + sy,      b + sy + 1,
                               b + sz, b + sz + 1, b + sy + sz, b + sy + sz + 1};
-        const double wx[2] = {1 - fr[0], fr[0]}, wy[2] = {1 - fr[1], fr[1]},
-                     wz[2] = {1 - fr[2], fr[2]};
-        double cw[8], v = 0;
-        for (int q = 0; q < 8; q++) {
-            cw[q] = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
+        for (int q = 0; q < 8; q++)
             v += cw[q] * phi[ci[q]];
-        }
         if (validate && fabs(v) > 0.5 * fmax(e->o.band, 1.0) * e->h)
             return 0;
         memcpy(idx, ci, sizeof ci);

@@ -208,6 +208,56 @@ static inline double phi_diff2(double pc, double vm, double vp, int upwind)
     return vp - vm;
 }
 
+/* The closest point p (index space) of an interior cell (i,j,k) of a 3D grid
+ * of spacing h from its phi pc and its six neighbours' (x-, x+, y-, y+, z-,
+ * z+): central differences, upwind where they are too short or long; 0 when
+ * |grad phi| stays outside [GRAD_MIN, GRAD_MAX]. The dense and the tiled
+ * evaluations both take it, so that they read the same points bit for bit. */
+static inline int hv__ext_closest_point(double pc, const double nb[6], double h, int i, int j,
+                                        int k, double p[3])
+{
+    double gx = 0, gy = 0, gz = 0, gn = 0;
+    for (int up = 0; up < 2; up++) { /* central, then upwind (phi_diff2) */
+        gx = phi_diff2(pc, nb[0], nb[1], up);
+        gy = phi_diff2(pc, nb[2], nb[3], up);
+        gz = phi_diff2(pc, nb[4], nb[5], up);
+        gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / h);
+        if (gn >= GRAD_MIN && gn <= GRAD_MAX)
+            break;
+    }
+    if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+        return 0;
+    const double sc = pc * 0.5 / (gn * h * h);
+    p[0] = i - sc * gx;
+    p[1] = j - sc * gy;
+    p[2] = k - sc * gz;
+    return 1;
+}
+
+/* The trilinear stencil of point p on a grid of nn cells: its base corner f
+ * (clamped so that f + 1 is in the grid) and the 8 weights, corner q at
+ * f + (q & 1, q >> 1 & 1, q >> 2); 0 when p lies more than half a cell
+ * outside. */
+static inline int hv__ext_trilinear(const double p[3], const int nn[3], int f[3], double w[8])
+{
+    double fr[3];
+    for (int a = 0; a < 3; a++) {
+        if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
+            return 0;
+        double q = p[a] < 0 ? 0 : p[a]; /* comparisons: fmin/fmax are libm calls here */
+        if (q > nn[a] - 1)
+            q = nn[a] - 1;
+        f[a] = (int)q;
+        if (f[a] > nn[a] - 2)
+            f[a] = nn[a] - 2;
+        fr[a] = q - f[a];
+    }
+    const double wx[2] = {1 - fr[0], fr[0]}, wy[2] = {1 - fr[1], fr[1]}, wz[2] = {1 - fr[2], fr[2]};
+    for (int q = 0; q < 8; q++)
+        w[q] = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
+    return 1;
+}
+
 /* ---- the per-cell passes (extend_eval.c) ------------------------------------ */
 
 /* The first pass over the grid: the weights e->w (a smooth bump of

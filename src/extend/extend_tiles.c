@@ -271,43 +271,21 @@ static int teval_point(const tctx *x, int i, int j, int k, float pc, int validat
     const int nx = e->n[0], ny = e->n[1], nz = e->n[2];
     const int nn[3] = {nx, ny, nz};
     if (i > 0 && j > 0 && k > 0 && i + 1 < nx && j + 1 < ny && k + 1 < nz) {
-        const float xm = tphi(x, i - 1, j, k, pc), xp = tphi(x, i + 1, j, k, pc),
-                    ym = tphi(x, i, j - 1, k, pc), yp = tphi(x, i, j + 1, k, pc),
-                    zm = tphi(x, i, j, k - 1, pc), zp = tphi(x, i, j, k + 1, pc);
-        double gx = 0, gy = 0, gz = 0, gn = 0;
-        for (int up = 0; up < 2; up++) { /* central, then upwind (phi_diff2) */
-            gx = phi_diff2(pc, xm, xp, up);
-            gy = phi_diff2(pc, ym, yp, up);
-            gz = phi_diff2(pc, zm, zp, up);
-            gn = sqrt(gx * gx + gy * gy + gz * gz) * (0.5 / e->h);
-            if (gn >= GRAD_MIN && gn <= GRAD_MAX)
-                break;
-        }
-        if (!(gn >= GRAD_MIN && gn <= GRAD_MAX))
+        const double nb[6] = {tphi(x, i - 1, j, k, pc), tphi(x, i + 1, j, k, pc),
+                              tphi(x, i, j - 1, k, pc), tphi(x, i, j + 1, k, pc),
+                              tphi(x, i, j, k - 1, pc), tphi(x, i, j, k + 1, pc)};
+        double p[3];
+        if (!hv__ext_closest_point(pc, nb, e->h, i, j, k, p))
             return 0;
-        const double sc = pc * 0.5 / (gn * e->h * e->h);
-        const double p[3] = {i - sc * gx, j - sc * gy, k - sc * gz};
         int f[3];
-        double fr[3];
-        for (int a = 0; a < 3; a++) {
-            if (p[a] < -0.5 || p[a] > nn[a] - 0.5)
-                return 0;
-            double q = p[a] < 0 ? 0 : p[a];
-            if (q > nn[a] - 1)
-                q = nn[a] - 1;
-            f[a] = (int)q;
-            if (f[a] > nn[a] - 2)
-                f[a] = nn[a] - 2;
-            fr[a] = q - f[a];
-        }
-        const double wx[2] = {1 - fr[0], fr[0]}, wy[2] = {1 - fr[1], fr[1]},
-                     wz[2] = {1 - fr[2], fr[2]};
-        tstencil t = {8, {f[0], f[1], f[2]}, {1, 1, 1}, {0}};
+        tstencil t = {8, {0, 0, 0}, {1, 1, 1}, {0}};
+        if (!hv__ext_trilinear(p, nn, f, t.wt))
+            return 0;
+        memcpy(t.c, f, sizeof f);
         double v = 0;
         for (int q = 0; q < 8; q++) {
             int c[3];
             corner(&t, q, c);
-            t.wt[q] = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
             v += t.wt[q] * tphi(x, c[0], c[1], c[2], pc);
         }
         if (validate && fabs(v) > 0.5 * fmax(e->o.band, 1.0) * e->h)
