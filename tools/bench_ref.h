@@ -80,7 +80,7 @@ int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
  * wall seconds and peak RSS in MB (wait4). Returns -1 when it cannot start or
  * exits non-zero. The caller's own resident memory at the fork counts in the
  * child's peak (Linux keeps the high-water mark across exec): call it from a
- * small process. (tools/cmd_bench_extend_band.c) */
+ * small process. (tools/bench_run.c) */
 int bench_run_self(char **argv, double *seconds, double *rss_mb);
 
 /* heatvox bench extend-band and extend-loop (tools/cmd_bench_extend_band.c). */

@@ -31,26 +31,6 @@ static int usage(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-/* Runs argv (this executable) and waits; wall seconds and peak RSS (MB). */
-static int run(char **argv, double *seconds, double *rss_mb)
-{
-    double t0 = hv_now();
-    pid_t pid = fork();
-    if (pid < 0)
-        return -1;
-    if (pid == 0) {
-        execv("/proc/self/exe", argv);
-        _exit(127);
-    }
-    int status;
-    struct rusage ru;
-    if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status))
-        return -1;
-    *seconds = hv_now() - t0;
-    *rss_mb = ru.ru_maxrss / 1024.0;
-    return 0;
-}
-
 /* The reference as its own process: heatvox bench band --ref MESH H X Y Z W OUT. */
 static int run_ref(int argc, char **argv)
 {
@@ -145,7 +125,7 @@ int cmd_bench_band(int argc, char **argv)
     char *hv_argv[] = {"heatvox", "sdf", (char *)path, "--res", ns,   "--band",
                        bs,        "-o",  mine,         "-q",    NULL, NULL};
     for (int k = 0; k < repeat; k++) {
-        if (run(hv_argv, &t, &r)) {
+        if (bench_run_self(hv_argv, &t, &r)) {
             fprintf(stderr, "heatvox bench band: heatvox sdf %s --res %d failed\n", path, n);
             return HV_EXIT_FAIL;
         }
@@ -154,7 +134,7 @@ int cmd_bench_band(int argc, char **argv)
     }
     for (int k = 0; dense && k < repeat; k++) {
         hv_argv[10] = "--no-tiles";
-        if (run(hv_argv, &t, &r)) {
+        if (bench_run_self(hv_argv, &t, &r)) {
             fprintf(stderr, "heatvox bench band: heatvox sdf %s --res %d --no-tiles failed\n", path,
                     n);
             return HV_EXIT_FAIL;
@@ -177,7 +157,7 @@ int cmd_bench_band(int argc, char **argv)
     char *ref_argv[] = {"heatvox", "bench", "band", "--ref", (char *)path, hs,
                         xs[0],     xs[1],   xs[2],  bs,      ref,          NULL};
     for (int k = 0; k < repeat; k++) {
-        if (run(ref_argv, &t, &r)) {
+        if (bench_run_self(ref_argv, &t, &r)) {
             fprintf(stderr, "heatvox bench band: the OpenVDB reference failed on %s\n", path);
             remove(mine);
             return HV_EXIT_FAIL;

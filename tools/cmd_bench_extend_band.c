@@ -56,25 +56,6 @@ static int usage(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-int bench_run_self(char **argv, double *seconds, double *rss_mb)
-{
-    double t0 = hv_now();
-    pid_t pid = fork();
-    if (pid < 0)
-        return -1;
-    if (pid == 0) {
-        execv("/proc/self/exe", argv);
-        _exit(127);
-    }
-    int status;
-    struct rusage ru;
-    if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status))
-        return -1;
-    *seconds = hv_now() - t0;
-    *rss_mb = ru.ru_maxrss / 1024.0;
-    return 0;
-}
-
 /* The smooth fields of bench extend (tools/bench_extend.c), of coordinates
  * scaled to about [-1,1]; neither comes near zero there, so relative errors
  * are well defined. */
