@@ -548,16 +548,7 @@ static void band_residual(const hv_extend_band *b, const float *u, double *acc, 
             const float *nb[4];
             for (int d = 0; d < 4; d++)
                 nb[d] = u + g->nb[d] * R;
-            for (size_t x = 0, y = 0; x < g->len; x++)
-                for (int r = 0; r < R; r++, y++) {
-                    double sum = (double)nb[0][y] + nb[1][y] + nb[2][y] + nb[3][y] +
-                                 v[(ptrdiff_t)y - R] + v[y + R];
-                    double res = f[y] - (g->d * (double)v[y] - s * sum);
-                    a[r] += res * res;
-                    if (fabs(res) > a[R + r])
-                        a[R + r] = fabs(res);
-                    a[2 * R + r] += (double)f[y] * f[y];
-                }
+            hv__band_run_residual(v, f, nb, g->len, R, g->d, s, a);
         }
 #pragma omp critical(hv_band_residual)
         for (int r = 0; r < R; r++) {

@@ -258,6 +258,27 @@ static inline int hv__ext_trilinear(const double p[3], const int nn[3], int f[3]
     return 1;
 }
 
+/* The residual f - A u along one x-run of a band solve (extend_band.c, and
+ * its waves, extend_wave.c): len cells of R fields side by side in v and f,
+ * the run's neighbours along y and z in nb[4] and along x at v[-R] and
+ * v[len R], diagonal d and coupling s. Adds each field's squared residuals,
+ * its largest |residual| and its squared right-hand side into acc[r],
+ * acc[R + r] (a maximum) and acc[2 R + r]. */
+static inline void hv__band_run_residual(const float *v, const float *f, const float *const nb[4],
+                                         size_t len, int R, double d, double s, double *acc)
+{
+    for (size_t x = 0, y = 0; x < len; x++)
+        for (int r = 0; r < R; r++, y++) {
+            double sum =
+                (double)nb[0][y] + nb[1][y] + nb[2][y] + nb[3][y] + v[(ptrdiff_t)y - R] + v[y + R];
+            double res = f[y] - (d * (double)v[y] - s * sum);
+            acc[r] += res * res;
+            if (fabs(res) > acc[R + r])
+                acc[R + r] = fabs(res);
+            acc[2 * R + r] += (double)f[y] * f[y];
+        }
+}
+
 /* ---- the per-cell passes (extend_eval.c) ------------------------------------ */
 
 /* The first pass over the grid: the weights e->w (a smooth bump of

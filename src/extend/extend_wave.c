@@ -280,16 +280,7 @@ static void finish_plane(const wave *w, int k)
             g->nb[2] == NONE || !um ? w->zero : um + (size_t)g->nb[2] * R,
             g->nb[3] == NONE || !up ? w->zero : up + (size_t)g->nb[3] * R,
         };
-        for (size_t x = 0, y = 0; x < g->len; x++)
-            for (int r = 0; r < R; r++, y++) {
-                double sum = (double)nb[0][y] + nb[1][y] + nb[2][y] + nb[3][y] +
-                             v[(ptrdiff_t)y - R] + v[y + R];
-                double res = f[y] - (g->d * (double)v[y] - s * sum);
-                a[r] += res * res;
-                if (fabs(res) > a[R + r])
-                    a[R + r] = fabs(res);
-                a[2 * R + r] += (double)f[y] * f[y];
-            }
+        hv__band_run_residual(v, f, nb, g->len, R, g->d, s, a);
     }
     /* Solutions at need's cells of this plane: each need run lies in one run of dom. */
     const hv_xrows *n = w->need, *d = w->dom;
