@@ -4,6 +4,8 @@
 
 #include "heatvox/core.h"
 
+#include <stdio.h>
+
 /* Records a formatted message for this thread and returns s, so that the
  * function detecting an error can write `return hv__error(HV_ERR_IO, "...")`. */
 hv_status hv__error(hv_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
@@ -22,5 +24,10 @@ hv_status hv__progress_part(double part, const char *stage);
 /* Bytes of physical memory (SIZE_MAX where unknown): what size checks such as
  * hv_check_dims compare a run's needs against. */
 size_t hv__physical_memory(void);
+
+/* The temporary of an output file (hv_tmp_name) opened for writing, its name
+ * in tmp; NULL with *st set (the file named) when it cannot be made. The
+ * writer then calls hv_tmp_commit, or hv_tmp_discard on failure. */
+FILE *hv__tmp_open(const char *path, char *tmp, size_t tmpsize, hv_status *st);
 
 #endif

@@ -155,3 +155,16 @@ void hv_tmp_cleanup_all(void)
         if (atomic_load(&tmp_used[i]) == 1)
             unlink(tmp_names[i]);
 }
+
+FILE *hv__tmp_open(const char *path, char *tmp, size_t tmpsize, hv_status *st)
+{
+    if ((*st = hv_tmp_name(path, tmp, tmpsize)))
+        return NULL;
+    FILE *f = fopen(tmp, "wb");
+    if (!f) {
+        int e = errno;
+        hv_tmp_discard(tmp);
+        *st = hv__error(HV_ERR_IO, "%s: cannot create the output file: %s", path, strerror(e));
+    }
+    return f;
+}

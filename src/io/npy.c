@@ -70,15 +70,10 @@ hv_status hv_write_npy(const char *path, const hv_grid *g)
     head[total - 1] = '\n';
 
     char tmp[4096];
-    hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
-    if (st)
+    hv_status st;
+    FILE *f = hv__tmp_open(path, tmp, sizeof tmp, &st);
+    if (!f)
         return st;
-    FILE *f = fopen(tmp, "wb");
-    if (!f) {
-        int e = errno;
-        hv_tmp_discard(tmp);
-        return hv__error(HV_ERR_IO, "%s: cannot create the output file: %s", path, strerror(e));
-    }
     int ok = fwrite(head, 1, total, f) == total;
     size_t count = hv_grid_count(g);
     if (host_is_little_endian()) {

@@ -150,15 +150,10 @@ hv_status hv_png_write_rgb(const char *path, const uint8_t *rgb, int width, int 
         return hv__error(HV_ERR_INVALID_ARG, "%s: PNG size %d x %d is out of range", path, width,
                          height);
     char tmp[4096];
-    hv_status st = hv_tmp_name(path, tmp, sizeof tmp);
-    if (st)
+    hv_status st;
+    FILE *f = hv__tmp_open(path, tmp, sizeof tmp, &st);
+    if (!f)
         return st;
-    FILE *f = fopen(tmp, "wb");
-    if (!f) {
-        int e = errno;
-        hv_tmp_discard(tmp);
-        return hv__error(HV_ERR_IO, "%s: cannot create %s: %s", path, tmp, strerror(e));
-    }
     struct png_err err;
     err.msg[0] = '\0';
     st = png_write_file(f, rgb, width, height, &err);

@@ -21,16 +21,9 @@ static hv_status open_tmp(const hv_mesh *m, const char *path, const char *fn, ch
         if (m->tris[i] >= m->nverts)
             return hv__error(HV_ERR_INVALID_ARG, "%s: triangle %zu uses vertex %u of %zu", path,
                              i / 3, m->tris[i], m->nverts);
-    hv_status st = hv_tmp_name(path, tmp, tmpsize);
-    if (st)
-        return st;
-    *f = fopen(tmp, "wb");
-    if (!*f) {
-        int e = errno;
-        hv_tmp_discard(tmp);
-        return hv__error(HV_ERR_IO, "%s: cannot create: %s", tmp, strerror(e));
-    }
-    return HV_OK;
+    hv_status st;
+    *f = hv__tmp_open(path, tmp, tmpsize, &st);
+    return *f ? HV_OK : st;
 }
 
 /* Closes f and renames tmp to path, or removes tmp when anything failed. */
