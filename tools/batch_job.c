@@ -1,6 +1,7 @@
 /* heatvox batch: job options, the resume sidecar, and the job one worker runs;
  * also the text helpers the batch files share. */
 #include "batch.h"
+#include "cli.h"
 
 #include <errno.h>
 #include <math.h>
@@ -186,9 +187,9 @@ int batch_opts_parse(int argc, char **argv, batch_opts *o, char *err, size_t err
         } else if (!strcmp(a, "--no-repair")) {
             o->sdf.repair = 0;
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v[0], &o->sdf.backend) != HV_OK)
-                return bad(err, errsize, "--backend must be auto, mg, fftw or opencl, got '%s'",
-                           v[0]);
+            char msg[160];
+            if (cli_backend_value(v[0], CLI_BACKENDS_LOCAL, &o->sdf.backend, msg, sizeof msg))
+                return bad(err, errsize, "%s", msg);
         } else if (!strcmp(a, "--diffuse-tol") || !strcmp(a, "--poisson-tol")) {
             if (cli_parse_double(v[0], &dv) || !(dv >= 1e-12) || dv >= 1)
                 return bad(err, errsize, "%s must be in [1e-12, 1), got '%s'", a, v[0]);

@@ -263,9 +263,8 @@ int bench_extend(int argc, char **argv)
             if (cli_parse_int(v, &repeat) || repeat < 1)
                 return cli_usage_error("bench extend", "--repeat must be >= 1, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &backend))
-                return cli_usage_error("bench extend",
-                                       "--backend must be auto, mg, fftw or opencl, got '%s'", v);
+            if (cli_parse_backend("bench extend", v, CLI_BACKENDS_LOCAL, &backend))
+                return HV_EXIT_USAGE;
         } else {
             return cli_usage_error("bench extend", "unknown option '%s'", a);
         }

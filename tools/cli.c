@@ -255,8 +255,8 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
             if (cli_parse_threads(v, 1, &A.threads))
                 return cli_usage_error(cmd, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &A.backend))
-                return cli_usage_error(cmd, "%s", hv_last_error());
+            if (cli_parse_backend(cmd, v, CLI_BACKENDS_LOCAL, &A.backend))
+                return HV_EXIT_USAGE;
         } else if (!strcmp(a, "--sign")) {
             if (cli_parse_sign(v, &A.sign))
                 return cli_usage_error(cmd, "--sign needs auto, heat or winding, got '%s'", v);
@@ -268,4 +268,39 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
         return cli_usage_error(cmd, "a mesh and --n are required");
     *out = A;
     return -1;
+}
+
+int cli_backend_value(const char *v, unsigned allowed, hv_backend *out, char *msg, size_t size)
+{
+    static const hv_backend order[] = {HV_BACKEND_AUTO, HV_BACKEND_MG, HV_BACKEND_FFTW,
+                                       HV_BACKEND_OPENCL, HV_BACKEND_PETSC};
+    hv_backend b;
+    if (v && hv_backend_parse(v, &b) == HV_OK && (allowed & CLI_BACKEND(b))) {
+        *out = b;
+        return 0;
+    }
+    int n = 0, k = 0;
+    for (size_t i = 0; i < sizeof order / sizeof order[0]; i++)
+        n += (allowed & CLI_BACKEND(order[i])) != 0;
+    size_t len = (size_t)snprintf(msg, size, "--backend must be ");
+    for (size_t i = 0; i < sizeof order / sizeof order[0] && len < size; i++)
+        if (allowed & CLI_BACKEND(order[i])) {
+            k++;
+            len += (size_t)snprintf(msg + len, size - len, "%s%s",
+                                    k == 1   ? ""
+                                    : k == n ? " or "
+                                             : ", ",
+                                    hv_backend_name(order[i]));
+        }
+    if (len < size)
+        snprintf(msg + len, size - len, ", got '%s'", v ? v : "");
+    return -1;
+}
+
+int cli_parse_backend(const char *cmd, const char *v, unsigned allowed, hv_backend *out)
+{
+    char msg[160];
+    if (cli_backend_value(v, allowed, out, msg, sizeof msg) == 0)
+        return 0;
+    return cli_usage_error(cmd, "%s", msg);
 }

@@ -70,6 +70,19 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
 /* Prints ,"device":"NAME","device_gpu":BOOL into a JSON line being written
  * when b is the opencl backend (the device it runs on); nothing otherwise. */
 void cli_json_device(hv_backend b);
+
+/* The backends a command takes, for cli_parse_backend: a mask of
+ * CLI_BACKEND(HV_BACKEND_...). */
+#define CLI_BACKEND(b) (1u << (b))
+#define CLI_BACKENDS_LOCAL                                                                         \
+    (CLI_BACKEND(HV_BACKEND_AUTO) | CLI_BACKEND(HV_BACKEND_MG) | CLI_BACKEND(HV_BACKEND_FFTW) |    \
+     CLI_BACKEND(HV_BACKEND_OPENCL))
+#define CLI_BACKENDS_ALL (CLI_BACKENDS_LOCAL | CLI_BACKEND(HV_BACKEND_PETSC))
+/* --backend V, one of the backends in `allowed`: 0 with *out set, else -1
+ * with msg saying which backends the option takes (for a manifest's errors). */
+int cli_backend_value(const char *v, unsigned allowed, hv_backend *out, char *msg, size_t size);
+/* The same for a command's option: 0, or the usage error's exit code. */
+int cli_parse_backend(const char *cmd, const char *v, unsigned allowed, hv_backend *out);
 int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
 #endif

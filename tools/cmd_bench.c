@@ -256,9 +256,9 @@ static int bench_solve(int argc, char **argv)
             if (cli_parse_int(v, &repeat) || repeat < 1)
                 return cli_usage_error("bench solve", "--repeat must be >= 1, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &backend) || backend == HV_BACKEND_AUTO)
-                return cli_usage_error("bench solve",
-                                       "--backend must be mg, fftw, opencl or petsc, got '%s'", v);
+            if (cli_parse_backend("bench solve", v,
+                                  CLI_BACKENDS_ALL & ~CLI_BACKEND(HV_BACKEND_AUTO), &backend))
+                return HV_EXIT_USAGE;
         } else if (!strcmp(a, "--smoother")) {
             smoother_set = 1;
             if (!strcmp(v, "rbgs"))

@@ -411,9 +411,8 @@ int cmd_distance(int argc, char **argv)
             if (cli_parse_double(v, &o.t_scale) || o.t_scale <= 0)
                 return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(
-                    CMD, "--backend must be auto, mg, fftw, opencl or petsc, got '%s'", v);
+            if (cli_parse_backend(CMD, v, CLI_BACKENDS_ALL, &o.backend))
+                return HV_EXIT_USAGE;
         } else if (!strcmp(a, "--unreachable")) {
             if (parse_unreachable(v, &o.unreachable))
                 return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);

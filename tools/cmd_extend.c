@@ -302,9 +302,8 @@ int cmd_extend(int argc, char **argv)
             if (cli_parse_double(v, &o.out_band) || o.out_band <= 0)
                 return cli_usage_error(CMD, "--out-band must be positive (voxels), got '%s'", v);
         } else if (!strcmp(a, "--backend")) {
-            if (hv_backend_parse(v, &o.backend))
-                return cli_usage_error(
-                    CMD, "--backend must be auto, mg, fftw, opencl or petsc, got '%s'", v);
+            if (cli_parse_backend(CMD, v, CLI_BACKENDS_ALL, &o.backend))
+                return HV_EXIT_USAGE;
         } else if (!strcmp(a, "--threads")) {
             if (cli_parse_threads(v, 1, &threads))
                 return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);

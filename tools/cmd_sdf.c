@@ -281,8 +281,8 @@ int cmd_sdf(int argc, char **argv)
             o.repair |= HV_SDF_REPAIR_DOMED_CAPS;
         } else if (!strcmp(a, "--backend")) {
             NEED(1);
-            if (hv_backend_parse(argv[++i], &o.backend))
-                return cli_usage_error("sdf", "%s", hv_last_error());
+            if (cli_parse_backend("sdf", argv[++i], CLI_BACKENDS_LOCAL, &o.backend))
+                return HV_EXIT_USAGE;
         } else if (!strcmp(a, "--threads")) {
             NEED(1);
             if (cli_parse_threads(argv[++i], 1, &threads))

@@ -94,8 +94,9 @@ int cmd_sdf2d(int argc, char **argv)
         } else if (!strcmp(a, "--no-repair")) {
             o.repair = 0;
         } else if (!strcmp(a, "--backend")) {
-            if (!more || hv_backend_parse(argv[i + 1], &o.backend) != HV_OK)
-                return cli_usage_error("sdf2d", "--backend must be auto, mg, fftw or opencl");
+            if (cli_parse_backend("sdf2d", more ? argv[i + 1] : NULL, CLI_BACKENDS_LOCAL,
+                                  &o.backend))
+                return HV_EXIT_USAGE;
             i++;
         } else if (a[0] == '-' && a[1]) {
             return cli_usage_error("sdf2d", "unknown option '%s'", a);

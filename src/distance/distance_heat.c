@@ -545,9 +545,9 @@ hv_status hv_distance_compute(hv_grid *g, const hv_distance_sources *src,
     dist_ctx d = {0};
     hv__dist_box_init(&d, g->dim, g->n, g->h, g->solid);
     d.whole = 1;
-    /* AUTO on a GPU: the pipeline on the device, as for an explicit opencl. */
-    if (hv_backend_resolve(o.backend, d.count, g->solid != NULL) == HV_BACKEND_OPENCL)
-        o.backend = HV_BACKEND_OPENCL;
+    /* The backend, chosen here once for every solve: AUTO on a GPU runs the
+     * pipeline on the device, as an explicit opencl does. */
+    o.backend = hv_backend_resolve(o.backend, d.count, g->solid != NULL);
     if ((st = hv_check_dims(d.dim, d.n, d.h, 2 * sizeof(double) + 3 * sizeof(float) + 4)))
         return st;
 

@@ -178,6 +178,22 @@ static size_t left_everywhere(const hv_extender *e, const hv_extend_dist *D)
     return D->sum(D->user, left);
 }
 
+/* Whether the extender runs on the device, decided once: AUTO on a GPU runs
+ * the whole extension there (extend_cl.c), as an explicit opencl does. AUTO
+ * stays AUTO otherwise: with mg it takes the band solves where they apply
+ * (hv__extend_band_allowed), which an explicit fftw does not. Decided on the
+ * first dense call:
+ * looking for a device loads the OpenCL platforms, which hv_extend_tiles
+ * never needs. */
+static void resolve_backend(hv_extender *e)
+{
+    if (!e->resolved) {
+        if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
+            e->o.backend = HV_BACKEND_OPENCL;
+        e->resolved = 1;
+    }
+}
+
 hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
                          hv_extend_stats *stats)
 {
@@ -202,14 +218,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
     hv_status st;
-    if (!e->resolved) {
-        /* AUTO on a GPU: the whole extension on the device (extend_cl.c).
-         * Resolved on the first dense call: looking for a device loads the
-         * OpenCL platforms, which hv_extend_tiles never needs. */
-        if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
-            e->o.backend = HV_BACKEND_OPENCL;
-        e->resolved = 1;
-    }
+    resolve_backend(e);
     if (e->o.backend == HV_BACKEND_OPENCL) {
         if ((st = hv_check_finite(phi, e->count, "the level set")))
             return st;
@@ -445,11 +454,7 @@ static hv_status device_extender(hv_extender *e, const char *who)
 {
     if (!e)
         return hv__error(HV_ERR_INVALID_ARG, "%s: the extender is NULL", who);
-    if (!e->resolved) {
-        if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
-            e->o.backend = HV_BACKEND_OPENCL;
-        e->resolved = 1;
-    }
+    resolve_backend(e);
     if (e->o.backend != HV_BACKEND_OPENCL)
         return hv__error(HV_ERR_UNSUPPORTED, "%s: the extender runs on the %s backend, not opencl",
                          who, hv_backend_name(e->o.backend));

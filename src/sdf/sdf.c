@@ -392,8 +392,10 @@ static hv_status sdf_place(const hv_mesh *M, hv_sdf_opts *o, const double lo[3],
         (st = hv_grid_create(&w->gh, 3, P->nh, P->hh, P->origin)))
         return st;
     const hv_grid *gh = w->gh ? w->gh : w->g;
-    if (P->need_heat && hv_backend_resolve(o->backend, hv_grid_count(gh), 0) == HV_BACKEND_OPENCL)
-        o->backend = HV_BACKEND_OPENCL;
+    /* The backend, chosen here once for every solve of the pipeline: on a
+     * device, the whole heat method runs there (sdf_cl.c). */
+    if (P->need_heat)
+        o->backend = hv_backend_resolve(o->backend, hv_grid_count(gh), 0);
     P->nlev = P->need_heat ? levels_for(o, P->nh) : 0;
     S->levels = P->nlev;
     S->t = (o->t_scale * P->hh) * (o->t_scale * P->hh);
