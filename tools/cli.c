@@ -304,3 +304,101 @@ int cli_parse_backend(const char *cmd, const char *v, unsigned allowed, hv_backe
         return 0;
     return cli_usage_error(cmd, "%s", msg);
 }
+
+/* The row of opts whose names include a, or NULL. */
+static const cli_opt *find_opt(const cli_opt *opts, const char *a)
+{
+    const size_t n = strlen(a);
+    for (const cli_opt *o = opts; o->names; o++)
+        for (const char *p = o->names; *p;) {
+            const char *e = strchr(p, '|');
+            size_t len = e ? (size_t)(e - p) : strlen(p);
+            if (len == n && !strncmp(p, a, n))
+                return o;
+            p += len + (e != NULL);
+        }
+    return NULL;
+}
+
+/* One option's values v[0..): 0, or the usage error's exit code. */
+static int take_value(const char *cmd, const char *a, const cli_opt *o, char **v)
+{
+    switch (o->kind) {
+    case CLI_STR:
+        if (o->min >= 1 && !*v[0])
+            return cli_usage_error(cmd, "%s must not be empty", a);
+        *(const char **)o->dst = v[0];
+        return 0;
+    case CLI_INT: {
+        int x;
+        if (cli_parse_int(v[0], &x) || x < o->min || x > o->max)
+            return cli_usage_error(cmd, "%s needs %s, got '%s'", a, o->needs, v[0]);
+        *(int *)o->dst = x;
+        return 0;
+    }
+    case CLI_DOUBLE: {
+        double x;
+        if (cli_parse_double(v[0], &x) || !(x >= o->min) || !(x <= o->max) ||
+            ((o->flags & CLI_ABOVE) && !(x > o->min)))
+            return cli_usage_error(cmd, "%s needs %s, got '%s'", a, o->needs, v[0]);
+        *(double *)o->dst = x;
+        return 0;
+    }
+    case CLI_DOUBLES:
+        for (int k = 0; k < o->val; k++)
+            if (cli_parse_double(v[k], (double *)o->dst + k))
+                return cli_usage_error(cmd, "%s needs %s, got '%s'", a, o->needs, v[k]);
+        return 0;
+    case CLI_BACKEND:
+        return cli_parse_backend(cmd, v[0], (unsigned)o->val, (hv_backend *)o->dst) ? HV_EXIT_USAGE
+                                                                                    : 0;
+    case CLI_THREADS:
+        if (cli_parse_threads(v[0], 1, (int *)o->dst))
+            return cli_usage_error(cmd, "%s must be 1..%d, got '%s'", a, HV_MAX_THREADS, v[0]);
+        return 0;
+    case CLI_SIGN:
+        if (cli_parse_sign(v[0], (hv_sdf_sign *)o->dst))
+            return cli_usage_error(cmd, "%s needs auto, heat or winding, got '%s'", a, v[0]);
+        return 0;
+    default: return 0;
+    }
+}
+
+int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
+              const char **positional, void (*help)(void))
+{
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+            help();
+            return HV_EXIT_OK;
+        }
+        const cli_opt *o = find_opt(opts, a);
+        if (!o && a[0] == '-' && a[1])
+            return cli_usage_error(cmd, "unknown option '%s'", a);
+        if (!o) {
+            if (*positional)
+                return cli_usage_error(cmd, "more than one %s given ('%s' and '%s')", noun,
+                                       *positional, a);
+            *positional = a;
+            continue;
+        }
+        if (o->given)
+            *o->given = 1;
+        if (o->kind == CLI_FLAG || o->kind == CLI_OR || o->kind == CLI_IGNORE) {
+            if (o->kind == CLI_FLAG)
+                *(int *)o->dst = o->val;
+            else if (o->kind == CLI_OR)
+                *(int *)o->dst |= o->val;
+            continue;
+        }
+        const int k = o->kind == CLI_DOUBLES ? o->val : 1;
+        if (i + k >= argc)
+            return cli_usage_error(cmd, "%s needs %d value%s", a, k, k > 1 ? "s" : "");
+        int rc = take_value(cmd, a, o, argv + i + 1);
+        if (rc)
+            return rc;
+        i += k;
+    }
+    return -1;
+}

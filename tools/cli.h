@@ -71,6 +71,43 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
  * when b is the opencl backend (the device it runs on); nothing otherwise. */
 void cli_json_device(hv_backend b);
 
+/* ---- options as tables ----
+ * A command lists its options as cli_opt rows and cli_parse reads argv
+ * against them: every value checked as its kind says, the same messages for
+ * every command. */
+typedef enum cli_kind {
+    CLI_FLAG,    /* *(int *)dst = val */
+    CLI_OR,      /* *(int *)dst |= val */
+    CLI_STR,     /* *(const char **)dst = the value; min 1: not empty */
+    CLI_INT,     /* *(int *)dst, an integer in [min, max] */
+    CLI_DOUBLE,  /* *(double *)dst, a number in [min, max] (> min with CLI_ABOVE) */
+    CLI_DOUBLES, /* *(double *)dst[0..val), finite numbers */
+    CLI_BACKEND, /* *(hv_backend *)dst, one of the backends in val (CLI_BACKEND mask) */
+    CLI_THREADS, /* *(int *)dst, 1..HV_MAX_THREADS */
+    CLI_SIGN,    /* *(hv_sdf_sign *)dst */
+    CLI_IGNORE   /* taken by the driver (-q, -v) */
+} cli_kind;
+
+#define CLI_ABOVE 1 /* cli_opt.flags: a number must exceed min */
+
+typedef struct cli_opt {
+    const char *names; /* "--res", or aliases split by '|': "-o|--output" */
+    cli_kind kind;
+    void *dst;
+    int val;           /* CLI_FLAG, CLI_OR: the value; CLI_DOUBLES: how many; CLI_BACKEND: mask */
+    double min, max;   /* CLI_INT, CLI_DOUBLE, CLI_STR (min 1: not empty) */
+    const char *needs; /* the message's "--x needs <needs>, got '...'" */
+    int *given;        /* set to 1 when the option is given (may be NULL) */
+    int flags;
+} cli_opt;
+
+/* Reads argv[1..argc) against the options (a row with names NULL ends
+ * them); words that are no option go to *positional (one at most: a second
+ * is a usage error naming both as `noun`s). --help and -h call help and
+ * return 0. Returns -1 when every word was taken, else the exit code. */
+int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
+              const char **positional, void (*help)(void));
+
 /* The backends a command takes, for cli_parse_backend: a mask of
  * CLI_BACKEND(HV_BACKEND_...). */
 #define CLI_BACKEND(b) (1u << (b))

@@ -4,7 +4,9 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <libgen.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -176,153 +178,148 @@ static int check_writable(const char *path)
     return ok ? 0 : -1;
 }
 
-int cmd_sdf(int argc, char **argv)
-{
-    const char *mesh_path = NULL, *out = NULL, *npy = NULL, *name = "sdf", *preview = NULL;
-    const char *mesh_out = NULL;
-    double band = 3.0, adaptivity = 0;
-    int have_adaptivity = 0;
-    int dense = 0, have_res = 0, have_h = 0, threads = 0, no_tiles = 0;
+/* The command line of heatvox sdf. */
+typedef struct sdf_args {
+    const char *mesh_path, *out, *npy, *name, *preview, *mesh_out;
+    double band, adaptivity;
+    int have_adaptivity, dense, have_res, have_h, have_bbox, threads, no_tiles;
     hv_sdf_opts o;
-    hv_sdf_opts_default(&o);
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        int more = i + 1 < argc;
-#define NEED(k)                                                                                    \
-    if (i + (k) >= argc)                                                                           \
-        return cli_usage_error("sdf", "%s needs %d value%s", a, k, (k) > 1 ? "s" : "");
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            help();
-            return HV_EXIT_OK;
-        } else if (!strcmp(a, "-q") || !strcmp(a, "-v")) {
-            /* handled by the driver */
-        } else if (!strcmp(a, "-o") || !strcmp(a, "--output")) {
-            NEED(1);
-            out = argv[++i];
-        } else if (!strcmp(a, "--npy")) {
-            NEED(1);
-            npy = argv[++i];
-        } else if (!strcmp(a, "--preview")) {
-            NEED(1);
-            preview = argv[++i];
-        } else if (!strcmp(a, "--mesh-out")) {
-            NEED(1);
-            mesh_out = argv[++i];
-        } else if (!strcmp(a, "--adaptivity")) {
-            NEED(1);
-            if (cli_parse_double(argv[++i], &adaptivity) || adaptivity < 0 || adaptivity > 1)
-                return cli_usage_error("sdf", "--adaptivity needs a number in [0, 1], got '%s'",
-                                       argv[i]);
-            have_adaptivity = 1;
-        } else if (!strcmp(a, "--name")) {
-            NEED(1);
-            name = argv[++i];
-            if (!*name)
-                return cli_usage_error("sdf", "--name must not be empty");
-        } else if (!strcmp(a, "--res")) {
-            NEED(1);
-            if (cli_parse_int(argv[++i], &o.res) || o.res < 1)
-                return cli_usage_error("sdf", "--res needs a positive integer, got '%s'", argv[i]);
-            have_res = 1;
-        } else if (!strcmp(a, "--voxel-size")) {
-            NEED(1);
-            if (cli_parse_double(argv[++i], &o.voxel_size) || !(o.voxel_size > 0))
-                return cli_usage_error("sdf", "--voxel-size needs a positive number, got '%s'",
-                                       argv[i]);
-            have_h = 1;
-        } else if (!strcmp(a, "--pad")) {
-            NEED(1);
-            if (cli_parse_int(argv[++i], &o.pad) || o.pad < 0)
-                return cli_usage_error("sdf", "--pad needs an integer >= 0, got '%s'", argv[i]);
-        } else if (!strcmp(a, "--bbox")) {
-            NEED(6);
-            for (int k = 0; k < 6; k++)
-                if (cli_parse_double(argv[i + 1 + k], &o.bbox[k]))
-                    return cli_usage_error("sdf", "--bbox needs 6 finite numbers, got '%s'",
-                                           argv[i + 1 + k]);
-            for (int k = 0; k < 3; k++)
-                if (!(o.bbox[3 + k] > o.bbox[k]))
-                    return cli_usage_error("sdf", "--bbox: %c1 (%g) must exceed %c0 (%g)", "XYZ"[k],
-                                           o.bbox[3 + k], "XYZ"[k], o.bbox[k]);
-            o.use_bbox = 1;
-            i += 6;
-        } else if (!strcmp(a, "--band")) {
-            NEED(1);
-            if (cli_parse_double(argv[++i], &band) || !(band > 0))
-                return cli_usage_error("sdf", "--band needs a positive number of voxels, got '%s'",
-                                       argv[i]);
-        } else if (!strcmp(a, "--dense")) {
-            dense = 1;
-        } else if (!strcmp(a, "--no-tiles")) {
-            no_tiles = 1;
-        } else if (!strcmp(a, "--unsigned")) {
-            o.unsigned_distance = 1;
-        } else if (!strcmp(a, "--heat")) {
-            o.magnitude = HV_SDF_HEAT;
-        } else if (!strcmp(a, "--t-scale")) {
-            NEED(1);
-            if (cli_parse_double(argv[++i], &o.t_scale) || !(o.t_scale > 0))
-                return cli_usage_error("sdf", "--t-scale needs a positive number, got '%s'",
-                                       argv[i]);
-        } else if (!strcmp(a, "--heat-coarsen")) {
-            NEED(1);
-            if (cli_parse_int(argv[++i], &o.heat_coarsen) || o.heat_coarsen < 1 ||
-                o.heat_coarsen > 4)
-                return cli_usage_error("sdf", "--heat-coarsen needs an integer in 1..4, got '%s'",
-                                       argv[i]);
-        } else if (!strcmp(a, "--sign")) {
-            NEED(1);
-            if (cli_parse_sign(argv[++i], &o.sign))
-                return cli_usage_error("sdf", "--sign needs auto, heat or winding, got '%s'",
-                                       argv[i]);
-        } else if (!strcmp(a, "--no-repair")) {
-            o.repair = 0;
-        } else if (!strcmp(a, "--domed-caps")) {
-            o.repair |= HV_SDF_REPAIR_DOMED_CAPS;
-        } else if (!strcmp(a, "--backend")) {
-            NEED(1);
-            if (cli_parse_backend("sdf", argv[++i], CLI_BACKENDS_LOCAL, &o.backend))
-                return HV_EXIT_USAGE;
-        } else if (!strcmp(a, "--threads")) {
-            NEED(1);
-            if (cli_parse_threads(argv[++i], 1, &threads))
-                return cli_usage_error("sdf", "--threads must be 1..%d, got '%s'", HV_MAX_THREADS,
-                                       argv[i]);
-        } else if (a[0] == '-' && a[1]) {
-            return cli_usage_error("sdf", "unknown option '%s'", a);
-        } else if (!mesh_path) {
-            mesh_path = a;
-        } else {
-            return cli_usage_error("sdf", "more than one mesh given ('%s' and '%s')", mesh_path, a);
-        }
-        (void)more;
-#undef NEED
-    }
-    if (!mesh_path)
+} sdf_args;
+
+/* The checks that involve several options. */
+static int check_args(sdf_args *A)
+{
+    hv_sdf_opts *o = &A->o;
+    for (int k = 0; A->have_bbox && k < 3; k++)
+        if (!(o->bbox[3 + k] > o->bbox[k]))
+            return cli_usage_error("sdf", "--bbox: %c1 (%g) must exceed %c0 (%g)", "XYZ"[k],
+                                   o -> bbox[3 + k], "XYZ"[k], o -> bbox[k]);
+    o->use_bbox = A->have_bbox;
+    if (!A->mesh_path)
         return cli_usage_error("sdf", "no mesh given");
-    if (!out && !npy && !mesh_out)
+    if (!A->out && !A->npy && !A->mesh_out)
         return cli_usage_error("sdf",
                                "no output given (-o OUT.vdb, --npy FILE or --mesh-out FILE)");
-    if (cli_check_ext("sdf", "-o", out, ".vdb") || cli_check_ext("sdf", "--npy", npy, ".npy") ||
-        cli_check_ext("sdf", "--preview", preview, ".png"))
+    if (cli_check_ext("sdf", "-o", A->out, ".vdb") ||
+        cli_check_ext("sdf", "--npy", A->npy, ".npy") ||
+        cli_check_ext("sdf", "--preview", A->preview, ".png"))
         return HV_EXIT_USAGE;
-    if (mesh_out && o.unsigned_distance)
+    if (A->mesh_out && o->unsigned_distance)
         return cli_usage_error("sdf", "--mesh-out needs a signed distance: an unsigned one has no "
                                       "zero level set (drop --unsigned)");
-    if (mesh_out && !mesh_ext_ok(mesh_out))
+    if (A->mesh_out && !mesh_ext_ok(A->mesh_out))
         return cli_usage_error("sdf", "--mesh-out %s: the extension must be .obj, .ply or .stl",
-                               mesh_out);
-    if (have_adaptivity && !mesh_out)
+                               A->mesh_out);
+    if (A->have_adaptivity && !A->mesh_out)
         return cli_usage_error("sdf", "--adaptivity applies to --mesh-out, which is not given");
-    if (have_res && have_h)
+    if (A->have_res && A->have_h)
         return cli_usage_error("sdf", "give either --res or --voxel-size, not both");
-    if (!have_h)
-        o.voxel_size = 0;
-    o.threads = threads;
+    return -1;
+}
+
+/* argv into *A: -1, or the exit code (help, usage error). */
+static int parse_args(int argc, char **argv, sdf_args *A)
+{
+    memset(A, 0, sizeof *A);
+    A->name = "sdf";
+    A->band = 3.0;
+    hv_sdf_opts *o = &A->o;
+    hv_sdf_opts_default(o);
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &A->out},
+        {.names = "--npy", .kind = CLI_STR, .dst = &A->npy},
+        {.names = "--preview", .kind = CLI_STR, .dst = &A->preview},
+        {.names = "--mesh-out", .kind = CLI_STR, .dst = &A->mesh_out},
+        {.names = "--adaptivity",
+         .kind = CLI_DOUBLE,
+         .dst = &A->adaptivity,
+         .max = 1,
+         .needs = "a number in [0, 1]",
+         .given = &A->have_adaptivity},
+        {.names = "--name", .kind = CLI_STR, .dst = &A->name, .min = 1},
+        {.names = "--res",
+         .kind = CLI_INT,
+         .dst = &o->res,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "a positive integer",
+         .given = &A->have_res},
+        {.names = "--voxel-size",
+         .kind = CLI_DOUBLE,
+         .dst = &o->voxel_size,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number",
+         .given = &A->have_h},
+        {.names = "--pad",
+         .kind = CLI_INT,
+         .dst = &o->pad,
+         .max = INT_MAX,
+         .needs = "an integer >= 0"},
+        {.names = "--bbox",
+         .kind = CLI_DOUBLES,
+         .dst = o->bbox,
+         .val = 6,
+         .needs = "6 finite numbers",
+         .given = &A->have_bbox},
+        {.names = "--band",
+         .kind = CLI_DOUBLE,
+         .dst = &A->band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--dense", .kind = CLI_FLAG, .dst = &A->dense, .val = 1},
+        {.names = "--no-tiles", .kind = CLI_FLAG, .dst = &A->no_tiles, .val = 1},
+        {.names = "--unsigned", .kind = CLI_FLAG, .dst = &o->unsigned_distance, .val = 1},
+        {.names = "--heat", .kind = CLI_FLAG, .dst = &o->magnitude, .val = HV_SDF_HEAT},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &o->t_scale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--heat-coarsen",
+         .kind = CLI_INT,
+         .dst = &o->heat_coarsen,
+         .min = 1,
+         .max = 4,
+         .needs = "an integer in 1..4"},
+        {.names = "--sign", .kind = CLI_SIGN, .dst = &o->sign},
+        {.names = "--no-repair", .kind = CLI_FLAG, .dst = &o->repair, .val = 0},
+        {.names = "--domed-caps",
+         .kind = CLI_OR,
+         .dst = &o->repair,
+         .val = HV_SDF_REPAIR_DOMED_CAPS},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &o->backend, .val = CLI_BACKENDS_LOCAL},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
+        {.names = NULL},
+    };
+    int rc = cli_parse("sdf", argc, argv, opts, "mesh", &A->mesh_path, help);
+    if (rc >= 0 || (rc = check_args(A)) >= 0)
+        return rc;
+    if (!A->have_h)
+        o->voxel_size = 0;
+    o->threads = A->threads;
     /* A narrow-band level set alone needs exact values only in its band (the
      * rest is the background with the heat method's sign): skip the sweeps. */
-    if (!dense && !npy && !preview && !o.unsigned_distance && o.magnitude == HV_SDF_EXACT)
-        o.band_only = band;
+    if (!A->dense && !A->npy && !A->preview && !o->unsigned_distance &&
+        o->magnitude == HV_SDF_EXACT)
+        o->band_only = A->band;
+    return -1;
+}
+
+int cmd_sdf(int argc, char **argv)
+{
+    sdf_args A;
+    int rc = parse_args(argc, argv, &A);
+    if (rc >= 0)
+        return rc;
+    const char *mesh_path = A.mesh_path, *out = A.out, *npy = A.npy, *name = A.name;
+    const char *preview = A.preview, *mesh_out = A.mesh_out;
+    const double band = A.band, adaptivity = A.adaptivity;
+    const int dense = A.dense, have_h = A.have_h, no_tiles = A.no_tiles;
+    hv_sdf_opts o = A.o;
     /* A narrow band alone, with the winding-number sign: tiles. */
     const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
     const int tiles = out && !dense && !npy && !mesh_out && !no_tiles && !o.unsigned_distance &&
