@@ -309,6 +309,56 @@ static int parse_args(int argc, char **argv, sdf_args *A)
     return -1;
 }
 
+/* The closing line on stdout (and with -v the solver's details on stderr);
+ * t: seconds to read, to make the mesh, to write, in all. */
+static void report(const sdf_args *A, const hv_sdf_stats *Sp, int tiles, size_t tris,
+                   size_t mesh_tris, const double t[4])
+{
+    const hv_sdf_stats S = *Sp;
+    const char *mesh_path = A->mesh_path, *out = A->out, *npy = A->npy, *mesh_out = A->mesh_out;
+    const double band = A->band, adaptivity = A->adaptivity;
+    const double t_read = t[0], t_mesh = t[1], tw = t[2], total = t[3];
+    const hv_sdf_repair_report *R = &S.repair;
+    char mesh_note[4200] = "";
+    if (cli_verbose >= 1 && tiles)
+        fprintf(stderr,
+                "heatvox sdf: %zu triangles in, %zu after repair; narrow band of %g voxels in "
+                "%zu tiles of 8^3 (%zu active voxels, %zu rasterized); sign from %s: %zu cells "
+                "by pseudonormals, %zu winding-number evaluations (%.2f s)\n",
+                tris, R->triangles_out, band, S.tiles, S.active_voxels, S.band_cells,
+                cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign);
+    else if (cli_verbose >= 1)
+        fprintf(stderr,
+                "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
+                "(relres %.1e), poisson %d (relres %.1e); surface rms %.3f -> %.3f voxels; "
+                "%zu dead faces; sign from %s (%zu winding-number evaluations, %.2f s); %zu "
+                "cells signed by pseudonormals (%zu changed)\n",
+                tris, R->triangles_out, hv_backend_name(S.backend), S.diffuse_iterations,
+                S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
+                S.surface_rms_after, S.dead_faces, cli_sign_name(S.sign), S.winding_evals, S.t_sign,
+                S.near_sign_cells, S.near_sign_changed);
+    if (cli_verbose >= 0 && mesh_out)
+        snprintf(mesh_note, sizeof mesh_note, " | mesh %s: %zu triangles, adaptivity %g", mesh_out,
+                 mesh_tris, adaptivity);
+    if (cli_verbose >= 0)
+        printf(
+            "sdf %s -> %s: grid %dx%dx%d h=%.6g | s: read %.2f repair %.2f splat %.2f diffuse %.2f "
+            "normalize %.2f poisson %.2f shift %.2f redistance %.2f mesh %.2f write %.2f total "
+            "%.2f | peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
+            "flipped %zu holes %zu/%zu filled, boundary %zu nonmanifold %zu inconsistent "
+            "%zu->%zu%s\n",
+            mesh_path,
+            out   ? out
+            : npy ? npy
+                  : mesh_out,
+            S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat, S.t_diffuse, S.t_normalize,
+            S.t_poisson, S.t_shift, S.t_redistance, t_mesh, tw, total, hv_peak_rss() / 1e6,
+            R->triangles_in, R->triangles_out, R->vertices_welded, R->degenerate_removed,
+            R->duplicates_removed, R->faces_flipped, R->holes_filled,
+            R->holes_filled + R->holes_left_open, R->boundary_edges, R->nonmanifold_edges,
+            R->inconsistent_before, R->inconsistent_after, mesh_note);
+}
+
 int cmd_sdf(int argc, char **argv)
 {
     sdf_args A;
@@ -438,44 +488,7 @@ int cmd_sdf(int argc, char **argv)
         return HV_EXIT_FAIL;
     tw = hv_now() - tw - t_mesh;
 
-    const hv_sdf_repair_report *R = &S.repair;
-    char mesh_note[4200] = "";
-    if (cli_verbose >= 1 && tiles)
-        fprintf(stderr,
-                "heatvox sdf: %zu triangles in, %zu after repair; narrow band of %g voxels in "
-                "%zu tiles of 8^3 (%zu active voxels, %zu rasterized); sign from %s: %zu cells "
-                "by pseudonormals, %zu winding-number evaluations (%.2f s)\n",
-                tris, R->triangles_out, band, S.tiles, S.active_voxels, S.band_cells,
-                cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign);
-    else if (cli_verbose >= 1)
-        fprintf(stderr,
-                "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
-                "(relres %.1e), poisson %d (relres %.1e); surface rms %.3f -> %.3f voxels; "
-                "%zu dead faces; sign from %s (%zu winding-number evaluations, %.2f s); %zu "
-                "cells signed by pseudonormals (%zu changed)\n",
-                tris, R->triangles_out, hv_backend_name(S.backend), S.diffuse_iterations,
-                S.diffuse_relres, S.poisson_iterations, S.poisson_relres, S.surface_rms_before,
-                S.surface_rms_after, S.dead_faces, cli_sign_name(S.sign), S.winding_evals, S.t_sign,
-                S.near_sign_cells, S.near_sign_changed);
-    if (cli_verbose >= 0 && mesh_out)
-        snprintf(mesh_note, sizeof mesh_note, " | mesh %s: %zu triangles, adaptivity %g", mesh_out,
-                 mesh_tris, adaptivity);
-    if (cli_verbose >= 0)
-        printf(
-            "sdf %s -> %s: grid %dx%dx%d h=%.6g | s: read %.2f repair %.2f splat %.2f diffuse %.2f "
-            "normalize %.2f poisson %.2f shift %.2f redistance %.2f mesh %.2f write %.2f total "
-            "%.2f | peak %.0f MB | defects: tris %zu->%zu welded %zu degenerate %zu duplicate %zu "
-            "flipped %zu holes %zu/%zu filled, boundary %zu nonmanifold %zu inconsistent "
-            "%zu->%zu%s\n",
-            mesh_path,
-            out   ? out
-            : npy ? npy
-                  : mesh_out,
-            S.n[0], S.n[1], S.n[2], S.h, t_read, S.t_repair, S.t_splat, S.t_diffuse, S.t_normalize,
-            S.t_poisson, S.t_shift, S.t_redistance, t_mesh, tw, hv_now() - t0, hv_peak_rss() / 1e6,
-            R->triangles_in, R->triangles_out, R->vertices_welded, R->degenerate_removed,
-            R->duplicates_removed, R->faces_flipped, R->holes_filled,
-            R->holes_filled + R->holes_left_open, R->boundary_edges, R->nonmanifold_edges,
-            R->inconsistent_before, R->inconsistent_after, mesh_note);
+    const double t[4] = {t_read, t_mesh, tw, hv_now() - t0};
+    report(&A, &S, tiles, tris, mesh_tris, t);
     return HV_EXIT_OK;
 }
