@@ -18,23 +18,11 @@ static int is_solid(const hv_extender *e, size_t c) { return e->solid && e->soli
  * corners. */
 static int stencil_in(int dim, const int n[3], const double p[3], size_t idx[8], double wt[8])
 {
-    int i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0};
-    double fr[3] = {0, 0, 0};
-    for (int a = 0; a < dim; a++) {
-        double q = p[a];
-        if (q < 0)
-            q = 0;
-        if (q > n[a] - 1)
-            q = n[a] - 1;
-        int f = (int)floor(q);
-        if (f > n[a] - 2)
-            f = n[a] - 2;
-        if (f < 0)
-            f = 0;
-        i0[a] = f;
-        i1[a] = n[a] > 1 ? f + 1 : f;
-        fr[a] = n[a] > 1 ? q - f : 0;
-    }
+    int i0[3], d[3], i1[3];
+    double fr[3];
+    hv__ext_clamped(dim, n, p, i0, d, fr);
+    for (int a = 0; a < 3; a++)
+        i1[a] = i0[a] + d[a];
     int m = dim == 3 ? 8 : 4;
     for (int q = 0; q < m; q++) {
         int ii = (q & 1) ? i1[0] : i0[0], jj = (q & 2) ? i1[1] : i0[1],

@@ -258,6 +258,34 @@ static inline int hv__ext_trilinear(const double p[3], const int nn[3], int f[3]
     return 1;
 }
 
+/* The trilinear (bilinear in 2D) stencil of p on a grid of nn cells, p
+ * clamped to the grid: along each of the dim axes its base corner f, its
+ * step d to the next corner (0 on an axis of one cell) and the fraction fr;
+ * the axes past dim get 0. The walls' stencil of both evaluations. */
+static inline void hv__ext_clamped(int dim, const int nn[3], const double p[3], int f[3], int d[3],
+                                   double fr[3])
+{
+    for (int a = 0; a < 3; a++) {
+        f[a] = d[a] = 0;
+        fr[a] = 0;
+    }
+    for (int a = 0; a < dim; a++) {
+        double q = p[a];
+        if (q < 0)
+            q = 0;
+        if (q > nn[a] - 1)
+            q = nn[a] - 1;
+        int fl = (int)floor(q);
+        if (fl > nn[a] - 2)
+            fl = nn[a] - 2;
+        if (fl < 0)
+            fl = 0;
+        f[a] = fl;
+        d[a] = nn[a] > 1;
+        fr[a] = nn[a] > 1 ? q - fl : 0;
+    }
+}
+
 /* The residual f - A u along one x-run of a band solve (extend_band.c, and
  * its waves, extend_wave.c): len cells of R fields side by side in v and f,
  * the run's neighbours along y and z in nb[4] and along x at v[-R] and

@@ -326,22 +326,8 @@ static int teval_point(const tctx *x, int i, int j, int k, float pc, int validat
             return 0;
     }
     tstencil t = {8, {0, 0, 0}, {0, 0, 0}, {0}};
-    double fr[3] = {0, 0, 0};
-    for (int a = 0; a < 3; a++) {
-        double q = p[a];
-        if (q < 0)
-            q = 0;
-        if (q > nn[a] - 1)
-            q = nn[a] - 1;
-        int fl = (int)floor(q);
-        if (fl > nn[a] - 2)
-            fl = nn[a] - 2;
-        if (fl < 0)
-            fl = 0;
-        t.c[a] = fl;
-        t.d[a] = nn[a] > 1;
-        fr[a] = nn[a] > 1 ? q - fl : 0;
-    }
+    double fr[3];
+    hv__ext_clamped(3, nn, p, t.c, t.d, fr);
     double v = 0;
     for (int q = 0; q < 8; q++) {
         t.wt[q] = ((q & 1) ? fr[0] : 1 - fr[0]) * ((q & 2) ? fr[1] : 1 - fr[1]) *
