@@ -191,20 +191,20 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 # Each suite sets Check's no-fork mode itself (whatever CK_FORK says): OpenVDB
 # (log4cplus/TBB threads) and OpenCL contexts hang forked children
 # (docs/METHOD.md, "Testing notes").
-# `timeout` stands in for Check's. The OpenCL solver suite runs a second time
-# as on a device without fp64 (float kernels, double correction on the host):
-# the run named fp32:SUITE; the multigrid suite a second time without its
+# `timeout` stands in for Check's. The OpenCL suites (solver, device fields,
+# extension, distance) run a second time as on a device without fp64 (float
+# kernels, double correction on the host): the runs named SUITE.fp32; the multigrid suite a second time without its
 # AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
 # offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
-# include map of src/README.md), the OpenCL one again as on a device without fp64 (NAME.fp32)
-# and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
+# include map of src/README.md), the OpenCL ones again as on a device without
+# fp64 (NAME.fp32) and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
               check_kernels check_includes \
-              $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device,$(notdir $(TESTS)))) \
+              $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device check_extend_cl check_distance_cl,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a
