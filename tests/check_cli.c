@@ -66,6 +66,40 @@ START_TEST(a_resolution_too_large_should_be_a_usage_error_naming_the_option)
 }
 END_TEST
 
+/* Options read from tables (cli_parse): the same words for the same mistake
+ * in every command, exit 2, nothing written. */
+START_TEST(option_errors_should_read_alike_in_every_command)
+{
+    const struct {
+        const char *args, *says;
+    } cases[] = {
+        {"sdf sc/meshes/torus_holes.obj -o t.vdb --band 0",
+         "sdf: --band needs a positive number of voxels, got '0'"},
+        {"extend sc/levelset/sphere_velocity.vdb --levelset s --field v -o t.vdb --band 0",
+         "extend: --band needs a positive number of voxels, got '0'"},
+        {"sdf sc/meshes/torus_holes.obj -o t.vdb --res", "sdf: --res needs 1 value"},
+        {"extend sc/levelset/sphere_velocity.vdb --levelset", "extend: --levelset needs 1 value"},
+        {"sdf sc/meshes/torus_holes.obj -o t.vdb --frob", "sdf: unknown option '--frob'"},
+        {"extend sc/levelset/sphere_velocity.vdb --frob", "extend: unknown option '--frob'"},
+        {"extend sc/levelset/sphere_velocity.vdb --field v --field v",
+         "extend: --field 'v' given twice"},
+        {"sdf a.obj b.obj -o t.vdb", "sdf: more than one mesh given ('a.obj' and 'b.obj')"},
+        {"extend a.vdb b.vdb", "extend: more than one input file given ('a.vdb' and 'b.vdb')"},
+        {"sdf sc/meshes/torus_holes.obj -o t.vdb --backend petsc",
+         "sdf: --backend must be auto, mg, fftw or opencl, got 'petsc'"},
+        {"sdf sc/meshes/torus_holes.obj -o t.vdb --bbox 0 0 0 1 1", "sdf: --bbox needs 6 values"},
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char err[4096];
+        int rc = hv(err, sizeof err, "%s", cases[c].args);
+        ck_assert_msg(rc == 2, "%s: exit %d (%s)", cases[c].args, rc, err);
+        ck_assert_msg(strstr(err, cases[c].says), "%s: says\n%s\nnot\n%s", cases[c].args, err,
+                      cases[c].says);
+        ck_assert(!exists("t.vdb"));
+    }
+}
+END_TEST
+
 START_TEST(a_non_finite_vertex_should_be_named_by_its_line)
 {
     char path[600];
@@ -224,6 +258,7 @@ int main(void)
     tcase_set_timeout(tc, 300);
     tcase_add_checked_fixture(tc, setup, teardown);
     tcase_add_test(tc, a_resolution_too_large_should_be_a_usage_error_naming_the_option);
+    tcase_add_test(tc, option_errors_should_read_alike_in_every_command);
     tcase_add_test(tc, a_non_finite_vertex_should_be_named_by_its_line);
     tcase_add_test(tc, messages_should_name_a_file_once);
     tcase_add_test(tc, outputs_should_be_checked_by_their_extension);

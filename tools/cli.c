@@ -360,6 +360,16 @@ static int take_value(const char *cmd, const char *a, const cli_opt *o, char **v
         if (cli_parse_sign(v[0], (hv_sdf_sign *)o->dst))
             return cli_usage_error(cmd, "%s needs auto, heat or winding, got '%s'", a, v[0]);
         return 0;
+    case CLI_LIST: {
+        const char **list = (const char **)o->dst;
+        for (int q = 0; q < *o->given; q++)
+            if (!strcmp(list[q], v[0]))
+                return cli_usage_error(cmd, "%s '%s' given twice", a, v[0]);
+        if (*o->given == o->val)
+            return cli_usage_error(cmd, "at most %d %s options", o->val, a);
+        list[(*o->given)++] = v[0];
+        return 0;
+    }
     default: return 0;
     }
 }
@@ -383,7 +393,7 @@ int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const
             *positional = a;
             continue;
         }
-        if (o->given)
+        if (o->given && o->kind != CLI_LIST)
             *o->given = 1;
         if (o->kind == CLI_FLAG || o->kind == CLI_OR || o->kind == CLI_IGNORE) {
             if (o->kind == CLI_FLAG)

@@ -85,6 +85,8 @@ typedef enum cli_kind {
     CLI_BACKEND, /* *(hv_backend *)dst, one of the backends in val (CLI_BACKEND mask) */
     CLI_THREADS, /* *(int *)dst, 1..HV_MAX_THREADS */
     CLI_SIGN,    /* *(hv_sdf_sign *)dst */
+    CLI_LIST,    /* appended to (const char **)dst, at most val, counted in *given;
+                    the same value twice is an error */
     CLI_IGNORE   /* taken by the driver (-q, -v) */
 } cli_kind;
 
@@ -97,7 +99,7 @@ typedef struct cli_opt {
     int val;           /* CLI_FLAG, CLI_OR: the value; CLI_DOUBLES: how many; CLI_BACKEND: mask */
     double min, max;   /* CLI_INT, CLI_DOUBLE, CLI_STR (min 1: not empty) */
     const char *needs; /* the message's "--x needs <needs>, got '...'" */
-    int *given;        /* set to 1 when the option is given (may be NULL) */
+    int *given;        /* set to 1 when the option is given (may be NULL); CLI_LIST: the count */
     int flags;
 } cli_opt;
 

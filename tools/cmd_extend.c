@@ -251,66 +251,46 @@ done:
     return rc;
 }
 
+static void help(void) { usage(stdout); }
+
 int cmd_extend(int argc, char **argv)
 {
     const char *in = NULL, *out = NULL, *ls = NULL, *fields[MAX_FIELDS];
     int nfields = 0, threads = 0, dense_flag = 0;
     hv_extend_opts o;
     hv_extend_opts_default(&o);
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!strcmp(a, "--dense")) {
-            dense_flag = 1;
-            continue;
-        }
-        if (!strcmp(a, "--plain")) {
-            o.closest_point = 0;
-            continue;
-        }
-        if (a[0] != '-') {
-            if (in)
-                return cli_usage_error(CMD, "one input file only ('%s' and '%s')", in, a);
-            in = a;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error(CMD, "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--levelset")) {
-            ls = v;
-        } else if (!strcmp(a, "--field")) {
-            if (nfields == MAX_FIELDS)
-                return cli_usage_error(CMD, "at most %d --field options", MAX_FIELDS);
-            for (int q = 0; q < nfields; q++)
-                if (!strcmp(fields[q], v))
-                    return cli_usage_error(CMD, "--field '%s' given twice", v);
-            fields[nfields++] = v;
-        } else if (!strcmp(a, "-o") || !strcmp(a, "--output")) {
-            out = v;
-        } else if (!strcmp(a, "--band")) {
-            if (cli_parse_double(v, &o.band) || o.band <= 0)
-                return cli_usage_error(CMD, "--band must be positive (voxels), got '%s'", v);
-        } else if (!strcmp(a, "--t-scale")) {
-            if (cli_parse_double(v, &o.t_scale) || o.t_scale <= 0)
-                return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--out-band")) {
-            if (cli_parse_double(v, &o.out_band) || o.out_band <= 0)
-                return cli_usage_error(CMD, "--out-band must be positive (voxels), got '%s'", v);
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend(CMD, v, CLI_BACKENDS_ALL, &o.backend))
-                return HV_EXIT_USAGE;
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &threads))
-                return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
-        } else {
-            return cli_usage_error(CMD, "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--dense", .kind = CLI_FLAG, .dst = &dense_flag, .val = 1},
+        {.names = "--plain", .kind = CLI_FLAG, .dst = &o.closest_point, .val = 0},
+        {.names = "--levelset", .kind = CLI_STR, .dst = &ls},
+        {.names = "--field", .kind = CLI_LIST, .dst = fields, .val = MAX_FIELDS, .given = &nfields},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &out},
+        {.names = "--band",
+         .kind = CLI_DOUBLE,
+         .dst = &o.band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &o.t_scale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--out-band",
+         .kind = CLI_DOUBLE,
+         .dst = &o.out_band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &o.backend, .val = CLI_BACKENDS_ALL},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &threads},
+        {.names = NULL},
+    };
+    int prc = cli_parse(CMD, argc, argv, opts, "input file", &in, help);
+    if (prc >= 0)
+        return prc;
     if (!in)
         return cli_usage_error(CMD, "an input IN.vdb is required");
     if (!ls)
