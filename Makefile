@@ -141,9 +141,9 @@ $(BUILD)/obj/tools/%.o: tools/%.c $(FLAGS) | $(STAMP)
 	$(CC) $(TOOL_CPPFLAGS) $(CFLAGS) -MMD -MP -c $< -o $@
 
 # C++ under tools/: the OpenVDB reference algorithms of the benchmarks
-# (tools/bench_ref_vdb.cpp), not part of the library. Public headers and
+# (tools/bench/bench_ref_vdb.cpp), not part of the library. Public headers and
 # OpenVDB's only; default visibility, like the library's OpenVDB shim.
-TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(wildcard tools/*.cpp))
+TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(wildcard tools/*.cpp tools/bench/*.cpp))
 $(BUILD)/obj/tools/%.o: tools/%.cpp $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CXX) $(TOOL_CPPFLAGS) $(CXXFLAGS) -MMD -MP -c $< -o $@
@@ -169,7 +169,7 @@ $(LIB_SO): $(LIB_SOV)
 	ln -sf $(notdir $<) $(BUILD)/libheatvox.so.$(SOMAJOR)
 	ln -sf $(notdir $<) $@
 
-$(BIN): $(BUILD)/obj/tools/heatvox.o $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tools/heatvox.c,$(wildcard tools/*.c))) $(TOOL_CXX_OBJ) $(LIB_A)
+$(BIN): $(BUILD)/obj/tools/heatvox.o $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tools/heatvox.c,$(wildcard tools/*.c tools/bench/*.c))) $(TOOL_CXX_OBJ) $(LIB_A)
 	$(CXX) -o $@ $^ $(LDFLAGS) $(LDLIBS)
 
 # Independent readers the tests compare against (OpenEXR's C++ library).
@@ -184,7 +184,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
 	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
 
 # check_vdb also tests the reference algorithms of the benchmarks.
-$(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/bench_ref_vdb.o $(TESTLIB) $(LIB_A)
+$(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/bench/bench_ref_vdb.o $(TESTLIB) $(LIB_A)
 	@mkdir -p $(dir $@)
 	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
 
@@ -295,7 +295,7 @@ sanitize:
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp
 
 bench: all
-	@sh tools/bench.sh $(BIN)
+	@sh tools/bench/bench.sh $(BIN)
 
 demo: all
 	@sh tools/demo.sh $(BIN)
@@ -333,7 +333,7 @@ endif
 # make format lays out every C and C++ source by .clang-format; make
 # format-check (run by CI) fails, listing the places, when one differs.
 FORMAT_SRC = $(sort $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h tools/*.c tools/*.h \
-               tools/*.cpp tests/*.c tests/*.h tests/*.cpp tests/fuzz/*.c tests/fuzz/*.h))
+               tools/*.cpp tools/bench/*.c tools/bench/*.h tools/bench/*.cpp tests/*.c tests/*.h tests/*.cpp tests/fuzz/*.c tests/fuzz/*.h))
 format: | $(STAMP)
 	clang-format -i $(FORMAT_SRC)
 

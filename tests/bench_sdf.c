@@ -1,7 +1,7 @@
 /*
  * Benchmark and accuracy report for hv_sdf_compute (not part of make check):
  *   make build/tests/bench_sdf && HEATVOX_TEST_DATA=../shared/meshes build/tests/bench_sdf [res]
- * or tools/bench_sdf.sh. Prints one line per measurement:
+ * or tools/bench/bench_sdf.sh. Prints one line per measurement:
  *   1. analytic shapes: band, whole-grid and far-field errors in voxels, for
  *      the default (exact magnitude) and the heat method's own phi;
  *   2. defects made from bunny_small and spot, per repair configuration (what

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """The include map of src/README.md, checked: every #include "..." of src/,
-include/heatvox/ and tools/ against the layers and interfaces that the two
+include/heatvox/ and tools/ (the command includes public headers and its
+own only) against the layers and interfaces that the two
 tables of src/README.md give. Prints one line per broken include and a
 closing line in the test framework's format.
 
@@ -102,12 +103,17 @@ def main():
             elif public[base] > public.get(me, -1):
                 fail(path, name, "layer %d above this header's %d" % (public[base], public.get(me, -1)))
     kind[0] = "tools"
-    tools = [f for e in ("c", "h", "cpp") for f in glob.glob(os.path.join(ROOT, "tools", "*." + e))]
+    tools = [f for d in ("*", os.path.join("*", "*")) for e in ("c", "h", "cpp")
+             for f in glob.glob(os.path.join(ROOT, "tools", d + "." + e))]
+    top = os.path.realpath(os.path.join(ROOT, "tools"))
     for path in sorted(tools):
         for name in includes(path):
             checked += 1
-            if "/" in name and not name.startswith("heatvox/"):
-                fail(path, name, "the command uses the public headers only")
+            if name.startswith("heatvox/"):
+                continue
+            where = os.path.realpath(os.path.join(os.path.dirname(path), name))
+            if not where.startswith(top + os.sep) or not os.path.exists(where):
+                fail(path, name, "the command uses the public headers and its own only")
     for line in bad:
         print(line)
     print("%d%%: Checks: 5, Failures: %d, Errors: 0" % (100 * (5 - len(failed)) // 5, len(failed)))

@@ -1,12 +1,12 @@
 /* OpenVDB files through the C shim: level sets (narrow band and dense), vec3,
  * masks, metadata, common boxes, errors; OpenVDB's own reader (pyopenvdb,
  * vdb_print) as the judge of the files; and the OpenVDB reference tools of the
- * benchmarks (meshToLevelSet, sdfToExt: tools/bench_ref_vdb.cpp, linked in)
+ * benchmarks (meshToLevelSet, sdfToExt: tools/bench/bench_ref_vdb.cpp, linked in)
  * against analytic answers.
  * Links OpenVDB: run with CK_FORK=no (docs/METHOD.md, "Testing notes"). */
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
-#include "../tools/bench_ref.h"
+#include "../tools/bench/bench_ref.h"
 #include "testlib.h"
 
 #include <check.h>

@@ -18,7 +18,7 @@ int cmd_make_scenes(int argc, char **argv);
 int cmd_distance(int argc, char **argv);
 int cmd_extend(int argc, char **argv);
 
-/* heatvox bench extend (tools/bench_extend.c). */
+/* heatvox bench extend (tools/bench/bench_extend.c). */
 int bench_extend(int argc, char **argv);
 
 #endif

@@ -1,5 +1,5 @@
 /* heatvox: the command-line driver, a thin layer over libheatvox. */
-#include "bench_device.h"
+#include "bench/bench_device.h"
 #include "cli.h"
 #include "commands.h"
 

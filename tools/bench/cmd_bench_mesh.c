@@ -1,7 +1,7 @@
 /* heatvox bench mesh: extracting the zero level set as a mesh (hv_grid_to_mesh,
  * what `heatvox sdf --mesh-out` runs) at adaptivity 0 and 0.5, against the
  * signed distance computation that produced the grid, in the same run. */
-#include "cli.h"
+#include "../cli.h"
 
 #include <stdio.h>
 #include <stdlib.h>

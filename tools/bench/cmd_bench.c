@@ -3,8 +3,8 @@
  * FFTW), because absolute times drift on shared machines. */
 #include "bench_device.h"
 #include "bench_ref.h"
-#include "cli.h"
-#include "commands.h"
+#include "../cli.h"
+#include "../commands.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -137,7 +137,7 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
     return HV_OK;
 }
 
-/* The device's own figures (tools/bench_device.c) as JSON fields: the solve
+/* The device's own figures (tools/bench/bench_device.c) as JSON fields: the solve
  * with the fields on the device, the transfers apart, the device's copy
  * bandwidth and the modelled traffic against it. */
 static void print_device(const hv_problem *p, hv_solver_opts *o, const float *f, int repeat,

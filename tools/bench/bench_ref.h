@@ -1,6 +1,6 @@
 /* OpenVDB's own algorithms that the benchmarks (heatvox bench sdf, bench
  * extend) and tests/check_vdb.c compare heatvox with, behind a C API
- * (tools/bench_ref_vdb.cpp). Not part of heatvox's API: the library does not
+ * (tools/bench/bench_ref_vdb.cpp). Not part of heatvox's API: the library does not
  * contain them; the command and the tests that use them link that file.
  *
  * Grids follow include/heatvox/vdb.h: voxel (i,j,k) of an hv_grid is OpenVDB
@@ -80,10 +80,10 @@ int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
  * wall seconds and peak RSS in MB (wait4). Returns -1 when it cannot start or
  * exits non-zero. The caller's own resident memory at the fork counts in the
  * child's peak (Linux keeps the high-water mark across exec): call it from a
- * small process. (tools/bench_run.c) */
+ * small process. (tools/bench/bench_run.c) */
 int bench_run_self(char **argv, double *seconds, double *rss_mb);
 
-/* heatvox bench extend-band and extend-loop (tools/cmd_bench_extend_band.c). */
+/* heatvox bench extend-band and extend-loop (tools/bench/cmd_bench_extend_band.c). */
 int cmd_bench_extend_band(int argc, char **argv);
 int cmd_bench_extend_loop(int argc, char **argv);
 

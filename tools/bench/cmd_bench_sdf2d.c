@@ -1,7 +1,7 @@
 /* heatvox bench sdf2d: `heatvox sdf2d` on a generated SVG of many small closed
  * paths, with the repair against --no-repair on the same file in the same run.
  * Each run is a child process, so that its peak memory is its own. */
-#include "cli.h"
+#include "../cli.h"
 
 #include <math.h>
 #include <stdio.h>

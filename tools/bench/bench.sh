@@ -1,6 +1,6 @@
 #!/bin/sh
 # make bench: the benchmark set, one JSON object per line on stdout.
-# Usage: tools/bench.sh path/to/heatvox
+# Usage: tools/bench/bench.sh path/to/heatvox
 # Rows that need an OpenCL platform or ../shared/meshes are skipped (with a
 # note on stderr) where those are missing.
 set -e

@@ -1,5 +1,5 @@
 /* The device's own figures for heatvox bench solve --backend opencl
- * (tools/bench_device.c). */
+ * (tools/bench/bench_device.c). */
 #ifndef HV_TOOLS_BENCH_DEVICE_H
 #define HV_TOOLS_BENCH_DEVICE_H
 

@@ -1,4 +1,4 @@
-// OpenVDB's own algorithms that heatvox is measured against (tools/bench_ref.h):
+// OpenVDB's own algorithms that heatvox is measured against (tools/bench/bench_ref.h):
 // meshToLevelSet for heatvox sdf, sdfToExt (fast sweeping) for heatvox extend.
 // Beside the benchmarks rather than in the library: heatvox's API does not
 // offer them. Every entry point runs its body inside guarded(), which turns
@@ -10,7 +10,7 @@
 #include "bench_ref.h"
 
 extern "C" {
-#include "cli.h"
+#include "../cli.h"
 }
 
 #include <openvdb/openvdb.h>

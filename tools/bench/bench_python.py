@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """make bench: the Python package's cost against the command, one JSON object per line.
 
-usage: tools/bench_python.py path/to/heatvox [--n N] [--repeat R]
+usage: tools/bench/bench_python.py path/to/heatvox [--n N] [--repeat R]
 
 The signed distance of scenes/meshes/sphere_holes_flips.obj (from `heatvox
 make-scenes`) at --res N (default 128) written as a .vdb and a .npy, by

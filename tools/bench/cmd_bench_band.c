@@ -3,8 +3,8 @@
  * .vdb write on the same lattice, each in its own process, so that the times
  * and the peak RSS (from wait4) are those a user sees. */
 #include "bench_ref.h"
-#include "cli.h"
-#include "commands.h"
+#include "../cli.h"
+#include "../commands.h"
 #include "heatvox/heatvox.h"
 
 #include <math.h>

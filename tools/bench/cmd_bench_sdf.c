@@ -1,7 +1,7 @@
 /* heatvox bench sdf: the signed heat method pipeline on a mesh, stage by stage,
  * against OpenVDB's meshToLevelSet on the same mesh and grid in the same run. */
 #include "bench_ref.h"
-#include "cli.h"
+#include "../cli.h"
 
 #include <stdio.h>
 #include <stdlib.h>

@@ -3,7 +3,7 @@
  * input in the same process; both are compared with the exact closest-point
  * extension. */
 #include "bench_ref.h"
-#include "cli.h"
+#include "../cli.h"
 
 #include <math.h>
 #include <stdio.h>

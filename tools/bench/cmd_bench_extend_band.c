@@ -9,7 +9,7 @@
  * sphere moving across the box, its level set as tiles each step), one
  * extender for all steps against sdfToExt per step, in this process. */
 #include "bench_ref.h"
-#include "cli.h"
+#include "../cli.h"
 
 #include <errno.h>
 #include <math.h>
@@ -56,7 +56,7 @@ static int usage(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-/* The smooth fields of bench extend (tools/bench_extend.c), of coordinates
+/* The smooth fields of bench extend (tools/bench/bench_extend.c), of coordinates
  * scaled to about [-1,1]; neither comes near zero there, so relative errors
  * are well defined. */
 static void field_at(const double p[3], double v[3])
