@@ -402,6 +402,13 @@ int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const
                 *(int *)o->dst |= o->val;
             continue;
         }
+        if (o->kind == CLI_FN) {
+            int took = o->fn(cmd, a, argv + i + 1, argc - i - 1, o->dst);
+            if (took < 0)
+                return -took;
+            i += took;
+            continue;
+        }
         const int k = o->kind == CLI_DOUBLES ? o->val : 1;
         if (i + k >= argc)
             return cli_usage_error(cmd, "%s needs %d value%s", a, k, k > 1 ? "s" : "");

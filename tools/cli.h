@@ -87,7 +87,9 @@ typedef enum cli_kind {
     CLI_SIGN,    /* *(hv_sdf_sign *)dst */
     CLI_LIST,    /* appended to (const char **)dst, at most val, counted in *given;
                     the same value twice is an error */
-    CLI_IGNORE   /* taken by the driver (-q, -v) */
+    CLI_IGNORE,  /* taken by the driver (-q, -v) */
+    CLI_FN       /* fn(cmd, option, values, how many follow, dst): the values it took
+                    (>= 0), or minus the exit code */
 } cli_kind;
 
 #define CLI_ABOVE 1 /* cli_opt.flags: a number must exceed min */
@@ -101,6 +103,7 @@ typedef struct cli_opt {
     const char *needs; /* the message's "--x needs <needs>, got '...'" */
     int *given;        /* set to 1 when the option is given (may be NULL); CLI_LIST: the count */
     int flags;
+    int (*fn)(const char *cmd, const char *opt, char **v, int nv, void *dst);
 } cli_opt;
 
 /* Reads argv[1..argc) against the options (a row with names NULL ends

@@ -4,6 +4,7 @@
 
 #include <ctype.h>
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -340,90 +341,119 @@ static int parse_unreachable(const char *v, float *out)
     return 0;
 }
 
+/* The command line of heatvox distance. */
+typedef struct dist_args {
+    const char *sources, *mask, *mask_grid, *obst_mesh, *out, *npy;
+    int res, dim, pad, use_bbox, threads, none;
+    double vsize, bbox[6];
+    hv_distance_opts o;
+} dist_args;
+
+/* --bbox: 6 numbers, or 4 with --dim 2 (which may come later: take what
+ * parses). */
+static int take_bbox(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    dist_args *A = dst;
+    double *bb = A->bbox;
+    int k = 0;
+    while (k < 6 && k < nv && cli_parse_double(v[k], &bb[k]) == 0)
+        k++;
+    if (k != 4 && k != 6)
+        return -cli_usage_error(cmd, "%s needs x0 y0 z0 x1 y1 z1 (or x0 y0 x1 y1 in 2D)", opt);
+    if (k == 4) {
+        const double b4[4] = {bb[0], bb[1], bb[2], bb[3]};
+        const double b6[6] = {b4[0], b4[1], -0.5, b4[2], b4[3], 0.5};
+        memcpy(bb, b6, sizeof b6);
+    }
+    A->use_bbox = k;
+    return k;
+}
+
+/* --obstacles MASK.vdb, or none. */
+static int take_obstacles(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    dist_args *A = dst;
+    if (nv < 1)
+        return -cli_usage_error(cmd, "%s needs 1 value", opt);
+    if (!strcmp(v[0], "none"))
+        A->none = 1;
+    else
+        A->mask = v[0];
+    return 1;
+}
+
+/* --unreachable V: the value of cells no source reaches, solid ones too. */
+static int take_unreachable(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    hv_distance_opts *o = dst;
+    if (nv < 1)
+        return -cli_usage_error(cmd, "%s needs 1 value", opt);
+    if (parse_unreachable(v[0], &o->unreachable))
+        return -cli_usage_error(cmd, "%s needs a number or inf, got '%s'", opt, v[0]);
+    o->solid_value = o->unreachable;
+    return 1;
+}
+
+static void help(void) { usage(stdout); }
+
 int cmd_distance(int argc, char **argv)
 {
-    const char *sources = NULL, *mask = NULL, *mask_grid = NULL, *obst_mesh = NULL;
-    const char *out = NULL, *npy = NULL;
-    int res = 0, dim = 3, pad = 4, use_bbox = 0, threads = 0, none = 0;
-    double vsize = 0, bbox[6] = {0}, index0[3] = {0, 0, 0};
+    dist_args A = {.dim = 3, .pad = 4};
+    hv_distance_opts_default(&A.o);
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--bbox", .kind = CLI_FN, .dst = &A, .fn = take_bbox},
+        {.names = "--sources", .kind = CLI_STR, .dst = &A.sources},
+        {.names = "--obstacles", .kind = CLI_FN, .dst = &A, .fn = take_obstacles},
+        {.names = "--obstacle-grid", .kind = CLI_STR, .dst = &A.mask_grid},
+        {.names = "--obstacle-mesh", .kind = CLI_STR, .dst = &A.obst_mesh},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &A.out},
+        {.names = "--npy", .kind = CLI_STR, .dst = &A.npy},
+        {.names = "--res",
+         .kind = CLI_INT,
+         .dst = &A.res,
+         .min = 4,
+         .max = INT_MAX,
+         .needs = "an integer >= 4"},
+        {.names = "--voxel-size",
+         .kind = CLI_DOUBLE,
+         .dst = &A.vsize,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--dim", .kind = CLI_INT, .dst = &A.dim, .min = 2, .max = 3, .needs = "2 or 3"},
+        {.names = "--pad",
+         .kind = CLI_INT,
+         .dst = &A.pad,
+         .max = INT_MAX,
+         .needs = "an integer >= 0"},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &A.o.t_scale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A.o.backend, .val = CLI_BACKENDS_ALL},
+        {.names = "--unreachable", .kind = CLI_FN, .dst = &A.o, .fn = take_unreachable},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A.threads},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int prc = cli_parse(CMD, argc, argv, opts, "argument", &stray, help);
+    if (prc >= 0)
+        return prc;
+    if (stray)
+        return cli_usage_error(CMD, "unexpected argument '%s' (the sources come with --sources)",
+                               stray);
+    const char *sources = A.sources, *mask = A.mask, *mask_grid = A.mask_grid;
+    const char *obst_mesh = A.obst_mesh, *out = A.out, *npy = A.npy;
+    const int res = A.res, dim = A.dim, pad = A.pad, use_bbox = A.use_bbox, threads = A.threads;
+    const int none = A.none;
+    const double vsize = A.vsize;
+    double bbox[6], index0[3] = {0, 0, 0};
+    memcpy(bbox, A.bbox, sizeof bbox);
     int have_index0 = 0;
-    hv_distance_opts o;
-    hv_distance_opts_default(&o);
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!strcmp(a, "--bbox")) {
-            /* 6 numbers (4 with --dim 2, which may come later: take what parses). */
-            int k = 0;
-            while (k < 6 && i + 1 + k < argc && cli_parse_double(argv[i + 1 + k], &bbox[k]) == 0)
-                k++;
-            if (k != 4 && k != 6)
-                return cli_usage_error(CMD,
-                                       "--bbox needs x0 y0 z0 x1 y1 z1 (or x0 y0 x1 y1 in 2D)");
-            if (k == 4) {
-                double b4[4] = {bbox[0], bbox[1], bbox[2], bbox[3]};
-                bbox[0] = b4[0];
-                bbox[1] = b4[1];
-                bbox[2] = -0.5;
-                bbox[3] = b4[2];
-                bbox[4] = b4[3];
-                bbox[5] = 0.5;
-            }
-            use_bbox = k;
-            i += k;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error(CMD, "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--sources")) {
-            sources = v;
-        } else if (!strcmp(a, "--obstacles")) {
-            if (!strcmp(v, "none"))
-                none = 1;
-            else
-                mask = v;
-        } else if (!strcmp(a, "--obstacle-grid")) {
-            mask_grid = v;
-        } else if (!strcmp(a, "--obstacle-mesh")) {
-            obst_mesh = v;
-        } else if (!strcmp(a, "-o") || !strcmp(a, "--output")) {
-            out = v;
-        } else if (!strcmp(a, "--npy")) {
-            npy = v;
-        } else if (!strcmp(a, "--res")) {
-            if (cli_parse_int(v, &res) || res < 4)
-                return cli_usage_error(CMD, "--res must be an integer >= 4, got '%s'", v);
-        } else if (!strcmp(a, "--voxel-size")) {
-            if (cli_parse_double(v, &vsize) || vsize <= 0)
-                return cli_usage_error(CMD, "--voxel-size must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--dim")) {
-            if (cli_parse_int(v, &dim) || (dim != 2 && dim != 3))
-                return cli_usage_error(CMD, "--dim must be 2 or 3, got '%s'", v);
-        } else if (!strcmp(a, "--pad")) {
-            if (cli_parse_int(v, &pad) || pad < 0)
-                return cli_usage_error(CMD, "--pad must be >= 0, got '%s'", v);
-        } else if (!strcmp(a, "--t-scale")) {
-            if (cli_parse_double(v, &o.t_scale) || o.t_scale <= 0)
-                return cli_usage_error(CMD, "--t-scale must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend(CMD, v, CLI_BACKENDS_ALL, &o.backend))
-                return HV_EXIT_USAGE;
-        } else if (!strcmp(a, "--unreachable")) {
-            if (parse_unreachable(v, &o.unreachable))
-                return cli_usage_error(CMD, "--unreachable must be a number or inf, got '%s'", v);
-            o.solid_value = o.unreachable;
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &threads))
-                return cli_usage_error(CMD, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
-        } else {
-            return cli_usage_error(CMD, "unknown option '%s'", a);
-        }
-    }
+    hv_distance_opts o = A.o;
     if (!sources)
         return cli_usage_error(CMD, "--sources is required");
     if (!out && !npy)
