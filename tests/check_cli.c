@@ -88,6 +88,12 @@ START_TEST(option_errors_should_read_alike_in_every_command)
         {"sdf sc/meshes/torus_holes.obj -o t.vdb --backend petsc",
          "sdf: --backend must be auto, mg, fftw or opencl, got 'petsc'"},
         {"sdf sc/meshes/torus_holes.obj -o t.vdb --bbox 0 0 0 1 1", "sdf: --bbox needs 6 values"},
+        {"distance --sources sc/distance/sources.txt -o t.vdb --res 2",
+         "distance: --res needs an integer >= 4, got '2'"},
+        {"distance --sources sc/distance/sources.txt -o t.vdb --frob",
+         "distance: unknown option '--frob'"},
+        {"distance --sources sc/distance/sources.txt -o t.vdb --obstacles",
+         "distance: --obstacles needs 1 value"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char err[4096];
