@@ -94,6 +94,9 @@ START_TEST(option_errors_should_read_alike_in_every_command)
          "distance: unknown option '--frob'"},
         {"distance --sources sc/distance/sources.txt -o t.vdb --obstacles",
          "distance: --obstacles needs 1 value"},
+        {"sdf2d x.txt -o t.exr --res 1", "sdf2d: --res needs an integer >= 2, got '1'"},
+        {"sdf2d x.txt y.txt -o t.exr",
+         "sdf2d: more than one curves file given ('x.txt' and 'y.txt')"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char err[4096];

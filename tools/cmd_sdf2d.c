@@ -1,6 +1,8 @@
 /* heatvox sdf2d: 2D signed distance from (broken) curves to EXR and PNG. */
 #include "cli.h"
 
+#include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
@@ -46,66 +48,59 @@ int cmd_sdf2d(int argc, char **argv)
     double range = 0;
     hv_sdf2d_opts o;
     hv_sdf2d_opts_default(&o);
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        int more = i + 1 < argc;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            help();
-            return HV_EXIT_OK;
-        } else if (!strcmp(a, "-q") || !strcmp(a, "-v")) {
-            continue;
-        } else if (!strcmp(a, "-o") || !strcmp(a, "--png") || !strcmp(a, "--channel")) {
-            if (!more)
-                return cli_usage_error("sdf2d", "%s needs a value", a);
-            *(a[1] == 'o' ? &out : a[2] == 'p' ? &png : &channel) = argv[++i];
-        } else if (!strcmp(a, "--res") || !strcmp(a, "--pad")) {
-            int v;
-            if (!more || cli_parse_int(argv[i + 1], &v) || v < (a[2] == 'r' ? 2 : 0))
-                return cli_usage_error("sdf2d", "%s needs an integer >= %d", a,
-                                       a[2] == 'r' ? 2 : 0);
-            *(a[2] == 'r' ? &o.res : &o.pad) = v;
-            i++;
-        } else if (!strcmp(a, "--voxel-size") || !strcmp(a, "--t-scale") || !strcmp(a, "--range")) {
-            double v;
-            if (!more || cli_parse_double(argv[i + 1], &v) || !(v > 0))
-                return cli_usage_error("sdf2d", "%s needs a positive number", a);
-            *(a[2] == 'v' ? &o.voxel_size : a[2] == 't' ? &o.t_scale : &range) = v;
-            i++;
-        } else if (!strcmp(a, "--bbox")) {
-            if (i + 4 >= argc)
-                return cli_usage_error("sdf2d", "--bbox needs X0 Y0 X1 Y1");
-            for (int k = 0; k < 4; k++)
-                if (cli_parse_double(argv[i + 1 + k], &o.bbox[k]))
-                    return cli_usage_error("sdf2d", "--bbox value '%s' is not a number",
-                                           argv[i + 1 + k]);
-            if (!(o.bbox[2] > o.bbox[0] && o.bbox[3] > o.bbox[1]))
-                return cli_usage_error("sdf2d", "--bbox is empty");
-            o.use_bbox = 1;
-            i += 4;
-        } else if (!strcmp(a, "--heat")) {
-            o.heat_magnitude = 1;
-        } else if (!strcmp(a, "--sign")) {
-            const char *v = more ? argv[i + 1] : "";
-            hv_sdf_sign sg;
-            if (cli_parse_sign(v, &sg))
-                return cli_usage_error("sdf2d", "--sign needs auto, heat or winding, got '%s'", v);
-            o.sign = (int)sg;
-            i++;
-        } else if (!strcmp(a, "--no-repair")) {
-            o.repair = 0;
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend("sdf2d", more ? argv[i + 1] : NULL, CLI_BACKENDS_LOCAL,
-                                  &o.backend))
-                return HV_EXIT_USAGE;
-            i++;
-        } else if (a[0] == '-' && a[1]) {
-            return cli_usage_error("sdf2d", "unknown option '%s'", a);
-        } else if (!in) {
-            in = a;
-        } else {
-            return cli_usage_error("sdf2d", "more than one input ('%s' and '%s')", in, a);
-        }
-    }
+    hv_sdf_sign sign = (hv_sdf_sign)o.sign;
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "-o", .kind = CLI_STR, .dst = &out},
+        {.names = "--png", .kind = CLI_STR, .dst = &png},
+        {.names = "--channel", .kind = CLI_STR, .dst = &channel},
+        {.names = "--res",
+         .kind = CLI_INT,
+         .dst = &o.res,
+         .min = 2,
+         .max = INT_MAX,
+         .needs = "an integer >= 2"},
+        {.names = "--pad",
+         .kind = CLI_INT,
+         .dst = &o.pad,
+         .max = INT_MAX,
+         .needs = "an integer >= 0"},
+        {.names = "--voxel-size",
+         .kind = CLI_DOUBLE,
+         .dst = &o.voxel_size,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &o.t_scale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--range",
+         .kind = CLI_DOUBLE,
+         .dst = &range,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--bbox",
+         .kind = CLI_DOUBLES,
+         .dst = o.bbox,
+         .val = 4,
+         .needs = "4 finite numbers (X0 Y0 X1 Y1)",
+         .given = &o.use_bbox},
+        {.names = "--heat", .kind = CLI_FLAG, .dst = &o.heat_magnitude, .val = 1},
+        {.names = "--sign", .kind = CLI_SIGN, .dst = &sign},
+        {.names = "--no-repair", .kind = CLI_FLAG, .dst = &o.repair, .val = 0},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &o.backend, .val = CLI_BACKENDS_LOCAL},
+        {.names = NULL},
+    };
+    int prc = cli_parse("sdf2d", argc, argv, opts, "curves file", &in, help);
+    if (prc >= 0)
+        return prc;
+    o.sign = (int)sign;
+    if (o.use_bbox && !(o.bbox[2] > o.bbox[0] && o.bbox[3] > o.bbox[1]))
+        return cli_usage_error("sdf2d", "--bbox is empty");
     if (!in)
         return cli_usage_error("sdf2d", "no curves file given");
     if (!out && !png)
