@@ -32,19 +32,6 @@ static int usage_extend(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-/* The smooth field on the surface, of coordinates scaled to about [-1,1]. */
-static void field_at(const double p[3], double v[3])
-{
-    v[0] = -p[1] + 0.3;
-    v[1] = p[0] + 0.2;
-    v[2] = 0.5 + 0.2 * p[2] + 0.3 * sin(3 * p[0]);
-}
-
-static double scalar_at(const double p[3])
-{
-    return 2 + sin(3 * p[0]) * cos(2 * p[1]) + 0.5 * p[2];
-}
-
 typedef struct {
     hv_grid *phi;
     hv_grid *in[3], *ex[3]; /* input field (band only) and exact extension */
@@ -81,9 +68,9 @@ static void fill_cell(bench_case *b, size_t c, const double cp[3], int vec)
     for (int a = 0; a < 3; a++)
         p[a] = (cp[a] - b->center[a]) / b->scale;
     if (vec) {
-        field_at(p, v);
+        bench_field_at(p, v);
     } else {
-        v[0] = v[1] = v[2] = scalar_at(p);
+        v[0] = v[1] = v[2] = bench_scalar_at(p);
     }
     int band = fabs(b->phi->v[c]) < 3 * b->phi->h;
     for (int q = 0; q < 3; q++) {

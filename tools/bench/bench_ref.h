@@ -83,6 +83,12 @@ int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
  * small process. (tools/bench/bench_run.c) */
 int bench_run_self(char **argv, double *seconds, double *rss_mb);
 
+/* The smooth fields the extension benchmarks extend (bench extend, extend-band,
+ * extend-loop), of coordinates scaled to about [-1,1]; neither comes near
+ * zero there, so relative errors are well defined. (tools/bench/bench_run.c) */
+void bench_field_at(const double p[3], double v[3]);
+double bench_scalar_at(const double p[3]);
+
 /* heatvox bench extend-band and extend-loop (tools/bench/cmd_bench_extend_band.c). */
 int cmd_bench_extend_band(int argc, char **argv);
 int cmd_bench_extend_loop(int argc, char **argv);

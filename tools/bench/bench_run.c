@@ -1,8 +1,10 @@
 /* The benchmarks' process runner (bench_ref.h): a benchmark that measures a
  * whole command runs it as its own process, so that its time and peak
- * resident memory are those a user sees. */
+ * resident memory are those a user sees; and the extension benchmarks'
+ * test fields. */
 #include "bench_ref.h"
 
+#include <math.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,3 +27,12 @@ int bench_run_self(char **argv, double *seconds, double *rss_mb)
     *rss_mb = ru.ru_maxrss / 1024.0;
     return 0;
 }
+
+void bench_field_at(const double p[3], double v[3])
+{
+    v[0] = -p[1] + 0.3;
+    v[1] = p[0] + 0.2;
+    v[2] = 0.5 + 0.2 * p[2] + 0.3 * sin(3 * p[0]);
+}
+
+double bench_scalar_at(const double p[3]) { return 2 + sin(3 * p[0]) * cos(2 * p[1]) + 0.5 * p[2]; }

@@ -56,21 +56,6 @@ static int usage(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-/* The smooth fields of bench extend (tools/bench/bench_extend.c), of coordinates
- * scaled to about [-1,1]; neither comes near zero there, so relative errors
- * are well defined. */
-static void field_at(const double p[3], double v[3])
-{
-    v[0] = -p[1] + 0.3;
-    v[1] = p[0] + 0.2;
-    v[2] = 0.5 + 0.2 * p[2] + 0.3 * sin(3 * p[0]);
-}
-
-static double scalar_at(const double p[3])
-{
-    return 2 + sin(3 * p[0]) * cos(2 * p[1]) + 0.5 * p[2];
-}
-
 /* g at world point x: ncomp values. */
 static void g_at(int ncomp, const double center[3], double scale, const double x[3], double v[3])
 {
@@ -78,9 +63,9 @@ static void g_at(int ncomp, const double center[3], double scale, const double x
     for (int a = 0; a < 3; a++)
         p[a] = (x[a] - center[a]) / scale;
     if (ncomp == 3)
-        field_at(p, v);
+        bench_field_at(p, v);
     else
-        v[0] = scalar_at(p);
+        v[0] = bench_scalar_at(p);
 }
 
 static inline int tile_on(const hv_tiles *t, size_t q, int c)
@@ -747,7 +732,7 @@ static hv_status sphere_tiles(int n, const double c0[3], double R, hv_tiles **ph
             tile_set_on(P, q, c);
             for (int a = 0; a < 3; a++)
                 cp[a] = c0[a] + R * d[a] / r;
-            field_at(cp, v);
+            bench_field_at(cp, v);
             for (int k = 0; k < 3; k++) {
                 ex[k]->v[i] = (float)v[k];
                 tile_set_on(ex[k], q, c);
