@@ -344,6 +344,7 @@ static int parse_unreachable(const char *v, float *out)
 /* The command line of heatvox distance. */
 typedef struct dist_args {
     const char *sources, *mask, *mask_grid, *obst_mesh, *out, *npy;
+    const char *h5; /* -o OUT.h5 (then out is NULL) */
     int res, dim, pad, use_bbox, threads, none;
     double vsize, bbox[6];
     hv_distance_opts o;
@@ -396,46 +397,45 @@ static int take_unreachable(const char *cmd, const char *opt, char **v, int nv, 
 
 static void help(void) { usage(stdout); }
 
-int cmd_distance(int argc, char **argv)
+/* Reads the command line into A: -1 to go on, else the exit code. */
+static int parse_args(int argc, char **argv, dist_args *A)
 {
-    dist_args A = {.dim = 3, .pad = 4};
-    hv_distance_opts_default(&A.o);
     const cli_opt opts[] = {
         {.names = "-q|-v", .kind = CLI_IGNORE},
-        {.names = "--bbox", .kind = CLI_FN, .dst = &A, .fn = take_bbox},
-        {.names = "--sources", .kind = CLI_STR, .dst = &A.sources},
-        {.names = "--obstacles", .kind = CLI_FN, .dst = &A, .fn = take_obstacles},
-        {.names = "--obstacle-grid", .kind = CLI_STR, .dst = &A.mask_grid},
-        {.names = "--obstacle-mesh", .kind = CLI_STR, .dst = &A.obst_mesh},
-        {.names = "-o|--output", .kind = CLI_STR, .dst = &A.out},
-        {.names = "--npy", .kind = CLI_STR, .dst = &A.npy},
+        {.names = "--bbox", .kind = CLI_FN, .dst = A, .fn = take_bbox},
+        {.names = "--sources", .kind = CLI_STR, .dst = &A->sources},
+        {.names = "--obstacles", .kind = CLI_FN, .dst = A, .fn = take_obstacles},
+        {.names = "--obstacle-grid", .kind = CLI_STR, .dst = &A->mask_grid},
+        {.names = "--obstacle-mesh", .kind = CLI_STR, .dst = &A->obst_mesh},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &A->out},
+        {.names = "--npy", .kind = CLI_STR, .dst = &A->npy},
         {.names = "--res",
          .kind = CLI_INT,
-         .dst = &A.res,
+         .dst = &A->res,
          .min = 4,
          .max = INT_MAX,
          .needs = "an integer >= 4"},
         {.names = "--voxel-size",
          .kind = CLI_DOUBLE,
-         .dst = &A.vsize,
+         .dst = &A->vsize,
          .max = INFINITY,
          .flags = CLI_ABOVE,
          .needs = "a positive number"},
-        {.names = "--dim", .kind = CLI_INT, .dst = &A.dim, .min = 2, .max = 3, .needs = "2 or 3"},
+        {.names = "--dim", .kind = CLI_INT, .dst = &A->dim, .min = 2, .max = 3, .needs = "2 or 3"},
         {.names = "--pad",
          .kind = CLI_INT,
-         .dst = &A.pad,
+         .dst = &A->pad,
          .max = INT_MAX,
          .needs = "an integer >= 0"},
         {.names = "--t-scale",
          .kind = CLI_DOUBLE,
-         .dst = &A.o.t_scale,
+         .dst = &A->o.t_scale,
          .max = INFINITY,
          .flags = CLI_ABOVE,
          .needs = "a positive number"},
-        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A.o.backend, .val = CLI_BACKENDS_ALL},
-        {.names = "--unreachable", .kind = CLI_FN, .dst = &A.o, .fn = take_unreachable},
-        {.names = "--threads", .kind = CLI_THREADS, .dst = &A.threads},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A->o.backend, .val = CLI_BACKENDS_ALL},
+        {.names = "--unreachable", .kind = CLI_FN, .dst = &A->o, .fn = take_unreachable},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
         {.names = NULL},
     };
     const char *stray = NULL;
@@ -445,213 +445,236 @@ int cmd_distance(int argc, char **argv)
     if (stray)
         return cli_usage_error(CMD, "unexpected argument '%s' (the sources come with --sources)",
                                stray);
-    const char *sources = A.sources, *mask = A.mask, *mask_grid = A.mask_grid;
-    const char *obst_mesh = A.obst_mesh, *out = A.out, *npy = A.npy;
-    const int res = A.res, dim = A.dim, pad = A.pad, use_bbox = A.use_bbox, threads = A.threads;
-    const int none = A.none;
-    const double vsize = A.vsize;
-    double bbox[6], index0[3] = {0, 0, 0};
-    memcpy(bbox, A.bbox, sizeof bbox);
-    int have_index0 = 0;
-    hv_distance_opts o = A.o;
-    if (!sources)
+    return -1;
+}
+
+/* The combinations of options that make no sense, and the outputs: -1 to go
+ * on, else the exit code. */
+static int check_args(dist_args *A)
+{
+    if (!A->sources)
         return cli_usage_error(CMD, "--sources is required");
-    if (!out && !npy)
+    if (!A->out && !A->npy)
         return cli_usage_error(CMD, "give -o OUT.vdb (and/or --npy OUT.npy)");
-    if (cli_check_ext(CMD, "-o", out, ".vdb .h5") || cli_check_ext(CMD, "--npy", npy, ".npy"))
+    if (cli_check_ext(CMD, "-o", A->out, ".vdb .h5") || cli_check_ext(CMD, "--npy", A->npy, ".npy"))
         return HV_EXIT_USAGE;
     int is_h5;
-    if (cli_h5_output(CMD, out, &is_h5))
+    if (cli_h5_output(CMD, A->out, &is_h5))
         return HV_EXIT_USAGE;
-    const char *h5 = is_h5 ? out : NULL;
-    if (is_h5)
-        out = NULL;
-    if ((mask != NULL) + (obst_mesh != NULL) + none > 1)
+    if (is_h5) {
+        A->h5 = A->out;
+        A->out = NULL;
+    }
+    const int dim = A->dim;
+    if ((A->mask != NULL) + (A->obst_mesh != NULL) + A->none > 1)
         return cli_usage_error(
             CMD, "give one of --obstacles MASK.vdb, --obstacle-mesh, --obstacles none");
-    if (mask && (res || vsize))
+    if (A->mask && (A->res || A->vsize))
         return cli_usage_error(CMD, "--res/--voxel-size cannot be used with --obstacles MASK.vdb "
                                     "(its voxels are the grid)");
-    if (mask && dim == 2)
+    if (A->mask && dim == 2)
         return cli_usage_error(
             CMD, "--dim 2 cannot be used with a VDB mask (a one-voxel-thick mask is fine in 3D)");
-    if (obst_mesh && dim == 2)
+    if (A->obst_mesh && dim == 2)
         return cli_usage_error(CMD, "--obstacle-mesh needs a 3D grid");
-    if (use_bbox && (use_bbox == 4) != (dim == 2))
+    if (A->use_bbox && (A->use_bbox == 4) != (dim == 2))
         return cli_usage_error(CMD, "--bbox takes %d numbers for a %dD grid", dim == 2 ? 4 : 6,
                                dim);
-    if (res && vsize)
+    if (A->res && A->vsize)
         return cli_usage_error(CMD, "give --res or --voxel-size, not both");
-    const char *outs[] = {out ? out : h5, npy}, *ins[] = {sources, mask, obst_mesh};
+    const char *outs[] = {A->out ? A->out : A->h5, A->npy};
+    const char *ins[] = {A->sources, A->mask, A->obst_mesh};
     if (cli_check_outputs(CMD, outs, 2, ins, 3))
         return HV_EXIT_FAIL;
-    hv_set_threads(threads);
+    return -1;
+}
 
-    double t_start = hv_now();
+/* The grid without a VDB mask: --bbox, or the sources' and the obstacle
+ * mesh's bounds plus --pad cells, with --res cells along the longest axis or
+ * --voxel-size; the obstacle mesh's cells marked solid. */
+static int grid_from_bounds(const dist_args *A, const source_list *src, const hv_mesh *om,
+                            hv_grid **g)
+{
+    const int dim = A->dim;
+    double lo[3], hi[3];
+    if (A->use_bbox) {
+        for (int a = 0; a < 3; a++) {
+            lo[a] = A->bbox[a];
+            hi[a] = A->bbox[3 + a];
+        }
+    } else if (src->nvox) {
+        return cli_usage_error(
+            CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
+    } else if (!source_bounds(src, om, lo, hi)) {
+        return cli_usage_error(CMD, "cannot size the grid: give --bbox");
+    }
+    double ext = 0;
+    for (int a = 0; a < dim; a++) {
+        if (!(hi[a] >= lo[a]))
+            return cli_usage_error(CMD, "--bbox is empty along %c", "xyz"[a]);
+        ext = fmax(ext, hi[a] - lo[a]);
+    }
+    int padc = A->use_bbox ? 0 : A->pad;
+    if (!(ext > 0) && !(A->vsize > 0))
+        return cli_usage_error(CMD, "the sources span no volume: give --bbox or --voxel-size");
+    double h = A->vsize > 0 ? A->vsize : ext / ((A->res ? A->res : 128) - 2 * padc);
+    if (!(h > 0))
+        return cli_usage_error(CMD, "--res is too small for --pad %d", padc);
+    int n[3] = {1, 1, 1};
+    double org[3] = {0, 0, 0};
+    for (int a = 0; a < dim; a++) {
+        n[a] = (int)ceil((hi[a] - lo[a]) / h - 1e-9) + 2 * padc;
+        if (n[a] < 1)
+            n[a] = 1;
+        org[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * h;
+    }
+    if (dim == 2)
+        org[2] = -0.5 * h;
+    hv_status st = hv_grid_create(g, dim, n, h, org);
+    if (!st && om)
+        st = hv_mask_from_mesh(*g, om, NULL);
+    if (st)
+        return cli_fail(CMD, om ? A->obst_mesh : "creating the grid", st);
+    return 0;
+}
+
+/* The .npy and the .vdb (the distance, the obstacles, how they were made),
+ * staged in co; a VDB mask's transform and index space kept (index0). */
+static int write_files(const dist_args *A, const hv_grid *g, const hv_distance_stats *sd,
+                       const double *index0, cli_outputs *co)
+{
+    const char *npy = A->npy, *out = A->out;
+    const char *t_npy = npy ? cli_stage(CMD, co, npy) : NULL;
+    const char *t_out = out && (!npy || t_npy) ? cli_stage(CMD, co, out) : NULL;
+    if ((npy && !t_npy) || (out && !t_out))
+        return HV_EXIT_FAIL;
+    hv_status st;
+    if (npy && (st = hv_write_npy(t_npy, g)))
+        return cli_fail(CMD, npy, st);
+    if (!out)
+        return 0;
+    hv_vdb_writer *w = NULL;
+    char buf[256];
+    st = hv_vdb_writer_create(&w);
+    if (!st && index0)
+        st = hv_vdb_writer_set_index_origin(w, index0);
+    if (!st)
+        st = hv_vdb_writer_add_float(w, g, "distance");
+    if (!st && g->solid)
+        st = hv_vdb_writer_add_mask(w, g, "obstacles");
+    snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s", A->o.t_scale,
+             sd->stages, A->sources);
+    if (!st)
+        st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_method", buf);
+    snprintf(buf, sizeof buf, "%zu", sd->unreachable_cells);
+    if (!st)
+        st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_unreachable_cells", buf);
+    if (!st)
+        st = hv_vdb_writer_write(w, t_out);
+    hv_vdb_writer_destroy(&w);
+    return st ? cli_fail(CMD, out, st) : 0;
+}
+
+static void report(const hv_grid *g, const hv_distance_stats *sd, double t_start)
+{
+    printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
+           "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
+           "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
+           "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f",
+           g->n[0], g->n[1], g->n[2], g->h, sd->stages, sd->source_cells, sd->regions,
+           sd->unreachable_cells, sd->dead_faces, hv_backend_name(sd->backend),
+           sd->diffuse_iterations, sd->t_diffuse, sd->poisson_iterations, sd->t_poisson,
+           hv_now() - t_start);
+    cli_json_device(sd->backend);
+    printf("}\n");
+}
+
+/* A rank other than 0 under mpirun with --backend petsc: its box of rank 0's
+ * grid, and its part of the HDF5 file. */
+static int other_rank(const dist_args *A)
+{
+    hv_distance_stats sd;
+    hv_status st;
+    if ((st = hv_petsc_distance_block(NULL, NULL, NULL, &sd)))
+        return cli_fail(CMD, A->sources, st);
+    if (A->h5 && (st = hv_petsc_write_h5(A->h5, 1, NULL, (const char *const[]){"distance"})))
+        return cli_fail(CMD, A->h5, st);
+    return 0;
+}
+
+/* The sources, the obstacle mesh and the grid (from the VDB mask, or from
+ * bounds); with a mask, *have_index0 = 1 and index0 its index origin. */
+static int read_inputs(const dist_args *A, source_list *src, hv_mesh **om, hv_grid **g,
+                       double index0[3], int *have_index0)
+{
+    int rc = read_sources(A->sources, A->dim, src);
+    if (rc)
+        return rc;
+    if (A->obst_mesh) {
+        hv_status st = hv_mesh_read(A->obst_mesh, om);
+        if (st)
+            return cli_fail(CMD, A->obst_mesh, st);
+    }
+    if (!A->mask)
+        return grid_from_bounds(A, src, *om, g);
+    if ((rc = grid_from_mask(A->mask, A->mask_grid, src, A->use_bbox == 6, A->bbox, A->pad, g,
+                             index0)))
+        return rc;
+    *have_index0 = 1;
+    return 0;
+}
+
+/* Reads, computes and writes. --backend petsc under mpirun: rank 0 reads the
+ * inputs and builds the grid, every rank computes its box
+ * (hv_petsc_distance_block), and rank 0 writes; the ranks write HDF5
+ * together. */
+static int run(const dist_args *A)
+{
+    const int spread = A->o.backend == HV_BACKEND_PETSC && hv_petsc_available();
+    if (spread && hv_mpi_rank() > 0)
+        return other_rank(A);
+    double t_start = hv_now(), index0[3] = {0, 0, 0};
+    int have_index0 = 0;
     source_list src = {0};
     cli_outputs co = {0};
     hv_mesh *om = NULL;
     hv_grid *g = NULL;
-    hv_distance_stats st_d;
+    hv_distance_stats sd;
     hv_status st;
-    int rc = 0;
-    /* --backend petsc under mpirun: rank 0 reads the inputs and builds the
-     * grid, every rank computes its box (hv_petsc_distance_block), and rank 0
-     * writes; the ranks write HDF5 together. */
-    const int spread = o.backend == HV_BACKEND_PETSC && hv_petsc_available();
     int released = !spread;
-    if (spread && hv_mpi_rank() > 0) {
-        released = 1;
-        if ((st = hv_petsc_distance_block(NULL, NULL, NULL, &st_d)))
-            rc = cli_fail(CMD, sources, st);
-        else if (h5 && (st = hv_petsc_write_h5(h5, 1, NULL, (const char *const[]){"distance"})))
-            rc = cli_fail(CMD, h5, st);
-        goto done;
-    }
-    rc = read_sources(sources, dim, &src);
+    int rc = read_inputs(A, &src, &om, &g, index0, &have_index0);
     if (rc)
         goto done;
-    if (obst_mesh) {
-        hv_status st = hv_mesh_read(obst_mesh, &om);
-        if (st) {
-            rc = cli_fail(CMD, obst_mesh, st);
-            goto done;
-        }
-    }
-    if (mask) {
-        if ((rc = grid_from_mask(mask, mask_grid, &src, use_bbox == 6, bbox, pad, &g, index0)))
-            goto done;
-        have_index0 = 1;
-    } else {
-        double lo[3], hi[3];
-        if (use_bbox) {
-            for (int a = 0; a < 3; a++) {
-                lo[a] = bbox[a];
-                hi[a] = bbox[3 + a];
-            }
-        } else if (src.nvox) {
-            rc = cli_usage_error(
-                CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
-            goto done;
-        } else if (!source_bounds(&src, om, lo, hi)) {
-            rc = cli_usage_error(CMD, "cannot size the grid: give --bbox");
-            goto done;
-        }
-        double ext = 0;
-        for (int a = 0; a < dim; a++) {
-            if (!(hi[a] >= lo[a])) {
-                rc = cli_usage_error(CMD, "--bbox is empty along %c", "xyz"[a]);
-                goto done;
-            }
-            ext = fmax(ext, hi[a] - lo[a]);
-        }
-        int padc = use_bbox ? 0 : pad;
-        if (!(ext > 0) && !(vsize > 0)) {
-            rc = cli_usage_error(CMD, "the sources span no volume: give --bbox or --voxel-size");
-            goto done;
-        }
-        double h = vsize > 0 ? vsize : ext / ((res ? res : 128) - 2 * padc);
-        if (!(h > 0)) {
-            rc = cli_usage_error(CMD, "--res is too small for --pad %d", padc);
-            goto done;
-        }
-        int n[3] = {1, 1, 1};
-        double org[3] = {0, 0, 0};
-        for (int a = 0; a < dim; a++) {
-            n[a] = (int)ceil((hi[a] - lo[a]) / h - 1e-9) + 2 * padc;
-            if (n[a] < 1)
-                n[a] = 1;
-            org[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * n[a] * h;
-        }
-        if (dim == 2)
-            org[2] = -0.5 * h;
-        hv_status st = hv_grid_create(&g, dim, n, h, org);
-        if (!st && om)
-            st = hv_mask_from_mesh(g, om, NULL);
-        if (st) {
-            rc = cli_fail(CMD, om ? obst_mesh : "creating the grid", st);
-            goto done;
-        }
-    }
     cli_info("heatvox distance: grid %d x %d x %d, h = %g\n", g->n[0], g->n[1], g->n[2], g->h);
-
     hv_distance_sources ds = {src.vox, src.nvox, src.pts, src.npts, src.mesh};
     released = 1;
-    st = spread ? hv_petsc_distance_block(g, &ds, &o, &st_d)
-                : hv_distance_compute(g, &ds, &o, &st_d);
+    st = spread ? hv_petsc_distance_block(g, &ds, &A->o, &sd)
+                : hv_distance_compute(g, &ds, &A->o, &sd);
     if (st) {
-        rc = cli_fail(CMD, sources, st);
+        rc = cli_fail(CMD, A->sources, st);
         goto done;
     }
-    if (st_d.sources_in_solid)
+    if (sd.sources_in_solid)
         fprintf(stderr,
                 "heatvox distance: warning: %zu sources lie in obstacles and were skipped\n",
-                st_d.sources_in_solid);
-    if (st_d.unreachable_cells && cli_verbose >= 0)
+                sd.sources_in_solid);
+    if (sd.unreachable_cells && cli_verbose >= 0)
         fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
-                st_d.unreachable_cells, (double)o.unreachable);
+                sd.unreachable_cells, (double)A->o.unreachable);
     /* Under mpirun the ranks write HDF5 together (rank 0's result), and rank
      * 0 the other files. */
-    if (h5) {
-        const hv_grid *fields[1] = {g};
-        const char *names[1] = {"distance"};
-        if ((st = hv_petsc_write_h5(h5, 1, fields, names))) {
-            rc = cli_fail(CMD, h5, st);
-            goto done;
-        }
+    if (A->h5 && (st = hv_petsc_write_h5(A->h5, 1, (const hv_grid *const[]){g},
+                                         (const char *const[]){"distance"}))) {
+        rc = cli_fail(CMD, A->h5, st);
+        goto done;
     }
     if (hv_mpi_rank() > 0)
-        npy = out = NULL;
-    const char *t_npy = npy ? cli_stage(CMD, &co, npy) : NULL;
-    const char *t_out = out && (!npy || t_npy) ? cli_stage(CMD, &co, out) : NULL;
-    if ((npy && !t_npy) || (out && !t_out)) {
-        rc = HV_EXIT_FAIL;
         goto done;
-    }
-    if (npy && (st = hv_write_npy(t_npy, g))) {
-        rc = cli_fail(CMD, npy, st);
+    if ((rc = write_files(A, g, &sd, have_index0 ? index0 : NULL, &co)) ||
+        (rc = cli_commit(CMD, &co)))
         goto done;
-    }
-    if (out) {
-        hv_vdb_writer *w = NULL;
-        char buf[256];
-        st = hv_vdb_writer_create(&w);
-        /* With a VDB mask, the output keeps the mask's transform and index space. */
-        if (!st && have_index0)
-            st = hv_vdb_writer_set_index_origin(w, index0);
-        if (!st)
-            st = hv_vdb_writer_add_float(w, g, "distance");
-        if (!st && g->solid)
-            st = hv_vdb_writer_add_mask(w, g, "obstacles");
-        snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s", o.t_scale,
-                 st_d.stages, sources);
-        if (!st)
-            st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_method", buf);
-        snprintf(buf, sizeof buf, "%zu", st_d.unreachable_cells);
-        if (!st)
-            st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_unreachable_cells", buf);
-        if (!st)
-            st = hv_vdb_writer_write(w, t_out);
-        hv_vdb_writer_destroy(&w);
-        if (st) {
-            rc = cli_fail(CMD, out, st);
-            goto done;
-        }
-    }
-    if ((rc = cli_commit(CMD, &co)) != 0)
-        goto done;
-    if (cli_verbose >= 0) {
-        printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
-               "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
-               "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
-               "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f",
-               g->n[0], g->n[1], g->n[2], g->h, st_d.stages, st_d.source_cells, st_d.regions,
-               st_d.unreachable_cells, st_d.dead_faces, hv_backend_name(st_d.backend),
-               st_d.diffuse_iterations, st_d.t_diffuse, st_d.poisson_iterations, st_d.t_poisson,
-               hv_now() - t_start);
-        cli_json_device(st_d.backend);
-        printf("}\n");
-    }
+    if (cli_verbose >= 0)
+        report(g, &sd, t_start);
 done:
     if (!released) /* the other ranks wait in hv_petsc_distance_block: release them */
         hv_petsc_distance_block(NULL, NULL, NULL, NULL);
@@ -660,4 +683,17 @@ done:
     hv_mesh_destroy(&om);
     hv_grid_destroy(&g);
     return rc;
+}
+
+int cmd_distance(int argc, char **argv)
+{
+    dist_args A = {.dim = 3, .pad = 4};
+    hv_distance_opts_default(&A.o);
+    int rc = parse_args(argc, argv, &A);
+    if (rc < 0)
+        rc = check_args(&A);
+    if (rc >= 0)
+        return rc;
+    hv_set_threads(A.threads);
+    return run(&A);
 }
