@@ -125,409 +125,526 @@ static void release_freed(void)
 #endif
 }
 
-/* The level set and the fields as tiles of the block [lo, hi], extended on
- * them and written from them (hv_extend_tiles): no dense block. */
-static int extend_tiles(const char *in, const char *out, const hv_vdb_grid_info *info, size_t count,
-                        const char *ls, const char *const *fields, int nfields, const int lo[3],
-                        const int hi[3], const hv_extend_opts *o, double t_start)
+/* What one run of the command extends: the parsed command line and the
+ * input's grids. */
+typedef struct extend_job {
+    const char *in, *out, *ls, *fields[MAX_FIELDS];
+    const char *h5; /* out when it names an HDF5 file, else NULL */
+    int nfields, threads, dense;
+    hv_extend_opts o;
+    const hv_vdb_grid_info *info;
+    size_t count;
+    double t_start;
+} extend_job;
+
+static void warn_staggered(const extend_job *j, int q)
 {
-    hv_tiles *P = NULL, *fin[MAX_FIELDS][3];
-    hv_extend_tiles_field tf[MAX_FIELDS];
-    memset(fin, 0, sizeof fin);
-    memset(tf, 0, sizeof tf);
-    hv_extender *e = NULL;
-    hv_vdb_writer *w = NULL;
-    int rc = 0, cls;
-    hv_status st;
-    double t0 = hv_now();
-    if ((st = hv_vdb_read_float_tiles(in, ls, lo, hi, &P, &cls))) {
-        rc = cli_fail(CMD, in, st);
-        goto done;
-    }
-    for (int q = 0; q < nfields; q++) {
-        int ncomp = 0;
-        if ((st = hv_vdb_read_tiles_like(in, fields[q], P, fin[q], &ncomp))) {
-            rc = cli_fail(CMD, in, st);
-            goto done;
-        }
-        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
-        if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
-            fprintf(stderr,
-                    "heatvox extend: warning: '%s' is staggered; its components are "
-                    "extended as if they sat at voxel centres\n",
-                    fields[q]);
-        tf[q].ncomp = ncomp;
-        for (int c = 0; c < ncomp; c++)
-            tf[q].v[c] = fin[q][c];
-    }
-    const double t_read = hv_now() - t0;
-    release_freed();
-    cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields, narrow band in %zu tiles of "
-             "8^3 (%zu active voxels); read %.2f s, peak %.0f MB\n",
-             P->n[0], P->n[1], P->n[2], P->h, nfields, P->count, P->active, t_read,
-             hv_peak_rss() / 1e6);
-    t0 = hv_now();
-    if ((st = hv_extender_create(&e, 3, P->n, P->h, NULL, o))) {
-        rc = cli_fail(CMD, in, st);
-        goto done;
-    }
-    const double t_setup = hv_now() - t0;
-    hv_extend_stats es;
-    if ((st = hv_extend_tiles(e, P, nfields, tf, &es))) {
-        rc = cli_fail(CMD, in, st);
-        goto done;
-    }
-    cli_info("heatvox extend: %d levels; %zu source cells, %zu output cells (%zu at closest "
-             "points), %zu cells in the first level's solve; work %.0f MB; set-up %.3f s, "
-             "extension %.2f s (solves %.2f, evaluation %.2f), peak %.0f MB\n",
-             es.levels, es.source_cells, es.cp_cells + es.ratio_cells, es.cp_cells, es.solve_cells,
-             es.work_bytes / 1e6, t_setup, es.t_total, es.t_solve, es.t_eval, hv_peak_rss() / 1e6);
-    if (es.weak_cells && cli_verbose >= 0)
+    const hv_vdb_grid_info *gi = find_grid(j->info, j->count, j->fields[q]);
+    if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
+        fprintf(stderr,
+                "heatvox extend: warning: '%s' is staggered; its components are "
+                "extended as if they sat at voxel centres\n",
+                j->fields[q]);
+}
+
+static void warn_weak(const hv_extend_stats *es)
+{
+    if (es->weak_cells && cli_verbose >= 0)
         fprintf(stderr,
                 "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
                 "their values are unreliable\n",
-                es.weak_cells);
-    release_freed();
-    /* Output: the fields, sparse, with names and classes, and the level set
-     * (band = its background, the largest |phi| of the tiles); each set of
-     * tiles is freed once the writer holds its copy. */
+                es->weak_cells);
+}
+
+/* The output level set's band in voxels: its background, the largest |phi|
+ * of the values. */
+static double levelset_band(const float *v, size_t count, double h)
+{
     double bg = 0;
-    for (size_t c = 0; c < P->count * (size_t)(HV_TILE * HV_TILE * HV_TILE); c++)
-        bg = fmax(bg, fabs(P->v[c]));
-    double band = bg / P->h;
-    if (!(band >= 1))
-        band = 1;
-    t0 = hv_now();
-    const hv_vdb_grid_info *lsi = find_grid(info, count, ls);
-    st = hv_vdb_writer_create(&w);
+    for (size_t c = 0; c < count; c++)
+        bg = fmax(bg, fabs(v[c]));
+    double band = bg / h;
+    return band >= 1 ? band : 1;
+}
+
+/* ---- a narrow band in tiles ---- */
+
+/* The level set and the fields as tiles of the block [lo, hi], extended on
+ * them and written from them (hv_extend_tiles): no dense block. */
+typedef struct tiles_run {
+    hv_tiles *P, *fin[MAX_FIELDS][3];
+    hv_extend_tiles_field tf[MAX_FIELDS];
+    hv_extend_stats es;
+    double t_setup;
+} tiles_run;
+
+static int read_tiles(const extend_job *j, const int lo[3], const int hi[3], tiles_run *r)
+{
+    int cls;
+    hv_status st;
+    double t0 = hv_now();
+    if ((st = hv_vdb_read_float_tiles(j->in, j->ls, lo, hi, &r->P, &cls)))
+        return cli_fail(CMD, j->in, st);
+    for (int q = 0; q < j->nfields; q++) {
+        int ncomp = 0;
+        if ((st = hv_vdb_read_tiles_like(j->in, j->fields[q], r->P, r->fin[q], &ncomp)))
+            return cli_fail(CMD, j->in, st);
+        warn_staggered(j, q);
+        r->tf[q].ncomp = ncomp;
+        for (int c = 0; c < ncomp; c++)
+            r->tf[q].v[c] = r->fin[q][c];
+    }
+    const double t_read = hv_now() - t0;
+    release_freed();
+    const hv_tiles *P = r->P;
+    cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields, narrow band in %zu tiles of "
+             "8^3 (%zu active voxels); read %.2f s, peak %.0f MB\n",
+             P->n[0], P->n[1], P->n[2], P->h, j->nfields, P->count, P->active, t_read,
+             hv_peak_rss() / 1e6);
+    return 0;
+}
+
+static int extend_on_tiles(const extend_job *j, tiles_run *r)
+{
+    hv_extender *e = NULL;
+    hv_status st;
+    double t0 = hv_now();
+    if ((st = hv_extender_create(&e, 3, r->P->n, r->P->h, NULL, &j->o)))
+        return cli_fail(CMD, j->in, st);
+    r->t_setup = hv_now() - t0;
+    st = hv_extend_tiles(e, r->P, j->nfields, r->tf, &r->es);
+    hv_extender_destroy(&e);
+    if (st)
+        return cli_fail(CMD, j->in, st);
+    const hv_extend_stats *es = &r->es;
+    cli_info("heatvox extend: %d levels; %zu source cells, %zu output cells (%zu at closest "
+             "points), %zu cells in the first level's solve; work %.0f MB; set-up %.3f s, "
+             "extension %.2f s (solves %.2f, evaluation %.2f), peak %.0f MB\n",
+             es->levels, es->source_cells, es->cp_cells + es->ratio_cells, es->cp_cells,
+             es->solve_cells, es->work_bytes / 1e6, r->t_setup, es->t_total, es->t_solve,
+             es->t_eval, hv_peak_rss() / 1e6);
+    warn_weak(es);
+    release_freed();
+    return 0;
+}
+
+/* The fields, sparse, with names and classes, and the level set (band = its
+ * background); each set of tiles is freed once the writer holds its copy. */
+static hv_status write_tiles(const extend_job *j, tiles_run *r)
+{
+    hv_tiles *P = r->P;
+    const double band = levelset_band(P->v, P->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), P->h);
+    const hv_vdb_grid_info *lsi = find_grid(j->info, j->count, j->ls);
+    hv_vdb_writer *w = NULL;
+    hv_status st = hv_vdb_writer_create(&w);
     if (!st)
         st = hv_vdb_writer_set_index_origin(w, lsi->index0_world);
-    for (int q = 0; q < nfields && !st; q++) {
-        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
-        hv_tiles *const *t = fin[q];
-        st = tf[q].ncomp == 3 ? hv_vdb_writer_add_vec3_tiles(w, t[0], t[1], t[2], fields[q])
-                              : hv_vdb_writer_add_float_tiles(w, t[0], fields[q]);
+    for (int q = 0; q < j->nfields && !st; q++) {
+        const hv_vdb_grid_info *gi = find_grid(j->info, j->count, j->fields[q]);
+        hv_tiles *const *t = r->fin[q];
+        st = r->tf[q].ncomp == 3 ? hv_vdb_writer_add_vec3_tiles(w, t[0], t[1], t[2], j->fields[q])
+                                 : hv_vdb_writer_add_float_tiles(w, t[0], j->fields[q]);
         if (!st && gi->grid_class != HV_VDB_UNKNOWN)
-            st = hv_vdb_writer_set_grid_meta(w, fields[q], "class", class_name(gi->grid_class));
+            st = hv_vdb_writer_set_grid_meta(w, j->fields[q], "class", class_name(gi->grid_class));
         for (int c = 0; c < 3; c++)
-            hv_tiles_destroy(&fin[q][c]);
+            hv_tiles_destroy(&r->fin[q][c]);
     }
-    const int n[3] = {P->n[0], P->n[1], P->n[2]};
-    const double h = P->h;
-    const size_t ntiles = P->count, nactive = P->active;
     if (!st)
-        st = hv_vdb_writer_add_levelset_tiles(w, P, ls, band);
-    hv_tiles_destroy(&P);
+        st = hv_vdb_writer_add_levelset_tiles(w, P, j->ls, band);
+    hv_tiles_destroy(&r->P);
     char buf[512];
     snprintf(buf, sizeof buf, "heatvox extend: levelset %s, band %g, t_scale %g, narrow band%s, %s",
-             ls, o->band, o->t_scale, o->out_band > 0 ? " (out-band)" : "",
-             o->closest_point ? "closest point" : "plain");
+             j->ls, j->o.band, j->o.t_scale, j->o.out_band > 0 ? " (out-band)" : "",
+             j->o.closest_point ? "closest point" : "plain");
     if (!st)
         st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
     if (!st)
-        st = hv_vdb_writer_write(w, out);
+        st = hv_vdb_writer_write(w, j->out);
+    hv_vdb_writer_destroy(&w);
+    return st;
+}
+
+static int extend_tiles(const extend_job *j, const int lo[3], const int hi[3])
+{
+    tiles_run r;
+    memset(&r, 0, sizeof r);
+    int rc = read_tiles(j, lo, hi, &r);
+    if (!rc)
+        rc = extend_on_tiles(j, &r);
+    if (rc)
+        goto done;
+    const int n[3] = {r.P->n[0], r.P->n[1], r.P->n[2]};
+    const double h = r.P->h;
+    const size_t ntiles = r.P->count, nactive = r.P->active;
+    double t0 = hv_now();
+    hv_status st = write_tiles(j, &r);
     if (st) {
-        rc = cli_fail(CMD, out, st);
+        rc = cli_fail(CMD, j->out, st);
         goto done;
     }
-    cli_info("heatvox extend: wrote %s in %.2f s, peak %.0f MB\n", out, hv_now() - t0,
+    cli_info("heatvox extend: wrote %s in %.2f s, peak %.0f MB\n", j->out, hv_now() - t0,
              hv_peak_rss() / 1e6);
+    const hv_extend_stats *es = &r.es;
     if (cli_verbose >= 0)
         printf("{\"command\":\"extend\",\"path\":\"tiles\",\"grid\":[%d,%d,%d],\"h\":%g,"
                "\"fields\":%d,\"tiles\":%zu,\"active_voxels\":%zu,\"solves\":%d,\"levels\":%d,"
                "\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,\"weak_cells\":%zu,"
                "\"solve_cells\":%zu,\"work_mb\":%.1f,\"setup_seconds\":%.4f,"
                "\"extend_seconds\":%.3f,\"seconds\":%.3f,\"peak_rss_mb\":%.1f}\n",
-               n[0], n[1], n[2], h, nfields, ntiles, nactive, es.solves, es.levels, es.source_cells,
-               es.cp_cells, es.ratio_cells, es.weak_cells, es.solve_cells, es.work_bytes / 1e6,
-               t_setup, es.t_total, hv_now() - t_start, hv_peak_rss() / 1e6);
+               n[0], n[1], n[2], h, j->nfields, ntiles, nactive, es->solves, es->levels,
+               es->source_cells, es->cp_cells, es->ratio_cells, es->weak_cells, es->solve_cells,
+               es->work_bytes / 1e6, r.t_setup, es->t_total, hv_now() - j->t_start,
+               hv_peak_rss() / 1e6);
 done:
-    hv_vdb_writer_destroy(&w);
-    hv_extender_destroy(&e);
-    hv_tiles_destroy(&P);
+    hv_tiles_destroy(&r.P);
     for (int q = 0; q < MAX_FIELDS; q++)
         for (int c = 0; c < 3; c++)
-            hv_tiles_destroy(&fin[q][c]);
+            hv_tiles_destroy(&r.fin[q][c]);
     return rc;
 }
 
+/* ---- a dense block ---- */
+
+typedef struct dense_run {
+    hv_grid *phi, *fin[MAX_FIELDS][3], *fout[MAX_FIELDS][3];
+    hv_extend_field ef[MAX_FIELDS];
+    hv_extend_stats es;
+} dense_run;
+
+static void dense_free(dense_run *r)
+{
+    hv_grid_destroy(&r->phi);
+    for (int q = 0; q < MAX_FIELDS; q++)
+        for (int c = 0; c < 3; c++) {
+            hv_grid_destroy(&r->fin[q][c]);
+            hv_grid_destroy(&r->fout[q][c]);
+        }
+}
+
+/* Each field's components, without arrays (the ranks other than 0 under
+ * --backend petsc, and a rank 0 that failed to read). */
+static void fields_without_arrays(const extend_job *j, hv_extend_field *ef)
+{
+    for (int q = 0; q < j->nfields; q++) {
+        memset(&ef[q], 0, sizeof ef[q]);
+        ef[q].ncomp = is_vector(find_grid(j->info, j->count, j->fields[q])->value_type) ? 3 : 1;
+    }
+}
+
+/* The level set, the fields and their outputs on the block ro. */
+static int read_dense(const extend_job *j, const hv_vdb_read_opts *ro, dense_run *r)
+{
+    int cls;
+    hv_status st;
+    if ((st = hv_vdb_read_float(j->in, j->ls, ro, &r->phi, &cls)))
+        return cli_fail(CMD, j->in, st);
+    const hv_grid *phi = r->phi;
+    for (int q = 0; q < j->nfields; q++) {
+        const hv_vdb_grid_info *gi = find_grid(j->info, j->count, j->fields[q]);
+        int vec = is_vector(gi->value_type);
+        hv_grid **in = r->fin[q];
+        st = vec ? hv_vdb_read_vec3(j->in, j->fields[q], ro, &in[0], &in[1], &in[2])
+                 : hv_vdb_read_float(j->in, j->fields[q], ro, &in[0], NULL);
+        if (st)
+            return cli_fail(CMD, j->in, st);
+        warn_staggered(j, q);
+        hv_extend_field *ef = &r->ef[q];
+        memset(ef, 0, sizeof *ef);
+        ef->ncomp = vec ? 3 : 1;
+        for (int c = 0; c < ef->ncomp; c++) {
+            if ((st = hv_grid_create(&r->fout[q][c], 3, phi->n, phi->h, phi->origin)))
+                return cli_fail(CMD, "allocating outputs", st);
+            ef->in[c] = in[c]->v;
+            ef->out[c] = r->fout[q][c]->v;
+        }
+    }
+    cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields\n", phi->n[0], phi->n[1],
+             phi->n[2], phi->h, j->nfields);
+    return 0;
+}
+
+/* The extension on the block: by this process, or with --backend petsc on
+ * every rank's box (hv_petsc_extend_block). */
+static int extend_dense_block(const extend_job *j, int spread, dense_run *r)
+{
+    const hv_grid *phi = r->phi;
+    hv_status st;
+    if (spread) {
+        st = hv_petsc_extend_block(3, phi->n, phi->h, &j->o, phi->v, j->nfields, r->ef, &r->es);
+    } else {
+        hv_extender *e = NULL;
+        st = hv_extender_create(&e, 3, phi->n, phi->h, NULL, &j->o);
+        if (!st)
+            st = hv_extend_many(e, phi->v, j->nfields, r->ef, &r->es);
+        hv_extender_destroy(&e);
+    }
+    if (st)
+        return cli_fail(CMD, j->in, st);
+    if (!spread)
+        warn_weak(&r->es);
+    return 0;
+}
+
+/* The HDF5 datasets of the block, written by the ranks together (petsc.h);
+ * a rank 0 that failed passes no grids (r NULL), which fails every rank. */
+static hv_status write_dense_h5(const extend_job *j, const dense_run *r, const hv_extend_field *ef)
+{
+    const hv_grid *hg[1 + 3 * MAX_FIELDS];
+    h5_names hn;
+    const int nh = h5_fields(&hn, j->ls, j->fields, j->nfields, ef);
+    if (r) {
+        hg[0] = r->phi;
+        for (int q = 0, k = 1; q < j->nfields; q++)
+            for (int c = 0; c < ef[q].ncomp; c++)
+                hg[k++] = r->fout[q][c];
+    }
+    return hv_petsc_write_h5(j->out, nh, r ? hg : NULL, hn.p);
+}
+
+/* The level set (band = its background, the largest |phi| on the block) and
+ * the fields, with names and classes, in the input's transform and index
+ * coordinates. */
+static hv_status fill_dense_writer(const extend_job *j, const dense_run *r, hv_vdb_writer *w)
+{
+    const hv_grid *phi = r->phi;
+    const double band = levelset_band(phi->v, hv_grid_count(phi), phi->h);
+    const hv_vdb_grid_info *lsi = find_grid(j->info, j->count, j->ls);
+    hv_status st = hv_vdb_writer_set_index_origin(w, lsi->index0_world);
+    if (!st)
+        st = hv_vdb_writer_add_levelset(w, phi, j->ls, band, 0);
+    for (int q = 0; q < j->nfields && !st; q++) {
+        const hv_vdb_grid_info *gi = find_grid(j->info, j->count, j->fields[q]);
+        hv_grid *const *f = r->fout[q];
+        st = r->ef[q].ncomp == 3 ? hv_vdb_writer_add_vec3(w, f[0], f[1], f[2], j->fields[q])
+                                 : hv_vdb_writer_add_float(w, f[0], j->fields[q]);
+        /* OpenVDB keeps a grid's class in its "class" metadata string. */
+        if (!st && gi->grid_class != HV_VDB_UNKNOWN && gi->grid_class != HV_VDB_LEVEL_SET)
+            st = hv_vdb_writer_set_grid_meta(w, j->fields[q], "class", class_name(gi->grid_class));
+        if (!st && gi->grid_class == HV_VDB_LEVEL_SET)
+            st = hv_vdb_writer_set_grid_meta(w, j->fields[q], "class", "level set");
+    }
+    char buf[512];
+    snprintf(buf, sizeof buf, "heatvox extend: levelset %s, band %g, t_scale %g, %s, %s", j->ls,
+             j->o.band, j->o.t_scale, j->o.out_band > 0 ? "out-band" : "dense",
+             j->o.closest_point ? "closest point" : "plain");
+    if (!st)
+        st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
+    return st;
+}
+
+/* OUT.h5 by every rank, or OUT.vdb by rank 0 under mpirun. */
+static int write_dense(const extend_job *j, const dense_run *r)
+{
+    hv_vdb_writer *w = NULL;
+    hv_status st = hv_vdb_writer_create(&w);
+    if (!st)
+        st = fill_dense_writer(j, r, w);
+    if (j->h5) {
+        const hv_status hs = write_dense_h5(j, st ? NULL : r, r->ef);
+        if (!st)
+            st = hs;
+    } else if (!st && hv_mpi_rank() == 0) {
+        st = hv_vdb_writer_write(w, j->out);
+    }
+    hv_vdb_writer_destroy(&w);
+    return st ? cli_fail(CMD, j->out, st) : 0;
+}
+
+static void report_dense(const extend_job *j, const dense_run *r, int spread)
+{
+    const hv_grid *phi = r->phi;
+    const hv_extend_stats *es = &r->es;
+    if (spread) /* the cell counts would be rank 0's box's */
+        printf("{\"command\":\"extend\",\"path\":\"dense-distributed\",\"ranks\":%d,"
+               "\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":%d,\"solves\":%d,\"levels\":%d,"
+               "\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
+               hv_mpi_size(), phi->n[0], phi->n[1], phi->n[2], phi->h, j->nfields, es->solves,
+               es->levels, es->t_total, hv_now() - j->t_start);
+    else
+        printf("{\"command\":\"extend\",\"path\":\"dense\",\"grid\":[%d,%d,%d],\"h\":%g,"
+               "\"fields\":%d,\"solves\":%d,"
+               "\"levels\":%d,\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
+               "\"weak_cells\":%zu,\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
+               phi->n[0], phi->n[1], phi->n[2], phi->h, j->nfields, es->solves, es->levels,
+               es->source_cells, es->cp_cells, es->ratio_cells, es->weak_cells, es->t_total,
+               hv_now() - j->t_start);
+}
+
+/* A rank other than 0 under mpirun with --backend petsc: its box of rank 0's
+ * block (which is the block), and its part of the HDF5 file. */
+static int other_rank(const extend_job *j)
+{
+    hv_extend_field ef[MAX_FIELDS];
+    hv_extend_stats es;
+    const int n1[3] = {1, 1, 1};
+    fields_without_arrays(j, ef);
+    hv_status st = hv_petsc_extend_block(3, n1, 1, &j->o, NULL, j->nfields, ef, &es);
+    if (st)
+        return cli_fail(CMD, j->in, st);
+    if (j->h5 && (st = write_dense_h5(j, NULL, ef)))
+        return cli_fail(CMD, j->out, st);
+    return 0;
+}
+
+/* The dense block ro: read, extended, written. --backend petsc: the block
+ * is read by rank 0, extended on the ranks' boxes and written by rank 0. */
+static int extend_dense(const extend_job *j, const hv_vdb_read_opts *ro)
+{
+    const int spread = j->o.backend == HV_BACKEND_PETSC;
+    if (spread && hv_mpi_rank() != 0)
+        return other_rank(j);
+    dense_run r;
+    memset(&r, 0, sizeof r);
+    int rc = read_dense(j, ro, &r);
+    if (rc && spread) { /* the other ranks wait in hv_petsc_extend_block: release them */
+        hv_extend_field none[MAX_FIELDS];
+        const int n1[3] = {1, 1, 1};
+        fields_without_arrays(j, none);
+        hv_petsc_extend_block(3, n1, 1, &j->o, NULL, j->nfields, none, &r.es);
+    }
+    if (!rc)
+        rc = extend_dense_block(j, spread, &r);
+    if (!rc)
+        rc = write_dense(j, &r);
+    if (!rc && cli_verbose >= 0)
+        report_dense(j, &r, spread);
+    dense_free(&r);
+    return rc;
+}
+
+/* ---- the command ---- */
+
 static void help(void) { usage(stdout); }
 
-int cmd_extend(int argc, char **argv)
+/* Reads the command line into j: -1 to go on, else the exit code. */
+static int parse_args(int argc, char **argv, extend_job *j)
 {
-    const char *in = NULL, *out = NULL, *ls = NULL, *fields[MAX_FIELDS];
-    int nfields = 0, threads = 0, dense_flag = 0;
-    hv_extend_opts o;
-    hv_extend_opts_default(&o);
+    hv_extend_opts *o = &j->o;
     const cli_opt opts[] = {
         {.names = "-q|-v", .kind = CLI_IGNORE},
-        {.names = "--dense", .kind = CLI_FLAG, .dst = &dense_flag, .val = 1},
-        {.names = "--plain", .kind = CLI_FLAG, .dst = &o.closest_point, .val = 0},
-        {.names = "--levelset", .kind = CLI_STR, .dst = &ls},
-        {.names = "--field", .kind = CLI_LIST, .dst = fields, .val = MAX_FIELDS, .given = &nfields},
-        {.names = "-o|--output", .kind = CLI_STR, .dst = &out},
+        {.names = "--dense", .kind = CLI_FLAG, .dst = &j->dense, .val = 1},
+        {.names = "--plain", .kind = CLI_FLAG, .dst = &o->closest_point, .val = 0},
+        {.names = "--levelset", .kind = CLI_STR, .dst = &j->ls},
+        {.names = "--field",
+         .kind = CLI_LIST,
+         .dst = j->fields,
+         .val = MAX_FIELDS,
+         .given = &j->nfields},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &j->out},
         {.names = "--band",
          .kind = CLI_DOUBLE,
-         .dst = &o.band,
+         .dst = &o->band,
          .max = INFINITY,
          .flags = CLI_ABOVE,
          .needs = "a positive number of voxels"},
         {.names = "--t-scale",
          .kind = CLI_DOUBLE,
-         .dst = &o.t_scale,
+         .dst = &o->t_scale,
          .max = INFINITY,
          .flags = CLI_ABOVE,
          .needs = "a positive number"},
         {.names = "--out-band",
          .kind = CLI_DOUBLE,
-         .dst = &o.out_band,
+         .dst = &o->out_band,
          .max = INFINITY,
          .flags = CLI_ABOVE,
          .needs = "a positive number of voxels"},
-        {.names = "--backend", .kind = CLI_BACKEND, .dst = &o.backend, .val = CLI_BACKENDS_ALL},
-        {.names = "--threads", .kind = CLI_THREADS, .dst = &threads},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &o->backend, .val = CLI_BACKENDS_ALL},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &j->threads},
         {.names = NULL},
     };
-    int prc = cli_parse(CMD, argc, argv, opts, "input file", &in, help);
+    int prc = cli_parse(CMD, argc, argv, opts, "input file", &j->in, help);
     if (prc >= 0)
         return prc;
-    if (!in)
+    if (!j->in)
         return cli_usage_error(CMD, "an input IN.vdb is required");
-    if (!ls)
+    if (!j->ls)
         return cli_usage_error(CMD, "--levelset NAME is required");
-    if (!nfields)
+    if (!j->nfields)
         return cli_usage_error(CMD, "give at least one --field NAME");
-    if (!out)
+    if (!j->out)
         return cli_usage_error(CMD, "-o OUT.vdb is required");
-    if (cli_check_ext(CMD, "-o", out, ".vdb .h5"))
+    if (cli_check_ext(CMD, "-o", j->out, ".vdb .h5"))
         return HV_EXIT_USAGE;
-    for (int q = 0; q < nfields; q++)
-        if (!strcmp(fields[q], ls))
-            return cli_usage_error(CMD, "--field '%s' is the level set", ls);
+    for (int q = 0; q < j->nfields; q++)
+        if (!strcmp(j->fields[q], j->ls))
+            return cli_usage_error(CMD, "--field '%s' is the level set", j->ls);
     int is_h5;
-    if (cli_h5_output(CMD, out, &is_h5))
+    if (cli_h5_output(CMD, j->out, &is_h5))
         return HV_EXIT_USAGE;
-    const char *h5 = is_h5 ? out : NULL;
-    if (cli_check_outputs(CMD, &out, 1, &in, 1))
+    j->h5 = is_h5 ? j->out : NULL;
+    if (cli_check_outputs(CMD, &j->out, 1, &j->in, 1))
         return HV_EXIT_FAIL;
-    hv_set_threads(threads);
-    double t_start = hv_now();
+    return -1;
+}
 
-    /* What the file holds. */
-    static hv_vdb_grid_info info[MAX_GRIDS];
-    size_t count = 0;
-    hv_status st = hv_vdb_list(in, info, MAX_GRIDS, &count);
-    if (st)
-        return cli_fail(CMD, in, st);
-    const char *names[MAX_FIELDS + 1];
-    names[0] = ls;
-    for (int q = 0; q < nfields; q++)
-        names[q + 1] = fields[q];
+/* Whether the level set and each field exist with values the extension
+ * takes and uniform transforms; names every problem, then lists the grids. */
+static int check_grids(const extend_job *j, const char *const *names)
+{
     int missing = 0;
-    for (int q = 0; q <= nfields; q++) {
-        const hv_vdb_grid_info *gi = find_grid(info, count, names[q]);
+    for (int q = 0; q <= j->nfields; q++) {
+        const hv_vdb_grid_info *gi = find_grid(j->info, j->count, names[q]);
         if (!gi) {
-            fprintf(stderr, "heatvox extend: %s: no grid named '%s' (%s)\n", in, names[q],
+            fprintf(stderr, "heatvox extend: %s: no grid named '%s' (%s)\n", j->in, names[q],
                     q ? "--field" : "--levelset");
             missing = 1;
         } else if (q == 0 ? !is_scalar(gi->value_type)
                           : !is_scalar(gi->value_type) && !is_vector(gi->value_type)) {
-            fprintf(stderr, "heatvox extend: %s: grid '%s' holds %s values; %s\n", in, names[q],
+            fprintf(stderr, "heatvox extend: %s: grid '%s' holds %s values; %s\n", j->in, names[q],
                     gi->value_type,
                     q ? "fields must be float, double, vec3s or vec3d"
                       : "the level set must be float or double");
             missing = 1;
         } else if (!gi->uniform) {
             fprintf(stderr,
-                    "heatvox extend: %s: grid '%s' has a non-uniform or rotated transform\n", in,
+                    "heatvox extend: %s: grid '%s' has a non-uniform or rotated transform\n", j->in,
                     names[q]);
             missing = 1;
         }
     }
     if (missing) {
-        list_grids(in, info, count);
+        list_grids(j->in, j->info, j->count);
         return HV_EXIT_FAIL;
     }
-    const hv_vdb_grid_info *lsi = find_grid(info, count, ls);
+    const hv_vdb_grid_info *lsi = find_grid(j->info, j->count, j->ls);
     if (lsi->grid_class != HV_VDB_LEVEL_SET && cli_verbose >= 0)
         fprintf(stderr, "heatvox extend: warning: '%s' has class '%s', read as a signed distance\n",
-                ls, class_name(lsi->grid_class));
+                j->ls, class_name(lsi->grid_class));
+    return 0;
+}
+
+int cmd_extend(int argc, char **argv)
+{
+    extend_job j;
+    memset(&j, 0, sizeof j);
+    hv_extend_opts_default(&j.o);
+    int rc = parse_args(argc, argv, &j);
+    if (rc >= 0)
+        return rc;
+    hv_set_threads(j.threads);
+    j.t_start = hv_now();
+
+    /* What the file holds. */
+    static hv_vdb_grid_info info[MAX_GRIDS];
+    hv_status st = hv_vdb_list(j.in, info, MAX_GRIDS, &j.count);
+    if (st)
+        return cli_fail(CMD, j.in, st);
+    j.info = info;
+    const char *names[MAX_FIELDS + 1];
+    names[0] = j.ls;
+    for (int q = 0; q < j.nfields; q++)
+        names[q + 1] = j.fields[q];
+    if ((rc = check_grids(&j, names)))
+        return rc;
 
     /* One block for all: transforms must agree (the shim names the grids that differ). */
     hv_vdb_read_opts ro = {1, {0, 0, 0}, {0, 0, 0}};
-    if ((st = hv_vdb_common_box(in, names, (size_t)nfields + 1, ro.box_lo, ro.box_hi)))
-        return cli_fail(CMD, in, st);
-    if (!dense_flag && !h5 && lsi->grid_class == HV_VDB_LEVEL_SET &&
-        (o.backend == HV_BACKEND_AUTO || o.backend == HV_BACKEND_MG))
-        return extend_tiles(in, out, info, count, ls, fields, nfields, ro.box_lo, ro.box_hi, &o,
-                            t_start);
-    hv_grid *phi = NULL;
-    hv_grid *fin[MAX_FIELDS][3], *fout[MAX_FIELDS][3];
-    memset(fin, 0, sizeof fin);
-    memset(fout, 0, sizeof fout);
-    hv_extend_field ef[MAX_FIELDS];
-    hv_extender *e = NULL;
-    hv_vdb_writer *w = NULL;
-    int rc = 0, cls;
-    /* --backend petsc: the block is read by rank 0, extended on the ranks'
-     * boxes (hv_petsc_extend_block) and written by rank 0. */
-    const int spread = o.backend == HV_BACKEND_PETSC;
-    const int reader = !spread || hv_mpi_rank() == 0;
-    hv_extend_stats es;
-    if (!reader) {
-        for (int q = 0; q < nfields; q++) {
-            ef[q].ncomp = is_vector(find_grid(info, count, fields[q])->value_type) ? 3 : 1;
-            for (int c = 0; c < 3; c++) {
-                ef[q].in[c] = NULL;
-                ef[q].out[c] = NULL;
-            }
-        }
-        const int n1[3] = {1, 1, 1}; /* rank 0's block is the block */
-        if ((st = hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, ef, &es))) {
-            rc = cli_fail(CMD, in, st);
-        } else if (h5) { /* with rank 0, which holds the result */
-            h5_names hn;
-            const int nh = h5_fields(&hn, ls, fields, nfields, ef);
-            if ((st = hv_petsc_write_h5(out, nh, NULL, hn.p)))
-                rc = cli_fail(CMD, out, st);
-        }
-        goto done;
-    }
-    if ((st = hv_vdb_read_float(in, ls, &ro, &phi, &cls))) {
-        rc = cli_fail(CMD, in, st);
-        goto read_failed;
-    }
-    for (int q = 0; q < nfields; q++) {
-        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
-        int vec = is_vector(gi->value_type);
-        st = vec ? hv_vdb_read_vec3(in, fields[q], &ro, &fin[q][0], &fin[q][1], &fin[q][2])
-                 : hv_vdb_read_float(in, fields[q], &ro, &fin[q][0], NULL);
-        if (st) {
-            rc = cli_fail(CMD, in, st);
-            goto read_failed;
-        }
-        if (gi->grid_class == HV_VDB_STAGGERED && cli_verbose >= 0)
-            fprintf(stderr,
-                    "heatvox extend: warning: '%s' is staggered; its components are "
-                    "extended as if they sat at voxel centres\n",
-                    fields[q]);
-        ef[q].ncomp = vec ? 3 : 1;
-        for (int c = 0; c < 3; c++) {
-            ef[q].in[c] = NULL;
-            ef[q].out[c] = NULL;
-        }
-        for (int c = 0; c < ef[q].ncomp; c++) {
-            if ((st = hv_grid_create(&fout[q][c], 3, phi->n, phi->h, phi->origin))) {
-                rc = cli_fail(CMD, "allocating outputs", st);
-                goto read_failed;
-            }
-            ef[q].in[c] = fin[q][c]->v;
-            ef[q].out[c] = fout[q][c]->v;
-        }
-    }
-    cli_info("heatvox extend: block %d x %d x %d, h = %g, %d fields\n", phi->n[0], phi->n[1],
-             phi->n[2], phi->h, nfields);
-
-    if (spread) {
-        if ((st = hv_petsc_extend_block(3, phi->n, phi->h, &o, phi->v, nfields, ef, &es))) {
-            rc = cli_fail(CMD, in, st);
-            goto done;
-        }
-    } else if ((st = hv_extender_create(&e, 3, phi->n, phi->h, NULL, &o)) ||
-               (st = hv_extend_many(e, phi->v, nfields, ef, &es))) {
-        rc = cli_fail(CMD, in, st);
-        goto done;
-    }
-    if (es.weak_cells && !spread && cli_verbose >= 0)
-        fprintf(stderr,
-                "heatvox extend: warning: %zu voxels are far beyond the diffusion's reach; "
-                "their values are unreliable\n",
-                es.weak_cells);
-
-    /* Output: the level set (band = its background, the largest |phi| on the block)
-     * and the fields, with names and classes. */
-    double bg = 0;
-    for (size_t c = 0; c < hv_grid_count(phi); c++)
-        bg = fmax(bg, fabs(phi->v[c]));
-    double band = bg / phi->h;
-    if (!(band >= 1))
-        band = 1;
-    st = hv_vdb_writer_create(&w);
-    /* Same transform and index coordinates as the input's level set. */
-    if (!st)
-        st = hv_vdb_writer_set_index_origin(w, lsi->index0_world);
-    if (!st)
-        st = hv_vdb_writer_add_levelset(w, phi, ls, band, 0);
-    for (int q = 0; q < nfields && !st; q++) {
-        const hv_vdb_grid_info *gi = find_grid(info, count, fields[q]);
-        st = ef[q].ncomp == 3
-                 ? hv_vdb_writer_add_vec3(w, fout[q][0], fout[q][1], fout[q][2], fields[q])
-                 : hv_vdb_writer_add_float(w, fout[q][0], fields[q]);
-        /* OpenVDB keeps a grid's class in its "class" metadata string. */
-        if (!st && gi->grid_class != HV_VDB_UNKNOWN && gi->grid_class != HV_VDB_LEVEL_SET)
-            st = hv_vdb_writer_set_grid_meta(w, fields[q], "class", class_name(gi->grid_class));
-        if (!st && gi->grid_class == HV_VDB_LEVEL_SET)
-            st = hv_vdb_writer_set_grid_meta(w, fields[q], "class", "level set");
-    }
-    char buf[512];
-    snprintf(buf, sizeof buf, "heatvox extend: levelset %s, band %g, t_scale %g, %s, %s", ls,
-             o.band, o.t_scale, o.out_band > 0 ? "out-band" : "dense",
-             o.closest_point ? "closest point" : "plain");
-    if (!st)
-        st = hv_vdb_writer_set_meta(w, "heatvox_extend", buf);
-    if (h5) {
-        /* Collective: the ranks write rank 0's result together (petsc.h); a
-         * rank 0 that failed passes no grids, which fails every rank. */
-        const hv_grid *hg[1 + 3 * MAX_FIELDS];
-        h5_names hn;
-        const int nh = h5_fields(&hn, ls, fields, nfields, ef);
-        hg[0] = phi;
-        for (int q = 0, k = 1; q < nfields; q++)
-            for (int c = 0; c < ef[q].ncomp; c++)
-                hg[k++] = fout[q][c];
-        const hv_status hs = hv_petsc_write_h5(out, nh, st ? NULL : hg, hn.p);
-        if (!st)
-            st = hs;
-    } else if (!st && hv_mpi_rank() == 0) { /* under mpirun, rank 0 writes */
-        st = hv_vdb_writer_write(w, out);
-    }
-    if (st) {
-        rc = cli_fail(CMD, out, st);
-        goto done;
-    }
-    if (cli_verbose >= 0 && spread) /* the cell counts would be rank 0's box's */
-        printf("{\"command\":\"extend\",\"path\":\"dense-distributed\",\"ranks\":%d,"
-               "\"grid\":[%d,%d,%d],\"h\":%g,\"fields\":%d,\"solves\":%d,\"levels\":%d,"
-               "\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
-               hv_mpi_size(), phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves,
-               es.levels, es.t_total, hv_now() - t_start);
-    else if (cli_verbose >= 0)
-        printf("{\"command\":\"extend\",\"path\":\"dense\",\"grid\":[%d,%d,%d],\"h\":%g,"
-               "\"fields\":%d,\"solves\":%d,"
-               "\"levels\":%d,\"source_cells\":%zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
-               "\"weak_cells\":%zu,\"extend_seconds\":%.3f,\"seconds\":%.3f}\n",
-               phi->n[0], phi->n[1], phi->n[2], phi->h, nfields, es.solves, es.levels,
-               es.source_cells, es.cp_cells, es.ratio_cells, es.weak_cells, es.t_total,
-               hv_now() - t_start);
-    goto done;
-read_failed:
-    if (spread) { /* the other ranks wait in hv_petsc_extend_block: release them */
-        hv_extend_field none[MAX_FIELDS];
-        const int n1[3] = {1, 1, 1};
-        for (int q = 0; q < nfields; q++) {
-            memset(&none[q], 0, sizeof none[q]);
-            none[q].ncomp = is_vector(find_grid(info, count, fields[q])->value_type) ? 3 : 1;
-        }
-        hv_petsc_extend_block(3, n1, 1, &o, NULL, nfields, none, &es);
-    }
-done:
-    hv_vdb_writer_destroy(&w);
-    hv_extender_destroy(&e);
-    hv_grid_destroy(&phi);
-    for (int q = 0; q < MAX_FIELDS; q++)
-        for (int c = 0; c < 3; c++) {
-            hv_grid_destroy(&fin[q][c]);
-            hv_grid_destroy(&fout[q][c]);
-        }
-    return rc;
+    if ((st = hv_vdb_common_box(j.in, names, (size_t)j.nfields + 1, ro.box_lo, ro.box_hi)))
+        return cli_fail(CMD, j.in, st);
+    const int level_set = find_grid(info, j.count, j.ls)->grid_class == HV_VDB_LEVEL_SET;
+    if (!j.dense && !j.h5 && level_set &&
+        (j.o.backend == HV_BACKEND_AUTO || j.o.backend == HV_BACKEND_MG))
+        return extend_tiles(&j, ro.box_lo, ro.box_hi);
+    return extend_dense(&j, &ro);
 }
