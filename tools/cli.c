@@ -28,9 +28,20 @@ int cli_fail(const char *cmd, const char *what, hv_status st)
     return HV_EXIT_FAIL;
 }
 
+/* Where cli_parse_quiet keeps the message of a usage error instead of
+ * printing it. */
+static char *capture;
+static size_t capture_size;
+
 int cli_usage_error(const char *cmd, const char *fmt, ...)
 {
     va_list ap;
+    if (capture) {
+        va_start(ap, fmt);
+        vsnprintf(capture, capture_size, fmt, ap);
+        va_end(ap);
+        return HV_EXIT_USAGE;
+    }
     fprintf(stderr, "heatvox %s: ", cmd);
     va_start(ap, fmt);
     vfprintf(stderr, fmt, ap);
@@ -305,8 +316,7 @@ int cli_parse_backend(const char *cmd, const char *v, unsigned allowed, hv_backe
     return cli_usage_error(cmd, "%s", msg);
 }
 
-/* The row of opts whose names include a, or NULL. */
-static const cli_opt *find_opt(const cli_opt *opts, const char *a)
+const cli_opt *cli_find_opt(const cli_opt *opts, const char *a)
 {
     const size_t n = strlen(a);
     for (const cli_opt *o = opts; o->names; o++)
@@ -360,6 +370,18 @@ static int take_value(const char *cmd, const char *a, const cli_opt *o, char **v
         if (cli_parse_sign(v[0], (hv_sdf_sign *)o->dst))
             return cli_usage_error(cmd, "%s needs auto, heat or winding, got '%s'", a, v[0]);
         return 0;
+    case CLI_CHOICE: {
+        int k = 0;
+        for (const char *p = o->choices; *p; k++) {
+            const size_t len = strcspn(p, "|");
+            if (strlen(v[0]) == len && !strncmp(p, v[0], len)) {
+                *(int *)o->dst = o->val + k;
+                return 0;
+            }
+            p += len + (p[len] == '|');
+        }
+        return cli_usage_error(cmd, "%s needs %s, got '%s'", a, o->needs, v[0]);
+    }
     case CLI_LIST: {
         const char **list = (const char **)o->dst;
         for (int q = 0; q < *o->given; q++)
@@ -374,23 +396,26 @@ static int take_value(const char *cmd, const char *a, const cli_opt *o, char **v
     }
 }
 
-int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
-              const char **positional, void (*help)(void))
+/* argv[first..argc) against opts. */
+static int parse_from(const char *cmd, int first, int argc, char **argv, const cli_opt *opts,
+                      const char *noun, const char **words, int max, int *nwords,
+                      void (*help)(void))
 {
-    for (int i = 1; i < argc; i++) {
+    *nwords = 0;
+    for (int i = first; i < argc; i++) {
         const char *a = argv[i];
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+        if (help && (!strcmp(a, "--help") || !strcmp(a, "-h"))) {
             help();
             return HV_EXIT_OK;
         }
-        const cli_opt *o = find_opt(opts, a);
-        if (!o && a[0] == '-' && a[1])
+        const cli_opt *o = cli_find_opt(opts, a);
+        if (!o && ((a[0] == '-' && a[1]) || !max))
             return cli_usage_error(cmd, "unknown option '%s'", a);
         if (!o) {
-            if (*positional)
+            if (*nwords == max)
                 return cli_usage_error(cmd, "more than one %s given ('%s' and '%s')", noun,
-                                       *positional, a);
-            *positional = a;
+                                       words[0], a);
+            words[(*nwords)++] = a;
             continue;
         }
         if (o->given && o->kind != CLI_LIST)
@@ -418,4 +443,43 @@ int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const
         i += k;
     }
     return -1;
+}
+
+int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
+              const char **positional, void (*help)(void))
+{
+    const char *words[1] = {*positional};
+    int n = 0;
+    int rc = parse_from(cmd, 1, argc, argv, opts, noun, words, 1, &n, help);
+    if (n)
+        *positional = words[0];
+    return rc;
+}
+
+int cli_parse_words(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
+                    const char **words, int max, int *nwords, void (*help)(void))
+{
+    return parse_from(cmd, 1, argc, argv, opts, noun, words, max, nwords, help);
+}
+
+int cli_parse_quiet(int argc, char **argv, const cli_opt *opts, char *err, size_t size)
+{
+    int n;
+    capture = err;
+    capture_size = size;
+    const int rc = parse_from("", 0, argc, argv, opts, NULL, NULL, 0, &n, NULL);
+    capture = NULL;
+    return rc < 0 ? 0 : -1;
+}
+
+int cli_opt_arity(const cli_opt *o)
+{
+    switch (o->kind) {
+    case CLI_FLAG:
+    case CLI_OR:
+    case CLI_IGNORE: return 0;
+    case CLI_DOUBLES:
+    case CLI_FN: return o->val;
+    default: return 1;
+    }
 }

@@ -85,11 +85,12 @@ typedef enum cli_kind {
     CLI_BACKEND, /* *(hv_backend *)dst, one of the backends in val (CLI_BACKEND mask) */
     CLI_THREADS, /* *(int *)dst, 1..HV_MAX_THREADS */
     CLI_SIGN,    /* *(hv_sdf_sign *)dst */
+    CLI_CHOICE,  /* *(int *)dst = val + the index of the value in choices ("vdb|exr") */
     CLI_LIST,    /* appended to (const char **)dst, at most val, counted in *given;
                     the same value twice is an error */
     CLI_IGNORE,  /* taken by the driver (-q, -v) */
     CLI_FN       /* fn(cmd, option, values, how many follow, dst): the values it took
-                    (>= 0), or minus the exit code */
+                    (>= 0), or minus the exit code; val: how many it takes, where fixed */
 } cli_kind;
 
 #define CLI_ABOVE 1 /* cli_opt.flags: a number must exceed min */
@@ -104,6 +105,7 @@ typedef struct cli_opt {
     int *given;        /* set to 1 when the option is given (may be NULL); CLI_LIST: the count */
     int flags;
     int (*fn)(const char *cmd, const char *opt, char **v, int nv, void *dst);
+    const char *choices; /* CLI_CHOICE: the values, split by '|' */
 } cli_opt;
 
 /* Reads argv[1..argc) against the options (a row with names NULL ends
@@ -112,6 +114,16 @@ typedef struct cli_opt {
  * return 0. Returns -1 when every word was taken, else the exit code. */
 int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
               const char **positional, void (*help)(void));
+/* The same with up to max words that are no option, in words[0..*nwords). */
+int cli_parse_words(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
+                    const char **words, int max, int *nwords, void (*help)(void));
+/* Options only, argv[0..argc) (a manifest line's): nothing printed; 0, or
+ * -1 with the message in err. */
+int cli_parse_quiet(int argc, char **argv, const cli_opt *opts, char *err, size_t size);
+/* The row of opts that takes the option name, or NULL. */
+const cli_opt *cli_find_opt(const cli_opt *opts, const char *name);
+/* How many values the row's option takes. */
+int cli_opt_arity(const cli_opt *o);
 
 /* The backends a command takes, for cli_parse_backend: a mask of
  * CLI_BACKEND(HV_BACKEND_...). */

@@ -70,19 +70,22 @@ static void print_auto(const hv_opencl_device *sel, int json)
     }
 }
 
+static void help(void) { usage(stdout); }
+
 int cmd_devices(int argc, char **argv)
 {
     int json = 0;
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            usage(stdout);
-            return HV_EXIT_OK;
-        } else if (!strcmp(argv[i], "--json")) {
-            json = 1;
-        } else if (strcmp(argv[i], "-q") && strcmp(argv[i], "-v")) {
-            return cli_usage_error("devices", "unknown option '%s'", argv[i]);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--json", .kind = CLI_FLAG, .dst = &json, .val = 1},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int rc = cli_parse("devices", argc, argv, opts, "argument", &stray, help);
+    if (rc >= 0)
+        return rc;
+    if (stray)
+        return cli_usage_error("devices", "unexpected argument '%s'", stray);
     int count = 0;
     hv_status st = hv_opencl_list_devices(NULL, 0, &count);
     if (st)

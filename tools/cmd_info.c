@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 static void help(void)
@@ -120,27 +121,24 @@ static void print_text(const char *file, const hv_mesh *m, const hv_mesh_report 
 int cmd_info(int argc, char **argv)
 {
     int json = 0, nfiles = 0, failed = 0;
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            help();
-            return HV_EXIT_OK;
-        }
-        if (!strcmp(argv[i], "--json"))
-            json = 1;
-        else if (!strcmp(argv[i], "-q") || !strcmp(argv[i], "-v"))
-            ;
-        else if (argv[i][0] == '-' && argv[i][1])
-            return cli_usage_error("info", "unknown option '%s'", argv[i]);
-        else
-            nfiles++;
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--json", .kind = CLI_FLAG, .dst = &json, .val = 1},
+        {.names = NULL},
+    };
+    const char **files = malloc((size_t)argc * sizeof *files);
+    if (!files)
+        return cli_fail("info", "reading the command line", HV_ERR_NOMEM);
+    int rc = cli_parse_words("info", argc, argv, opts, "mesh", files, argc, &nfiles, help);
+    if (rc < 0 && !nfiles)
+        rc = cli_usage_error("info", "no mesh given");
+    if (rc >= 0) {
+        free(files);
+        return rc;
     }
-    if (!nfiles)
-        return cli_usage_error("info", "no mesh given");
     int first = 1;
-    for (int i = 1; i < argc; i++) {
-        const char *file = argv[i];
-        if (file[0] == '-' && file[1])
-            continue;
+    for (int i = 0; i < nfiles; i++) {
+        const char *file = files[i];
         hv_mesh *m = NULL;
         hv_mesh_report r;
         double t0 = hv_now();
@@ -181,5 +179,6 @@ int cmd_info(int argc, char **argv)
         hv_mesh_destroy(&m);
     }
     fflush(stdout);
+    free(files);
     return failed ? HV_EXIT_FAIL : HV_EXIT_OK;
 }

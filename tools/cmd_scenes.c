@@ -288,20 +288,13 @@ static int distance_inputs(const char *dir)
 int cmd_make_scenes(int argc, char **argv)
 {
     const char *dir = NULL;
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            help();
-            return HV_EXIT_OK;
-        } else if (!strcmp(argv[i], "-q") || !strcmp(argv[i], "-v")) {
-            continue;
-        } else if (argv[i][0] == '-' && argv[i][1]) {
-            return cli_usage_error("make-scenes", "unknown option '%s'", argv[i]);
-        } else if (!dir) {
-            dir = argv[i];
-        } else {
-            return cli_usage_error("make-scenes", "more than one directory given");
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = NULL},
+    };
+    int rc = cli_parse("make-scenes", argc, argv, opts, "directory", &dir, help);
+    if (rc >= 0)
+        return rc;
     if (!dir)
         dir = "scenes";
     char sub[1024];

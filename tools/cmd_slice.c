@@ -1,6 +1,8 @@
 /* heatvox slice: one 2D slice of a volume, as EXR data or a PNG preview. */
 #include "cli.h"
 
+#include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
@@ -73,43 +75,42 @@ static hv_status read_volume(const char *path, const char *grid, hv_grid **out)
     return hv_exr_read(path, grid, out);
 }
 
+/* --axis x|y|z: 0, 1 or 2. */
+static int take_axis(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    if (nv < 1 || strlen(v[0]) != 1 || !strchr("xyz", v[0][0]))
+        return -cli_usage_error(cmd, "%s needs x, y or z%s%s%s", opt, nv ? ", got '" : "",
+                                nv ? v[0] : "", nv ? "'" : "");
+    *(int *)dst = v[0][0] - 'x';
+    return 1;
+}
+
 int cmd_slice(int argc, char **argv)
 {
     const char *in = NULL, *out = NULL, *grid = NULL;
     int axis = 2, index = -1;
     double range = 0;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        int more = i + 1 < argc;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            help();
-            return HV_EXIT_OK;
-        } else if (!strcmp(a, "-q") || !strcmp(a, "-v")) {
-            continue;
-        } else if (!strcmp(a, "-o") || !strcmp(a, "--grid")) {
-            if (!more)
-                return cli_usage_error("slice", "%s needs a value", a);
-            *(a[1] == 'o' ? &out : &grid) = argv[++i];
-        } else if (!strcmp(a, "--axis")) {
-            if (!more || strlen(argv[i + 1]) != 1 || !strchr("xyz", argv[i + 1][0]))
-                return cli_usage_error("slice", "--axis must be x, y or z");
-            axis = argv[++i][0] - 'x';
-        } else if (!strcmp(a, "--index")) {
-            if (!more || cli_parse_int(argv[i + 1], &index) || index < 0)
-                return cli_usage_error("slice", "--index needs an integer >= 0");
-            i++;
-        } else if (!strcmp(a, "--range")) {
-            if (!more || cli_parse_double(argv[i + 1], &range) || !(range > 0))
-                return cli_usage_error("slice", "--range needs a positive number");
-            i++;
-        } else if (a[0] == '-' && a[1]) {
-            return cli_usage_error("slice", "unknown option '%s'", a);
-        } else if (!in) {
-            in = a;
-        } else {
-            return cli_usage_error("slice", "more than one input ('%s' and '%s')", in, a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "-o|--output", .kind = CLI_STR, .dst = &out},
+        {.names = "--grid", .kind = CLI_STR, .dst = &grid},
+        {.names = "--axis", .kind = CLI_FN, .dst = &axis, .fn = take_axis},
+        {.names = "--index",
+         .kind = CLI_INT,
+         .dst = &index,
+         .max = INT_MAX,
+         .needs = "an integer >= 0"},
+        {.names = "--range",
+         .kind = CLI_DOUBLE,
+         .dst = &range,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = NULL},
+    };
+    int prc = cli_parse("slice", argc, argv, opts, "input", &in, help);
+    if (prc >= 0)
+        return prc;
     if (!in)
         return cli_usage_error("slice", "no volume given");
     if (!out)
