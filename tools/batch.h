@@ -29,6 +29,14 @@ void batch_opts_default(batch_opts *o);
 
 /* Number of arguments option `name` takes, or -1 when it is not a job option. */
 int batch_opt_arity(const char *name);
+/* The job options as BATCH_JOB_OPTS rows t[0..) of kind CLI_FN, each with fn
+ * and dst and its arity in val (the batch command passes them on to its
+ * workers); returns BATCH_JOB_OPTS. */
+#define BATCH_JOB_OPTS 21
+int batch_opts_forward(cli_opt *t, int (*fn)(const char *, const char *, char **, int, void *),
+                       void *dst);
+#define BATCH_STR_(x) #x
+#define BATCH_STR(x) BATCH_STR_(x)
 
 /* Applies argv[0..argc) (job options only) to o; on error writes a message to
  * err and returns -1. */
@@ -110,7 +118,8 @@ void batch_jobs_free(batch_joblist *l);
 /* Appends the jobs of each input: a mesh file, a directory (searched
  * recursively for meshes; outputs keep the sub-directory under outdir) or a
  * manifest. Inputs that cannot be read become jobs with an error. */
-void batch_inputs_find(batch_joblist *l, char *const *inputs, int ninputs, const char *outdir);
+void batch_inputs_find(batch_joblist *l, const char *const *inputs, int ninputs,
+                       const char *outdir);
 
 /* batch_plan.c. Parses the options of every job (the global ones gargv, then
  * its own), names its output and marks the jobs that are up to date (unless

@@ -203,7 +203,7 @@ static void read_manifest(batch_joblist *l, const char *path, const char *outdir
     fclose(f);
 }
 
-void batch_inputs_find(batch_joblist *l, char *const *inputs, int ninputs, const char *outdir)
+void batch_inputs_find(batch_joblist *l, const char *const *inputs, int ninputs, const char *outdir)
 {
     for (int i = 0; i < ninputs; i++) {
         char *in = batch_xstrdup(inputs[i]);

@@ -4,6 +4,7 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -92,18 +93,6 @@ char *batch_xprintf(const char *fmt, ...)
 
 /* ---- options ---- */
 
-static const struct {
-    const char *name;
-    int nargs;
-} job_options[] = {
-    {"--res", 1},         {"--voxel-size", 1},  {"--pad", 1},       {"--bbox", 6},
-    {"--round-to", 1},    {"--unsigned", 0},    {"--heat", 0},      {"--exact", 0},
-    {"--t-scale", 1},     {"--far-levels", 1},  {"--no-repair", 0}, {"--backend", 1},
-    {"--diffuse-tol", 1}, {"--poisson-tol", 1}, {"--threads", 1},   {"--band", 1},
-    {"--dense", 0},       {"--format", 1},      {"--preview", 0},   {"--mesh-out-format", 1},
-    {"--adaptivity", 1},
-};
-
 static const char *const mesh_exts[] = {NULL, "obj", "ply", "stl"};
 
 void batch_opts_default(batch_opts *o)
@@ -112,14 +101,6 @@ void batch_opts_default(batch_opts *o)
     hv_sdf_opts_default(&o->sdf);
     o->format = BATCH_VDB;
     o->band = 3.0;
-}
-
-int batch_opt_arity(const char *name)
-{
-    for (size_t i = 0; i < sizeof job_options / sizeof job_options[0]; i++)
-        if (!strcmp(name, job_options[i].name))
-            return job_options[i].nargs;
-    return -1;
 }
 
 static int bad(char *err, size_t size, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
@@ -132,103 +113,153 @@ static int bad(char *err, size_t size, const char *fmt, ...)
     return -1;
 }
 
+/* --res N: the cell count wins over a --voxel-size given before it (by the
+ * command line, under a manifest line's). */
+static int take_res(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    hv_sdf_opts *o = dst;
+    int n;
+    if (nv < 1)
+        return -cli_usage_error(cmd, "%s needs 1 value", opt);
+    if (cli_parse_int(v[0], &n) || n < 2)
+        return -cli_usage_error(cmd, "%s needs an integer >= 2, got '%s'", opt, v[0]);
+    o->res = n;
+    o->voxel_size = 0;
+    return 1;
+}
+
+static int take_bbox(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    hv_sdf_opts *o = dst;
+    if (nv < 6)
+        return -cli_usage_error(cmd, "%s needs 6 values", opt);
+    for (int d = 0; d < 6; d++)
+        if (cli_parse_double(v[d], &o->bbox[d]))
+            return -cli_usage_error(cmd, "%s needs 6 finite numbers, got '%s'", opt, v[d]);
+    for (int d = 0; d < 3; d++)
+        if (!(o->bbox[d] < o->bbox[d + 3]))
+            return -cli_usage_error(cmd, "%s: the %c range is empty", opt, "xyz"[d]);
+    o->use_bbox = 1;
+    return 6;
+}
+
+#define JOB_OPTS BATCH_JOB_OPTS
+
+/* The job options over o: the batch command's (passed on to every worker)
+ * and each manifest line's. */
+static void job_options(batch_opts *o, cli_opt t[JOB_OPTS + 1])
+{
+    hv_sdf_opts *s = &o->sdf;
+    const cli_opt rows[JOB_OPTS + 1] = {
+        {.names = "--res", .kind = CLI_FN, .dst = s, .val = 1, .fn = take_res},
+        {.names = "--voxel-size",
+         .kind = CLI_DOUBLE,
+         .dst = &s->voxel_size,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--pad",
+         .kind = CLI_INT,
+         .dst = &s->pad,
+         .max = INT_MAX,
+         .needs = "an integer >= 0"},
+        {.names = "--bbox", .kind = CLI_FN, .dst = s, .val = 6, .fn = take_bbox},
+        {.names = "--round-to",
+         .kind = CLI_INT,
+         .dst = &s->round_to,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--unsigned", .kind = CLI_FLAG, .dst = &s->unsigned_distance, .val = 1},
+        {.names = "--heat", .kind = CLI_FLAG, .dst = &s->magnitude, .val = HV_SDF_HEAT},
+        {.names = "--exact", .kind = CLI_FLAG, .dst = &s->magnitude, .val = HV_SDF_EXACT},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &s->t_scale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--far-levels",
+         .kind = CLI_INT,
+         .dst = &s->far_levels,
+         .min = -1,
+         .max = INT_MAX,
+         .needs = "an integer >= -1"},
+        {.names = "--no-repair", .kind = CLI_FLAG, .dst = &s->repair, .val = 0},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &s->backend, .val = CLI_BACKENDS_LOCAL},
+        {.names = "--diffuse-tol",
+         .kind = CLI_DOUBLE,
+         .dst = &s->diffuse_tol,
+         .min = 1e-12,
+         .max = 1 - 0x1p-53,
+         .needs = "a number in [1e-12, 1)"},
+        {.names = "--poisson-tol",
+         .kind = CLI_DOUBLE,
+         .dst = &s->poisson_tol,
+         .min = 1e-12,
+         .max = 1 - 0x1p-53,
+         .needs = "a number in [1e-12, 1)"},
+        {.names = "--threads",
+         .kind = CLI_INT,
+         .dst = &s->threads,
+         .max = HV_MAX_THREADS,
+         .needs = "an integer in [0, " BATCH_STR(HV_MAX_THREADS) "]"},
+        {.names = "--band",
+         .kind = CLI_DOUBLE,
+         .dst = &o->band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--dense", .kind = CLI_FLAG, .dst = &o->dense, .val = 1},
+        {.names = "--format",
+         .kind = CLI_CHOICE,
+         .dst = &o->format,
+         .val = BATCH_VDB,
+         .choices = "vdb|exr",
+         .needs = "vdb or exr"},
+        {.names = "--preview", .kind = CLI_FLAG, .dst = &o->preview, .val = 1},
+        {.names = "--mesh-out-format",
+         .kind = CLI_CHOICE,
+         .dst = &o->mesh_format,
+         .val = BATCH_MESH_OBJ,
+         .choices = "obj|ply|stl",
+         .needs = "obj, ply or stl"},
+        {.names = "--adaptivity",
+         .kind = CLI_DOUBLE,
+         .dst = &o->adaptivity,
+         .max = 1,
+         .needs = "a number in [0, 1]"},
+        {.names = NULL},
+    };
+    memcpy(t, rows, sizeof rows);
+}
+
+int batch_opt_arity(const char *name)
+{
+    batch_opts o;
+    cli_opt t[JOB_OPTS + 1];
+    job_options(&o, t);
+    const cli_opt *r = cli_find_opt(t, name);
+    return r ? cli_opt_arity(r) : -1;
+}
+
+int batch_opts_forward(cli_opt *t, int (*fn)(const char *, const char *, char **, int, void *),
+                       void *dst)
+{
+    batch_opts o;
+    job_options(&o, t);
+    for (int i = 0; i < JOB_OPTS; i++) {
+        const int k = cli_opt_arity(&t[i]);
+        t[i] = (cli_opt){.names = t[i].names, .kind = CLI_FN, .dst = dst, .val = k, .fn = fn};
+    }
+    return JOB_OPTS;
+}
+
 int batch_opts_parse(int argc, char **argv, batch_opts *o, char *err, size_t errsize)
 {
-    for (int i = 0; i < argc; i++) {
-        const char *a = argv[i];
-        int k = batch_opt_arity(a);
-        if (k < 0)
-            return bad(err, errsize, "unknown option '%s'", a);
-        if (i + k >= argc)
-            return bad(err, errsize, "%s needs %d value%s", a, k, k > 1 ? "s" : "");
-        char **v = argv + i + 1;
-        i += k;
-        int iv = 0;
-        double dv = 0;
-        if (!strcmp(a, "--res")) {
-            if (cli_parse_int(v[0], &iv) || iv < 2)
-                return bad(err, errsize, "--res must be an integer >= 2, got '%s'", v[0]);
-            o->sdf.res = iv;
-            o->sdf.voxel_size = 0;
-        } else if (!strcmp(a, "--voxel-size")) {
-            if (cli_parse_double(v[0], &dv) || !(dv > 0))
-                return bad(err, errsize, "--voxel-size must be positive, got '%s'", v[0]);
-            o->sdf.voxel_size = dv;
-        } else if (!strcmp(a, "--pad")) {
-            if (cli_parse_int(v[0], &iv) || iv < 0)
-                return bad(err, errsize, "--pad must be an integer >= 0, got '%s'", v[0]);
-            o->sdf.pad = iv;
-        } else if (!strcmp(a, "--bbox")) {
-            for (int d = 0; d < 6; d++)
-                if (cli_parse_double(v[d], &o->sdf.bbox[d]))
-                    return bad(err, errsize, "--bbox value '%s' is not a number", v[d]);
-            for (int d = 0; d < 3; d++)
-                if (!(o->sdf.bbox[d] < o->sdf.bbox[d + 3]))
-                    return bad(err, errsize, "--bbox: the %c range is empty", "xyz"[d]);
-            o->sdf.use_bbox = 1;
-        } else if (!strcmp(a, "--round-to")) {
-            if (cli_parse_int(v[0], &iv) || iv < 1)
-                return bad(err, errsize, "--round-to must be an integer >= 1, got '%s'", v[0]);
-            o->sdf.round_to = iv;
-        } else if (!strcmp(a, "--unsigned")) {
-            o->sdf.unsigned_distance = 1;
-        } else if (!strcmp(a, "--heat")) {
-            o->sdf.magnitude = HV_SDF_HEAT;
-        } else if (!strcmp(a, "--exact")) {
-            o->sdf.magnitude = HV_SDF_EXACT;
-        } else if (!strcmp(a, "--t-scale")) {
-            if (cli_parse_double(v[0], &dv) || !(dv > 0))
-                return bad(err, errsize, "--t-scale must be positive, got '%s'", v[0]);
-            o->sdf.t_scale = dv;
-        } else if (!strcmp(a, "--far-levels")) {
-            if (cli_parse_int(v[0], &iv) || iv < -1)
-                return bad(err, errsize, "--far-levels must be an integer >= -1, got '%s'", v[0]);
-            o->sdf.far_levels = iv;
-        } else if (!strcmp(a, "--no-repair")) {
-            o->sdf.repair = 0;
-        } else if (!strcmp(a, "--backend")) {
-            char msg[160];
-            if (cli_backend_value(v[0], CLI_BACKENDS_LOCAL, &o->sdf.backend, msg, sizeof msg))
-                return bad(err, errsize, "%s", msg);
-        } else if (!strcmp(a, "--diffuse-tol") || !strcmp(a, "--poisson-tol")) {
-            if (cli_parse_double(v[0], &dv) || !(dv >= 1e-12) || dv >= 1)
-                return bad(err, errsize, "%s must be in [1e-12, 1), got '%s'", a, v[0]);
-            *(a[2] == 'd' ? &o->sdf.diffuse_tol : &o->sdf.poisson_tol) = dv;
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v[0], 0, &iv))
-                return bad(err, errsize, "--threads must be an integer in [0, %d], got '%s'",
-                           HV_MAX_THREADS, v[0]);
-            o->sdf.threads = iv;
-        } else if (!strcmp(a, "--band")) {
-            if (cli_parse_double(v[0], &dv) || !(dv > 0))
-                return bad(err, errsize, "--band must be positive (voxels), got '%s'", v[0]);
-            o->band = dv;
-        } else if (!strcmp(a, "--dense")) {
-            o->dense = 1;
-        } else if (!strcmp(a, "--format")) {
-            if (!strcmp(v[0], "vdb"))
-                o->format = BATCH_VDB;
-            else if (!strcmp(v[0], "exr"))
-                o->format = BATCH_EXR;
-            else
-                return bad(err, errsize, "--format must be vdb or exr, got '%s'", v[0]);
-        } else if (!strcmp(a, "--preview")) {
-            o->preview = 1;
-        } else if (!strcmp(a, "--mesh-out-format")) {
-            o->mesh_format = BATCH_MESH_NONE;
-            for (int f = BATCH_MESH_OBJ; f <= BATCH_MESH_STL; f++)
-                if (!strcmp(v[0], mesh_exts[f]))
-                    o->mesh_format = f;
-            if (o->mesh_format == BATCH_MESH_NONE)
-                return bad(err, errsize, "--mesh-out-format must be obj, ply or stl, got '%s'",
-                           v[0]);
-        } else if (!strcmp(a, "--adaptivity")) {
-            if (cli_parse_double(v[0], &dv) || dv < 0 || dv > 1)
-                return bad(err, errsize, "--adaptivity must be in [0, 1], got '%s'", v[0]);
-            o->adaptivity = dv;
-        }
-    }
-    return 0;
+    cli_opt t[JOB_OPTS + 1];
+    job_options(o, t);
+    return cli_parse_quiet(argc, argv, t, err, errsize);
 }
 
 int batch_opts_check(const batch_opts *o, char *err, size_t errsize)
@@ -467,184 +498,239 @@ static int write_volume(const char *output, const hv_grid *g, const hv_tiles *T,
     return 0;
 }
 
+/* One job: what it computed, how long each stage took, and where it stopped. */
+typedef struct job {
+    const char *input, *output;
+    batch_opts o;
+    char err[1024], canon[1024], hash[17];
+    const char *stage; /* the stage that failed, NULL once all are done */
+    double t0, t_read, t_report, t_write, t_preview, t_mesh;
+    char mesh_path[4200];
+    size_t mesh_tris;
+    int have_mesh, have_rep, have_stats;
+    hv_mesh *m;
+    hv_grid *g;
+    hv_tiles *T;
+    hv_mesh_report rep;
+    hv_sdf_stats stats;
+} job;
+
+/* The zero level set as a mesh beside the volume. */
+static int job_mesh(job *J)
+{
+    J->stage = "mesh";
+    batch_mesh_path(J->output, J->o.mesh_format, J->mesh_path, sizeof J->mesh_path);
+    double t = hv_now();
+    hv_mesh *iso = NULL;
+    hv_status st = hv_grid_to_mesh(J->g, 0.0, J->o.adaptivity, &iso);
+    if (!st) {
+        J->mesh_tris = iso->ntris;
+        st = hv_mesh_write(iso, J->mesh_path);
+    }
+    hv_mesh_destroy(&iso);
+    J->t_mesh = hv_now() - t;
+    if (st) {
+        error_text(st, J->mesh_path, J->err, sizeof J->err);
+        return -1;
+    }
+    J->have_mesh = 1;
+    return 0;
+}
+
+/* The volume and what goes beside it: preview, mesh, and last the sidecar,
+ * so that an output whose preview or mesh failed is not taken as up to
+ * date. */
+static int job_write(job *J)
+{
+    J->stage = "write";
+    if (mkdir_parents(J->output) != 0) {
+        snprintf(J->err, sizeof J->err, "%s: cannot create its directory: %s", J->output,
+                 strerror(errno));
+        return -1;
+    }
+    double t = hv_now();
+    int wr = write_volume(J->output, J->g, J->T, &J->o, J->input, J->canon, J->err, sizeof J->err);
+    hv_tiles_destroy(&J->T);
+    J->t_write = hv_now() - t;
+    if (wr)
+        return -1;
+    if (J->o.preview) {
+        J->stage = "preview";
+        char png[4200];
+        batch_preview_path(J->output, png, sizeof png);
+        t = hv_now();
+        hv_status st = hv_png_write_preview(png, J->g, 0);
+        J->t_preview = hv_now() - t;
+        if (st) {
+            error_text(st, png, J->err, sizeof J->err);
+            return -1;
+        }
+    }
+    if (J->o.mesh_format != BATCH_MESH_NONE && job_mesh(J))
+        return -1;
+    J->stage = "sidecar";
+    return write_sidecar(J->input, J->output, J->canon, J->hash, hv_now() - J->t0, J->err,
+                         sizeof J->err);
+}
+
+/* Reads the mesh, reports its defects, computes the distance and writes. */
+static int job_run(job *J)
+{
+    J->stage = "read";
+    double t = hv_now();
+    hv_status st = hv_mesh_read(J->input, &J->m);
+    J->t_read = hv_now() - t;
+    if (st) {
+        error_text(st, J->input, J->err, sizeof J->err);
+        return -1;
+    }
+    t = hv_now();
+    J->have_rep = hv_mesh_report_compute(J->m, &J->rep) == HV_OK;
+    J->t_report = hv_now() - t;
+    J->stage = "sdf";
+    st = wants_tiles(&J->o) ? hv_sdf_compute_tiles(J->m, &J->o.sdf, J->o.band, &J->T, &J->stats)
+                            : hv_sdf_compute(J->m, &J->o.sdf, &J->g, &J->stats);
+    if (st) {
+        error_text(st, J->input, J->err, sizeof J->err);
+        return -1;
+    }
+    J->have_stats = 1;
+    if (job_write(J))
+        return -1;
+    J->stage = NULL;
+    return 0;
+}
+
+static void report_times(batch_buf *b, const job *J)
+{
+    const hv_sdf_stats *s = &J->stats;
+    bb_printf(b, ",\"seconds\":{\"read\":%.4f,\"report\":%.4f", J->t_read, J->t_report);
+    if (J->have_stats)
+        bb_printf(b,
+                  ",\"repair\":%.4f,\"splat\":%.4f,\"diffuse\":%.4f,\"normalize\":%.4f"
+                  ",\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,\"sdf\":%.4f",
+                  s->t_repair, s->t_splat, s->t_diffuse, s->t_normalize, s->t_poisson, s->t_shift,
+                  s->t_redistance, s->t_total);
+    bb_printf(b, ",\"write\":%.4f,\"preview\":%.4f,\"mesh\":%.4f,\"total\":%.4f}", J->t_write,
+              J->t_preview, J->t_mesh, hv_now() - J->t0);
+}
+
+static void report_defects(batch_buf *b, const job *J)
+{
+    const hv_mesh_report *r = &J->rep;
+    if (!J->have_rep) {
+        bb_printf(b, ",\"defects\":null");
+        return;
+    }
+    bb_printf(b,
+              ",\"defects\":{\"vertices\":%zu,\"triangles\":%zu,\"boundary_edges\":%zu"
+              ",\"nonmanifold_edges\":%zu,\"inconsistent_edges\":%zu,\"duplicate_faces\":%zu"
+              ",\"degenerate_faces\":%zu,\"nonfinite_vertices\":%zu,\"components\":%zu}",
+              r->vertices, r->triangles, r->boundary_edges, r->nonmanifold_edges,
+              r->inconsistent_edges, r->duplicate_faces, r->degenerate_faces, r->nonfinite_vertices,
+              r->components);
+}
+
+/* The repair's and the solver's counts, and the tiles of a narrow band. */
+static void report_repair(batch_buf *b, const job *J)
+{
+    const hv_sdf_stats *s = &J->stats;
+    const hv_sdf_repair_report *r = &s->repair;
+    bb_printf(b,
+              ",\"repair\":{\"vertices_welded\":%zu,\"degenerate_removed\":%zu"
+              ",\"duplicates_removed\":%zu,\"faces_flipped\":%zu,\"components_flipped\":%zu"
+              ",\"holes_filled\":%zu,\"holes_left_open\":%zu"
+              ",\"boundary_edges\":%zu,\"inconsistent_after\":%zu}"
+              ",\"solver\":{\"levels\":%d,\"diffuse_iterations\":%d,\"diffuse_relres\":%.3g"
+              ",\"poisson_iterations\":%d,\"poisson_relres\":%.3g,\"dead_faces\":%zu}",
+              r->vertices_welded, r->degenerate_removed, r->duplicates_removed, r->faces_flipped,
+              r->components_flipped, r->holes_filled, r->holes_left_open, r->boundary_edges,
+              r->inconsistent_after, s->levels, s->diffuse_iterations, s->diffuse_relres,
+              s->poisson_iterations, s->poisson_relres, s->dead_faces);
+    if (s->tiles)
+        bb_printf(b, ",\"tiles\":%zu,\"active_voxels\":%zu,\"sign\":\"%s\"", s->tiles,
+                  s->active_voxels, cli_sign_name(s->sign));
+}
+
+/* The job's JSON line on stdout (batch --report's format). */
+static void report_line(const job *J)
+{
+    const int ok = J->stage == NULL;
+    const hv_sdf_stats *s = &J->stats;
+    batch_buf b = {0};
+    bb_printf(&b, "{\"file\":");
+    bb_json_string(&b, J->input);
+    bb_printf(&b, ",\"output\":");
+    bb_json_string(&b, J->output);
+    bb_printf(&b, ",\"status\":\"%s\",\"error\":", ok ? "ok" : "failed");
+    bb_json_string(&b, ok ? NULL : J->err);
+    bb_printf(&b, ",\"stage\":");
+    bb_json_string(&b, J->stage);
+    bb_printf(&b, ",\"options\":");
+    bb_json_string(&b, J->canon);
+    bb_printf(&b, ",\"options_hash\":\"%s\"", J->hash);
+    if (J->have_stats)
+        bb_printf(&b,
+                  ",\"grid\":[%d,%d,%d],\"voxel_size\":%.17g,\"origin\":[%.17g,%.17g,%.17g]"
+                  ",\"backend\":\"%s\"",
+                  s->n[0], s->n[1], s->n[2], s->h, s->origin[0], s->origin[1], s->origin[2],
+                  hv_backend_name(s->backend));
+    else
+        bb_printf(&b, ",\"grid\":null");
+    report_times(&b, J);
+    if (J->have_mesh) {
+        bb_printf(&b, ",\"mesh\":{\"output\":");
+        bb_json_string(&b, J->mesh_path);
+        bb_printf(&b, ",\"triangles\":%zu,\"adaptivity\":%.17g}", J->mesh_tris, J->o.adaptivity);
+    } else {
+        bb_printf(&b, ",\"mesh\":null");
+    }
+    report_defects(&b, J);
+    if (J->have_stats)
+        report_repair(&b, J);
+    bb_printf(&b, "}\n");
+    if (b.s)
+        fputs(b.s, stdout);
+    fflush(stdout);
+    bb_free(&b);
+}
+
 int batch_job_main(int argc, char **argv)
 {
     if (argc < 2) {
         fprintf(stderr, "heatvox batch --job: needs INPUT OUTPUT [options]\n");
         return HV_EXIT_USAGE;
     }
-    const char *input = argv[0], *output = argv[1];
-    double t0 = hv_now();
-    batch_opts o;
-    batch_opts_default(&o);
-    /* -q / -v are for the driver; the job prints only its report line. */
+    job *J = calloc(1, sizeof *J);
     char **rest = malloc(sizeof(char *) * (size_t)(argc + 1));
+    if (!J || !rest) {
+        free(J);
+        free(rest);
+        fprintf(stderr, "heatvox batch --job: out of memory\n");
+        return HV_EXIT_FAIL;
+    }
+    J->input = argv[0];
+    J->output = argv[1];
+    J->t0 = hv_now();
+    batch_opts_default(&J->o);
+    /* -q / -v are for the driver; the job prints only its report line. */
     int nrest = 0;
     for (int i = 2; i < argc; i++)
         if (strcmp(argv[i], "-q") && strcmp(argv[i], "-v"))
             rest[nrest++] = argv[i];
-    char err[1024] = "", canon[1024], hash[17];
-    const char *stage = "options";
-    double t_read = 0, t_report = 0, t_write = 0, t_preview = 0, t_mesh = 0;
-    char mesh_path[4200] = "";
-    size_t mesh_tris = 0;
-    int have_mesh = 0;
-    hv_mesh *m = NULL;
-    hv_grid *g = NULL;
-    hv_tiles *T = NULL;
-    hv_mesh_report rep;
-    hv_sdf_stats stats;
-    int have_rep = 0, have_stats = 0;
-    memset(&stats, 0, sizeof stats);
-    int parsed = batch_opts_parse(nrest, rest, &o, err, sizeof err) == 0 &&
-                 batch_opts_check(&o, err, sizeof err) == 0;
+    J->stage = "options";
+    int parsed = batch_opts_parse(nrest, rest, &J->o, J->err, sizeof J->err) == 0 &&
+                 batch_opts_check(&J->o, J->err, sizeof J->err) == 0;
     free(rest);
-    batch_opts_canonical(&o, canon, sizeof canon);
-    batch_hash(canon, hash);
-    hv_status st = HV_OK;
-    if (!parsed)
-        goto report;
-    stage = "read";
-    double t = hv_now();
-    st = hv_mesh_read(input, &m);
-    t_read = hv_now() - t;
-    if (st) {
-        error_text(st, input, err, sizeof err);
-        goto report;
-    }
-    t = hv_now();
-    have_rep = hv_mesh_report_compute(m, &rep) == HV_OK;
-    t_report = hv_now() - t;
-    stage = "sdf";
-    st = wants_tiles(&o) ? hv_sdf_compute_tiles(m, &o.sdf, o.band, &T, &stats)
-                         : hv_sdf_compute(m, &o.sdf, &g, &stats);
-    if (st) {
-        error_text(st, input, err, sizeof err);
-        goto report;
-    }
-    have_stats = 1;
-    stage = "write";
-    if (mkdir_parents(output) != 0) {
-        snprintf(err, sizeof err, "%s: cannot create its directory: %s", output, strerror(errno));
-        st = HV_ERR_IO;
-        goto report;
-    }
-    t = hv_now();
-    int wr = write_volume(output, g, T, &o, input, canon, err, sizeof err);
-    hv_tiles_destroy(&T);
-    t_write = hv_now() - t;
-    if (wr)
-        goto report;
-    if (o.preview) {
-        stage = "preview";
-        char png[4200];
-        batch_preview_path(output, png, sizeof png);
-        t = hv_now();
-        st = hv_png_write_preview(png, g, 0);
-        t_preview = hv_now() - t;
-        if (st) {
-            error_text(st, png, err, sizeof err);
-            goto report;
-        }
-    }
-    if (o.mesh_format != BATCH_MESH_NONE) {
-        stage = "mesh";
-        batch_mesh_path(output, o.mesh_format, mesh_path, sizeof mesh_path);
-        t = hv_now();
-        hv_mesh *iso = NULL;
-        st = hv_grid_to_mesh(g, 0.0, o.adaptivity, &iso);
-        if (!st) {
-            mesh_tris = iso->ntris;
-            st = hv_mesh_write(iso, mesh_path);
-        }
-        hv_mesh_destroy(&iso);
-        t_mesh = hv_now() - t;
-        if (st) {
-            error_text(st, mesh_path, err, sizeof err);
-            goto report;
-        }
-        have_mesh = 1;
-    }
-    /* Last, so that an output whose preview or mesh failed is not taken as
-     * up to date. */
-    stage = "sidecar";
-    if (write_sidecar(input, output, canon, hash, hv_now() - t0, err, sizeof err))
-        goto report;
-    stage = NULL;
-report:;
-    int ok = stage == NULL;
-    batch_buf b = {0};
-    bb_printf(&b, "{\"file\":");
-    bb_json_string(&b, input);
-    bb_printf(&b, ",\"output\":");
-    bb_json_string(&b, output);
-    bb_printf(&b, ",\"status\":\"%s\",\"error\":", ok ? "ok" : "failed");
-    bb_json_string(&b, ok ? NULL : err);
-    bb_printf(&b, ",\"stage\":");
-    bb_json_string(&b, stage);
-    bb_printf(&b, ",\"options\":");
-    bb_json_string(&b, canon);
-    bb_printf(&b, ",\"options_hash\":\"%s\"", hash);
-    if (have_stats)
-        bb_printf(&b,
-                  ",\"grid\":[%d,%d,%d],\"voxel_size\":%.17g,\"origin\":[%.17g,%.17g,%.17g]"
-                  ",\"backend\":\"%s\"",
-                  stats.n[0], stats.n[1], stats.n[2], stats.h, stats.origin[0], stats.origin[1],
-                  stats.origin[2], hv_backend_name(stats.backend));
-    else
-        bb_printf(&b, ",\"grid\":null");
-    bb_printf(&b, ",\"seconds\":{\"read\":%.4f,\"report\":%.4f", t_read, t_report);
-    if (have_stats)
-        bb_printf(&b,
-                  ",\"repair\":%.4f,\"splat\":%.4f,\"diffuse\":%.4f,\"normalize\":%.4f"
-                  ",\"poisson\":%.4f,\"shift\":%.4f,\"redistance\":%.4f,\"sdf\":%.4f",
-                  stats.t_repair, stats.t_splat, stats.t_diffuse, stats.t_normalize,
-                  stats.t_poisson, stats.t_shift, stats.t_redistance, stats.t_total);
-    bb_printf(&b, ",\"write\":%.4f,\"preview\":%.4f,\"mesh\":%.4f,\"total\":%.4f}", t_write,
-              t_preview, t_mesh, hv_now() - t0);
-    if (have_mesh) {
-        bb_printf(&b, ",\"mesh\":{\"output\":");
-        bb_json_string(&b, mesh_path);
-        bb_printf(&b, ",\"triangles\":%zu,\"adaptivity\":%.17g}", mesh_tris, o.adaptivity);
-    } else {
-        bb_printf(&b, ",\"mesh\":null");
-    }
-    if (have_rep)
-        bb_printf(&b,
-                  ",\"defects\":{\"vertices\":%zu,\"triangles\":%zu,\"boundary_edges\":%zu"
-                  ",\"nonmanifold_edges\":%zu,\"inconsistent_edges\":%zu,\"duplicate_faces\":%zu"
-                  ",\"degenerate_faces\":%zu,\"nonfinite_vertices\":%zu,\"components\":%zu}",
-                  rep.vertices, rep.triangles, rep.boundary_edges, rep.nonmanifold_edges,
-                  rep.inconsistent_edges, rep.duplicate_faces, rep.degenerate_faces,
-                  rep.nonfinite_vertices, rep.components);
-    else
-        bb_printf(&b, ",\"defects\":null");
-    if (have_stats) {
-        const hv_sdf_repair_report *r = &stats.repair;
-        bb_printf(&b,
-                  ",\"repair\":{\"vertices_welded\":%zu,\"degenerate_removed\":%zu"
-                  ",\"duplicates_removed\":%zu,\"faces_flipped\":%zu,\"components_flipped\":%zu"
-                  ",\"holes_filled\":%zu,\"holes_left_open\":%zu"
-                  ",\"boundary_edges\":%zu,\"inconsistent_after\":%zu}"
-                  ",\"solver\":{\"levels\":%d,\"diffuse_iterations\":%d,\"diffuse_relres\":%.3g"
-                  ",\"poisson_iterations\":%d,\"poisson_relres\":%.3g,\"dead_faces\":%zu}",
-                  r->vertices_welded, r->degenerate_removed, r->duplicates_removed,
-                  r->faces_flipped, r->components_flipped, r->holes_filled, r->holes_left_open,
-                  r->boundary_edges, r->inconsistent_after, stats.levels, stats.diffuse_iterations,
-                  stats.diffuse_relres, stats.poisson_iterations, stats.poisson_relres,
-                  stats.dead_faces);
-        /* A narrow band in tiles: how many, and the voxels in its band. */
-        if (stats.tiles)
-            bb_printf(&b, ",\"tiles\":%zu,\"active_voxels\":%zu,\"sign\":\"%s\"", stats.tiles,
-                      stats.active_voxels, cli_sign_name(stats.sign));
-    }
-    bb_printf(&b, "}\n");
-    if (b.s)
-        fputs(b.s, stdout);
-    fflush(stdout);
-    bb_free(&b);
-    hv_grid_destroy(&g);
-    hv_tiles_destroy(&T);
-    hv_mesh_destroy(&m);
+    batch_opts_canonical(&J->o, J->canon, sizeof J->canon);
+    batch_hash(J->canon, J->hash);
+    if (parsed)
+        job_run(J);
+    report_line(J);
+    const int ok = J->stage == NULL;
+    hv_grid_destroy(&J->g);
+    hv_tiles_destroy(&J->T);
+    hv_mesh_destroy(&J->m);
+    free(J);
     return ok ? HV_EXIT_OK : HV_EXIT_FAIL;
 }

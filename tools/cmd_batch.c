@@ -93,98 +93,84 @@ static void help(void)
 
 /* ---- command ---- */
 
-int cmd_batch(int argc, char **argv)
+/* The command line: the batch command's own options, the job options it
+ * passes on to every worker (gargv), and the inputs. */
+typedef struct batch_args {
+    const char *outdir, *report;
+    int nworkers, dry, force;
+    const char **inputs;
+    int ninputs;
+    char **gargv;
+    int gargc;
+} batch_args;
+
+/* A job option and its values, kept for the workers. */
+static int forward(const char *cmd, const char *opt, char **v, int nv, void *dst)
 {
-    if (argc >= 2 && !strcmp(argv[1], "--job"))
-        return batch_job_main(argc - 2, argv + 2);
-    const char *outdir = NULL, *report = NULL;
-    int nworkers = batch_ncpus(), dry = 0, force = 0;
-    char **inputs = malloc(sizeof(char *) * (size_t)argc);
-    char **gargv = malloc(sizeof(char *) * (size_t)argc);
-    int ninputs = 0, gargc = 0;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            help();
-            free(inputs);
-            free(gargv);
-            return HV_EXIT_OK;
-        }
-        int k;
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!strcmp(a, "-o") || !strcmp(a, "-j") || !strcmp(a, "--report")) {
-            if (i + 1 >= argc) {
-                free(inputs);
-                free(gargv);
-                return cli_usage_error("batch", "%s needs a value", a);
-            }
-            const char *v = argv[++i];
-            if (a[1] == 'o')
-                outdir = v;
-            else if (a[1] == '-')
-                report = v;
-            else if (cli_parse_int(v, &nworkers) || nworkers < 1 || nworkers > BATCH_MAX_WORKERS) {
-                free(inputs);
-                free(gargv);
-                return cli_usage_error("batch", "-j must be 1..%d, got '%s'", BATCH_MAX_WORKERS, v);
-            }
-        } else if (!strcmp(a, "--dry-run")) {
-            dry = 1;
-        } else if (!strcmp(a, "--force")) {
-            force = 1;
-        } else if ((k = batch_opt_arity(a)) >= 0) {
-            if (i + k >= argc) {
-                free(inputs);
-                free(gargv);
-                return cli_usage_error("batch", "%s needs %d value%s", a, k, k > 1 ? "s" : "");
-            }
-            for (int t = 0; t <= k; t++)
-                gargv[gargc++] = argv[i + t];
-            i += k;
-        } else if (a[0] == '-' && a[1]) {
-            free(inputs);
-            free(gargv);
-            return cli_usage_error("batch", "unknown option '%s'", a);
-        } else {
-            inputs[ninputs++] = argv[i];
-        }
-    }
-    int rc = HV_EXIT_OK;
-    if (!ninputs || !outdir) {
-        rc = cli_usage_error("batch", ninputs ? "no output directory (-o DIR)" : "no input given");
-        free(inputs);
-        free(gargv);
+    batch_args *A = dst;
+    const int k = batch_opt_arity(opt);
+    if (nv < k)
+        return -cli_usage_error(cmd, "%s needs %d value%s", opt, k, k > 1 ? "s" : "");
+    A->gargv[A->gargc++] = (char *)opt;
+    for (int t = 0; t < k; t++)
+        A->gargv[A->gargc++] = v[t];
+    return k;
+}
+
+/* Reads the command line into A (whose arrays hold argc words): -1 to go
+ * on, else the exit code. */
+static int parse_args(int argc, char **argv, batch_args *A)
+{
+    cli_opt t[6 + BATCH_JOB_OPTS + 1] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "-o", .kind = CLI_STR, .dst = &A->outdir},
+        {.names = "--report", .kind = CLI_STR, .dst = &A->report},
+        {.names = "-j",
+         .kind = CLI_INT,
+         .dst = &A->nworkers,
+         .min = 1,
+         .max = BATCH_MAX_WORKERS,
+         .needs = "an integer in 1.." BATCH_STR(BATCH_MAX_WORKERS)},
+        {.names = "--dry-run", .kind = CLI_FLAG, .dst = &A->dry, .val = 1},
+        {.names = "--force", .kind = CLI_FLAG, .dst = &A->force, .val = 1},
+    };
+    t[6 + batch_opts_forward(t + 6, forward, A)] = (cli_opt){.names = NULL};
+    int rc = cli_parse_words("batch", argc, argv, t, "input", A->inputs, argc, &A->ninputs, help);
+    if (rc >= 0)
         return rc;
-    }
+    if (!A->ninputs || !A->outdir)
+        return cli_usage_error("batch",
+                               A->ninputs ? "no output directory (-o DIR)" : "no input given");
     batch_opts check;
     batch_opts_default(&check);
     char err[512];
-    if (batch_opts_parse(gargc, gargv, &check, err, sizeof err) ||
-        batch_opts_check(&check, err, sizeof err)) {
-        free(inputs);
-        free(gargv);
+    if (batch_opts_parse(A->gargc, A->gargv, &check, err, sizeof err) ||
+        batch_opts_check(&check, err, sizeof err))
         return cli_usage_error("batch", "%s", err);
-    }
+    return -1;
+}
+
+/* Plans the jobs and runs them on the pool (or lists them with --dry-run). */
+static int run(const batch_args *A)
+{
+    int rc = HV_EXIT_OK;
     char exe[PATH_MAX];
     ssize_t el = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (el <= 0) {
         fprintf(stderr, "heatvox batch: cannot find my own executable: %s\n", strerror(errno));
-        free(inputs);
-        free(gargv);
         return HV_EXIT_FAIL;
     }
     exe[el] = '\0';
 
     /* Strip trailing slashes from OUTDIR so output names stay clean. */
-    char *od = batch_xstrdup(outdir);
+    char *od = batch_xstrdup(A->outdir);
     for (size_t n = strlen(od); n > 1 && od[n - 1] == '/'; n--)
         od[n - 1] = '\0';
     batch_joblist l = {0};
-    batch_inputs_find(&l, inputs, ninputs, od);
-    batch_plan(&l, gargc, gargv, force);
+    batch_inputs_find(&l, A->inputs, A->ninputs, od);
+    batch_plan(&l, A->gargc, A->gargv, A->force);
 
-    if (dry) {
+    if (A->dry) {
         rc = batch_plan_print(&l);
         goto done;
     }
@@ -197,16 +183,16 @@ int cmd_batch(int argc, char **argv)
         rc = HV_EXIT_FAIL;
         goto done;
     }
-    if (report) {
-        p.report = fopen(report, "we");
+    if (A->report) {
+        p.report = fopen(A->report, "we");
         if (!p.report) {
-            fprintf(stderr, "heatvox batch: %s: cannot write the report: %s\n", report,
+            fprintf(stderr, "heatvox batch: %s: cannot write the report: %s\n", A->report,
                     strerror(errno));
             rc = HV_EXIT_FAIL;
             goto done;
         }
     }
-    int sig = batch_pool_run(&l, &p, exe, nworkers, gargc, gargv);
+    int sig = batch_pool_run(&l, &p, exe, A->nworkers, A->gargc, A->gargv);
     batch_bar_clear(&p);
     if (p.report)
         fclose(p.report);
@@ -215,8 +201,6 @@ int cmd_batch(int argc, char **argv)
         hv_tmp_cleanup_all();
         batch_jobs_free(&l);
         free(od);
-        free(inputs);
-        free(gargv);
         signal(sig, SIG_DFL);
         raise(sig);
         return 128 + sig;
@@ -225,7 +209,21 @@ int cmd_batch(int argc, char **argv)
 done:
     batch_jobs_free(&l);
     free(od);
-    free(inputs);
-    free(gargv);
+    return rc;
+}
+
+int cmd_batch(int argc, char **argv)
+{
+    if (argc >= 2 && !strcmp(argv[1], "--job"))
+        return batch_job_main(argc - 2, argv + 2);
+    batch_args A = {.nworkers = batch_ncpus()};
+    A.inputs = malloc(sizeof(char *) * (size_t)argc);
+    A.gargv = malloc(sizeof(char *) * (size_t)argc);
+    int rc = A.inputs && A.gargv ? parse_args(argc, argv, &A)
+                                 : cli_fail("batch", "reading the command line", HV_ERR_NOMEM);
+    if (rc < 0)
+        rc = run(&A);
+    free(A.inputs);
+    free(A.gargv);
     return rc;
 }
