@@ -6,6 +6,8 @@
 #include "../cli.h"
 #include "../commands.h"
 
+#include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -213,187 +215,264 @@ static int usage_solve(FILE *out)
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
-static int bench_solve(int argc, char **argv)
-{
-    int n = 0, dim = 3, poisson = 0, threads = 0, repeat = 3;
-    double tscale = 4, tol = 1e-6;
-    hv_backend backend = HV_BACKEND_MG;
-    hv_smoother smoother = HV_SMOOTH_RBGS;
-    int smoother_set = 0;
-    const char *pc = "auto"; /* backend petsc: its preconditioner */
-    const char *wisdom = NULL, *obstacle = "none";
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage_solve(stdout);
-        if (!strcmp(a, "--poisson")) {
-            poisson = 1;
-            continue;
-        }
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!v)
-            return cli_usage_error("bench solve", "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 2)
-                return cli_usage_error("bench solve", "--n must be an integer >= 2, got '%s'", v);
-        } else if (!strcmp(a, "--dim")) {
-            if (cli_parse_int(v, &dim) || (dim != 2 && dim != 3))
-                return cli_usage_error("bench solve", "--dim must be 2 or 3, got '%s'", v);
-        } else if (!strcmp(a, "--t-scale")) {
-            if (cli_parse_double(v, &tscale) || tscale <= 0)
-                return cli_usage_error("bench solve", "--t-scale must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--tol")) {
-            if (cli_parse_double(v, &tol) || tol < 1e-12 || tol >= 1)
-                return cli_usage_error("bench solve", "--tol must be in [1e-12, 1), got '%s'", v);
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &threads))
-                return cli_usage_error("bench solve", "--threads must be 1..%d, got '%s'",
-                                       HV_MAX_THREADS, v);
-        } else if (!strcmp(a, "--repeat")) {
-            if (cli_parse_int(v, &repeat) || repeat < 1)
-                return cli_usage_error("bench solve", "--repeat must be >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend("bench solve", v,
-                                  CLI_BACKENDS_ALL & ~CLI_BACKEND(HV_BACKEND_AUTO), &backend))
-                return HV_EXIT_USAGE;
-        } else if (!strcmp(a, "--smoother")) {
-            smoother_set = 1;
-            if (!strcmp(v, "rbgs"))
-                smoother = HV_SMOOTH_RBGS;
-            else if (!strcmp(v, "jacobi"))
-                smoother = HV_SMOOTH_JACOBI;
-            else if (!strcmp(v, "chebyshev"))
-                smoother = HV_SMOOTH_CHEBYSHEV;
-            else
-                return cli_usage_error("bench solve", "unknown smoother '%s'", v);
-        } else if (!strcmp(a, "--pc")) {
-            if (strcmp(v, "auto") && strcmp(v, "boomeramg") && strcmp(v, "pfmg") &&
-                strcmp(v, "gamg"))
-                return cli_usage_error("bench solve",
-                                       "--pc must be auto, boomeramg, pfmg or gamg, got '%s'", v);
-            pc = v;
-        } else if (!strcmp(a, "--wisdom")) {
-            wisdom = v;
-        } else if (!strcmp(a, "--obstacle")) {
-            if (strcmp(v, "none") && strcmp(v, "ball") && strcmp(v, "baffles"))
-                return cli_usage_error("bench solve",
-                                       "--obstacle must be none, ball or baffles, got '%s'", v);
-            obstacle = v;
-        } else {
-            return cli_usage_error("bench solve", "unknown option '%s'", a);
-        }
-    }
-    if (!n)
-        return cli_usage_error("bench solve", "--n is required");
-    if (backend == HV_BACKEND_OPENCL && !smoother_set)
-        smoother = HV_SMOOTH_CHEBYSHEV;
-    if (strcmp(pc, "auto") && backend != HV_BACKEND_PETSC)
-        return cli_usage_error("bench solve", "--pc needs --backend petsc");
-    if (backend == HV_BACKEND_PETSC) {
-        hv_status pst = hv_petsc_option("-hv_petsc_pc", pc);
-        if (pst)
-            return cli_fail("bench solve", "--pc", pst);
-    }
-    hv_set_threads(threads);
-    threads = hv_get_threads();
+/* bench solve's command line. */
+typedef struct solve_args {
+    int n, dim, poisson, threads, repeat;
+    double tscale, tol;
+    hv_backend backend;
+    int smoother, smoother_set; /* hv_smoother */
+    int pc;                     /* index in PCS: backend petsc's preconditioner */
+    int obstacle;               /* index in OBSTACLES */
+    const char *wisdom;
+} solve_args;
 
-    double h = 1.0 / n;
-    hv_problem p = {dim,  {n, n, dim == 3 ? n : 1}, h,
-                    NULL, poisson ? 0.0 : 1.0,      poisson ? 1.0 : tscale * h * h};
-    size_t count = (size_t)n * n * (dim == 3 ? n : 1);
-    hv_status st = hv_check_dims(dim, p.n, h, 24);
+static const char *const PCS[] = {"auto", "boomeramg", "pfmg", "gamg"};
+static const char *const OBSTACLES[] = {"none", "ball", "baffles"};
+
+static void help_solve(void) { usage_solve(stdout); }
+
+/* -1 to go on, else the exit code. */
+static int parse_solve(int argc, char **argv, solve_args *A)
+{
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--poisson", .kind = CLI_FLAG, .dst = &A->poisson, .val = 1},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &A->n,
+         .min = 2,
+         .max = INT_MAX,
+         .needs = "an integer >= 2"},
+        {.names = "--dim", .kind = CLI_INT, .dst = &A->dim, .min = 2, .max = 3, .needs = "2 or 3"},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &A->tscale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--tol",
+         .kind = CLI_DOUBLE,
+         .dst = &A->tol,
+         .min = 1e-12,
+         .max = 1 - 0x1p-53,
+         .needs = "a number in [1e-12, 1)"},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
+        {.names = "--repeat",
+         .kind = CLI_INT,
+         .dst = &A->repeat,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--backend",
+         .kind = CLI_BACKEND,
+         .dst = &A->backend,
+         .val = CLI_BACKENDS_ALL & ~CLI_BACKEND(HV_BACKEND_AUTO)},
+        {.names = "--smoother",
+         .kind = CLI_CHOICE,
+         .dst = &A->smoother,
+         .val = HV_SMOOTH_RBGS,
+         .choices = "rbgs|jacobi|chebyshev",
+         .needs = "rbgs, jacobi or chebyshev",
+         .given = &A->smoother_set},
+        {.names = "--pc",
+         .kind = CLI_CHOICE,
+         .dst = &A->pc,
+         .choices = "auto|boomeramg|pfmg|gamg",
+         .needs = "auto, boomeramg, pfmg or gamg"},
+        {.names = "--wisdom", .kind = CLI_STR, .dst = &A->wisdom},
+        {.names = "--obstacle",
+         .kind = CLI_CHOICE,
+         .dst = &A->obstacle,
+         .choices = "none|ball|baffles",
+         .needs = "none, ball or baffles"},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int rc = cli_parse("bench solve", argc, argv, opts, "argument", &stray, help_solve);
+    if (rc >= 0)
+        return rc;
+    if (stray)
+        return cli_usage_error("bench solve", "unexpected argument '%s'", stray);
+    if (!A->n)
+        return cli_usage_error("bench solve", "--n is required");
+    if (A->backend == HV_BACKEND_OPENCL && !A->smoother_set)
+        A->smoother = HV_SMOOTH_CHEBYSHEV;
+    if (A->pc && A->backend != HV_BACKEND_PETSC)
+        return cli_usage_error("bench solve", "--pc needs --backend petsc");
+    return -1;
+}
+
+/* The problem of a run: the box, its random right-hand side, the solution
+ * and the obstacle's solid cells. */
+typedef struct solve_problem {
+    hv_problem p;
+    size_t count;
+    float *f, *u;
+    uint8_t *solid;
+} solve_problem;
+
+static void problem_free(solve_problem *P)
+{
+    free(P->solid);
+    hv_free(P->f);
+    hv_free(P->u);
+}
+
+static int make_problem(const solve_args *A, solve_problem *P)
+{
+    const int n = A->n, dim = A->dim;
+    const double h = 1.0 / n;
+    const hv_problem p = {dim,  {n, n, dim == 3 ? n : 1}, h,
+                          NULL, A->poisson ? 0.0 : 1.0,   A->poisson ? 1.0 : A->tscale * h * h};
+    P->p = p;
+    P->count = (size_t)n * n * (dim == 3 ? n : 1);
+    hv_status st = hv_check_dims(dim, P->p.n, h, 24);
     if (st)
         return cli_fail("bench solve", "grid", st);
-    float *f = hv_malloc(count * sizeof(float)), *u = hv_calloc(count, sizeof(float));
-    if (!f || !u)
+    P->f = hv_malloc(P->count * sizeof(float));
+    P->u = hv_calloc(P->count, sizeof(float));
+    if (!P->f || !P->u)
         return cli_fail("bench solve", "allocating the problem", HV_ERR_NOMEM);
-    fill_rhs(f, count);
-    uint8_t *solid = NULL;
-    if (strcmp(obstacle, "none")) {
-        if (!(solid = make_obstacle(obstacle, dim, n))) {
-            hv_free(f);
-            hv_free(u);
+    fill_rhs(P->f, P->count);
+    if (A->obstacle) {
+        if (!(P->solid = make_obstacle(OBSTACLES[A->obstacle], dim, n)))
             return cli_fail("bench solve", "allocating the obstacle", HV_ERR_NOMEM);
-        }
-        p.solid = solid;
+        P->p.solid = P->solid;
     }
-    /* The copy reference (not under mpirun: ranks would share the memory
-     * bandwidth it measures, and its buffers would blur the peak memory). */
+    return 0;
+}
+
+/* What the timed solves measured. */
+typedef struct solve_row {
+    double setup, seconds, cycle_gbs, solve_gbs, traffic, peak_mb;
+    double copy_gbs, copy1_gbs, copy_mb;
+    hv_solve_info info;
+    int levels;
+} solve_row;
+
+/* Creates the solver and times its solves, the copy reference's trials run
+ * between them (not under mpirun: ranks would share the memory bandwidth it
+ * measures, and its buffers would blur the peak memory). */
+static int time_row(const solve_args *A, const solve_problem *P, const hv_solver_opts *o,
+                    solve_row *R)
+{
     copy_ref ref = {0};
-    const int copy = backend != HV_BACKEND_PETSC;
-    if (copy && copy_ref_init(&ref, count * sizeof(float) > (256u << 20) ? count * sizeof(float)
-                                                                         : (256u << 20))) {
+    const int copy = A->backend != HV_BACKEND_PETSC;
+    const size_t bytes = P->count * sizeof(float);
+    if (copy && copy_ref_init(&ref, bytes > (256u << 20) ? bytes : (256u << 20))) {
         copy_ref_free(&ref);
-        free(solid);
-        hv_free(f);
-        hv_free(u);
         return cli_fail("bench solve", "allocating the copy reference", HV_ERR_NOMEM);
     }
-
-    hv_solver_opts o;
-    hv_solver_opts_default(&o);
-    o.backend = backend;
-    o.smoother = smoother;
-    o.tol = tol;
-    o.fftw_double = 0;
-    o.fftw_measure = 1;
-    o.wisdom_file = wisdom;
     hv_solver *s = NULL;
-    /* Under mpirun (backend petsc) every rank solves and rank 0 reports, with
-     * mg on the same grid in the same run as the reference: first, so that
-     * each peak memory counts from a high-water mark reset after the other
-     * (PETSc keeps what it freed resident; mg hands its arrays back). */
-    const int rank = hv_mpi_rank(), ranks = hv_mpi_size();
-    double mg_seconds = 0, unused_gbs, ref_peak_mb = -1;
-    hv_solve_info mginfo = {0};
-    if (backend == HV_BACKEND_PETSC) {
-        o.backend = HV_BACKEND_MG;
-        o.smoother = HV_SMOOTH_AUTO;
-        const int reset = hv_peak_rss_reset() == HV_OK;
-        if ((st = hv_solver_create(&s, &p, &o)) ||
-            (st = time_solve(s, f, u, repeat, NULL, &mg_seconds, &mginfo, &unused_gbs)))
-            return cli_fail("bench solve", "the mg reference", st);
-        hv_solver_destroy(&s);
-        if (reset)
-            ref_peak_mb = hv_peak_rss() / 1048576.0;
-        o.backend = backend;
-        o.smoother = smoother;
-        hv_peak_rss_reset();
-    }
-    double t0 = hv_now();
-    if ((st = hv_solver_create(&s, &p, &o)))
+    double t0 = hv_now(), best_cycle_gbs;
+    hv_status st = hv_solver_create(&s, &P->p, o);
+    if (st) {
+        copy_ref_free(&ref);
         return cli_fail("bench solve", "creating the solver", st);
-    double setup = hv_now() - t0, seconds;
-    hv_solve_info info;
-    double best_cycle_gbs;
-    if ((st = time_solve(s, f, u, repeat, copy ? &ref : NULL, &seconds, &info, &best_cycle_gbs)))
-        return cli_fail("bench solve", "solving", st);
-    double copy_gbs = ref.gbs, copy1_gbs = ref.gbs1,
-           copy_mb = 2.0 * ref.n * sizeof(float) / 1048576;
+    }
+    R->setup = hv_now() - t0;
+    st = time_solve(s, P->f, P->u, A->repeat, copy ? &ref : NULL, &R->seconds, &R->info,
+                    &best_cycle_gbs);
+    R->copy_gbs = ref.gbs;
+    R->copy1_gbs = ref.gbs1;
+    R->copy_mb = 2.0 * ref.n * sizeof(float) / 1048576;
     copy_ref_free(&ref);
+    if (st) {
+        hv_solver_destroy(&s);
+        return cli_fail("bench solve", "solving", st);
+    }
     hv_solver_stats stats;
     hv_solver_get_stats(s, &stats);
+    R->levels = stats.levels;
     /* Each iteration runs one cycle plus its correction; further cycles in an
      * iteration (mg: info.cycles > iterations) add bytes_per_cycle each. */
-    double traffic = stats.bytes_per_iteration * info.iterations;
-    if (info.cycles > info.iterations && stats.bytes_per_cycle > 0)
-        traffic += stats.bytes_per_cycle * (info.cycles - info.iterations);
-    double solve_gbs =
-        info.iterations > 0 && backend != HV_BACKEND_FFTW ? traffic / seconds / 1e9 : 0;
+    const hv_solve_info *info = &R->info;
+    R->traffic = stats.bytes_per_iteration * info->iterations;
+    if (info->cycles > info->iterations && stats.bytes_per_cycle > 0)
+        R->traffic += stats.bytes_per_cycle * (info->cycles - info->iterations);
+    R->solve_gbs =
+        info->iterations > 0 && A->backend != HV_BACKEND_FFTW ? R->traffic / R->seconds / 1e9 : 0;
     /* The V-cycle's own bandwidth where the backend times its cycles (mg);
      * otherwise the whole solve's. */
-    double cycle_gbs = best_cycle_gbs > 0 ? best_cycle_gbs : solve_gbs;
+    R->cycle_gbs = best_cycle_gbs > 0 ? best_cycle_gbs : R->solve_gbs;
     hv_solver_destroy(&s);
-    const double peak_mb = hv_peak_rss() / 1048576.0;
-    if (rank != 0) {
-        free(solid);
-        hv_free(f);
-        hv_free(u);
-        return HV_EXIT_OK;
+    R->peak_mb = hv_peak_rss() / 1048576.0;
+    return 0;
+}
+
+/* Under mpirun (backend petsc): mg on the same grid in the same run, first,
+ * so that each peak memory counts from a high-water mark reset after the
+ * other (PETSc keeps what it freed resident; mg hands its arrays back). */
+typedef struct mg_ref {
+    double seconds, peak_mb;
+    hv_solve_info info;
+} mg_ref;
+
+static int time_mg_ref(const solve_args *A, const solve_problem *P, hv_solver_opts o, mg_ref *M)
+{
+    hv_solver *s = NULL;
+    double unused_gbs;
+    o.backend = HV_BACKEND_MG;
+    o.smoother = HV_SMOOTH_AUTO;
+    M->peak_mb = -1;
+    const int reset = hv_peak_rss_reset() == HV_OK;
+    hv_status st = hv_solver_create(&s, &P->p, &o);
+    if (!st)
+        st = time_solve(s, P->f, P->u, A->repeat, NULL, &M->seconds, &M->info, &unused_gbs);
+    hv_solver_destroy(&s);
+    if (st)
+        return cli_fail("bench solve", "the mg reference", st);
+    if (reset)
+        M->peak_mb = hv_peak_rss() / 1048576.0;
+    hv_peak_rss_reset();
+    return 0;
+}
+
+static const char *smoother_name(const solve_args *A)
+{
+    if (A->backend == HV_BACKEND_PETSC)
+        return A->pc         ? PCS[A->pc]
+               : A->dim == 3 ? "auto:pfmg" /* one fluid region */
+                             : "auto:boomeramg";
+    return A->smoother == HV_SMOOTH_RBGS     ? "rbgs"
+           : A->smoother == HV_SMOOTH_JACOBI ? "jacobi"
+                                             : "chebyshev";
+}
+
+/* The reference's fields: mg in the same run under mpirun, else FFTW on the
+ * same box (without the obstacle: FFTW solves plain boxes). */
+static void print_reference(const solve_args *A, const solve_problem *P, hv_solver_opts o,
+                            const solve_row *R, const mg_ref *M)
+{
+    if (A->backend == HV_BACKEND_PETSC) {
+        printf(",\"ref\":\"mg\",\"ref_seconds\":%.5f,\"ref_iterations\":%d,\"ref_relres\":%.3e,"
+               "\"ratio\":%.3f",
+               M->seconds, M->info.iterations, M->info.relres, R->seconds / M->seconds);
+        if (M->peak_mb >= 0)
+            printf(",\"ref_peak_rss_mb\":%.1f,\"mem_ratio\":%.3f", M->peak_mb,
+                   R->peak_mb / M->peak_mb);
+        return;
     }
+    if (A->backend == HV_BACKEND_FFTW)
+        return;
+    hv_problem plain = P->p;
+    plain.solid = NULL;
+    o.backend = HV_BACKEND_FFTW;
+    hv_solver *s = NULL;
+    double ref_seconds = 0, unused;
+    hv_solve_info rinfo;
+    if (hv_solver_create(&s, &plain, &o) == HV_OK &&
+        time_solve(s, P->f, P->u, A->repeat, NULL, &ref_seconds, &rinfo, &unused) == HV_OK)
+        printf(",\"ref\":\"%s\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
+               P->solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres,
+               R->seconds / ref_seconds);
+    hv_solver_destroy(&s);
+}
+
+static void print_row(const solve_args *A, const solve_problem *P, hv_solver_opts *o,
+                      const solve_row *R, const mg_ref *M)
+{
+    const hv_solve_info *info = &R->info;
     printf(
         "{\"bench\":\"solve\",\"n\":%d,\"ranks\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
         "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
@@ -402,52 +481,53 @@ static int bench_solve(int argc, char **argv)
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
         "\"obstacle\":\"%s\"",
-        n, ranks, dim, poisson ? "poisson" : "heat", poisson ? 0.0 : tscale,
-        hv_backend_name(backend),
-        backend == HV_BACKEND_PETSC    ? (strcmp(pc, "auto") ? pc
-                                          : dim == 3         ? "auto:pfmg" /* one fluid region */
-                                                             : "auto:boomeramg")
-        : smoother == HV_SMOOTH_RBGS   ? "rbgs"
-        : smoother == HV_SMOOTH_JACOBI ? "jacobi"
-                                       : "chebyshev",
-        threads, tol, setup, seconds, peak_mb, info.iterations, info.cycles, info.relres,
-        hv_stop_reason_str(info.reason), stats.levels, copy_gbs, cycle_gbs, info.cycles_timed,
-        solve_gbs, obstacle);
-    if (backend == HV_BACKEND_PETSC) {
-        printf(",\"ref\":\"mg\",\"ref_seconds\":%.5f,\"ref_iterations\":%d,\"ref_relres\":%.3e,"
-               "\"ratio\":%.3f",
-               mg_seconds, mginfo.iterations, mginfo.relres, seconds / mg_seconds);
-        if (ref_peak_mb >= 0)
-            printf(",\"ref_peak_rss_mb\":%.1f,\"mem_ratio\":%.3f", ref_peak_mb,
-                   peak_mb / ref_peak_mb);
-    } else if (backend != HV_BACKEND_FFTW) {
-        o.backend = HV_BACKEND_FFTW;
-        p.solid = NULL; /* FFTW solves plain boxes: the reference is the box without it */
-        double ref_seconds = 0, unused;
-        hv_solve_info rinfo;
-        if (hv_solver_create(&s, &p, &o) == HV_OK &&
-            time_solve(s, f, u, repeat, NULL, &ref_seconds, &rinfo, &unused) == HV_OK)
-            printf(",\"ref\":\"%s\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
-                   solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres,
-                   seconds / ref_seconds);
-        hv_solver_destroy(&s);
-    }
-    if (copy)
-        printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", copy1_gbs, copy_mb);
-    if (backend == HV_BACKEND_OPENCL) {
-        hv_problem pd = p;
-        pd.solid = solid; /* the FFTW reference above took it off */
-        print_device(&pd, &o, f, repeat, traffic, seconds);
-    }
-    if (copy_gbs > 0 && cycle_gbs > 0)
-        printf(",\"cycle_vs_copy\":%.3f,\"solve_vs_copy\":%.3f", cycle_gbs / copy_gbs,
-               solve_gbs / copy_gbs);
+        A->n, hv_mpi_size(), A->dim, A->poisson ? "poisson" : "heat", A->poisson ? 0.0 : A->tscale,
+        hv_backend_name(A->backend), smoother_name(A), A->threads, A->tol, R->setup, R->seconds,
+        R->peak_mb, info->iterations, info->cycles, info->relres, hv_stop_reason_str(info->reason),
+        R->levels, R->copy_gbs, R->cycle_gbs, info->cycles_timed, R->solve_gbs,
+        OBSTACLES[A->obstacle]);
+    print_reference(A, P, *o, R, M);
+    if (A->backend != HV_BACKEND_PETSC)
+        printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", R->copy1_gbs, R->copy_mb);
+    if (A->backend == HV_BACKEND_OPENCL)
+        print_device(&P->p, o, P->f, A->repeat, R->traffic, R->seconds);
+    if (R->copy_gbs > 0 && R->cycle_gbs > 0)
+        printf(",\"cycle_vs_copy\":%.3f,\"solve_vs_copy\":%.3f", R->cycle_gbs / R->copy_gbs,
+               R->solve_gbs / R->copy_gbs);
     printf("}\n");
     fflush(stdout);
-    free(solid);
-    hv_free(f);
-    hv_free(u);
-    return HV_EXIT_OK;
+}
+
+static int bench_solve(int argc, char **argv)
+{
+    solve_args A = {.dim = 3, .repeat = 3, .tscale = 4, .tol = 1e-6, .backend = HV_BACKEND_MG};
+    int rc = parse_solve(argc, argv, &A);
+    if (rc >= 0)
+        return rc;
+    if (A.backend == HV_BACKEND_PETSC) {
+        hv_status pst = hv_petsc_option("-hv_petsc_pc", PCS[A.pc]);
+        if (pst)
+            return cli_fail("bench solve", "--pc", pst);
+    }
+    hv_set_threads(A.threads);
+    A.threads = hv_get_threads();
+    solve_problem P = {0};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = A.backend;
+    o.smoother = (hv_smoother)A.smoother;
+    o.tol = A.tol;
+    o.fftw_double = 0;
+    o.fftw_measure = 1;
+    o.wisdom_file = A.wisdom;
+    mg_ref M = {0};
+    solve_row R = {0};
+    if (!(rc = make_problem(&A, &P)) &&
+        !(rc = A.backend == HV_BACKEND_PETSC ? time_mg_ref(&A, &P, o, &M) : 0) &&
+        !(rc = time_row(&A, &P, &o, &R)) && hv_mpi_rank() == 0)
+        print_row(&A, &P, &o, &R, &M); /* every rank solves, rank 0 reports */
+    problem_free(&P);
+    return rc;
 }
 
 static int bench_run(int argc, char **argv)
