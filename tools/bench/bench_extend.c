@@ -5,6 +5,7 @@
 #include "bench_ref.h"
 #include "../cli.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -202,133 +203,148 @@ static void errors(const bench_case *b, hv_grid *const out[3], int vec, double *
     *near = mn ? sn / mn : NAN;
 }
 
-int bench_extend(int argc, char **argv)
+/* bench extend's command line. */
+typedef struct extend_args {
+    int n, threads, repeat, vec;
+    double out_band, band, tscale;
+    const char *shape;
+    hv_backend backend;
+} extend_args;
+
+/* --shape sphere|mesh:PATH */
+static int take_shape(const char *cmd, const char *opt, char **v, int nv, void *dst)
 {
-    int n = 0, threads = 0, repeat = 3, vec = 1;
-    hv_extend_opts dflt;
-    hv_extend_opts_default(&dflt);
-    double out_band = -1, band = dflt.band, tscale = dflt.t_scale;
-    const char *shape = "sphere";
-    hv_backend backend = HV_BACKEND_AUTO;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage_extend(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!v)
-            return cli_usage_error("bench extend", "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 16)
-                return cli_usage_error("bench extend", "--n must be an integer >= 16, got '%s'", v);
-        } else if (!strcmp(a, "--shape")) {
-            if (strcmp(v, "sphere") && strncmp(v, "mesh:", 5))
-                return cli_usage_error("bench extend",
-                                       "--shape must be sphere or mesh:PATH, got '%s'", v);
-            shape = v;
-        } else if (!strcmp(a, "--field")) {
-            if (strcmp(v, "vector") && strcmp(v, "scalar"))
-                return cli_usage_error("bench extend", "--field must be vector or scalar, got '%s'",
-                                       v);
-            vec = !strcmp(v, "vector");
-        } else if (!strcmp(a, "--out-band")) {
-            if (cli_parse_double(v, &out_band) || out_band <= 0)
-                return cli_usage_error("bench extend", "--out-band must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--band")) {
-            if (cli_parse_double(v, &band) || band <= 0)
-                return cli_usage_error("bench extend", "--band must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--t-scale")) {
-            if (cli_parse_double(v, &tscale) || tscale <= 0)
-                return cli_usage_error("bench extend", "--t-scale must be positive, got '%s'", v);
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &threads))
-                return cli_usage_error("bench extend", "--threads must be 1..%d, got '%s'",
-                                       HV_MAX_THREADS, v);
-        } else if (!strcmp(a, "--repeat")) {
-            if (cli_parse_int(v, &repeat) || repeat < 1)
-                return cli_usage_error("bench extend", "--repeat must be >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend("bench extend", v, CLI_BACKENDS_LOCAL, &backend))
-                return HV_EXIT_USAGE;
-        } else {
-            return cli_usage_error("bench extend", "unknown option '%s'", a);
-        }
-    }
-    if (!n)
+    if (nv < 1)
+        return -cli_usage_error(cmd, "%s needs 1 value", opt);
+    if (strcmp(v[0], "sphere") && strncmp(v[0], "mesh:", 5))
+        return -cli_usage_error(cmd, "%s needs sphere or mesh:PATH, got '%s'", opt, v[0]);
+    *(const char **)dst = v[0];
+    return 1;
+}
+
+static void help_extend(void) { usage_extend(stdout); }
+
+/* -1 to go on, else the exit code. */
+static int parse_extend(int argc, char **argv, extend_args *A)
+{
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &A->n,
+         .min = 16,
+         .max = INT_MAX,
+         .needs = "an integer >= 16"},
+        {.names = "--shape", .kind = CLI_FN, .dst = &A->shape, .val = 1, .fn = take_shape},
+        {.names = "--field",
+         .kind = CLI_CHOICE,
+         .dst = &A->vec,
+         .choices = "scalar|vector",
+         .needs = "vector or scalar"},
+        {.names = "--out-band",
+         .kind = CLI_DOUBLE,
+         .dst = &A->out_band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--band",
+         .kind = CLI_DOUBLE,
+         .dst = &A->band,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number of voxels"},
+        {.names = "--t-scale",
+         .kind = CLI_DOUBLE,
+         .dst = &A->tscale,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive number"},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
+        {.names = "--repeat",
+         .kind = CLI_INT,
+         .dst = &A->repeat,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A->backend, .val = CLI_BACKENDS_LOCAL},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int rc = cli_parse("bench extend", argc, argv, opts, "argument", &stray, help_extend);
+    if (rc >= 0)
+        return rc;
+    if (stray)
+        return cli_usage_error("bench extend", "unexpected argument '%s'", stray);
+    if (!A->n)
         return cli_usage_error("bench extend", "--n is required");
-    hv_set_threads(threads);
-    threads = hv_get_threads();
-    const int is_mesh = !strncmp(shape, "mesh:", 5);
-    if (is_mesh && out_band < 0)
-        out_band = 2;
+    return -1;
+}
 
-    bench_case b = {0};
-    double sdf_seconds = 0;
-    hv_status st =
-        is_mesh ? make_mesh(&b, shape + 5, n, vec, &sdf_seconds) : make_sphere(&b, n, vec);
-    if (st) {
-        free_case(&b);
-        return cli_fail("bench extend", is_mesh ? shape + 5 : "building the sphere", st);
-    }
-    if (out_band > 0) {
-        size_t count = hv_grid_count(b.phi);
-        for (size_t c = 0; c < count; c++)
-            if (!(fabs(b.phi->v[c]) < out_band * b.phi->h))
-                b.eval[c] = 0;
-    }
-    hv_grid *out[3] = {NULL, NULL, NULL}, *ref[3] = {NULL, NULL, NULL};
-    for (int q = 0; q < 3 && !st; q++)
-        if (!(st = hv_grid_create(&out[q], 3, b.phi->n, b.phi->h, b.phi->origin)))
-            st = hv_grid_create(&ref[q], 3, b.phi->n, b.phi->h, b.phi->origin);
-    if (st)
-        return cli_fail("bench extend", "allocating outputs", st);
+/* What heatvox's extension measured: the extender built once (a
+ * simulation's set-up), then timed per call. */
+typedef struct extend_row {
+    double setup, seconds;
+    hv_extend_stats es;
+} extend_row;
 
-    /* heatvox: the extender is built once (a simulation's set-up), then timed per call. */
+static int time_heatvox(const extend_args *A, const bench_case *b, hv_grid *const out[3],
+                        extend_row *R)
+{
     hv_extend_opts o;
     hv_extend_opts_default(&o);
-    o.band = band;
-    o.t_scale = tscale;
-    o.out_band = out_band > 0 ? out_band : 0;
-    o.backend = backend;
+    o.band = A->band;
+    o.t_scale = A->tscale;
+    o.out_band = A->out_band > 0 ? A->out_band : 0;
+    o.backend = A->backend;
     hv_extender *e = NULL;
     double t0 = hv_now();
-    if ((st = hv_extender_create(&e, 3, b.phi->n, b.phi->h, NULL, &o)))
+    hv_status st = hv_extender_create(&e, 3, b->phi->n, b->phi->h, NULL, &o);
+    if (st)
         return cli_fail("bench extend", "creating the extender", st);
     hv_extend_field f = {
-        vec ? 3 : 1, {b.in[0]->v, b.in[1]->v, b.in[2]->v}, {out[0]->v, out[1]->v, out[2]->v}};
-    hv_extend_stats es;
-    if ((st = hv_extend_many(e, b.phi->v, 1, &f, &es)))
-        return cli_fail("bench extend", "extending", st);
-    double setup = hv_now() - t0, seconds = 1e30;
-    for (int r = 0; r < repeat; r++) {
+        A->vec ? 3 : 1, {b->in[0]->v, b->in[1]->v, b->in[2]->v}, {out[0]->v, out[1]->v, out[2]->v}};
+    st = hv_extend_many(e, b->phi->v, 1, &f, &R->es);
+    R->setup = hv_now() - t0;
+    R->seconds = 1e30;
+    for (int r = 0; r < A->repeat && !st; r++) {
         t0 = hv_now();
-        if ((st = hv_extend_many(e, b.phi->v, 1, &f, &es)))
-            return cli_fail("bench extend", "extending", st);
-        seconds = fmin(seconds, hv_now() - t0);
+        st = hv_extend_many(e, b->phi->v, 1, &f, &R->es);
+        R->seconds = fmin(R->seconds, hv_now() - t0);
     }
-    setup -= seconds;
+    R->setup -= R->seconds;
     hv_extender_destroy(&e);
+    return st ? cli_fail("bench extend", "extending", st) : 0;
+}
 
-    /* OpenVDB sdfToExt on the same input: time inside OpenVDB, best of R. */
-    double ref_seconds = 1e30, ref_wall = 1e30;
-    const double vb = out_band > 0 ? out_band + 1 : 0; /* sdfToExt's own band, voxels */
-    for (int r = 0; r < repeat; r++) {
-        double s = 0;
-        t0 = hv_now();
-        st = vec ? ref_vdb_sdf_to_ext_vec3(b.phi, b.in[0], b.in[1], b.in[2], vb, 1, 0.0f, ref[0],
-                                           ref[1], ref[2], &s)
-                 : ref_vdb_sdf_to_ext(b.phi, b.in[0], vb, 1, 0.0f, ref[0], &s);
+/* OpenVDB sdfToExt on the same input: time inside OpenVDB, best of R, and
+ * the wall time around it. */
+static int time_openvdb(const extend_args *A, const bench_case *b, hv_grid *const ref[3],
+                        double *seconds, double *wall)
+{
+    *seconds = *wall = 1e30;
+    const double vb = A->out_band > 0 ? A->out_band + 1 : 0; /* sdfToExt's own band, voxels */
+    for (int r = 0; r < A->repeat; r++) {
+        double s = 0, t0 = hv_now();
+        hv_status st = A->vec ? ref_vdb_sdf_to_ext_vec3(b->phi, b->in[0], b->in[1], b->in[2], vb, 1,
+                                                        0.0f, ref[0], ref[1], ref[2], &s)
+                              : ref_vdb_sdf_to_ext(b->phi, b->in[0], vb, 1, 0.0f, ref[0], &s);
         if (st)
             return ref_vdb_fail("bench extend", "OpenVDB sdfToExt", st);
-        ref_wall = fmin(ref_wall, hv_now() - t0);
-        ref_seconds = fmin(ref_seconds, s);
+        *wall = fmin(*wall, hv_now() - t0);
+        *seconds = fmin(*seconds, s);
     }
+    return 0;
+}
 
+static void print_extend(const extend_args *A, const bench_case *b, hv_grid *const out[3],
+                         hv_grid *const ref[3], const extend_row *R, double ref_seconds,
+                         double ref_wall, double sdf_seconds)
+{
+    const int is_mesh = !strncmp(A->shape, "mesh:", 5);
+    const hv_extend_stats *es = &R->es;
     double err, err_near, rerr, rerr_near;
-    errors(&b, out, vec, &err, &err_near);
-    errors(&b, ref, vec, &rerr, &rerr_near);
+    errors(b, out, A->vec, &err, &err_near);
+    errors(b, ref, A->vec, &rerr, &rerr_near);
     printf("{\"bench\":\"extend\",\"n\":%d,\"grid\":[%d,%d,%d],\"shape\":\"%s\",\"field\":\"%s\","
            "\"output\":\"%s\",\"backend\":\"%s\",\"threads\":%d,\"band\":%g,\"t_scale\":%g,"
            "\"seconds\":%.4f,\"setup_seconds\":%.4f,\"solves\":%d,\"levels\":%d,"
@@ -336,22 +352,73 @@ int bench_extend(int argc, char **argv)
            "zu,\"cp_cells\":%zu,\"ratio_cells\":%zu,"
            "\"ref\":\"openvdb-sdfToExt\",\"ref_seconds\":%.4f,\"ref_wall_seconds\":%.4f,"
            "\"ratio\":%.3f,\"err\":%.3e,\"ref_err\":%.3e,\"err_near\":%.3e,\"ref_err_near\":%.3e",
-           n, b.phi->n[0], b.phi->n[1], b.phi->n[2], is_mesh ? shape + 5 : "sphere",
-           vec ? "vector" : "scalar", out_band > 0 ? "band" : "dense", hv_backend_name(backend),
-           threads, band, tscale, seconds, setup, es.solves, es.levels, es.t_weights, es.t_solve,
-           es.t_eval, es.solve_cells, es.cp_cells, es.ratio_cells, ref_seconds, ref_wall,
-           seconds / ref_seconds, err, rerr, err_near, rerr_near);
-    if (out_band > 0)
-        printf(",\"out_band\":%g", out_band);
+           A->n, b->phi->n[0], b->phi->n[1], b->phi->n[2], is_mesh ? A->shape + 5 : "sphere",
+           A->vec ? "vector" : "scalar", A->out_band > 0 ? "band" : "dense",
+           hv_backend_name(A->backend), A->threads, A->band, A->tscale, R->seconds, R->setup,
+           es->solves, es->levels, es->t_weights, es->t_solve, es->t_eval, es->solve_cells,
+           es->cp_cells, es->ratio_cells, ref_seconds, ref_wall, R->seconds / ref_seconds, err,
+           rerr, err_near, rerr_near);
+    if (A->out_band > 0)
+        printf(",\"out_band\":%g", A->out_band);
     if (is_mesh)
         printf(",\"sdf_seconds\":%.4f", sdf_seconds);
-    cli_json_device(backend);
+    cli_json_device(A->backend);
     printf("}\n");
     fflush(stdout);
+}
+
+int bench_extend(int argc, char **argv)
+{
+    hv_extend_opts dflt;
+    hv_extend_opts_default(&dflt);
+    extend_args A = {.repeat = 3,
+                     .vec = 1,
+                     .out_band = -1,
+                     .band = dflt.band,
+                     .tscale = dflt.t_scale,
+                     .shape = "sphere",
+                     .backend = HV_BACKEND_AUTO};
+    int rc = parse_extend(argc, argv, &A);
+    if (rc >= 0)
+        return rc;
+    hv_set_threads(A.threads);
+    A.threads = hv_get_threads();
+    const int is_mesh = !strncmp(A.shape, "mesh:", 5);
+    if (is_mesh && A.out_band < 0)
+        A.out_band = 2;
+
+    bench_case b = {0};
+    hv_grid *out[3] = {NULL, NULL, NULL}, *ref[3] = {NULL, NULL, NULL};
+    double sdf_seconds = 0;
+    hv_status st = is_mesh ? make_mesh(&b, A.shape + 5, A.n, A.vec, &sdf_seconds)
+                           : make_sphere(&b, A.n, A.vec);
+    if (st) {
+        rc = cli_fail("bench extend", is_mesh ? A.shape + 5 : "building the sphere", st);
+        goto done;
+    }
+    if (A.out_band > 0) {
+        size_t count = hv_grid_count(b.phi);
+        for (size_t c = 0; c < count; c++)
+            if (!(fabs(b.phi->v[c]) < A.out_band * b.phi->h))
+                b.eval[c] = 0;
+    }
+    for (int q = 0; q < 3 && !st; q++)
+        if (!(st = hv_grid_create(&out[q], 3, b.phi->n, b.phi->h, b.phi->origin)))
+            st = hv_grid_create(&ref[q], 3, b.phi->n, b.phi->h, b.phi->origin);
+    if (st) {
+        rc = cli_fail("bench extend", "allocating outputs", st);
+        goto done;
+    }
+    extend_row R;
+    double ref_seconds, ref_wall;
+    if (!(rc = time_heatvox(&A, &b, out, &R)) &&
+        !(rc = time_openvdb(&A, &b, ref, &ref_seconds, &ref_wall)))
+        print_extend(&A, &b, out, ref, &R, ref_seconds, ref_wall, sdf_seconds);
+done:
     for (int q = 0; q < 3; q++) {
         hv_grid_destroy(&out[q]);
         hv_grid_destroy(&ref[q]);
     }
     free_case(&b);
-    return HV_EXIT_OK;
+    return rc;
 }
