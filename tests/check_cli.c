@@ -97,6 +97,19 @@ START_TEST(option_errors_should_read_alike_in_every_command)
         {"sdf2d x.txt -o t.exr --res 1", "sdf2d: --res needs an integer >= 2, got '1'"},
         {"sdf2d x.txt y.txt -o t.exr",
          "sdf2d: more than one curves file given ('x.txt' and 'y.txt')"},
+        {"slice x.vdb -o t.png --axis w", "slice: --axis needs x, y or z, got 'w'"},
+        {"slice x.vdb -o t.png --index -1", "slice: --index needs an integer >= 0, got '-1'"},
+        {"info --frob", "info: unknown option '--frob'"},
+        {"batch sc/meshes -o t --res 1", "batch: --res needs an integer >= 2, got '1'"},
+        {"batch sc/meshes -o t --format png", "batch: --format needs vdb or exr, got 'png'"},
+        {"batch sc/meshes -o t -j 0", "batch: -j needs an integer in 1..256, got '0'"},
+        {"bench solve --n 8 --smoother sor",
+         "bench solve: --smoother needs rbgs, jacobi or chebyshev, got 'sor'"},
+        {"bench solve --n 8 --backend auto",
+         "bench solve: --backend must be mg, fftw, opencl or petsc, got 'auto'"},
+        {"bench extend --n 8", "bench extend: --n needs an integer >= 16, got '8'"},
+        {"bench band a.obj b.obj --n 64",
+         "bench band: more than one mesh given ('a.obj' and 'b.obj')"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char err[4096];

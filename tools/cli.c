@@ -3,6 +3,7 @@
  * checked before anything runs and land together. */
 #include "cli.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -237,44 +238,37 @@ const char *cli_sign_name(hv_sdf_sign s)
     return s == HV_SDF_SIGN_WINDING ? "winding" : s == HV_SDF_SIGN_HEAT ? "heat" : "none";
 }
 
+/* The mesh benchmark's usage, for cli_parse's help. */
+static int (*bench_mesh_usage)(FILE *);
+static void bench_mesh_help(void) { bench_mesh_usage(stdout); }
+
 int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usage)(FILE *),
                               cli_bench_mesh_args *out)
 {
     cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO, HV_SDF_SIGN_AUTO};
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (a[0] != '-') {
-            if (A.path)
-                return cli_usage_error(cmd, "only one mesh, got '%s' and '%s'", A.path, a);
-            A.path = a;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error(cmd, "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &A.n) || A.n < 8)
-                return cli_usage_error(cmd, "--n must be an integer >= 8, got '%s'", v);
-        } else if (!strcmp(a, "--repeat")) {
-            if (cli_parse_int(v, &A.repeat) || A.repeat < 1)
-                return cli_usage_error(cmd, "--repeat must be >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--threads")) {
-            if (cli_parse_threads(v, 1, &A.threads))
-                return cli_usage_error(cmd, "--threads must be 1..%d, got '%s'", HV_MAX_THREADS, v);
-        } else if (!strcmp(a, "--backend")) {
-            if (cli_parse_backend(cmd, v, CLI_BACKENDS_LOCAL, &A.backend))
-                return HV_EXIT_USAGE;
-        } else if (!strcmp(a, "--sign")) {
-            if (cli_parse_sign(v, &A.sign))
-                return cli_usage_error(cmd, "--sign needs auto, heat or winding, got '%s'", v);
-        } else {
-            return cli_usage_error(cmd, "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &A.n,
+         .min = 8,
+         .max = INT_MAX,
+         .needs = "an integer >= 8"},
+        {.names = "--repeat",
+         .kind = CLI_INT,
+         .dst = &A.repeat,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--threads", .kind = CLI_THREADS, .dst = &A.threads},
+        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A.backend, .val = CLI_BACKENDS_LOCAL},
+        {.names = "--sign", .kind = CLI_SIGN, .dst = &A.sign},
+        {.names = NULL},
+    };
+    bench_mesh_usage = usage;
+    int rc = cli_parse(cmd, argc, argv, opts, "mesh", &A.path, bench_mesh_help);
+    if (rc >= 0)
+        return rc;
     if (!A.path || !A.n)
         return cli_usage_error(cmd, "a mesh and --n are required");
     *out = A;

@@ -7,6 +7,7 @@
 #include "../commands.h"
 #include "heatvox/heatvox.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -78,6 +79,8 @@ static int compare(const char *mine, const char *ref, double band, double *agree
     return 0;
 }
 
+static void help(void) { usage(stdout); }
+
 int cmd_bench_band(int argc, char **argv)
 {
     if (argc > 1 && !strcmp(argv[1], "--ref"))
@@ -85,32 +88,32 @@ int cmd_bench_band(int argc, char **argv)
     const char *path = NULL;
     int n = 0, repeat = 1, dense = 0;
     double band = 3;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!strcmp(a, "--n") && v) {
-            if (cli_parse_int(v, &n) || n < 16)
-                return cli_usage_error("bench band", "--n needs an integer >= 16, got '%s'", v);
-            i++;
-        } else if (!strcmp(a, "--band") && v) {
-            if (cli_parse_double(v, &band) || !(band >= 1) || band > 16)
-                return cli_usage_error("bench band", "--band needs 1..16 voxels, got '%s'", v);
-            i++;
-        } else if (!strcmp(a, "--repeat") && v) {
-            if (cli_parse_int(v, &repeat) || repeat < 1)
-                return cli_usage_error("bench band", "--repeat needs a positive integer");
-            i++;
-        } else if (!strcmp(a, "--dense")) {
-            dense = 1;
-        } else if (a[0] != '-' && !path) {
-            path = a;
-        } else {
-            return cli_usage_error("bench band", "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &n,
+         .min = 16,
+         .max = INT_MAX,
+         .needs = "an integer >= 16"},
+        {.names = "--band",
+         .kind = CLI_DOUBLE,
+         .dst = &band,
+         .min = 1,
+         .max = 16,
+         .needs = "1..16 voxels"},
+        {.names = "--repeat",
+         .kind = CLI_INT,
+         .dst = &repeat,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "a positive integer"},
+        {.names = "--dense", .kind = CLI_FLAG, .dst = &dense, .val = 1},
+        {.names = NULL},
+    };
+    int rc = cli_parse("bench band", argc, argv, opts, "mesh", &path, help);
+    if (rc >= 0)
+        return rc;
     if (!path || !n)
         return usage(stderr);
     const char *dir = getenv("TMPDIR");

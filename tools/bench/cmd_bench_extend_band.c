@@ -12,6 +12,7 @@
 #include "../cli.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -533,47 +534,43 @@ static void remove_files(const char *dir, char (*files)[4096], int nfiles, int k
     rmdir(dir);
 }
 
+static void help(void) { usage(stdout); }
+
 int cmd_bench_extend_band(int argc, char **argv)
 {
     if (argc > 1 && !strcmp(argv[1], "--input"))
         return make_input(argc, argv);
     if (argc > 1 && !strcmp(argv[1], "--ref"))
         return run_ref(argc, argv);
-    const char *mesh = NULL, *keep = NULL, *field = "vector";
-    int n = 0;
+    const char *mesh = NULL, *keep = NULL;
+    int n = 0, vec = 1;
     double band = 3;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (a[0] != '-') {
-            if (mesh)
-                return cli_usage_error(CMD, "one mesh only ('%s' and '%s')", mesh, a);
-            mesh = a;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error(CMD, "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 16)
-                return cli_usage_error(CMD, "--n needs an integer >= 16, got '%s'", v);
-        } else if (!strcmp(a, "--out-band")) {
-            if (cli_parse_double(v, &band) || !(band >= 1) || band > 3)
-                return cli_usage_error(
-                    CMD, "--out-band needs 1..3 voxels (the input band), got '%s'", v);
-        } else if (!strcmp(a, "--field")) {
-            if (strcmp(v, "vector") && strcmp(v, "scalar"))
-                return cli_usage_error(CMD, "--field must be vector or scalar, got '%s'", v);
-            field = v;
-        } else if (!strcmp(a, "--keep")) {
-            keep = v;
-        } else {
-            return cli_usage_error(CMD, "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &n,
+         .min = 16,
+         .max = INT_MAX,
+         .needs = "an integer >= 16"},
+        {.names = "--out-band",
+         .kind = CLI_DOUBLE,
+         .dst = &band,
+         .min = 1,
+         .max = 3,
+         .needs = "1..3 voxels (the input band)"},
+        {.names = "--field",
+         .kind = CLI_CHOICE,
+         .dst = &vec,
+         .choices = "scalar|vector",
+         .needs = "vector or scalar"},
+        {.names = "--keep", .kind = CLI_STR, .dst = &keep},
+        {.names = NULL},
+    };
+    int prc = cli_parse(CMD, argc, argv, opts, "mesh", &mesh, help);
+    if (prc >= 0)
+        return prc;
+    const char *field = vec ? "vector" : "scalar";
     if (!mesh || !n)
         return usage(stderr);
     if (access(mesh, R_OK)) {
@@ -784,29 +781,34 @@ static void loop_errors(const hv_tiles *phi, hv_tiles *const ex[3], hv_tiles *co
     m[0] += m0, m[1] += m1, m[2] += m2;
 }
 
+static void help_loop(void) { usage_loop(stdout); }
+
 int cmd_bench_extend_loop(int argc, char **argv)
 {
     const char *cmd = "bench extend-loop";
     int n = 0, steps = 20;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage_loop(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!v)
-            return cli_usage_error(cmd, "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 32)
-                return cli_usage_error(cmd, "--n needs an integer >= 32, got '%s'", v);
-        } else if (!strcmp(a, "--steps")) {
-            if (cli_parse_int(v, &steps) || steps < 1)
-                return cli_usage_error(cmd, "--steps needs a positive integer, got '%s'", v);
-        } else {
-            return cli_usage_error(cmd, "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &n,
+         .min = 32,
+         .max = INT_MAX,
+         .needs = "an integer >= 32"},
+        {.names = "--steps",
+         .kind = CLI_INT,
+         .dst = &steps,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "a positive integer"},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int rc = cli_parse(cmd, argc, argv, opts, "argument", &stray, help_loop);
+    if (rc >= 0)
+        return rc;
+    if (stray)
+        return cli_usage_error(cmd, "unexpected argument '%s'", stray);
     if (!n)
         return usage_loop(stderr);
     const double R = 0.25, from[3] = {-0.55, -0.45, -0.5}, to[3] = {0.55, 0.45, 0.5};

@@ -3,6 +3,7 @@
  * Each run is a child process, so that its peak memory is its own. */
 #include "../cli.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -122,40 +123,43 @@ static int run_sdf2d(const char *svg, const char *exr, int res, int repair, doub
     return 0;
 }
 
+static void help(void) { usage(stdout); }
+
 int cmd_bench_sdf2d(int argc, char **argv)
 {
     int n = 0, res = 256, repeat = 1, keep = 0;
     const char *dir = getenv("TMPDIR");
     dir = dir && *dir ? dir : "/tmp";
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-            return usage(stdout);
-        if (!strcmp(a, "-q") || !strcmp(a, "-v"))
-            continue;
-        if (!strcmp(a, "--keep")) {
-            keep = 1;
-            continue;
-        }
-        if (!v)
-            return cli_usage_error("bench sdf2d", "option %s needs a value", a);
-        i++;
-        if (!strcmp(a, "--n")) {
-            if (cli_parse_int(v, &n) || n < 1)
-                return cli_usage_error("bench sdf2d", "--n must be an integer >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--res")) {
-            if (cli_parse_int(v, &res) || res < 32)
-                return cli_usage_error("bench sdf2d", "--res must be an integer >= 32, got '%s'",
-                                       v);
-        } else if (!strcmp(a, "--repeat")) {
-            if (cli_parse_int(v, &repeat) || repeat < 1)
-                return cli_usage_error("bench sdf2d", "--repeat must be >= 1, got '%s'", v);
-        } else if (!strcmp(a, "--dir")) {
-            dir = v;
-        } else {
-            return cli_usage_error("bench sdf2d", "unknown option '%s'", a);
-        }
-    }
+    const cli_opt opts[] = {
+        {.names = "-q|-v", .kind = CLI_IGNORE},
+        {.names = "--keep", .kind = CLI_FLAG, .dst = &keep, .val = 1},
+        {.names = "--n",
+         .kind = CLI_INT,
+         .dst = &n,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--res",
+         .kind = CLI_INT,
+         .dst = &res,
+         .min = 32,
+         .max = INT_MAX,
+         .needs = "an integer >= 32"},
+        {.names = "--repeat",
+         .kind = CLI_INT,
+         .dst = &repeat,
+         .min = 1,
+         .max = INT_MAX,
+         .needs = "an integer >= 1"},
+        {.names = "--dir", .kind = CLI_STR, .dst = &dir},
+        {.names = NULL},
+    };
+    const char *stray = NULL;
+    int prc = cli_parse("bench sdf2d", argc, argv, opts, "argument", &stray, help);
+    if (prc >= 0)
+        return prc;
+    if (stray)
+        return cli_usage_error("bench sdf2d", "unexpected argument '%s'", stray);
     if (!n)
         return cli_usage_error("bench sdf2d", "--n is required");
     char svg[4096], exr[4200];
