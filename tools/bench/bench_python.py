@@ -71,9 +71,9 @@ def main():
     except ImportError:
         print("bench: %s has no NumPy, python rows skipped" % sys.executable, file=sys.stderr)
         return
-    here = os.path.dirname(os.path.abspath(__file__))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.path.join(os.path.dirname(here), "python")
+    env["PYTHONPATH"] = os.path.join(root, "python")
     env.setdefault("HEATVOX_LIBRARY", os.path.join(os.path.dirname(hv), "libheatvox.so"))
     env.setdefault("GOMP_SPINCOUNT", "1000")  # what the command sets for itself
 
