@@ -194,16 +194,26 @@ static void resolve_backend(hv_extender *e)
     }
 }
 
-hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
-                         hv_extend_stats *stats)
+/* What the stages of hv_extend_many share. The band's arrays are this call's
+ * (hv__extend_band_free at the end); need is e->bneed when the band solve
+ * applies, NULL otherwise. */
+typedef struct extend_run {
+    hv_extender *e;
+    const hv_extend_dist *D; /* distributed: every rank runs the same stages */
+    const float *phi;
+    int nfields, nrhs;
+    const hv_extend_field *f;
+    hv_extend_stats *S;
+    uint8_t *need;
+    hv_extend_band band;
+    ibox band_box, ratio_box;
+    size_t npend, npend_all; /* output cells left here, and over all ranks */
+} extend_run;
+
+/* The right-hand sides the fields take (*nrhs), the fields checked. */
+static hv_status count_rhs(int nfields, const hv_extend_field *f, int *nrhs)
 {
-    double t_start = hv_now();
-    if (!e || !phi || nfields < 0 || (nfields > 0 && !f))
-        return hv__error(HV_ERR_INVALID_ARG, "hv_extend_many: bad arguments");
-    hv_extend_stats lst;
-    hv_extend_stats *S = stats ? stats : &lst;
-    memset(S, 0, sizeof *S);
-    int nrhs = 1;
+    *nrhs = 1;
     if (nfields > MAX_FIELDS_PER_CALL)
         return hv__error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
                          MAX_FIELDS_PER_CALL);
@@ -215,9 +225,199 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
             if (!f[i].in[q] || !f[i].out[q])
                 return hv__error(HV_ERR_INVALID_ARG, "extend: field %d component %d has no array",
                                  i, q);
-        nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
+        *nrhs += f[i].ncomp == 1 ? 1 : f[i].ncomp + 1;
     }
-    hv_status st;
+    return HV_OK;
+}
+
+/* The band solve's cell mask (short times, no obstacles; CPU backends only: an
+ * explicit fftw or opencl backend gets its own solver) and the output cells'
+ * states. Without memory for the mask a single process does without the band
+ * solve; a distributed one cannot, its band solve being every rank's level 0. */
+static hv_status work_masks(extend_run *r)
+{
+    hv_extender *e = r->e;
+    if (hv__extend_band_allowed(e) && (!r->D || r->D->band0)) {
+        if (e->bneed || (e->bneed = hv_malloc(e->count)))
+            r->need = e->bneed;
+        else if (r->D)
+            return hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+    }
+    if (!e->pending && !(e->pending = hv_malloc(e->count)))
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory");
+    return HV_OK;
+}
+
+/* One pass over the grid: the weights, the checks, where each output cell is
+ * read, the boxes, the band solve's cells; then the sources counted over all
+ * ranks. A rank that fails tells the others before the next collective call,
+ * and every rank returns (agree). */
+static hv_status classify_cells(extend_run *r)
+{
+    hv_extender *e = r->e;
+    const hv_extend_dist *D = r->D;
+    hv_extend_stats *S = r->S;
+    hv_status st = dense_arrays(e);
+    double t0 = hv_now();
+    if (!st)
+        st = work_masks(r);
+    size_t nsrc = 0;
+    r->npend = 0;
+    if (!st)
+        st = hv__extend_classify(e, r->phi, r->nfields, r->f, r->need, &nsrc, &r->npend,
+                                 &r->band_box, &r->ratio_box);
+    if (!st)
+        st = ensure_solutions(e, r->nrhs);
+    if ((st = agree(D, st)))
+        return st;
+    /* Distributed: the closest points past the box, checked against their
+     * owners' phi, their stencils marked in the owners' band. */
+    if (D && D->rem && (st = agree(D, D->remote(D->user, e, r->phi, r->need, 0))))
+        return st;
+    S->remote_cells = D && D->rem ? D->rem->cells : 0;
+    S->source_cells = nsrc;
+    r->npend_all = D ? left_everywhere(e, D) : r->npend;
+    if (D ? !D->sum(D->user, nsrc) : !nsrc)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
+                         "zero crossing in the grid, or the band is too thin)",
+                         e->o.band * e->h);
+    S->t_weights = hv_now() - t0;
+    return HV_OK;
+}
+
+/* The background on the cells no level will write, then level 0's band: its
+ * cells start from the weights, the closest points' stencils and the cells
+ * read at themselves. */
+static hv_status first_band(extend_run *r)
+{
+    hv_extender *e = r->e;
+    hv_extend_stats *S = r->S;
+    hv_status st = HV_OK;
+    double t0 = hv_now();
+    if (r->npend < e->count)
+        hv__extend_fill_background(e, r->nfields, r->f);
+    S->t_eval = hv_now() - t0;
+    t0 = hv_now();
+    if (r->need) {
+        int lo[3], bn[3];
+        hv__extend_level_box(e, r->band_box.lo, r->band_box.hi, r->ratio_box.lo, r->ratio_box.hi, 0,
+                             lo, bn);
+        r->band.need = r->need;
+        int built =
+            hv__extend_band_build(e, &r->band, band_box_cells(e, bn), r->nrhs, e->o.t_scale);
+        if (built < 0)
+            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+        if (built <= 0)
+            hv__extend_band_free(&r->band);
+    }
+    if ((st = agree(r->D, st)))
+        return st;
+    S->t_solve = hv_now() - t0;
+    return HV_OK;
+}
+
+/* Later levels answer for the cells left, read at themselves: on a band around
+ * them too when it is small. */
+static hv_status level_band(extend_run *r, int l, const int bn[3])
+{
+    hv_extender *e = r->e;
+    uint8_t *need = r->need;
+    hv__extend_band_free(&r->band);
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < e->count; c++)
+        need[c] = e->pending[c] != 0;
+    r->band.need = need;
+    int built = hv__extend_band_build(e, &r->band, band_box_cells(e, bn), r->nrhs,
+                                      e->o.t_scale * pow(LEVEL_FACTOR, l));
+    if (built < 0)
+        return hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
+    if (!built)
+        hv__extend_band_free(&r->band);
+    return HV_OK;
+}
+
+/* Level l's solutions into e->sol and its trust bound *thr: on the band, on
+ * the ranks (distributed), or on the box [lo, lo + bn). */
+static hv_status solve_level(extend_run *r, int l, int band_l, int on_band, const int lo[3],
+                             const int bn[3], double *thr)
+{
+    hv_extender *e = r->e;
+    const hv_extend_dist *D = r->D;
+    if (D && band_l) {
+        /* A rank without band cells reads nothing at this level; the
+         * bound is the worst rank's residual's, as one process's. */
+        *thr = 0;
+        hv_status st =
+            on_band ? hv__extend_band_solve(e, &r->band, r->nfields, r->f, thr, r->S) : HV_OK;
+        *thr = D->max(D->user, *thr);
+        return agree(D, st);
+    }
+    return on_band ? hv__extend_band_solve(e, &r->band, r->nfields, r->f, thr, r->S)
+           : D     ? D->solve(D->user, e, l, r->nrhs, r->nfields, r->f, thr, r->S)
+                   : hv__extend_solve_level(e, l, lo, bn, r->nrhs, r->nfields, r->f, thr, r->S);
+}
+
+/* The levels: each solves, then reads the cells it can answer for; with an
+ * output band they stop at the first that reaches across it. */
+static hv_status run_levels(extend_run *r)
+{
+    hv_extender *e = r->e;
+    const hv_extend_dist *D = r->D;
+    hv_extend_stats *S = r->S;
+    hv_status st = HV_OK;
+    const int last =
+        e->o.out_band > 0 ? hv__extend_last_level(e, e->o.out_band) : e->o.max_levels - 1;
+    for (int l = 0; l <= last && r->npend_all > 0; l++) {
+        /* most calls need one level; later ones only reach the far cells */
+        if (!D && (st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
+            break;
+        double thr;
+        int lo[3], bn[3];
+        hv__extend_level_box(e, r->band_box.lo, r->band_box.hi, r->ratio_box.lo, r->ratio_box.hi, l,
+                             lo, bn);
+        double t0 = hv_now();
+        /* Distributed: the band solve on level 0 only (its reach is what the
+         * ghost layer holds); later levels over all ranks. */
+        const int band_l = D ? l == 0 && D->band0 : l == 0 || hv__extend_band_level_allowed(e, l);
+        if (l > 0 && r->need && band_l && (st = level_band(r, l, bn)))
+            break;
+        const int on_band = r->band.runs && band_l;
+        const uint8_t *trusted = on_band ? r->band.need : NULL;
+        if ((st = solve_level(r, l, band_l, on_band, lo, bn, &thr)))
+            break;
+        /* ... and the owners' solutions there, once level 0 is solved. */
+        if (D && D->rem && l == 0 && (st = agree(D, D->remote(D->user, e, r->phi, NULL, 1))))
+            break;
+        S->t_solve += hv_now() - t0;
+        S->levels = l + 1;
+        t0 = hv_now();
+        hv_extend_counts k;
+        hv__extend_eval_level(e, r->phi, r->nfields, r->f, thr, l == last, trusted, &r->ratio_box,
+                              &k);
+        S->cp_cells += k.cp;
+        S->ratio_cells += k.ratio;
+        S->weak_cells += k.weak;
+        r->npend = k.left;
+        r->npend_all = D ? left_everywhere(e, D) : r->npend;
+        S->t_eval += hv_now() - t0;
+    }
+    return st;
+}
+
+hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv_extend_field *f,
+                         hv_extend_stats *stats)
+{
+    double t_start = hv_now();
+    if (!e || !phi || nfields < 0 || (nfields > 0 && !f))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_extend_many: bad arguments");
+    hv_extend_stats lst;
+    hv_extend_stats *S = stats ? stats : &lst;
+    memset(S, 0, sizeof *S);
+    int nrhs;
+    hv_status st = count_rhs(nfields, f, &nrhs);
+    if (st)
+        return st;
     resolve_backend(e);
     if (e->o.backend == HV_BACKEND_OPENCL) {
         if ((st = hv_check_finite(phi, e->count, "the level set")))
@@ -228,132 +428,23 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
         S->t_total = hv_now() - t_start;
         return st;
     }
-    /* Distributed: a rank that fails tells the others before the next
-     * collective call, and every rank returns (agree). */
-    const hv_extend_dist *D = e->dist;
-    st = dense_arrays(e);
-    double t0 = hv_now();
-    /* The band solve (short times, no obstacles; CPU backends only: an explicit
-     * fftw or opencl backend gets its own solver): its cells start from the
-     * weights, the closest points' stencils and the cells read at themselves. */
-    hv_extend_band band;
-    memset(&band, 0, sizeof band);
-    uint8_t *need = NULL;
-    if (!st && hv__extend_band_allowed(e) && (!D || D->band0)) {
-        if (e->bneed || (e->bneed = hv_malloc(e->count)))
-            need = e->bneed;
-        else if (D) /* its band solve is every rank's level 0 */
-            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
-    }
-
-    /* One pass over the grid: the weights, the checks, where each output cell
-     * is read, the boxes, the band solve's cells. */
-    if (!st && !e->pending && !(e->pending = hv_malloc(e->count)))
-        st = hv__error(HV_ERR_NOMEM, "extend: out of memory");
-    size_t nsrc = 0, npend = 0;
-    ibox band_box, ratio_box;
-    if (!st)
-        st = hv__extend_classify(e, phi, nfields, f, need, &nsrc, &npend, &band_box, &ratio_box);
-    if (!st)
-        st = ensure_solutions(e, nrhs);
-    if ((st = agree(D, st)))
+    extend_run r;
+    memset(&r, 0, sizeof r);
+    r.e = e;
+    r.D = e->dist;
+    r.phi = phi;
+    r.nfields = nfields;
+    r.nrhs = nrhs;
+    r.f = f;
+    r.S = S;
+    if ((st = classify_cells(&r)))
         return st;
-    /* Distributed: the closest points past the box, checked against their
-     * owners' phi, their stencils marked in the owners' band. */
-    if (D && D->rem && (st = agree(D, D->remote(D->user, e, phi, need, 0))))
+    if ((st = first_band(&r))) {
+        hv__extend_band_free(&r.band);
         return st;
-    S->remote_cells = D && D->rem ? D->rem->cells : 0;
-    S->source_cells = nsrc;
-    size_t npend_all = D ? left_everywhere(e, D) : npend;
-    if (D ? !D->sum(D->user, nsrc) : !nsrc)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "extend: no fluid cell has |phi| < band * h = %g (the level set has no "
-                         "zero crossing in the grid, or the band is too thin)",
-                         e->o.band * e->h);
-    S->t_weights = hv_now() - t0;
-
-    /* The background, on the cells no level will write: runs of each row. */
-    t0 = hv_now();
-    if (npend < e->count)
-        hv__extend_fill_background(e, nfields, f);
-    S->t_eval = hv_now() - t0;
-    t0 = hv_now();
-    if (need) {
-        int lo[3], bn[3];
-        hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, 0, lo, bn);
-        band.need = need;
-        int built = hv__extend_band_build(e, &band, band_box_cells(e, bn), nrhs, e->o.t_scale);
-        if (built < 0)
-            st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
-        if (built <= 0)
-            hv__extend_band_free(&band);
     }
-    if ((st = agree(D, st)))
-        return st;
-    S->t_solve = hv_now() - t0;
-
-    /* With an output band, the levels stop at the first that reaches across it. */
-    const int last =
-        e->o.out_band > 0 ? hv__extend_last_level(e, e->o.out_band) : e->o.max_levels - 1;
-    for (int l = 0; l <= last && npend_all > 0; l++) {
-        /* most calls need one level; later ones only reach the far cells */
-        if (!D && (st = hv__progress(l ? 0.5 + 0.5 * l / e->o.max_levels : 0.1, "extend")))
-            break;
-        double thr;
-        int lo[3], bn[3];
-        hv__extend_level_box(e, band_box.lo, band_box.hi, ratio_box.lo, ratio_box.hi, l, lo, bn);
-        t0 = hv_now();
-        /* Distributed: the band solve on level 0 only (its reach is what the
-         * ghost layer holds); later levels over all ranks. */
-        const int band_l = D ? l == 0 && D->band0 : l == 0 || hv__extend_band_level_allowed(e, l);
-        if (l > 0 && need && band_l) {
-            /* Later levels answer for the cells left, read at themselves: on a
-             * band around them too when it is small. */
-            hv__extend_band_free(&band);
-#pragma omp parallel for schedule(static)
-            for (size_t c = 0; c < e->count; c++)
-                need[c] = e->pending[c] != 0;
-            band.need = need;
-            int built = hv__extend_band_build(e, &band, band_box_cells(e, bn), nrhs,
-                                              e->o.t_scale * pow(LEVEL_FACTOR, l));
-            if (built < 0) {
-                st = hv__error(HV_ERR_NOMEM, "extend: out of memory for the band solve");
-                break;
-            }
-            if (!built)
-                hv__extend_band_free(&band);
-        }
-        const int on_band = band.runs && band_l;
-        const uint8_t *trusted = on_band ? band.need : NULL;
-        if (D && band_l) {
-            /* A rank without band cells reads nothing at this level; the
-             * bound is the worst rank's residual's, as one process's. */
-            thr = 0;
-            st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S) : HV_OK;
-            thr = D->max(D->user, thr);
-            if ((st = agree(D, st)))
-                break;
-        } else if ((st = on_band ? hv__extend_band_solve(e, &band, nfields, f, &thr, S)
-                         : D     ? D->solve(D->user, e, l, nrhs, nfields, f, &thr, S)
-                             : hv__extend_solve_level(e, l, lo, bn, nrhs, nfields, f, &thr, S))) {
-            break;
-        }
-        /* ... and the owners' solutions there, once level 0 is solved. */
-        if (D && D->rem && l == 0 && (st = agree(D, D->remote(D->user, e, phi, NULL, 1))))
-            break;
-        S->t_solve += hv_now() - t0;
-        S->levels = l + 1;
-        t0 = hv_now();
-        hv_extend_counts k;
-        hv__extend_eval_level(e, phi, nfields, f, thr, l == last, trusted, &ratio_box, &k);
-        S->cp_cells += k.cp;
-        S->ratio_cells += k.ratio;
-        S->weak_cells += k.weak;
-        npend = k.left;
-        npend_all = D ? left_everywhere(e, D) : npend;
-        S->t_eval += hv_now() - t0;
-    }
-    hv__extend_band_free(&band);
+    st = run_levels(&r);
+    hv__extend_band_free(&r.band);
     S->t_total = hv_now() - t_start;
     return st;
 }
