@@ -47,6 +47,10 @@ typedef struct dist_cl_work {
     double *hpart;
     uint32_t *hidx;
     double *hval, *num;
+    /* the grid's shape and launch ranges (work_shape) */
+    int dim;
+    cl_int N[4];
+    size_t count, ngroups, g1[1], l1[1], gc[2], lc[2], gr, lr;
 } dist_cl_work;
 
 static void work_free(dist_cl_work *k)
@@ -130,6 +134,295 @@ out:
     return st;
 }
 
+/* Opens the device and the distance kernels; *handled stays 0 on a device
+ * without fp64, where the host path runs instead. */
+static hv_status open_device(dist_cl_work *k, int *handled)
+{
+    hv_status st = hv__cl_open(&k->cl);
+    if (st)
+        return st;
+    if (!k->cl->fp64) {
+        hv__cl_close(&k->cl);
+        return HV_OK;
+    }
+    *handled = 1;
+    if ((st = hv__cl_module_open(k->cl, &dist_module))) {
+        hv__cl_close(&k->cl);
+        return st;
+    }
+    return HV_OK;
+}
+
+static void work_shape(dist_cl_work *k, const hv_grid *g)
+{
+    k->dim = g->dim;
+    k->N[0] = g->n[0];
+    k->N[1] = g->n[1];
+    k->N[2] = k->dim == 3 ? g->n[2] : 1;
+    k->N[3] = k->dim;
+    k->count = hv_grid_count(g);
+    hv__cl_range1(k->count, k->g1, k->l1);
+    hv__cl_range2((size_t)k->N[0], (size_t)k->N[1] * k->N[2], k->gc, k->lc);
+    k->ngroups = hv__cl_range_red(k->count, &k->gr, &k->lr);
+}
+
+/* The launch range over the faces normal to axis a. */
+static void face_range(const cl_int N[4], int a, size_t g2[2], size_t l2[2])
+{
+    hv__cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2, l2);
+}
+
+/* The buffers, and the faces closed (0) or open (NaN); *left counts the open
+ * faces. */
+static hv_status open_faces(dist_cl_work *k, const int32_t *region, const double *w0, size_t *left)
+{
+    hv_cl *cl = k->cl;
+    const int dim = k->dim;
+    const cl_int *N = k->N;
+    const size_t count = k->count, dbytes = count * sizeof(double);
+    size_t nface[3] = {0, 0, 0};
+    size_t g2[2], l2[2];
+    uint32_t cnt[2];
+    hv_status st;
+    for (int a = 0; a < dim; a++)
+        nface[a] = (size_t)(N[0] + (a == 0)) * (N[1] + (a == 1)) * (N[2] + (a == 2));
+    if ((st = hv__cl_alloc(cl, count * sizeof(int32_t), region, &k->region)) ||
+        (st = hv__cl_alloc(cl, dbytes, w0, &k->w)) ||
+        (st = hv__cl_alloc(cl, dbytes, NULL, &k->u)) ||
+        (st = hv__cl_alloc(cl, dbytes, NULL, &k->u2)) ||
+        (st = hv__cl_alloc(cl, count, NULL, &k->ok)) ||
+        (st = hv__cl_alloc(cl, count, NULL, &k->inside)) ||
+        (st = hv__cl_alloc(cl, 2 * sizeof(uint32_t), NULL, &k->cnt)) ||
+        (st = hv__cl_alloc(cl, 3 * k->ngroups * sizeof(double), NULL, &k->part)))
+        return st;
+    if (!(k->hpart = malloc(3 * k->ngroups * sizeof *k->hpart)))
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory for partial sums");
+    for (int a = 0; a < dim; a++)
+        if ((st = hv__cl_alloc(cl, nface[a] * sizeof(float), NULL, &k->X[a])))
+            return st;
+    hv__cl_zero(cl, k->inside, count);
+    hv__cl_zero(cl, k->cnt, 2 * sizeof(uint32_t));
+    for (int a = 0; a < dim; a++) {
+        face_range(N, a, g2, l2);
+        hv__cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k->region, k->X[a], k->cnt);
+        hv__cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
+    }
+    if ((st = read_counts(cl, k->cnt, cnt)))
+        return st;
+    *left = cnt[0];
+    return HV_OK;
+}
+
+/* A stage's two diffusions of the front's weights w: for t into u, for
+ * T_RATIO t into u2. */
+static hv_status diffuse(dist_cl_work *k, const hv_grid *g, const hv_distance_opts *o,
+                         hv_solve_info info[2], hv_distance_stats *S)
+{
+    hv_status st;
+    if ((st = hv__cl_finish(k->cl)))
+        return st;
+    for (int q = 0; q < 2; q++) {
+        if (!k->sv[q] &&
+            (st = hv__dist_solver(&k->sv[q], g->dim, g->n, g->h, g->solid, 1.0,
+                                  S->t * (q ? T_RATIO : 1), o->diffuse_tol, HV_BACKEND_OPENCL)))
+            return st;
+        if ((st = hv__cl_solver_solve_d(k->sv[q], k->w, q ? k->u2 : k->u, &info[q])))
+            return st;
+        S->diffuse_iterations += info[q].iterations;
+        S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
+    }
+    return HV_OK;
+}
+
+/* ||w||, then the trust bounds (*lthr: the one for t), the cells trusted and
+ * the faces they assign; cnt: the faces left open, those assigned. */
+static hv_status assign_faces(dist_cl_work *k, const hv_distance_opts *o,
+                              const hv_solve_info info[2], double *lthr, uint32_t cnt[2])
+{
+    hv_cl *cl = k->cl;
+    size_t g2[2], l2[2];
+    hv_status st;
+    hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", k->w, k->w, k->count, k->part);
+    hv__cl_run(cl, HV_K_FINE_DOT, 1, &k->gr, &k->lr);
+    hv__cl_read(cl, k->part, 0, k->ngroups * sizeof(double), k->hpart);
+    if ((st = hv__cl_check(cl)))
+        return st;
+    const double wn = sqrt(sum_parts(k->hpart, k->ngroups, 1, 0));
+    *lthr = hv__dist_trust_log(fmax(info[0].relres, o->diffuse_tol), wn, o->t_scale);
+    const double lthr2 =
+        hv__dist_trust_log(fmax(info[1].relres, o->diffuse_tol), wn, o->t_scale * T_RATIO);
+    hv__cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", k->count, k->region, k->u, k->u2, k->ok,
+                       *lthr, lthr2);
+    hv__cl_module_run(cl, &dist_module, DK_LOG, 1, k->g1, k->l1);
+    for (int a = 0; a < k->dim; a++) {
+        face_range(k->N, a, g2, l2);
+        hv__cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", k->N, a, k->u2, k->ok, k->X[a],
+                           k->cnt);
+        hv__cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
+    }
+    return read_counts(cl, k->cnt, cnt);
+}
+
+/* next_front: the front's level of psi and ln u, then the cell pass. *moved
+ * stays 0 where the front ends: no weight on it, a step under 2 voxels, or no
+ * cell in the next one. */
+static hv_status next_front(dist_cl_work *k, double lthr, const double tau[2], int *moved)
+{
+    hv_cl *cl = k->cl;
+    uint32_t cnt[2];
+    hv_status st;
+    *moved = 0;
+    hv__cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", k->count, k->w, k->u2, k->u,
+                       k->ok, k->part);
+    hv__cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &k->gr, &k->lr);
+    hv__cl_read(cl, k->part, 0, 3 * k->ngroups * sizeof(double), k->hpart);
+    if ((st = hv__cl_check(cl)))
+        return st;
+    const double sw = sum_parts(k->hpart, k->ngroups, 3, 2);
+    if (!(sw > 0))
+        return HV_OK;
+    const double psi0 = sum_parts(k->hpart, k->ngroups, 3, 0) / sw;
+    const double lu0 = sum_parts(k->hpart, k->ngroups, 3, 1) / sw;
+    const double step = hv__dist_front_step(lu0, lthr, k->dim, tau[0]);
+    if (!(step >= 2))
+        return HV_OK;
+    hv__cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", k->N, k->u2, k->ok, k->inside,
+                       k->w, psi0, step, tau[0], tau[1], FRONT_BAND, k->cnt);
+    hv__cl_module_run(cl, &dist_module, DK_FRONT, 2, k->gc, k->lc);
+    if ((st = read_counts(cl, k->cnt, cnt)))
+        return st;
+    *moved = cnt[0] != 0;
+    return HV_OK;
+}
+
+/* Stages, as distance_heat.c; *left: the faces still open. */
+static hv_status run_stages(dist_cl_work *k, const hv_grid *g, const hv_distance_opts *o,
+                            size_t *left, hv_distance_stats *S)
+{
+    const double tau[2] = {1.0 / o->t_scale, 1.0 / (o->t_scale * T_RATIO)};
+    int idle = 0;
+    hv_status st;
+    for (int l = 0; l<o->max_stages && * left> 0; l++) {
+        double t0 = hv_now();
+        hv_solve_info info[2];
+        if ((st = diffuse(k, g, o, info, S)))
+            return st;
+        S->backend = info[0].backend;
+        S->t_diffuse += hv_now() - t0;
+        t0 = hv_now();
+        double lthr;
+        uint32_t cnt[2];
+        if ((st = assign_faces(k, o, info, &lthr, cnt)))
+            return st;
+        *left = cnt[0];
+        const size_t got = cnt[1];
+        if (l < 8)
+            S->faces_per_stage[l] = got;
+        S->stages = l + 1;
+        idle = got ? 0 : idle + 1;
+        if (idle == 2) /* two stages without a new face: the rest is out of reach */
+            break;
+        if (*left) {
+            int moved;
+            if ((st = next_front(k, lthr, tau, &moved)))
+                return st;
+            if (!moved)
+                break;
+        }
+        S->t_normalize += hv_now() - t0;
+    }
+    return HV_OK;
+}
+
+/* Poisson: -Lap phi = -div X (unassigned faces count 0), rhs in u2, phi in u. */
+static hv_status poisson(dist_cl_work *k, const hv_grid *g, const int32_t *region,
+                         const hv_distance_opts *o, hv_distance_stats *S)
+{
+    hv_cl *cl = k->cl;
+    hv_status st;
+    double t0 = hv_now();
+    hv_solver_destroy(&k->sv[0]);
+    hv_solver_destroy(&k->sv[1]);
+    hv__cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", k->N, k->region, k->X[0], k->X[1],
+                       k->dim == 3 ? k->X[2] : NULL, 1.0 / g->h, k->u2);
+    hv__cl_module_run(cl, &dist_module, DK_DIV, 2, k->gc, k->lc);
+    if ((st = hv__cl_finish(cl)) ||
+        (st = hv__dist_solver(&k->sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
+                              HV_BACKEND_OPENCL)))
+        return st;
+    hv_solve_info pinfo;
+    if ((st = hv__cl_solver_solve_d(k->sv[0], k->u2, k->u, &pinfo)))
+        return st;
+    S->poisson_iterations = pinfo.iterations;
+    double rel = pinfo.relres;
+    if (rel > o->poisson_tol && (st = poisson_restarts(k, g, region, o, &rel, S)))
+        return st;
+    hv_solver_destroy(&k->sv[0]);
+    S->poisson_relres = rel;
+    S->t_poisson = hv_now() - t0;
+    return HV_OK;
+}
+
+/* Offsets: phi at the cells near the sources, fitted per region on the host
+ * in the host path's order, into k->num[0 .. nregions - 1]. */
+static hv_status fit_offsets(dist_cl_work *k, const hv_grid *g, const int32_t *region,
+                             const float *ref, size_t nregions)
+{
+    hv_cl *cl = k->cl;
+    const size_t count = k->count;
+    hv_status st;
+    size_t m = 0;
+    for (size_t c = 0; c < count; c++)
+        m += ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0;
+    k->hidx = malloc((m ? m : 1) * sizeof *k->hidx);
+    k->hval = malloc((m ? m : 1) * sizeof *k->hval);
+    k->num = calloc(2 * nregions + 1, sizeof *k->num);
+    if (!k->hidx || !k->hval || !k->num)
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory");
+    m = 0;
+    for (size_t c = 0; c < count; c++)
+        if (ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0)
+            k->hidx[m++] = (uint32_t)c;
+    if (m) {
+        if ((st = hv__cl_alloc(cl, m * sizeof(uint32_t), k->hidx, &k->idx)) ||
+            (st = hv__cl_alloc(cl, m * sizeof(double), NULL, &k->gath)))
+            return st;
+        size_t gg[1], lg[1];
+        hv__cl_range1(m, gg, lg);
+        hv__cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k->u, k->idx, k->gath, m);
+        hv__cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
+        hv__cl_read(cl, k->gath, 0, m * sizeof(double), k->hval);
+        if ((st = hv__cl_check(cl)))
+            return st;
+    }
+    for (size_t q = 0; q < m; q++) {
+        const size_t c = k->hidx[q];
+        const double wt = ref[c] >= 1.5 * g->h ? 1.0 : 1e-3;
+        k->num[2 * region[c]] += wt * (k->hval[q] - ref[c]);
+        k->num[2 * region[c] + 1] += wt;
+    }
+    for (size_t r = 0; r < nregions; r++)
+        k->num[r] = k->num[2 * r] / k->num[2 * r + 1];
+    return HV_OK;
+}
+
+/* The distance into g->v: phi less its region's offset on free cells, the
+ * solid and unreachable values elsewhere. */
+static hv_status write_output(dist_cl_work *k, hv_grid *g, const hv_distance_opts *o,
+                              size_t nregions)
+{
+    hv_cl *cl = k->cl;
+    hv_status st;
+    if ((st = hv__cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k->num, &k->off)) ||
+        (st = hv__cl_alloc(cl, k->count * sizeof(float), NULL, &k->out)))
+        return st;
+    hv__cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", k->count, k->region, k->u, k->off,
+                       (double)o->solid_value, (double)o->unreachable, k->out);
+    hv__cl_module_run(cl, &dist_module, DK_OUTPUT, 1, k->g1, k->l1);
+    hv__cl_read(cl, k->out, 0, k->count * sizeof(float), g->v);
+    return hv__cl_check(cl);
+}
+
 hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32_t *region,
                                size_t nregions, const double *w0, const float *ref,
                                hv_distance_stats *S, int *handled)
@@ -140,207 +433,21 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
     const char *env = getenv("HEATVOX_DISTANCE_CL");
     if (env && !strcmp(env, "0")) /* tests: the host path with the same backend */
         return HV_OK;
-    hv_status st = hv__cl_open(&k.cl);
-    if (st)
+    hv_status st = open_device(&k, handled);
+    if (st || !*handled)
         return st;
-    hv_cl *cl = k.cl;
-    if (!cl->fp64) {
-        hv__cl_close(&k.cl);
-        return HV_OK;
-    }
-    *handled = 1;
-    if ((st = hv__cl_module_open(cl, &dist_module))) {
-        hv__cl_close(&k.cl);
-        return st;
-    }
-    const int dim = g->dim;
-    const cl_int N[4] = {g->n[0], g->n[1], dim == 3 ? g->n[2] : 1, dim};
-    const size_t count = hv_grid_count(g), dbytes = count * sizeof(double);
-    size_t nface[3] = {0, 0, 0};
-    size_t g1[1], l1[1], g2[2], l2[2], gc[2], lc[2], gr, lr;
-    hv__cl_range1(count, g1, l1);
-    hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
-    const size_t ngroups = hv__cl_range_red(count, &gr, &lr);
-    uint32_t cnt[2];
+    work_shape(&k, g);
     double t0 = hv_now();
-
-    /* Buffers; faces closed (0) or open (NaN). */
-    for (int a = 0; a < dim; a++)
-        nface[a] = (size_t)(N[0] + (a == 0)) * (N[1] + (a == 1)) * (N[2] + (a == 2));
-    if ((st = hv__cl_alloc(cl, count * sizeof(int32_t), region, &k.region)) ||
-        (st = hv__cl_alloc(cl, dbytes, w0, &k.w)) || (st = hv__cl_alloc(cl, dbytes, NULL, &k.u)) ||
-        (st = hv__cl_alloc(cl, dbytes, NULL, &k.u2)) ||
-        (st = hv__cl_alloc(cl, count, NULL, &k.ok)) ||
-        (st = hv__cl_alloc(cl, count, NULL, &k.inside)) ||
-        (st = hv__cl_alloc(cl, 2 * sizeof(uint32_t), NULL, &k.cnt)) ||
-        (st = hv__cl_alloc(cl, 3 * ngroups * sizeof(double), NULL, &k.part)))
+    size_t left = 0;
+    if ((st = open_faces(&k, region, w0, &left)))
         goto done;
-    if (!(k.hpart = malloc(3 * ngroups * sizeof *k.hpart))) {
-        st = hv__error(HV_ERR_NOMEM, "distance: out of memory for partial sums");
-        goto done;
-    }
-    for (int a = 0; a < dim; a++)
-        if ((st = hv__cl_alloc(cl, nface[a] * sizeof(float), NULL, &k.X[a])))
-            goto done;
-    hv__cl_zero(cl, k.inside, count);
-    hv__cl_zero(cl, k.cnt, 2 * sizeof(uint32_t));
-    for (int a = 0; a < dim; a++) {
-        hv__cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)), g2,
-                      l2);
-        hv__cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k.region, k.X[a], k.cnt);
-        hv__cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
-    }
-    if ((st = read_counts(cl, k.cnt, cnt)))
-        goto done;
-    size_t left = cnt[0];
     S->t_splat += hv_now() - t0;
-
-    /* Stages, as distance_heat.c. */
-    const double tau[2] = {1.0 / o->t_scale, 1.0 / (o->t_scale * T_RATIO)};
-    int idle = 0;
-    for (int l = 0; l < o->max_stages && left > 0; l++) {
-        t0 = hv_now();
-        hv_solve_info info[2];
-        if ((st = hv__cl_finish(cl)))
-            goto done;
-        for (int q = 0; q < 2; q++) {
-            if (!k.sv[q] &&
-                (st = hv__dist_solver(&k.sv[q], g->dim, g->n, g->h, g->solid, 1.0,
-                                      S->t * (q ? T_RATIO : 1), o->diffuse_tol, HV_BACKEND_OPENCL)))
-                goto done;
-            if ((st = hv__cl_solver_solve_d(k.sv[q], k.w, q ? k.u2 : k.u, &info[q])))
-                goto done;
-            S->diffuse_iterations += info[q].iterations;
-            S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
-        }
-        S->backend = info[0].backend;
-        S->t_diffuse += hv_now() - t0;
-        t0 = hv_now();
-        /* ||w||, then the trust bounds */
-        hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", k.w, k.w, count, k.part);
-        hv__cl_run(cl, HV_K_FINE_DOT, 1, &gr, &lr);
-        hv__cl_read(cl, k.part, 0, ngroups * sizeof(double), k.hpart);
-        if ((st = hv__cl_check(cl)))
-            goto done;
-        const double wn = sqrt(sum_parts(k.hpart, ngroups, 1, 0));
-        const double lthr =
-            hv__dist_trust_log(fmax(info[0].relres, o->diffuse_tol), wn, o->t_scale);
-        const double lthr2 =
-            hv__dist_trust_log(fmax(info[1].relres, o->diffuse_tol), wn, o->t_scale * T_RATIO);
-        hv__cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", count, k.region, k.u, k.u2, k.ok,
-                           lthr, lthr2);
-        hv__cl_module_run(cl, &dist_module, DK_LOG, 1, g1, l1);
-        for (int a = 0; a < dim; a++) {
-            hv__cl_range2((size_t)N[0] + (a == 0), (size_t)(N[1] + (a == 1)) * (N[2] + (a == 2)),
-                          g2, l2);
-            hv__cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", N, a, k.u2, k.ok, k.X[a],
-                               k.cnt);
-            hv__cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
-        }
-        if ((st = read_counts(cl, k.cnt, cnt)))
-            goto done;
-        left = cnt[0];
-        const size_t got = cnt[1];
-        if (l < 8)
-            S->faces_per_stage[l] = got;
-        S->stages = l + 1;
-        idle = got ? 0 : idle + 1;
-        if (idle == 2) /* two stages without a new face: the rest is out of reach */
-            break;
-        if (left) {
-            /* next_front: the front's level of psi and ln u, then the cell pass */
-            hv__cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", count, k.w, k.u2, k.u,
-                               k.ok, k.part);
-            hv__cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &gr, &lr);
-            hv__cl_read(cl, k.part, 0, 3 * ngroups * sizeof(double), k.hpart);
-            if ((st = hv__cl_check(cl)))
-                goto done;
-            const double sw = sum_parts(k.hpart, ngroups, 3, 2);
-            if (!(sw > 0))
-                break;
-            const double psi0 = sum_parts(k.hpart, ngroups, 3, 0) / sw;
-            const double lu0 = sum_parts(k.hpart, ngroups, 3, 1) / sw;
-            const double step = hv__dist_front_step(lu0, lthr, dim, tau[0]);
-            if (!(step >= 2))
-                break;
-            hv__cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", N, k.u2, k.ok, k.inside,
-                               k.w, psi0, step, tau[0], tau[1], FRONT_BAND, k.cnt);
-            hv__cl_module_run(cl, &dist_module, DK_FRONT, 2, gc, lc);
-            if ((st = read_counts(cl, k.cnt, cnt)))
-                goto done;
-            if (!cnt[0])
-                break;
-        }
-        S->t_normalize += hv_now() - t0;
-    }
+    if ((st = run_stages(&k, g, o, &left, S)))
+        goto done;
     S->dead_faces = left;
-
-    /* Poisson: -Lap phi = -div X (unassigned faces count 0), rhs in u2. */
-    t0 = hv_now();
-    hv_solver_destroy(&k.sv[0]);
-    hv_solver_destroy(&k.sv[1]);
-    hv__cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", N, k.region, k.X[0], k.X[1],
-                       dim == 3 ? k.X[2] : NULL, 1.0 / g->h, k.u2);
-    hv__cl_module_run(cl, &dist_module, DK_DIV, 2, gc, lc);
-    if ((st = hv__cl_finish(cl)) ||
-        (st = hv__dist_solver(&k.sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
-                              HV_BACKEND_OPENCL)))
+    if ((st = poisson(&k, g, region, o, S)) || (st = fit_offsets(&k, g, region, ref, nregions)))
         goto done;
-    hv_solve_info pinfo;
-    if ((st = hv__cl_solver_solve_d(k.sv[0], k.u2, k.u, &pinfo)))
-        goto done;
-    S->poisson_iterations = pinfo.iterations;
-    double rel = pinfo.relres;
-    if (rel > o->poisson_tol && (st = poisson_restarts(&k, g, region, o, &rel, S)))
-        goto done;
-    hv_solver_destroy(&k.sv[0]);
-    S->poisson_relres = rel;
-    S->t_poisson = hv_now() - t0;
-
-    /* Offsets: phi at the cells near the sources, fitted per region on the host
-     * in the host path's order, then the output. */
-    size_t m = 0;
-    for (size_t c = 0; c < count; c++)
-        m += ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0;
-    k.hidx = malloc((m ? m : 1) * sizeof *k.hidx);
-    k.hval = malloc((m ? m : 1) * sizeof *k.hval);
-    k.num = calloc(2 * nregions + 1, sizeof *k.num);
-    if (!k.hidx || !k.hval || !k.num) {
-        st = hv__error(HV_ERR_NOMEM, "distance: out of memory");
-        goto done;
-    }
-    m = 0;
-    for (size_t c = 0; c < count; c++)
-        if (ref[c] <= HV_DIST_REF_RADIUS * g->h && region[c] >= 0)
-            k.hidx[m++] = (uint32_t)c;
-    if (m) {
-        if ((st = hv__cl_alloc(cl, m * sizeof(uint32_t), k.hidx, &k.idx)) ||
-            (st = hv__cl_alloc(cl, m * sizeof(double), NULL, &k.gath)))
-            goto done;
-        size_t gg[1], lg[1];
-        hv__cl_range1(m, gg, lg);
-        hv__cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k.u, k.idx, k.gath, m);
-        hv__cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
-        hv__cl_read(cl, k.gath, 0, m * sizeof(double), k.hval);
-        if ((st = hv__cl_check(cl)))
-            goto done;
-    }
-    for (size_t q = 0; q < m; q++) {
-        const size_t c = k.hidx[q];
-        const double wt = ref[c] >= 1.5 * g->h ? 1.0 : 1e-3;
-        k.num[2 * region[c]] += wt * (k.hval[q] - ref[c]);
-        k.num[2 * region[c] + 1] += wt;
-    }
-    for (size_t r = 0; r < nregions; r++)
-        k.num[r] = k.num[2 * r] / k.num[2 * r + 1];
-    if ((st = hv__cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k.num, &k.off)) ||
-        (st = hv__cl_alloc(cl, count * sizeof(float), NULL, &k.out)))
-        goto done;
-    hv__cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", count, k.region, k.u, k.off,
-                       (double)o->solid_value, (double)o->unreachable, k.out);
-    hv__cl_module_run(cl, &dist_module, DK_OUTPUT, 1, g1, l1);
-    hv__cl_read(cl, k.out, 0, count * sizeof(float), g->v);
-    st = hv__cl_check(cl);
+    st = write_output(&k, g, o, nregions);
 done:
     work_free(&k);
     return st;
