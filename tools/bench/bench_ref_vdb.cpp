@@ -4,9 +4,8 @@
 // offer them. Every entry point runs its body inside guarded(), which turns
 // any exception into an hv_status and a message (ref_vdb_last_error()).
 // Compiled like the library's OpenVDB shim (C++17, default visibility), from
-// the public headers and OpenVDB's alone; the grid helpers below follow the
-// shim's (src/io/vdb_write.cpp, vdb_read.cpp) so that OpenVDB gets the same
-// grids.
+// the public headers and OpenVDB's alone: the grids OpenVDB gets are built
+// with OpenVDB's own API, as its users build them from dense arrays.
 #include "bench_ref.h"
 
 extern "C" {
@@ -14,6 +13,7 @@ extern "C" {
 }
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Dense.h>
 #include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/MeshToVolume.h>
@@ -86,155 +86,6 @@ void init_vdb()
     std::call_once(init_flag, [] { openvdb::initialize(); });
 }
 
-// Index (i,j,k) maps to the cell centre origin + (i+1/2)h.
-openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
-{
-    auto xf = openvdb::math::Transform::createLinearTransform(h);
-    xf->postTranslate(Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
-    return xf;
-}
-
-void check_grid(const hv_grid *g, const char *what)
-{
-    if (!g || !g->v)
-        fail(HV_ERR_INVALID_ARG, std::string(what) + " is NULL");
-    if (g->dim != 2 && g->dim != 3)
-        fail(HV_ERR_INVALID_ARG, std::string(what) + ": dimension must be 2 or 3");
-    for (int a = 0; a < 3; a++)
-        if (g->n[a] <= 0 || !std::isfinite(g->origin[a]))
-            fail(HV_ERR_INVALID_ARG, std::string(what) + ": bad size or origin");
-    if (!(g->h > 0) || !std::isfinite(g->h))
-        fail(HV_ERR_INVALID_ARG, std::string(what) + ": voxel size must be positive");
-}
-
-void check_same_shape(const hv_grid *a, const hv_grid *b, const char *an, const char *bn)
-{
-    bool same = a->n[0] == b->n[0] && a->n[1] == b->n[1] && a->n[2] == b->n[2] &&
-                std::fabs(a->h - b->h) <= 1e-12 * a->h;
-    for (int d = 0; d < 3 && same; d++)
-        same = std::fabs(a->origin[d] - b->origin[d]) <= 1e-9 * (a->h + std::fabs(a->origin[d]));
-    if (!same) {
-        char buf[512];
-        snprintf(
-            buf, sizeof buf,
-            "%s (%d x %d x %d, h %g, origin %g %g %g) and %s (%d x %d x %d, h %g, origin %g %g "
-            "%g) must have the same size, voxel size and origin",
-            an, a->n[0], a->n[1], a->n[2], a->h, a->origin[0], a->origin[1], a->origin[2], bn,
-            b->n[0], b->n[1], b->n[2], b->h, b->origin[0], b->origin[1], b->origin[2]);
-        fail(HV_ERR_INVALID_ARG, buf);
-    }
-}
-
-inline size_t lin(const hv_grid *g, int i, int j, int k)
-{
-    return (size_t)i + (size_t)g->n[0] * ((size_t)j + (size_t)g->n[1] * (size_t)k);
-}
-
-// Builds a tree over the block [0,n) leaf by leaf. value(i,j,k, &active) gives
-// each block voxel; the voxels of boundary leaves beyond the block are
-// inactive and hold outside(i,j,k) of the nearest block voxel (the background,
-// or for a level set the background with that voxel's sign, so that the sign
-// stays continuous across the block's faces). Constant leaves are then
-// collapsed into tiles by tools::prune (tolerance 0, lossless).
-int floor_div(int a, int d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
-
-template <class GridT, class F, class G>
-void fill_block(GridT &grid, const int n[3], const int off[3], F &&value, G &&outside, bool prune)
-{
-    using LeafT = typename GridT::TreeType::LeafNodeType;
-    using ValueT = typename GridT::ValueType;
-    const int D = (int)LeafT::DIM;
-    // Leaves cover the index box [off, off + n), aligned to multiples of D.
-    int l0[3];
-    size_t L[3];
-    for (int a = 0; a < 3; a++) {
-        l0[a] = floor_div(off[a], D);
-        L[a] = (size_t)(floor_div(off[a] + n[a] - 1, D) - l0[a] + 1);
-    }
-    const size_t nleaf = L[0] * L[1] * L[2];
-    auto origin = [&](size_t l) {
-        return Coord((l0[0] + (int)(l % L[0])) * D, (l0[1] + (int)(l / L[0] % L[1])) * D,
-                     (l0[2] + (int)(l / L[0] / L[1])) * D);
-    };
-    // Leaves are built in parallel; a leaf-sized region with no active voxel
-    // and one value becomes a tile instead of a leaf.
-    std::vector<std::unique_ptr<LeafT>> leaves(nleaf);
-    std::vector<ValueT> tiles(nleaf);
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, nleaf), [&](const tbb::blocked_range<size_t> &r) {
-            std::vector<ValueT> vals(LeafT::SIZE);
-            std::vector<char> on(LeafT::SIZE);
-            for (size_t l = r.begin(); l != r.end(); l++) {
-                const Coord o = origin(l);
-                bool any_on = false;
-                for (int x = o[0]; x < o[0] + D; x++)
-                    for (int y = o[1]; y < o[1] + D; y++)
-                        for (int z = o[2]; z < o[2] + D; z++) {
-                            const openvdb::Index q = LeafT::coordToOffset(Coord(x, y, z));
-                            const int bi = x - off[0], bj = y - off[1], bk = z - off[2];
-                            const int i = std::clamp(bi, 0, n[0] - 1),
-                                      j = std::clamp(bj, 0, n[1] - 1),
-                                      k = std::clamp(bk, 0, n[2] - 1);
-                            bool active = false;
-                            if (bi == i && bj == j && bk == k)
-                                vals[q] = value(i, j, k, &active);
-                            else
-                                vals[q] = outside(i, j, k);
-                            on[q] = active;
-                            any_on |= active;
-                        }
-                bool uniform = !any_on;
-                for (size_t q = 1; uniform && q < vals.size(); q++)
-                    uniform = vals[q] == vals[0];
-                if (uniform) {
-                    tiles[l] = vals[0];
-                    continue;
-                }
-                auto leaf = std::make_unique<LeafT>(o, vals[0], false);
-                for (openvdb::Index q = 0; q < LeafT::SIZE; q++) {
-                    if (on[q])
-                        leaf->setValueOn(q, vals[q]);
-                    else
-                        leaf->setValueOff(q, vals[q]);
-                }
-                leaves[l] = std::move(leaf);
-            }
-        });
-    auto &tree = grid.tree();
-    for (size_t l = 0; l < nleaf; l++) {
-        if (leaves[l])
-            tree.addLeaf(leaves[l].release());
-        else
-            tree.addTile(1, origin(l), tiles[l], false);
-    }
-    if (prune)
-        openvdb::tools::prune(tree);
-}
-
-// phi as an OpenVDB level set, block voxel (i,j,k) at index (i,j,k), built as
-// the shim's writer builds it (src/io/vdb_write.cpp), so that OpenVDB sees the
-// grid a heatvox file would hold.
-openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool dense)
-{
-    const float bg = (float)(band_voxels * g->h);
-    auto grid = openvdb::FloatGrid::create(bg);
-    const float *v = g->v;
-    const int off[3] = {0, 0, 0};
-    fill_block(
-        *grid, g->n, off,
-        [&](int i, int j, int k, bool *active) {
-            float p = v[lin(g, i, j, k)];
-            *active = dense || std::fabs(p) < bg;
-            if (*active)
-                return p;
-            return p < 0 ? -bg : bg;
-        },
-        [&](int i, int j, int k) { return v[lin(g, i, j, k)] < 0 ? -bg : bg; }, true);
-    grid->setTransform(make_transform(g->h, g->origin));
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    return grid;
-}
-
 // Calls put(linear index, value) for every voxel of box, parallel over z.
 template <class GridT, class F> void for_box(const GridT &grid, const CoordBBox &box, F &&put)
 {
@@ -284,8 +135,10 @@ float sample(const hv_grid *g, const Vec3d &p)
                     (((c >> 2) & 1) ? w[2] : 1 - w[2]);
         if (wt == 0)
             continue;
-        s += wt * g->v[lin(g, std::min(ii, g->n[0] - 1), std::min(jj, g->n[1] - 1),
-                           std::min(kk, g->n[2] - 1))];
+        ii = std::min(ii, g->n[0] - 1);
+        jj = std::min(jj, g->n[1] - 1);
+        kk = std::min(kk, g->n[2] - 1);
+        s += wt * g->v[(size_t)ii + (size_t)g->n[0] * ((size_t)jj + (size_t)g->n[1] * (size_t)kk)];
     }
     return (float)s;
 }
@@ -305,11 +158,16 @@ struct VecOp {
     }
 };
 
-// phi/h on an identity transform: distances in voxels, and the callback's
-// coordinates are our index coordinates whatever transform OpenVDB applies.
+// phi/h as a level set on an identity transform: distances in voxels, and the
+// callback's coordinates are our index coordinates whatever transform OpenVDB
+// applies. Block voxel (i,j,k) is index (i,j,k); the voxels with |phi| under
+// band_voxels are active (with band_voxels <= 0 all of the block's), the
+// others hold -/+ the background by sign, and past the block the background.
+// The grid the shim writes (hv_vdb_writer_add_levelset) for a surface inside
+// the block; where the block cuts it, the shim carries phi's sign on to the end
+// of the face's leaves (none of the level sets measured here is cut).
 openvdb::FloatGrid::Ptr index_space_sdf(const hv_grid *phi, double band_voxels)
 {
-    hv_grid scaled = *phi;
     std::vector<float> v(hv_grid_count(phi));
     bool neg = false, pos = false;
     for (size_t i = 0; i < v.size(); i++) {
@@ -319,27 +177,52 @@ openvdb::FloatGrid::Ptr index_space_sdf(const hv_grid *phi, double band_voxels)
     }
     if (!neg || !pos)
         fail(HV_ERR_INVALID_ARG, "sdf_to_ext: phi has no zero crossing (all of one sign)");
-    scaled.v = v.data();
-    scaled.h = 1.0;
-    const double o0[3] = {-0.5, -0.5, -0.5};
-    for (int a = 0; a < 3; a++)
-        scaled.origin[a] = o0[a];
     const bool dense = !(band_voxels > 0);
-    double band = dense ? (double)std::max({phi->n[0], phi->n[1], phi->n[2]}) + 1.0 : band_voxels;
-    auto grid = levelset_from(&scaled, band, dense);
+    const float bg =
+        (float)(dense ? (double)std::max({phi->n[0], phi->n[1], phi->n[2]}) + 1.0 : band_voxels);
+    const CoordBBox block(Coord(0, 0, 0), Coord(phi->n[0] - 1, phi->n[1] - 1, phi->n[2] - 1));
+    // x runs fastest in an hv_grid
+    const openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> values(block, v.data());
+    auto grid = openvdb::FloatGrid::create(bg);
+    openvdb::tools::copyFromDense(values, *grid, 0.0f); // voxels equal to bg come inactive
+    if (dense) {
+        auto all = openvdb::MaskGrid::create();
+        all->fill(block, true, true);
+        grid->topologyUnion(*all);
+    } else {
+        for (auto it = grid->beginValueOn(); it; ++it)
+            if (!(std::fabs(*it) < bg)) {
+                it.setValue(*it < 0 ? -bg : bg);
+                it.setActiveState(false);
+            }
+    }
+    openvdb::tools::prune(grid->tree());
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
     grid->tree().voxelizeActiveTiles(); // FastSweeping refuses active tiles
     return grid;
+}
+
+// g, a grid the caller made like phi (hv_grid_create), with phi's voxels.
+void check_like(const hv_grid *phi, const hv_grid *g, const char *what)
+{
+    if (!g || !g->v)
+        fail(HV_ERR_INVALID_ARG, std::string("sdf_to_ext: ") + what + " is NULL");
+    bool same = g->dim == phi->dim && g->h == phi->h;
+    for (int a = 0; a < 3; a++)
+        same = same && g->n[a] == phi->n[a] && g->origin[a] == phi->origin[a];
+    if (!same)
+        fail(HV_ERR_INVALID_ARG,
+             std::string("sdf_to_ext: ") + what + " must have phi's size, voxel size and origin");
 }
 
 void check_ext_args(const hv_grid *phi, const hv_grid *const *in, const hv_grid *const *out,
                     int count)
 {
-    check_grid(phi, "sdf_to_ext: phi");
+    if (!phi || !phi->v)
+        fail(HV_ERR_INVALID_ARG, "sdf_to_ext: phi is NULL");
     for (int c = 0; c < count; c++) {
-        check_grid(in[c], "sdf_to_ext: field");
-        check_grid(out[c], "sdf_to_ext: output");
-        check_same_shape(phi, in[c], "phi", "field");
-        check_same_shape(phi, out[c], "phi", "output");
+        check_like(phi, in[c], "a field");
+        check_like(phi, out[c], "an output");
     }
     hv_status st = hv_check_finite(phi->v, hv_grid_count(phi), "phi");
     if (st)
@@ -590,9 +473,8 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
 {
     return guarded("ref_vdb_mesh_to_levelset", [&] {
         init_vdb();
-        check_grid(out, "ref_vdb_mesh_to_levelset: output grid");
-        if (out->dim != 3)
-            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: output grid must be 3D");
+        if (!out || !out->v || out->dim != 3)
+            fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: the output grid must be 3D");
         if (!verts || !tris || nv == 0 || nt == 0)
             fail(HV_ERR_INVALID_ARG, "ref_vdb_mesh_to_levelset: empty mesh");
         if (!(band_voxels >= 1) || !std::isfinite(band_voxels))
@@ -603,7 +485,10 @@ hv_status ref_vdb_mesh_to_levelset(const double *verts, size_t nv, const uint32_
         std::vector<openvdb::Vec3s> pts;
         std::vector<openvdb::Vec3I> tri;
         vdb_mesh("ref_vdb_mesh_to_levelset", verts, nv, tris, nt, pts, tri);
-        auto xf = make_transform(out->h, out->origin);
+        // index (i,j,k) at the cell centre origin + (i+1/2)h (heatvox/vdb.h)
+        auto xf = openvdb::math::Transform::createLinearTransform(out->h);
+        xf->postTranslate(Vec3d(out->origin[0] + 0.5 * out->h, out->origin[1] + 0.5 * out->h,
+                                out->origin[2] + 0.5 * out->h));
         auto t0 = std::chrono::steady_clock::now();
         auto grid =
             openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*xf, pts, tri, (float)band_voxels);
