@@ -123,39 +123,34 @@ static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbe
                      n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
 }
 
-hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
-                        double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S)
+/* A tile's key: its 2x2x2 group of tiles (16^3 cells, rasterized together)
+ * numbered along x, then y, then z, then its octant within the group. */
+static uint64_t tile_key(const int nb[3], int x, int y, int z)
 {
-    *out = NULL;
-    const int nt[3] = {(n[0] + HV_TILE - 1) / HV_TILE, (n[1] + HV_TILE - 1) / HV_TILE,
-                       (n[2] + HV_TILE - 1) / HV_TILE};
-    /* Tiles are numbered by 2x2x2 group (16^3 cells, rasterized together),
-     * then by octant within it. */
-    const int nb[3] = {(nt[0] + 1) / 2, (nt[1] + 1) / 2, (nt[2] + 1) / 2};
-#define TKEY(x, y, z)                                                                              \
-    ((((uint64_t)((x) >> 1) +                                                                      \
-       (uint64_t)nb[0] * ((uint64_t)((y) >> 1) + (uint64_t)nb[1] * (uint64_t)((z) >> 1)))          \
-      << 3) |                                                                                      \
-     (uint64_t)(((x)&1) | ((y)&1) << 1 | ((z)&1) << 2))
-    hv_status st = band_fits(M, n, h, 8.0 * nb[0] * nb[1] * nb[2] < 4294967295.0);
-    if (st)
-        return st;
-    /* The raster's reach: the band, and at least the 2 voxels the dense
-     * path rasterizes, so that both keep the same nearest triangles. */
-    const double bandw = band * h, W = fmax(band, 2.0) * h;
-    const float bg = (float)bandw;
+    return (((uint64_t)(x >> 1) +
+             (uint64_t)nb[0] * ((uint64_t)(y >> 1) + (uint64_t)nb[1] * (uint64_t)(z >> 1)))
+            << 3) |
+           (uint64_t)((x & 1) | (y & 1) << 1 | (z & 1) << 2);
+}
+
+static hv_status tiles_nomem(void)
+{
+    return hv__error(HV_ERR_NOMEM, "sdf: out of memory for the narrow band's tiles");
+}
+
+/* 1. Bin: every (tile << 32 | triangle) pair, counted first, then filled,
+ * sorted by tile. *pairs_out is new; NULL on failure. */
+static hv_status bin_triangles(const hv_mesh *M, const int n[3], double h, const double origin[3],
+                               double W, const int nt[3], const int nb[3], uint64_t **pairs_out,
+                               size_t *npairs_out)
+{
     const size_t ntri = M->ntris;
     size_t *first = hv_malloc((ntri + 1) * sizeof *first);
     uint64_t *pairs = NULL, *tmp = NULL;
-    size_t *tstart = NULL, *gstart = NULL;
-    hv_tiles *T = NULL;
-    uint8_t *keep = NULL;
-    hv_pseudo ps;
-    int have_ps = 0;
+    hv_status st = HV_OK;
+    *pairs_out = NULL;
     if (!first)
         goto nomem;
-
-    /* 1. Bin: (tile << 32 | triangle), counted first, then filled. */
     first[0] = 0;
 #pragma omp parallel for schedule(static)
     for (size_t t = 0; t < ntri; t++) {
@@ -182,76 +177,342 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
         for (int z = lo[2]; z <= hi[2]; z++)
             for (int y = lo[1]; y <= hi[1]; y++)
                 for (int x = lo[0]; x <= hi[0]; x++) {
-                    pairs[at++] = TKEY(x, y, z) << 32 | (uint64_t)t;
+                    pairs[at++] = tile_key(nb, x, y, z) << 32 | (uint64_t)t;
                 }
     }
+    /* The counts go before the sort, which holds the pairs twice. */
     hv_free(first);
     first = NULL;
     if (!sort_by_tile(pairs, tmp, npairs))
         qsort(pairs, npairs, sizeof *pairs, cmp_hi32);
+    *pairs_out = pairs;
+    *npairs_out = npairs;
+    pairs = NULL;
+    goto out;
+nomem:
+    st = tiles_nomem();
+out:
+    hv_free(first);
+    hv_free(pairs);
     hv_free(tmp);
-    tmp = NULL;
-    size_t ntiles = 0;
-    for (size_t i = 0; i < npairs; i++)
-        ntiles += i == 0 || pairs[i] >> 32 != pairs[i - 1] >> 32;
-    if ((st = hv__progress(0.3, "tiles")))
-        goto out;
+    return st;
+}
 
-    /* Memory: the tiles, and the .vdb writer's copy of them. */
-    {
-        double need = (double)ntiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12) +
-                      (double)npairs * 8;
-        int dims[3] = {(int)(need / 1048576.0) + 1, 1, 1};
-        if (need > 1e18 || (st = hv_check_dims(3, dims, 1.0, 1048576))) {
-            hv_clear_error();
-            st = hv__error(HV_ERR_NOMEM,
-                           "sdf: a block of %d x %d x %d cells: its narrow band needs about "
-                           "%.3g GB, more than this machine's %.3g GB",
-                           n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
-            goto out;
-        }
+/* The memory of the tiles, and of the .vdb writer's copy of them. */
+static hv_status band_memory(size_t ntiles, size_t npairs, const int n[3])
+{
+    double need =
+        (double)ntiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12) + (double)npairs * 8;
+    int dims[3] = {(int)(need / 1048576.0) + 1, 1, 1};
+    if (need > 1e18 || hv_check_dims(3, dims, 1.0, 1048576)) {
+        hv_clear_error();
+        return hv__error(HV_ERR_NOMEM,
+                         "sdf: a block of %d x %d x %d cells: its narrow band needs about "
+                         "%.3g GB, more than this machine's %.3g GB",
+                         n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
     }
-    if (!(tstart = hv_malloc((ntiles + 1) * sizeof *tstart)) || !(T = calloc(1, sizeof *T)) ||
-        !(T->ijk = hv_malloc(3 * ntiles * sizeof *T->ijk)) ||
+    return HV_OK;
+}
+
+/* The tiles of the sorted pairs: runs of one tile key (the high 32 bits).
+ * Where start is not NULL, each run's first pair into it, and npairs after
+ * the last. Returns how many. */
+static size_t tile_runs(const uint64_t *pairs, size_t npairs, size_t *start)
+{
+    size_t k = 0;
+    for (size_t i = 0; i < npairs; i++)
+        if (i == 0 || pairs[i] >> 32 != pairs[i - 1] >> 32) {
+            if (start)
+                start[k] = i;
+            k++;
+        }
+    if (start)
+        start[k] = npairs;
+    return k;
+}
+
+/* The groups: runs of tiles with one 16^3 group (tile key >> 3). *gstart
+ * (each group's first tile, and ntiles after the last) is new; 0 when out of
+ * memory. */
+static int group_runs(const uint64_t *pairs, const size_t *tstart, size_t ntiles, size_t **gstart,
+                      size_t *ngroups)
+{
+    size_t ng = 0;
+    for (size_t q = 0; q < ntiles; q++)
+        ng += q == 0 || pairs[tstart[q]] >> 35 != pairs[tstart[q - 1]] >> 35;
+    size_t *gs = hv_malloc((ng + 1) * sizeof *gs);
+    if (!gs)
+        return 0;
+    for (size_t q = 0, g = 0; q < ntiles; q++)
+        if (q == 0 || pairs[tstart[q]] >> 35 != pairs[tstart[q - 1]] >> 35)
+            gs[g++] = q;
+    gs[ng] = ntiles;
+    *gstart = gs;
+    *ngroups = ng;
+    return 1;
+}
+
+/* ntiles tiles on the block (n, h, origin), no voxel active; NULL when out
+ * of memory. */
+static hv_tiles *tiles_alloc(const int n[3], double h, const double origin[3], size_t ntiles)
+{
+    hv_tiles *T = calloc(1, sizeof *T);
+    if (!T || !(T->ijk = hv_malloc(3 * ntiles * sizeof *T->ijk)) ||
         !(T->v = hv_malloc((size_t)T3 * ntiles * sizeof *T->v)) ||
-        !(T->on = hv_calloc(8 * ntiles, sizeof *T->on)) || !(keep = hv_calloc(ntiles, 1)))
-        goto nomem;
-    for (size_t i = 0, k = 0; i < npairs; i++)
-        if (i == 0 || pairs[i] >> 32 != pairs[i - 1] >> 32)
-            tstart[k++] = i;
-    tstart[ntiles] = npairs;
+        !(T->on = hv_calloc(8 * ntiles, sizeof *T->on))) {
+        hv_tiles_destroy(&T);
+        return NULL;
+    }
     for (int a = 0; a < 3; a++) {
         T->n[a] = n[a];
         T->origin[a] = origin[a];
     }
     T->h = h;
-    if (!unsig) {
-        if ((st = hv__pseudo_build(M, &ps)))
-            goto out;
-        have_ps = 1;
-    }
+    return T;
+}
 
-    /* 2-3. Raster and sign, tile by tile. */
-    const float hf = (float)h, dlim = (float)(near_sign * h);
-    const int closed = !unsig && ps.balanced;
-#define CENTRE(p, i, j, k)                                                                         \
-    do {                                                                                           \
-        (p)[0] = origin[0] + (blo[0] + (i) + 0.5) * h;                                             \
-        (p)[1] = origin[1] + (blo[1] + (j) + 0.5) * h;                                             \
-        (p)[2] = origin[2] + (blo[2] + (k) + 0.5) * h;                                             \
-    } while (0)
+/* What the threads read while they rasterize and sign the groups of tiles. */
+typedef struct {
+    const hv_mesh *M;
+    hv_pseudo *ps; /* the pseudonormals and winding numbers; unset when unsig */
+    const int *n, *nb;
+    const double *origin;
+    double h, W;                   /* voxel; the raster's reach */
+    float hf, dlim, bg;            /* voxel; pseudonormals' reach; band, the value off it */
+    int unsig, closed;             /* closed: the sign floods between neighbours */
+    const uint64_t *pairs;         /* (tile << 32 | triangle), sorted */
+    const size_t *tstart, *gstart; /* each tile's first pair, each group's first tile */
+    hv_tiles *T;
+    uint8_t *keep; /* per tile: whether it holds an active voxel */
+} band_ctx;
+
+/* A thread's sums over its tiles. */
+typedef struct {
+    size_t band_cells, active, evals, used;
+    double ts;
+} band_counts;
+
+/* The world position of cell (i, j, k) of the tile whose first cell is blo. */
+static void cell_centre(const band_ctx *c, const int blo[3], int i, int j, int k, double p[3])
+{
+    p[0] = c->origin[0] + (blo[0] + i + 0.5) * c->h;
+    p[1] = c->origin[1] + (blo[1] + j + 0.5) * c->h;
+    p[2] = c->origin[2] + (blo[2] + k + 0.5) * c->h;
+}
+
+/* The distinct triangles of a group's np pairs, sorted, into tl; returns how
+ * many. */
+static size_t group_triangles(const uint64_t *pairs, size_t np, uint32_t *tl)
+{
+    for (size_t i = 0; i < np; i++)
+        tl[i] = (uint32_t)pairs[i];
+    qsort(tl, np, sizeof *tl, cmp_u32);
+    size_t nu = 0;
+    for (size_t i = 0; i < np; i++)
+        if (i == 0 || tl[i] != tl[i - 1])
+            tl[nu++] = tl[i];
+    return nu;
+}
+
+/* Tile q of group gc (rasterized into big over glo..ghi): its first cell blo
+ * (also into T->ijk), its extent ext within the block, and its cells'
+ * (distance << 32 | triangle) minima from big into best (ext[0] x ext[1] x
+ * ext[2]). */
+static void tile_nearest(const band_ctx *c, size_t q, const int gc[3], const int glo[3],
+                         const int ghi[3], const uint64_t *big, int blo[3], int ext[3],
+                         uint64_t *best)
+{
+    const uint64_t key = c->pairs[c->tstart[q]] >> 32;
+    const int oc = (int)(key & 7);
+    const int tc[3] = {2 * gc[0] + (oc & 1), 2 * gc[1] + (oc >> 1 & 1), 2 * gc[2] + (oc >> 2)};
+    int bhi[3];
+    for (int a = 0; a < 3; a++) {
+        blo[a] = tc[a] * HV_TILE;
+        bhi[a] = blo[a] + HV_TILE - 1 < c->n[a] - 1 ? blo[a] + HV_TILE - 1 : c->n[a] - 1;
+        c->T->ijk[3 * q + a] = blo[a];
+    }
+    const int ex = bhi[0] - blo[0] + 1, ey = bhi[1] - blo[1] + 1, ez = bhi[2] - blo[2] + 1;
+    ext[0] = ex;
+    ext[1] = ey;
+    ext[2] = ez;
+    const int gx = ghi[0] - glo[0] + 1, gy = ghi[1] - glo[1] + 1;
+    for (int k = 0; k < ez; k++)
+        for (int j = 0; j < ey; j++)
+            for (int i = 0; i < ex; i++)
+                best[i + ex * (j + ey * k)] =
+                    big[(blo[0] - glo[0] + i) +
+                        (size_t)gx * ((blo[1] - glo[1] + j) + (size_t)gy * (blo[2] - glo[2] + k))];
+}
+
+/* The tile's cells: v the band's edge, d the distance where the raster
+ * reached (INFINITY elsewhere), and the sign sg of those within a voxel: the
+ * clean nearest feature's pseudonormal (within near_sign voxels), else the
+ * winding number (0: not yet signed). Returns the cells in the band left
+ * unsigned. */
+static int sign_near(const band_ctx *c, const int blo[3], const int ext[3], uint64_t *best,
+                     float *v, float *d, int8_t *sg, band_counts *cnt)
+{
+    const int ex = ext[0], ey = ext[1], ez = ext[2];
+    int todo = 0;
+    for (int k = 0; k < HV_TILE; k++)
+        for (int j = 0; j < HV_TILE; j++)
+            for (int i = 0; i < HV_TILE; i++) {
+                const int o = i + HV_TILE * (j + HV_TILE * k);
+                v[o] = c->bg;
+                d[o] = INFINITY;
+                sg[o] = 0;
+                if (i >= ex || j >= ey || k >= ez)
+                    continue;
+                const uint64_t b = best[i + ex * (j + ey * k)];
+                if (b == UINT64_MAX)
+                    continue;
+                cnt->band_cells++;
+                uint32_t bits = (uint32_t)(b >> 32);
+                memcpy(&d[o], &bits, sizeof d[o]);
+                best[i + ex * (j + ey * k)] = (uint64_t)(uint32_t)b; /* the triangle */
+                if (c->unsig || !(d[o] < c->hf)) {
+                    todo += !c->unsig && d[o] < c->bg;
+                    continue;
+                }
+                double p[3];
+                cell_centre(c, blo, i, j, k, p);
+                int s = d[o] < c->dlim ? hv__pseudo_sign(c->ps, c->M, (uint32_t)b, p, 0) : 0;
+                if (s)
+                    cnt->used++;
+                else
+                    s = hv__wn_sure(&c->ps->W, p, &cnt->evals) > 0.5 ? -1 : 1;
+                sg[o] = (int8_t)s;
+            }
+    return todo;
+}
+
+/* Unsigned cells of the raster's reach take a signed neighbour's sign, until
+ * none does. Returns todo less the cells of the band so signed. */
+static int flood_signs(const float *d, int8_t *sg, float bg, int todo)
+{
+    int changed = 1;
+    while (changed) {
+        changed = 0;
+        for (int o = 0; o < T3; o++) {
+            if (sg[o] || !(d[o] < INFINITY))
+                continue;
+            const int i = o % HV_TILE, j = o / HV_TILE % HV_TILE, k = o / (HV_TILE * HV_TILE);
+            int s = i > 0 ? sg[o - 1] : 0;
+            s = !s && i < HV_TILE - 1 ? sg[o + 1] : s;
+            s = !s && j > 0 ? sg[o - HV_TILE] : s;
+            s = !s && j < HV_TILE - 1 ? sg[o + HV_TILE] : s;
+            s = !s && k > 0 ? sg[o - HV_TILE * HV_TILE] : s;
+            s = !s && k < HV_TILE - 1 ? sg[o + HV_TILE * HV_TILE] : s;
+            if (s) {
+                sg[o] = (int8_t)s;
+                changed = 1;
+                todo -= d[o] < bg;
+            }
+        }
+    }
+    return todo;
+}
+
+/* Beyond a voxel. With a closed mesh the winding number only changes across
+ * the surface, and no surface passes between two neighbours of which one is a
+ * voxel or more from it: its sign floods in from the neighbours, with one
+ * evaluation per part of the tile it does not reach. An open mesh's winding
+ * number also crosses 1/2 in free space (across openings): one evaluation per
+ * cell. */
+static void sign_far(const band_ctx *c, const int blo[3], const float *d, int8_t *sg, int todo,
+                     size_t *evals)
+{
+    while (todo > 0) {
+        if (c->closed)
+            todo = flood_signs(d, sg, c->bg, todo);
+        for (int o = 0; o < T3 && todo > 0; o++) {
+            if (sg[o] || !(d[o] < c->bg))
+                continue;
+            double p[3];
+            cell_centre(c, blo, o % HV_TILE, o / HV_TILE % HV_TILE, o / (HV_TILE * HV_TILE), p);
+            sg[o] = hv__wn_sure(&c->ps->W, p, evals) > 0.5 ? -1 : 1;
+            todo--;
+            if (c->closed)
+                break;
+        }
+    }
+}
+
+/* The band's signed distances into v and their bits into on. Returns
+ * whether the tile has any. */
+static int write_band(float bg, const float *d, const int8_t *sg, float *v, uint64_t *on,
+                      size_t *active)
+{
+    int any = 0;
+    for (int o = 0; o < T3; o++) {
+        if (!(d[o] < bg))
+            continue;
+        v[o] = sg[o] < 0 ? -d[o] : d[o];
+        on[o / (HV_TILE * HV_TILE)] |= (uint64_t)1 << (o % (HV_TILE * HV_TILE));
+        (*active)++;
+        any = 1;
+    }
+    return any;
+}
+
+/* 2-3. Tile q of a group rasterized into big: its values, active voxels and
+ * keep[q]. */
+static void sign_tile(const band_ctx *c, size_t q, const int gc[3], const int glo[3],
+                      const int ghi[3], const uint64_t *big, band_counts *cnt)
+{
+    uint64_t best[T3];
+    int blo[3], ext[3];
+    tile_nearest(c, q, gc, glo, ghi, big, blo, ext, best);
+    float *v = c->T->v + (size_t)T3 * q;
+    uint64_t *on = c->T->on + 8 * q;
+    double t0 = hv_now();
+    float d[T3];
+    int8_t sg[T3];
+    int todo = sign_near(c, blo, ext, best, v, d, sg, cnt);
+    sign_far(c, blo, d, sg, todo, &cnt->evals);
+    int any = write_band(c->bg, d, sg, v, on, &cnt->active);
+    cnt->ts += hv_now() - t0;
+    c->keep[q] = (uint8_t)any;
+}
+
+/* 2-3. Group gq: its triangles, each once, rasterized into its 16^3 box
+ * (fewer (box, triangle) pairs than tile by tile, the same minima), then its
+ * tiles signed. 0 when out of memory. */
+static int sign_group(const band_ctx *c, size_t gq, band_counts *cnt)
+{
+    const size_t p0 = c->tstart[c->gstart[gq]], p1 = c->tstart[c->gstart[gq + 1]];
+    uint32_t *tl = malloc((p1 - p0) * sizeof *tl);
+    uint64_t *big = malloc(8 * T3 * sizeof *big);
+    if (!tl || !big) {
+        free(tl);
+        free(big);
+        return 0;
+    }
+    const size_t nu = group_triangles(c->pairs + p0, p1 - p0, tl);
+    const uint64_t gkey = c->pairs[p0] >> 35;
+    const uint64_t nb0 = (uint64_t)c->nb[0], nb1 = (uint64_t)c->nb[1];
+    const int gc[3] = {(int)(gkey % nb0), (int)(gkey / nb0 % nb1), (int)(gkey / nb0 / nb1)};
+    int glo[3], ghi[3];
+    for (int a = 0; a < 3; a++) {
+        glo[a] = gc[a] * 2 * HV_TILE;
+        ghi[a] = glo[a] + 2 * HV_TILE - 1 < c->n[a] - 1 ? glo[a] + 2 * HV_TILE - 1 : c->n[a] - 1;
+    }
+    memset(big, 0xff, 8 * T3 * sizeof *big);
+    for (size_t i = 0; i < nu; i++)
+        hv__exact_raster_tile(c->M, c->origin, c->h, glo, ghi, tl[i], c->W, big);
+    free(tl);
+    for (size_t q = c->gstart[gq]; q < c->gstart[gq + 1]; q++)
+        sign_tile(c, q, gc, glo, ghi, big, cnt);
+    free(big);
+    return 1;
+}
+
+/* 2-3. Every group, in parallel; the sums into *sum. Returns how many groups
+ * ran out of memory. */
+static int sign_groups(const band_ctx *c, size_t ngroups, band_counts *sum)
+{
     size_t band_cells = 0, active = 0, evals = 0, used = 0;
     double ts = 0;
-    /* Groups: runs of tiles with one 16^3 group (tile key >> 3). */
-    size_t ngroups = 0;
-    for (size_t q = 0; q < ntiles; q++)
-        ngroups += q == 0 || pairs[tstart[q]] >> 35 != pairs[tstart[q - 1]] >> 35;
-    if (!(gstart = hv_malloc((ngroups + 1) * sizeof *gstart)))
-        goto nomem;
-    for (size_t q = 0, g = 0; q < ntiles; q++)
-        if (q == 0 || pairs[tstart[q]] >> 35 != pairs[tstart[q - 1]] >> 35)
-            gstart[g++] = q;
-    gstart[ngroups] = ntiles;
     int failed = 0;
     /* Progress from the first thread alone, which also notes a cancel; the
      * groups after it are skipped. */
@@ -266,155 +527,24 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
         if (omp_get_thread_num() == 0 && done % 64 == 0 &&
             hv__progress_part((double)done / ngroups, "tiles"))
             atomic_store(&cancelled, 1);
-        /* The group's triangles, each once, rasterized into its 16^3 box:
-         * fewer (box, triangle) pairs than tile by tile, the same minima. */
-        const size_t p0 = tstart[gstart[gq]], p1 = tstart[gstart[gq + 1]];
-        uint32_t *tl = malloc((p1 - p0) * sizeof *tl);
-        uint64_t *big = malloc(8 * T3 * sizeof *big);
-        if (!tl || !big) {
-            free(tl);
-            free(big);
-            failed++;
-            continue;
-        }
-        for (size_t i = p0; i < p1; i++)
-            tl[i - p0] = (uint32_t)pairs[i];
-        qsort(tl, p1 - p0, sizeof *tl, cmp_u32);
-        size_t nu = 0;
-        for (size_t i = 0; i < p1 - p0; i++)
-            if (i == 0 || tl[i] != tl[i - 1])
-                tl[nu++] = tl[i];
-        const uint64_t gkey = pairs[p0] >> 35;
-        const int gc[3] = {(int)(gkey % (uint64_t)nb[0]),
-                           (int)(gkey / (uint64_t)nb[0] % (uint64_t)nb[1]),
-                           (int)(gkey / (uint64_t)nb[0] / (uint64_t)nb[1])};
-        int glo[3], ghi[3];
-        for (int a = 0; a < 3; a++) {
-            glo[a] = gc[a] * 2 * HV_TILE;
-            ghi[a] = glo[a] + 2 * HV_TILE - 1 < n[a] - 1 ? glo[a] + 2 * HV_TILE - 1 : n[a] - 1;
-        }
-        const int gx = ghi[0] - glo[0] + 1, gy = ghi[1] - glo[1] + 1;
-        memset(big, 0xff, 8 * T3 * sizeof *big);
-        for (size_t i = 0; i < nu; i++)
-            hv__exact_raster_tile(M, origin, h, glo, ghi, tl[i], W, big);
-        free(tl);
-        for (size_t q = gstart[gq]; q < gstart[gq + 1]; q++) {
-            uint64_t best[T3];
-            const uint64_t key = pairs[tstart[q]] >> 32;
-            const int oc = (int)(key & 7);
-            const int tc[3] = {2 * gc[0] + (oc & 1), 2 * gc[1] + (oc >> 1 & 1),
-                               2 * gc[2] + (oc >> 2)};
-            int blo[3], bhi[3];
-            for (int a = 0; a < 3; a++) {
-                blo[a] = tc[a] * HV_TILE;
-                bhi[a] = blo[a] + HV_TILE - 1 < n[a] - 1 ? blo[a] + HV_TILE - 1 : n[a] - 1;
-                T->ijk[3 * q + a] = blo[a];
-            }
-            const int ex = bhi[0] - blo[0] + 1, ey = bhi[1] - blo[1] + 1, ez = bhi[2] - blo[2] + 1;
-            for (int k = 0; k < ez; k++)
-                for (int j = 0; j < ey; j++)
-                    for (int i = 0; i < ex; i++)
-                        best[i + ex * (j + ey * k)] =
-                            big[(blo[0] - glo[0] + i) +
-                                (size_t)gx *
-                                    ((blo[1] - glo[1] + j) + (size_t)gy * (blo[2] - glo[2] + k))];
-            float *v = T->v + (size_t)T3 * q;
-            uint64_t *on = T->on + 8 * q;
-            double t0 = hv_now();
-            int any = 0;
-            float d[T3];
-            int8_t sg[T3];
-            int todo = 0;
-            for (int k = 0; k < HV_TILE; k++)
-                for (int j = 0; j < HV_TILE; j++)
-                    for (int i = 0; i < HV_TILE; i++) {
-                        const int o = i + HV_TILE * (j + HV_TILE * k);
-                        v[o] = bg;
-                        d[o] = INFINITY;
-                        sg[o] = 0;
-                        if (i >= ex || j >= ey || k >= ez)
-                            continue;
-                        const uint64_t b = best[i + ex * (j + ey * k)];
-                        if (b == UINT64_MAX)
-                            continue;
-                        band_cells++;
-                        uint32_t bits = (uint32_t)(b >> 32);
-                        memcpy(&d[o], &bits, sizeof d[o]);
-                        best[i + ex * (j + ey * k)] = (uint64_t)(uint32_t)b; /* the triangle */
-                        if (unsig || !(d[o] < hf)) {
-                            todo += !unsig && d[o] < bg;
-                            continue;
-                        }
-                        /* Within a voxel: the clean nearest feature's pseudonormal
-                     * (within near_sign voxels), else the winding number. */
-                        double p[3];
-                        CENTRE(p, i, j, k);
-                        int s = d[o] < dlim ? hv__pseudo_sign(&ps, M, (uint32_t)b, p, 0) : 0;
-                        if (s)
-                            used++;
-                        else
-                            s = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
-                        sg[o] = (int8_t)s;
-                    }
-            /* Beyond a voxel. With a closed mesh the winding number only changes
-         * across the surface, and no surface passes between two neighbours
-         * of which one is a voxel or more from it: its sign floods in from
-         * the neighbours, with one evaluation per part of the tile it does
-         * not reach. An open mesh's winding number also crosses 1/2 in free
-         * space (across openings): one evaluation per cell. */
-            while (todo > 0) {
-                int changed = 1;
-                while (closed && changed) {
-                    changed = 0;
-                    for (int o = 0; o < T3; o++) {
-                        if (sg[o] || !(d[o] < INFINITY))
-                            continue;
-                        const int i = o % HV_TILE, j = o / HV_TILE % HV_TILE,
-                                  k = o / (HV_TILE * HV_TILE);
-                        int s = i > 0 ? sg[o - 1] : 0;
-                        s = !s && i < HV_TILE - 1 ? sg[o + 1] : s;
-                        s = !s && j > 0 ? sg[o - HV_TILE] : s;
-                        s = !s && j < HV_TILE - 1 ? sg[o + HV_TILE] : s;
-                        s = !s && k > 0 ? sg[o - HV_TILE * HV_TILE] : s;
-                        s = !s && k < HV_TILE - 1 ? sg[o + HV_TILE * HV_TILE] : s;
-                        if (s) {
-                            sg[o] = (int8_t)s;
-                            changed = 1;
-                            todo -= d[o] < bg;
-                        }
-                    }
-                }
-                for (int o = 0; o < T3 && todo > 0; o++) {
-                    if (sg[o] || !(d[o] < bg))
-                        continue;
-                    double p[3];
-                    CENTRE(p, o % HV_TILE, o / HV_TILE % HV_TILE, o / (HV_TILE * HV_TILE));
-                    sg[o] = hv__wn_sure(&ps.W, p, &evals) > 0.5 ? -1 : 1;
-                    todo--;
-                    if (closed)
-                        break;
-                }
-            }
-            for (int o = 0; o < T3; o++) {
-                if (!(d[o] < bg))
-                    continue;
-                v[o] = sg[o] < 0 ? -d[o] : d[o];
-                on[o / (HV_TILE * HV_TILE)] |= (uint64_t)1 << (o % (HV_TILE * HV_TILE));
-                active++;
-                any = 1;
-            }
-            ts += hv_now() - t0;
-            keep[q] = (uint8_t)any;
-        }
-        free(big);
+        /* The thread's own sums go through cnt and back: they add up tile by
+         * tile, as one running sum per thread. */
+        band_counts cnt = {band_cells, active, evals, used, ts};
+        failed += !sign_group(c, gq, &cnt);
+        band_cells = cnt.band_cells;
+        active = cnt.active;
+        evals = cnt.evals;
+        used = cnt.used;
+        ts = cnt.ts;
     }
-    if (failed)
-        goto nomem;
-    if ((st = hv__progress(0.9, "tiles")))
-        goto out;
-    /* A cancel inside the loop is the callback's answer again here. */
+    *sum = (band_counts){band_cells, active, evals, used, ts};
+    return failed;
+}
 
-    /* 4. Compact in place, in tile order. */
+/* 4. The tiles with an active voxel moved to the front, in tile order.
+ * Returns how many. */
+static size_t compact_tiles(hv_tiles *T, const uint8_t *keep, size_t ntiles)
+{
     size_t kept = 0;
     for (size_t q = 0; q < ntiles; q++) {
         if (!keep[q])
@@ -426,35 +556,99 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
         }
         kept++;
     }
+    return kept;
+}
+
+static void band_stats(hv_sdf_stats *S, size_t kept, const band_counts *sum)
+{
+    S->tiles = kept;
+    S->active_voxels = sum->active;
+    S->band_cells = sum->band_cells;
+    S->winding_evals = sum->evals;
+    S->near_sign_cells = sum->used;
+    S->t_sign = sum->ts / (hv_get_threads() > 0 ? hv_get_threads() : 1);
+}
+
+hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
+                        double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S)
+{
+    *out = NULL;
+    const int nt[3] = {(n[0] + HV_TILE - 1) / HV_TILE, (n[1] + HV_TILE - 1) / HV_TILE,
+                       (n[2] + HV_TILE - 1) / HV_TILE};
+    const int nb[3] = {(nt[0] + 1) / 2, (nt[1] + 1) / 2, (nt[2] + 1) / 2};
+    hv_status st = band_fits(M, n, h, 8.0 * nb[0] * nb[1] * nb[2] < 4294967295.0);
+    if (st)
+        return st;
+    /* The raster's reach: the band, and at least the 2 voxels the dense
+     * path rasterizes, so that both keep the same nearest triangles. */
+    const double bandw = band * h, W = fmax(band, 2.0) * h;
+    uint64_t *pairs = NULL;
+    size_t *tstart = NULL, *gstart = NULL;
+    hv_tiles *T = NULL;
+    uint8_t *keep = NULL;
+    hv_pseudo ps;
+    int have_ps = 0;
+    size_t npairs = 0, ngroups = 0;
+    if ((st = bin_triangles(M, n, h, origin, W, nt, nb, &pairs, &npairs)))
+        goto out;
+    const size_t ntiles = tile_runs(pairs, npairs, NULL);
+    if ((st = hv__progress(0.3, "tiles")) || (st = band_memory(ntiles, npairs, n)))
+        goto out;
+    if (!(tstart = hv_malloc((ntiles + 1) * sizeof *tstart)) ||
+        !(T = tiles_alloc(n, h, origin, ntiles)) || !(keep = hv_calloc(ntiles, 1)))
+        goto nomem;
+    tile_runs(pairs, npairs, tstart);
+    if (!unsig) {
+        if ((st = hv__pseudo_build(M, &ps)))
+            goto out;
+        have_ps = 1;
+    }
+    if (!group_runs(pairs, tstart, ntiles, &gstart, &ngroups))
+        goto nomem;
+    const band_ctx c = {.M = M,
+                        .ps = &ps,
+                        .n = n,
+                        .nb = nb,
+                        .origin = origin,
+                        .h = h,
+                        .W = W,
+                        .hf = (float)h,
+                        .dlim = (float)(near_sign * h),
+                        .bg = (float)bandw,
+                        .unsig = unsig,
+                        .closed = !unsig && ps.balanced,
+                        .pairs = pairs,
+                        .tstart = tstart,
+                        .gstart = gstart,
+                        .T = T,
+                        .keep = keep};
+    band_counts sum;
+    if (sign_groups(&c, ngroups, &sum))
+        goto nomem;
+    /* A cancel inside the loop is the callback's answer again here. */
+    if ((st = hv__progress(0.9, "tiles")))
+        goto out;
+    const size_t kept = compact_tiles(T, keep, ntiles);
     if (kept == 0) {
         st = hv__error(HV_ERR_INVALID_ARG,
                        "sdf: no part of the mesh's narrow band lies inside the grid block");
         goto out;
     }
     T->count = kept;
-    T->active = active;
-    S->tiles = kept;
-    S->active_voxels = active;
-    S->band_cells = band_cells;
-    S->winding_evals = evals;
-    S->near_sign_cells = used;
-    S->t_sign = ts / (hv_get_threads() > 0 ? hv_get_threads() : 1);
+    T->active = sum.active;
+    band_stats(S, kept, &sum);
     *out = T;
     T = NULL;
     goto out;
 nomem:
-    st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the narrow band's tiles");
+    st = tiles_nomem();
 out:
     if (have_ps)
         hv__pseudo_free(&ps);
-    hv_free(first);
     hv_free(pairs);
-    hv_free(tmp);
     hv_free(tstart);
     hv_free(gstart);
     hv_free(keep);
     hv_tiles_destroy(&T);
     return st;
-#undef CENTRE
-#undef TKEY
 }
