@@ -169,15 +169,6 @@ static void count_edges(const edge_rec *E, const uint32_t *estart, size_t ne, co
     *boundary = b, *nonmanifold = nm, *inconsistent = inc;
 }
 
-/* Decides the orientation of each component with generalized winding numbers
- * (Jacobson et al. 2013). A correctly oriented solid's boundary has winding
- * number 1/2 on it (1 inside, 0 outside); an open piece of it, e.g. a tube
- * segment between holes, still has a positive principal value where signed
- * volume about a centroid can come out either way. So: (1) each component
- * takes the orientation that makes its own winding number at its face
- * centroids positive; (2) the largest components, outermost first, take the
- * orientation that brings the total winding number at their faces closest to
- * 1/2, which turns shells nested in odd numbers of others (cavities) inward. */
 typedef struct area_idx {
     double area;
     uint32_t idx;
@@ -195,171 +186,246 @@ typedef struct comp_samples {
     size_t first, count; /* into the sample arrays */
 } comp_samples;
 
+/* orient_outward's components and their samples. */
+typedef struct orient_ctx {
+    const double *V;
+    const uint32_t *T;
+    size_t nc, nbig;
+    uint32_t *start, *faces; /* component k's faces: faces[start[k] .. start[k + 1]) */
+    comp_samples *cs;        /* component k's samples */
+    double *sx, *sa, *sw;    /* per sample: centroid, area, own winding number */
+    uint32_t *sf;            /* per sample: its face */
+    double *carea;           /* per component: area */
+    signed char *sgn;        /* per component: -1 to be flipped */
+    uint32_t *big;           /* the components by area, largest first */
+    hv_wn_tree *trees;       /* the nbig largest's winding numbers, in big's order */
+} orient_ctx;
+
+/* The faces of each component, in face order. 0 when out of memory. */
+static int component_faces(const uint32_t *comp, size_t nt, size_t nc, uint32_t *start,
+                           uint32_t *faces)
+{
+    for (size_t f = 0; f < nt; f++)
+        start[comp[f] + 1]++;
+    for (size_t k = 0; k < nc; k++)
+        start[k + 1] += start[k];
+    uint32_t *fill = malloc(nc * sizeof *fill);
+    if (!fill)
+        return 0;
+    memcpy(fill, start, nc * sizeof *fill);
+    for (size_t f = 0; f < nt; f++)
+        faces[fill[comp[f]]++] = (uint32_t)f;
+    free(fill);
+    return 1;
+}
+
+/* Sample faces: at most ORIENT_SAMPLES per component, evenly strided. Returns
+ * the stride of component k's faces; with cs, where its samples go. */
+static size_t sample_stride(const uint32_t *start, size_t k)
+{
+    size_t nf = start[k + 1] - start[k];
+    return nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
+}
+
+static size_t sample_layout(const uint32_t *start, size_t nc, comp_samples *cs)
+{
+    size_t ns = 0;
+    for (size_t k = 0; k < nc; k++) {
+        size_t nf = start[k + 1] - start[k];
+        size_t stride = sample_stride(start, k);
+        cs[k].first = ns;
+        cs[k].count = (nf + stride - 1) / stride;
+        ns += cs[k].count;
+    }
+    return ns;
+}
+
+/* The samples' faces, centroids and areas, and each component's area. */
+static void take_samples(orient_ctx *c)
+{
+    const double *V = c->V;
+    const uint32_t *T = c->T;
+    for (size_t k = 0; k < c->nc; k++) {
+        size_t stride = sample_stride(c->start, k);
+        for (size_t q = 0; q < c->cs[k].count; q++) {
+            uint32_t f = c->faces[c->start[k] + q * stride];
+            size_t i = c->cs[k].first + q;
+            double n[3];
+            cross_at(V, T + 3 * (size_t)f, n);
+            c->sa[i] = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            c->sf[i] = f;
+            for (int d = 0; d < 3; d++)
+                c->sx[3 * i + d] =
+                    (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
+                     V[3 * (size_t)T[3 * (size_t)f + 2] + d]) /
+                    3.0;
+        }
+        for (size_t q = c->start[k]; q < c->start[k + 1]; q++) {
+            double n[3];
+            cross_at(V, T + 3 * (size_t)c->faces[q], n);
+            c->carea[k] += 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        }
+    }
+}
+
+/* big: the components by area, largest first (ties by index). 0 when out of
+ * memory. */
+static int by_area(const double *carea, size_t nc, uint32_t *big)
+{
+    area_idx *ai = malloc(nc * sizeof *ai);
+    if (!ai)
+        return 0;
+    for (size_t k = 0; k < nc; k++)
+        ai[k].area = carea[k], ai[k].idx = (uint32_t)k;
+    qsort(ai, nc, sizeof *ai, cmp_area_desc);
+    for (size_t k = 0; k < nc; k++)
+        big[k] = ai[k].idx;
+    free(ai);
+    return 1;
+}
+
+/* (1) Each component, largest first, takes the sign that makes its own
+ * winding number at its samples positive (sw: those numbers); the nbig
+ * largest keep their trees for the nesting. */
+static hv_status own_winding(orient_ctx *c, const uint8_t *flip)
+{
+    hv_status st;
+    for (size_t b = 0; b < c->nc; b++) {
+        size_t k = c->big[b]; /* every component, largest first */
+        hv_wn_tree W;
+        if ((st = hv__wn_build(&W, c->V, c->T, c->faces + c->start[k],
+                               c->start[k + 1] - c->start[k], flip)))
+            return st;
+        double num = 0, den = 0;
+        for (size_t i = c->cs[k].first; i < c->cs[k].first + c->cs[k].count; i++) {
+            c->sw[i] = hv__wn_eval(&W, c->sx + 3 * i, c->sf[i]);
+            num += c->sa[i] * c->sw[i];
+            den += c->sa[i];
+        }
+        c->sgn[k] = (den > 0 && num < -1e-3 * den) ? -1 : 1;
+        if (b < c->nbig)
+            c->trees[b] = W;
+        else
+            hv__wn_free(&W);
+    }
+    return HV_OK;
+}
+
+/* The winding number at sample i of the big components other than the b-th,
+ * each under its present sign. */
+static double others_winding(const orient_ctx *c, size_t b, size_t i)
+{
+    double wo = 0;
+    for (size_t o = 0; o < c->nbig; o++)
+        if (o != b)
+            wo += c->sgn[c->big[o]] * hv__wn_eval(&c->trees[o], c->sx + 3 * i, UINT32_MAX);
+    return wo;
+}
+
+/* (2) Nesting among the big components, outermost first: each enclosed by
+ * another takes the sign that brings the total winding number at its samples
+ * closest to 1/2. HV_ERR_NOMEM (no message) when out of memory. */
+static hv_status nest_shells(orient_ctx *c)
+{
+    const size_t nbig = c->nbig;
+    double *depth = calloc(nbig, sizeof *depth);
+    size_t *ord = malloc(nbig * sizeof *ord);
+    if (!depth || !ord) {
+        free(depth), free(ord);
+        return HV_ERR_NOMEM;
+    }
+    for (size_t b = 0; b < nbig; b++) {
+        size_t k = c->big[b];
+        double num = 0, den = 0;
+        for (size_t i = c->cs[k].first; i < c->cs[k].first + c->cs[k].count; i++) {
+            double wo = others_winding(c, b, i);
+            num += c->sa[i] * wo;
+            den += c->sa[i];
+        }
+        depth[b] = den > 0 ? num / den : 0;
+        ord[b] = b;
+    }
+    for (size_t i = 1; i < nbig; i++) {
+        size_t v = ord[i], j = i;
+        while (j > 0 && depth[ord[j - 1]] > depth[v])
+            ord[j] = ord[j - 1], j--;
+        ord[j] = v;
+    }
+    for (size_t r = 0; r < nbig; r++) {
+        size_t b = ord[r], k = c->big[b];
+        if (depth[b] < 0.5)
+            continue; /* enclosed by nothing: outward */
+        double cost[2] = {0, 0};
+        for (size_t i = c->cs[k].first; i < c->cs[k].first + c->cs[k].count; i++) {
+            double wo = others_winding(c, b, i);
+            double ws = c->sgn[k] * c->sw[i];
+            cost[0] += c->sa[i] * fabs(wo + ws - 0.5);
+            cost[1] += c->sa[i] * fabs(wo - ws - 0.5);
+        }
+        if (cost[1] < cost[0])
+            c->sgn[k] = (signed char)-c->sgn[k];
+    }
+    free(ord), free(depth);
+    return HV_OK;
+}
+
+/* Decides the orientation of each component with generalized winding numbers
+ * (Jacobson et al. 2013). A correctly oriented solid's boundary has winding
+ * number 1/2 on it (1 inside, 0 outside); an open piece of it, e.g. a tube
+ * segment between holes, still has a positive principal value where signed
+ * volume about a centroid can come out either way. So: (1) each component
+ * takes the orientation that makes its own winding number at its face
+ * centroids positive; (2) the largest components, outermost first, take the
+ * orientation that brings the total winding number at their faces closest to
+ * 1/2, which turns shells nested in odd numbers of others (cavities) inward. */
 static hv_status orient_outward(const double *V, const uint32_t *T, size_t nt, uint8_t *flip,
                                 const uint32_t *comp, size_t nc, size_t *faces_flipped,
                                 size_t *comps_flipped)
 {
     hv_status st = HV_ERR_NOMEM;
-    uint32_t *start = calloc(nc + 1, sizeof *start), *faces = malloc(nt * sizeof *faces);
-    double *carea = calloc(nc, sizeof *carea);
-    signed char *sgn = malloc(nc);
-    uint32_t *big = malloc(nc * sizeof *big);
-    hv_wn_tree *trees = NULL;
-    comp_samples *cs = calloc(nc, sizeof *cs);
-    double *sx = NULL, *sa = NULL, *sw = NULL;
-    uint32_t *sf = NULL;
-    double *depth = NULL;
-    size_t nbig = 0;
-    if (!start || !faces || !carea || !sgn || !big || !cs)
+    orient_ctx c = {.V = V, .T = T, .nc = nc};
+    c.start = calloc(nc + 1, sizeof *c.start), c.faces = malloc(nt * sizeof *c.faces);
+    c.carea = calloc(nc, sizeof *c.carea);
+    c.sgn = malloc(nc);
+    c.big = malloc(nc * sizeof *c.big);
+    c.cs = calloc(nc, sizeof *c.cs);
+    if (!c.start || !c.faces || !c.carea || !c.sgn || !c.big || !c.cs ||
+        !component_faces(comp, nt, nc, c.start, c.faces))
         goto out;
-    for (size_t f = 0; f < nt; f++)
-        start[comp[f] + 1]++;
-    for (size_t k = 0; k < nc; k++)
-        start[k + 1] += start[k];
-    {
-        uint32_t *fill = malloc(nc * sizeof *fill);
-        if (!fill)
-            goto out;
-        memcpy(fill, start, nc * sizeof *fill);
-        for (size_t f = 0; f < nt; f++)
-            faces[fill[comp[f]]++] = (uint32_t)f;
-        free(fill);
-    }
-    /* Sample faces: at most ORIENT_SAMPLES per component, evenly strided. */
-    size_t ns = 0;
-    for (size_t k = 0; k < nc; k++) {
-        size_t nf = start[k + 1] - start[k];
-        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
-        cs[k].first = ns;
-        cs[k].count = (nf + stride - 1) / stride;
-        ns += cs[k].count;
-    }
-    sx = malloc(3 * ns * sizeof *sx);
-    sa = malloc(ns * sizeof *sa);
-    sw = malloc(ns * sizeof *sw);
-    sf = malloc(ns * sizeof *sf);
-    if (!sx || !sa || !sw || !sf)
+    size_t ns = sample_layout(c.start, nc, c.cs);
+    c.sx = malloc(3 * ns * sizeof *c.sx);
+    c.sa = malloc(ns * sizeof *c.sa);
+    c.sw = malloc(ns * sizeof *c.sw);
+    c.sf = malloc(ns * sizeof *c.sf);
+    if (!c.sx || !c.sa || !c.sw || !c.sf)
         goto out;
-    for (size_t k = 0; k < nc; k++) {
-        size_t nf = start[k + 1] - start[k];
-        size_t stride = nf > ORIENT_SAMPLES ? (nf + ORIENT_SAMPLES - 1) / ORIENT_SAMPLES : 1;
-        for (size_t q = 0; q < cs[k].count; q++) {
-            uint32_t f = faces[start[k] + q * stride];
-            size_t i = cs[k].first + q;
-            double n[3];
-            cross_at(V, T + 3 * (size_t)f, n);
-            sa[i] = 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-            sf[i] = f;
-            for (int d = 0; d < 3; d++)
-                sx[3 * i + d] =
-                    (V[3 * (size_t)T[3 * (size_t)f] + d] + V[3 * (size_t)T[3 * (size_t)f + 1] + d] +
-                     V[3 * (size_t)T[3 * (size_t)f + 2] + d]) /
-                    3.0;
-        }
-        for (size_t q = start[k]; q < start[k + 1]; q++) {
-            double n[3];
-            cross_at(V, T + 3 * (size_t)faces[q], n);
-            carea[k] += 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        }
-    }
+    take_samples(&c);
     /* The largest components take part in the nesting test. */
-    {
-        area_idx *ai = malloc(nc * sizeof *ai);
-        if (!ai)
-            goto out;
-        for (size_t k = 0; k < nc; k++)
-            ai[k].area = carea[k], ai[k].idx = (uint32_t)k;
-        qsort(ai, nc, sizeof *ai, cmp_area_desc);
-        for (size_t k = 0; k < nc; k++)
-            big[k] = ai[k].idx;
-        free(ai);
-    }
-    nbig = nc < NEST_MAX_SHELLS ? nc : NEST_MAX_SHELLS;
-    trees = calloc(nbig ? nbig : 1, sizeof *trees);
-    if (!trees)
+    if (!by_area(c.carea, nc, c.big))
         goto out;
-    /* (1) Own winding number. */
-    for (size_t b = 0; b < nc; b++) {
-        size_t k = big[b]; /* every component, largest first */
-        hv_wn_tree W;
-        if ((st = hv__wn_build(&W, V, T, faces + start[k], start[k + 1] - start[k], flip)))
-            goto out;
-        double num = 0, den = 0;
-        for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
-            sw[i] = hv__wn_eval(&W, sx + 3 * i, sf[i]);
-            num += sa[i] * sw[i];
-            den += sa[i];
-        }
-        sgn[k] = (den > 0 && num < -1e-3 * den) ? -1 : 1;
-        if (b < nbig)
-            trees[b] = W;
-        else
-            hv__wn_free(&W);
-    }
-    st = HV_OK;
-    /* (2) Nesting among the big components, outermost first. */
-    if (nbig > 1) {
-        depth = calloc(nbig, sizeof *depth);
-        size_t *ord = malloc(nbig * sizeof *ord);
-        if (!depth || !ord) {
-            free(ord);
-            st = HV_ERR_NOMEM;
-            goto out;
-        }
-        for (size_t b = 0; b < nbig; b++) {
-            size_t k = big[b];
-            double num = 0, den = 0;
-            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
-                double wo = 0;
-                for (size_t o = 0; o < nbig; o++)
-                    if (o != b)
-                        wo += sgn[big[o]] * hv__wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
-                num += sa[i] * wo;
-                den += sa[i];
-            }
-            depth[b] = den > 0 ? num / den : 0;
-            ord[b] = b;
-        }
-        for (size_t i = 1; i < nbig; i++) {
-            size_t v = ord[i], j = i;
-            while (j > 0 && depth[ord[j - 1]] > depth[v])
-                ord[j] = ord[j - 1], j--;
-            ord[j] = v;
-        }
-        for (size_t r = 0; r < nbig; r++) {
-            size_t b = ord[r], k = big[b];
-            if (depth[b] < 0.5)
-                continue; /* enclosed by nothing: outward */
-            double cost[2] = {0, 0};
-            for (size_t i = cs[k].first; i < cs[k].first + cs[k].count; i++) {
-                double wo = 0;
-                for (size_t o = 0; o < nbig; o++)
-                    if (o != b)
-                        wo += sgn[big[o]] * hv__wn_eval(&trees[o], sx + 3 * i, UINT32_MAX);
-                double ws = sgn[k] * sw[i];
-                cost[0] += sa[i] * fabs(wo + ws - 0.5);
-                cost[1] += sa[i] * fabs(wo - ws - 0.5);
-            }
-            if (cost[1] < cost[0])
-                sgn[k] = (signed char)-sgn[k];
-        }
-        free(ord);
-    }
+    c.nbig = nc < NEST_MAX_SHELLS ? nc : NEST_MAX_SHELLS;
+    c.trees = calloc(c.nbig ? c.nbig : 1, sizeof *c.trees);
+    if (!c.trees)
+        goto out;
+    if ((st = own_winding(&c, flip)))
+        goto out;
+    if (c.nbig > 1 && (st = nest_shells(&c)))
+        goto out;
     for (size_t k = 0; k < nc; k++)
-        if (sgn[k] < 0) {
+        if (c.sgn[k] < 0) {
             (*comps_flipped)++;
-            for (size_t q = start[k]; q < start[k + 1]; q++) {
-                flip[faces[q]] ^= 1;
+            for (size_t q = c.start[k]; q < c.start[k + 1]; q++) {
+                flip[c.faces[q]] ^= 1;
                 (*faces_flipped)++;
             }
         }
 out:
-    if (trees)
-        for (size_t b = 0; b < nbig; b++)
-            hv__wn_free(&trees[b]);
-    free(trees);
-    free(start), free(faces), free(carea), free(sgn), free(big), free(cs);
-    free(sx), free(sa), free(sw), free(sf), free(depth);
+    if (c.trees)
+        for (size_t b = 0; b < c.nbig; b++)
+            hv__wn_free(&c.trees[b]);
+    free(c.trees);
+    free(c.start), free(c.faces), free(c.carea), free(c.sgn), free(c.big), free(c.cs);
+    free(c.sx), free(c.sa), free(c.sw), free(c.sf);
     if (st == HV_ERR_NOMEM)
         return hv__error(HV_ERR_NOMEM, "mesh repair: out of memory orienting %zu components", nc);
     return st;
@@ -641,16 +707,10 @@ hv_status hv__nonfinite_vertex_error(const hv_mesh *m, const char *who, size_t v
                      x);
 }
 
-hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
-                        hv_sdf_repair_report *report)
+/* The arguments' and the mesh's checks, before any allocation. */
+static hv_status check_input(const hv_mesh *in, double max_hole)
 {
-    if (!in || !out)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_repair: NULL argument");
-    *out = NULL;
-    hv_sdf_repair_report rep;
-    memset(&rep, 0, sizeof rep);
     size_t nv = in->nverts, nt = in->ntris;
-    rep.vertices_in = nv, rep.triangles_in = nt;
     if (!(max_hole >= 0) || !isfinite(max_hole))
         return hv__error(HV_ERR_INVALID_ARG,
                          "mesh repair: max hole size must be finite and >= 0, got %g", max_hole);
@@ -667,26 +727,20 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
         if (in->tris[i] >= nv)
             return hv__error(HV_ERR_INVALID_ARG, "mesh repair: triangle %zu uses vertex %u of %zu",
                              i / 3, in->tris[i], nv);
+    return HV_OK;
+}
 
-    hv_status st = HV_ERR_NOMEM;
-    uint32_t *remap = malloc(nv * sizeof *remap);
-    uint32_t *T = malloc(3 * nt * sizeof *T);
-    double *V = malloc(3 * nv * sizeof *V);
-    uint8_t *keep = malloc(nt);
-    face_key *fk = NULL;
-    edge_rec *E = NULL;
-    uint32_t *estart = NULL, *comp = NULL;
-    uint8_t *flip = NULL;
-    hv_mesh *m = NULL;
-    if (!remap || !T || !V || !keep)
-        goto fail;
-
-    /* 1. Weld by exact position: sort vertices, map each to its first twin. */
-    size_t nvo = nv;
+/* 1. Weld by exact position: sort vertices, map each to its first twin (with
+ * HV_SDF_REPAIR_WELD; else every vertex is its own). V gets the vertices
+ * kept, remap each input vertex's index among them. Returns how many are
+ * kept; 0 when out of memory. */
+static size_t weld_vertices(const hv_mesh *in, unsigned flags, double *V, uint32_t *remap)
+{
+    size_t nv = in->nverts, nvo = nv;
     if (flags & HV_SDF_REPAIR_WELD) {
         uint32_t *order = malloc(nv * sizeof *order);
         if (!order)
-            goto fail;
+            return 0;
         for (size_t i = 0; i < nv; i++)
             order[i] = (uint32_t)i;
         g_sort_v = in->verts;
@@ -702,17 +756,20 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
             remap[order[r]] = (uint32_t)(nvo - 1);
         }
         free(order);
-        rep.vertices_welded = nv - nvo;
     } else {
         memcpy(V, in->verts, 3 * nv * sizeof *V);
         for (size_t i = 0; i < nv; i++)
             remap[i] = (uint32_t)i;
     }
-    for (size_t i = 0; i < 3 * nt; i++)
-        T[i] = remap[in->tris[i]];
+    return nvo;
+}
 
-    /* 2. Degenerate faces: a repeated vertex, or an area negligible against the
-     * longest edge (collinear corners up to rounding). */
+/* 2. Degenerate faces (with HV_SDF_REPAIR_DEGENERATE): a repeated vertex, or
+ * an area negligible against the longest edge (collinear corners up to
+ * rounding). keep[f] = 0 for those, else 1; returns how many. */
+static size_t mark_degenerate(const double *V, const uint32_t *T, size_t nt, unsigned flags,
+                              uint8_t *keep)
+{
     for (size_t f = 0; f < nt; f++) {
         keep[f] = 1;
         if (!(flags & HV_SDF_REPAIR_DEGENERATE))
@@ -733,49 +790,77 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
         if (sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) <= 1e-12 * L2)
             keep[f] = 0;
     }
+    size_t removed = 0;
     for (size_t f = 0; f < nt; f++)
-        rep.degenerate_removed += !keep[f];
+        removed += !keep[f];
+    return removed;
+}
 
-    /* 3. Duplicates: the same vertex set as an earlier face, either orientation. */
-    if (flags & HV_SDF_REPAIR_DUPLICATES) {
-        fk = malloc(nt * sizeof *fk);
-        if (!fk)
-            goto fail;
-        size_t nk = 0;
-        for (size_t f = 0; f < nt; f++) {
-            if (!keep[f])
-                continue;
-            memcpy(fk[nk].v, T + 3 * f, sizeof fk[nk].v);
-            sort3(fk[nk].v);
-            fk[nk++].face = (uint32_t)f;
-        }
-        qsort(fk, nk, sizeof *fk, cmp_face_key);
-        for (size_t r = 1; r < nk; r++)
-            if (!memcmp(fk[r].v, fk[r - 1].v, sizeof fk[r].v)) {
-                keep[fk[r].face] = 0;
-                rep.duplicates_removed++;
-            }
-        free(fk);
-        fk = NULL;
+/* 3. Duplicates: the same vertex set as an earlier kept face, either
+ * orientation; keep[f] = 0 for those, counted into *removed. 0 when out of
+ * memory. */
+static int drop_duplicates(const uint32_t *T, size_t nt, uint8_t *keep, size_t *removed)
+{
+    face_key *fk = malloc(nt * sizeof *fk);
+    if (!fk)
+        return 0;
+    size_t nk = 0;
+    for (size_t f = 0; f < nt; f++) {
+        if (!keep[f])
+            continue;
+        memcpy(fk[nk].v, T + 3 * f, sizeof fk[nk].v);
+        sort3(fk[nk].v);
+        fk[nk++].face = (uint32_t)f;
     }
+    qsort(fk, nk, sizeof *fk, cmp_face_key);
+    for (size_t r = 1; r < nk; r++)
+        if (!memcmp(fk[r].v, fk[r - 1].v, sizeof fk[r].v)) {
+            keep[fk[r].face] = 0;
+            (*removed)++;
+        }
+    free(fk);
+    return 1;
+}
 
-    /* Compact the faces (unreferenced vertices are kept: they are harmless). */
+/* The kept faces to the front of T, in order (unreferenced vertices are
+ * kept: they are harmless). Returns how many. */
+static size_t compact_faces(uint32_t *T, const uint8_t *keep, size_t nt)
+{
     size_t ntk = 0;
     for (size_t f = 0; f < nt; f++)
         if (keep[f])
             memmove(T + 3 * ntk++, T + 3 * f, 3 * sizeof *T);
-    if (ntk == 0) {
-        st = hv__error(HV_ERR_INVALID_ARG, "mesh repair: all %zu triangles are degenerate", nt);
-        goto fail;
-    }
-    /* 4. Edges, orientation propagation, components. */
-    E = malloc(3 * ntk * sizeof *E);
-    estart = malloc((3 * ntk + 1) * sizeof *estart);
-    comp = malloc(ntk * sizeof *comp);
-    flip = calloc(ntk, 1);
-    if (!E || !estart || !comp || !flip)
-        goto fail;
-    for (size_t f = 0; f < ntk; f++)
+    return ntk;
+}
+
+/* Steps 1-3 on V and T (room for the input's vertices and faces): the
+ * welded vertices (*nvo of them) and the faces kept (*ntk); keep and remap
+ * are scratch. HV_ERR_NOMEM, without a message, when out of memory. */
+static hv_status clean_faces(const hv_mesh *in, unsigned flags, double *V, uint32_t *T,
+                             uint32_t *remap, uint8_t *keep, size_t *nvo, size_t *ntk,
+                             hv_sdf_repair_report *rep)
+{
+    size_t nv = in->nverts, nt = in->ntris;
+    if ((*nvo = weld_vertices(in, flags, V, remap)) == 0)
+        return HV_ERR_NOMEM;
+    rep->vertices_welded = nv - *nvo;
+    for (size_t i = 0; i < 3 * nt; i++)
+        T[i] = remap[in->tris[i]];
+    rep->degenerate_removed = mark_degenerate(V, T, nt, flags, keep);
+    if ((flags & HV_SDF_REPAIR_DUPLICATES) &&
+        !drop_duplicates(T, nt, keep, &rep->duplicates_removed))
+        return HV_ERR_NOMEM;
+    if ((*ntk = compact_faces(T, keep, nt)) == 0)
+        return hv__error(HV_ERR_INVALID_ARG, "mesh repair: all %zu triangles are degenerate", nt);
+    return HV_OK;
+}
+
+/* The nt faces' edges, sorted by (vertex pair, face), into E (3 nt); estart
+ * (3 nt + 1) the first record of each vertex pair, and 3 nt after the last.
+ * Returns how many pairs. */
+static size_t sorted_edges(const uint32_t *T, size_t nt, edge_rec *E, uint32_t *estart)
+{
+    for (size_t f = 0; f < nt; f++)
         for (int e = 0; e < 3; e++) {
             uint32_t a = T[3 * f + e], b = T[3 * f + (e + 1) % 3];
             edge_rec *r = E + 3 * f + e;
@@ -783,12 +868,78 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
             r->face = (uint32_t)f;
             r->fwd = a < b;
         }
-    qsort(E, 3 * ntk, sizeof *E, cmp_edge);
+    qsort(E, 3 * nt, sizeof *E, cmp_edge);
     size_t ne = 0;
-    for (size_t r = 0; r < 3 * ntk; r++)
+    for (size_t r = 0; r < 3 * nt; r++)
         if (r == 0 || E[r].key != E[r - 1].key)
             estart[ne++] = (uint32_t)r;
-    estart[ne] = (uint32_t)(3 * ntk);
+    estart[ne] = (uint32_t)(3 * nt);
+    return ne;
+}
+
+/* A new mesh of V (nv) and T (nt) with the flipped faces turned; NULL when
+ * out of memory. */
+static hv_mesh *flipped_mesh(const double *V, size_t nv, const uint32_t *T, const uint8_t *flip,
+                             size_t nt)
+{
+    hv_mesh *m = calloc(1, sizeof *m);
+    if (!m)
+        return NULL;
+    m->nverts = nv;
+    m->ntris = nt;
+    m->verts = malloc(3 * nv * sizeof *m->verts);
+    m->tris = malloc(3 * nt * sizeof *m->tris);
+    if (!m->verts || !m->tris) {
+        free(m->verts);
+        free(m->tris);
+        free(m);
+        return NULL;
+    }
+    memcpy(m->verts, V, 3 * nv * sizeof *V);
+    for (size_t f = 0; f < nt; f++) {
+        m->tris[3 * f] = T[3 * f];
+        m->tris[3 * f + 1] = flip[f] ? T[3 * f + 2] : T[3 * f + 1];
+        m->tris[3 * f + 2] = flip[f] ? T[3 * f + 1] : T[3 * f + 2];
+    }
+    return m;
+}
+
+hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_mesh **out,
+                        hv_sdf_repair_report *report)
+{
+    if (!in || !out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_repair: NULL argument");
+    *out = NULL;
+    hv_sdf_repair_report rep;
+    memset(&rep, 0, sizeof rep);
+    size_t nv = in->nverts, nt = in->ntris;
+    rep.vertices_in = nv, rep.triangles_in = nt;
+    hv_status st = check_input(in, max_hole);
+    if (st)
+        return st;
+
+    st = HV_ERR_NOMEM;
+    uint32_t *remap = malloc(nv * sizeof *remap);
+    uint32_t *T = malloc(3 * nt * sizeof *T);
+    double *V = malloc(3 * nv * sizeof *V);
+    uint8_t *keep = malloc(nt);
+    edge_rec *E = NULL;
+    uint32_t *estart = NULL, *comp = NULL;
+    uint8_t *flip = NULL;
+    size_t nvo = 0, ntk = 0;
+    if (!remap || !T || !V || !keep)
+        goto fail;
+    if ((st = clean_faces(in, flags, V, T, remap, keep, &nvo, &ntk, &rep)))
+        goto fail;
+    /* 4. Edges, orientation propagation, components. */
+    st = HV_ERR_NOMEM;
+    E = malloc(3 * ntk * sizeof *E);
+    estart = malloc((3 * ntk + 1) * sizeof *estart);
+    comp = malloc(ntk * sizeof *comp);
+    flip = calloc(ntk, 1);
+    if (!E || !estart || !comp || !flip)
+        goto fail;
+    size_t ne = sorted_edges(T, ntk, E, estart);
     size_t bnd, nm;
     count_edges(E, estart, ne, flip, &bnd, &nm, &rep.inconsistent_before);
     size_t nc = 0;
@@ -816,24 +967,11 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
     count_edges(E, estart, ne, flip, &rep.boundary_edges, &rep.nonmanifold_edges,
                 &rep.inconsistent_after);
     rep.boundary_edges -= rep.boundary_edges_closed;
-    (void)bnd, (void)nm, (void)nt_orig;
+    (void)bnd, (void)nm;
 
-    /* Output mesh. */
-    m = calloc(1, sizeof *m);
+    hv_mesh *m = flipped_mesh(V, nvo, T, flip, ntk);
     if (!m)
         goto fail;
-    m->nverts = nvo;
-    m->ntris = ntk;
-    m->verts = malloc(3 * nvo * sizeof *m->verts);
-    m->tris = malloc(3 * ntk * sizeof *m->tris);
-    if (!m->verts || !m->tris)
-        goto fail;
-    memcpy(m->verts, V, 3 * nvo * sizeof *V);
-    for (size_t f = 0; f < ntk; f++) {
-        m->tris[3 * f] = T[3 * f];
-        m->tris[3 * f + 1] = flip[f] ? T[3 * f + 2] : T[3 * f + 1];
-        m->tris[3 * f + 2] = flip[f] ? T[3 * f + 1] : T[3 * f + 2];
-    }
     rep.vertices_out = nvo;
     rep.triangles_out = ntk;
     free(remap), free(T), free(V), free(keep), free(E), free(estart), free(comp), free(flip);
@@ -845,12 +983,6 @@ fail:
     if (st == HV_ERR_NOMEM)
         st = hv__error(HV_ERR_NOMEM, "mesh repair: out of memory for %zu vertices, %zu triangles",
                        nv, nt);
-    free(remap), free(T), free(V), free(keep), free(fk), free(E), free(estart), free(comp),
-        free(flip);
-    if (m) {
-        free(m->verts);
-        free(m->tris);
-        free(m);
-    }
+    free(remap), free(T), free(V), free(keep), free(E), free(estart), free(comp), free(flip);
     return st;
 }
