@@ -81,35 +81,23 @@ static double wn_at(const hv_wn_tree *W, const hv_grid *g, const long base[3], c
     return hv__wn_sure(W, p, evals);
 }
 
-hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist,
-                           const uint32_t *tri, hv_pseudo *ps, double dlim, float *out,
-                           size_t *evals_out, size_t *ps_used)
+/* Global lattice index of cell 0: blocks on one lattice differ by whole
+ * cells. */
+static void lattice_base(const hv_grid *g, long base[3])
 {
-    const int *n = g->n;
-    const double h = g->h;
-    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
-    /* Global lattice index of cell 0: blocks on one lattice differ by whole cells. */
-    long base[3];
     for (int a = 0; a < 3; a++) {
-        double q = g->origin[a] / h;
+        double q = g->origin[a] / g->h;
         /* Beyond 2^40 cells from the origin the block anchors its own cubes. */
         base[a] = fabs(q) < 0x1p40 ? lround(q) : 0;
     }
-    const hv_wn_tree *W = &ps->W;
-    hv_status st = HV_OK;
+}
 
-    /* Sign marker: 0 undecided, else +1 outside / -1 inside. */
-    int8_t *sg = hv_calloc(hv_grid_count(g), 1);
-    ws_level L[4];
-    memset(L, 0, sizeof L);
-    size_t evals = 0;
-    if (!sg) {
-        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the winding-number sign");
-        goto out;
-    }
-    int nlev = 0;
-    for (int s = WS_TOP; s >= 2; s /= 2, nlev++) {
-        ws_level *lv = &L[nlev];
+/* The levels of cubes, WS_TOP cells down to 2, covering the block; *nlev
+ * counts those made. 0 when out of memory (the levels made are in L). */
+static int levels_create(ws_level L[4], const long base[3], const int n[3], int *nlev)
+{
+    for (int s = WS_TOP; s >= 2; s /= 2, (*nlev)++) {
+        ws_level *lv = &L[*nlev];
         lv->s = s;
         size_t nc = 1, nw = 1;
         for (int a = 0; a < 3; a++) {
@@ -120,103 +108,136 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
         }
         lv->act = hv_calloc(nc, 1);
         lv->w = hv_malloc(nw * sizeof(float));
-        if (!lv->act || !lv->w) {
-            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the winding-number sign");
-            goto out;
-        }
+        if (!lv->act || !lv->w)
+            return 0;
     }
-    /* Every cube of the first level is to be decided. */
-    {
-        ws_level *lv = &L[0];
-        memset(lv->act, 1, (size_t)lv->nr[0] * lv->nr[1] * lv->nr[2]);
-    }
-    for (int l = 0; l < nlev; l++) {
-        ws_level *lv = &L[l];
-        const int s = lv->s;
-        const int nr0 = lv->nr[0], nr1 = lv->nr[1], nr2 = lv->nr[2];
-        const int nw0 = nr0 + 1, nw1 = nr1 + 1, nw2 = nr2 + 1;
-        /* Corners of active cubes. */
+    return 1;
+}
+
+/* The winding number at the corners of the level's active cubes, NAN at the
+ * other corners. Returns the evaluations. */
+static size_t level_corners(ws_level *lv, const hv_wn_tree *W, const hv_grid *g, const long base[3])
+{
+    const int s = lv->s;
+    const int nr0 = lv->nr[0], nr1 = lv->nr[1], nr2 = lv->nr[2];
+    const int nw0 = nr0 + 1, nw1 = nr1 + 1, nw2 = nr2 + 1;
+    size_t evals = 0;
 #pragma omp parallel for collapse(2) schedule(dynamic, 4) reduction(+ : evals)
-        for (int cz = 0; cz < nw2; cz++)
-            for (int cy = 0; cy < nw1; cy++)
-                for (int cx = 0; cx < nw0; cx++) {
-                    int need = 0;
-                    for (int q = 0; q < 8 && !need; q++) {
-                        int rx = cx - (q & 1), ry = cy - (q >> 1 & 1), rz = cz - (q >> 2 & 1);
-                        if (rx >= 0 && ry >= 0 && rz >= 0 && rx < nr0 && ry < nr1 && rz < nr2)
-                            need = lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)];
-                    }
-                    float v = NAN;
-                    if (need) {
-                        long G[3] = {(lv->r0[0] + cx) * s, (lv->r0[1] + cy) * s,
-                                     (lv->r0[2] + cz) * s};
-                        v = (float)wn_at(W, g, base, G, &evals);
-                    }
-                    lv->w[cx + (size_t)nw0 * (cy + (size_t)nw1 * cz)] = v;
+    for (int cz = 0; cz < nw2; cz++)
+        for (int cy = 0; cy < nw1; cy++)
+            for (int cx = 0; cx < nw0; cx++) {
+                int need = 0;
+                for (int q = 0; q < 8 && !need; q++) {
+                    int rx = cx - (q & 1), ry = cy - (q >> 1 & 1), rz = cz - (q >> 2 & 1);
+                    if (rx >= 0 && ry >= 0 && rz >= 0 && rx < nr0 && ry < nr1 && rz < nr2)
+                        need = lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)];
                 }
-        /* Decide or split each active cube. */
-        const float dnear = (float)(fmax(WS_NEAR, WS_NEAR_REL * s) * h);
-        ws_level *next = l + 1 < nlev ? &L[l + 1] : NULL;
-#pragma omp parallel for collapse(2) schedule(dynamic, 4)
-        for (int rz = 0; rz < nr2; rz++)
-            for (int ry = 0; ry < nr1; ry++)
-                for (int rx = 0; rx < nr0; rx++) {
-                    if (!lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)])
-                        continue;
-                    int lo[3], hi[3];
-                    const int r[3] = {rx, ry, rz};
-                    for (int a = 0; a < 3; a++) {
-                        long c0 = (lv->r0[a] + r[a]) * s - base[a];
-                        lo[a] = c0 < 0 ? 0 : (int)c0;
-                        hi[a] = c0 + s > n[a] ? n[a] : (int)(c0 + s);
-                    }
-                    int side = 0;
-                    for (int q = 0; q < 8; q++) {
-                        float v = lv->w[(rx + (q & 1)) +
-                                        (size_t)nw0 * ((ry + (q >> 1 & 1)) +
-                                                       (size_t)nw1 * (rz + (q >> 2 & 1)))];
-                        int sd = v > 0.5 + WS_MARGIN ? -1 : v < 0.5 - WS_MARGIN ? 1 : 0;
-                        if (!sd || (side && sd != side)) {
-                            side = 0;
-                            break;
-                        }
-                        side = sd;
-                    }
-                    for (int k = lo[2]; k < hi[2] && side; k++)
-                        for (int j = lo[1]; j < hi[1] && side; j++)
-                            for (int i = lo[0]; i < hi[0]; i++)
-                                if (dist[i + sy * j + sz * k] < dnear) {
-                                    side = 0;
-                                    break;
-                                }
-                    if (side) {
-                        for (int k = lo[2]; k < hi[2]; k++)
-                            for (int j = lo[1]; j < hi[1]; j++)
-                                memset(sg + lo[0] + sy * j + sz * k, side, (size_t)(hi[0] - lo[0]));
-                        continue;
-                    }
-                    if (next) {
-                        /* The 8 children of this cube at the next level. */
-                        for (int q = 0; q < 8; q++) {
-                            long cr[3];
-                            int ok = 1;
-                            for (int a = 0; a < 3; a++) {
-                                cr[a] = (lv->r0[a] + r[a]) * 2 + (q >> a & 1) - next->r0[a];
-                                ok &= cr[a] >= 0 && cr[a] < next->nr[a];
-                            }
-                            if (ok)
-                                next->act[cr[0] + (size_t)next->nr[0] *
-                                                      (cr[1] + (size_t)next->nr[1] * cr[2])] = 1;
-                        }
-                    }
+                float v = NAN;
+                if (need) {
+                    long G[3] = {(lv->r0[0] + cx) * s, (lv->r0[1] + cy) * s, (lv->r0[2] + cz) * s};
+                    v = (float)wn_at(W, g, base, G, &evals);
                 }
+                lv->w[cx + (size_t)nw0 * (cy + (size_t)nw1 * cz)] = v;
+            }
+    return evals;
+}
+
+/* The side all eight corners of cube (rx, ry, rz) lie on, clear of 1/2 by
+ * WS_MARGIN: -1 inside, +1 outside, 0 when they do not agree. */
+static int corner_side(const ws_level *lv, int rx, int ry, int rz)
+{
+    const int nw0 = lv->nr[0] + 1, nw1 = lv->nr[1] + 1;
+    int side = 0;
+    for (int q = 0; q < 8; q++) {
+        float v = lv->w[(rx + (q & 1)) +
+                        (size_t)nw0 * ((ry + (q >> 1 & 1)) + (size_t)nw1 * (rz + (q >> 2 & 1)))];
+        int sd = v > 0.5 + WS_MARGIN ? -1 : v < 0.5 - WS_MARGIN ? 1 : 0;
+        if (!sd || (side && sd != side))
+            return 0;
+        side = sd;
     }
-    /* Cells left undecided: within dlim of a clean feature whose faces bound a
-     * solid, its pseudonormal (exact there, and no evaluation); elsewhere the
-     * winding number at the centre. */
-    size_t used = 0;
+    return side;
+}
+
+/* Whether a cell of the box lo..hi (exclusive) is nearer the surface than
+ * dnear. */
+static int any_near(const float *dist, const int n[3], const int lo[3], const int hi[3],
+                    float dnear)
+{
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    for (int k = lo[2]; k < hi[2]; k++)
+        for (int j = lo[1]; j < hi[1]; j++)
+            for (int i = lo[0]; i < hi[0]; i++)
+                if (dist[i + sy * j + sz * k] < dnear)
+                    return 1;
+    return 0;
+}
+
+/* The 8 children of cube r of lv at the next level, to be decided there. */
+static void mark_children(const ws_level *lv, ws_level *next, const int r[3])
+{
+    for (int q = 0; q < 8; q++) {
+        long cr[3];
+        int ok = 1;
+        for (int a = 0; a < 3; a++) {
+            cr[a] = (lv->r0[a] + r[a]) * 2 + (q >> a & 1) - next->r0[a];
+            ok &= cr[a] >= 0 && cr[a] < next->nr[a];
+        }
+        if (ok)
+            next->act[cr[0] + (size_t)next->nr[0] * (cr[1] + (size_t)next->nr[1] * cr[2])] = 1;
+    }
+}
+
+/* Each active cube of the level takes one sign into sg where its corners
+ * agree and no cell of it is near the surface; else its children at the next
+ * level (NULL: none) are to be decided. */
+static void level_decide(const ws_level *lv, ws_level *next, const hv_grid *g, const long base[3],
+                         const float *dist, int8_t *sg)
+{
+    const int *n = g->n;
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    const int s = lv->s;
+    const int nr0 = lv->nr[0], nr1 = lv->nr[1], nr2 = lv->nr[2];
+    const float dnear = (float)(fmax(WS_NEAR, WS_NEAR_REL * s) * g->h);
+#pragma omp parallel for collapse(2) schedule(dynamic, 4)
+    for (int rz = 0; rz < nr2; rz++)
+        for (int ry = 0; ry < nr1; ry++)
+            for (int rx = 0; rx < nr0; rx++) {
+                if (!lv->act[rx + (size_t)nr0 * (ry + (size_t)nr1 * rz)])
+                    continue;
+                int lo[3], hi[3];
+                const int r[3] = {rx, ry, rz};
+                for (int a = 0; a < 3; a++) {
+                    long c0 = (lv->r0[a] + r[a]) * s - base[a];
+                    lo[a] = c0 < 0 ? 0 : (int)c0;
+                    hi[a] = c0 + s > n[a] ? n[a] : (int)(c0 + s);
+                }
+                int side = corner_side(lv, rx, ry, rz);
+                if (side && any_near(dist, n, lo, hi, dnear))
+                    side = 0;
+                if (side) {
+                    for (int k = lo[2]; k < hi[2]; k++)
+                        for (int j = lo[1]; j < hi[1]; j++)
+                            memset(sg + lo[0] + sy * j + sz * k, side, (size_t)(hi[0] - lo[0]));
+                    continue;
+                }
+                if (next)
+                    mark_children(lv, next, r);
+            }
+}
+
+/* Cells left undecided: within dlim of a clean feature whose faces bound a
+ * solid, its pseudonormal (exact there, and no evaluation); elsewhere the
+ * winding number at the centre. *used counts the first; returns the
+ * evaluations. */
+static size_t sign_cells(const hv_mesh *m, const hv_grid *g, const float *dist, const uint32_t *tri,
+                         hv_pseudo *ps, double dlim, int8_t *sg, size_t *used)
+{
+    const int *n = g->n;
+    const size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
+    size_t evals = 0, nused = 0;
     const float dl = (float)dlim;
-#pragma omp parallel for collapse(2) schedule(dynamic, 4) reduction(+ : evals, used)
+#pragma omp parallel for collapse(2) schedule(dynamic, 4) reduction(+ : evals, nused)
     for (int k = 0; k < n[2]; k++)
         for (int j = 0; j < n[1]; j++) {
             int8_t *row = sg + sy * j + sz * k;
@@ -230,17 +251,46 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
                     int s = hv__pseudo_sign(ps, m, tri[c], p, 0);
                     if (s) {
                         row[i] = (int8_t)s;
-                        used++;
+                        nused++;
                         continue;
                     }
                 }
-                row[i] = hv__wn_sure(W, p, &evals) > 0.5 ? -1 : 1;
+                row[i] = hv__wn_sure(&ps->W, p, &evals) > 0.5 ? -1 : 1;
             }
         }
+    *used = nused;
+    return evals;
+}
+
+hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist,
+                           const uint32_t *tri, hv_pseudo *ps, double dlim, float *out,
+                           size_t *evals_out, size_t *ps_used)
+{
+    long base[3];
+    lattice_base(g, base);
+    hv_status st = HV_OK;
+    /* Sign marker: 0 undecided, else +1 outside / -1 inside. */
+    int8_t *sg = hv_calloc(hv_grid_count(g), 1);
+    ws_level L[4];
+    memset(L, 0, sizeof L);
+    size_t evals = 0;
+    int nlev = 0;
+    if (!sg || !levels_create(L, base, g->n, &nlev)) {
+        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the winding-number sign");
+        goto out;
+    }
+    /* Every cube of the first level is to be decided. */
+    memset(L[0].act, 1, (size_t)L[0].nr[0] * L[0].nr[1] * L[0].nr[2]);
+    for (int l = 0; l < nlev; l++) {
+        evals += level_corners(&L[l], &ps->W, g, base);
+        level_decide(&L[l], l + 1 < nlev ? &L[l + 1] : NULL, g, base, dist, sg);
+    }
+    size_t used = 0;
+    evals += sign_cells(m, g, dist, tri, ps, dlim, sg, &used);
     if (ps_used)
         *ps_used = used;
     /* The sign as a value below any distance the pseudonormal test looks at. */
-    const float tiny = (float)(1e-6 * h);
+    const float tiny = (float)(1e-6 * g->h);
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < hv_grid_count(g); c++)
         out[c] = sg[c] < 0 ? -tiny : tiny;
