@@ -400,70 +400,56 @@ out:
     return st;
 }
 
-hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const hv_sdf_opts *o,
-                       hv_sdf_stats *S)
+/* 2. Splat the surface's vector area (unsigned: its area) onto the grid. */
+static hv_status heat_splat(heat_work *w, const hv_grid *gh, int unsig)
 {
-    heat_work W, *w = &W;
-    memset(w, 0, sizeof *w);
-    w->q = q;
-    hv_status st = HV_OK;
     const size_t hcount = hv_grid_count(gh);
-    const int nh[3] = {gh->n[0], gh->n[1], gh->n[2]};
-    const double hh = gh->h;
-    double tt = hv_now();
     const int ncomp = unsig ? 1 : 3;
-    /* Backend opencl: stages 2-6 keep their fields on the device (sdf_cl.c). */
-    if (o->backend == HV_BACKEND_OPENCL) {
-        st = hv__sdf_heat_cl(q, gh, nlev, unsig, o, S);
-        goto out;
-    }
     for (int b = 0; b < ncomp; b++)
-        if (!(w->Y0[b] = hv_calloc(hcount, sizeof(float)))) {
-            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
-                           hcount);
-            goto out;
-        }
+        if (!(w->Y0[b] = hv_calloc(hcount, sizeof(float))))
+            return hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
+                             hcount);
     if (unsig)
         splat(gh, w->q, 1, NULL, 1, w->Y0);
     else
         splat(gh, w->q, 3, w->q->w, 3, w->Y0);
-    S->t_splat += hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 3. Diffuse: one backward-Euler step per level, the components sharing a solver. */
-    tt = hv_now();
-    double tau[9] = {0};
+/* 3. Diffuse: one backward-Euler step per level (times S->t 16^k), the
+ * components sharing a solver; tau[k] the noise threshold of level k. With
+ * the local shift the level-0 solver stays in w->heat. */
+static hv_status heat_diffuse(heat_work *w, const hv_grid *gh, int nlev, int unsig,
+                              const hv_sdf_opts *o, const hv_solver_opts *so, double tau[9],
+                              hv_sdf_stats *S)
+{
+    double tt = hv_now();
+    const size_t hcount = hv_grid_count(gh);
+    const int ncomp = unsig ? 1 : 3;
     const int keep_heat = !unsig && o->local_shift;
+    hv_status st;
     w->Ybuf = hv_malloc((size_t)nlev * ncomp * hcount * sizeof(float));
-    if (!w->Ybuf) {
-        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells",
-                       nlev * ncomp, hcount);
-        goto out;
-    }
+    if (!w->Ybuf)
+        return hv__error(HV_ERR_NOMEM, "sdf: out of memory for %d diffused fields of %zu cells",
+                         nlev * ncomp, hcount);
     double f2 = 0;
     for (int b = 0; b < ncomp; b++)
         f2 += norm2(w->Y0[b], hcount);
-    hv_solver_opts so;
-    hv_solver_opts_default(&so);
-    so.backend = o->backend;
-    so.tol = o->diffuse_tol;
-    so.max_iter = 100;
     for (int k = 0; k < nlev; k++) {
-        if (!(w->Y[k] = malloc(3 * sizeof(float *)))) {
-            st = hv__error(HV_ERR_NOMEM, "sdf: out of memory");
-            goto out;
-        }
+        if (!(w->Y[k] = malloc(3 * sizeof(float *))))
+            return hv__error(HV_ERR_NOMEM, "sdf: out of memory");
         for (int b = 0; b < ncomp; b++)
             w->Y[k][b] = w->Ybuf + ((size_t)k * ncomp + b) * hcount;
         double t = S->t * pow(16.0, k);
-        hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 1.0, t};
+        hv_problem pb = {3, {gh->n[0], gh->n[1], gh->n[2]}, gh->h, NULL, 1.0, t};
         if ((st = stage(0.1 + 0.5 * k / nlev, "diffuse")))
-            goto out;
-        if ((st = solver_create(&w->solver, &pb, &so)))
-            goto out;
+            return st;
+        if ((st = solver_create(&w->solver, &pb, so)))
+            return st;
         for (int b = 0; b < ncomp; b++) {
             hv_solve_info info;
             if ((st = hv_solver_solve(w->solver, w->Y0[b], w->Y[k][b], &info)))
-                goto out;
+                return st;
             S->diffuse_iterations += info.iterations;
             S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
             S->backend = info.backend;
@@ -477,42 +463,55 @@ hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const
         /* ||e||_2 <= ||r||_2 <= relres ||f||_2 since (I - t Lap) >= I; for the
          * unsigned gradient the bound grows by 2/h per component. */
         double bound = fmax(S->diffuse_relres, o->diffuse_tol) * sqrt(f2);
-        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / hh : 1.0);
+        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / gh->h : 1.0);
     }
     S->t_diffuse = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 4. Normalize on faces, divergence. */
+/* 4. Normalize on faces, divergence into w->rhs; the splat and the diffused
+ * fields are freed. */
+static hv_status heat_normalize(heat_work *w, const hv_grid *gh, int nlev, int unsig,
+                                const double tau[9], hv_sdf_stats *S)
+{
+    hv_status st;
     if ((st = stage(0.6, "normalize")))
-        goto out;
-    tt = hv_now();
-    if (!(w->rhs = hv_malloc(hcount * sizeof(float)))) {
-        st = hv__error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)", hcount);
-        goto out;
-    }
+        return st;
+    double tt = hv_now();
+    const size_t hcount = hv_grid_count(gh);
+    if (!(w->rhs = hv_malloc(hcount * sizeof(float))))
+        return hv__error(HV_ERR_NOMEM, "sdf: out of memory for the divergence (%zu cells)", hcount);
     if (nlev == 1 && !unsig)
         S->dead_faces = build_rhs1(w->Y[0], tau[0], gh, w->Y0, w->rhs);
     else
         S->dead_faces = build_rhs(w->Y, nlev, tau, unsig, gh, w->rhs);
-    for (int b = 0; b < ncomp; b++) {
+    for (int b = 0; b < (unsig ? 1 : 3); b++) {
         hv_free(w->Y0[b]);
         w->Y0[b] = NULL;
     }
     hv_free(w->Ybuf);
     w->Ybuf = NULL;
     S->t_normalize = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 5. Poisson. */
-    float *phi = gh->v;
+/* 5. Poisson: phi (gh->v) from the divergence, with the diffusion's solver
+ * options but the Poisson tolerance. */
+static hv_status heat_poisson(heat_work *w, hv_grid *gh, const hv_sdf_opts *o,
+                              const hv_solver_opts *diffuse_so, hv_sdf_stats *S)
+{
+    hv_status st;
     if ((st = stage(0.65, "poisson")))
-        goto out;
-    tt = hv_now();
-    hv_problem pb = {3, {nh[0], nh[1], nh[2]}, hh, NULL, 0.0, 1.0};
-    so.tol = o->poisson_tol; /* the diffusion's options otherwise */
+        return st;
+    double tt = hv_now();
+    hv_problem pb = {3, {gh->n[0], gh->n[1], gh->n[2]}, gh->h, NULL, 0.0, 1.0};
+    hv_solver_opts so = *diffuse_so;
+    so.tol = o->poisson_tol;
     if ((st = solver_create(&w->solver, &pb, &so)))
-        goto out;
+        return st;
     hv_solve_info info;
-    if ((st = hv_solver_solve(w->solver, w->rhs, phi, &info)))
-        goto out;
+    if ((st = hv_solver_solve(w->solver, w->rhs, gh->v, &info)))
+        return st;
     S->poisson_iterations = info.iterations;
     S->poisson_relres = info.relres;
     S->backend = info.backend;
@@ -520,11 +519,20 @@ hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const
     hv_free(w->rhs);
     w->rhs = NULL;
     S->t_poisson = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 6. Shift: area-weighted mean of phi at the surface samples to zero. */
+/* 6. Shift: area-weighted mean of phi at the surface samples to zero; then,
+ * with o->local_shift (signed), the zero-set correction. */
+static hv_status heat_shift(heat_work *w, hv_grid *gh, const hv_sdf_opts *o, int unsig,
+                            hv_sdf_stats *S)
+{
+    hv_status st;
     if ((st = stage(0.8, "shift")))
-        goto out;
-    tt = hv_now();
+        return st;
+    double tt = hv_now();
+    const size_t hcount = hv_grid_count(gh);
+    float *phi = gh->v;
     double num = 0, den = 0, rms = 0;
 #pragma omp parallel for reduction(+ : num, den, rms) schedule(static)
     for (size_t p = 0; p < w->q->count; p++) {
@@ -534,7 +542,7 @@ hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const
         rms += w->q->area[p] * val * val;
     }
     S->shift = den > 0 ? num / den : 0;
-    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / hh;
+    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / gh->h;
     const float sh = (float)S->shift;
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < hcount; c++)
@@ -542,10 +550,41 @@ hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const
     S->surface_rms_after = S->surface_rms_before;
     if (o->local_shift && !unsig) {
         if ((st = local_shift(w, gh, o, S)))
-            goto out;
+            return st;
     }
     S->t_shift = hv_now() - tt;
+    return HV_OK;
+}
 
+hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const hv_sdf_opts *o,
+                       hv_sdf_stats *S)
+{
+    heat_work W, *w = &W;
+    memset(w, 0, sizeof *w);
+    w->q = q;
+    hv_status st = HV_OK;
+    double tt = hv_now();
+    /* Backend opencl: stages 2-6 keep their fields on the device (sdf_cl.c). */
+    if (o->backend == HV_BACKEND_OPENCL) {
+        st = hv__sdf_heat_cl(q, gh, nlev, unsig, o, S);
+        goto out;
+    }
+    if ((st = heat_splat(w, gh, unsig)))
+        goto out;
+    S->t_splat += hv_now() - tt;
+    double tau[9] = {0};
+    hv_solver_opts so;
+    hv_solver_opts_default(&so);
+    so.backend = o->backend;
+    so.tol = o->diffuse_tol;
+    so.max_iter = 100;
+    st = heat_diffuse(w, gh, nlev, unsig, o, &so, tau, S);
+    if (!st)
+        st = heat_normalize(w, gh, nlev, unsig, tau, S);
+    if (!st)
+        st = heat_poisson(w, gh, o, &so, S);
+    if (!st)
+        st = heat_shift(w, gh, o, unsig, S);
 out:
     heat_work_free(w);
     return st;
