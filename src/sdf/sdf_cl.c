@@ -264,165 +264,219 @@ static hv_status sample_sums(sdf_cl_work *w, const hv_quad *q, double *num, doub
     return HV_OK;
 }
 
-hv_status hv__sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
-                          hv_sdf_stats *S)
+/* 2. Splat: bin the samples once, one gather per component; *f2 the sum of
+ * the components' squared norms. */
+static hv_status cl_splat(sdf_cl_work *w, const hv_quad *q, const hv_grid *g, int unsig, double *f2)
 {
-    sdf_cl_work w;
-    memset(&w, 0, sizeof w);
-    const int *n = g->n;
+    hv_cl *cl = w->cl;
     const double h = g->h;
     const size_t count = hv_grid_count(g), bytes = count * sizeof(float);
     const int ncomp = unsig ? 1 : 3;
     hv_status st;
-    double tt = hv_now();
-
-    /* 2. Splat: bin the samples once, one gather per component. */
-    if ((st = hv__cl_open(&w.cl)))
+    if ((st = hv__cl_splat_create(cl, &w->sp, 3, g->n, h, g->origin, q->count, q->x)))
         return st;
-    hv_cl *cl = w.cl;
-    if ((st = hv__cl_splat_create(cl, &w.sp, 3, n, h, g->origin, q->count, q->x)))
-        goto done;
     const double inv_h3 = 1.0 / (h * h * h);
     for (int b = 0; b < ncomp; b++)
-        if ((st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[b])) ||
-            (st = hv__cl_splat_run(cl, &w.sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
-                                   w.Y0[b])))
-            goto done;
-    if ((st = hv__cl_alloc(cl, 4 * sizeof(double), NULL, &w.sums)))
-        goto done;
+        if ((st = hv__cl_alloc(cl, bytes, NULL, &w->Y0[b])) ||
+            (st = hv__cl_splat_run(cl, &w->sp, unsig ? q->area : q->w + b, unsig ? 1 : 3, inv_h3,
+                                   w->Y0[b])))
+            return st;
+    if ((st = hv__cl_alloc(cl, 4 * sizeof(double), NULL, &w->sums)))
+        return st;
     for (int b = 0; b < ncomp; b++)
-        hv__cl_dot_f(cl, w.Y0[b], w.Y0[b], count, w.sums, b);
-    double sq[3] = {0, 0, 0}, f2 = 0;
-    hv__cl_read_acc(cl, w.sums, 0, ncomp, sq);
+        hv__cl_dot_f(cl, w->Y0[b], w->Y0[b], count, w->sums, b);
+    double sq[3] = {0, 0, 0};
+    hv__cl_read_acc(cl, w->sums, 0, ncomp, sq);
     if ((st = hv__cl_check(cl)))
-        goto done;
+        return st;
     for (int b = 0; b < ncomp; b++)
-        f2 += sq[b];
-    S->t_splat += hv_now() - tt;
+        *f2 += sq[b];
+    return HV_OK;
+}
 
-    /* 3. Diffuse: one backward-Euler step per level, straight into Y. */
-    tt = hv_now();
-    double tau[9] = {0};
-    if ((st = hv__cl_alloc(cl, (size_t)nlev * ncomp * bytes, NULL, &w.Y)) ||
-        (st = hv__cl_alloc(cl, bytes, NULL, &w.tmp)) || (st = hv__cl_finish(cl)))
-        goto done;
+/* 3. Diffuse: one backward-Euler step per level, straight into Y; tau[k]
+ * the noise threshold of level k. The splat is freed. */
+static hv_status cl_diffuse(sdf_cl_work *w, const hv_grid *g, int nlev, int unsig,
+                            const hv_sdf_opts *o, double f2, double tau[9], hv_sdf_stats *S)
+{
+    double tt = hv_now();
+    hv_cl *cl = w->cl;
+    const size_t bytes = hv_grid_count(g) * sizeof(float);
+    const int ncomp = unsig ? 1 : 3;
+    hv_status st;
+    if ((st = hv__cl_alloc(cl, (size_t)nlev * ncomp * bytes, NULL, &w->Y)) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w->tmp)) || (st = hv__cl_finish(cl)))
+        return st;
     for (int k = 0; k < nlev; k++) {
         if ((st = hv__progress(0.1 + 0.5 * k / nlev, "diffuse")))
-            goto done;
-        if ((st = opencl_solver(&w.solver, g, 1.0, S->t * pow(16.0, k), o->diffuse_tol)))
-            goto done;
+            return st;
+        if ((st = opencl_solver(&w->solver, g, 1.0, S->t * pow(16.0, k), o->diffuse_tol)))
+            return st;
         for (int b = 0; b < ncomp; b++) {
             hv_solve_info info;
-            if ((st = hv__cl_solver_solve(w.solver, w.Y0[b], w.tmp, &info)))
-                goto done;
+            if ((st = hv__cl_solver_solve(w->solver, w->Y0[b], w->tmp, &info)))
+                return st;
             S->diffuse_iterations += info.iterations;
             S->diffuse_relres = fmax(S->diffuse_relres, info.relres);
             hv__cl_fail(cl,
-                        clEnqueueCopyBuffer(cl->q, w.tmp, w.Y, 0, ((size_t)k * ncomp + b) * bytes,
+                        clEnqueueCopyBuffer(cl->q, w->tmp, w->Y, 0, ((size_t)k * ncomp + b) * bytes,
                                             bytes, 0, NULL, NULL),
                         "clEnqueueCopyBuffer");
             if ((st = hv__cl_finish(cl)))
-                goto done;
+                return st;
         }
-        hv_solver_destroy(&w.solver);
+        hv_solver_destroy(&w->solver);
         /* as sdf.c: ||e||_2 <= relres ||f||_2, grown by 2/h per component for the gradient */
         double bound = fmax(S->diffuse_relres, o->diffuse_tol) * sqrt(f2);
-        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / h : 1.0);
+        tau[k] = SDF_NOISE_FACTOR * bound * (unsig ? 2.0 * sqrt(3.0) / g->h : 1.0);
     }
     S->backend = HV_BACKEND_OPENCL;
     for (int b = 0; b < ncomp; b++)
-        hv__cl_free(&w.Y0[b]);
+        hv__cl_free(&w->Y0[b]);
     S->t_diffuse = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 4. Normalize on faces, divergence. */
+/* 4. Normalize on faces, divergence into rhs; the diffused fields are freed. */
+static hv_status cl_normalize(sdf_cl_work *w, const hv_grid *g, int nlev, int unsig, double tau[9],
+                              hv_sdf_stats *S)
+{
+    hv_status st;
     if ((st = hv__progress(0.6, "normalize")))
-        goto done;
-    tt = hv_now();
+        return st;
+    double tt = hv_now();
+    hv_cl *cl = w->cl;
+    const size_t bytes = hv_grid_count(g) * sizeof(float);
     float tauf[9];
     for (int k = 0; k < nlev; k++)
         tauf[k] = (float)tau[k];
     const uint32_t zero = 0;
     if ((st = hv__cl_alloc(cl, (size_t)nlev * cl->acc, cl->fp64 ? (void *)tau : (void *)tauf,
-                           &w.tau)) ||
-        (st = hv__cl_alloc(cl, sizeof zero, &zero, &w.dead)) ||
-        (st = hv__cl_alloc(cl, bytes, NULL, &w.rhs)))
-        goto done;
-    hv__cl_sdf_rhs(cl, n, h, w.Y, nlev, ncomp, w.tau, w.rhs, w.dead);
+                           &w->tau)) ||
+        (st = hv__cl_alloc(cl, sizeof zero, &zero, &w->dead)) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w->rhs)))
+        return st;
+    hv__cl_sdf_rhs(cl, g->n, g->h, w->Y, nlev, unsig ? 1 : 3, w->tau, w->rhs, w->dead);
     uint32_t dead = 0;
-    hv__cl_read(cl, w.dead, 0, sizeof dead, &dead);
+    hv__cl_read(cl, w->dead, 0, sizeof dead, &dead);
     if ((st = hv__cl_check(cl)))
-        goto done;
+        return st;
     S->dead_faces = dead;
-    hv__cl_free(&w.Y);
+    hv__cl_free(&w->Y);
     S->t_normalize = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 5. Poisson, then phi to the host: the one read of a field. */
+/* 5. Poisson: phi on the device; the divergence is freed. */
+static hv_status cl_poisson(sdf_cl_work *w, const hv_grid *g, const hv_sdf_opts *o, hv_sdf_stats *S)
+{
+    hv_status st;
     if ((st = hv__progress(0.65, "poisson")))
-        goto done;
-    tt = hv_now();
-    if ((st = opencl_solver(&w.solver, g, 0.0, 1.0, o->poisson_tol)) ||
-        (st = hv__cl_alloc(cl, bytes, NULL, &w.phi)))
-        goto done;
+        return st;
+    double tt = hv_now();
+    if ((st = opencl_solver(&w->solver, g, 0.0, 1.0, o->poisson_tol)) ||
+        (st = hv__cl_alloc(w->cl, hv_grid_count(g) * sizeof(float), NULL, &w->phi)))
+        return st;
     hv_solve_info info;
-    if ((st = hv__cl_solver_solve(w.solver, w.rhs, w.phi, &info)))
-        goto done;
+    if ((st = hv__cl_solver_solve(w->solver, w->rhs, w->phi, &info)))
+        return st;
     S->poisson_iterations = info.iterations;
     S->poisson_relres = info.relres;
-    if ((st = hv__cl_check(cl)))
-        goto done;
-    hv_solver_destroy(&w.solver);
-    hv__cl_free(&w.rhs);
+    if ((st = hv__cl_check(w->cl)))
+        return st;
+    hv_solver_destroy(&w->solver);
+    hv__cl_free(&w->rhs);
     S->t_poisson = hv_now() - tt;
+    return HV_OK;
+}
 
-    /* 6. Shift: area-weighted mean of phi at the samples to zero, then the
-     * local zero-set correction, as sdf.c. */
-    if ((st = hv__progress(0.8, "shift")))
-        goto done;
-    tt = hv_now();
+/* The local zero-set correction, as sdf.c: c = K*(a r) / K*(a),
+ * K = (I - t Lap)^-1, r = phi at the samples. */
+static hv_status cl_local_shift(sdf_cl_work *w, const hv_quad *q, const hv_grid *g,
+                                const hv_sdf_opts *o, hv_sdf_stats *S)
+{
+    hv_cl *cl = w->cl;
+    const double h = g->h;
+    const size_t count = hv_grid_count(g), bytes = count * sizeof(float);
+    const double inv_h3 = 1.0 / (h * h * h);
     double num, den, rms;
-    if ((st = sample_sums(&w, q, &num, &den, &rms)))
-        goto done;
-    S->shift = den > 0 ? num / den : 0;
-    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / h;
-    S->surface_rms_after = S->surface_rms_before;
-    hv__cl_sdf_shift(cl, count, w.phi, NULL, NULL, (float)S->shift, 0.0, 0);
-    if (o->local_shift && !unsig) {
-        /* c = K*(a r) / K*(a), K = (I - t Lap)^-1, r = phi at the samples */
-        if ((st = sample_sums(&w, q, &num, &den, &rms)))
-            goto done;
-        for (size_t k = 0; k < q->count; k++)
-            w.res[w.sp.order[k]] = q->area[w.sp.order[k]] * w.vals[k];
-        if ((st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[0])) ||
-            (st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[1])) ||
-            (st = hv__cl_alloc(cl, bytes, NULL, &w.Y0[2])) ||
-            (st = hv__cl_splat_run(cl, &w.sp, w.res, 1, inv_h3, w.Y0[0])) ||
-            (st = hv__cl_splat_run(cl, &w.sp, q->area, 1, inv_h3, w.Y0[1])))
-            goto done;
-        hv__cl_dot_f(cl, w.Y0[1], w.Y0[1], count, w.sums, 0);
-        double f1sq = 0;
-        hv__cl_read_acc(cl, w.sums, 0, 1, &f1sq);
-        if ((st = hv__cl_finish(cl)) ||
-            (st = opencl_solver(&w.solver, g, 1.0, S->t, o->diffuse_tol)))
-            goto done;
-        hv_solve_info info;
-        if ((st = hv__cl_solver_solve(w.solver, w.Y0[0], w.Y0[2], &info)))
-            goto done;
-        S->diffuse_iterations += info.iterations;
-        if ((st = hv__cl_solver_solve(w.solver, w.Y0[1], w.tmp, &info)))
-            goto done;
-        S->diffuse_iterations += info.iterations;
-        hv_solver_destroy(&w.solver);
-        const double tau_den = fmax(info.relres, o->diffuse_tol) * sqrt(f1sq);
-        hv__cl_sdf_shift(cl, count, w.phi, w.Y0[2], w.tmp, 0.0, tau_den, 1);
-        if ((st = sample_sums(&w, q, &num, &den, &rms)))
-            goto done;
-        S->surface_rms_after = sqrt(rms / den) / h;
-    }
+    hv_status st;
+    if ((st = sample_sums(w, q, &num, &den, &rms)))
+        return st;
+    for (size_t k = 0; k < q->count; k++)
+        w->res[w->sp.order[k]] = q->area[w->sp.order[k]] * w->vals[k];
+    if ((st = hv__cl_alloc(cl, bytes, NULL, &w->Y0[0])) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w->Y0[1])) ||
+        (st = hv__cl_alloc(cl, bytes, NULL, &w->Y0[2])) ||
+        (st = hv__cl_splat_run(cl, &w->sp, w->res, 1, inv_h3, w->Y0[0])) ||
+        (st = hv__cl_splat_run(cl, &w->sp, q->area, 1, inv_h3, w->Y0[1])))
+        return st;
+    hv__cl_dot_f(cl, w->Y0[1], w->Y0[1], count, w->sums, 0);
+    double f1sq = 0;
+    hv__cl_read_acc(cl, w->sums, 0, 1, &f1sq);
+    if ((st = hv__cl_finish(cl)) || (st = opencl_solver(&w->solver, g, 1.0, S->t, o->diffuse_tol)))
+        return st;
+    hv_solve_info info;
+    if ((st = hv__cl_solver_solve(w->solver, w->Y0[0], w->Y0[2], &info)))
+        return st;
+    S->diffuse_iterations += info.iterations;
+    if ((st = hv__cl_solver_solve(w->solver, w->Y0[1], w->tmp, &info)))
+        return st;
+    S->diffuse_iterations += info.iterations;
+    hv_solver_destroy(&w->solver);
+    const double tau_den = fmax(info.relres, o->diffuse_tol) * sqrt(f1sq);
+    hv__cl_sdf_shift(cl, count, w->phi, w->Y0[2], w->tmp, 0.0, tau_den, 1);
+    if ((st = sample_sums(w, q, &num, &den, &rms)))
+        return st;
+    S->surface_rms_after = sqrt(rms / den) / h;
+    return HV_OK;
+}
 
-    /* phi to the host: the one read of a field */
-    hv__cl_read(cl, w.phi, 0, bytes, g->v);
+/* 6. Shift: area-weighted mean of phi at the samples to zero, then the
+ * local zero-set correction, as sdf.c; then phi to the host, the one read of
+ * a field. */
+static hv_status cl_shift(sdf_cl_work *w, const hv_quad *q, hv_grid *g, int unsig,
+                          const hv_sdf_opts *o, hv_sdf_stats *S)
+{
+    hv_status st;
+    if ((st = hv__progress(0.8, "shift")))
+        return st;
+    double tt = hv_now();
+    hv_cl *cl = w->cl;
+    const size_t count = hv_grid_count(g), bytes = count * sizeof(float);
+    double num, den, rms;
+    if ((st = sample_sums(w, q, &num, &den, &rms)))
+        return st;
+    S->shift = den > 0 ? num / den : 0;
+    S->surface_rms_before = sqrt(fmax(0.0, rms / den - S->shift * S->shift)) / g->h;
+    S->surface_rms_after = S->surface_rms_before;
+    hv__cl_sdf_shift(cl, count, w->phi, NULL, NULL, (float)S->shift, 0.0, 0);
+    if (o->local_shift && !unsig && (st = cl_local_shift(w, q, g, o, S)))
+        return st;
+    hv__cl_read(cl, w->phi, 0, bytes, g->v);
     st = hv__cl_check(cl);
     S->t_shift = hv_now() - tt;
+    return st;
+}
+
+hv_status hv__sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, const hv_sdf_opts *o,
+                          hv_sdf_stats *S)
+{
+    sdf_cl_work w;
+    memset(&w, 0, sizeof w);
+    hv_status st;
+    double tt = hv_now();
+    if ((st = hv__cl_open(&w.cl)))
+        return st;
+    double f2 = 0;
+    if ((st = cl_splat(&w, q, g, unsig, &f2)))
+        goto done;
+    S->t_splat += hv_now() - tt;
+    double tau[9] = {0};
+    if ((st = cl_diffuse(&w, g, nlev, unsig, o, f2, tau, S)) ||
+        (st = cl_normalize(&w, g, nlev, unsig, tau, S)) || (st = cl_poisson(&w, g, o, S)))
+        goto done;
+    st = cl_shift(&w, q, g, unsig, o, S);
 done:
     work_free(&w);
     return st;
