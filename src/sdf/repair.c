@@ -970,6 +970,7 @@ hv_status hv_sdf_repair(const hv_mesh *in, unsigned flags, double max_hole, hv_m
     (void)bnd, (void)nm;
 
     hv_mesh *m = flipped_mesh(V, nvo, T, flip, ntk);
+    st = HV_ERR_NOMEM;
     if (!m)
         goto fail;
     rep.vertices_out = nvo;
