@@ -203,7 +203,8 @@ static hv_status band_memory(size_t ntiles, size_t npairs, const int n[3])
 {
     double need =
         (double)ntiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12) + (double)npairs * 8;
-    int dims[3] = {(int)(need / 1048576.0) + 1, 1, 1};
+    /* Checked before the conversion: an int holds up to 2 PB in MiB. */
+    int dims[3] = {need > 1e18 ? 1 : (int)(need / 1048576.0) + 1, 1, 1};
     if (need > 1e18 || hv_check_dims(3, dims, 1.0, 1048576)) {
         hv_clear_error();
         return hv__error(HV_ERR_NOMEM,
