@@ -238,49 +238,58 @@ static hv_status nesting_turns(const double *P, const sdf2d_seg *S, uint32_t nu,
     return HV_OK;
 }
 
-hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
-                                  const uint32_t *mstart, const uint32_t *members, double tol,
-                                  uint8_t *turn, hv_sdf2d_stats *st)
+/* The chains being oriented, and what the open ones among them tell. */
+typedef struct chains {
+    const double *P;
+    const sdf2d_seg *S;
+    uint32_t nc;
+    const uint32_t *mstart, *members;
+    uint8_t *turn;  /* turn[c] ^= 1 reverses chain c */
+    chain_end *ce;  /* the ends of each chain, following its turns */
+    uint32_t *open; /* the open chains with both ends, open[0..m) */
+    uint32_t m;
+    double eps;    /* the least distance the coupling sees */
+    uint32_t *gid; /* group of each open chain, ng groups */
+    uint32_t ng;
+} chains;
+
+/* The ends of every chain, the cycles counted; the open chains listed. */
+static void find_open_chains(chains *C, const uint32_t *deg, uint8_t *is_cycle, hv_sdf2d_stats *st)
 {
-    hv_status status = HV_OK;
-    uint8_t *is_cycle = calloc(nc, 1);
-    uint32_t *open = malloc(nc * sizeof *open), *unit = malloc(nc * sizeof *unit);
-    chain_end *ce = malloc(nc * sizeof *ce);
-    double *acc = NULL, *G = NULL;
-    uint32_t *gpar = NULL, *gid = NULL;
-    uint8_t *segturn = NULL;
-    if (!is_cycle || !open || !unit || !ce) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto out;
-    }
+    const uint32_t *mstart = C->mstart;
+    chain_end *ce = C->ce;
     uint32_t m = 0;
-    for (uint32_t c = 0; c < nc; c++) {
+    for (uint32_t c = 0; c < C->nc; c++) {
         int cyc = 1;
         ce[c].s[0] = ce[c].s[1] = ce[c].e[0] = ce[c].e[1] = NAN;
         for (uint32_t k = mstart[c]; k < mstart[c + 1]; k++) {
-            sdf2d_seg s = S[members[k]];
+            sdf2d_seg s = C->S[C->members[k]];
             int da = deg[s.a + 1] - deg[s.a] == 2, db = deg[s.b + 1] - deg[s.b] == 2;
             cyc &= da && db;
             if (!da && isnan(ce[c].s[0]))
-                memcpy(ce[c].s, P + 2 * s.a, sizeof ce[c].s);
+                memcpy(ce[c].s, C->P + 2 * s.a, sizeof ce[c].s);
             if (!db && isnan(ce[c].e[0]))
-                memcpy(ce[c].e, P + 2 * s.b, sizeof ce[c].e);
+                memcpy(ce[c].e, C->P + 2 * s.b, sizeof ce[c].e);
         }
         is_cycle[c] = (uint8_t)(cyc && mstart[c + 1] - mstart[c] >= 3);
         st->cycles += is_cycle[c];
         if (!is_cycle[c] && !isnan(ce[c].s[0]) && !isnan(ce[c].e[0]))
-            open[m++] = c;
+            C->open[m++] = c;
     }
-    /* Single-chain local search on the coupling energy. */
-    double eps = fmax(tol, 1e-12);
-    acc = calloc(m ? m : 1, sizeof *acc);
-    if (!acc) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto out;
-    }
+    C->m = m;
+}
+
+/* Single-chain local search on the coupling energy. */
+static hv_status flip_chains(chains *C)
+{
+    const uint32_t m = C->m, *open = C->open;
+    chain_end *ce = C->ce;
+    double *acc = calloc(m ? m : 1, sizeof *acc);
+    if (!acc)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     for (uint32_t i = 0; i < m; i++)
         for (uint32_t j = i + 1; j < m; j++) {
-            double J = coupling(&ce[open[i]], &ce[open[j]], eps);
+            double J = coupling(&ce[open[i]], &ce[open[j]], C->eps);
             acc[i] += J;
             acc[j] += J;
         }
@@ -296,192 +305,271 @@ hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t 
             break;
         for (uint32_t j = 0; j < m; j++)
             if (j != worst)
-                acc[j] -= 2 * coupling(&ce[open[worst]], &ce[open[j]], eps);
+                acc[j] -= 2 * coupling(&ce[open[worst]], &ce[open[j]], C->eps);
         acc[worst] = -acc[worst];
         reverse_end(&ce[open[worst]]);
-        turn[open[worst]] ^= 1;
+        C->turn[open[worst]] ^= 1;
     }
-    /* Groups of strongly coupled chains, then the same search over groups. */
-    gpar = malloc((m ? m : 1) * sizeof *gpar);
-    gid = malloc((m ? m : 1) * sizeof *gid);
-    if (!gpar || !gid) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto out;
+    free(acc);
+    return HV_OK;
+}
+
+/* Groups of strongly coupled open chains (J > 2, transitively): C->gid. */
+static hv_status group_chains(chains *C)
+{
+    const uint32_t m = C->m, *open = C->open;
+    uint32_t *gpar = malloc((m ? m : 1) * sizeof *gpar);
+    C->gid = malloc((m ? m : 1) * sizeof *C->gid);
+    if (!gpar || !C->gid) {
+        free(gpar);
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     }
     for (uint32_t i = 0; i < m; i++)
         gpar[i] = i;
     for (uint32_t i = 0; i < m; i++)
         for (uint32_t j = i + 1; j < m; j++)
-            if (coupling(&ce[open[i]], &ce[open[j]], eps) > 2) {
+            if (coupling(&C->ce[open[i]], &C->ce[open[j]], C->eps) > 2) {
                 uint32_t a = sdf2d_uf_find(gpar, i), b = sdf2d_uf_find(gpar, j);
                 if (a != b)
                     gpar[a > b ? a : b] = a < b ? a : b;
             }
-    uint32_t ng = 0;
+    uint32_t ng = 0, *gid = C->gid;
     for (uint32_t i = 0; i < m; i++)
         gid[i] = sdf2d_uf_find(gpar, i) == i ? ng++ : UINT32_MAX;
     for (uint32_t i = 0; i < m; i++)
         gid[i] = gid[sdf2d_uf_find(gpar, i)];
-    if (ng > 1 && ng <= 4096) {
-        G = calloc((size_t)ng * ng, sizeof *G);
-        if (!G) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto out;
+    C->ng = ng;
+    free(gpar);
+    return HV_OK;
+}
+
+/* The local search of flip_chains over whole groups (up to 4096 of them). */
+static hv_status flip_groups(chains *C)
+{
+    const uint32_t m = C->m, ng = C->ng, *open = C->open, *gid = C->gid;
+    if (!(ng > 1 && ng <= 4096))
+        return HV_OK;
+    double *G = calloc((size_t)ng * ng, sizeof *G);
+    if (!G)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t i = 0; i < m; i++)
+        for (uint32_t j = i + 1; j < m; j++)
+            if (gid[i] != gid[j]) {
+                double J = coupling(&C->ce[open[i]], &C->ce[open[j]], C->eps);
+                G[(size_t)gid[i] * ng + gid[j]] += J;
+                G[(size_t)gid[j] * ng + gid[i]] += J;
+            }
+    for (size_t iter = 0; iter < 10 * (size_t)ng; iter++) {
+        uint32_t worst = UINT32_MAX;
+        double low = -1e-9;
+        for (uint32_t g = 0; g < ng; g++) {
+            double a = 0;
+            for (uint32_t h = 0; h < ng; h++)
+                a += G[(size_t)g * ng + h];
+            if (a < low) {
+                low = a;
+                worst = g;
+            }
+        }
+        if (worst == UINT32_MAX)
+            break;
+        for (uint32_t h = 0; h < ng; h++) {
+            G[(size_t)worst * ng + h] = -G[(size_t)worst * ng + h];
+            G[(size_t)h * ng + worst] = -G[(size_t)h * ng + worst];
         }
         for (uint32_t i = 0; i < m; i++)
-            for (uint32_t j = i + 1; j < m; j++)
-                if (gid[i] != gid[j]) {
-                    double J = coupling(&ce[open[i]], &ce[open[j]], eps);
-                    G[(size_t)gid[i] * ng + gid[j]] += J;
-                    G[(size_t)gid[j] * ng + gid[i]] += J;
-                }
-        for (size_t iter = 0; iter < 10 * (size_t)ng; iter++) {
-            uint32_t worst = UINT32_MAX;
-            double low = -1e-9;
-            for (uint32_t g = 0; g < ng; g++) {
-                double a = 0;
-                for (uint32_t h = 0; h < ng; h++)
-                    a += G[(size_t)g * ng + h];
-                if (a < low) {
-                    low = a;
-                    worst = g;
-                }
+            if (gid[i] == worst) {
+                C->turn[open[i]] ^= 1;
+                reverse_end(&C->ce[open[i]]);
             }
-            if (worst == UINT32_MAX)
-                break;
-            for (uint32_t h = 0; h < ng; h++) {
-                G[(size_t)worst * ng + h] = -G[(size_t)worst * ng + h];
-                G[(size_t)h * ng + worst] = -G[(size_t)h * ng + worst];
-            }
-            for (uint32_t i = 0; i < m; i++)
-                if (gid[i] == worst) {
-                    turn[open[i]] ^= 1;
-                    reverse_end(&ce[open[i]]);
-                }
-        }
     }
-    /* Units: each cycle, each group of open chains, each other chain alone. */
-    uint32_t nu = 0;
-    for (uint32_t c = 0; c < nc; c++)
-        unit[c] = UINT32_MAX;
-    for (uint32_t i = 0; i < m; i++)
-        unit[open[i]] = gid[i];
-    nu = ng;
-    for (uint32_t c = 0; c < nc; c++)
-        if (unit[c] == UINT32_MAX)
-            unit[c] = nu++;
-    /* Per unit: its segments (sorted by unit), shoelace sum, a point on it. */
-    uint32_t *ustart = calloc((size_t)nu + 1, sizeof *ustart);
-    uint32_t *useg = malloc((mstart[nc] ? mstart[nc] : 1) * sizeof *useg);
-    double *upt = malloc(2 * (nu ? nu : 1) * sizeof *upt);
-    double *ulen = calloc(nu ? nu : 1, sizeof *ulen), *uarea = calloc(nu ? nu : 1, sizeof *uarea);
-    double *utot = calloc(nu ? nu : 1, sizeof *utot);
-    uint8_t *uturn = calloc(nu ? nu : 1, 1);
-    double *ugap = NULL;
-    uint32_t *ufirst = NULL, *ulast = NULL;
-    if (!ustart || !useg || !upt || !ulen || !uarea || !utot || !uturn) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto units_out;
-    }
+    free(G);
+    return HV_OK;
+}
+
+/* The units of the nesting test, each with its segments (useg, by unit),
+ * shoelace sum, total length and a point on its longest segment. */
+typedef struct units {
+    uint32_t nu;
+    uint32_t *unit; /* unit of each chain */
+    uint32_t *ustart, *useg;
+    uint8_t *segturn; /* 1 where a segment runs against S (S is not yet turned) */
+    double *upt, *ulen, *uarea, *utot;
+    double *ugap; /* the gaps closing a group of open chains; < 0 for one chain */
+    uint32_t *ufirst, *ulast;
+    uint8_t *uturn;
+} units;
+
+static void units_free(units *U)
+{
+    free(U->ugap);
+    free(U->ufirst);
+    free(U->ulast);
+    free(U->segturn);
+    free(U->ustart);
+    free(U->useg);
+    free(U->utot);
+    free(U->upt);
+    free(U->ulen);
+    free(U->uarea);
+    free(U->uturn);
+}
+
+/* Units: each cycle, each group of open chains, each other chain alone. */
+static void assign_units(const chains *C, units *U)
+{
+    for (uint32_t c = 0; c < C->nc; c++)
+        U->unit[c] = UINT32_MAX;
+    for (uint32_t i = 0; i < C->m; i++)
+        U->unit[C->open[i]] = C->gid[i];
+    uint32_t nu = C->ng;
+    for (uint32_t c = 0; c < C->nc; c++)
+        if (U->unit[c] == UINT32_MAX)
+            U->unit[c] = nu++;
+    U->nu = nu;
+}
+
+/* The segments of each unit (sorted by unit), and which way each runs. */
+static hv_status unit_segments(const chains *C, units *U)
+{
+    const uint32_t nc = C->nc, nu = U->nu, *mstart = C->mstart, *members = C->members;
+    const uint32_t *unit = U->unit;
+    U->ustart = calloc((size_t)nu + 1, sizeof *U->ustart);
+    U->useg = malloc((mstart[nc] ? mstart[nc] : 1) * sizeof *U->useg);
+    U->upt = malloc(2 * (nu ? nu : 1) * sizeof *U->upt);
+    U->ulen = calloc(nu ? nu : 1, sizeof *U->ulen);
+    U->uarea = calloc(nu ? nu : 1, sizeof *U->uarea);
+    U->utot = calloc(nu ? nu : 1, sizeof *U->utot);
+    U->uturn = calloc(nu ? nu : 1, 1);
+    if (!U->ustart || !U->useg || !U->upt || !U->ulen || !U->uarea || !U->utot || !U->uturn)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    uint32_t *ustart = U->ustart;
     for (uint32_t c = 0; c < nc; c++)
         ustart[unit[c] + 1] += mstart[c + 1] - mstart[c];
     for (uint32_t u = 0; u < nu; u++)
         ustart[u + 1] += ustart[u];
-    {
-        uint32_t *fill = calloc(nu ? nu : 1, sizeof *fill);
-        if (!fill) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto units_out;
-        }
-        for (uint32_t c = 0; c < nc; c++)
-            for (uint32_t k = mstart[c]; k < mstart[c + 1]; k++)
-                useg[ustart[unit[c]] + fill[unit[c]]++] = members[k];
-        free(fill);
-    }
+    uint32_t *fill = calloc(nu ? nu : 1, sizeof *fill);
+    if (!fill)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t c = 0; c < nc; c++)
+        for (uint32_t k = mstart[c]; k < mstart[c + 1]; k++)
+            U->useg[ustart[unit[c]] + fill[unit[c]]++] = members[k];
+    free(fill);
     /* S is not yet reversed by turn: signs carry it. */
-    {
-        size_t nseg = mstart[nc];
-        segturn = calloc(nseg ? nseg : 1, 1);
-        if (!segturn) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto units_out;
-        }
-        for (uint32_t c = 0; c < nc; c++)
-            for (uint32_t k = mstart[c]; k < mstart[c + 1]; k++)
-                segturn[members[k]] = turn[c];
-    }
-    for (uint32_t u = 0; u < nu; u++) {
+    size_t nseg = mstart[nc];
+    U->segturn = calloc(nseg ? nseg : 1, 1);
+    if (!U->segturn)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t c = 0; c < nc; c++)
+        for (uint32_t k = mstart[c]; k < mstart[c + 1]; k++)
+            U->segturn[members[k]] = C->turn[c];
+    return HV_OK;
+}
+
+/* Per unit: the shoelace sum, the length, the middle of the longest segment. */
+static void unit_shapes(const chains *C, units *U)
+{
+    const double *P = C->P;
+    const sdf2d_seg *S = C->S;
+    for (uint32_t u = 0; u < U->nu; u++) {
         /* shoelace about a point of the unit, so that open pieces do not
          * depend on where the origin is */
-        const double *o = P + 2 * S[useg[ustart[u]]].a;
-        for (uint32_t k = ustart[u]; k < ustart[u + 1]; k++) {
-            uint32_t id = useg[k];
+        const double *o = P + 2 * S[U->useg[U->ustart[u]]].a;
+        for (uint32_t k = U->ustart[u]; k < U->ustart[u + 1]; k++) {
+            uint32_t id = U->useg[k];
             const double *p = P + 2 * S[id].a, *q = P + 2 * S[id].b;
-            double sg = segturn[id] ? -1 : 1;
-            uarea[u] += sg * ((p[0] - o[0]) * (q[1] - o[1]) - (q[0] - o[0]) * (p[1] - o[1]));
+            double sg = U->segturn[id] ? -1 : 1;
+            U->uarea[u] += sg * ((p[0] - o[0]) * (q[1] - o[1]) - (q[0] - o[0]) * (p[1] - o[1]));
             double L = hypot(q[0] - p[0], q[1] - p[1]);
-            utot[u] += L;
-            if (L > ulen[u]) {
-                ulen[u] = L;
-                upt[2 * u] = 0.5 * (p[0] + q[0]);
-                upt[2 * u + 1] = 0.5 * (p[1] + q[1]);
+            U->utot[u] += L;
+            if (L > U->ulen[u]) {
+                U->ulen[u] = L;
+                U->upt[2 * u] = 0.5 * (p[0] + q[0]);
+                U->upt[2 * u + 1] = 0.5 * (p[1] + q[1]);
             }
         }
     }
-    /* Gaps closing each group of open chains, end of one to start of the next
-     * (ce follows the turns); ugap < 0 marks units of a single chain. */
-    ugap = malloc((nu ? nu : 1) * sizeof *ugap);
-    ufirst = malloc((nu ? nu : 1) * sizeof *ufirst);
-    ulast = malloc((nu ? nu : 1) * sizeof *ulast);
-    if (!ugap || !ufirst || !ulast) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto units_out;
-    }
+}
+
+/* Gaps closing each group of open chains, end of one to start of the next
+ * (ce follows the turns); ugap < 0 marks units of a single chain. */
+static hv_status unit_gaps(const chains *C, units *U)
+{
+    const uint32_t nu = U->nu;
+    const chain_end *ce = C->ce;
+    U->ugap = malloc((nu ? nu : 1) * sizeof *U->ugap);
+    U->ufirst = malloc((nu ? nu : 1) * sizeof *U->ufirst);
+    U->ulast = malloc((nu ? nu : 1) * sizeof *U->ulast);
+    if (!U->ugap || !U->ufirst || !U->ulast)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    double *ugap = U->ugap;
     for (uint32_t u = 0; u < nu; u++) {
         ugap[u] = -1;
-        ufirst[u] = UINT32_MAX;
+        U->ufirst[u] = UINT32_MAX;
     }
-    for (uint32_t i = 0; i < m; i++) {
-        uint32_t c = open[i], u = unit[c];
-        if (ufirst[u] == UINT32_MAX) {
-            ufirst[u] = c;
+    for (uint32_t i = 0; i < C->m; i++) {
+        uint32_t c = C->open[i], u = U->unit[c];
+        if (U->ufirst[u] == UINT32_MAX) {
+            U->ufirst[u] = c;
         } else {
-            const double *e = ce[ulast[u]].e;
+            const double *e = ce[U->ulast[u]].e;
             ugap[u] = fmax(ugap[u], 0) + hypot(ce[c].s[0] - e[0], ce[c].s[1] - e[1]);
         }
-        ulast[u] = c;
+        U->ulast[u] = c;
     }
     for (uint32_t u = 0; u < nu; u++)
         if (ugap[u] >= 0) {
-            const double *e = ce[ulast[u]].e, *s0 = ce[ufirst[u]].s;
+            const double *e = ce[U->ulast[u]].e, *s0 = ce[U->ufirst[u]].s;
             ugap[u] += hypot(s0[0] - e[0], s0[1] - e[1]);
         }
-    status = nesting_turns(P, S, nu, ustart, useg, segturn, upt, uarea, utot, ugap, uturn,
-                           &st->nesting_tests);
-    if (status != HV_OK)
-        goto units_out;
-    for (uint32_t c = 0; c < nc; c++)
-        turn[c] ^= uturn[unit[c]];
-units_out:
-    free(ugap);
-    free(ufirst);
-    free(ulast);
-    free(segturn);
-    free(ustart);
-    free(useg);
-    free(utot);
-    free(upt);
-    free(ulen);
-    free(uarea);
-    free(uturn);
+    return HV_OK;
+}
+
+/* Every unit turned to agree with its nesting depth (see the top). */
+static hv_status orient_units(const chains *C, uint32_t *unit, hv_sdf2d_stats *st)
+{
+    units U;
+    memset(&U, 0, sizeof U);
+    U.unit = unit;
+    assign_units(C, &U);
+    hv_status status = unit_segments(C, &U);
+    if (status == HV_OK) {
+        unit_shapes(C, &U);
+        status = unit_gaps(C, &U);
+    }
+    if (status == HV_OK)
+        status = nesting_turns(C->P, C->S, U.nu, U.ustart, U.useg, U.segturn, U.upt, U.uarea,
+                               U.utot, U.ugap, U.uturn, &st->nesting_tests);
+    if (status == HV_OK)
+        for (uint32_t c = 0; c < C->nc; c++)
+            C->turn[c] ^= U.uturn[unit[c]];
+    units_free(&U);
+    return status;
+}
+
+hv_status hv__sdf2d_orient_chains(const double *P, sdf2d_seg *S, const uint32_t *deg, uint32_t nc,
+                                  const uint32_t *mstart, const uint32_t *members, double tol,
+                                  uint8_t *turn, hv_sdf2d_stats *st)
+{
+    hv_status status = HV_OK;
+    chains C = {P, S, nc, mstart, members, turn, NULL, NULL, 0, fmax(tol, 1e-12), NULL, 0};
+    uint8_t *is_cycle = calloc(nc, 1);
+    C.open = malloc(nc * sizeof *C.open);
+    uint32_t *unit = malloc(nc * sizeof *unit);
+    C.ce = malloc(nc * sizeof *C.ce);
+    if (!is_cycle || !C.open || !unit || !C.ce) {
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        goto out;
+    }
+    find_open_chains(&C, deg, is_cycle, st);
+    if ((status = flip_chains(&C)) || (status = group_chains(&C)) || (status = flip_groups(&C)))
+        goto out;
+    status = orient_units(&C, unit, st);
 out:
     free(is_cycle);
-    free(open);
+    free(C.open);
     free(unit);
-    free(ce);
-    free(acc);
-    free(G);
-    free(gpar);
-    free(gid);
+    free(C.ce);
+    free(C.gid);
     return status;
 }
