@@ -337,35 +337,32 @@ static void weld_near(const double *P, const point_grid *g, int64_t cx, int64_t 
         }
 }
 
-/* Welds, drops zero-length and duplicate segments, orients chains (see
- * sdf2d_internal.h). */
-hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
-                           double h, hv_sdf2d_stats *st)
+/* 1. Weld: points within tol, pairs found on a grid of cells >= 2 tol. The
+ * roots (the lowest index of each cluster) and the count do not depend on
+ * the order the pairs are met in. */
+static hv_status weld_points(const double *P, size_t np, double tol, uint32_t *par, size_t *welded)
 {
-    sdf2d_seg *S = *Sp;
-    hv_status status = HV_OK;
-    uint32_t *par = malloc(np * sizeof *par);
-    if (!par)
-        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-    for (uint32_t i = 0; i < np; i++)
-        par[i] = i;
-    /* 1. Weld: points within tol, pairs found on a grid of cells >= 2 tol. The
-     * roots (the lowest index of each cluster) and the count do not depend on
-     * the order the pairs are met in. */
-    if (tol > 0) {
-        point_grid g = {{0, 0}, 0, {0, 0}, NULL, NULL};
-        if ((status = pg_build(&g, P, np, NULL, 2 * tol)) != HV_OK)
-            goto out;
-        for (int64_t cy = 0; cy < g.n[1]; cy++)
-            for (int64_t cx = 0; cx < g.n[0]; cx++) {
-                size_t c = (size_t)(cx + g.n[0] * cy);
-                for (uint32_t e = g.start[c]; e < g.start[c + 1]; e++)
-                    weld_near(P, &g, cx, cy, g.ids[e], tol, par, &st->points_welded);
-            }
-        pg_free(&g);
-    }
+    point_grid g = {{0, 0}, 0, {0, 0}, NULL, NULL};
+    hv_status status = pg_build(&g, P, np, NULL, 2 * tol);
+    if (status != HV_OK)
+        return status;
+    for (int64_t cy = 0; cy < g.n[1]; cy++)
+        for (int64_t cx = 0; cx < g.n[0]; cx++) {
+            size_t c = (size_t)(cx + g.n[0] * cy);
+            for (uint32_t e = g.start[c]; e < g.start[c + 1]; e++)
+                weld_near(P, &g, cx, cy, g.ids[e], tol, par, welded);
+        }
+    pg_free(&g);
+    return HV_OK;
+}
+
+/* The segments S[0..ns) between welded points, compacted in place without
+ * those of zero length; returns their number. */
+static size_t weld_segments(const double *P, sdf2d_seg *S, size_t ns, uint32_t *par,
+                            hv_sdf2d_stats *st)
+{
     size_t n = 0;
-    for (size_t k = 0; k < *ns; k++) {
+    for (size_t k = 0; k < ns; k++) {
         sdf2d_seg s = {sdf2d_uf_find(par, S[k].a), sdf2d_uf_find(par, S[k].b)};
         if (s.a == s.b || sdf2d_seg_len(P, s) == 0) {
             st->zero_length_removed++;
@@ -373,18 +370,16 @@ hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *n
         }
         S[n++] = s;
     }
-    /* 1b. Overlaps: split at points lying on other segments. */
-    if (tol > 0 && n > 0) {
-        if ((status = split_overlaps(P, np, Sp, &n, tol, h, &st->segments_split)) != HV_OK)
-            goto out;
-        S = *Sp;
-    }
-    /* 2. Duplicates (either direction): keep the first. */
+    return n;
+}
+
+/* 2. Duplicates (either direction): keep the first. */
+static hv_status drop_duplicates(sdf2d_seg *S, size_t *np, hv_sdf2d_stats *st)
+{
+    const size_t n = *np;
     uint64_t *key = malloc(n * 2 * sizeof *key);
-    if (!key && n) {
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto out;
-    }
+    if (!key && n)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     for (size_t k = 0; k < n; k++) {
         uint32_t lo = S[k].a < S[k].b ? S[k].a : S[k].b, hi = S[k].a ^ S[k].b ^ lo;
         key[2 * k] = ((uint64_t)lo << 32) | hi;
@@ -395,8 +390,7 @@ hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *n
     uint8_t *drop = calloc(n ? n : 1, 1);
     if (!drop) {
         free(key);
-        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-        goto out;
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
     }
     for (size_t k = 1; k < n; k++)
         if (key[2 * k] == key[2 * k - 2])
@@ -410,137 +404,212 @@ hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *n
             S[m++] = S[k];
     }
     free(drop);
-    n = m;
-    *ns = n;
-    if (n == 0)
-        goto out;
+    *np = m;
+    return HV_OK;
+}
 
-    /* 3. Chains through points of degree 2; consistent direction by a walk. */
-    {
-        uint32_t *deg = calloc(np + 1, sizeof *deg), *inc = malloc(2 * n * sizeof *inc);
-        uint32_t *comp = malloc(n * sizeof *comp), *queue = malloc(n * sizeof *queue);
-        uint8_t *flip = calloc(n, 1);
-        double *vote = NULL;
-        uint32_t *members = NULL, *mstart = NULL;
-        if (!deg || !inc || !comp || !queue || !flip) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto chains_out;
-        }
-        for (size_t k = 0; k < n; k++) {
-            deg[S[k].a + 1]++;
-            deg[S[k].b + 1]++;
-        }
-        for (size_t v = 0; v < np; v++)
-            deg[v + 1] += deg[v]; /* deg is now the CSR offset array */
-        {
-            uint32_t *fill = calloc(np, sizeof *fill);
-            if (!fill) {
-                status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-                goto chains_out;
-            }
-            for (uint32_t k = 0; k < n; k++) {
-                inc[deg[S[k].a] + fill[S[k].a]++] = k;
-                inc[deg[S[k].b] + fill[S[k].b]++] = k;
-            }
-            free(fill);
-        }
-        for (size_t k = 0; k < n; k++)
-            comp[k] = UINT32_MAX;
-        uint32_t nc = 0;
-        for (uint32_t seed = 0; seed < n; seed++) {
-            if (comp[seed] != UINT32_MAX)
-                continue;
-            size_t head = 0, tail = 0;
-            comp[seed] = nc;
-            queue[tail++] = seed;
-            while (head < tail) {
-                uint32_t s = queue[head++];
-                uint32_t ends[2] = {S[s].a, S[s].b};
-                for (int e = 0; e < 2; e++) {
-                    uint32_t v = ends[e];
-                    if (deg[v + 1] - deg[v] != 2)
-                        continue;
-                    uint32_t t = inc[deg[v]] == s ? inc[deg[v] + 1] : inc[deg[v]];
-                    if (comp[t] != UINT32_MAX)
-                        continue;
-                    /* exactly one of the two (as oriented) must end at v */
-                    int s_ends = (S[s].b == v) ^ flip[s];
-                    int t_ends_raw = S[t].b == v;
-                    flip[t] = (uint8_t)(1 ^ s_ends ^ t_ends_raw);
-                    comp[t] = nc;
-                    queue[tail++] = t;
-                }
-            }
-            nc++;
-        }
-        st->chains = nc;
-        /* Vote: keep the direction most of the length had. */
-        vote = calloc(2 * (size_t)nc, sizeof *vote);
-        mstart = calloc((size_t)nc + 1, sizeof *mstart);
-        members = malloc(n * sizeof *members);
-        if (!vote || !mstart || !members) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto chains_out;
-        }
-        for (size_t k = 0; k < n; k++) {
-            vote[2 * comp[k] + flip[k]] += sdf2d_seg_len(P, S[k]);
-            mstart[comp[k] + 1]++;
-        }
-        for (uint32_t c = 0; c < nc; c++)
-            mstart[c + 1] += mstart[c];
-        {
-            uint32_t *fill = calloc(nc, sizeof *fill);
-            if (!fill) {
-                status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-                goto chains_out;
-            }
-            for (uint32_t k = 0; k < n; k++)
-                members[mstart[comp[k]] + fill[comp[k]]++] = k;
-            free(fill);
-        }
-        for (size_t k = 0; k < n; k++)
-            if (vote[2 * comp[k] + 1] > vote[2 * comp[k]])
-                flip[k] ^= 1;
-        for (size_t k = 0; k < n; k++)
-            if (flip[k]) {
-                uint32_t t = S[k].a;
-                S[k].a = S[k].b;
-                S[k].b = t;
-            }
-        /* 4. Orientation of whole chains (open ones by their mutual coupling,
-         * then every loop by nesting). */
-        uint8_t *turn = calloc(nc, 1);
-        if (!turn) {
-            status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
-            goto chains_out;
-        }
-        status = hv__sdf2d_orient_chains(P, S, deg, nc, mstart, members, tol, turn, st);
-        if (status != HV_OK) {
-            free(turn);
-            goto chains_out;
-        }
-        for (size_t k = 0; k < n; k++) {
-            flip[k] ^= turn[comp[k]];
-            if (turn[comp[k]]) {
-                uint32_t t = S[k].a;
-                S[k].a = S[k].b;
-                S[k].b = t;
-            }
-        }
-        free(turn);
-        /* flip[k] now says whether segment k runs against its input direction */
-        for (size_t k = 0; k < n; k++)
-            st->segments_flipped += flip[k];
-    chains_out:
-        free(deg);
-        free(inc);
-        free(comp);
-        free(queue);
-        free(flip);
-        free(vote);
-        free(members);
-        free(mstart);
+/* The chains through points of degree 2 of the n segments: deg the CSR
+ * offsets of each point's incident segments inc, comp the chain of each
+ * segment and flip whether it runs against its chain, the chains' members
+ * (mstart, CSR) and the length voting for each direction. */
+typedef struct seg_chains {
+    uint32_t *deg, *inc, *comp, *queue;
+    uint8_t *flip;
+    double *vote;
+    uint32_t *members, *mstart;
+    uint32_t nc;
+} seg_chains;
+
+static void seg_chains_free(seg_chains *K)
+{
+    free(K->deg);
+    free(K->inc);
+    free(K->comp);
+    free(K->queue);
+    free(K->flip);
+    free(K->vote);
+    free(K->members);
+    free(K->mstart);
+}
+
+/* deg and inc: the segments incident to each point. */
+static hv_status link_points(const sdf2d_seg *S, size_t n, size_t np, seg_chains *K)
+{
+    uint32_t *deg = K->deg;
+    for (size_t k = 0; k < n; k++) {
+        deg[S[k].a + 1]++;
+        deg[S[k].b + 1]++;
     }
+    for (size_t v = 0; v < np; v++)
+        deg[v + 1] += deg[v]; /* deg is now the CSR offset array */
+    uint32_t *fill = calloc(np, sizeof *fill);
+    if (!fill)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t k = 0; k < n; k++) {
+        K->inc[deg[S[k].a] + fill[S[k].a]++] = k;
+        K->inc[deg[S[k].b] + fill[S[k].b]++] = k;
+    }
+    free(fill);
+    return HV_OK;
+}
+
+/* comp and flip: a walk through points of degree 2 from each unvisited
+ * segment, orienting each segment met after the one it was reached from. */
+static void walk_chains(const sdf2d_seg *S, size_t n, seg_chains *K)
+{
+    const uint32_t *deg = K->deg, *inc = K->inc;
+    uint32_t *comp = K->comp, *queue = K->queue;
+    uint8_t *flip = K->flip;
+    for (size_t k = 0; k < n; k++)
+        comp[k] = UINT32_MAX;
+    uint32_t nc = 0;
+    for (uint32_t seed = 0; seed < n; seed++) {
+        if (comp[seed] != UINT32_MAX)
+            continue;
+        size_t head = 0, tail = 0;
+        comp[seed] = nc;
+        queue[tail++] = seed;
+        while (head < tail) {
+            uint32_t s = queue[head++];
+            uint32_t ends[2] = {S[s].a, S[s].b};
+            for (int e = 0; e < 2; e++) {
+                uint32_t v = ends[e];
+                if (deg[v + 1] - deg[v] != 2)
+                    continue;
+                uint32_t t = inc[deg[v]] == s ? inc[deg[v] + 1] : inc[deg[v]];
+                if (comp[t] != UINT32_MAX)
+                    continue;
+                /* exactly one of the two (as oriented) must end at v */
+                int s_ends = (S[s].b == v) ^ flip[s];
+                int t_ends_raw = S[t].b == v;
+                flip[t] = (uint8_t)(1 ^ s_ends ^ t_ends_raw);
+                comp[t] = nc;
+                queue[tail++] = t;
+            }
+        }
+        nc++;
+    }
+    K->nc = nc;
+}
+
+/* Vote: each chain keeps the direction most of its length had, and S is
+ * turned so; the chains' members listed. */
+static hv_status vote_directions(const double *P, sdf2d_seg *S, size_t n, seg_chains *K)
+{
+    const uint32_t nc = K->nc, *comp = K->comp;
+    uint8_t *flip = K->flip;
+    K->vote = calloc(2 * (size_t)nc, sizeof *K->vote);
+    K->mstart = calloc((size_t)nc + 1, sizeof *K->mstart);
+    K->members = malloc(n * sizeof *K->members);
+    if (!K->vote || !K->mstart || !K->members)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    double *vote = K->vote;
+    uint32_t *mstart = K->mstart;
+    for (size_t k = 0; k < n; k++) {
+        vote[2 * comp[k] + flip[k]] += sdf2d_seg_len(P, S[k]);
+        mstart[comp[k] + 1]++;
+    }
+    for (uint32_t c = 0; c < nc; c++)
+        mstart[c + 1] += mstart[c];
+    uint32_t *fill = calloc(nc, sizeof *fill);
+    if (!fill)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t k = 0; k < n; k++)
+        K->members[mstart[comp[k]] + fill[comp[k]]++] = k;
+    free(fill);
+    for (size_t k = 0; k < n; k++)
+        if (vote[2 * comp[k] + 1] > vote[2 * comp[k]])
+            flip[k] ^= 1;
+    for (size_t k = 0; k < n; k++)
+        if (flip[k]) {
+            uint32_t t = S[k].a;
+            S[k].a = S[k].b;
+            S[k].b = t;
+        }
+    return HV_OK;
+}
+
+/* 4. Orientation of whole chains (open ones by their mutual coupling, then
+ * every loop by nesting): S turned, flip updated. */
+static hv_status turn_chains(const double *P, sdf2d_seg *S, size_t n, double tol, seg_chains *K,
+                             hv_sdf2d_stats *st)
+{
+    uint8_t *turn = calloc(K->nc, 1);
+    if (!turn)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    hv_status status =
+        hv__sdf2d_orient_chains(P, S, K->deg, K->nc, K->mstart, K->members, tol, turn, st);
+    if (status != HV_OK) {
+        free(turn);
+        return status;
+    }
+    for (size_t k = 0; k < n; k++) {
+        K->flip[k] ^= turn[K->comp[k]];
+        if (turn[K->comp[k]]) {
+            uint32_t t = S[k].a;
+            S[k].a = S[k].b;
+            S[k].b = t;
+        }
+    }
+    free(turn);
+    return HV_OK;
+}
+
+/* 3. Chains through points of degree 2; consistent direction by a walk,
+ * then by a vote of their length, then whole chains turned. */
+static hv_status orient_segments(const double *P, size_t np, sdf2d_seg *S, size_t n, double tol,
+                                 hv_sdf2d_stats *st)
+{
+    hv_status status = HV_OK;
+    seg_chains K;
+    memset(&K, 0, sizeof K);
+    K.deg = calloc(np + 1, sizeof *K.deg);
+    K.inc = malloc(2 * n * sizeof *K.inc);
+    K.comp = malloc(n * sizeof *K.comp);
+    K.queue = malloc(n * sizeof *K.queue);
+    K.flip = calloc(n, 1);
+    if (!K.deg || !K.inc || !K.comp || !K.queue || !K.flip) {
+        status = hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+        goto out;
+    }
+    if ((status = link_points(S, n, np, &K)) != HV_OK)
+        goto out;
+    walk_chains(S, n, &K);
+    st->chains = K.nc;
+    if ((status = vote_directions(P, S, n, &K)) != HV_OK ||
+        (status = turn_chains(P, S, n, tol, &K, st)) != HV_OK)
+        goto out;
+    /* flip[k] now says whether segment k runs against its input direction */
+    for (size_t k = 0; k < n; k++)
+        st->segments_flipped += K.flip[k];
+out:
+    seg_chains_free(&K);
+    return status;
+}
+
+/* Welds, drops zero-length and duplicate segments, orients chains (see
+ * sdf2d_internal.h). */
+hv_status hv__sdf2d_repair(const double *P, size_t np, sdf2d_seg **Sp, size_t *ns, double tol,
+                           double h, hv_sdf2d_stats *st)
+{
+    hv_status status = HV_OK;
+    uint32_t *par = malloc(np * sizeof *par);
+    if (!par)
+        return hv__error(HV_ERR_NOMEM, "sdf2d: out of memory for the repair");
+    for (uint32_t i = 0; i < np; i++)
+        par[i] = i;
+    if (tol > 0 && (status = weld_points(P, np, tol, par, &st->points_welded)) != HV_OK)
+        goto out;
+    size_t n = weld_segments(P, *Sp, *ns, par, st);
+    /* 1b. Overlaps: split at points lying on other segments. */
+    if (tol > 0 && n > 0 &&
+        (status = split_overlaps(P, np, Sp, &n, tol, h, &st->segments_split)) != HV_OK)
+        goto out;
+    if ((status = drop_duplicates(*Sp, &n, st)) != HV_OK)
+        goto out;
+    *ns = n;
+    if (n > 0)
+        status = orient_segments(P, np, *Sp, n, tol, st);
 out:
     free(par);
     return status;
