@@ -123,15 +123,11 @@ static const char *dict_value(const char *hdr, const char *key)
     return NULL;
 }
 
-hv_status hv_read_npy(const char *path, hv_grid **out)
+/* Opens path for reading when it is a regular file: the data's size is
+ * checked against the file's, and only a regular file has one (a pipe or a
+ * device such as /dev/zero is refused before opening). */
+static hv_status open_regular(const char *path, FILE **fp)
 {
-    if (!out)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: out is NULL");
-    *out = NULL;
-    if (!path || !*path)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: input path is empty");
-    /* The data's size is checked against the file's: only a regular file has
-     * one (a pipe or a device such as /dev/zero is refused before opening). */
     struct stat sb;
     if (stat(path, &sb) != 0)
         return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
@@ -148,97 +144,85 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
         fclose(f);
         return hv__error(HV_ERR_IO, "%s: not a regular file", path);
     }
+    *fp = f;
+    return HV_OK;
+}
 
-    hv_status st = HV_OK;
-    char *hdr = NULL;
-    hv_grid *g = NULL;
-    double *dbuf = NULL;
+/* The magic, the version and the header dict, read into *hdr (malloc'ed,
+ * NUL-terminated: the caller frees it, also on failure); *data_off, where
+ * the data starts. */
+static hv_status read_header(FILE *f, const char *path, char **hdr, size_t *data_off)
+{
     uint8_t pre[12];
-    if (fread(pre, 1, 10, f) != 10 || memcmp(pre, NPY_MAGIC, NPY_MAGIC_LEN) != 0) {
-        st = hv__error(HV_ERR_PARSE, "%s: not a NumPy .npy file (no \\x93NUMPY magic at byte 0)",
-                       path);
-        goto done;
-    }
+    if (fread(pre, 1, 10, f) != 10 || memcmp(pre, NPY_MAGIC, NPY_MAGIC_LEN) != 0)
+        return hv__error(HV_ERR_PARSE, "%s: not a NumPy .npy file (no \\x93NUMPY magic at byte 0)",
+                         path);
     int major = pre[6], minor = pre[7];
-    size_t hlen, data_off;
+    size_t hlen;
     if (major == 1) {
         hlen = (size_t)pre[8] | (size_t)pre[9] << 8;
-        data_off = 10 + hlen;
+        *data_off = 10 + hlen;
     } else if (major == 2 || major == 3) {
-        if (fread(pre + 10, 1, 2, f) != 2) {
-            st = hv__error(HV_ERR_PARSE, "%s: truncated .npy header (byte 10)", path);
-            goto done;
-        }
+        if (fread(pre + 10, 1, 2, f) != 2)
+            return hv__error(HV_ERR_PARSE, "%s: truncated .npy header (byte 10)", path);
         hlen = (size_t)pre[8] | (size_t)pre[9] << 8 | (size_t)pre[10] << 16 | (size_t)pre[11] << 24;
-        data_off = 12 + hlen;
+        *data_off = 12 + hlen;
     } else {
-        st = hv__error(HV_ERR_UNSUPPORTED, "%s: .npy format version %d.%d is not supported", path,
-                       major, minor);
-        goto done;
+        return hv__error(HV_ERR_UNSUPPORTED, "%s: .npy format version %d.%d is not supported", path,
+                         major, minor);
     }
-    if (hlen == 0 || hlen > NPY_MAX_HEADER) {
-        st = hv__error(HV_ERR_PARSE, "%s: .npy header length %zu is out of range", path, hlen);
-        goto done;
-    }
-    hdr = malloc(hlen + 1);
-    if (!hdr) {
-        st = hv__error(HV_ERR_NOMEM, "%s: no memory for the .npy header", path);
-        goto done;
-    }
-    if (fread(hdr, 1, hlen, f) != hlen) {
-        st =
-            hv__error(HV_ERR_PARSE, "%s: truncated .npy header (expected %zu bytes after byte %zu)",
-                      path, hlen, data_off - hlen);
-        goto done;
-    }
-    hdr[hlen] = '\0';
-    if (memchr(hdr, '\0', hlen)) {
-        st = hv__error(HV_ERR_PARSE, "%s: .npy header contains a NUL byte", path);
-        goto done;
-    }
+    if (hlen == 0 || hlen > NPY_MAX_HEADER)
+        return hv__error(HV_ERR_PARSE, "%s: .npy header length %zu is out of range", path, hlen);
+    char *h = *hdr = malloc(hlen + 1);
+    if (!h)
+        return hv__error(HV_ERR_NOMEM, "%s: no memory for the .npy header", path);
+    if (fread(h, 1, hlen, f) != hlen)
+        return hv__error(HV_ERR_PARSE,
+                         "%s: truncated .npy header (expected %zu bytes after byte %zu)", path,
+                         hlen, *data_off - hlen);
+    h[hlen] = '\0';
+    if (memchr(h, '\0', hlen))
+        return hv__error(HV_ERR_PARSE, "%s: .npy header contains a NUL byte", path);
+    return HV_OK;
+}
 
-    const char *descr = dict_value(hdr, "descr");
-    const char *fortran = dict_value(hdr, "fortran_order");
-    const char *shape = dict_value(hdr, "shape");
-    if (!descr || !fortran || !shape) {
-        st = hv__error(HV_ERR_PARSE, "%s: .npy header lacks '%s': %s", path,
-                       !descr     ? "descr"
-                       : !fortran ? "fortran_order"
-                                  : "shape",
-                       hdr);
-        goto done;
+/* 'descr': little-endian float32 or float64 only. */
+static hv_status parse_descr(const char *path, const char *descr, size_t *itemsize)
+{
+    if (!strncmp(descr, "'<f4'", 5) || !strncmp(descr, "\"<f4\"", 5)) {
+        *itemsize = 4;
+        return HV_OK;
     }
-    size_t itemsize;
-    if (!strncmp(descr, "'<f4'", 5) || !strncmp(descr, "\"<f4\"", 5))
-        itemsize = 4;
-    else if (!strncmp(descr, "'<f8'", 5) || !strncmp(descr, "\"<f8\"", 5))
-        itemsize = 8;
-    else {
-        int len = 0;
-        while (descr[len] && descr[len] != ',' && descr[len] != '}' && len < 40)
-            len++;
-        st = hv__error(HV_ERR_UNSUPPORTED,
-                       "%s: .npy dtype %.*s is not supported (need little-endian float32 '<f4' or "
-                       "float64 '<f8')",
-                       path, len, descr);
-        goto done;
+    if (!strncmp(descr, "'<f8'", 5) || !strncmp(descr, "\"<f8\"", 5)) {
+        *itemsize = 8;
+        return HV_OK;
     }
-    if (!strncmp(fortran, "True", 4)) {
-        st = hv__error(HV_ERR_UNSUPPORTED,
-                       "%s: .npy array is in Fortran order; save it in C order "
-                       "(numpy.ascontiguousarray)",
-                       path);
-        goto done;
-    }
-    if (strncmp(fortran, "False", 5)) {
-        st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad fortran_order value", path);
-        goto done;
-    }
-    if (*shape != '(') {
-        st = hv__error(HV_ERR_PARSE, "%s: .npy header: shape is not a tuple", path);
-        goto done;
-    }
-    long dims[4];
+    int len = 0;
+    while (descr[len] && descr[len] != ',' && descr[len] != '}' && len < 40)
+        len++;
+    return hv__error(HV_ERR_UNSUPPORTED,
+                     "%s: .npy dtype %.*s is not supported (need little-endian float32 '<f4' or "
+                     "float64 '<f8')",
+                     path, len, descr);
+}
+
+static hv_status parse_fortran_order(const char *path, const char *fortran)
+{
+    if (!strncmp(fortran, "True", 4))
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "%s: .npy array is in Fortran order; save it in C order "
+                         "(numpy.ascontiguousarray)",
+                         path);
+    if (strncmp(fortran, "False", 5))
+        return hv__error(HV_ERR_PARSE, "%s: .npy header: bad fortran_order value", path);
+    return HV_OK;
+}
+
+/* 'shape': a tuple of up to 4 entries (a fourth only to refuse it). */
+static hv_status parse_shape(const char *path, const char *shape, long dims[4], int *ndims)
+{
+    if (*shape != '(')
+        return hv__error(HV_ERR_PARSE, "%s: .npy header: shape is not a tuple", path);
     int nd = 0;
     const char *p = shape + 1;
     for (;;) {
@@ -246,109 +230,142 @@ hv_status hv_read_npy(const char *path, hv_grid **out)
             p++;
         if (*p == ')')
             break;
-        if (!isdigit((unsigned char)*p)) {
-            st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
-            goto done;
-        }
+        if (!isdigit((unsigned char)*p))
+            return hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
         char *end;
         errno = 0;
         long v = strtol(p, &end, 10);
-        if (errno || v > 0x7fffffffL) {
-            st = hv__error(HV_ERR_INVALID_ARG, "%s: .npy shape entry is too large", path);
-            goto done;
-        }
-        if (nd == 4) {
-            st = hv__error(HV_ERR_UNSUPPORTED, "%s: .npy array has more than 3 dimensions", path);
-            goto done;
-        }
+        if (errno || v > 0x7fffffffL)
+            return hv__error(HV_ERR_INVALID_ARG, "%s: .npy shape entry is too large", path);
+        if (nd == 4)
+            return hv__error(HV_ERR_UNSUPPORTED, "%s: .npy array has more than 3 dimensions", path);
         dims[nd++] = v;
         p = end;
         while (isspace((unsigned char)*p))
             p++;
         if (*p == ',')
             p++;
-        else if (*p != ')') {
-            st = hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
-            goto done;
-        }
+        else if (*p != ')')
+            return hv__error(HV_ERR_PARSE, "%s: .npy header: bad shape near \"%.20s\"", path, p);
     }
-    if (nd != 2 && nd != 3) {
-        st = hv__error(HV_ERR_UNSUPPORTED,
-                       "%s: .npy array has %d dimension%s; heatvox grids need 2 (ny, nx) or 3 "
-                       "(nz, ny, nx)",
-                       path, nd, nd == 1 ? "" : "s");
-        goto done;
-    }
-    int n[3] = {(int)dims[nd - 1], (int)dims[nd - 2], nd == 3 ? (int)dims[0] : 1};
-    st = hv_check_dims(nd, n, 1.0, itemsize);
+    *ndims = nd;
+    return HV_OK;
+}
+
+/* The header dict: item size and grid dimensions (x fastest). */
+static hv_status parse_dict(const char *path, const char *hdr, size_t *itemsize, int *nd, int n[3])
+{
+    const char *descr = dict_value(hdr, "descr");
+    const char *fortran = dict_value(hdr, "fortran_order");
+    const char *shape = dict_value(hdr, "shape");
+    if (!descr || !fortran || !shape)
+        return hv__error(HV_ERR_PARSE, "%s: .npy header lacks '%s': %s", path,
+                         !descr     ? "descr"
+                         : !fortran ? "fortran_order"
+                                    : "shape",
+                         hdr);
+    long dims[4];
+    hv_status st;
+    if ((st = parse_descr(path, descr, itemsize)) || (st = parse_fortran_order(path, fortran)) ||
+        (st = parse_shape(path, shape, dims, nd)))
+        return st;
+    if (*nd != 2 && *nd != 3)
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "%s: .npy array has %d dimension%s; heatvox grids need 2 (ny, nx) or 3 "
+                         "(nz, ny, nx)",
+                         path, *nd, *nd == 1 ? "" : "s");
+    n[0] = (int)dims[*nd - 1];
+    n[1] = (int)dims[*nd - 2];
+    n[2] = *nd == 3 ? (int)dims[0] : 1;
+    st = hv_check_dims(*nd, n, 1.0, *itemsize);
     if (st) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", hv_last_error());
-        st = hv__error(st, "%s: %s", path, msg);
-        goto done;
+        return hv__error(st, "%s: %s", path, msg);
     }
-    size_t count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
-    size_t need = count * itemsize;
-    if (fseek(f, 0, SEEK_END) != 0) {
-        st = hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
-        goto done;
-    }
+    return HV_OK;
+}
+
+/* The file holds exactly need bytes from data_off on; leaves f there. */
+static hv_status check_data_size(FILE *f, const char *path, size_t data_off, size_t need)
+{
+    if (fseek(f, 0, SEEK_END) != 0)
+        return hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
     long fsize = ftell(f);
-    if (fsize < 0 || fseek(f, (long)data_off, SEEK_SET) != 0) {
-        st = hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
-        goto done;
-    }
-    if ((size_t)fsize < data_off + need) {
-        st = hv__error(HV_ERR_PARSE,
-                       "%s: truncated .npy data: shape needs %zu bytes from byte %zu, the file has "
-                       "%zu",
-                       path, need, data_off,
-                       (size_t)fsize > data_off ? (size_t)fsize - data_off : 0);
-        goto done;
-    }
-    if ((size_t)fsize > data_off + need) {
-        st = hv__error(HV_ERR_PARSE,
-                       "%s: .npy file has %zu bytes after the data that the shape describes "
-                       "(data from byte %zu, %zu bytes)",
-                       path, (size_t)fsize - data_off - need, data_off, need);
-        goto done;
-    }
-    st = hv_grid_create(&g, nd, n, 1.0, NULL);
-    if (st)
-        goto done;
+    if (fsize < 0 || fseek(f, (long)data_off, SEEK_SET) != 0)
+        return hv__error(HV_ERR_IO, "%s: cannot seek: %s", path, strerror(errno));
+    if ((size_t)fsize < data_off + need)
+        return hv__error(HV_ERR_PARSE,
+                         "%s: truncated .npy data: shape needs %zu bytes from byte %zu, the file "
+                         "has %zu",
+                         path, need, data_off,
+                         (size_t)fsize > data_off ? (size_t)fsize - data_off : 0);
+    if ((size_t)fsize > data_off + need)
+        return hv__error(HV_ERR_PARSE,
+                         "%s: .npy file has %zu bytes after the data that the shape describes "
+                         "(data from byte %zu, %zu bytes)",
+                         path, (size_t)fsize - data_off - need, data_off, need);
+    return HV_OK;
+}
+
+/* The count values into g->v, float64 narrowed to float32. */
+static hv_status read_data(FILE *f, const char *path, size_t itemsize, size_t count, hv_grid *g)
+{
     int little = host_is_little_endian();
     if (itemsize == 4) {
-        if (fread(g->v, 4, count, f) != count) {
-            st = hv__error(HV_ERR_IO, "%s: read error in the data", path);
-            goto done;
-        }
+        if (fread(g->v, 4, count, f) != count)
+            return hv__error(HV_ERR_IO, "%s: read error in the data", path);
         if (!little)
             for (size_t i = 0; i < count; i++)
                 swap4(&g->v[i]);
-    } else {
-        enum { CHUNK = 4096 };
-        dbuf = malloc(CHUNK * sizeof(double));
-        if (!dbuf) {
-            st = hv__error(HV_ERR_NOMEM, "%s: no memory for a read buffer", path);
-            goto done;
+        return HV_OK;
+    }
+    enum { CHUNK = 4096 };
+    double *dbuf = malloc(CHUNK * sizeof(double));
+    if (!dbuf)
+        return hv__error(HV_ERR_NOMEM, "%s: no memory for a read buffer", path);
+    for (size_t i = 0; i < count; i += CHUNK) {
+        size_t m = count - i < CHUNK ? count - i : CHUNK;
+        if (fread(dbuf, 8, m, f) != m) {
+            free(dbuf);
+            return hv__error(HV_ERR_IO, "%s: read error in the data", path);
         }
-        for (size_t i = 0; i < count; i += CHUNK) {
-            size_t m = count - i < CHUNK ? count - i : CHUNK;
-            if (fread(dbuf, 8, m, f) != m) {
-                st = hv__error(HV_ERR_IO, "%s: read error in the data", path);
-                goto done;
-            }
-            for (size_t j = 0; j < m; j++) {
-                if (!little)
-                    swap8(&dbuf[j]);
-                g->v[i + j] = (float)dbuf[j];
-            }
+        for (size_t j = 0; j < m; j++) {
+            if (!little)
+                swap8(&dbuf[j]);
+            g->v[i + j] = (float)dbuf[j];
         }
     }
+    free(dbuf);
+    return HV_OK;
+}
+
+hv_status hv_read_npy(const char *path, hv_grid **out)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: out is NULL");
+    *out = NULL;
+    if (!path || !*path)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_read_npy: input path is empty");
+    FILE *f = NULL;
+    hv_status st = open_regular(path, &f);
+    if (st)
+        return st;
+    char *hdr = NULL;
+    hv_grid *g = NULL;
+    size_t data_off = 0, itemsize = 0;
+    int nd = 0, n[3] = {0, 0, 0};
+    if ((st = read_header(f, path, &hdr, &data_off)) ||
+        (st = parse_dict(path, hdr, &itemsize, &nd, n)))
+        goto done;
+    size_t count = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
+    if ((st = check_data_size(f, path, data_off, count * itemsize)) ||
+        (st = hv_grid_create(&g, nd, n, 1.0, NULL)) ||
+        (st = read_data(f, path, itemsize, count, g)))
+        goto done;
     *out = g;
     g = NULL;
 done:
-    free(dbuf);
     free(hdr);
     hv_grid_destroy(&g);
     fclose(f);
