@@ -62,26 +62,11 @@ static uint32_t max_corner(const uint32_t *t)
 
 static int collapsed(const uint32_t *t) { return t[0] == t[1] || t[1] == t[2] || t[0] == t[2]; }
 
-hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
+/* Non-finite vertices, degenerate faces (repeated corners or zero normal)
+ * and the signed volume (the divergence theorem over the finite faces). */
+static void count_vertices_faces(const hv_mesh *m, hv_mesh_report *r)
 {
-    if (!m || !r)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: NULL argument");
-    memset(r, 0, sizeof *r);
-    size_t nt = m->ntris;
-    r->vertices = m->nverts;
-    r->triangles = nt;
-    r->polygons_fanned = m->polygons_fanned;
-    r->input_vertices = m->input_vertices;
-    r->unreferenced_vertices = m->unreferenced_vertices;
-    if (nt > MESH_MAX_COUNT / 3)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: %zu triangles is too many",
-                         nt);
-    for (size_t i = 0; i < 3 * nt; i++)
-        if (m->tris[i] >= m->nverts)
-            return hv__error(HV_ERR_INVALID_ARG,
-                             "hv_mesh_report_compute: triangle %zu uses vertex %u of %zu", i / 3,
-                             m->tris[i], m->nverts);
-
+    const size_t nt = m->ntris;
     for (size_t i = 0; i < m->nverts; i++) {
         const double *p = m->verts + 3 * i;
         if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2]))
@@ -108,25 +93,29 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
             vol += det / 6.0;
     }
     r->signed_volume = vol;
-    if (nt == 0)
-        return HV_OK;
+}
 
-    size_t ne = 3 * nt;
-    uint64_t *key = malloc(ne * sizeof *key), *tk = malloc(ne * sizeof *tk);
-    uint32_t *val = malloc(ne * sizeof *val), *tv = malloc(ne * sizeof *tv);
-    uint32_t *parent = malloc(nt * sizeof *parent);
-    if (!key || !tk || !val || !tv || !parent) {
-        free(key);
-        free(tk);
-        free(val);
-        free(tv);
-        free(parent);
-        return hv__error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory for %zu triangles",
-                         nt);
-    }
+/* Keys and values to sort, with the radix sort's scratch (3 ntris each). */
+typedef struct sort_buf {
+    uint64_t *key, *tk;
+    uint32_t *val, *tv;
+} sort_buf;
 
-    /* Duplicates: sort the triangles by their sorted corner triple (two stable
-     * passes: by the largest corner, then by the two smaller ones). */
+static void sort_buf_free(sort_buf *b)
+{
+    free(b->key);
+    free(b->tk);
+    free(b->val);
+    free(b->tv);
+}
+
+/* Duplicates: sort the triangles by their sorted corner triple (two stable
+ * passes: by the largest corner, then by the two smaller ones). */
+static void count_duplicates(const hv_mesh *m, sort_buf *sb, hv_mesh_report *r)
+{
+    const size_t nt = m->ntris;
+    uint64_t *key = sb->key;
+    uint32_t *val = sb->val;
     for (size_t t = 0; t < nt; t++) {
         uint32_t a = m->tris[3 * t], b = m->tris[3 * t + 1], c = m->tris[3 * t + 2], x;
         if (a > b)
@@ -138,7 +127,7 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
         key[t] = c;
         val[t] = (uint32_t)t;
     }
-    radix_sort(key, val, tk, tv, nt);
+    radix_sort(key, val, sb->tk, sb->tv, nt);
     for (size_t i = 0; i < nt; i++) {
         const uint32_t *c = m->tris + 3 * (size_t)val[i];
         uint32_t a = c[0], b = c[1], d = c[2], x;
@@ -150,17 +139,24 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
             x = a, a = b, b = x;
         key[i] = (uint64_t)a << 32 | b;
     }
-    radix_sort(key, val, tk, tv, nt);
+    radix_sort(key, val, sb->tk, sb->tv, nt);
     /* Within a run of equal (a, b) the largest corners ascend (the sort is
      * stable), so repeated vertex sets are neighbours. */
     for (size_t k = 1; k < nt; k++)
         if (key[k] == key[k - 1] && max_corner(m->tris + 3 * (size_t)val[k]) ==
                                         max_corner(m->tris + 3 * (size_t)val[k - 1]))
             r->duplicate_faces++;
+}
 
-    /* Edges: one entry per corner of each proper triangle, keyed by the
-     * undirected edge; the value is the corner (3 t + k), so the direction is
-     * recovered from the triangle. */
+/* Edges: one entry per corner of each proper triangle, keyed by the
+ * undirected edge; the value is the corner (3 t + k), so the direction is
+ * recovered from the triangle. The triangles sharing an edge are joined in
+ * parent (nt entries): the edge-connected components. */
+static void count_edges(const hv_mesh *m, sort_buf *sb, uint32_t *parent, hv_mesh_report *r)
+{
+    const size_t nt = m->ntris;
+    uint64_t *key = sb->key;
+    uint32_t *val = sb->val;
     size_t n = 0;
     for (size_t t = 0; t < nt; t++) {
         const uint32_t *c = m->tris + 3 * t;
@@ -173,7 +169,7 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
             val[n++] = (uint32_t)(3 * t + (size_t)k);
         }
     }
-    radix_sort(key, val, tk, tv, n);
+    radix_sort(key, val, sb->tk, sb->tv, n);
     for (size_t i = 0; i < n;) {
         size_t j = i + 1;
         while (j < n && key[j] == key[i])
@@ -198,40 +194,80 @@ hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
     for (size_t t = 0; t < nt; t++)
         if (!collapsed(m->tris + 3 * t) && uf_find(parent, (uint32_t)t) == t)
             r->components++;
+}
 
-    /* Vertex-connected components: union the corners of every triangle, then
-     * count the distinct roots of used vertices. */
-    uint32_t *vp = realloc(parent, (m->nverts > nt ? m->nverts : nt) * sizeof *vp);
+/* Vertex-connected components: union the corners of every triangle, then
+ * count the distinct roots of used vertices. *parent (nt entries) grows to
+ * one per vertex; the caller frees it, also on failure. */
+static hv_status count_vertex_components(const hv_mesh *m, uint32_t **parent, hv_mesh_report *r)
+{
+    const size_t nt = m->ntris;
+    uint32_t *vp = realloc(*parent, (m->nverts > nt ? m->nverts : nt) * sizeof *vp);
+    if (vp)
+        *parent = vp;
     unsigned char *seen = calloc(m->nverts ? m->nverts : 1, 1);
     if (!vp || !seen) {
         free(seen);
-        free(key);
-        free(tk);
-        free(val);
-        free(tv);
-        free(vp ? vp : parent);
         return hv__error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory");
     }
-    parent = vp;
     for (size_t i = 0; i < m->nverts; i++)
-        parent[i] = (uint32_t)i;
+        vp[i] = (uint32_t)i;
     for (size_t t = 0; t < nt; t++) {
         const uint32_t *c = m->tris + 3 * t;
-        uf_union(parent, c[0], c[1]);
-        uf_union(parent, c[1], c[2]);
+        uf_union(vp, c[0], c[1]);
+        uf_union(vp, c[1], c[2]);
     }
     for (size_t i = 0; i < 3 * nt; i++) {
-        uint32_t root = uf_find(parent, m->tris[i]);
+        uint32_t root = uf_find(vp, m->tris[i]);
         if (!seen[root]) {
             seen[root] = 1;
             r->vertex_components++;
         }
     }
     free(seen);
-    free(key);
-    free(tk);
-    free(val);
-    free(tv);
-    free(parent);
     return HV_OK;
+}
+
+hv_status hv_mesh_report_compute(const hv_mesh *m, hv_mesh_report *r)
+{
+    if (!m || !r)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: NULL argument");
+    memset(r, 0, sizeof *r);
+    size_t nt = m->ntris;
+    r->vertices = m->nverts;
+    r->triangles = nt;
+    r->polygons_fanned = m->polygons_fanned;
+    r->input_vertices = m->input_vertices;
+    r->unreferenced_vertices = m->unreferenced_vertices;
+    if (nt > MESH_MAX_COUNT / 3)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_report_compute: %zu triangles is too many",
+                         nt);
+    for (size_t i = 0; i < 3 * nt; i++)
+        if (m->tris[i] >= m->nverts)
+            return hv__error(HV_ERR_INVALID_ARG,
+                             "hv_mesh_report_compute: triangle %zu uses vertex %u of %zu", i / 3,
+                             m->tris[i], m->nverts);
+    count_vertices_faces(m, r);
+    if (nt == 0)
+        return HV_OK;
+
+    size_t ne = 3 * nt;
+    sort_buf b;
+    b.key = malloc(ne * sizeof *b.key);
+    b.tk = malloc(ne * sizeof *b.tk);
+    b.val = malloc(ne * sizeof *b.val);
+    b.tv = malloc(ne * sizeof *b.tv);
+    uint32_t *parent = malloc(nt * sizeof *parent);
+    if (!b.key || !b.tk || !b.val || !b.tv || !parent) {
+        sort_buf_free(&b);
+        free(parent);
+        return hv__error(HV_ERR_NOMEM, "hv_mesh_report_compute: out of memory for %zu triangles",
+                         nt);
+    }
+    count_duplicates(m, &b, r);
+    count_edges(m, &b, parent, r);
+    hv_status st = count_vertex_components(m, &parent, r);
+    sort_buf_free(&b);
+    free(parent);
+    return st;
 }
