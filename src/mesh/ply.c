@@ -446,150 +446,184 @@ static void free_elems(ply_elem *el, size_t n)
     free(el);
 }
 
-hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out)
+/* The header as read so far: the format, the elements with their
+ * properties, the number of the last line read. */
+typedef struct ply_header {
+    int format; /* -1 until a format line */
+    ply_elem *el;
+    size_t nel, elcap;
+    size_t line;
+    const char *data; /* the first byte after end_header */
+} ply_header;
+
+static hv_status header_format(const char *path, size_t line, const char **w, const size_t *wl,
+                               size_t nw, const char *eol, int *format)
 {
-    *out = NULL;
-    const char *p = buf, *end = buf + len;
-    if (len < 4 || strncmp(buf, "ply", 3) || (buf[3] != '\n' && buf[3] != '\r'))
-        return hv__error(HV_ERR_PARSE, "%s: not a PLY file (does not start with \"ply\")", path);
-    int format = -1;
-    ply_elem *el = NULL;
-    size_t nel = 0, elcap = 0, line = 0;
+    if (nw >= 2 && name_is(w[1], wl[1], "ascii"))
+        *format = PLY_ASCII;
+    else if (nw >= 2 && name_is(w[1], wl[1], "binary_little_endian"))
+        *format = PLY_LE;
+    else if (nw >= 2 && name_is(w[1], wl[1], "binary_big_endian"))
+        *format = PLY_BE;
+    else
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: unknown PLY format '%s'", path, line,
+                         nw >= 2 ? hv__mesh_token_preview(w[1], eol) : "");
+    return HV_OK;
+}
+
+/* "element NAME COUNT" */
+static hv_status header_element(const char *path, ply_header *H, const char **w, const size_t *wl,
+                                size_t nw)
+{
+    int64_t count;
+    const char *e;
+    if (nw != 3 || hv__mesh_parse_i64(w[2], &e, &count) || e != w[2] + wl[2] || count < 0)
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: expected 'element NAME COUNT'", path,
+                         H->line);
+    if (H->nel == H->elcap) {
+        size_t c = H->elcap ? 2 * H->elcap : 8;
+        ply_elem *q = realloc(H->el, c * sizeof *q);
+        if (!q)
+            return hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
+        H->el = q;
+        H->elcap = c;
+    }
+    H->el[H->nel++] = (ply_elem){w[1], wl[1], (uint64_t)count, H->line, NULL, 0, 0};
+    return HV_OK;
+}
+
+/* "property TYPE NAME" or "property list COUNT_TYPE TYPE NAME", of the last
+ * element. */
+static hv_status header_property(const char *path, ply_header *H, const char **w, const size_t *wl,
+                                 size_t nw)
+{
+    const size_t line = H->line;
+    if (!H->nel)
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: property before any element", path, line);
+    ply_prop pr = {0};
+    if (nw == 5 && name_is(w[1], wl[1], "list")) {
+        pr.count_type = parse_type(w[2], wl[2]);
+        pr.type = parse_type(w[3], wl[3]);
+        pr.name = w[4];
+        pr.namelen = wl[4];
+        if (pr.count_type == T_NONE || pr.type == T_NONE || !is_int_type(pr.count_type))
+            return hv__error(HV_ERR_PARSE, "%s: line %zu: bad list types '%.*s %.*s'", path, line,
+                             (int)wl[2], w[2], (int)wl[3], w[3]);
+    } else if (nw == 3) {
+        pr.type = parse_type(w[1], wl[1]);
+        pr.name = w[2];
+        pr.namelen = wl[2];
+        if (pr.type == T_NONE)
+            return hv__error(HV_ERR_PARSE, "%s: line %zu: unknown property type '%.*s'", path, line,
+                             (int)wl[1], w[1]);
+    } else {
+        return hv__error(HV_ERR_PARSE, "%s: line %zu: malformed property line", path, line);
+    }
+    ply_elem *e = &H->el[H->nel - 1];
+    if (e->nprops == e->cap) {
+        size_t c = e->cap ? 2 * e->cap : 8;
+        ply_prop *q = realloc(e->props, c * sizeof *q);
+        if (!q)
+            return hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
+        e->props = q;
+        e->cap = c;
+    }
+    e->props[e->nprops++] = pr;
+    return HV_OK;
+}
+
+/* The header lines up to end_header. H->el is the caller's to free, also on
+ * failure. */
+static hv_status read_header(const char *path, const char *buf, const char *end, ply_header *H)
+{
     hv_status st = HV_OK;
-    const char *data = NULL;
-    while (p < end && !st) {
-        line++;
+    for (const char *p = buf; p < end && !st;) {
+        H->line++;
         const char *eol = memchr(p, '\n', (size_t)(end - p));
-        if (!eol) {
-            st = hv__error(HV_ERR_PARSE, "%s: line %zu: header has no end_header line", path, line);
-            break;
-        }
+        if (!eol)
+            return hv__error(HV_ERR_PARSE, "%s: line %zu: header has no end_header line", path,
+                             H->line);
         const char *w[6];
         size_t wl[6];
         size_t nw = split_words(p, eol, w, wl, 6);
         const char *next = eol + 1;
-        if (line == 1 || nw == 0) {
+        if (H->line == 1 || nw == 0) {
             /* "ply" */
         } else if (name_is(w[0], wl[0], "end_header")) {
-            data = next;
+            H->data = next;
             break;
         } else if (name_is(w[0], wl[0], "comment") || name_is(w[0], wl[0], "obj_info")) {
         } else if (name_is(w[0], wl[0], "format")) {
-            if (nw >= 2 && name_is(w[1], wl[1], "ascii"))
-                format = PLY_ASCII;
-            else if (nw >= 2 && name_is(w[1], wl[1], "binary_little_endian"))
-                format = PLY_LE;
-            else if (nw >= 2 && name_is(w[1], wl[1], "binary_big_endian"))
-                format = PLY_BE;
-            else
-                st = hv__error(HV_ERR_PARSE, "%s: line %zu: unknown PLY format '%s'", path, line,
-                               nw >= 2 ? hv__mesh_token_preview(w[1], eol) : "");
+            st = header_format(path, H->line, w, wl, nw, eol, &H->format);
         } else if (name_is(w[0], wl[0], "element")) {
-            int64_t count;
-            const char *e;
-            if (nw != 3 || hv__mesh_parse_i64(w[2], &e, &count) || e != w[2] + wl[2] || count < 0) {
-                st = hv__error(HV_ERR_PARSE, "%s: line %zu: expected 'element NAME COUNT'", path,
-                               line);
-                break;
-            }
-            if (nel == elcap) {
-                size_t c = elcap ? 2 * elcap : 8;
-                ply_elem *q = realloc(el, c * sizeof *q);
-                if (!q) {
-                    st = hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
-                    break;
-                }
-                el = q;
-                elcap = c;
-            }
-            el[nel++] = (ply_elem){w[1], wl[1], (uint64_t)count, line, NULL, 0, 0};
+            st = header_element(path, H, w, wl, nw);
         } else if (name_is(w[0], wl[0], "property")) {
-            if (!nel) {
-                st = hv__error(HV_ERR_PARSE, "%s: line %zu: property before any element", path,
-                               line);
-                break;
-            }
-            ply_prop pr = {0};
-            if (nw == 5 && name_is(w[1], wl[1], "list")) {
-                pr.count_type = parse_type(w[2], wl[2]);
-                pr.type = parse_type(w[3], wl[3]);
-                pr.name = w[4];
-                pr.namelen = wl[4];
-                if (pr.count_type == T_NONE || pr.type == T_NONE || !is_int_type(pr.count_type)) {
-                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: bad list types '%.*s %.*s'", path,
-                                   line, (int)wl[2], w[2], (int)wl[3], w[3]);
-                    break;
-                }
-            } else if (nw == 3) {
-                pr.type = parse_type(w[1], wl[1]);
-                pr.name = w[2];
-                pr.namelen = wl[2];
-                if (pr.type == T_NONE) {
-                    st = hv__error(HV_ERR_PARSE, "%s: line %zu: unknown property type '%.*s'", path,
-                                   line, (int)wl[1], w[1]);
-                    break;
-                }
-            } else {
-                st = hv__error(HV_ERR_PARSE, "%s: line %zu: malformed property line", path, line);
-                break;
-            }
-            ply_elem *e = &el[nel - 1];
-            if (e->nprops == e->cap) {
-                size_t c = e->cap ? 2 * e->cap : 8;
-                ply_prop *q = realloc(e->props, c * sizeof *q);
-                if (!q) {
-                    st = hv__error(HV_ERR_NOMEM, "%s: out of memory", path);
-                    break;
-                }
-                e->props = q;
-                e->cap = c;
-            }
-            e->props[e->nprops++] = pr;
+            st = header_property(path, H, w, wl, nw);
         } else {
             /* some exporters write free text without "comment" (Blender 2.4x) */
-            hv__log(HV_LOG_DEBUG, "%s: line %zu: skipping unknown header line", path, line);
+            hv__log(HV_LOG_DEBUG, "%s: line %zu: skipping unknown header line", path, H->line);
         }
         p = next;
     }
-    if (!st && !data)
+    if (!st && !H->data)
         st = hv__error(HV_ERR_PARSE, "%s: header has no end_header line", path);
-    if (!st && format < 0)
+    if (!st && H->format < 0)
         st = hv__error(HV_ERR_PARSE, "%s: header has no format line", path);
-    if (st) {
-        free_elems(el, nel);
-        return st;
-    }
+    return st;
+}
 
-    ply_reader r = {path, data, end, buf, line + 1, format};
-    ply_state s;
-    memset(&s, 0, sizeof s);
-    hv__mb_init(&s.b, path);
+/* The data, element by element: the first vertex element, faces and strips
+ * read, everything else skipped. */
+static hv_status read_elements(ply_reader *r, ply_state *s, const ply_header *H)
+{
+    hv_status st = HV_OK;
     int seen_vertex = 0;
-    for (size_t k = 0; k < nel && !st; k++) {
-        ply_elem *e = &el[k];
+    for (size_t k = 0; k < H->nel && !st; k++) {
+        const ply_elem *e = &H->el[k];
         /* Every record takes at least min bytes: a count the file cannot hold is
          * refused before anything is allocated for it. */
-        size_t min = min_record_bytes(e, format);
-        size_t left = (size_t)(end - r.p);
+        size_t min = min_record_bytes(e, H->format);
+        size_t left = (size_t)(r->end - r->p);
         if (e->count && min && e->count > (left + 2) / min)
             st = hv__error(HV_ERR_PARSE,
                            "%s: line %zu: element %.*s declares %llu records but only %zu bytes of "
                            "data remain (at least %zu bytes each)",
-                           path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
+                           r->path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
                            left, min);
         else if (e->nprops == 0)
             continue;
         else if (name_is(e->name, e->namelen, "vertex") && !seen_vertex) {
             seen_vertex = 1;
-            st = read_vertices(&r, &s, e);
+            st = read_vertices(r, s, e);
         } else if (name_is(e->name, e->namelen, "face"))
-            st = read_faces(&r, &s, e);
+            st = read_faces(r, s, e);
         else if (name_is(e->name, e->namelen, "tristrips"))
-            st = read_strips(&r, &s, e);
+            st = read_strips(r, s, e);
         else
-            st = skip_element(&r, e);
+            st = skip_element(r, e);
     }
-    free_elems(el, nel);
+    return st;
+}
+
+hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_mesh **out)
+{
+    *out = NULL;
+    const char *end = buf + len;
+    if (len < 4 || strncmp(buf, "ply", 3) || (buf[3] != '\n' && buf[3] != '\r'))
+        return hv__error(HV_ERR_PARSE, "%s: not a PLY file (does not start with \"ply\")", path);
+    ply_header H = {-1, NULL, 0, 0, 0, NULL};
+    hv_status st = read_header(path, buf, end, &H);
+    if (st) {
+        free_elems(H.el, H.nel);
+        return st;
+    }
+
+    ply_reader r = {path, H.data, end, buf, H.line + 1, H.format};
+    ply_state s;
+    memset(&s, 0, sizeof s);
+    hv__mb_init(&s.b, path);
+    st = read_elements(&r, &s, &H);
+    free_elems(H.el, H.nel);
     if (!st && s.max_index > s.b.nv)
         st = hv__error(HV_ERR_PARSE, "%s: %s: vertex index %llu out of range (%zu vertices)", path,
                        s.max_where, (unsigned long long)(s.max_index - 1), s.b.nv);
@@ -606,5 +640,5 @@ hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_me
                 s.strips_dropped);
     static const char *const names[] = {"PLY ascii", "PLY binary_little_endian",
                                         "PLY binary_big_endian"};
-    return hv__mb_finish(&s.b, names[format], out);
+    return hv__mb_finish(&s.b, names[H.format], out);
 }
