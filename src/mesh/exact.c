@@ -111,36 +111,54 @@ static inline double d2_at(const double p[3], const double *a, const double *b, 
     return hv_closest(p, a, b, c, q, &region);
 }
 
-/* Writes the distance of triangle t into the cells within W of it: along
- * each column of cells parallel to the triangle's dominant normal axis that
- * passes within W of the projected triangle (projection does not increase
- * distances), the cells of the slab |n.(p - a)| <= W whose distance is within
- * W. The squared distance is convex along a column, and so is the sequence of
- * its samples: the walk goes downhill from the middle of the slab to a sample
- * within W, then out both ways until the samples leave it. Only the cells of
- * the box [blo, bhi] (block indices, inclusive) are written, cell blo at
- * index 0 with the given strides: atomically into abest (threads share the
- * grid), or into pbest (one thread owns the box, a tile). */
-static inline void raster_box(const hv_mesh *m, const double origin[3], double h, const int blo[3],
-                              const int bhi[3], const size_t stride[3], uint32_t t, double W,
-                              _Atomic uint64_t *abest, uint64_t *pbest)
+/* One triangle as raster_box writes it into one box: its corners, unit
+ * normal (nl the cross product's length, 0 for a degenerate triangle, where
+ * ind = 1 / n[d] is 0 too), the normal's dominant axis d and the other two,
+ * its bounding sphere (centroid sc, radius sr: distances to the triangle are
+ * at least |p - sc| - sr); the grid (origin, h, and od = origin[d]); the
+ * box's strides from its cell blo (see raster_box). n and sc point to the
+ * caller's arrays: a struct holding arrays indexed by d would stay in
+ * memory, its scalars with it. */
+typedef struct raster_ctx {
+    const double *a, *b, *c;
+    const double *n, *sc;
+    double nl, ind, sr;
+    int d, e1, e2;
+    const double *origin;
+    double h, ih, od, W, W2;
+    const int *blo;
+    const size_t *stride;
+    uint32_t t;
+} raster_ctx;
+
+/* The cells lo..hi of the box [blo, bhi] within W of the triangle's bounds
+ * along each axis; 0 when there are none. */
+static inline int raster_bounds(const raster_ctx *R, const int bhi[3], int lo[3], int hi[3])
 {
-    const uint32_t *v = m->tris + 3 * (size_t)t;
-    const double *a = m->verts + 3 * (size_t)v[0], *b = m->verts + 3 * (size_t)v[1],
-                 *c = m->verts + 3 * (size_t)v[2];
-    const double ih = 1.0 / h;
-    int lo[3], hi[3];
+    const double *a = R->a, *b = R->b, *c = R->c, *origin = R->origin;
+    const double W = R->W, ih = R->ih;
+    const int *blo = R->blo;
     for (int ax = 0; ax < 3; ax++) {
         double mn = fmin(a[ax], fmin(b[ax], c[ax])) - W, mx = fmax(a[ax], fmax(b[ax], c[ax])) + W;
         double l = ceil((mn - origin[ax]) * ih - 0.5), u = floor((mx - origin[ax]) * ih - 0.5);
         if (u < blo[ax] || l > bhi[ax])
-            return;
+            return 0;
         lo[ax] = l < blo[ax] ? blo[ax] : (int)l;
         hi[ax] = u > bhi[ax] ? bhi[ax] : (int)u;
     }
+    return 1;
+}
+
+/* The normal n, its dominant axis and the bounding sphere (centroid sc) of
+ * R's corners. */
+static inline void raster_shape(raster_ctx *R, double n[3], double sc[3])
+{
+    const double *a = R->a, *b = R->b, *c = R->c;
     double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
            w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+    n[0] = u[1] * w[2] - u[2] * w[1];
+    n[1] = u[2] * w[0] - u[0] * w[2];
+    n[2] = u[0] * w[1] - u[1] * w[0];
     double nl = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     int d = 0;
     if (nl > 0) {
@@ -149,132 +167,197 @@ static inline void raster_box(const hv_mesh *m, const double origin[3], double h
         d = fabs(n[0]) >= fabs(n[1]) ? (fabs(n[0]) >= fabs(n[2]) ? 0 : 2)
                                      : (fabs(n[1]) >= fabs(n[2]) ? 1 : 2);
     }
-    int e1 = (d + 1) % 3, e2 = (d + 2) % 3;
-    /* The triangle's bounding sphere (centroid sc, radius sr): distances to
-     * it are at least |p - sc| - sr. */
-    double sc[3], sr = 0;
+    double sr = 0;
     for (int ax = 0; ax < 3; ax++)
         sc[ax] = (a[ax] + b[ax] + c[ax]) / 3.0;
-    {
-        const double *vv[3] = {a, b, c};
-        for (int q = 0; q < 3; q++) {
-            double r2 = 0;
-            for (int ax = 0; ax < 3; ax++)
-                r2 += (vv[q][ax] - sc[ax]) * (vv[q][ax] - sc[ax]);
-            sr = fmax(sr, r2);
-        }
-        sr = sqrt(sr) * (1 + 1e-9);
+    const double *vv[3] = {a, b, c};
+    for (int q = 0; q < 3; q++) {
+        double r2 = 0;
+        for (int ax = 0; ax < 3; ax++)
+            r2 += (vv[q][ax] - sc[ax]) * (vv[q][ax] - sc[ax]);
+        sr = fmax(sr, r2);
     }
-    const double W2 = W * W, od = origin[d];
+    R->n = n;
+    R->sc = sc;
+    R->sr = sqrt(sr) * (1 + 1e-9);
+    R->nl = nl;
+    R->d = d;
+    R->e1 = (d + 1) % 3;
+    R->e2 = (d + 2) % 3;
+    R->ind = nl > 0 ? 1.0 / n[d] : 0;
+    R->od = R->origin[d];
+}
+
+/* The cells i0..i1 of the column through p narrowed to the slab
+ * |n.(p - a)| <= W: linear in p[d], an interval of the column. */
+static inline void slab_range(const raster_ctx *R, const double p[3], int *i0, int *i1)
+{
+    const int d = R->d, e1 = R->e1, e2 = R->e2;
+    const double *a = R->a, *n = R->n, W = R->W;
+    double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
+    double x0 = a[d] + (-W - rest) * R->ind, x1 = a[d] + (W - rest) * R->ind;
+    if (x0 > x1) {
+        double tmp = x0;
+        x0 = x1, x1 = tmp;
+    }
+    int l = iceil((x0 - R->od) * R->ih - 0.5), hh = ifloor((x1 - R->od) * R->ih - 0.5);
+    *i0 = l > *i0 ? l : *i0;
+    *i1 = hh < *i1 ? hh : *i1;
+}
+
+/* Cell i of the column at base takes squared distance dd if that is its
+ * nearest so far (see raster_box for abest and pbest). */
+static inline void raster_put(const raster_ctx *R, _Atomic uint64_t *abest, uint64_t *pbest,
+                              size_t base, int i, double dd)
+{
+    size_t at = base + (size_t)(i - R->blo[R->d]) * R->stride[R->d];
+    uint64_t v = pack((float)sqrt(dd), R->t);
+    if (abest)
+        atomic_min_u64(&abest[at], v);
+    else if (v < pbest[at])
+        pbest[at] = v;
+}
+
+/* One thread owns the box: every cell i0..i1 of the column through p,
+ * skipping those whose distance so far is already below a lower bound of
+ * this triangle's (its plane's distance, its bounding sphere's), by enough
+ * that its packed value would be larger whatever the rounding: the same
+ * minimum as column_walk's. */
+static inline void column_owned(const raster_ctx *R, _Atomic uint64_t *abest, uint64_t *pbest,
+                                double p[3], int i0, int i1, size_t base)
+{
+    const int d = R->d, e1 = R->e1, e2 = R->e2;
+    const double *a = R->a, *n = R->n, *sc = R->sc;
+    const double od = R->od, h = R->h, sr = R->sr, W2 = R->W2;
+    const double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
+    const double q1 = p[e1] - sc[e1], q2 = p[e2] - sc[e2], lat = q1 * q1 + q2 * q2;
+    for (int i = i0; i <= i1; i++) {
+        p[d] = od + (i + 0.5) * h;
+        const size_t at = base + (size_t)(i - R->blo[d]) * R->stride[d];
+        double lim = INFINITY;
+        if (pbest[at] != UINT64_MAX) {
+            uint32_t bits = (uint32_t)(pbest[at] >> 32);
+            float bd;
+            memcpy(&bd, &bits, sizeof bd);
+            lim = bd * (1 + 1e-6);
+            if (fabs(rest + n[d] * (p[d] - a[d])) > lim)
+                continue;
+            const double q0 = p[d] - sc[d];
+            if (lat + q0 * q0 > (lim + sr) * (lim + sr))
+                continue;
+        }
+        double d2 = d2_at(p, a, R->b, R->c);
+        if (d2 <= W2 && d2 <= lim * lim) /* else its packed value is larger */
+            raster_put(R, abest, pbest, base, i, d2);
+    }
+}
+
+/* The cells i0..i1 of the column through p within W. The squared distance
+ * is convex along a column, and so is the sequence of its samples: the walk
+ * goes downhill from the middle of the slab to a sample within W, then out
+ * both ways until the samples leave it. */
+static inline void column_walk(const raster_ctx *R, _Atomic uint64_t *abest, uint64_t *pbest,
+                               double p[3], int i0, int i1, size_t base)
+{
+    const int d = R->d;
+    const double *a = R->a, *b = R->b, *c = R->c;
+    const double od = R->od, h = R->h, W2 = R->W2;
+    int ic = (i0 + i1) / 2;
+    p[d] = od + (ic + 0.5) * h;
+    double dc = d2_at(p, a, b, c);
+    if (dc > W2) {
+        int dir = 0;
+        double dn = INFINITY;
+        for (int sgn = -1; sgn <= 1; sgn += 2) {
+            int ii = ic + sgn;
+            if (ii < i0 || ii > i1)
+                continue;
+            p[d] = od + (ii + 0.5) * h;
+            double vv = d2_at(p, a, b, c);
+            if (vv < dc && vv < dn)
+                dn = vv, dir = sgn;
+        }
+        if (!dir)
+            return;
+        ic += dir;
+        dc = dn;
+        while (dc > W2) {
+            int ii = ic + dir;
+            if (ii < i0 || ii > i1)
+                break;
+            p[d] = od + (ii + 0.5) * h;
+            double vv = d2_at(p, a, b, c);
+            if (!(vv < dc))
+                break;
+            ic = ii, dc = vv;
+        }
+        if (dc > W2)
+            return;
+    }
+    raster_put(R, abest, pbest, base, ic, dc);
+    for (int sgn = -1; sgn <= 1; sgn += 2)
+        for (int i = ic + sgn; i >= i0 && i <= i1; i += sgn) {
+            p[d] = od + (i + 0.5) * h;
+            double d2 = d2_at(p, a, b, c);
+            if (d2 > W2)
+                break;
+            raster_put(R, abest, pbest, base, i, d2);
+        }
+}
+
+/* Writes the distance of triangle t into the cells within W of it: along
+ * each column of cells parallel to the triangle's dominant normal axis that
+ * passes within W of the projected triangle (projection does not increase
+ * distances), the cells of the slab |n.(p - a)| <= W whose distance is within
+ * W (column_walk, or column_owned for a tile). Only the cells of the box
+ * [blo, bhi] (block indices, inclusive) are written, cell blo at index 0
+ * with the given strides: atomically into abest (threads share the grid),
+ * or into pbest (one thread owns the box, a tile). */
+static inline void raster_box(const hv_mesh *m, const double origin[3], double h, const int blo[3],
+                              const int bhi[3], const size_t stride[3], uint32_t t, double W,
+                              _Atomic uint64_t *abest, uint64_t *pbest)
+{
+    const uint32_t *v = m->tris + 3 * (size_t)t;
+    raster_ctx R;
+    R.a = m->verts + 3 * (size_t)v[0];
+    R.b = m->verts + 3 * (size_t)v[1];
+    R.c = m->verts + 3 * (size_t)v[2];
+    R.origin = origin;
+    R.h = h;
+    R.ih = 1.0 / h;
+    R.W = W;
+    R.W2 = W * W;
+    R.blo = blo;
+    R.stride = stride;
+    R.t = t;
+    int lo[3], hi[3];
+    if (!raster_bounds(&R, bhi, lo, hi))
+        return;
+    double n[3], sc[3];
+    raster_shape(&R, n, sc);
+    const int d = R.d, e1 = R.e1, e2 = R.e2;
+    const double *a = R.a, *b = R.b, *c = R.c;
     const double P6[6] = {a[e1], a[e2], b[e1], b[e2], c[e1], c[e2]};
     tri2d P;
     tri2_init(&P, P6);
-    const double ind = nl > 0 ? 1.0 / n[d] : 0;
     for (int j = lo[e1]; j <= hi[e1]; j++)
         for (int k = lo[e2]; k <= hi[e2]; k++) {
             double p[3];
             p[e1] = origin[e1] + (j + 0.5) * h;
             p[e2] = origin[e2] + (k + 0.5) * h;
             const double q2[2] = {p[e1], p[e2]};
-            if (tri2(q2, &P) > W2)
+            if (tri2(q2, &P) > R.W2)
                 continue;
             int i0 = lo[d], i1 = hi[d];
-            if (nl > 0) {
-                /* |n.(p - a)| <= W is linear in p[d]: intersect with the box range. */
-                double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
-                double x0 = a[d] + (-W - rest) * ind, x1 = a[d] + (W - rest) * ind;
-                if (x0 > x1) {
-                    double tmp = x0;
-                    x0 = x1, x1 = tmp;
-                }
-                int l = iceil((x0 - od) * ih - 0.5), hh = ifloor((x1 - od) * ih - 0.5);
-                i0 = l > i0 ? l : i0;
-                i1 = hh < i1 ? hh : i1;
-            }
+            if (R.nl > 0)
+                slab_range(&R, p, &i0, &i1);
             if (i0 > i1)
                 continue;
             size_t base = (size_t)(j - blo[e1]) * stride[e1] + (size_t)(k - blo[e2]) * stride[e2];
-#define PUT(i, dd)                                                                                 \
-    do {                                                                                           \
-        size_t at_ = base + (size_t)((i)-blo[d]) * stride[d];                                      \
-        uint64_t v_ = pack((float)sqrt(dd), t);                                                    \
-        if (abest)                                                                                 \
-            atomic_min_u64(&abest[at_], v_);                                                       \
-        else if (v_ < pbest[at_])                                                                  \
-            pbest[at_] = v_;                                                                       \
-    } while (0)
-            if (pbest && nl > 0) {
-                /* One thread owns the box: every cell of the slab, skipping
-                 * those whose distance so far is already below a lower
-                 * bound of this triangle's (its plane's distance, its
-                 * bounding sphere's), by enough that its packed value would
-                 * be larger whatever the rounding: the same minimum as the
-                 * walk below. */
-                const double rest = n[e1] * (p[e1] - a[e1]) + n[e2] * (p[e2] - a[e2]);
-                const double q1 = p[e1] - sc[e1], q2 = p[e2] - sc[e2], lat = q1 * q1 + q2 * q2;
-                for (int i = i0; i <= i1; i++) {
-                    p[d] = od + (i + 0.5) * h;
-                    const size_t at = base + (size_t)(i - blo[d]) * stride[d];
-                    double lim = INFINITY;
-                    if (pbest[at] != UINT64_MAX) {
-                        uint32_t bits = (uint32_t)(pbest[at] >> 32);
-                        float bd;
-                        memcpy(&bd, &bits, sizeof bd);
-                        lim = bd * (1 + 1e-6);
-                        if (fabs(rest + n[d] * (p[d] - a[d])) > lim)
-                            continue;
-                        const double q0 = p[d] - sc[d];
-                        if (lat + q0 * q0 > (lim + sr) * (lim + sr))
-                            continue;
-                    }
-                    double d2 = d2_at(p, a, b, c);
-                    if (d2 <= W2 && d2 <= lim * lim) /* else its packed value is larger */
-                        PUT(i, d2);
-                }
-                continue;
-            }
-            int ic = (i0 + i1) / 2;
-            p[d] = od + (ic + 0.5) * h;
-            double dc = d2_at(p, a, b, c);
-            if (dc > W2) {
-                int dir = 0;
-                double dn = INFINITY;
-                for (int sgn = -1; sgn <= 1; sgn += 2) {
-                    int ii = ic + sgn;
-                    if (ii < i0 || ii > i1)
-                        continue;
-                    p[d] = od + (ii + 0.5) * h;
-                    double vv = d2_at(p, a, b, c);
-                    if (vv < dc && vv < dn)
-                        dn = vv, dir = sgn;
-                }
-                if (!dir)
-                    continue;
-                ic += dir;
-                dc = dn;
-                while (dc > W2) {
-                    int ii = ic + dir;
-                    if (ii < i0 || ii > i1)
-                        break;
-                    p[d] = od + (ii + 0.5) * h;
-                    double vv = d2_at(p, a, b, c);
-                    if (!(vv < dc))
-                        break;
-                    ic = ii, dc = vv;
-                }
-                if (dc > W2)
-                    continue;
-            }
-            PUT(ic, dc);
-            for (int sgn = -1; sgn <= 1; sgn += 2)
-                for (int i = ic + sgn; i >= i0 && i <= i1; i += sgn) {
-                    p[d] = od + (i + 0.5) * h;
-                    double d2 = d2_at(p, a, b, c);
-                    if (d2 > W2)
-                        break;
-                    PUT(i, d2);
-                }
-#undef PUT
+            if (pbest && R.nl > 0)
+                column_owned(&R, abest, pbest, p, i0, i1, base);
+            else
+                column_walk(&R, abest, pbest, p, i0, i1, base);
         }
 }
 
@@ -460,61 +543,114 @@ static hv_status grow(size_t **v, size_t *cap, size_t need)
     return HV_OK;
 }
 
-/* Band dilation, OpenVDB's design: from the rasterized cells, layer by layer,
- * each new 6-neighbour of the front takes the best of its finished
- * neighbours' nearest triangles (refined by descent) and joins the next front
- * while within the cap. Then red-black relaxation passes over the dilated
- * cells against their neighbours' triangles until nothing changes (a cell of
- * one colour reads only cells of the other, so the result does not depend on
- * the threads). Only cells up to the cap and their first neighbours beyond
- * are touched. */
-static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, double cap, float *dist,
-                        uint32_t *tri)
+/* The band being dilated: the grid, its distances and nearest triangles, and
+ * the state of each cell (ST_*; in the upper bits the time of its last
+ * change in the relaxation). */
+typedef struct band {
+    const hv_mesh *m;
+    const ring *r;
+    const hv_grid *g;
+    int nx, ny, nz;
+    size_t count;
+    ptrdiff_t s[3];
+    float *dist;
+    uint32_t *tri;
+    uint8_t *state;
+} band;
+
+/* Cell c's 6-neighbour q: -x, +x, -y, +y, -z, +z. */
+static inline size_t nb(const ptrdiff_t s[3], size_t c, int q)
 {
-    const int nx = g->n[0], ny = g->n[1], nz = g->dim == 3 ? g->n[2] : 1;
-    const size_t count = hv_grid_count(g);
-    const ptrdiff_t s[3] = {1, nx, (ptrdiff_t)nx * ny};
-    uint8_t *state = hv_malloc(count);
+    return c + (q & 1 ? s[q >> 1] : -s[q >> 1]);
+}
+
+/* The untouched 6-neighbours of the front, marked queued: fresh[0..*nnew). */
+static hv_status front_neighbours(const band *B, const size_t *front, size_t nfront, size_t **fresh,
+                                  size_t *cap_new, size_t *nnew)
+{
+    const int nx = B->nx, ny = B->ny, nz = B->nz;
+    const ptrdiff_t s[3] = {B->s[0], B->s[1], B->s[2]};
+    uint8_t *state = B->state;
+    hv_status st;
+    *nnew = 0;
+    for (size_t f = 0; f < nfront; f++) {
+        size_t c = front[f];
+        int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny),
+            k = (int)(c / (size_t)s[2]);
+        const int ok[6] = {i > 0, i<nx - 1, j> 0, j<ny - 1, k> 0, k < nz - 1};
+        for (int q = 0; q < 6; q++) {
+            if (!ok[q])
+                continue;
+            size_t d = nb(s, c, q);
+            if (state[d] != ST_NONE)
+                continue;
+            state[d] = ST_QUEUED;
+            if ((st = grow(fresh, cap_new, *nnew + 1)))
+                return st;
+            (*fresh)[(*nnew)++] = d;
+        }
+    }
+    return HV_OK;
+}
+
+/* Each fresh cell's distance nd and triangle nt: the best of its finished
+ * neighbours' nearest triangles, refined by descent. */
+static void fresh_nearest(const band *B, const size_t *fresh, size_t nnew, float *nd, uint32_t *nt)
+{
+    const hv_mesh *m = B->m;
+    const ring *r = B->r;
+    const hv_grid *g = B->g;
+    const int nx = B->nx, ny = B->ny, nz = B->nz;
+    const ptrdiff_t s[3] = {B->s[0], B->s[1], B->s[2]};
+    const uint8_t *state = B->state;
+    const uint32_t *tri = B->tri;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (size_t e = 0; e < nnew; e++) {
+        size_t c = fresh[e];
+        int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny),
+            k = (int)(c / (size_t)s[2]);
+        const int ok[6] = {i > 0, i<nx - 1, j> 0, j<ny - 1, k> 0, k < nz - 1};
+        uint32_t cand[6];
+        int nc = 0;
+        for (int q = 0; q < 6; q++) {
+            if (!ok[q])
+                continue;
+            size_t d = nb(s, c, q);
+            uint32_t t = tri[d];
+            if ((state[d] & 3) < ST_SEED || t == UINT32_MAX)
+                continue;
+            int dup = 0;
+            for (int u = 0; u < nc; u++)
+                dup |= cand[u] == t;
+            if (!dup)
+                cand[nc++] = t;
+        }
+        double p[3];
+        hv_grid_cell_center(g, i, j, k, p);
+        nd[e] = (float)best_of(m, r, p, cand, nc, &nt[e], 1);
+    }
+}
+
+/* Layer by layer from the seeds: each new 6-neighbour of the front takes
+ * the best of its finished neighbours' nearest triangles and joins the next
+ * front while within the cap. */
+static hv_status grow_layers(const band *B, double cap)
+{
     size_t cap_front = 0, nfront = 0, cap_new = 0, nnew = 0;
     size_t *front = NULL, *fresh = NULL;
     float *nd = NULL;
     uint32_t *nt = NULL;
     hv_status st = HV_OK;
-    if (!state) {
-        st = hv__error(HV_ERR_NOMEM, "exact distance: out of memory for the band");
-        goto out;
-    }
-#pragma omp parallel for schedule(static)
-    for (size_t c = 0; c < count; c++)
-        state[c] = tri[c] != UINT32_MAX ? ST_SEED : ST_NONE;
-    for (size_t c = 0; c < count; c++) {
-        if (state[c] != ST_SEED)
+    for (size_t c = 0; c < B->count; c++) {
+        if (B->state[c] != ST_SEED)
             continue;
         if ((st = grow(&front, &cap_front, nfront + 1)))
             goto out;
         front[nfront++] = c;
     }
-#define NB(c, q) ((c) + ((q)&1 ? s[(q) >> 1] : -s[(q) >> 1]))
     while (nfront) {
-        /* Untouched 6-neighbours of the front. */
-        nnew = 0;
-        for (size_t f = 0; f < nfront; f++) {
-            size_t c = front[f];
-            int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny),
-                k = (int)(c / (size_t)s[2]);
-            const int ok[6] = {i > 0, i<nx - 1, j> 0, j<ny - 1, k> 0, k < nz - 1};
-            for (int q = 0; q < 6; q++) {
-                if (!ok[q])
-                    continue;
-                size_t d = NB(c, q);
-                if (state[d] != ST_NONE)
-                    continue;
-                state[d] = ST_QUEUED;
-                if ((st = grow(&fresh, &cap_new, nnew + 1)))
-                    goto out;
-                fresh[nnew++] = d;
-            }
-        }
+        if ((st = front_neighbours(B, front, nfront, &fresh, &cap_new, &nnew)))
+            goto out;
         if (!nnew)
             break;
         float *nd2 = realloc(nd, nnew * sizeof *nd);
@@ -526,47 +662,42 @@ static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, doubl
             goto out;
         }
         nt = nt2;
-#pragma omp parallel for schedule(dynamic, 256)
-        for (size_t e = 0; e < nnew; e++) {
-            size_t c = fresh[e];
-            int i = (int)(c % (size_t)nx), j = (int)((c / (size_t)nx) % (size_t)ny),
-                k = (int)(c / (size_t)s[2]);
-            const int ok[6] = {i > 0, i<nx - 1, j> 0, j<ny - 1, k> 0, k < nz - 1};
-            uint32_t cand[6];
-            int nc = 0;
-            for (int q = 0; q < 6; q++) {
-                if (!ok[q])
-                    continue;
-                size_t d = NB(c, q);
-                uint32_t t = tri[d];
-                if ((state[d] & 3) < ST_SEED || t == UINT32_MAX)
-                    continue;
-                int dup = 0;
-                for (int u = 0; u < nc; u++)
-                    dup |= cand[u] == t;
-                if (!dup)
-                    cand[nc++] = t;
-            }
-            double p[3];
-            hv_grid_cell_center(g, i, j, k, p);
-            nd[e] = (float)best_of(m, r, p, cand, nc, &nt[e], 1);
-        }
+        fresh_nearest(B, fresh, nnew, nd, nt);
         /* Commit; cells within the cap form the next front. */
         if ((st = grow(&front, &cap_front, nnew)))
             goto out;
         nfront = 0;
         for (size_t e = 0; e < nnew; e++) {
             size_t c = fresh[e];
-            state[c] = ST_DILATED;
-            dist[c] = nd[e];
-            tri[c] = nt[e];
+            B->state[c] = ST_DILATED;
+            B->dist[c] = nd[e];
+            B->tri[c] = nt[e];
             if (nd[e] <= cap)
                 front[nfront++] = c;
         }
     }
-    /* Relaxation. A cell is rechecked only when a neighbour changed after
-     * its last check: the upper bits of state hold the time (2 round +
-     * colour + 1) of a cell's last change. */
+out:
+    free(front);
+    free(fresh);
+    free(nd);
+    free(nt);
+    return st;
+}
+
+/* Red-black relaxation of the dilated cells against their neighbours'
+ * triangles until nothing changes. A cell is rechecked only when a
+ * neighbour changed after its last check: the upper bits of state hold the
+ * time (2 round + colour + 1) of a cell's last change. */
+static void relax_band(const band *B)
+{
+    const hv_mesh *m = B->m;
+    const ring *r = B->r;
+    const hv_grid *g = B->g;
+    const int nx = B->nx, ny = B->ny, nz = B->nz;
+    const ptrdiff_t s[3] = {B->s[0], B->s[1], B->s[2]};
+    float *dist = B->dist;
+    uint32_t *tri = B->tri;
+    uint8_t *state = B->state;
     for (int round = 0; round < EXACT_MAX_ROUNDS; round++) {
         size_t upd = 0;
         for (int colour = 0; colour < 2; colour++) {
@@ -586,7 +717,7 @@ static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, doubl
                         for (int q = 0; q < 6; q++) {
                             if (!ok[q])
                                 continue;
-                            size_t d = NB(c, q);
+                            size_t d = nb(s, c, q);
                             uint32_t t = tri[d];
                             if (t == UINT32_MAX)
                                 continue;
@@ -615,9 +746,33 @@ static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, doubl
         if (!upd)
             break;
     }
-#undef NB
+}
+
+/* Band dilation, OpenVDB's design: from the rasterized cells, layer by layer,
+ * each new 6-neighbour of the front takes the best of its finished
+ * neighbours' nearest triangles (refined by descent) and joins the next front
+ * while within the cap. Then red-black relaxation passes over the dilated
+ * cells against their neighbours' triangles until nothing changes (a cell of
+ * one colour reads only cells of the other, so the result does not depend on
+ * the threads). Only cells up to the cap and their first neighbours beyond
+ * are touched. */
+static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, double cap, float *dist,
+                        uint32_t *tri)
+{
+    const int nx = g->n[0], ny = g->n[1], nz = g->dim == 3 ? g->n[2] : 1;
+    const size_t count = hv_grid_count(g);
+    band B = {m, r, g, nx, ny, nz, count, {1, nx, (ptrdiff_t)nx * ny}, dist, tri, NULL};
+    uint8_t *state = B.state = hv_malloc(count);
+    if (!state)
+        return hv__error(HV_ERR_NOMEM, "exact distance: out of memory for the band");
+#pragma omp parallel for schedule(static)
+    for (size_t c = 0; c < count; c++)
+        state[c] = tri[c] != UINT32_MAX ? ST_SEED : ST_NONE;
+    hv_status st = grow_layers(&B, cap);
+    if (st == HV_OK)
+        relax_band(&B);
     /* Beyond the cap: nothing. */
-    if (isfinite(cap)) {
+    if (st == HV_OK && isfinite(cap)) {
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < count; c++)
             if ((state[c] & 3) == ST_DILATED && dist[c] > cap) {
@@ -625,12 +780,7 @@ static hv_status dilate(const hv_mesh *m, const ring *r, const hv_grid *g, doubl
                 tri[c] = UINT32_MAX;
             }
     }
-out:
     hv_free(state);
-    free(front);
-    free(fresh);
-    free(nd);
-    free(nt);
     return st;
 }
 
