@@ -126,6 +126,18 @@ typedef struct hv_sdf_opts {
                              The winding number needs the repair's orientation steps
                              (HV_SDF_REPAIR_ORIENT and HV_SDF_REPAIR_OUTWARD); AUTO uses the
                              heat method without them */
+
+    /* Morphology of the signed result, in world units, applied in this order
+     * (0 = off; signed distances only). The block is placed around the
+     * mesh's bounds grown by what the shape may grow (offset > 0, close), and
+     * bands grow by what they need. */
+    double close;  /* grow by close, then shrink by it: fills gaps and cracks narrower
+                      than 2 close (dense grids only) */
+    double open;   /* shrink by open, then grow: removes parts thinner than 2 open
+                      (dense grids only) */
+    double offset; /* the surface moved out by offset (in when negative): phi - offset */
+    double shell;  /* > 0: only a wall of this thickness inside the surface:
+                      max(phi, -phi - shell) */
 } hv_sdf_opts;
 
 typedef struct hv_sdf_repair_report {

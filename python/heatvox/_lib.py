@@ -265,6 +265,10 @@ class hv_sdf_opts(Structure):
         ("heat_coarsen", c_int),
         ("threads", c_int),
         ("sign", c_int),
+        ("close", c_double),
+        ("open", c_double),
+        ("offset", c_double),
+        ("shell", c_double),
     ]
 
 

@@ -82,6 +82,11 @@ _MORE = {
     "band_only": lambda x: _arrays.real(x, "band_only", 0.0),
     "diffuse_tol": lambda x: _arrays.real(x, "diffuse_tol", 0.0),
     "poisson_tol": lambda x: _arrays.real(x, "poisson_tol", 0.0),
+    # morphology in world units (sdf.h): close and open run on the dense grid
+    "close": lambda x: _arrays.real(x, "close", 0.0),
+    "open": lambda x: _arrays.real(x, "open", 0.0),
+    "offset": lambda x: _arrays.real(x, "offset"),
+    "shell": lambda x: _arrays.real(x, "shell", 0.0),
 }
 
 

@@ -158,7 +158,17 @@ static hv_status check_opts(const hv_sdf_opts *o)
                                  "sdf: bounding box is empty along %c (%g to %g)", "xyz"[a],
                                  o -> bbox[a], o -> bbox[3 + a]);
     }
-    return HV_OK;
+    return hv__sdf_morph_check(o);
+}
+
+/* Mesh bounds grown by what the morphology may add to the shape. */
+static void grow_bounds(const hv_sdf_opts *o, double lo[3], double hi[3])
+{
+    const double g = hv__sdf_morph_growth(o);
+    for (int a = 0; a < 3; a++) {
+        lo[a] -= g;
+        hi[a] += g;
+    }
 }
 
 /* Bounds of the vertices used by triangles; checks indices and finiteness. */
@@ -261,7 +271,10 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
         return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
     hv_status st = check_opts(opts);
     double lo[3], hi[3];
-    if (st || (st = used_bounds(m, lo, hi)) || (st = grid_place(opts, lo, hi, n, h, origin)))
+    if (st || (st = used_bounds(m, lo, hi)))
+        return st;
+    grow_bounds(opts, lo, hi);
+    if ((st = grid_place(opts, lo, hi, n, h, origin)))
         return st;
     /* The heat method runs unless the sign is the winding number's or the
      * distance is exact and unsigned; AUTO may run it. */
@@ -565,6 +578,9 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
         (st = sdf_place(M, &o, lo, hi, &w, &P, &S)) ||
         (P.need_heat && (st = sdf_surface(M, &P, &w, &S))))
         goto done;
+    /* A band reaches as far as the morphology moves the surface. */
+    if (o.band_only > 0)
+        o.band_only += hv__sdf_morph_reach(&o) / P.h;
     /* 2-6. The signed heat method (sdf_heat.c), where it decides the sign or
      * gives the distance; phi on gh. */
     hv_grid *gh = w.gh ? w.gh : w.g;
@@ -581,6 +597,8 @@ hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_grid **ou
             goto done;
         S.t_redistance = hv_now() - tt;
     }
+    if (hv__sdf_morph_on(&o) && (st = hv__sdf_morph_grid(w.g, &o)))
+        goto done;
     if ((st = stage(1.0, "done")))
         goto done;
     S.t_total = hv_now() - t0;
@@ -623,12 +641,15 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
         return hv__error(HV_ERR_INVALID_ARG,
                          "sdf: a narrow band of tiles takes its sign from the winding number, "
                          "which needs the repair's orientation steps");
+    if ((st = hv__sdf_morph_tiles_check(&o)))
+        return st;
     if (o.threads > 0)
         hv_set_threads(o.threads);
     const double t0 = hv_now();
     const hv_mesh *M = m;
     int n[3];
     double h, origin[3];
+    grow_bounds(&o, lo, hi);
     if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) || (st = grid_place(&o, lo, hi, n, &h, origin)))
         goto done;
     memcpy(S.n, n, sizeof S.n);
@@ -639,8 +660,12 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     if ((st = stage(0.1, "tiles")))
         goto done;
     double tt = hv_now();
-    if ((st = hv__sdf_tiles(M, n, h, origin, band, unsig, o.near_sign, out, &S)))
+    if ((st = hv__sdf_tiles(M, n, h, origin, band + hv__sdf_morph_reach(&o) / h, unsig, o.near_sign,
+                            out, &S)))
         goto done;
+    if (hv__sdf_morph_on(&o))
+        hv__sdf_morph_tiles(*out, &o, band);
+    S.active_voxels = (*out)->active;
     S.t_redistance = hv_now() - tt;
     if ((st = stage(1.0, "done"))) {
         hv_tiles_destroy(out);

@@ -19,6 +19,19 @@ hv_status hv__nonfinite_vertex_error(const hv_mesh *m, const char *who, size_t v
  * on faces, Poisson, shift. phi in gh->v; times and counts into S. */
 hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const hv_sdf_opts *o,
                        hv_sdf_stats *S);
+/* Morphology of the result (sdf_morph.c): whether o asks for any, its
+ * checks, how far the shape may grow (world units; the block is placed
+ * around the bounds grown by it) and how far bands must reach beyond the
+ * output's band; the operations on a dense grid and on tiles (offset and
+ * shell only; band: the output's band in voxels, whose voxels stay active). */
+int hv__sdf_morph_on(const hv_sdf_opts *o);
+hv_status hv__sdf_morph_check(const hv_sdf_opts *o);
+double hv__sdf_morph_growth(const hv_sdf_opts *o);
+double hv__sdf_morph_reach(const hv_sdf_opts *o);
+hv_status hv__sdf_morph_grid(hv_grid *g, const hv_sdf_opts *o);
+hv_status hv__sdf_morph_tiles_check(const hv_sdf_opts *o);
+void hv__sdf_morph_tiles(hv_tiles *T, const hv_sdf_opts *o, double band);
+
 /* out (on g) = trilinear interpolation of v (on gh) at g's cell centres. */
 hv_status hv__sdf_upsample(const hv_grid *gh, const float *v, const hv_grid *g, float *out);
 
