@@ -69,6 +69,14 @@ static void help(void)
            "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
            "  --domed-caps       close holes with caps that bulge like the wall around them\n"
            "                     (default: planar caps)\n"
+           "shape (world units, applied in this order; with -o the band moves along):\n"
+           "  --close R          grow by R, then shrink by R: fills gaps and cracks narrower\n"
+           "                     than 2R (computes the dense block)\n"
+           "  --open R           shrink by R, then grow by R: removes parts thinner than 2R\n"
+           "                     (computes the dense block)\n"
+           "  --offset D         move the surface out by D (in when D < 0)\n"
+           "  --shell T          keep a wall of thickness T inside the surface (for printing)\n"
+           "  The block is placed around the mesh grown by what --offset and --close add.\n"
            "  --backend B        linear solver: auto, mg, fftw, opencl (default auto)\n"
            "  --threads N        worker threads (default: all cores)\n"
            "  -v                 progress and details on stderr\n"
@@ -178,6 +186,17 @@ static int check_writable(const char *path)
     return ok ? 0 : -1;
 }
 
+/* " close=R open=R offset=D shell=T" for the output's parameters, or "". */
+static const char *morph_text(const hv_sdf_opts *o)
+{
+    static char buf[160];
+    buf[0] = 0;
+    if (o->close > 0 || o->open > 0 || o->offset != 0 || o->shell > 0)
+        snprintf(buf, sizeof buf, " close=%.9g open=%.9g offset=%.9g shell=%.9g", o->close, o->open,
+                 o->offset, o->shell);
+    return buf;
+}
+
 /* The command line of heatvox sdf. */
 typedef struct sdf_args {
     const char *mesh_path, *out, *npy, *name, *preview, *mesh_out;
@@ -214,6 +233,9 @@ static int check_args(sdf_args *A)
         return cli_usage_error("sdf", "--adaptivity applies to --mesh-out, which is not given");
     if (A->have_res && A->have_h)
         return cli_usage_error("sdf", "give either --res or --voxel-size, not both");
+    if ((o->close > 0 || o->open > 0 || o->offset != 0 || o->shell > 0) && o->unsigned_distance)
+        return cli_usage_error("sdf", "--close, --open, --offset and --shell need a signed "
+                                      "distance (drop --unsigned)");
     return -1;
 }
 
@@ -293,6 +315,30 @@ static int parse_args(int argc, char **argv, sdf_args *A)
          .val = HV_SDF_REPAIR_DOMED_CAPS},
         {.names = "--backend", .kind = CLI_BACKEND, .dst = &o->backend, .val = CLI_BACKENDS_LOCAL},
         {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
+        {.names = "--close",
+         .kind = CLI_DOUBLE,
+         .dst = &o->close,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive distance"},
+        {.names = "--open",
+         .kind = CLI_DOUBLE,
+         .dst = &o->open,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive distance"},
+        {.names = "--offset",
+         .kind = CLI_DOUBLE,
+         .dst = &o->offset,
+         .min = -INFINITY,
+         .max = INFINITY,
+         .needs = "a distance"},
+        {.names = "--shell",
+         .kind = CLI_DOUBLE,
+         .dst = &o->shell,
+         .max = INFINITY,
+         .flags = CLI_ABOVE,
+         .needs = "a positive thickness"},
         {.names = NULL},
     };
     int rc = cli_parse("sdf", argc, argv, opts, "mesh", &A->mesh_path, help);
@@ -374,7 +420,7 @@ int cmd_sdf(int argc, char **argv)
     const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
     const int tiles = out && !dense && !npy && !mesh_out && !no_tiles && !o.unsigned_distance &&
                       o.magnitude == HV_SDF_EXACT && o.sign != HV_SDF_SIGN_HEAT &&
-                      (o.repair & orient) == orient;
+                      (o.repair & orient) == orient && !(o.close > 0) && !(o.open > 0);
     const char *outs[] = {out, npy, preview, mesh_out};
     if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;
@@ -419,11 +465,11 @@ int cmd_sdf(int argc, char **argv)
     char params[512];
     snprintf(params, sizeof params,
              "grid=%dx%dx%d voxel_size=%.9g origin=%.9g,%.9g,%.9g t_scale=%g mode=%s magnitude=%s "
-             "repair=0x%x backend=%s band=%g heat_coarsen=%d sign=%s%s%s",
+             "repair=0x%x backend=%s band=%g heat_coarsen=%d sign=%s%s%s%s",
              S.n[0], S.n[1], S.n[2], S.h, S.origin[0], S.origin[1], S.origin[2], o.t_scale,
              o.unsigned_distance ? "unsigned" : "signed",
              o.magnitude == HV_SDF_EXACT ? "exact" : "heat", o.repair, hv_backend_name(S.backend),
-             band, S.heat_coarsen, cli_sign_name(S.sign), dense ? " dense" : "",
+             band, S.heat_coarsen, cli_sign_name(S.sign), morph_text(&o), dense ? " dense" : "",
              tiles ? " tiles" : "");
     /* Every output is staged; they are renamed together once all are written. */
     cli_outputs co = {0};

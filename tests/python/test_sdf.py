@@ -69,6 +69,11 @@ class SameAsCommand(unittest.TestCase):
         self.assertEqual(g.stats["winding_evals"], 0)
         self.assertIsNone(heatvox.sdf(hvtest.scene("meshes/torus_holes.obj"), res=16, unsigned=True).stats["sign"])
 
+    def test_offset_shell_and_close_should_equal_command_npy(self):
+        self.check("meshes/torus_holes.obj", ["--res", "40", "--offset", "0.1"], res=40, offset=0.1)
+        self.check("meshes/torus_holes.obj", ["--res", "40", "--shell", "0.08"], res=40, shell=0.08)
+        self.check("meshes/torus_soup.obj", ["--res", "40", "--close", "0.1"], res=40, close=0.1)
+
     def test_path_form_should_equal_array_form(self):
         path = hvtest.scene("meshes/sphere_holes_flips.obj")
         a = heatvox.sdf(path, res=24)
