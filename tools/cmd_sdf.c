@@ -23,6 +23,12 @@ static void help(void)
            "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
            "level set (negative inside), a dense .npy array, and/or its zero level set as a\n"
            "closed, manifold, outward-oriented triangle mesh (at least one of the three).\n"
+           "MESH may also be an oriented point cloud (a scan): a text file .xyz, .pts or\n"
+           ".xyzn with x y z nx ny nz per line, or a PLY file of vertices with nx ny nz and\n"
+           "no faces. Its surface comes from the signed heat method with the points'\n"
+           "normals (normals flipped on part of the cloud are outvoted) moved onto the\n"
+           "points, and everything below applies to it as to a mesh (-v tells the points,\n"
+           "their spacing and how many normals were turned).\n"
            "Prints one summary line on stdout.\n"
            "\n"
            "grid (cell-centred; sample (i,j,k) at corner + (i+1/2, j+1/2, k+1/2) h):\n"
@@ -436,11 +442,11 @@ int cmd_sdf(int argc, char **argv)
 
     double t0 = hv_now();
     hv_mesh *m = NULL;
-    hv_status st = hv_mesh_read(mesh_path, &m);
-    if (st) {
-        fprintf(stderr, "heatvox sdf: %s\n", hv_last_error());
-        return HV_EXIT_FAIL;
-    }
+    hv_points_report pr;
+    hv_status st = cli_read_shape(mesh_path, &o, &m, &pr);
+    if (st)
+        return cli_fail("sdf", mesh_path, st);
+    cli_points_note("sdf", mesh_path, &pr);
     double t_read = hv_now() - t0;
     hv_grid *g = NULL;
     hv_tiles *T = NULL;

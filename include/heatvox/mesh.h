@@ -76,6 +76,34 @@ HV_API hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out);
 /* Frees *m and sets it to NULL; accepts NULL and *m == NULL. */
 HV_API void hv_mesh_destroy(hv_mesh **m);
 
+/* Oriented point clouds (a scan, a depth fusion, a normal estimator's
+ * output): positions with unit outward normals. */
+typedef struct hv_points {
+    size_t count;
+    double *xyz;        /* 3 * count coordinates, owned */
+    double *normals;    /* 3 * count unit normals, owned */
+    const char *format; /* static name ("PLY points", "text points"); NULL when not read */
+} hv_points;
+
+/* 1 when path names a point cloud: a text file by its extension (.xyz,
+ * .pts, .xyzn) or a PLY file whose header has vertices and no faces. */
+HV_API int hv_points_file(const char *path);
+
+/* Reads an oriented point cloud: text, x y z nx ny nz per line (# starts a
+ * comment, further columns are ignored), or a PLY vertex element with x y z
+ * nx ny nz. Points without normals are an error (an unoriented cloud), as
+ * are NaN/Inf values and normals of zero length (named by line, or by the
+ * point's place in a binary PLY). Normals are scaled to unit length. The
+ * caller owns *out (hv_points_destroy). */
+HV_API hv_status hv_points_read(const char *path, hv_points **out);
+
+/* A point cloud from arrays (copied, normals scaled to unit length). */
+HV_API hv_status hv_points_from_arrays(hv_points **out, const double *xyz, const double *normals,
+                                       size_t count);
+
+/* Frees *p and sets it to NULL; accepts NULL and *p == NULL. */
+HV_API void hv_points_destroy(hv_points **p);
+
 /* Axis-aligned bounds of the finite vertices (HV_ERR_NUMERIC when none is finite). */
 HV_API hv_status hv_mesh_bounds(const hv_mesh *m, double lo[3], double hi[3]);
 

@@ -230,6 +230,48 @@ HV_API hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_gr
 HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
                                       hv_tiles **out, hv_sdf_stats *stats);
 
+/* Oriented point clouds to a closed surface: the signed heat method with
+ * the points' normals as the source, then the zero set moved onto the
+ * points.
+ *   1. spacing   the area each point stands for, pi d^2 / k from the
+ *                distance d to its k = 6th nearest neighbour, so that uneven
+ *                density does not weigh the dense parts more
+ *   2. heat      stages 2-6 of hv_sdf_compute on the block hv_sdf_compute
+ *                would place around the points (res, voxel_size, pad, bbox,
+ *                heat_coarsen as there), with these areas and normals as the
+ *                vector areas, diffusion time (t_scale max(h, spacing))^2;
+ *                normals flipped on part of the cloud are outvoted by their
+ *                neighbours in the diffused field
+ *   3. surface   phi's zero set as a closed mesh (hv_grid_to_mesh)
+ *   4. project   each vertex moved along phi's gradient onto the local plane
+ *                of the points within 2 spacings that face the same way
+ *                (Gaussian weights, at most one voxel): noise averages out,
+ *                and where the cloud has a gap the heat method's surface
+ *                stays
+ * The result is closed and oriented outward; its signed distance
+ * (hv_sdf_compute, hv_sdf_compute_tiles) is the cloud's. */
+typedef struct hv_points_report {
+    size_t points;
+    double spacing_median, spacing_min, spacing_max; /* world units */
+    size_t normals_against;   /* points whose normal points into the surface found */
+    double normal_agreement;  /* fraction of the points' area whose normal points out of it */
+    size_t vertices;          /* surface vertices */
+    size_t vertices_unsupported; /* no point within reach: left where the heat method put them */
+    double move_mean, move_max;  /* projection distances, voxels of the heat grid */
+    int n[3];                    /* the heat method's grid */
+    double h;
+    hv_sdf_stats heat;           /* its stages (t_splat .. t_shift, iterations, backend) */
+    double t_spacing, t_heat, t_mesh, t_project, t_total; /* seconds */
+} hv_points_report;
+
+/* The closed surface of oriented points P (above); opts as for
+ * hv_sdf_compute (NULL: defaults; only the placement, t_scale,
+ * heat_coarsen, backend and threads are read). The caller owns *out
+ * (hv_mesh_destroy). report may be NULL. Fails on an empty cloud, one with
+ * no extent, and when the heat method finds no inside. */
+HV_API hv_status hv_points_surface(const hv_points *P, const hv_sdf_opts *opts, hv_mesh **out,
+                                   hv_points_report *report);
+
 #ifdef __cplusplus
 }
 #endif

@@ -58,6 +58,28 @@ hv_status hv__mesh_weld(const double *verts, size_t nverts, uint32_t *tris, size
 hv_status hv__mesh_from_arrays_as_is(hv_mesh **out, const double *verts, size_t nverts,
                                      const uint32_t *tris, size_t ntris);
 
+/* The whole of path in a new buffer (*out, freed by the caller) with a NUL
+ * byte after its *len bytes: regular files, and pipes up to a bound;
+ * directories, devices and sockets are refused (mesh_read.c). */
+hv_status hv__mesh_read_file(const char *path, char **out, size_t *len);
+
+/* Point clouds (points.c, ply.c). A reader adds each point through
+ * hv__points_add, which checks it (finite, a normal of non-zero length) and
+ * names the place `where` ("line 12", "point 7") in its message. */
+typedef struct points_builder {
+    const char *path;
+    double *xyz, *nrm;
+    size_t n, cap;
+    int negative; /* some normal component was negative */
+    int nonunit;  /* some normal was not of unit length */
+} points_builder;
+hv_status hv__points_reserve(points_builder *b, size_t n);
+hv_status hv__points_add(points_builder *b, const double p[6], const char *where);
+/* PLY: whether the header has a vertex element and no faces (ply.c), and
+ * the vertex element's x y z nx ny nz into b. */
+int hv__ply_is_points(const char *buf, size_t len);
+hv_status hv__points_read_ply(const char *path, const char *buf, size_t len, points_builder *b);
+
 /* A growable array of uint32_t for polygon corners (no fixed limit). */
 typedef struct u32vec {
     uint32_t *a;

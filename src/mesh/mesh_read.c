@@ -85,7 +85,7 @@ static const char *file_kind(mode_t m)
 /* Regular files are read whole; FIFOs up to MESH_MAX_PIPE_BYTES; anything else
  * (directories, devices such as /dev/zero, sockets) is refused before it is
  * opened, and checked again on the open descriptor. */
-static hv_status read_whole_file(const char *path, char **out, size_t *len)
+hv_status hv__mesh_read_file(const char *path, char **out, size_t *len)
 {
     *out = NULL;
     *len = 0;
@@ -244,7 +244,7 @@ hv_status hv_mesh_read(const char *path, hv_mesh **out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_read: empty path");
     char *buf;
     size_t len;
-    hv_status st = read_whole_file(path, &buf, &len);
+    hv_status st = hv__mesh_read_file(path, &buf, &len);
     if (st)
         return st;
     if (len == 0) {

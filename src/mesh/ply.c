@@ -642,3 +642,112 @@ hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_me
                                         "PLY binary_big_endian"};
     return hv__mb_finish(&s.b, names[H.format], out);
 }
+
+/* ---- point clouds ---- */
+
+/* Whether the header declares vertices and no faces or strips (a point
+ * cloud); 0 for anything else, including headers that do not parse. */
+int hv__ply_is_points(const char *buf, size_t len)
+{
+    if (len < 4 || strncmp(buf, "ply", 3) || (buf[3] != '\n' && buf[3] != '\r'))
+        return 0;
+    ply_header H = {-1, NULL, 0, 0, 0, NULL};
+    hv_status st = read_header("", buf, buf + len, &H);
+    int vertices = 0, faces = 0;
+    for (size_t k = 0; !st && k < H.nel; k++) {
+        const ply_elem *e = &H.el[k];
+        if (name_is(e->name, e->namelen, "vertex"))
+            vertices += e->count > 0;
+        else if (name_is(e->name, e->namelen, "face") || name_is(e->name, e->namelen, "tristrips"))
+            faces += e->count > 0;
+    }
+    free_elems(H.el, H.nel);
+    if (st)
+        hv_clear_error();
+    return !st && vertices && !faces;
+}
+
+/* The places of x y z nx ny nz among e's properties; a missing normal is
+ * an unoriented cloud. */
+static hv_status point_props(const ply_reader *r, const ply_elem *e, int ix[6])
+{
+    static const char *const names[6] = {"x", "y", "z", "nx", "ny", "nz"};
+    for (int a = 0; a < 6; a++) {
+        ix[a] = -1;
+        for (size_t k = 0; k < e->nprops; k++)
+            if (name_is(e->props[k].name, e->props[k].namelen, names[a])) {
+                if (e->props[k].count_type != T_NONE)
+                    return hv__error(HV_ERR_PARSE, "%s: line %zu: vertex property %s is a list",
+                                     r->path, e->line, names[a]);
+                ix[a] = (int)k;
+            }
+    }
+    for (int a = 0; a < 3; a++)
+        if (ix[a] < 0)
+            return hv__error(HV_ERR_PARSE, "%s: line %zu: vertex element has no property %s",
+                             r->path, e->line, names[a]);
+    if (ix[3] < 0 || ix[4] < 0 || ix[5] < 0)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "%s: line %zu: points without normals (no nx, ny, nz): an unoriented "
+                         "point cloud; the signed distance needs a normal per point (estimate "
+                         "and orient them first, or give a mesh)",
+                         r->path, e->line);
+    return HV_OK;
+}
+
+static hv_status read_point_records(ply_reader *r, const ply_elem *e, points_builder *b)
+{
+    int ix[6];
+    hv_status st = point_props(r, e, ix);
+    if (!st)
+        st = hv__points_reserve(b, (size_t)e->count);
+    for (uint64_t n = 0; n < e->count && !st; n++) {
+        double p[6] = {0, 0, 0, 0, 0, 0};
+        char at[64];
+        if (r->format == PLY_ASCII)
+            snprintf(at, sizeof at, "line %zu", r->line);
+        else
+            snprintf(at, sizeof at, "point %llu", (unsigned long long)n + 1);
+        for (size_t k = 0; k < e->nprops && !st; k++) {
+            int a = 0;
+            while (a < 6 && ix[a] != (int)k)
+                a++;
+            int64_t i;
+            st = a < 6 ? read_value(r, e->props[k].type, &p[a], &i, "a point coordinate")
+                       : skip_prop(r, &e->props[k]);
+        }
+        if (!st)
+            st = hv__points_add(b, p, at);
+    }
+    return st;
+}
+
+hv_status hv__points_read_ply(const char *path, const char *buf, size_t len, points_builder *b)
+{
+    const char *end = buf + len;
+    if (len < 4 || strncmp(buf, "ply", 3) || (buf[3] != '\n' && buf[3] != '\r'))
+        return hv__error(HV_ERR_PARSE, "%s: not a PLY file (does not start with \"ply\")", path);
+    ply_header H = {-1, NULL, 0, 0, 0, NULL};
+    hv_status st = read_header(path, buf, end, &H);
+    ply_reader r = {path, H.data, end, buf, H.line + 1, H.format};
+    int done = 0;
+    for (size_t k = 0; k < H.nel && !st && !done; k++) {
+        const ply_elem *e = &H.el[k];
+        size_t min = min_record_bytes(e, H.format), left = (size_t)(r.end - r.p);
+        if (e->count && min && e->count > (left + 2) / min)
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: line %zu: element %.*s declares %llu records but only %zu bytes of "
+                           "data remain",
+                           path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
+                           left);
+        else if (name_is(e->name, e->namelen, "vertex")) {
+            st = read_point_records(&r, e, b);
+            done = 1;
+        } else
+            st = skip_element(&r, e);
+    }
+    free_elems(H.el, H.nel);
+    if (!st && !done)
+        st = hv__error(HV_ERR_PARSE, "%s: no vertex element", path);
+    return st;
+}

@@ -86,7 +86,7 @@ static void resolve_auto(hv_sdf_opts *o)
         o->poisson_tol = sign_only ? SDF_SIGN_POISSON_TOL : 1e-8;
 }
 
-static int heat_factor(const hv_sdf_opts *o, const int n[3])
+int hv__sdf_heat_factor(const hv_sdf_opts *o, const int n[3])
 {
     if (o->magnitude != HV_SDF_EXACT || o->unsigned_distance)
         return 1;
@@ -95,7 +95,7 @@ static int heat_factor(const hv_sdf_opts *o, const int n[3])
     return (size_t)n[0] * n[1] * n[2] > SDF_COARSEN_CELLS ? 2 : 1;
 }
 
-static hv_status check_opts(const hv_sdf_opts *o)
+hv_status hv__sdf_check_opts(const hv_sdf_opts *o)
 {
     if (!(o->voxel_size >= 0) || !isfinite(o->voxel_size))
         return hv__error(HV_ERR_INVALID_ARG, "sdf: voxel size must be positive and finite, got %g",
@@ -217,8 +217,8 @@ static int levels_for(const hv_sdf_opts *oin, const int n[3])
 }
 
 /* The block for mesh bounds lo, hi: cell counts, voxel size, origin. */
-static hv_status grid_place(const hv_sdf_opts *opts, const double lo[3], const double hi[3],
-                            int n[3], double *h, double origin[3])
+hv_status hv__sdf_grid_place(const hv_sdf_opts *opts, const double lo[3], const double hi[3],
+                             int n[3], double *h, double origin[3])
 {
     if (opts->use_bbox) {
         const double *b = opts->bbox;
@@ -269,12 +269,12 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
     }
     if (!n || !h || !origin)
         return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_grid_for_mesh: NULL output");
-    hv_status st = check_opts(opts);
+    hv_status st = hv__sdf_check_opts(opts);
     double lo[3], hi[3];
     if (st || (st = used_bounds(m, lo, hi)))
         return st;
     grow_bounds(opts, lo, hi);
-    if ((st = grid_place(opts, lo, hi, n, h, origin)))
+    if ((st = hv__sdf_grid_place(opts, lo, hi, n, h, origin)))
         return st;
     /* The heat method runs unless the sign is the winding number's or the
      * distance is exact and unsigned; AUTO may run it. */
@@ -282,7 +282,7 @@ hv_status hv_sdf_grid_for_mesh(const hv_mesh *m, const hv_sdf_opts *opts, int n[
     const int heat = !(exact && (opts->unsigned_distance || opts->sign == HV_SDF_SIGN_WINDING));
     size_t per = exact ? SDF_EXACT_BYTES : 0;
     if (heat) {
-        const int f = heat_factor(opts, n);
+        const int f = hv__sdf_heat_factor(opts, n);
         int nh[3];
         for (int a = 0; a < 3; a++)
             nh[a] = (n[a] + f - 1) / f;
@@ -396,7 +396,7 @@ static hv_status sdf_place(const hv_mesh *M, hv_sdf_opts *o, const double lo[3],
               : P->wn_sign  ? HV_SDF_SIGN_WINDING
                             : HV_SDF_SIGN_HEAT;
     P->need_heat = !(P->unsig && P->exact) && !P->wn_sign;
-    P->f = heat_factor(o, P->n);
+    P->f = hv__sdf_heat_factor(o, P->n);
     S->heat_coarsen = P->need_heat ? P->f : 0;
     P->hh = P->f * P->h;
     for (int a = 0; a < 3; a++)
@@ -548,7 +548,7 @@ static hv_status sdf_begin(const hv_mesh *m, const hv_sdf_opts *opts, hv_sdf_opt
         hv_sdf_opts_default(o);
     memset(S, 0, sizeof *S);
     memset(w, 0, sizeof *w);
-    hv_status st = check_opts(o);
+    hv_status st = hv__sdf_check_opts(o);
     return st ? st : used_bounds(m, lo, hi);
 }
 
@@ -650,7 +650,7 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     int n[3];
     double h, origin[3];
     grow_bounds(&o, lo, hi);
-    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) || (st = grid_place(&o, lo, hi, n, &h, origin)))
+    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) || (st = hv__sdf_grid_place(&o, lo, hi, n, &h, origin)))
         goto done;
     memcpy(S.n, n, sizeof S.n);
     S.h = h;

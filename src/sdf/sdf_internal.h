@@ -19,6 +19,13 @@ hv_status hv__nonfinite_vertex_error(const hv_mesh *m, const char *who, size_t v
  * on faces, Poisson, shift. phi in gh->v; times and counts into S. */
 hv_status hv__sdf_heat(const hv_quad *q, hv_grid *gh, int nlev, int unsig, const hv_sdf_opts *o,
                        hv_sdf_stats *S);
+/* The options' checks, the block for bounds lo, hi (cell counts, voxel
+ * size, origin) and how many times coarser the heat method's grid is (sdf.c). */
+hv_status hv__sdf_check_opts(const hv_sdf_opts *o);
+hv_status hv__sdf_grid_place(const hv_sdf_opts *opts, const double lo[3], const double hi[3],
+                             int n[3], double *h, double origin[3]);
+int hv__sdf_heat_factor(const hv_sdf_opts *o, const int n[3]);
+
 /* Morphology of the result (sdf_morph.c): whether o asks for any, its
  * checks, how far the shape may grow (world units; the block is placed
  * around the bounds grown by it) and how far bands must reach beyond the

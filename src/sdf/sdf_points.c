@@ -1,0 +1,536 @@
+/*
+ * Oriented point clouds to a closed surface (hv_points_surface, sdf.h): the
+ * signed heat method with the points as its surface samples, the zero set
+ * as a mesh, and the mesh's vertices moved onto the points.
+ */
+#include "sdf_internal.h"
+#include "core/error.h"
+#include "heatvox/vdb.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PTS_K 6          /* neighbours of the spacing estimate */
+#define PTS_RINGS 4      /* cell rings searched around a point */
+#define PTS_KEY_BITS 21  /* per axis in a cell key */
+#define PTS_FACING 0.5   /* cosine above which a point faces a vertex's way */
+
+/* Points binned into cubic cells of side c, sorted by cell; a table with
+ * open addressing maps a cell's key to its run of points. */
+typedef struct pt_bins {
+    double lo[3], c;
+    uint32_t *order;       /* point indices, cell by cell */
+    uint64_t *keys;        /* table: cell keys, UINT64_MAX where empty */
+    uint32_t *start, *len; /* table: each cell's run in order */
+    size_t mask;
+} pt_bins;
+
+typedef struct key_idx {
+    uint64_t key;
+    uint32_t idx;
+} key_idx;
+
+static int cmp_key(const void *a, const void *b)
+{
+    const key_idx *x = a, *y = b;
+    return x->key < y->key ? -1 : x->key > y->key ? 1 : x->idx < y->idx ? -1 : x->idx > y->idx;
+}
+
+static uint64_t hash_key(uint64_t k)
+{
+    k += 0x9e3779b97f4a7c15ull;
+    k = (k ^ (k >> 30)) * 0xbf58476d1ce4e5b9ull;
+    k = (k ^ (k >> 27)) * 0x94d049bb133111ebull;
+    return k ^ (k >> 31);
+}
+
+/* The key of cell (i, j, k); UINT64_MAX outside the keyed range. */
+static uint64_t cell_key(long i, long j, long k)
+{
+    const long lim = 1L << PTS_KEY_BITS;
+    if (i < 0 || j < 0 || k < 0 || i >= lim || j >= lim || k >= lim)
+        return UINT64_MAX;
+    return (uint64_t)i | (uint64_t)j << PTS_KEY_BITS | (uint64_t)k << (2 * PTS_KEY_BITS);
+}
+
+static void cell_of(const pt_bins *B, const double *x, long c[3])
+{
+    for (int a = 0; a < 3; a++)
+        c[a] = (long)floor((x[a] - B->lo[a]) / B->c);
+}
+
+static void bins_free(pt_bins *B)
+{
+    free(B->order);
+    free(B->keys);
+    free(B->start);
+    free(B->len);
+}
+
+static void bins_insert(pt_bins *B, uint64_t key, uint32_t start, uint32_t len)
+{
+    size_t s = hash_key(key) & B->mask;
+    while (B->keys[s] != UINT64_MAX)
+        s = (s + 1) & B->mask;
+    B->keys[s] = key;
+    B->start[s] = start;
+    B->len[s] = len;
+}
+
+/* The run of points in cell key: *len points from order + *start. */
+static int bins_find(const pt_bins *B, uint64_t key, uint32_t *start, uint32_t *len)
+{
+    if (key == UINT64_MAX)
+        return 0;
+    for (size_t s = hash_key(key) & B->mask;; s = (s + 1) & B->mask) {
+        if (B->keys[s] == UINT64_MAX)
+            return 0;
+        if (B->keys[s] == key) {
+            *start = B->start[s];
+            *len = B->len[s];
+            return 1;
+        }
+    }
+}
+
+static hv_status bins_build(pt_bins *B, const hv_points *P, const double lo[3], double c)
+{
+    memset(B, 0, sizeof *B);
+    memcpy(B->lo, lo, sizeof B->lo);
+    B->c = c;
+    const size_t n = P->count;
+    key_idx *ki = malloc(n * sizeof *ki);
+    B->order = malloc(n * sizeof *B->order);
+    if (!ki || !B->order) {
+        free(ki);
+        return hv__error(HV_ERR_NOMEM, "points: out of memory binning %zu points", n);
+    }
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < n; i++) {
+        long q[3];
+        cell_of(B, P->xyz + 3 * i, q);
+        ki[i] = (key_idx){cell_key(q[0], q[1], q[2]), (uint32_t)i};
+    }
+    qsort(ki, n, sizeof *ki, cmp_key);
+    size_t runs = 0;
+    for (size_t i = 0; i < n; i++) {
+        B->order[i] = ki[i].idx;
+        runs += i == 0 || ki[i].key != ki[i - 1].key;
+    }
+    size_t cap = 16;
+    while (cap < 2 * runs)
+        cap *= 2;
+    B->mask = cap - 1;
+    B->keys = malloc(cap * sizeof *B->keys);
+    B->start = malloc(cap * sizeof *B->start);
+    B->len = malloc(cap * sizeof *B->len);
+    if (!B->keys || !B->start || !B->len) {
+        free(ki);
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu cells", runs);
+    }
+    memset(B->keys, 0xff, cap * sizeof *B->keys);
+    for (size_t i = 0, s = 0; i <= n; i++)
+        if (i == n || ki[i].key != ki[s].key) {
+            bins_insert(B, ki[s].key, (uint32_t)s, (uint32_t)(i - s));
+            s = i;
+        }
+    free(ki);
+    return HV_OK;
+}
+
+/* The points of the cells at Chebyshev distance r from cell q, one by one:
+ * ring_first, then ring_next until it returns 0. */
+typedef struct ring_iter {
+    long q[3], r, d[3];
+    uint32_t s, len, m;
+} ring_iter;
+
+/* Steps d through the cube [-r, r]^3, x fastest; 0 past its end. */
+static int cube_step(long d[3], long r)
+{
+    for (int a = 0; a < 3; a++) {
+        if (d[a] < r) {
+            d[a]++;
+            return 1;
+        }
+        d[a] = -r;
+    }
+    return 0;
+}
+
+/* Loads the next cell of the ring that has points; 0 when none is left. */
+static int ring_cell(const pt_bins *B, ring_iter *it)
+{
+    do {
+        if (!cube_step(it->d, it->r))
+            return 0;
+        if (labs(it->d[0]) != it->r && labs(it->d[1]) != it->r && labs(it->d[2]) != it->r)
+            continue;
+        it->m = 0;
+    } while (!bins_find(B, cell_key(it->q[0] + it->d[0], it->q[1] + it->d[1], it->q[2] + it->d[2]),
+                        &it->s, &it->len));
+    return 1;
+}
+
+static void ring_first(ring_iter *it, const long q[3], long r)
+{
+    memcpy(it->q, q, sizeof it->q);
+    it->r = r;
+    it->d[0] = -r - 1; /* cube_step's first step lands on (-r, -r, -r) */
+    it->d[1] = it->d[2] = -r;
+    it->len = it->m = 0;
+}
+
+static int ring_next(const pt_bins *B, ring_iter *it, uint32_t *j)
+{
+    while (it->m >= it->len)
+        if (!ring_cell(B, it))
+            return 0;
+    *j = B->order[it->s + it->m++];
+    return 1;
+}
+
+static double dist2(const double *a, const double *b)
+{
+    double d0 = a[0] - b[0], d1 = a[1] - b[1], d2 = a[2] - b[2];
+    return d0 * d0 + d1 * d1 + d2 * d2;
+}
+
+/* Keeps the k smallest values of d2 in best (ascending), *m of them. */
+static void keep_smallest(double *best, int *m, double d2)
+{
+    if (*m == PTS_K && d2 >= best[PTS_K - 1])
+        return;
+    int i = *m < PTS_K ? (*m)++ : PTS_K - 1;
+    while (i > 0 && best[i - 1] > d2) {
+        best[i] = best[i - 1];
+        i--;
+    }
+    best[i] = d2;
+}
+
+/* The area point i stands for: pi d^2 / k, d its distance to the k-th
+ * nearest neighbour (rings out until that is certain, or PTS_RINGS). */
+static double point_area(const pt_bins *B, const hv_points *P, size_t i)
+{
+    const double *x = P->xyz + 3 * i;
+    long q[3];
+    cell_of(B, x, q);
+    double best[PTS_K];
+    int m = 0;
+    for (long r = 0; r <= PTS_RINGS; r++) {
+        ring_iter it;
+        uint32_t j;
+        ring_first(&it, q, r);
+        while (ring_next(B, &it, &j))
+            if (j != i)
+                keep_smallest(best, &m, dist2(x, P->xyz + 3 * (size_t)j));
+        if (m == PTS_K && best[PTS_K - 1] <= (double)(r * r) * B->c * B->c)
+            break;
+    }
+    if (m == PTS_K)
+        return M_PI * best[PTS_K - 1] / PTS_K;
+    const double reach = PTS_RINGS * B->c;
+    return M_PI * reach * reach / (m + 1);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* 1. The areas, and the spacings they give (sqrt of the area) into R. */
+static hv_status points_spacing(const pt_bins *B, const hv_points *P, double *area,
+                                hv_points_report *R)
+{
+    const size_t n = P->count;
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (size_t i = 0; i < n; i++)
+        area[i] = point_area(B, P, i);
+    double *s = malloc(n * sizeof *s);
+    if (!s)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu spacings", n);
+    for (size_t i = 0; i < n; i++)
+        s[i] = sqrt(area[i]);
+    qsort(s, n, sizeof *s, cmp_double);
+    R->spacing_min = s[0];
+    R->spacing_median = s[n / 2];
+    R->spacing_max = s[n - 1];
+    free(s);
+    return HV_OK;
+}
+
+/* The block hv_sdf_compute would place around the points' bounds, and the
+ * heat method's grid on it (f times coarser). */
+static hv_status points_grid(const hv_points *P, const hv_sdf_opts *o, hv_grid **gh,
+                             hv_points_report *R)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < P->count; i++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fmin(lo[a], P->xyz[3 * i + a]);
+            hi[a] = fmax(hi[a], P->xyz[3 * i + a]);
+        }
+    int n[3];
+    double h, origin[3];
+    hv_status st = hv__sdf_grid_place(o, lo, hi, n, &h, origin);
+    if (st)
+        return st;
+    const int f = hv__sdf_heat_factor(o, n);
+    for (int a = 0; a < 3; a++)
+        R->n[a] = (n[a] + f - 1) / f;
+    R->h = f * h;
+    if ((st = hv_check_dims(3, R->n, R->h, 80)))
+        return st;
+    return hv_grid_create(gh, 3, R->n, R->h, origin);
+}
+
+/* 2. Stages 2-6 of the signed heat method with the points as the surface
+ * samples: vector area a_i n_i at p_i. phi into gh. */
+static hv_status points_heat(const hv_points *P, const double *area, const hv_sdf_opts *o,
+                             hv_grid *gh, hv_points_report *R)
+{
+    const size_t n = P->count;
+    hv_quad q = {n, P->xyz, malloc(3 * n * sizeof(double)), (double *)area};
+    if (!q.w)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu vector areas", n);
+    for (size_t i = 0; i < 3 * n; i++)
+        q.w[i] = area[i / 3] * P->normals[i];
+    hv_sdf_opts ho = *o;
+    ho.diffuse_tol = 1e-6;
+    ho.poisson_tol = 1e-6;
+    ho.local_shift = 1;
+    ho.backend = hv_backend_resolve(o->backend, hv_grid_count(gh), 0);
+    hv_sdf_stats *S = &R->heat;
+    memset(S, 0, sizeof *S);
+    memcpy(S->n, gh->n, sizeof S->n);
+    S->h = gh->h;
+    memcpy(S->origin, gh->origin, sizeof S->origin);
+    const double width = o->t_scale * fmax(gh->h, R->spacing_median);
+    S->t = width * width;
+    S->levels = 1;
+    S->surface_samples = n;
+    hv_status st = hv__sdf_heat(&q, gh, 1, 0, &ho, S);
+    free(q.w);
+    return st;
+}
+
+/* phi at x, trilinear. */
+static double sample(const hv_grid *g, const double x[3])
+{
+    size_t c0, step[3];
+    double wt[8], val = 0;
+    hv__trilinear(g, x, &c0, step, wt);
+    for (int q = 0; q < 8; q++)
+        val += wt[q] *
+               g->v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
+    return val;
+}
+
+/* The gradient of phi (trilinear) at x, by central differences half a
+ * voxel apart. */
+static void phi_gradient(const hv_grid *g, const double x[3], double grad[3])
+{
+    const double e = 0.5 * g->h;
+    for (int a = 0; a < 3; a++) {
+        double xp[3] = {x[0], x[1], x[2]}, xm[3] = {x[0], x[1], x[2]};
+        xp[a] += e;
+        xm[a] -= e;
+        grad[a] = (sample(g, xp) - sample(g, xm)) / (2 * e);
+    }
+}
+
+/* Each point's normal turned to face out of phi's inside (into nrm), and
+ * how many had to be turned. */
+static void points_orient(const hv_points *P, const double *area, const hv_grid *gh, double *nrm,
+                          hv_points_report *R)
+{
+    size_t against = 0;
+    double a_against = 0, a_all = 0;
+#pragma omp parallel for schedule(static) reduction(+ : against, a_against, a_all)
+    for (size_t i = 0; i < P->count; i++) {
+        double g[3];
+        phi_gradient(gh, P->xyz + 3 * i, g);
+        const double *m = P->normals + 3 * i;
+        const int flip = m[0] * g[0] + m[1] * g[1] + m[2] * g[2] < 0;
+        for (int a = 0; a < 3; a++)
+            nrm[3 * i + a] = flip ? -m[a] : m[a];
+        against += (size_t)flip;
+        a_against += flip ? area[i] : 0;
+        a_all += area[i];
+    }
+    R->normals_against = against;
+    R->normal_agreement = a_all > 0 ? 1 - a_against / a_all : 0;
+}
+
+/* How far along u (unit) vertex v moves onto the points near it: the
+ * weighted mean of (p - v) . u over the points within 2 sigma that face
+ * u's way, Gaussian weights times their areas. NAN where none does. */
+static double vertex_offset(const pt_bins *B, const hv_points *P, const double *area,
+                            const double *nrm, const double v[3], const double u[3], double sigma)
+{
+    long q[3];
+    cell_of(B, v, q);
+    const long rings = (long)ceil(2 * sigma / B->c);
+    const double reach2 = 4 * sigma * sigma, inv2 = 1 / (sigma * sigma);
+    double num = 0, den = 0;
+    for (long r = 0; r <= rings; r++) {
+        ring_iter it;
+        uint32_t j;
+        ring_first(&it, q, r);
+        while (ring_next(B, &it, &j)) {
+            const double *p = P->xyz + 3 * (size_t)j, *m = nrm + 3 * (size_t)j;
+            const double d2 = dist2(p, v);
+            if (d2 > reach2 || m[0] * u[0] + m[1] * u[1] + m[2] * u[2] < PTS_FACING)
+                continue;
+            const double w = area[j] * exp(-d2 * inv2);
+            num += w * ((p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2]);
+            den += w;
+        }
+    }
+    return den > 0 ? num / den : NAN;
+}
+
+/* 4. The surface's vertices moved along phi's gradient onto the points'
+ * local plane, at most one heat voxel. */
+static void points_project(const pt_bins *B, const hv_points *P, const double *area,
+                           const double *nrm, const hv_grid *gh, hv_mesh *M, hv_points_report *R)
+{
+    const double sigma = fmax(gh->h, R->spacing_median);
+    size_t lonely = 0;
+    double sum = 0, mx = 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : lonely, sum) reduction(max : mx)
+    for (size_t i = 0; i < M->nverts; i++) {
+        double *v = M->verts + 3 * i, g[3];
+        phi_gradient(gh, v, g);
+        const double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        double d = len > 0 ? vertex_offset(B, P, area, nrm, v,
+                                           (const double[3]){g[0] / len, g[1] / len, g[2] / len},
+                                           sigma)
+                           : NAN;
+        if (isnan(d)) {
+            lonely++;
+            continue;
+        }
+        d = fmax(-gh->h, fmin(gh->h, d));
+        for (int a = 0; a < 3; a++)
+            v[a] += d * g[a] / len;
+        sum += fabs(d) / gh->h;
+        mx = fmax(mx, fabs(d) / gh->h);
+    }
+    R->vertices = M->nverts;
+    R->vertices_unsupported = lonely;
+    R->move_mean = M->nverts > lonely ? sum / (double)(M->nverts - lonely) : 0;
+    R->move_max = mx;
+}
+
+/* The cloud's checks: points, finite values (hv_points_read and
+ * hv_points_from_arrays make sure of them; a caller's own struct may not). */
+static hv_status points_check(const hv_points *P)
+{
+    if (!P || P->count == 0 || !P->xyz || !P->normals)
+        return hv__error(HV_ERR_INVALID_ARG, "points: the cloud is empty (%zu points)",
+                         P ? P->count : 0);
+    if (P->count > UINT32_MAX)
+        return hv__error(HV_ERR_INVALID_ARG, "points: %zu points, more than %u", P->count,
+                         UINT32_MAX);
+    for (size_t i = 0; i < 3 * P->count; i++)
+        if (!isfinite(P->xyz[i]) || !isfinite(P->normals[i]))
+            return hv__error(HV_ERR_NUMERIC, "points: point %zu has a NaN or Inf value", i / 3 + 1);
+    return HV_OK;
+}
+
+typedef struct pts_work {
+    pt_bins B;
+    double *area, *nrm;
+    hv_grid *gh;
+    hv_mesh *M;
+} pts_work;
+
+static void pts_work_free(pts_work *w)
+{
+    bins_free(&w->B);
+    free(w->area);
+    free(w->nrm);
+    hv_grid_destroy(&w->gh);
+    hv_mesh_destroy(&w->M);
+}
+
+/* 3. The zero set of phi as a closed mesh. */
+static hv_status points_mesh(const hv_grid *gh, hv_mesh **M)
+{
+    hv_status st = hv_grid_to_mesh(gh, 0.0, 0.0, M);
+    if (st == HV_ERR_INVALID_ARG && !*M)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "points: the heat method found no inside (the normals do not enclose a "
+                         "volume in the block)");
+    return st;
+}
+
+static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *w,
+                            hv_points_report *R)
+{
+    hv_status st;
+    double tt = hv_now();
+    if ((st = points_grid(P, o, &w->gh, R)) ||
+        (st = bins_build(&w->B, P, w->gh->origin, w->gh->h)))
+        return st;
+    w->area = malloc(P->count * sizeof *w->area);
+    w->nrm = malloc(3 * P->count * sizeof *w->nrm);
+    if (!w->area || !w->nrm)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu points", P->count);
+    if ((st = points_spacing(&w->B, P, w->area, R)))
+        return st;
+    R->t_spacing = hv_now() - tt;
+    tt = hv_now();
+    if ((st = points_heat(P, w->area, o, w->gh, R)))
+        return st;
+    R->t_heat = hv_now() - tt;
+    tt = hv_now();
+    points_orient(P, w->area, w->gh, w->nrm, R);
+    if ((st = points_mesh(w->gh, &w->M)))
+        return st;
+    R->t_mesh = hv_now() - tt;
+    tt = hv_now();
+    points_project(&w->B, P, w->area, w->nrm, w->gh, w->M, R);
+    R->t_project = hv_now() - tt;
+    return HV_OK;
+}
+
+hv_status hv_points_surface(const hv_points *P, const hv_sdf_opts *opts, hv_mesh **out,
+                            hv_points_report *report)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_points_surface: out is NULL");
+    *out = NULL;
+    hv_sdf_opts o;
+    if (opts)
+        o = *opts;
+    else
+        hv_sdf_opts_default(&o);
+    hv_points_report R;
+    memset(&R, 0, sizeof R);
+    pts_work w;
+    memset(&w, 0, sizeof w);
+    hv_status st = hv__sdf_check_opts(&o);
+    if (!st)
+        st = points_check(P);
+    if (!st && o.threads > 0)
+        hv_set_threads(o.threads);
+    const double t0 = hv_now();
+    if (!st) {
+        R.points = P->count;
+        st = points_run(P, &o, &w, &R);
+    }
+    R.t_total = hv_now() - t0;
+    if (!st) {
+        *out = w.M;
+        w.M = NULL;
+    }
+    pts_work_free(&w);
+    if (report)
+        *report = R;
+    return st;
+}

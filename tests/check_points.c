@@ -1,0 +1,425 @@
+/* Oriented point clouds: the readers (text and PLY, their errors), and the
+ * surface hv_points_surface finds against known truth: points on a sphere
+ * (analytic distance) and on the shared meshes (the intact mesh's solid),
+ * clean and with uneven density, noise, flipped normals and a missing
+ * patch. Errors in voxels of the grid. */
+#include "heatvox/heatvox.h"
+#include "testlib.h"
+
+#include <check.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static char dir[64];
+
+static void setup(void)
+{
+    snprintf(dir, sizeof dir, "/tmp/hv_points_XXXXXX");
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+}
+
+static void teardown(void) { tl_rm_rf(dir); }
+
+static const char *write_file(const char *name, const char *text, size_t len)
+{
+    static char path[128];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "wb");
+    ck_assert_ptr_nonnull(f);
+    ck_assert_uint_eq(fwrite(text, 1, len, f), len);
+    fclose(f);
+    return path;
+}
+
+/* Reads path expecting failure with status want and a message containing
+ * each of the NULL-terminated words. */
+static void expect_error(const char *path, hv_status want, const char *const *words)
+{
+    hv_points *P = NULL;
+    hv_status st = hv_points_read(path, &P);
+    ck_assert_msg(st == want, "%s: got %s (%s)", path, hv_status_str(st), hv_last_error());
+    ck_assert_ptr_null(P);
+    for (; *words; words++)
+        ck_assert_msg(strstr(hv_last_error(), *words), "'%s' lacks '%s'", hv_last_error(), *words);
+}
+
+START_TEST(text_reader)
+{
+    const char *t = "# a comment\r\n1 2 3 0 0 2\r\n\r\n  4 5 6  -3 0 4 0.5 0.5  # more columns\n";
+    const char *path = write_file("a.xyz", t, strlen(t));
+    ck_assert_int_eq(hv_points_file(path), 1);
+    hv_points *P = NULL;
+    TL_ASSERT_OK(hv_points_read(path, &P));
+    ck_assert_uint_eq(P->count, 2);
+    ck_assert_double_eq(P->xyz[3], 4);
+    ck_assert_double_eq_tol(P->normals[2], 1, 1e-15);
+    ck_assert_double_eq_tol(P->normals[3], -0.6, 1e-15);
+    ck_assert_double_eq_tol(P->normals[5], 0.8, 1e-15);
+    hv_points_destroy(&P);
+    ck_assert_ptr_null(P);
+}
+END_TEST
+
+START_TEST(text_errors)
+{
+    const char *t1 = "0 0 0 1 0 0\n1 2 3\n";
+    expect_error(write_file("u.xyz", t1, strlen(t1)), HV_ERR_INVALID_ARG,
+                 (const char *[]){"u.xyz", "line 2", "unoriented", NULL});
+    const char *t2 = "0 0 0 1 0 0\n\n0 0 x 1 0 0\n";
+    expect_error(write_file("b.xyz", t2, strlen(t2)), HV_ERR_PARSE,
+                 (const char *[]){"b.xyz", "line 3", "column 3", NULL});
+    const char *t3 = "0 0 0 1 0 0\n0 0 0 0 0 0\n";
+    expect_error(write_file("z.xyz", t3, strlen(t3)), HV_ERR_NUMERIC,
+                 (const char *[]){"line 2", "no direction", NULL});
+    const char *t4 = "0 0 nan 1 0 0\n";
+    expect_error(write_file("n.xyz", t4, strlen(t4)), HV_ERR_NUMERIC,
+                 (const char *[]){"line 1", "coordinate z", NULL});
+    const char *t5 = "0 0 0 1 0\n";
+    expect_error(write_file("f.xyz", t5, strlen(t5)), HV_ERR_PARSE,
+                 (const char *[]){"line 1", "5 numbers", NULL});
+    expect_error(write_file("e.xyz", "# nothing\n", 10), HV_ERR_PARSE,
+                 (const char *[]){"no points", NULL});
+    char colours[512] = "";
+    for (int i = 0; i < 10; i++)
+        snprintf(colours + strlen(colours), sizeof colours - strlen(colours),
+                 "%d 0 0 255 %d 0\n", i, 20 * i);
+    expect_error(write_file("c.xyz", colours, strlen(colours)), HV_ERR_INVALID_ARG,
+                 (const char *[]){"colours", NULL});
+}
+END_TEST
+
+static const char ply_head[] = "ply\nformat %s 1.0\ncomment points\nelement vertex 2\n"
+                               "property float x\nproperty float y\nproperty float z\n"
+                               "property uchar red\nproperty float nx\nproperty float ny\n"
+                               "property float nz\n%send_header\n";
+
+START_TEST(ply_reader)
+{
+    char text[1024];
+    int n = snprintf(text, sizeof text, ply_head, "ascii", "");
+    n += snprintf(text + n, sizeof text - n, "1 2 3 255 0 0 1\n4 5 6 0 0 -2 0\n");
+    const char *path = write_file("a.ply", text, (size_t)n);
+    ck_assert_int_eq(hv_points_file(path), 1);
+    hv_points *P = NULL;
+    TL_ASSERT_OK(hv_points_read(path, &P));
+    ck_assert_uint_eq(P->count, 2);
+    ck_assert_double_eq(P->xyz[5], 6);
+    ck_assert_double_eq(P->normals[4], -1);
+    hv_points_destroy(&P);
+    /* Binary little endian: records of 3 floats, a byte, 3 floats. */
+    n = snprintf(text, sizeof text, ply_head, "binary_little_endian", "");
+    const float rec[2][7] = {{1, 2, 3, 0, 0, 0, 1}, {4, 5, 6, 0, 0, 3, 0}};
+    for (int r = 0; r < 2; r++) {
+        memcpy(text + n, rec[r], 12);
+        text[n + 12] = 7;
+        memcpy(text + n + 13, rec[r] + 4, 12);
+        n += 25;
+    }
+    path = write_file("b.ply", text, (size_t)n);
+    TL_ASSERT_OK(hv_points_read(path, &P));
+    ck_assert_double_eq(P->xyz[3], 4);
+    ck_assert_double_eq(P->normals[4], 1);
+    hv_points_destroy(&P);
+    /* Faces make it a mesh; no normals make it unoriented. */
+    n = snprintf(text, sizeof text, ply_head, "ascii",
+                 "element face 1\nproperty list uchar int vertex_indices\n");
+    ck_assert_int_eq(hv_points_file(write_file("m.ply", text, (size_t)n)), 0);
+    const char *bare = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+                       "property float y\nproperty float z\nend_header\n0 0 0\n";
+    expect_error(write_file("u.ply", bare, strlen(bare)), HV_ERR_INVALID_ARG,
+                 (const char *[]){"u.ply", "line 3", "unoriented", NULL});
+}
+END_TEST
+
+/* ---- surfaces against known truth ---- */
+
+static double rnd(uint64_t *s) { return tl_rand(s) + 0.5; }
+
+static double gauss(uint64_t *s)
+{
+    double u = rnd(s), v = rnd(s);
+    return sqrt(-2 * log(u + 1e-300)) * cos(2 * M_PI * v);
+}
+
+/* How a cloud departs from clean, uniform samples of the surface. */
+typedef struct defects {
+    double noise;  /* Gaussian offset along the normal, voxels (sd) */
+    double flip;   /* fraction of normals turned around */
+    int uneven;    /* density 10:1 from low x to high x */
+    double hole;   /* radius of a missing patch around the first vertex, in
+                      units of the bounding box's width (0: none) */
+} defects;
+
+static void add_point(double *xyz, double *nrm, size_t i, const double p[3], const double n[3],
+                      double off, int flip)
+{
+    for (int a = 0; a < 3; a++) {
+        xyz[3 * i + a] = p[a] + off * n[a];
+        nrm[3 * i + a] = flip ? -n[a] : n[a];
+    }
+}
+
+/* A point uniform on triangle t of m, its unit normal, and its area. */
+static double on_triangle(const hv_mesh *m, size_t t, uint64_t *s, double p[3], double n[3])
+{
+    const double *a = m->verts + 3 * (size_t)m->tris[3 * t], *b = m->verts + 3 * (size_t)m->tris[3 * t + 1],
+                 *c = m->verts + 3 * (size_t)m->tris[3 * t + 2];
+    double r1 = sqrt(rnd(s)), r2 = rnd(s), u[3], v[3];
+    for (int k = 0; k < 3; k++) {
+        p[k] = (1 - r1) * a[k] + r1 * (1 - r2) * b[k] + r1 * r2 * c[k];
+        u[k] = b[k] - a[k];
+        v[k] = c[k] - a[k];
+    }
+    n[0] = u[1] * v[2] - u[2] * v[1];
+    n[1] = u[2] * v[0] - u[0] * v[2];
+    n[2] = u[0] * v[1] - u[1] * v[0];
+    double l = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int k = 0; k < 3; k++)
+        n[k] = l > 0 ? n[k] / l : 0;
+    return 0.5 * l;
+}
+
+/* count points sampled from m's surface with defects D; h: the voxel. */
+static hv_points *sample(const hv_mesh *m, size_t count, const defects *D, double h, uint64_t seed)
+{
+    double *cdf = malloc(m->ntris * sizeof *cdf), A = 0, p[3], n[3], lo[3], hi[3];
+    uint64_t s = seed;
+    for (size_t t = 0; t < m->ntris; t++)
+        cdf[t] = A += on_triangle(m, t, &s, p, n);
+    TL_ASSERT_OK(hv_mesh_bounds(m, lo, hi));
+    const double *c = m->verts, R = D->hole * (hi[0] - lo[0]);
+    double *xyz = malloc(3 * count * sizeof *xyz), *nrm = malloc(3 * count * sizeof *nrm);
+    size_t k = 0;
+    while (k < count) {
+        double r = rnd(&s) * A;
+        size_t L = 0, U = m->ntris - 1;
+        while (L < U) {
+            size_t M = (L + U) / 2;
+            if (cdf[M] < r)
+                L = M + 1;
+            else
+                U = M;
+        }
+        on_triangle(m, L, &s, p, n);
+        double d2 = (p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
+                    (p[2] - c[2]) * (p[2] - c[2]);
+        if ((D->uneven && rnd(&s) > 0.1 + 0.9 * (p[0] - lo[0]) / (hi[0] - lo[0])) || d2 < R * R ||
+            n[0] * n[0] + n[1] * n[1] + n[2] * n[2] == 0)
+            continue;
+        add_point(xyz, nrm, k++, p, n, D->noise * h * gauss(&s), rnd(&s) < D->flip);
+    }
+    hv_points *P = NULL;
+    TL_ASSERT_OK(hv_points_from_arrays(&P, xyz, nrm, count));
+    free(cdf);
+    free(xyz);
+    free(nrm);
+    return P;
+}
+
+/* The options of a run at res with the block of g (NULL: placed around the
+ * shape). */
+static hv_sdf_opts opts_on(int res, const hv_grid *g)
+{
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = res;
+    if (g) {
+        o.use_bbox = 1;
+        o.voxel_size = g->h;
+        o.round_to = 1;
+        for (int a = 0; a < 3; a++) {
+            o.bbox[a] = g->origin[a];
+            o.bbox[3 + a] = g->origin[a] + g->n[a] * g->h;
+        }
+    }
+    return o;
+}
+
+static double sample_grid(const hv_grid *g, const double x[3])
+{
+    double f[3], v = 0;
+    int i0[3];
+    for (int a = 0; a < 3; a++) {
+        double t = fmin(fmax((x[a] - g->origin[a]) / g->h - 0.5, 0), g->n[a] - 1.000001);
+        i0[a] = (int)t;
+        f[a] = t - i0[a];
+    }
+    for (int q = 0; q < 8; q++) {
+        int i = i0[0] + (q & 1), j = i0[1] + (q >> 1 & 1), k = i0[2] + (q >> 2 & 1);
+        v += (q & 1 ? f[0] : 1 - f[0]) * (q & 2 ? f[1] : 1 - f[1]) * (q & 4 ? f[2] : 1 - f[2]) *
+             g->v[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)];
+    }
+    return v;
+}
+
+/* Mean (area-weighted, at triangle centroids) and largest distance of S to
+ * the zero set of the signed distance truth, voxels. */
+static void surface_error(const hv_mesh *S, const hv_grid *truth, double *mean, double *max)
+{
+    double sum = 0, area = 0, mx = 0, p[3], n[3];
+    uint64_t s = 1;
+    for (size_t t = 0; t < S->ntris; t++) {
+        double a = on_triangle(S, t, &s, p, n);
+        double d = fabs(sample_grid(truth, p)) / truth->h;
+        sum += a * d;
+        area += a;
+        mx = fmax(mx, d);
+    }
+    *mean = sum / area;
+    *max = mx;
+}
+
+/* Inside-IoU of the cells where a and b are negative. */
+static double iou(const hv_grid *a, const hv_grid *b)
+{
+    size_t I = 0, U = 0;
+    for (size_t c = 0; c < hv_grid_count(a); c++) {
+        int x = a->v[c] < 0, y = b->v[c] < 0;
+        I += x && y;
+        U += x || y;
+    }
+    return (double)I / (double)U;
+}
+
+/* The surface of P and its signed distance on truth's block: IoU and
+ * surface error against truth. */
+static void score(const hv_points *P, const hv_grid *truth, double *j, double *mean, double *max,
+                  hv_points_report *R)
+{
+    hv_sdf_opts o = opts_on(0, truth);
+    hv_mesh *S = NULL;
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_points_surface(P, &o, &S, R));
+    TL_ASSERT_OK(hv_sdf_compute(S, &o, &g, NULL));
+    ck_assert_int_eq(g->n[0], truth->n[0]);
+    *j = iou(g, truth);
+    surface_error(S, truth, mean, max);
+    hv_mesh_destroy(&S);
+    hv_grid_destroy(&g);
+}
+
+/* The analytic signed distance of the sphere |x| = r on a block n^3 over
+ * [-L, L]^3. */
+static hv_grid *sphere_truth(int n, double L, double r)
+{
+    hv_grid *g = NULL;
+    const int dims[3] = {n, n, n};
+    const double org[3] = {-L, -L, -L};
+    TL_ASSERT_OK(hv_grid_create(&g, 3, dims, 2 * L / n, org));
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                g->v[i + (size_t)n * (j + (size_t)n * k)] =
+                    (float)(sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - r);
+            }
+    return g;
+}
+
+/* Points on a unit sphere (a fine icosphere, faceting < 1e-3 voxel) at 64^3:
+ * clean and with every defect, the surface within the targets. */
+START_TEST(sphere_defects)
+{
+    static const defects cases[] = {
+        {0, 0, 0, 0}, {0.25, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 0.3}};
+    static const double mean_max[] = {0.05, 0.1, 0.15, 0.05, 0.05, 0.3};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 6));
+    hv_grid *truth = sphere_truth(64, 1.3, 1.0);
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        hv_points *P = sample(m, 40000, &cases[c], truth->h, 7 + c);
+        hv_points_report R;
+        double j, mean, max;
+        score(P, truth, &j, &mean, &max, &R);
+        printf("points: sphere case %zu: IoU %.5f, surface error mean %.3f max %.3f voxels; "
+               "%zu normals turned, agreement %.3f, %zu vertices without points\n",
+               c, j, mean, max, R.normals_against, R.normal_agreement, R.vertices_unsupported);
+        ck_assert_msg(j >= 0.99 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
+                      mean);
+        ck_assert_uint_eq(R.points, 40000);
+        if (cases[c].flip > 0)
+            ck_assert_msg(fabs(R.normals_against - 4000.0) < 300, "%zu turned", R.normals_against);
+        else
+            ck_assert_uint_le(R.normals_against, 40);
+        if (cases[c].hole > 0)
+            ck_assert_uint_gt(R.vertices_unsupported, 0);
+        hv_points_destroy(&P);
+    }
+    hv_grid_destroy(&truth);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+/* Points sampled from the intact bunny (shared meshes) at 128^3: inside-IoU
+ * against its solid and the surface's distance to it. */
+START_TEST(bunny_defects)
+{
+    const char *data = tl_test_data();
+    char path[512];
+    if (!data)
+        TL_SKIP("bunny_defects: no test meshes (HEATVOX_TEST_DATA)");
+    snprintf(path, sizeof path, "%s/stanford-bunny.obj", data);
+    if (access(path, R_OK))
+        TL_SKIP("bunny_defects: %s is absent", path);
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_read(path, &m));
+    hv_sdf_opts o = opts_on(128, NULL);
+    o.sign = HV_SDF_SIGN_WINDING;
+    hv_grid *truth = NULL;
+    TL_ASSERT_OK(hv_sdf_compute(m, &o, &truth, NULL));
+    static const defects cases[] = {{0, 0, 0, 0},   {0, 0, 1, 0},   {0.25, 0, 0, 0},
+                                    {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 0, 0.15}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        hv_points *P = sample(m, 200000, &cases[c], truth->h, 11 + c);
+        hv_points_report R;
+        double j, mean, max;
+        score(P, truth, &j, &mean, &max, &R);
+        printf("points: bunny case %zu: IoU %.5f, surface error mean %.3f max %.3f voxels; "
+               "%zu normals turned; %.2f s\n",
+               c, j, mean, max, R.normals_against, R.t_total);
+        ck_assert_msg(j >= 0.99 && mean <= 0.5, "case %zu: IoU %g, mean error %g", c, j, mean);
+        hv_points_destroy(&P);
+    }
+    hv_grid_destroy(&truth);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+START_TEST(refusals)
+{
+    hv_mesh *S = NULL;
+    ck_assert_int_eq(hv_points_surface(NULL, NULL, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "empty"));
+    hv_points *P = NULL;
+    const double x[3] = {0, 0, 0}, n[3] = {1, 0, 0};
+    TL_ASSERT_OK(hv_points_from_arrays(&P, x, n, 1));
+    /* One point has no extent to place a block around. */
+    ck_assert_int_eq(hv_points_surface(P, NULL, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_null(S);
+    hv_points_destroy(&P);
+    ck_assert_int_eq(hv_points_from_arrays(&P, x, (const double[3]){0, 0, 0}, 1), HV_ERR_NUMERIC);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "point 1"));
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("points");
+    TCase *tc = tcase_create("readers");
+    tcase_add_checked_fixture(tc, setup, teardown);
+    tcase_add_test(tc, text_reader);
+    tcase_add_test(tc, text_errors);
+    tcase_add_test(tc, ply_reader);
+    suite_add_tcase(s, tc);
+    tc = tcase_create("surfaces");
+    tcase_set_timeout(tc, 300);
+    tcase_add_test(tc, sphere_defects);
+    tcase_add_test(tc, bunny_defects);
+    tcase_add_test(tc, refusals);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}
