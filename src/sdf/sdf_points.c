@@ -15,6 +15,7 @@
 #define PTS_RINGS 4      /* cell rings searched around a point */
 #define PTS_KEY_BITS 21  /* per axis in a cell key */
 #define PTS_FACING 0.5   /* cosine above which a point faces a vertex's way */
+#define PTS_HEAT_CELLS ((double)(1 << 22)) /* the heat grid's default bound */
 
 /* Points binned into cubic cells of side c, sorted by cell; a table with
  * open addressing maps a cell's key to its run of points. */
@@ -25,17 +26,6 @@ typedef struct pt_bins {
     uint32_t *start, *len; /* table: each cell's run in order */
     size_t mask;
 } pt_bins;
-
-typedef struct key_idx {
-    uint64_t key;
-    uint32_t idx;
-} key_idx;
-
-static int cmp_key(const void *a, const void *b)
-{
-    const key_idx *x = a, *y = b;
-    return x->key < y->key ? -1 : x->key > y->key ? 1 : x->idx < y->idx ? -1 : x->idx > y->idx;
-}
 
 static uint64_t hash_key(uint64_t k)
 {
@@ -68,14 +58,59 @@ static void bins_free(pt_bins *B)
     free(B->len);
 }
 
-static void bins_insert(pt_bins *B, uint64_t key, uint32_t start, uint32_t len)
+/* The table slot of key: where it is, or the empty one where it goes. */
+static size_t bins_slot(const pt_bins *B, uint64_t key)
 {
     size_t s = hash_key(key) & B->mask;
-    while (B->keys[s] != UINT64_MAX)
+    while (B->keys[s] != UINT64_MAX && B->keys[s] != key)
         s = (s + 1) & B->mask;
-    B->keys[s] = key;
-    B->start[s] = start;
-    B->len[s] = len;
+    return s;
+}
+
+/* Makes the table of B cap slots (a power of two) and moves its cells
+ * over; -1 when out of memory. */
+static int bins_resize(pt_bins *B, size_t cap)
+{
+    pt_bins N = *B;
+    N.mask = cap - 1;
+    N.keys = malloc(cap * sizeof *N.keys);
+    N.len = calloc(cap, sizeof *N.len);
+    if (!N.keys || !N.len) {
+        free(N.keys);
+        free(N.len);
+        return -1;
+    }
+    memset(N.keys, 0xff, cap * sizeof *N.keys);
+    for (size_t t = 0; B->keys && t <= B->mask; t++)
+        if (B->keys[t] != UINT64_MAX) {
+            size_t u = bins_slot(&N, B->keys[t]);
+            N.keys[u] = B->keys[t];
+            N.len[u] = B->len[t];
+        }
+    free(B->keys);
+    free(B->len);
+    *B = N;
+    return 0;
+}
+
+/* Counts the points of each cell (keys[i]: point i's cell) into the
+ * table, growing it to stay at most half full; the number of cells. */
+static size_t bins_count(pt_bins *B, const uint64_t *keys, size_t n)
+{
+    size_t cells = 0;
+    if (bins_resize(B, 1024))
+        return SIZE_MAX;
+    for (size_t i = 0; i < n; i++) {
+        size_t t = bins_slot(B, keys[i]);
+        if (B->keys[t] == UINT64_MAX) {
+            B->keys[t] = keys[i];
+            if (2 * ++cells > B->mask && bins_resize(B, 2 * (B->mask + 1)))
+                return SIZE_MAX;
+            t = bins_slot(B, keys[i]);
+        }
+        B->len[t]++;
+    }
+    return cells;
 }
 
 /* The run of points in cell key: *len points from order + *start. */
@@ -94,48 +129,42 @@ static int bins_find(const pt_bins *B, uint64_t key, uint32_t *start, uint32_t *
     }
 }
 
-static hv_status bins_build(pt_bins *B, const hv_points *P, const double lo[3], double c)
+/* Bins the n points xyz into cells of side c from lo: a counting sort
+ * through the table, so each cell's points stay in input order. */
+static hv_status bins_build(pt_bins *B, const double *xyz, size_t n, const double lo[3], double c,
+                            size_t *cells)
 {
     memset(B, 0, sizeof *B);
     memcpy(B->lo, lo, sizeof B->lo);
     B->c = c;
-    const size_t n = P->count;
-    key_idx *ki = malloc(n * sizeof *ki);
+    uint64_t *keys = malloc(n * sizeof *keys);
     B->order = malloc(n * sizeof *B->order);
-    if (!ki || !B->order) {
-        free(ki);
+    if (!keys || !B->order) {
+        free(keys);
         return hv__error(HV_ERR_NOMEM, "points: out of memory binning %zu points", n);
     }
 #pragma omp parallel for schedule(static)
     for (size_t i = 0; i < n; i++) {
         long q[3];
-        cell_of(B, P->xyz + 3 * i, q);
-        ki[i] = (key_idx){cell_key(q[0], q[1], q[2]), (uint32_t)i};
+        cell_of(B, xyz + 3 * i, q);
+        keys[i] = cell_key(q[0], q[1], q[2]);
     }
-    qsort(ki, n, sizeof *ki, cmp_key);
-    size_t runs = 0;
-    for (size_t i = 0; i < n; i++) {
-        B->order[i] = ki[i].idx;
-        runs += i == 0 || ki[i].key != ki[i - 1].key;
+    *cells = bins_count(B, keys, n);
+    B->start = *cells != SIZE_MAX ? malloc((B->mask + 1) * sizeof *B->start) : NULL;
+    if (!B->start) {
+        free(keys);
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for the cells of %zu points", n);
     }
-    size_t cap = 16;
-    while (cap < 2 * runs)
-        cap *= 2;
-    B->mask = cap - 1;
-    B->keys = malloc(cap * sizeof *B->keys);
-    B->start = malloc(cap * sizeof *B->start);
-    B->len = malloc(cap * sizeof *B->len);
-    if (!B->keys || !B->start || !B->len) {
-        free(ki);
-        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu cells", runs);
+    uint32_t at = 0;
+    for (size_t t = 0; t <= B->mask; t++) {
+        B->start[t] = at;
+        at += B->len[t];
     }
-    memset(B->keys, 0xff, cap * sizeof *B->keys);
-    for (size_t i = 0, s = 0; i <= n; i++)
-        if (i == n || ki[i].key != ki[s].key) {
-            bins_insert(B, ki[s].key, (uint32_t)s, (uint32_t)(i - s));
-            s = i;
-        }
-    free(ki);
+    for (size_t i = 0; i < n; i++) /* start[t] walks to the end of its run */
+        B->order[B->start[bins_slot(B, keys[i])]++] = (uint32_t)i;
+    for (size_t t = 0; t <= B->mask; t++)
+        B->start[t] -= B->len[t];
+    free(keys);
     return HV_OK;
 }
 
@@ -235,10 +264,95 @@ static double point_area(const pt_bins *B, const hv_points *P, size_t i)
     return M_PI * reach * reach / (m + 1);
 }
 
-static int cmp_double(const void *a, const void *b)
+/* The k-th smallest of v[0..n) (v is reordered): Hoare's selection. */
+static double select_kth(double *v, size_t n, size_t k)
 {
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
+    size_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        const double pivot = v[lo + (hi - lo) / 2];
+        size_t i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < pivot)
+                i++;
+            while (v[j] > pivot)
+                j--;
+            if (i <= j) {
+                double t = v[i];
+                v[i] = v[j];
+                v[j] = t;
+                i++;
+                if (j-- == 0)
+                    break;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break;
+    }
+    return v[k];
+}
+
+/* The cell of table slot t. */
+static void slot_cell(const pt_bins *B, size_t t, long q[3])
+{
+    const uint64_t key = B->keys[t], mask = (1u << PTS_KEY_BITS) - 1;
+    q[0] = (long)(key & mask);
+    q[1] = (long)(key >> PTS_KEY_BITS & mask);
+    q[2] = (long)(key >> (2 * PTS_KEY_BITS));
+}
+
+/* The points of the cells within `rings` rings around cell q into *buf
+ * (grown as needed); their number, SIZE_MAX when out of memory. */
+static size_t gather_block(const pt_bins *B, const long q[3], long rings, uint32_t **buf,
+                           size_t *cap)
+{
+    size_t m = 0;
+    for (long r = 0; r <= rings; r++) {
+        ring_iter it;
+        uint32_t j;
+        ring_first(&it, q, r);
+        while (ring_next(B, &it, &j)) {
+            if (m == *cap) {
+                size_t c = *cap ? 2 * *cap : 256;
+                uint32_t *nb = realloc(*buf, c * sizeof *nb);
+                if (!nb)
+                    return SIZE_MAX;
+                *buf = nb;
+                *cap = c;
+            }
+            (*buf)[m++] = j;
+        }
+    }
+    return m;
+}
+
+/* The areas of the points in the cell of table slot t: the k nearest among
+ * the 27 cells around it where that is certain (the k-th within a cell's
+ * side), else point_area's search. Returns -1 when out of memory. */
+static int cell_areas(const pt_bins *B, const hv_points *P, size_t t, uint32_t **buf,
+                      size_t *cap, double *area)
+{
+    long q[3];
+    slot_cell(B, t, q);
+    size_t m = gather_block(B, q, 1, buf, cap);
+    if (m == SIZE_MAX)
+        return -1;
+    for (uint32_t u = 0; u < B->len[t]; u++) {
+        const uint32_t i = B->order[B->start[t] + u];
+        const double *x = P->xyz + 3 * (size_t)i;
+        double best[PTS_K];
+        int found = 0;
+        for (size_t v = 0; v < m; v++)
+            if ((*buf)[v] != i)
+                keep_smallest(best, &found, dist2(x, P->xyz + 3 * (size_t)(*buf)[v]));
+        area[i] = found == PTS_K && best[PTS_K - 1] <= B->c * B->c
+                      ? M_PI * best[PTS_K - 1] / PTS_K
+                      : point_area(B, P, i);
+    }
+    return 0;
 }
 
 /* 1. The areas, and the spacings they give (sqrt of the area) into R. */
@@ -246,24 +360,40 @@ static hv_status points_spacing(const pt_bins *B, const hv_points *P, double *ar
                                 hv_points_report *R)
 {
     const size_t n = P->count;
-#pragma omp parallel for schedule(dynamic, 1024)
-    for (size_t i = 0; i < n; i++)
-        area[i] = point_area(B, P, i);
+    int failed = 0;
+#pragma omp parallel reduction(| : failed)
+    {
+        uint32_t *buf = NULL;
+        size_t cap = 0;
+#pragma omp for schedule(dynamic, 64)
+        for (size_t t = 0; t <= B->mask; t++)
+            if (B->keys[t] != UINT64_MAX && !failed)
+                failed |= cell_areas(B, P, t, &buf, &cap, area) != 0;
+        free(buf);
+    }
+    if (failed)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for the neighbour search");
     double *s = malloc(n * sizeof *s);
     if (!s)
         return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu spacings", n);
-    for (size_t i = 0; i < n; i++)
+    R->spacing_min = INFINITY;
+    R->spacing_max = 0;
+    for (size_t i = 0; i < n; i++) {
         s[i] = sqrt(area[i]);
-    qsort(s, n, sizeof *s, cmp_double);
-    R->spacing_min = s[0];
-    R->spacing_median = s[n / 2];
-    R->spacing_max = s[n - 1];
+        R->spacing_min = fmin(R->spacing_min, s[i]);
+        R->spacing_max = fmax(R->spacing_max, s[i]);
+    }
+    R->spacing_median = select_kth(s, n, n / 2);
     free(s);
     return HV_OK;
 }
 
-/* The block hv_sdf_compute would place around the points' bounds, and the
- * heat method's grid on it (f times coarser). */
+/* The heat method's grid: f times coarser than the block hv_sdf_compute
+ * would place around the points' bounds, with cell counts that are
+ * multiples of 8 (fast for FFTW and multigrid alike), centred on it. The
+ * surface only needs it to find the inside and the surface near each point
+ * (the projection does the rest), so by default f keeps it under
+ * PTS_HEAT_CELLS. */
 static hv_status points_grid(const hv_points *P, const hv_sdf_opts *o, hv_grid **gh,
                              hv_points_report *R)
 {
@@ -278,13 +408,20 @@ static hv_status points_grid(const hv_points *P, const hv_sdf_opts *o, hv_grid *
     hv_status st = hv__sdf_grid_place(o, lo, hi, n, &h, origin);
     if (st)
         return st;
-    const int f = hv__sdf_heat_factor(o, n);
-    for (int a = 0; a < 3; a++)
-        R->n[a] = (n[a] + f - 1) / f;
+    const double cells = (double)n[0] * n[1] * n[2];
+    int f = o->heat_coarsen;
+    if (f == 0)
+        f = (int)fmin(4, fmax(1, ceil(cbrt(cells / PTS_HEAT_CELLS) - 1e-9)));
     R->h = f * h;
+    double org[3];
+    for (int a = 0; a < 3; a++) {
+        int m = (n[a] + f - 1) / f;
+        R->n[a] = m >= 16 ? (m + 7) / 8 * 8 : m;
+        org[a] = origin[a] + 0.5 * (n[a] * h - R->n[a] * R->h);
+    }
     if ((st = hv_check_dims(3, R->n, R->h, 80)))
         return st;
-    return hv_grid_create(gh, 3, R->n, R->h, origin);
+    return hv_grid_create(gh, 3, R->n, R->h, org);
 }
 
 /* 2. Stages 2-6 of the signed heat method with the points as the surface
@@ -366,64 +503,93 @@ static void points_orient(const hv_points *P, const double *area, const hv_grid 
 }
 
 /* How far along u (unit) vertex v moves onto the points near it: the
- * weighted mean of (p - v) . u over the points within 2 sigma that face
- * u's way, Gaussian weights times their areas. NAN where none does. */
-static double vertex_offset(const pt_bins *B, const hv_points *P, const double *area,
-                            const double *nrm, const double v[3], const double u[3], double sigma)
+ * weighted mean of (p - v) . u over the candidates cand[0..m) within 2
+ * sigma that face u's way, Gaussian weights times their areas. NAN where
+ * none does. */
+static double vertex_offset(const hv_points *P, const double *area, const double *nrm,
+                            const uint32_t *cand, size_t m, const double v[3], const double u[3],
+                            double sigma)
 {
-    long q[3];
-    cell_of(B, v, q);
-    const long rings = (long)ceil(2 * sigma / B->c);
     const double reach2 = 4 * sigma * sigma, inv2 = 1 / (sigma * sigma);
     double num = 0, den = 0;
-    for (long r = 0; r <= rings; r++) {
-        ring_iter it;
-        uint32_t j;
-        ring_first(&it, q, r);
-        while (ring_next(B, &it, &j)) {
-            const double *p = P->xyz + 3 * (size_t)j, *m = nrm + 3 * (size_t)j;
-            const double d2 = dist2(p, v);
-            if (d2 > reach2 || m[0] * u[0] + m[1] * u[1] + m[2] * u[2] < PTS_FACING)
-                continue;
-            const double w = area[j] * exp(-d2 * inv2);
-            num += w * ((p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2]);
-            den += w;
-        }
+    for (size_t c = 0; c < m; c++) {
+        const uint32_t j = cand[c];
+        const double *p = P->xyz + 3 * (size_t)j, *n = nrm + 3 * (size_t)j;
+        const double d2 = dist2(p, v);
+        if (d2 > reach2 || n[0] * u[0] + n[1] * u[1] + n[2] * u[2] < PTS_FACING)
+            continue;
+        const double w = area[j] * exp(-d2 * inv2);
+        num += w * ((p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2]);
+        den += w;
     }
     return den > 0 ? num / den : NAN;
 }
 
-/* 4. The surface's vertices moved along phi's gradient onto the points'
- * local plane, at most one heat voxel. */
-static void points_project(const pt_bins *B, const hv_points *P, const double *area,
-                           const double *nrm, const hv_grid *gh, hv_mesh *M, hv_points_report *R)
+/* Moves vertex v along phi's gradient by its offset (at most one heat
+ * voxel); the distance moved in voxels, NAN where no point supports it. */
+static double move_vertex(const hv_points *P, const double *area, const double *nrm,
+                          const hv_grid *gh, const uint32_t *cand, size_t m, double *v,
+                          double sigma)
 {
-    const double sigma = fmax(gh->h, R->spacing_median);
-    size_t lonely = 0;
+    double g[3];
+    phi_gradient(gh, v, g);
+    const double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+    if (!(len > 0))
+        return NAN;
+    const double u[3] = {g[0] / len, g[1] / len, g[2] / len};
+    double d = vertex_offset(P, area, nrm, cand, m, v, u, sigma);
+    if (isnan(d))
+        return NAN;
+    d = fmax(-gh->h, fmin(gh->h, d));
+    for (int a = 0; a < 3; a++)
+        v[a] += d * u[a];
+    return fabs(d) / gh->h;
+}
+
+/* 4. The surface's vertices moved onto the points' local plane, cell by
+ * cell of B: the points within reach of a cell gathered once for all its
+ * vertices. */
+static hv_status points_project(const pt_bins *B, const hv_points *P, const double *area,
+                                const double *nrm, const hv_grid *gh, hv_mesh *M,
+                                hv_points_report *R)
+{
+    const double sigma = fmax(0.5 * gh->h, 2 * R->spacing_median);
+    const long rings = (long)ceil(2 * sigma / B->c);
+    pt_bins V;
+    size_t cells, lonely = 0;
+    hv_status st = bins_build(&V, M->verts, M->nverts, B->lo, B->c, &cells);
     double sum = 0, mx = 0;
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : lonely, sum) reduction(max : mx)
-    for (size_t i = 0; i < M->nverts; i++) {
-        double *v = M->verts + 3 * i, g[3];
-        phi_gradient(gh, v, g);
-        const double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-        double d = len > 0 ? vertex_offset(B, P, area, nrm, v,
-                                           (const double[3]){g[0] / len, g[1] / len, g[2] / len},
-                                           sigma)
-                           : NAN;
-        if (isnan(d)) {
-            lonely++;
-            continue;
+    int failed = 0;
+#pragma omp parallel if (!st) reduction(+ : lonely, sum) reduction(max : mx) reduction(| : failed)
+    {
+        uint32_t *buf = NULL;
+        size_t cap = 0;
+#pragma omp for schedule(dynamic, 16)
+        for (size_t t = 0; t <= V.mask; t++) {
+            if (st || V.keys[t] == UINT64_MAX || failed)
+                continue;
+            long q[3];
+            slot_cell(&V, t, q);
+            const size_t m = gather_block(B, q, rings, &buf, &cap);
+            failed |= m == SIZE_MAX;
+            for (uint32_t u = 0; u < V.len[t] && !failed; u++) {
+                double *v = M->verts + 3 * (size_t)V.order[V.start[t] + u];
+                double d = move_vertex(P, area, nrm, gh, buf, m, v, sigma);
+                lonely += isnan(d);
+                sum += isnan(d) ? 0 : d;
+                mx = isnan(d) ? mx : fmax(mx, d);
+            }
         }
-        d = fmax(-gh->h, fmin(gh->h, d));
-        for (int a = 0; a < 3; a++)
-            v[a] += d * g[a] / len;
-        sum += fabs(d) / gh->h;
-        mx = fmax(mx, fabs(d) / gh->h);
+        free(buf);
     }
+    bins_free(&V);
+    if (!st && failed)
+        st = hv__error(HV_ERR_NOMEM, "points: out of memory gathering points for the surface");
     R->vertices = M->nverts;
     R->vertices_unsupported = lonely;
     R->move_mean = M->nverts > lonely ? sum / (double)(M->nverts - lonely) : 0;
     R->move_max = mx;
+    return st;
 }
 
 /* The cloud's checks: points, finite values (hv_points_read and
@@ -443,7 +609,8 @@ static hv_status points_check(const hv_points *P)
 }
 
 typedef struct pts_work {
-    pt_bins B;
+    pt_bins B;    /* cells of the heat grid's size */
+    pt_bins near; /* cells of about 1.5 spacings, for the nearest neighbours */
     double *area, *nrm;
     hv_grid *gh;
     hv_mesh *M;
@@ -452,6 +619,7 @@ typedef struct pts_work {
 static void pts_work_free(pts_work *w)
 {
     bins_free(&w->B);
+    bins_free(&w->near);
     free(w->area);
     free(w->nrm);
     hv_grid_destroy(&w->gh);
@@ -474,14 +642,22 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
 {
     hv_status st;
     double tt = hv_now();
+    size_t cells, near_cells;
     if ((st = points_grid(P, o, &w->gh, R)) ||
-        (st = bins_build(&w->B, P, w->gh->origin, w->gh->h)))
+        (st = bins_build(&w->B, P->xyz, P->count, w->gh->origin, w->gh->h, &cells)))
+        return st;
+    /* A surface through `cells` cells of side c holds about cells c^2 of
+     * area: the spacing it gives sizes the cells of the neighbour search,
+     * so that its first ring holds the 6th neighbour and few more. */
+    const double s0 = w->gh->h * sqrt((double)cells / (double)P->count);
+    if ((st = bins_build(&w->near, P->xyz, P->count, w->gh->origin, fmin(w->gh->h, 1.5 * s0),
+                          &near_cells)))
         return st;
     w->area = malloc(P->count * sizeof *w->area);
     w->nrm = malloc(3 * P->count * sizeof *w->nrm);
     if (!w->area || !w->nrm)
         return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu points", P->count);
-    if ((st = points_spacing(&w->B, P, w->area, R)))
+    if ((st = points_spacing(&w->near, P, w->area, R)))
         return st;
     R->t_spacing = hv_now() - tt;
     tt = hv_now();
@@ -494,7 +670,8 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
         return st;
     R->t_mesh = hv_now() - tt;
     tt = hv_now();
-    points_project(&w->B, P, w->area, w->nrm, w->gh, w->M, R);
+    if ((st = points_project(&w->B, P, w->area, w->nrm, w->gh, w->M, R)))
+        return st;
     R->t_project = hv_now() - tt;
     return HV_OK;
 }
