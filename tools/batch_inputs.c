@@ -58,7 +58,7 @@ static int has_ext(const char *path, const char *const *exts)
     return 0;
 }
 
-static const char *const mesh_exts[] = {"obj", "ply", "stl", "off", NULL};
+static const char *const mesh_exts[] = {"obj", "ply", "stl", "off", "xyz", "pts", "xyzn", NULL};
 static const char *const manifest_exts[] = {"txt", "list", NULL};
 
 /* "dir/name.ext" -> "name" */

@@ -513,6 +513,7 @@ typedef struct job {
     hv_tiles *T;
     hv_mesh_report rep;
     hv_sdf_stats stats;
+    hv_points_report points; /* points.points > 0 for a point cloud */
 } job;
 
 /* The zero level set as a mesh beside the volume. */
@@ -578,7 +579,7 @@ static int job_run(job *J)
 {
     J->stage = "read";
     double t = hv_now();
-    hv_status st = hv_mesh_read(J->input, &J->m);
+    hv_status st = cli_read_shape(J->input, &J->o.sdf, &J->m, &J->points);
     J->t_read = hv_now() - t;
     if (st) {
         error_text(st, J->input, J->err, sizeof J->err);
@@ -652,6 +653,19 @@ static void report_repair(batch_buf *b, const job *J)
                   s->active_voxels, cli_sign_name(s->sign));
 }
 
+/* A point cloud's surface: the points, their spacing, the normals turned. */
+static void report_points(batch_buf *b, const job *J)
+{
+    const hv_points_report *p = &J->points;
+    if (!p->points)
+        return;
+    bb_printf(b,
+              ",\"points\":{\"count\":%zu,\"spacing\":%.9g,\"normals_turned\":%zu"
+              ",\"normal_agreement\":%.6f,\"vertices_unsupported\":%zu}",
+              p->points, p->spacing_median, p->normals_against, p->normal_agreement,
+              p->vertices_unsupported);
+}
+
 /* The job's JSON line on stdout (batch --report's format). */
 static void report_line(const job *J)
 {
@@ -688,6 +702,7 @@ static void report_line(const job *J)
     report_defects(&b, J);
     if (J->have_stats)
         report_repair(&b, J);
+    report_points(&b, J);
     bb_printf(&b, "}\n");
     if (b.s)
         fputs(b.s, stdout);

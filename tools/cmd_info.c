@@ -13,7 +13,9 @@ static void help(void)
            "Reads each mesh (OBJ, PLY, STL or OFF; format from the extension, else the\n"
            "content), welds vertices by exact position and prints its defect report:\n"
            "boundary, non-manifold and inconsistently oriented edges, duplicate and\n"
-           "degenerate faces, non-finite vertices, edge-connected components.\n"
+           "degenerate faces, non-finite vertices, edge-connected components. An oriented\n"
+           "point cloud (.xyz .pts .xyzn, or a PLY of points with normals) gets its point\n"
+           "count and bounds.\n"
            "\n"
            "  --json   one JSON object per mesh, one per line, on stdout; a mesh that fails\n"
            "           gives {\"file\": ..., \"error\": ...}\n"
@@ -118,6 +120,62 @@ static void print_text(const char *file, const hv_mesh *m, const hv_mesh_report 
     printf("  verdict             %s\n", verdict);
 }
 
+/* A file that failed: the reason on stderr, and with --json its line. */
+static void report_failure(const char *file, hv_status st, int json)
+{
+    const char *msg = hv_last_error();
+    size_t fl = strlen(file);
+    /* library messages start with the file name already */
+    if (!strncmp(msg, file, fl) && msg[fl] == ':')
+        fprintf(stderr, "heatvox info: %s\n", msg);
+    else
+        fprintf(stderr, "heatvox info: %s: %s%s%s\n", file, hv_status_str(st), *msg ? ": " : "",
+                msg);
+    if (json) {
+        printf("{\"file\":");
+        json_string(file);
+        printf(",\"error\":");
+        json_string(*msg ? msg : hv_status_str(st));
+        printf("}\n");
+    }
+}
+
+/* An oriented point cloud: its points and bounds; 1 when it fails to read. */
+static int info_points(const char *file, int json)
+{
+    hv_points *P = NULL;
+    double t0 = hv_now();
+    hv_status st = hv_points_read(file, &P);
+    double seconds = hv_now() - t0;
+    if (st) {
+        report_failure(file, st, json);
+        return 1;
+    }
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < 3 * P->count; i++) {
+        lo[i % 3] = fmin(lo[i % 3], P->xyz[i]);
+        hi[i % 3] = fmax(hi[i % 3], P->xyz[i]);
+    }
+    if (json) {
+        printf("{\"file\":");
+        json_string(file);
+        printf(",\"format\":");
+        json_string(P->format);
+        printf(",\"points\":%zu,\"oriented\":true,\"bounds\":[[%.17g,%.17g,%.17g],"
+               "[%.17g,%.17g,%.17g]],\"read_seconds\":%.6f}\n",
+               P->count, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], seconds);
+    } else if (cli_verbose >= 0) {
+        printf("%s\n", file);
+        printf("  format              %s (read in %.3f s)\n", P->format, seconds);
+        printf("  points              %zu, each with a normal\n", P->count);
+        printf("  bounds              [%g %g %g] .. [%g %g %g]\n", lo[0], lo[1], lo[2], hi[0],
+               hi[1], hi[2]);
+        printf("  verdict             an oriented point cloud (heatvox sdf takes it)\n");
+    }
+    hv_points_destroy(&P);
+    return 0;
+}
+
 int cmd_info(int argc, char **argv)
 {
     int json = 0, nfiles = 0, failed = 0;
@@ -139,6 +197,13 @@ int cmd_info(int argc, char **argv)
     int first = 1;
     for (int i = 0; i < nfiles; i++) {
         const char *file = files[i];
+        if (hv_points_file(file)) {
+            if (!first && !json && cli_verbose >= 0)
+                putchar('\n');
+            failed |= info_points(file, json);
+            first = 0;
+            continue;
+        }
         hv_mesh *m = NULL;
         hv_mesh_report r;
         double t0 = hv_now();
@@ -147,21 +212,7 @@ int cmd_info(int argc, char **argv)
         if (!st)
             st = hv_mesh_report_compute(m, &r);
         if (st) {
-            const char *msg = hv_last_error();
-            size_t fl = strlen(file);
-            /* library messages start with the file name already */
-            if (!strncmp(msg, file, fl) && msg[fl] == ':')
-                fprintf(stderr, "heatvox info: %s\n", msg);
-            else
-                fprintf(stderr, "heatvox info: %s: %s%s%s\n", file, hv_status_str(st),
-                        *msg ? ": " : "", msg);
-            if (json) {
-                printf("{\"file\":");
-                json_string(file);
-                printf(",\"error\":");
-                json_string(*msg ? msg : hv_status_str(st));
-                printf("}\n");
-            }
+            report_failure(file, st, json);
             hv_mesh_destroy(&m);
             failed = 1;
             continue;

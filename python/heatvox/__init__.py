@@ -4,6 +4,9 @@ A thin layer over libheatvox (ctypes and NumPy only) that computes what the
 ``heatvox`` command does, on arrays:
 
 - ``read_mesh(path) -> (vertices, faces)`` and ``mesh_report(...)``;
+- ``read_points(path) -> (points, normals)`` and ``points_surface(points,
+  normals, res=...) -> (vertices, faces, report)``: oriented point clouds
+  and the closed surface through them;
 - ``sdf(vertices, faces, res=128, ...) -> Grid``: the signed distance of a
   (broken) triangle mesh, bit for bit the command's ``--npy`` output;
 - ``distance(sources, solid, voxel_size, ...) -> Grid``: geodesic distance
@@ -35,6 +38,7 @@ slows solves down on busy machines).
 from ._lib import Error, Status, fn as _fn, path as library_path
 from ._grid import Grid
 from ._mesh import mesh_report, read_mesh
+from ._points import points_surface, read_points
 from ._sdf import sdf, sdf_vdb
 from ._heat import Extender, distance, extend, mask_from_mesh
 from ._solve import SolveInfo, Solver
@@ -42,8 +46,8 @@ from ._solve import SolveInfo, Solver
 __version__ = _fn.hv_version().decode()
 
 # Public names show as heatvox.X in help() and tracebacks.
-for _obj in (Error, Status, Grid, sdf, read_mesh, mesh_report, distance, extend, mask_from_mesh,
-             Extender, Solver, SolveInfo):
+for _obj in (Error, Status, Grid, sdf, read_mesh, mesh_report, read_points, points_surface,
+             distance, extend, mask_from_mesh, Extender, Solver, SolveInfo):
     _obj.__module__ = __name__
 del _obj
 

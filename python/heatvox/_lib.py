@@ -336,6 +336,38 @@ class hv_sdf_stats(Structure):
     ]
 
 
+class hv_points(Structure):
+    _fields_ = [
+        ("count", c_size_t),
+        ("xyz", POINTER(c_double)),
+        ("normals", POINTER(c_double)),
+        ("format", c_char_p),
+    ]
+
+
+class hv_points_report(Structure):
+    _fields_ = [
+        ("points", c_size_t),
+        ("spacing_median", c_double),
+        ("spacing_min", c_double),
+        ("spacing_max", c_double),
+        ("normals_against", c_size_t),
+        ("normal_agreement", c_double),
+        ("vertices", c_size_t),
+        ("vertices_unsupported", c_size_t),
+        ("move_mean", c_double),
+        ("move_max", c_double),
+        ("n", c_int * 3),
+        ("h", c_double),
+        ("heat", hv_sdf_stats),
+        ("t_spacing", c_double),
+        ("t_heat", c_double),
+        ("t_mesh", c_double),
+        ("t_project", c_double),
+        ("t_total", c_double),
+    ]
+
+
 class hv_distance_sources(Structure):
     _fields_ = [
         ("voxels", POINTER(c_int)),
@@ -436,6 +468,8 @@ STRUCTS = [
     hv_sdf_opts,
     hv_sdf_repair_report,
     hv_sdf_stats,
+    hv_points,
+    hv_points_report,
     hv_distance_sources,
     hv_distance_opts,
     hv_distance_stats,
@@ -480,6 +514,10 @@ _PROTOTYPES = {
     "hv_mesh_read": (_status, [c_char_p, _P(_mesh_p)]),
     "hv_mesh_from_arrays": (_status, [_P(_mesh_p), c_void_p, c_size_t, c_void_p, c_size_t]),
     "hv_mesh_destroy": (None, [_P(_mesh_p)]),
+    "hv_points_file": (c_int, [c_char_p]),
+    "hv_points_read": (_status, [c_char_p, _P(_P(hv_points))]),
+    "hv_points_from_arrays": (_status, [_P(_P(hv_points)), c_void_p, c_void_p, c_size_t]),
+    "hv_points_destroy": (None, [_P(_P(hv_points))]),
     "hv_mesh_report_compute": (_status, [_mesh_p, _P(hv_mesh_report)]),
     # io.h
     "hv_write_npy": (_status, [c_char_p, _grid_p]),
@@ -495,6 +533,7 @@ _PROTOTYPES = {
     "hv_solver_destroy": (None, [_P(c_void_p)]),
     # sdf.h
     "hv_sdf_opts_default": (None, [_P(hv_sdf_opts)]),
+    "hv_points_surface": (_status, [_P(hv_points), _P(hv_sdf_opts), _P(_mesh_p), _P(hv_points_report)]),
     "hv_sdf_compute": (_status, [_mesh_p, _P(hv_sdf_opts), _P(_grid_p), _P(hv_sdf_stats)]),
     "hv_sdf_compute_tiles": (
         _status,

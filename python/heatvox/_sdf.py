@@ -24,6 +24,16 @@ from ._lib import (
     struct_dict,
 )
 from ._mesh import c_mesh, read_mesh
+from ._points import is_points_file, read_points, surface_of_points
+
+
+def _shape(path, o):
+    """(vertices, faces) of a mesh file, or of the surface through an oriented
+    point cloud's file (placed with o)."""
+    if is_points_file(path):
+        v, f, _ = surface_of_points(*read_points(path), o)
+        return v, f
+    return read_mesh(path)
 
 def _opts(res, pad, voxel_size, bbox, band, unsigned, backend, heat, t_scale, heat_coarsen, sign,
           repair, domed_caps, threads, more):
@@ -117,7 +127,9 @@ def sdf(
 
     ``sdf(vertices, faces, ...)`` with a float (n, 3) array and an integer
     (m, 3) array (``read_mesh`` gives both), or ``sdf(path, ...)`` to read
-    the mesh file. The options and defaults are the command's, and the
+    the mesh file; a path to an oriented point cloud (see
+    ``read_points``) gets the distance to its surface (``points_surface``),
+    as the command does. The options and defaults are the command's, and the
     result's ``values`` are bit for bit the command's ``--npy`` output for
     the same options:
 
@@ -169,12 +181,12 @@ def sdf(
     and the repair report under "repair"). Raises heatvox.Error (mesh
     file errors name the file), TypeError or ValueError for bad arguments.
     """
-    if faces is None:
-        if not is_path(vertices):
-            raise TypeError("sdf needs (vertices, faces) arrays or a mesh path")
-        vertices, faces = read_mesh(vertices)
+    if faces is None and not is_path(vertices):
+        raise TypeError("sdf needs (vertices, faces) arrays or a mesh path")
     o, band = _opts(res, pad, voxel_size, bbox, band, unsigned, backend, heat, t_scale,
                     heat_coarsen, sign, repair, domed_caps, threads, more)
+    if faces is None:
+        vertices, faces = _shape(vertices, o)
     out = ctypes.POINTER(hv_grid)()
     st = hv_sdf_stats()
     with c_mesh(vertices, faces) as mesh, progress_scope(progress):
@@ -228,14 +240,14 @@ def sdf_vdb(
         faces, path = None, faces
     if path is None:
         raise TypeError("sdf_vdb needs the output path")
-    if faces is None:
-        if not is_path(vertices):
-            raise TypeError("sdf_vdb needs (vertices, faces) arrays or a mesh path")
-        vertices, faces = read_mesh(vertices)
+    if faces is None and not is_path(vertices):
+        raise TypeError("sdf_vdb needs (vertices, faces) arrays or a mesh path")
     if sign == "heat":
         raise ValueError("sdf_vdb's tiles take the winding number's sign; use sdf(sign='heat')")
     o, band = _opts(res, pad, voxel_size, bbox, band, False, "auto", False, 1.0, 0, sign,
                     repair, domed_caps, threads, more)
+    if faces is None:
+        vertices, faces = _shape(vertices, o)
     if not str(name):
         raise ValueError("name must not be empty")
     tiles = ctypes.POINTER(hv_tiles)()

@@ -737,7 +737,7 @@ hv_status hv__points_read_ply(const char *path, const char *buf, size_t len, poi
         if (e->count && min && e->count > (left + 2) / min)
             st = hv__error(HV_ERR_PARSE,
                            "%s: line %zu: element %.*s declares %llu records but only %zu bytes of "
-                           "data remain",
+                           "data remain (the file is truncated, or its header is wrong)",
                            path, e->line, (int)e->namelen, e->name, (unsigned long long)e->count,
                            left);
         else if (name_is(e->name, e->namelen, "vertex")) {
