@@ -70,7 +70,7 @@ START_TEST(text_errors)
                  (const char *[]){"u.xyz", "line 2", "unoriented", NULL});
     const char *t2 = "0 0 0 1 0 0\n\n0 0 x 1 0 0\n";
     expect_error(write_file("b.xyz", t2, strlen(t2)), HV_ERR_PARSE,
-                 (const char *[]){"b.xyz", "line 3", "column 3", NULL});
+                 (const char *[]){"b.xyz", "line 3", "column 3 is not a number (x)", NULL});
     const char *t3 = "0 0 0 1 0 0\n0 0 0 0 0 0\n";
     expect_error(write_file("z.xyz", t3, strlen(t3)), HV_ERR_NUMERIC,
                  (const char *[]){"line 2", "no direction", NULL});

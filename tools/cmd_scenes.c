@@ -24,6 +24,9 @@ static void help(void)
            "  DIR/meshes/torus_soup.obj           torus as a soup (every triangle its own\n"
            "                                      vertices), 10%% flipped\n"
            "  DIR/meshes/truncated.obj            a file cut off mid-face (malformed)\n"
+           "  DIR/points/torus_scan.xyz           a torus scanned as oriented points: uneven\n"
+           "                                      density, noise, 10%% of the normals turned\n"
+           "                                      around, a patch missing\n"
            "  DIR/levelset/sphere_velocity.vdb    sphere level set (radius 1, 64^3) and a\n"
            "                                      rotation about z (grids \"sdf\", \"v\")\n"
            "  DIR/distance/sources.txt            one source point (heatvox distance)\n"
@@ -124,6 +127,60 @@ static int meshes(const char *dir)
         return 1;
     if (cli_verbose >= 0)
         printf("%-40s malformed on purpose\n", path);
+    return rc;
+}
+
+/* Deterministic uniform numbers in [0, 1). */
+static double lcg(uint64_t *s)
+{
+    *s = *s * 6364136223846793005ull + 1442695040888963407ull;
+    return (double)(*s >> 11) / 9007199254740992.0;
+}
+
+/* One point of the scan: uniform by area on the torus (rejection on the
+ * area element), then its defects. 0 when dropped. */
+static int scan_point(uint64_t *s, double R, double r, double out[6])
+{
+    const double u = 2 * M_PI * lcg(s), v = 2 * M_PI * lcg(s);
+    if (lcg(s) * (R + r) > R + r * cos(v))
+        return 0;
+    const double n[3] = {cos(v) * cos(u), cos(v) * sin(u), sin(v)};
+    const double p[3] = {R * cos(u) + r * n[0], R * sin(u) + r * n[1], r * n[2]};
+    /* density 5:1 from -x to +x; a patch of radius 0.3 missing at (R + r, 0, 0) */
+    const double gap = (p[0] - R - r) * (p[0] - R - r) + p[1] * p[1] + p[2] * p[2];
+    if (lcg(s) > 0.2 + 0.8 * (p[0] + R + r) / (2 * (R + r)) || gap < 0.09)
+        return 0;
+    const double noise = 0.004 * (lcg(s) + lcg(s) + lcg(s) - 1.5) * 2;
+    const double sign = lcg(s) < 0.1 ? -1 : 1;
+    for (int a = 0; a < 3; a++) {
+        out[a] = p[a] + noise * n[a];
+        out[3 + a] = sign * n[a];
+    }
+    return 1;
+}
+
+static int points(const char *dir)
+{
+    enum { COUNT = 12000 };
+    char path[1024], *text = malloc((size_t)COUNT * 96 + 128);
+    if (!text)
+        return cli_fail("make-scenes", "torus_scan", HV_ERR_NOMEM);
+    size_t len = (size_t)snprintf(text, 128, "# heatvox make-scenes: a torus (R 1, r 0.35) as "
+                                             "oriented points\n# x y z nx ny nz\n");
+    uint64_t s = 29;
+    for (int k = 0; k < COUNT;) {
+        double q[6];
+        if (!scan_point(&s, 1.0, 0.35, q))
+            continue;
+        len += (size_t)snprintf(text + len, 96, "%.6f %.6f %.6f %.5f %.5f %.5f\n", q[0], q[1], q[2],
+                                q[3], q[4], q[5]);
+        k++;
+    }
+    snprintf(path, sizeof path, "%s/points/torus_scan.xyz", dir);
+    int rc = write_text(path, text);
+    free(text);
+    if (!rc && cli_verbose >= 0)
+        printf("%-40s %d oriented points\n", path, COUNT);
     return rc;
 }
 
@@ -302,6 +359,9 @@ int cmd_make_scenes(int argc, char **argv)
         return HV_EXIT_FAIL;
     snprintf(sub, sizeof sub, "%s/meshes", dir);
     if (make_dir(sub) || meshes(dir))
+        return HV_EXIT_FAIL;
+    snprintf(sub, sizeof sub, "%s/points", dir);
+    if (make_dir(sub) || points(dir))
         return HV_EXIT_FAIL;
     snprintf(sub, sizeof sub, "%s/levelset", dir);
     if (make_dir(sub) || levelset(dir))

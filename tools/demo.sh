@@ -1,6 +1,7 @@
 #!/bin/sh
 # make demo: generates the scenes, then runs the main jobs on them into out/:
-# a batch of broken meshes to VDB level sets with previews, 2D signed distances
+# a batch of broken meshes to VDB level sets with previews, a scanned point
+# cloud to a level set and a closed mesh, 2D signed distances
 # from broken curves to EXR and PNG, slices, geodesic distance around walls and
 # through a building, and a velocity extension. Usage: tools/demo.sh path/to/heatvox
 set -e
@@ -18,6 +19,12 @@ rc=0
 "$hv" batch scenes/batch/meshes.list -o "$out/batch" -j 2 --res 64 --preview \
     --report "$out/batch/report.jsonl" || rc=$?
 [ "$rc" -le 1 ] || exit "$rc"
+
+echo
+echo "== a scanned torus: oriented points to a level set and a closed mesh"
+mkdir -p "$out/points"
+"$hv" sdf scenes/points/torus_scan.xyz -o "$out/points/torus_scan.vdb" \
+    --mesh-out "$out/points/torus_scan.ply" --res 96
 
 echo
 echo "== 2D: signed distance from broken curves (heatvox sdf2d)"
@@ -52,6 +59,7 @@ echo
 echo "done in $(($(date +%s) - t0)) s; results:"
 echo "  $out/batch/*.vdb          level sets (grid \"sdf\"), *.png previews (x, y, z middle slices)"
 echo "  $out/batch/report.jsonl   one JSON line per input: status, errors, grid, seconds per stage"
+echo "  $out/points/              the scanned torus's level set and closed mesh"
 echo "  $out/2d/*.exr, *.png      2D signed distances from scenes/curves/"
 echo "  $out/batch/*_z.png, *_x.exr   slices cut by heatvox slice"
 echo "  $out/distance/*.vdb       geodesic distance (grid \"distance\"), walls_z.png a slice"

@@ -53,8 +53,9 @@ hv_status hv__points_add(points_builder *b, const double p[6], const char *where
 }
 
 /* The numbers on one text line (up to max); -1 on a word that is not one,
- * with its column in *bad. */
-static int line_numbers(const char *s, const char *e, double *v, int max, int *bad)
+ * with its column in *bad and its place in *at. */
+static int line_numbers(const char *s, const char *e, double *v, int max, int *bad,
+                        const char **at)
 {
     int n = 0;
     while (s < e) {
@@ -66,6 +67,7 @@ static int line_numbers(const char *s, const char *e, double *v, int max, int *b
         double d;
         if (hv__mesh_parse_double(s, &t, &d) || (t < e && !mesh_is_space(*t) && *t != '#')) {
             *bad = n + 1;
+            *at = s;
             return -1;
         }
         if (n < max)
@@ -85,12 +87,13 @@ static hv_status read_text(const char *path, const char *buf, size_t len, points
         eol = eol ? eol : end;
         line++;
         double v[6];
-        int bad = 0, n = line_numbers(p, eol, v, 6, &bad);
+        const char *word = p;
+        int bad = 0, n = line_numbers(p, eol, v, 6, &bad, &word);
         char at[48];
         snprintf(at, sizeof at, "line %zu", line);
         if (n < 0)
             st = hv__error(HV_ERR_PARSE, "%s: line %zu: column %d is not a number (%s)", path, line,
-                           bad, hv__mesh_token_preview(p, eol));
+                           bad, hv__mesh_token_preview(word, eol));
         else if (n == 3)
             st = hv__error(HV_ERR_INVALID_ARG,
                            "%s: line %zu: x y z without a normal: an unoriented point cloud; the "
