@@ -320,13 +320,15 @@ static hv_grid *sphere_truth(int n, double L, double r)
     return g;
 }
 
-/* Points on a unit sphere (a fine icosphere, faceting < 1e-3 voxel) at 64^3:
- * clean and with every defect, the surface within the targets. */
+/* Points on a unit sphere (a fine icosphere, faceting < 1e-3 voxel) at 64^3,
+ * 49 voxels across: clean and with every defect. The surface's mean error
+ * is bounded per case; the inside-IoU of so small a sphere moves by 0.012
+ * per 0.1 voxel of error, so it is held to 0.985. */
 START_TEST(sphere_defects)
 {
     static const defects cases[] = {
         {0, 0, 0, 0}, {0.25, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 0.3}};
-    static const double mean_max[] = {0.05, 0.1, 0.15, 0.05, 0.05, 0.3};
+    static const double mean_max[] = {0.01, 0.07, 0.12, 0.01, 0.02, 0.06};
     hv_mesh *m = NULL;
     TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 6));
     hv_grid *truth = sphere_truth(64, 1.3, 1.0);
@@ -338,7 +340,7 @@ START_TEST(sphere_defects)
         printf("points: sphere case %zu: IoU %.5f, surface error mean %.3f max %.3f voxels; "
                "%zu normals turned, agreement %.3f, %zu vertices without points\n",
                c, j, mean, max, R.normals_against, R.normal_agreement, R.vertices_unsupported);
-        ck_assert_msg(j >= 0.99 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
+        ck_assert_msg(j >= 0.985 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
                       mean);
         ck_assert_uint_eq(R.points, 40000);
         if (cases[c].flip > 0)

@@ -244,10 +244,11 @@ HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts,
  *                neighbours in the diffused field
  *   3. surface   phi's zero set as a closed mesh (hv_grid_to_mesh)
  *   4. project   each vertex moved along phi's gradient onto the local plane
- *                of the points within 2 spacings that face the same way
- *                (Gaussian weights, at most one voxel): noise averages out,
- *                and where the cloud has a gap the heat method's surface
- *                stays
+ *                of the points within 2 sigma that face the same way
+ *                (Gaussian weights of width sigma = max(the block's voxel,
+ *                the spacing), corrected for the curvature, at most one
+ *                heat voxel): noise averages out, and where the cloud has
+ *                a gap the heat method's surface stays
  * The result is closed and oriented outward; its signed distance
  * (hv_sdf_compute, hv_sdf_compute_tiles) is the cloud's. */
 typedef struct hv_points_report {
@@ -260,6 +261,7 @@ typedef struct hv_points_report {
     double move_mean, move_max;  /* projection distances, voxels of the heat grid */
     int n[3];                    /* the heat method's grid */
     double h;
+    int coarsen;                 /* it is this many times coarser than the block */
     hv_sdf_stats heat;           /* its stages (t_splat .. t_shift, iterations, backend) */
     double t_spacing, t_heat, t_mesh, t_project, t_total; /* seconds */
 } hv_points_report;

@@ -359,6 +359,7 @@ class hv_points_report(Structure):
         ("move_max", c_double),
         ("n", c_int * 3),
         ("h", c_double),
+        ("coarsen", c_int),
         ("heat", hv_sdf_stats),
         ("t_spacing", c_double),
         ("t_heat", c_double),

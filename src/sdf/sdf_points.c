@@ -413,6 +413,7 @@ static hv_status points_grid(const hv_points *P, const hv_sdf_opts *o, hv_grid *
     if (f == 0)
         f = (int)fmin(4, fmax(1, ceil(cbrt(cells / PTS_HEAT_CELLS) - 1e-9)));
     R->h = f * h;
+    R->coarsen = f;
     double org[3];
     for (int a = 0; a < 3; a++) {
         int m = (n[a] + f - 1) / f;
@@ -504,14 +505,16 @@ static void points_orient(const hv_points *P, const double *area, const hv_grid 
 
 /* How far along u (unit) vertex v moves onto the points near it: the
  * weighted mean of (p - v) . u over the candidates cand[0..m) within 2
- * sigma that face u's way, Gaussian weights times their areas. NAN where
- * none does. */
+ * sigma that face u's way, Gaussian weights times their areas, corrected
+ * for the surface's curvature: on a surface of mean curvature H = div(u)/2
+ * a point at tangential distance r lies H r^2 / 2 below the tangent plane,
+ * so the mean is low by H E[r^2] / 2. NAN where no point faces u's way. */
 static double vertex_offset(const hv_points *P, const double *area, const double *nrm,
                             const uint32_t *cand, size_t m, const double v[3], const double u[3],
-                            double sigma)
+                            double div_u, double sigma)
 {
     const double reach2 = 4 * sigma * sigma, inv2 = 1 / (sigma * sigma);
-    double num = 0, den = 0;
+    double num = 0, den = 0, r2 = 0;
     for (size_t c = 0; c < m; c++) {
         const uint32_t j = cand[c];
         const double *p = P->xyz + 3 * (size_t)j, *n = nrm + 3 * (size_t)j;
@@ -519,25 +522,54 @@ static double vertex_offset(const hv_points *P, const double *area, const double
         if (d2 > reach2 || n[0] * u[0] + n[1] * u[1] + n[2] * u[2] < PTS_FACING)
             continue;
         const double w = area[j] * exp(-d2 * inv2);
-        num += w * ((p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2]);
+        const double z = (p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2];
+        num += w * z;
+        r2 += w * (d2 - z * z);
         den += w;
     }
-    return den > 0 ? num / den : NAN;
+    return den > 0 ? (num + 0.25 * div_u * r2) / den : NAN;
 }
 
-/* Moves vertex v along phi's gradient by its offset (at most one heat
- * voxel); the distance moved in voxels, NAN where no point supports it. */
+/* The unit normal of phi's level set at x (NAN components where phi is
+ * flat). */
+static void unit_normal(const hv_grid *gh, const double x[3], double u[3])
+{
+    phi_gradient(gh, x, u);
+    const double len = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    for (int a = 0; a < 3; a++)
+        u[a] = len > 0 ? u[a] / len : NAN;
+}
+
+/* div(grad phi / |grad phi|) at x: the sum of the principal curvatures of
+ * the level set through x, by central differences two voxels apart. */
+static double normal_divergence(const hv_grid *gh, const double x[3])
+{
+    const double e = gh->h;
+    double div = 0;
+    for (int a = 0; a < 3; a++) {
+        double xp[3] = {x[0], x[1], x[2]}, xm[3] = {x[0], x[1], x[2]}, up[3], um[3];
+        xp[a] += e;
+        xm[a] -= e;
+        unit_normal(gh, xp, up);
+        unit_normal(gh, xm, um);
+        div += (up[a] - um[a]) / (2 * e);
+    }
+    return isfinite(div) ? div : 0;
+}
+
+/* Moves vertex v along phi's normal by its offset (at most one heat voxel);
+ * the distance moved in voxels, NAN where no point supports it. */
 static double move_vertex(const hv_points *P, const double *area, const double *nrm,
                           const hv_grid *gh, const uint32_t *cand, size_t m, double *v,
                           double sigma)
 {
-    double g[3];
-    phi_gradient(gh, v, g);
-    const double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-    if (!(len > 0))
+    double u[3];
+    unit_normal(gh, v, u);
+    if (isnan(u[0]))
         return NAN;
-    const double u[3] = {g[0] / len, g[1] / len, g[2] / len};
-    double d = vertex_offset(P, area, nrm, cand, m, v, u, sigma);
+    /* Curvature above one per voxel is no surface the grid resolves. */
+    const double div_u = fmax(-2 / gh->h, fmin(2 / gh->h, normal_divergence(gh, v)));
+    double d = vertex_offset(P, area, nrm, cand, m, v, u, div_u, sigma);
     if (isnan(d))
         return NAN;
     d = fmax(-gh->h, fmin(gh->h, d));
@@ -553,7 +585,7 @@ static hv_status points_project(const pt_bins *B, const hv_points *P, const doub
                                 const double *nrm, const hv_grid *gh, hv_mesh *M,
                                 hv_points_report *R)
 {
-    const double sigma = fmax(0.5 * gh->h, 2 * R->spacing_median);
+    const double sigma = fmax(gh->h / R->coarsen, R->spacing_median);
     const long rings = (long)ceil(2 * sigma / B->c);
     pt_bins V;
     size_t cells, lonely = 0;
