@@ -408,6 +408,58 @@ START_TEST(refusals)
 }
 END_TEST
 
+/* Writes P as a text cloud at path. */
+static void write_xyz(const char *path, const hv_points *P)
+{
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f, "# x y z nx ny nz\n");
+    for (size_t i = 0; i < P->count; i++) {
+        const double *x = P->xyz + 3 * i, *n = P->normals + 3 * i;
+        fprintf(f, "%.17g %.17g %.17g %.17g %.17g %.17g\n", x[0], x[1], x[2], n[0], n[1], n[2]);
+    }
+    ck_assert_int_eq(fclose(f), 0);
+}
+
+/* heatvox sdf on a cloud: a level set of the sphere read back from the
+ * .vdb; an unoriented cloud fails naming the file and line, writing
+ * nothing. */
+START_TEST(command)
+{
+    const char *bin = tl_heatvox_bin();
+    ck_assert_msg(bin != NULL, "no heatvox command to run");
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 5));
+    const defects clean = {0, 0.1, 0, 0};
+    hv_points *P = sample(m, 20000, &clean, 0.05, 5);
+    char path[128], err[2048];
+    snprintf(path, sizeof path, "%s/s.xyz", dir);
+    write_xyz(path, P);
+    ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf s.xyz -o s.vdb --res 48 -q"), 0);
+    snprintf(path, sizeof path, "%s/s.vdb", dir);
+    hv_grid *g = NULL;
+    int cls = 0;
+    TL_ASSERT_OK(hv_vdb_read_float(path, "sdf", NULL, &g, &cls));
+    ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
+    double worst = 0;
+    for (int a = 0; a < 3; a++) {
+        double x[3] = {0, 0, 0};
+        x[a] = 1; /* on the sphere */
+        worst = fmax(worst, fabs(sample_grid(g, x)) / g->h);
+    }
+    ck_assert_msg(worst < 0.05, "|phi| on the sphere up to %g voxels", worst);
+    ck_assert_double_lt(sample_grid(g, (const double[3]){0, 0, 0}), 0);
+    hv_grid_destroy(&g);
+    write_file("u.xyz", "0 0 0\n1 0 0\n", 12);
+    ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf u.xyz -o u.vdb"), 1);
+    ck_assert_msg(strstr(err, "u.xyz: line 1: x y z without a normal"), "stderr: %s", err);
+    snprintf(path, sizeof path, "%s/u.vdb", dir);
+    ck_assert_int_ne(access(path, F_OK), 0);
+    hv_points_destroy(&P);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("points");
@@ -416,6 +468,7 @@ int main(void)
     tcase_add_test(tc, text_reader);
     tcase_add_test(tc, text_errors);
     tcase_add_test(tc, ply_reader);
+    tcase_add_test(tc, command);
     suite_add_tcase(s, tc);
     tc = tcase_create("surfaces");
     tcase_set_timeout(tc, 300);
