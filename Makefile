@@ -188,6 +188,12 @@ $(BUILD)/tests/check_vdb: $(BUILD)/obj/tests/check_vdb.o $(BUILD)/obj/tools/benc
 	@mkdir -p $(dir $@)
 	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
 
+# check_points_sample tests the point sampler of the benchmarks.
+$(BUILD)/tests/check_points_sample: $(BUILD)/obj/tests/check_points_sample.o \
+                                    $(BUILD)/obj/tools/bench/points_sample.o $(TESTLIB) $(LIB_A)
+	@mkdir -p $(dir $@)
+	$(CXX) -o $@ $^ $(LDFLAGS) $$(pkg-config --libs check) $(LDLIBS)
+
 # Each suite sets Check's no-fork mode itself (whatever CK_FORK says): OpenVDB
 # (log4cplus/TBB threads) and OpenCL contexts hang forked children
 # (docs/METHOD.md, "Testing notes").
