@@ -40,6 +40,10 @@ DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboos
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
             ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format \
             clang-14
+# Those of CGAL's reference program alone (make bench), checked with a stamp
+# of their own by the same rule.
+CGAL_PKGS  := libcgal-dev libeigen3-dev
+CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
 
 # MPI and PETSc (optional): where pkg-config finds PETSc (Debian's petsc-dev,
 # with OpenMPI, hypre and parallel HDF5), the build links it and gains the
@@ -95,7 +99,8 @@ BIN     := $(BUILD)/heatvox
 all: $(LIB_A) $(LIB_SO) $(BIN)
 
 deps: $(STAMP)
-$(STAMP): Makefile
+$(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
+$(STAMP) $(CGAL_STAMP): Makefile
 	@missing=""; for p in $(DEB_PKGS); do \
 	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
 	done; \
@@ -143,7 +148,9 @@ $(BUILD)/obj/tools/%.o: tools/%.c $(FLAGS) | $(STAMP)
 # C++ under tools/: the OpenVDB reference algorithms of the benchmarks
 # (tools/bench/bench_ref_vdb.cpp), not part of the library. Public headers and
 # OpenVDB's only; default visibility, like the library's OpenVDB shim.
-TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(wildcard tools/*.cpp tools/bench/*.cpp))
+# tools/bench/bench_ref_cgal.cpp is a program of its own (make bench, below).
+TOOL_CXX_OBJ := $(patsubst %.cpp,$(BUILD)/obj/%.o,$(filter-out tools/bench/bench_ref_cgal.cpp,\
+                  $(wildcard tools/*.cpp tools/bench/*.cpp)))
 $(BUILD)/obj/tools/%.o: tools/%.cpp $(FLAGS) | $(STAMP)
 	@mkdir -p $(dir $@)
 	$(CXX) $(TOOL_CPPFLAGS) $(CXXFLAGS) -MMD -MP -c $< -o $@
@@ -300,7 +307,20 @@ sanitize:
 	  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp
 
-bench: all
+# CGAL's Poisson surface reconstruction, the reference of `heatvox bench
+# points` (tools/bench/bench_ref_cgal.cpp): a program of its own, built by
+# make bench only, since CGAL's headers take a minute to compile. Its Debian
+# packages (CGAL_PKGS) are installed, or asked for, by the deps rule. CGAL
+# needs -frounding-math for its exact predicates under GCC; NDEBUG drops its
+# assertions, as CGAL's release builds do.
+REF_CGAL := $(BUILD)/bench_ref_cgal
+.PHONY: bench-ref-cgal
+bench-ref-cgal: $(REF_CGAL)
+$(REF_CGAL): tools/bench/bench_ref_cgal.cpp $(FLAGS) | $(CGAL_STAMP)
+	$(CXX) -std=c++17 $(OPT) $(WARN) -frounding-math -DNDEBUG -DCGAL_EIGEN3_ENABLED \
+	  -I/usr/include/eigen3 $< -o $@ -lgmp -lmpfr
+
+bench: all $(REF_CGAL)
 	@sh tools/bench/bench.sh $(BIN)
 
 demo: all
