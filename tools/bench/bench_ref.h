@@ -82,6 +82,12 @@ int ref_vdb_fail(const char *cmd, const char *what, hv_status st);
  * child's peak (Linux keeps the high-water mark across exec): call it from a
  * small process. (tools/bench/bench_run.c) */
 int bench_run_self(char **argv, double *seconds, double *rss_mb);
+/* The same for the program exe, its stdout into the file out (NULL: this
+ * process's): *code is its exit status (-1 when a signal ended it, 126
+ * when out could not be opened, 127 when exe could not be run). Returns -1
+ * only when no child could be started. */
+int bench_run_exe(const char *exe, char **argv, const char *out, double *seconds, double *rss_mb,
+                  int *code);
 
 /* The smooth fields the extension benchmarks extend (bench extend, extend-band,
  * extend-loop), of coordinates scaled to about [-1,1]; neither comes near

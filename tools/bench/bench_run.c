@@ -4,27 +4,41 @@
  * test fields. */
 #include "bench_ref.h"
 
+#include <fcntl.h>
 #include <math.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
-int bench_run_self(char **argv, double *seconds, double *rss_mb)
+int bench_run_exe(const char *exe, char **argv, const char *out, double *seconds, double *rss_mb,
+                  int *code)
 {
     double t0 = hv_now();
     pid_t pid = fork();
     if (pid < 0)
         return -1;
     if (pid == 0) {
-        execv("/proc/self/exe", argv);
+        int fd = out ? open(out, O_WRONLY | O_CREAT | O_TRUNC, 0644) : -1;
+        if (out && (fd < 0 || dup2(fd, STDOUT_FILENO) < 0))
+            _exit(126);
+        execv(exe, argv);
         _exit(127);
     }
     int status;
     struct rusage ru;
-    if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status))
+    if (wait4(pid, &status, 0, &ru) != pid)
         return -1;
     *seconds = hv_now() - t0;
     *rss_mb = ru.ru_maxrss / 1024.0;
+    *code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return 0;
+}
+
+int bench_run_self(char **argv, double *seconds, double *rss_mb)
+{
+    int code;
+    if (bench_run_exe("/proc/self/exe", argv, NULL, seconds, rss_mb, &code) || code)
+        return -1;
     return 0;
 }
 
