@@ -8,6 +8,7 @@ int cmd_bench_sdf(int argc, char **argv);
 int cmd_bench_mesh(int argc, char **argv);
 int cmd_bench_sdf2d(int argc, char **argv);
 int cmd_bench_band(int argc, char **argv);
+int cmd_bench_points(int argc, char **argv);
 int cmd_sdf(int argc, char **argv);
 int cmd_info(int argc, char **argv);
 int cmd_devices(int argc, char **argv);

@@ -542,6 +542,8 @@ static int bench_run(int argc, char **argv)
         return cmd_bench_sdf2d(argc - 1, argv + 1);
     if (!strcmp(argv[1], "band"))
         return cmd_bench_band(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "points"))
+        return cmd_bench_points(argc - 1, argv + 1);
     if (!strcmp(argv[1], "extend"))
         return bench_extend(argc - 1, argv + 1);
     if (!strcmp(argv[1], "extend-band"))
@@ -556,7 +558,8 @@ int cmd_bench(int argc, char **argv)
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *out = argc < 2 ? stderr : stdout;
         fprintf(out,
-                "usage: heatvox bench <solve|sdf|band|mesh|sdf2d|extend|extend-band|extend-loop> "
+                "usage: heatvox bench "
+                "<solve|sdf|band|mesh|points|sdf2d|extend|extend-band|extend-loop> "
                 "[options]   (heatvox "
                 "bench <name> --help)\n"
                 "With HEATVOX_OPENCL_PROFILE=1, one more JSON line per OpenCL kernel and transfer\n"
