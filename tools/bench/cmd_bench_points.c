@@ -278,9 +278,10 @@ static void run_program(const char *exe, char **argv, const char *out, run *R)
         fprintf(stderr, "heatvox %s: cannot start %s: %s\n", CMD, exe, strerror(errno));
         return;
     }
-    if (R->code)
-        fprintf(stderr, "heatvox %s: %s %s ... %s\n", CMD, exe, argv[1],
-                R->code < 0 ? "was killed by a signal" : "failed");
+    if (R->code < 0)
+        fprintf(stderr, "heatvox %s: %s %s ... was killed by a signal\n", CMD, exe, argv[1]);
+    else if (R->code)
+        fprintf(stderr, "heatvox %s: %s %s ... failed (exit %d)\n", CMD, exe, argv[1], R->code);
 }
 
 static void run_heatvox(bench *B, int s)
