@@ -176,15 +176,49 @@ Mesh reconstruct(const std::vector<Point_with_normal> &pts, double h, Times &t)
     return mesh;
 }
 
-void put(std::FILE *f, const void *p, size_t n, const std::string &tmp)
-{
-    if (std::fwrite(p, 1, n, f) != n)
-        fail(tmp + ": write error: " + std::strerror(errno));
-}
+// The output under ".NAME.tmp-PID" beside it, created before the work so
+// that an output that cannot be written fails at once; renamed onto NAME by
+// commit, removed when the run fails.
+struct Staged {
+    std::string path, tmp;
+    std::FILE *f = nullptr;
 
-void write_body(std::FILE *f, const Mesh &m, const std::string &tmp)
+    explicit Staged(const char *name) : path(name)
+    {
+        const size_t slash = path.rfind('/');
+        const size_t cut = slash == std::string::npos ? 0 : slash + 1;
+        tmp = path.substr(0, cut) + "." + path.substr(cut) + ".tmp-" + std::to_string(getpid());
+        if (!(f = std::fopen(tmp.c_str(), "wb")))
+            fail(path + ": cannot create: " + std::strerror(errno));
+    }
+    ~Staged()
+    {
+        if (f) {
+            std::fclose(f);
+            std::remove(tmp.c_str());
+        }
+    }
+    void put(const void *p, size_t n)
+    {
+        if (std::fwrite(p, 1, n, f) != n)
+            fail(path + ": write error: " + std::strerror(errno));
+    }
+    void commit()
+    {
+        const bool closed = std::fclose(f) == 0;
+        f = nullptr;
+        if (!closed || std::rename(tmp.c_str(), path.c_str()) != 0) {
+            const std::string why = std::strerror(errno);
+            std::remove(tmp.c_str());
+            fail(path + ": cannot write: " + why);
+        }
+    }
+};
+
+// Binary little-endian PLY, double coordinates (as heatvox writes them).
+void write_ply(Staged &out, const Mesh &m)
 {
-    std::fprintf(f,
+    std::fprintf(out.f,
                  "ply\nformat binary_little_endian 1.0\ncomment %s: CGAL Poisson reconstruction\n"
                  "element vertex %zu\nproperty double x\nproperty double y\nproperty double z\n"
                  "element face %zu\nproperty list uchar uint vertex_indices\nend_header\n",
@@ -192,7 +226,7 @@ void write_body(std::FILE *f, const Mesh &m, const std::string &tmp)
     for (Mesh::Vertex_index v : m.vertices()) { // a fresh mesh: indices 0..n-1, no gaps
         const Point &p = m.point(v);
         const double xyz[3] = {p.x(), p.y(), p.z()};
-        put(f, xyz, sizeof xyz, tmp);
+        out.put(xyz, sizeof xyz);
     }
     for (Mesh::Face_index fc : m.faces()) {
         unsigned char three = 3;
@@ -200,35 +234,10 @@ void write_body(std::FILE *f, const Mesh &m, const std::string &tmp)
         int k = 0;
         for (Mesh::Vertex_index v : m.vertices_around_face(m.halfedge(fc)))
             idx[k++] = (uint32_t)v;
-        put(f, &three, 1, tmp);
-        put(f, idx, sizeof idx, tmp);
+        out.put(&three, 1);
+        out.put(idx, sizeof idx);
     }
-}
-
-// Binary PLY under ".NAME.tmp-PID" beside path, renamed onto path when complete.
-void write_ply(const char *path, const Mesh &m)
-{
-    const std::string p(path);
-    const size_t slash = p.rfind('/');
-    const std::string dir = slash == std::string::npos ? "" : p.substr(0, slash + 1);
-    const std::string base = slash == std::string::npos ? p : p.substr(slash + 1);
-    const std::string tmp = dir + "." + base + ".tmp-" + std::to_string(getpid());
-    std::FILE *f = std::fopen(tmp.c_str(), "wb");
-    if (!f)
-        fail(tmp + ": cannot create: " + std::strerror(errno));
-    try {
-        write_body(f, m, tmp);
-    } catch (...) {
-        std::fclose(f);
-        std::remove(tmp.c_str());
-        throw;
-    }
-    const bool closed = std::fclose(f) == 0;
-    if (!closed || std::rename(tmp.c_str(), path) != 0) {
-        const std::string why = std::strerror(errno);
-        std::remove(tmp.c_str());
-        fail(p + ": cannot write: " + why);
-    }
+    out.commit();
 }
 
 // Peak resident memory of this program: Linux's VmHWM, which starts anew at
@@ -250,10 +259,11 @@ int run(const char *in, const char *out, double h)
     // The surface mesher starts from random points, by default seeded from the
     // clock: a fixed seed makes the runs repeatable.
     CGAL::get_default_random() = CGAL::Random(1);
+    Staged staged(out);
     const std::vector<Point_with_normal> pts = read_xyz(in);
     Times t;
     const Mesh mesh = reconstruct(pts, h, t);
-    write_ply(out, mesh);
+    write_ply(staged, mesh);
     std::printf("{\"ref\":\"cgal-poisson\",\"points\":%zu,\"triangles\":%zu,\"h\":%.9g,"
                 "\"poisson_seconds\":%.4f,\"mesh_seconds\":%.4f,\"compute_seconds\":%.4f,"
                 "\"seconds\":%.4f,\"peak_rss_mb\":%.1f}\n",
