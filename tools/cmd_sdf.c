@@ -462,8 +462,14 @@ int cmd_sdf(int argc, char **argv)
         return cli_fail("sdf", mesh_path, st);
     }
     size_t tris = m->ntris;
-    /* The preview of a run in tiles computes its slices from the mesh. */
-    if (!(tiles && preview))
+    /* The preview of a run in tiles computes its slices from the mesh. A
+     * cloud's surface is the output's zero set: --mesh-out writes it as it
+     * is (the grid's zero set taken again would stray from it by the
+     * extraction's error), unless the shape was moved or merged. */
+    const int own_surface =
+        pr.points && mesh_out && adaptivity == 0 &&
+        !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
+    if (!(tiles && preview) && !own_surface)
         hv_mesh_destroy(&m);
 
     /* Output. */
@@ -511,10 +517,13 @@ int cmd_sdf(int argc, char **argv)
     if (!st && preview &&
         (st = tiles ? preview_slices(m, &o, &S, tmp[2]) : hv_png_write_preview(tmp[2], g, 0)))
         failed = preview;
-    hv_mesh_destroy(&m);
     double t_mesh = hv_now();
     size_t mesh_tris = 0;
-    if (!st && mesh_out) {
+    if (!st && own_surface) {
+        mesh_tris = m->ntris;
+        if ((st = write_mesh_as(m, mesh_out, tmp[3])))
+            failed = mesh_out;
+    } else if (!st && mesh_out) {
         hv_mesh *iso = NULL;
         if (!(st = hv_grid_to_mesh(g, 0.0, adaptivity, &iso))) {
             mesh_tris = iso->ntris;
@@ -525,6 +534,7 @@ int cmd_sdf(int argc, char **argv)
             failed = mesh_out;
     }
     t_mesh = hv_now() - t_mesh;
+    hv_mesh_destroy(&m);
     hv_grid_destroy(&g);
     if (st) {
         cli_fail("sdf", failed, st);
