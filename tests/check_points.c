@@ -84,8 +84,8 @@ START_TEST(text_errors)
                  (const char *[]){"no points", NULL});
     char colours[512] = "";
     for (int i = 0; i < 10; i++)
-        snprintf(colours + strlen(colours), sizeof colours - strlen(colours),
-                 "%d 0 0 255 %d 0\n", i, 20 * i);
+        snprintf(colours + strlen(colours), sizeof colours - strlen(colours), "%d 0 0 255 %d 0\n",
+                 i, 20 * i);
     expect_error(write_file("c.xyz", colours, strlen(colours)), HV_ERR_INVALID_ARG,
                  (const char *[]){"colours", NULL});
 }
@@ -146,10 +146,10 @@ static double gauss(uint64_t *s)
 
 /* How a cloud departs from clean, uniform samples of the surface. */
 typedef struct defects {
-    double noise;  /* Gaussian offset along the normal, voxels (sd) */
-    double flip;   /* fraction of normals turned around */
-    int uneven;    /* density 10:1 from low x to high x */
-    double hole;   /* radius of a missing patch around the first vertex, in
+    double noise; /* Gaussian offset along the normal, voxels (sd) */
+    double flip;  /* fraction of normals turned around */
+    int uneven;   /* density 10:1 from low x to high x */
+    double hole;  /* radius of a missing patch around the first vertex, in
                       units of the bounding box's width (0: none) */
 } defects;
 
@@ -165,7 +165,8 @@ static void add_point(double *xyz, double *nrm, size_t i, const double p[3], con
 /* A point uniform on triangle t of m, its unit normal, and its area. */
 static double on_triangle(const hv_mesh *m, size_t t, uint64_t *s, double p[3], double n[3])
 {
-    const double *a = m->verts + 3 * (size_t)m->tris[3 * t], *b = m->verts + 3 * (size_t)m->tris[3 * t + 1],
+    const double *a = m->verts + 3 * (size_t)m->tris[3 * t],
+                 *b = m->verts + 3 * (size_t)m->tris[3 * t + 1],
                  *c = m->verts + 3 * (size_t)m->tris[3 * t + 2];
     double r1 = sqrt(rnd(s)), r2 = rnd(s), u[3], v[3];
     for (int k = 0; k < 3; k++) {
@@ -326,8 +327,8 @@ static hv_grid *sphere_truth(int n, double L, double r)
  * per 0.1 voxel of error, so it is held to 0.985. */
 START_TEST(sphere_defects)
 {
-    static const defects cases[] = {
-        {0, 0, 0, 0}, {0.25, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 0.3}};
+    static const defects cases[] = {{0, 0, 0, 0},   {0.25, 0, 0, 0}, {0.5, 0, 0, 0},
+                                    {0, 0.1, 0, 0}, {0, 0, 1, 0},    {0, 0, 0, 0.3}};
     static const double mean_max[] = {0.01, 0.07, 0.12, 0.01, 0.02, 0.06};
     hv_mesh *m = NULL;
     TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 6));

@@ -142,8 +142,7 @@ int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* The shape an sdf reads from path (tools/shape.c): a mesh, or the closed
  * surface of an oriented point cloud (hv_points_surface with o), whose
  * report goes to *pr (pr->points is 0 for a mesh). Errors as the library's. */
-hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m,
-                         hv_points_report *pr);
+hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m, hv_points_report *pr);
 /* With -v, a line on stderr about a cloud read by cli_read_shape. */
 void cli_points_note(const char *cmd, const char *path, const hv_points_report *pr);
 

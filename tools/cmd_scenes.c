@@ -165,8 +165,9 @@ static int points(const char *dir)
     char path[1024], *text = malloc((size_t)COUNT * 96 + 128);
     if (!text)
         return cli_fail("make-scenes", "torus_scan", HV_ERR_NOMEM);
-    size_t len = (size_t)snprintf(text, 128, "# heatvox make-scenes: a torus (R 1, r 0.35) as "
-                                             "oriented points\n# x y z nx ny nz\n");
+    size_t len = (size_t)snprintf(text, 128,
+                                  "# heatvox make-scenes: a torus (R 1, r 0.35) as "
+                                  "oriented points\n# x y z nx ny nz\n");
     uint64_t s = 29;
     for (int k = 0; k < COUNT;) {
         double q[6];

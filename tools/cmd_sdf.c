@@ -466,9 +466,8 @@ int cmd_sdf(int argc, char **argv)
      * cloud's surface is the output's zero set: --mesh-out writes it as it
      * is (the grid's zero set taken again would stray from it by the
      * extraction's error), unless the shape was moved or merged. */
-    const int own_surface =
-        pr.points && mesh_out && adaptivity == 0 &&
-        !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
+    const int own_surface = pr.points && mesh_out && adaptivity == 0 &&
+                            !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
     if (!(tiles && preview) && !own_surface)
         hv_mesh_destroy(&m);
 

@@ -5,8 +5,7 @@
 #include <stdio.h>
 #include <string.h>
 
-hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m,
-                         hv_points_report *pr)
+hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m, hv_points_report *pr)
 {
     memset(pr, 0, sizeof *pr);
     *m = NULL;

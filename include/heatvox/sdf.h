@@ -254,15 +254,15 @@ HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts,
 typedef struct hv_points_report {
     size_t points;
     double spacing_median, spacing_min, spacing_max; /* world units */
-    size_t normals_against;   /* points whose normal points into the surface found */
-    double normal_agreement;  /* fraction of the points' area whose normal points out of it */
-    size_t vertices;          /* surface vertices */
+    size_t normals_against;      /* points whose normal points into the surface found */
+    double normal_agreement;     /* fraction of the points' area whose normal points out of it */
+    size_t vertices;             /* surface vertices */
     size_t vertices_unsupported; /* no point within reach: left where the heat method put them */
     double move_mean, move_max;  /* projection distances, voxels of the heat grid */
     int n[3];                    /* the heat method's grid */
     double h;
-    int coarsen;                 /* it is this many times coarser than the block */
-    hv_sdf_stats heat;           /* its stages (t_splat .. t_shift, iterations, backend) */
+    int coarsen;       /* it is this many times coarser than the block */
+    hv_sdf_stats heat; /* its stages (t_splat .. t_shift, iterations, backend) */
     double t_spacing, t_heat, t_mesh, t_project, t_total; /* seconds */
 } hv_points_report;
 

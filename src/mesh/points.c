@@ -54,8 +54,7 @@ hv_status hv__points_add(points_builder *b, const double p[6], const char *where
 
 /* The numbers on one text line (up to max); -1 on a word that is not one,
  * with its column in *bad and its place in *at. */
-static int line_numbers(const char *s, const char *e, double *v, int max, int *bad,
-                        const char **at)
+static int line_numbers(const char *s, const char *e, double *v, int max, int *bad, const char **at)
 {
     int n = 0;
     while (s < e) {

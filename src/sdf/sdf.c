@@ -650,7 +650,8 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     int n[3];
     double h, origin[3];
     grow_bounds(&o, lo, hi);
-    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) || (st = hv__sdf_grid_place(&o, lo, hi, n, &h, origin)))
+    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) ||
+        (st = hv__sdf_grid_place(&o, lo, hi, n, &h, origin)))
         goto done;
     memcpy(S.n, n, sizeof S.n);
     S.h = h;

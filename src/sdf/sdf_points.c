@@ -11,10 +11,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define PTS_K 6          /* neighbours of the spacing estimate */
-#define PTS_RINGS 4      /* cell rings searched around a point */
-#define PTS_KEY_BITS 21  /* per axis in a cell key */
-#define PTS_FACING 0.5   /* cosine above which a point faces a vertex's way */
+#define PTS_K 6                            /* neighbours of the spacing estimate */
+#define PTS_RINGS 4                        /* cell rings searched around a point */
+#define PTS_KEY_BITS 21                    /* per axis in a cell key */
+#define PTS_FACING 0.5                     /* cosine above which a point faces a vertex's way */
 #define PTS_HEAT_CELLS ((double)(1 << 22)) /* the heat grid's default bound */
 
 /* Points binned into cubic cells of side c, sorted by cell; a table with
@@ -332,8 +332,8 @@ static size_t gather_block(const pt_bins *B, const long q[3], long rings, uint32
 /* The areas of the points in the cell of table slot t: the k nearest among
  * the 27 cells around it where that is certain (the k-th within a cell's
  * side), else point_area's search. Returns -1 when out of memory. */
-static int cell_areas(const pt_bins *B, const hv_points *P, size_t t, uint32_t **buf,
-                      size_t *cap, double *area)
+static int cell_areas(const pt_bins *B, const hv_points *P, size_t t, uint32_t **buf, size_t *cap,
+                      double *area)
 {
     long q[3];
     slot_cell(B, t, q);
@@ -348,9 +348,8 @@ static int cell_areas(const pt_bins *B, const hv_points *P, size_t t, uint32_t *
         for (size_t v = 0; v < m; v++)
             if ((*buf)[v] != i)
                 keep_smallest(best, &found, dist2(x, P->xyz + 3 * (size_t)(*buf)[v]));
-        area[i] = found == PTS_K && best[PTS_K - 1] <= B->c * B->c
-                      ? M_PI * best[PTS_K - 1] / PTS_K
-                      : point_area(B, P, i);
+        area[i] = found == PTS_K && best[PTS_K - 1] <= B->c * B->c ? M_PI * best[PTS_K - 1] / PTS_K
+                                                                   : point_area(B, P, i);
     }
     return 0;
 }
@@ -683,7 +682,7 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
      * so that its first ring holds the 6th neighbour and few more. */
     const double s0 = w->gh->h * sqrt((double)cells / (double)P->count);
     if ((st = bins_build(&w->near, P->xyz, P->count, w->gh->origin, fmin(w->gh->h, 1.5 * s0),
-                          &near_cells)))
+                         &near_cells)))
         return st;
     w->area = malloc(P->count * sizeof *w->area);
     w->nrm = malloc(3 * P->count * sizeof *w->nrm);
