@@ -41,7 +41,7 @@ static const scenario SCENARIOS[NSCEN] = {
 
 typedef struct args {
     const char *mesh, *keep, *cgal, *heatvox;
-    int n, count, nonly;
+    int n, count, nonly, band;
     const char *only[NSCEN];
 } args;
 
@@ -62,6 +62,7 @@ typedef struct bench {
     int have_cgal;
     int asked[NSCEN];
     run hv[NSCEN], cg[NSCEN];
+    run mesh_band; /* --band: heatvox sdf MESH -o X.vdb --res N */
 } bench;
 
 static int usage(FILE *out)
@@ -89,6 +90,10 @@ static int usage(FILE *out)
                  "  --cgal BIN       the reference program (default: bench_ref_cgal beside\n"
                  "                   this heatvox); without it the cgal rows are skipped\n"
                  "  --heatvox BIN    the heatvox that reconstructs (default: this one)\n"
+                 "  --band           time the narrow band alone instead: heatvox sdf PTS.xyz\n"
+                 "                   -o X.vdb --res N (tiles), against the same command on\n"
+                 "                   MESH itself in the same run (ref \"mesh-band\"); no cgal\n"
+                 "                   rows, no scores\n"
                  "Prints one JSON line per scenario and program: bench, mesh, n, backend\n"
                  "(\"heatvox\" or \"cgal-poisson\"), scenario, points, threads, seconds,\n"
                  "peak_rss_mb, triangles, iou, mean_dist_vox, max_dist_vox, dist_samples; cgal\n"
@@ -123,6 +128,7 @@ static int parse(int argc, char **argv, args *A)
         {.names = "--keep", .kind = CLI_STR, .dst = &A->keep, .min = 1},
         {.names = "--cgal", .kind = CLI_STR, .dst = &A->cgal, .min = 1},
         {.names = "--heatvox", .kind = CLI_STR, .dst = &A->heatvox, .min = 1},
+        {.names = "--band", .kind = CLI_FLAG, .dst = &A->band, .val = 1},
         {.names = NULL},
     };
     int rc = cli_parse(CMD, argc, argv, opts, "mesh", &A->mesh, help);
@@ -293,6 +299,11 @@ static void run_heatvox(bench *B, int s)
     file_of(B, s, "-heatvox.out", out, sizeof out);
     snprintf(ns, sizeof ns, "%d", B->A.n);
     char *argv[] = {"heatvox", "sdf", xyz, "--res", ns, "--npy", npy, "--mesh-out", ply, NULL};
+    if (B->A.band) { /* the narrow band alone, in tiles */
+        file_of(B, s, "-heatvox.vdb", npy, sizeof npy);
+        argv[5] = "-o";
+        argv[7] = NULL;
+    }
     run_program(B->heatvox, argv, out, &B->hv[s]);
 }
 
@@ -410,6 +421,45 @@ static int run_all(bench *B)
     return HV_EXIT_OK;
 }
 
+/* --band: the narrow band of MESH itself, the reference of every row. */
+static void run_mesh_band(bench *B)
+{
+    char vdb[4096 + 64], out[4096 + 64], ns[16];
+    snprintf(vdb, sizeof vdb, "%s/mesh-band.vdb", B->dir);
+    snprintf(out, sizeof out, "%s/mesh-band.out", B->dir);
+    snprintf(ns, sizeof ns, "%d", B->A.n);
+    char *argv[] = {"heatvox", "sdf", (char *)B->A.mesh, "--res", ns, "-o", vdb, NULL};
+    run_program(B->heatvox, argv, out, &B->mesh_band);
+}
+
+/* --band's rows: time and memory against the mesh's own band. */
+static int band_rows(bench *B)
+{
+    run_mesh_band(B);
+    for (int s = 0; s < NSCEN; s++) {
+        if (!B->asked[s])
+            continue;
+        if (write_points(B, s))
+            return HV_EXIT_FAIL;
+        run_heatvox(B, s);
+        const run *R = &B->hv[s], *M = &B->mesh_band;
+        print_head(B, s, "heatvox-band");
+        if (R->code)
+            printf(",\"error\":\"heatvox sdf failed\"}\n");
+        else
+            printf(",\"threads\":%d,\"band\":3,\"seconds\":%.4f,\"peak_rss_mb\":%.1f",
+                   hv_get_threads(), R->seconds, R->rss_mb);
+        if (!R->code && !M->code)
+            printf(",\"ref\":\"mesh-band\",\"ref_seconds\":%.4f,\"ref_peak_rss_mb\":%.1f,"
+                   "\"ratio\":%.3f}\n",
+                   M->seconds, M->rss_mb, R->seconds / M->seconds);
+        else if (!R->code)
+            printf("}\n");
+        fflush(stdout);
+    }
+    return HV_EXIT_OK;
+}
+
 /* MESH as heatvox sdf's repair closes it (the Stanford bunny's holes in its
  * base capped): the surface the points are drawn from and scored against. */
 static int read_truth(bench *B)
@@ -438,7 +488,7 @@ int cmd_bench_points(int argc, char **argv)
     if (rc >= 0 || (rc = pick_scenarios(&B)) >= 0 || (rc = read_truth(&B)) >= 0)
         return rc;
     if ((rc = place(&B)) < 0 && (rc = find_programs(&B)) < 0 && (rc = make_dir(&B)) < 0)
-        rc = run_all(&B);
+        rc = B.A.band ? band_rows(&B) : run_all(&B);
     remove_dir(&B);
     hv_mesh_destroy(&B.m);
     return rc;
