@@ -31,7 +31,12 @@ CXXFLAGS += -std=c++17 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS) -I/usr/include/
 LIBFLAGS := -fvisibility=hidden
 # The command uses the public API alone: include/ only, no src/.
 TOOL_CPPFLAGS := -Iinclude -D_GNU_SOURCE
-LDLIBS   += -lopenvdb -ltbb -lImath-3_1 -lOpenEXRCore-3_1 -lpng \
+# assimp (the glTF, FBX, 3MF, COLLADA and X reader) through pkg-config; the
+# fallback keeps the flags the same before `make deps` installs it.
+ASSIMP_CFLAGS := $(shell pkg-config --cflags assimp 2>/dev/null)
+ASSIMP_LIBS   := $(or $(shell pkg-config --libs assimp 2>/dev/null),-lassimp)
+CPPFLAGS += $(ASSIMP_CFLAGS)
+LDLIBS   += -lopenvdb -ltbb -lImath-3_1 -lOpenEXRCore-3_1 -lpng $(ASSIMP_LIBS) \
             -lfftw3_threads -lfftw3f_threads -lfftw3 -lfftw3f -lOpenCL -lz -lm -lpthread
 LDFLAGS  += -fopenmp $(SANFLAGS)
 
@@ -39,7 +44,7 @@ LDFLAGS  += -fopenmp $(SANFLAGS)
 DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
             ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format \
-            clang-14
+            clang-14 libassimp-dev
 # Those of CGAL's reference program alone (make bench), checked with a stamp
 # of their own by the same rule.
 CGAL_PKGS  := libcgal-dev libeigen3-dev
@@ -334,7 +339,7 @@ install: all
 	ln -sf libheatvox.so.$(VERSION) $(DESTDIR)$(PREFIX)/lib/libheatvox.so
 	install -m 644 include/heatvox/*.h $(DESTDIR)$(PREFIX)/include/heatvox/
 	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/
-	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' \
+	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' -e 's|@ASSIMP_LIBS@|$(ASSIMP_LIBS)|' \
 	  -e 's|@REQUIRES@|$(if $(filter 1,$(HV_PETSC)),Requires.private: PETSc ompi-c hdf5-openmpi,)|' \
 	  heatvox.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/heatvox.pc
 ifneq ($(PYVER),)

@@ -120,6 +120,11 @@ START_TEST(test_headers_compile_alone)
 }
 END_TEST
 
+/* Exported beside the public API on purpose: assimp's assertion handler,
+ * which libassimp must find in libheatvox before its own aborting one
+ * (src/mesh/mesh_assimp_guard.cpp). */
+static const char *const exported_on_purpose[] = {"_ZN6Assimp17aiAssertViolationEPKcS1_i"};
+
 /* nm -D of the shared library against the HV_API declarations. */
 START_TEST(test_exports_are_the_public_api)
 {
@@ -141,6 +146,11 @@ START_TEST(test_exports_are_the_public_api)
         char *at = strchr(name, '@');
         if (at)
             *at = '\0';
+        int on_purpose = 0;
+        for (size_t i = 0; i < sizeof exported_on_purpose / sizeof *exported_on_purpose; i++)
+            on_purpose |= !strcmp(name, exported_on_purpose[i]);
+        if (on_purpose)
+            continue;
         exported++;
         const char *key = name;
         char **hit = bsearch(&key, names, (size_t)count, sizeof *names, cmp_str);

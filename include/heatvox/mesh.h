@@ -30,6 +30,14 @@ typedef struct hv_mesh {
      * text format (0: a binary format, or none). */
     size_t nonfinite_vertex;
     size_t nonfinite_line;
+    /* Metres per coordinate unit, from the file (0: it declares none, or
+     * the format has no unit). heatvox never rescales coordinates: FBX gives
+     * its GlobalSettings UnitScaleFactor (0.01: centimetres), glTF is metres
+     * by definition, and COLLADA comes in metres because assimp applies the
+     * file's <unit> to the scene's root. */
+    double unit_meters;
+    /* Point and line primitives left out (formats read through assimp). */
+    size_t skipped_primitives;
 } hv_mesh;
 
 typedef struct hv_mesh_report {
@@ -54,7 +62,12 @@ typedef struct hv_mesh_report {
 } hv_mesh_report;
 
 /* Reads a mesh, choosing the format by extension (.obj .ply .stl .off, any case)
- * and falling back to the content. Errors name the file and the line or byte
+ * and falling back to the content. Through assimp (by extension only): glTF
+ * 2.0 (.gltf with its buffers beside it, .glb), FBX, 3MF, COLLADA (.dae) and
+ * DirectX (.x); their scene graphs are flattened with the nodes' transforms
+ * (faces turned back where a transform mirrors), polygons fanned, points and
+ * lines left out and counted, and a file assimp rejects gives HV_ERR_PARSE
+ * naming it with assimp's reason. Errors name the file and the line or byte
  * offset. An empty mesh (no triangles) is an error. The caller owns *out.
  * Vertices that no face uses are dropped (counted in unreferenced_vertices).
  * A PLY `tristrips` element (lists with -1 restarts) is converted to triangles
@@ -63,6 +76,13 @@ typedef struct hv_mesh_report {
  * Only regular files and pipes (up to 1 GiB) are read; finite coordinates
  * beyond +-1e100 give HV_ERR_NUMERIC (NaN and inf load and are counted). */
 HV_API hv_status hv_mesh_read(const char *path, hv_mesh **out);
+
+/* The format hv_mesh_read reads a file of this name in, judging by the
+ * extension alone (any case): "OBJ", "PLY", "STL", "OFF", or one of those read
+ * through assimp ("glTF 2.0 via assimp", "FBX via assimp", ...); NULL for an
+ * extension it does not know (hv_mesh_read then judges by the content).
+ * The string is static. */
+HV_API const char *hv_mesh_format_by_extension(const char *path);
 
 /* Builds a mesh from arrays (copied); vertices are welded by exact position
  * (-0 equals +0; vertices with a NaN coordinate are never merged) and vertices

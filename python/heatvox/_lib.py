@@ -173,6 +173,8 @@ class hv_mesh(Structure):
         ("polygons_fanned", c_size_t),
         ("nonfinite_vertex", c_size_t),
         ("nonfinite_line", c_size_t),
+        ("unit_meters", c_double),
+        ("skipped_primitives", c_size_t),
     ]
 
 

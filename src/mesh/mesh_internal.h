@@ -110,6 +110,23 @@ hv_status hv__mesh_read_ply(const char *path, const char *buf, size_t len, hv_me
 hv_status hv__mesh_read_stl(const char *path, const char *buf, size_t len, hv_mesh **out);
 hv_status hv__mesh_read_off(const char *path, const char *buf, size_t len, hv_mesh **out);
 
+/* Formats read through assimp (mesh_assimp.c). hv__mesh_assimp_format names
+ * the one the extension of path selects (NULL: none). hv__mesh_read_assimp
+ * reads the file at path, of size bytes, or with buf not NULL the len (=
+ * size) bytes of buf (a pipe's content: files the scene refers to, such as a
+ * .gltf's buffers, are not found then). */
+const char *hv__mesh_assimp_format(const char *path);
+hv_status hv__mesh_read_assimp(const char *path, const char *buf, size_t len, uint64_t size,
+                               hv_mesh **out);
+/* assimp's import of path (or of buf's len bytes), by the one reader of
+ * assimp that path's extension names, with assimp's failed checks turned into
+ * a failed import (mesh_assimp_guard.cpp). On failure NULL, with the reason in
+ * err; else the scene, which *owner holds until hv__assimp_release(*owner). */
+struct aiScene;
+const struct aiScene *hv__assimp_import(const char *path, const char *buf, size_t len, char *err,
+                                        size_t errsize, void **owner);
+void hv__assimp_release(void *owner);
+
 /* Splitmix64, for the defect makers. */
 static inline uint64_t mesh_rng_next(uint64_t *s)
 {

@@ -1,5 +1,6 @@
-/* hv_mesh_read: loads the file, picks the reader by extension or content, and
- * the number scanning the text readers share. */
+/* hv_mesh_read: loads the file, picks the reader by extension or content (the
+ * formats assimp reads by extension, handing it the path), and the number
+ * scanning the text readers share. */
 #include "mesh_internal.h"
 
 #include <errno.h>
@@ -160,6 +161,40 @@ hv_status hv__mesh_read_file(const char *path, char **out, size_t *len)
     return HV_OK;
 }
 
+/* A regular file read through assimp, which opens it itself (and the files
+ * it refers to): refused here, as hv__mesh_read_file would refuse it, when it
+ * cannot be opened or is empty. */
+static hv_status check_regular_file(const char *path, const struct stat *sb)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    fclose(f);
+    if (sb->st_size == 0)
+        return hv__error(HV_ERR_PARSE, "%s: empty file", path);
+    return HV_OK;
+}
+
+static hv_status read_through_assimp(const char *path, hv_mesh **out)
+{
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return hv__error(HV_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+    if (S_ISREG(sb.st_mode)) {
+        hv_status st = check_regular_file(path, &sb);
+        return st ? st : hv__mesh_read_assimp(path, NULL, 0, (uint64_t)sb.st_size, out);
+    }
+    char *buf;
+    size_t len;
+    hv_status st = hv__mesh_read_file(path, &buf, &len);
+    if (st)
+        return st;
+    st = len ? hv__mesh_read_assimp(path, buf, len, len, out)
+             : hv__error(HV_ERR_PARSE, "%s: empty file", path);
+    free(buf);
+    return st;
+}
+
 typedef enum { FMT_UNKNOWN, FMT_OBJ, FMT_PLY, FMT_STL, FMT_OFF } mesh_format;
 
 static mesh_format format_by_extension(const char *path)
@@ -177,6 +212,15 @@ static mesh_format format_by_extension(const char *path)
     if (!strcasecmp(dot, ".off"))
         return FMT_OFF;
     return FMT_UNKNOWN;
+}
+
+const char *hv_mesh_format_by_extension(const char *path)
+{
+    if (!path)
+        return NULL;
+    static const char *const names[] = {NULL, "OBJ", "PLY", "STL", "OFF"};
+    mesh_format f = format_by_extension(path);
+    return f != FMT_UNKNOWN ? names[f] : hv__mesh_assimp_format(path);
 }
 
 static int starts_with_word(const char *s, const char *word)
@@ -242,6 +286,8 @@ hv_status hv_mesh_read(const char *path, hv_mesh **out)
     *out = NULL;
     if (!path || !*path)
         return hv__error(HV_ERR_INVALID_ARG, "hv_mesh_read: empty path");
+    if (hv__mesh_assimp_format(path))
+        return read_through_assimp(path, out);
     char *buf;
     size_t len;
     hv_status st = hv__mesh_read_file(path, &buf, &len);
@@ -268,8 +314,8 @@ hv_status hv_mesh_read(const char *path, hv_mesh **out)
                            path);
         else
             st = hv__error(HV_ERR_PARSE,
-                           "%s: not a mesh format heatvox reads (OBJ, PLY, STL, OFF), judging by "
-                           "its extension and content",
+                           "%s: not a mesh format heatvox reads (OBJ, PLY, STL, OFF by extension "
+                           "or content; glTF, GLB, FBX, 3MF, DAE, X by extension)",
                            path);
     }
     free(buf);
