@@ -58,7 +58,9 @@ static int has_ext(const char *path, const char *const *exts)
     return 0;
 }
 
-static const char *const mesh_exts[] = {"obj", "ply", "stl", "off", "xyz", "pts", "xyzn", NULL};
+/* Oriented point clouds by extension (hv_points_file); meshes are those
+ * hv_mesh_format_by_extension names. */
+static const char *const points_exts[] = {"xyz", "pts", "xyzn", NULL};
 static const char *const manifest_exts[] = {"txt", "list", NULL};
 
 /* "dir/name.ext" -> "name" */
@@ -94,7 +96,7 @@ static void walk(batch_joblist *l, const char *dir, const char *rel, const char 
             if (stat(path, &sb) == 0 && S_ISDIR(sb.st_mode)) {
                 if (depth < MAX_DEPTH)
                     walk(l, path, sub, outdir, depth + 1);
-            } else if (has_ext(name, mesh_exts)) {
+            } else if (hv_mesh_format_by_extension(name) || has_ext(name, points_exts)) {
                 char *stem = stem_of(name);
                 char *out = batch_xprintf("%s/%s%s%s", outdir, rel, *rel ? "/" : "", stem);
                 batch_jobs_add(l, path, out);

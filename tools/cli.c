@@ -15,6 +15,21 @@
 
 int cli_verbose = 0;
 
+void cli_mesh_note(const char *cmd, const char *path, const hv_mesh *m)
+{
+    if (cli_verbose < 1 || !m)
+        return;
+    fprintf(stderr, "heatvox %s: %s: %s, %zu triangles on %zu vertices", cmd, path,
+            m->format ? m->format : "mesh", m->ntris, m->nverts);
+    if (m->skipped_primitives)
+        fprintf(stderr, ", %zu points and lines left out", m->skipped_primitives);
+    if (m->unit_meters > 0)
+        fprintf(stderr, "; length unit %g m, from the file", m->unit_meters);
+    else
+        fprintf(stderr, "; no length unit in the file");
+    fputc('\n', stderr);
+}
+
 int cli_fail(const char *cmd, const char *what, hv_status st)
 {
     const char *detail = hv_last_error();

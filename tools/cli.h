@@ -11,6 +11,9 @@ enum { HV_EXIT_OK = 0, HV_EXIT_FAIL = 1, HV_EXIT_USAGE = 2 };
 
 extern int cli_verbose; /* -1 quiet (-q), 0 default, 1 verbose (-v) */
 
+/* With -v: what the reader made of a mesh file (format, triangles, points and
+ * lines left out, the unit the file declares) on stderr. */
+void cli_mesh_note(const char *cmd, const char *path, const hv_mesh *m);
 /* Prints "heatvox <cmd>: <what>: <status>: <hv_last_error()>" on stderr and
  * returns HV_EXIT_FAIL. */
 int cli_fail(const char *cmd, const char *what, hv_status st);

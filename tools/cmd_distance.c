@@ -27,7 +27,8 @@ static int usage(FILE *out)
             "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
             "when there are obstacles, a bool grid 'obstacles'.\n"
             "\n"
-            "Sources FILE: a mesh (.obj .ply .stl .off: its surface is the source), or text,\n"
+            "Sources FILE: a mesh (.obj .ply .stl .off, or .gltf .glb .fbx .3mf .dae .x read\n"
+            "through assimp: its surface is the source), or text,\n"
             "one source per line, '#' starts a comment:\n"
             "  x y z           a world point (2D grids: x y)\n"
             "  point x y z     the same\n"
@@ -87,18 +88,6 @@ static int push3(void **arr, size_t *n, size_t *cap, size_t elem, const void *v)
     return 0;
 }
 
-static int has_mesh_ext(const char *path)
-{
-    const char *dot = strrchr(path, '.');
-    if (!dot)
-        return 0;
-    const char *exts[] = {".obj", ".ply", ".stl", ".off"};
-    for (int i = 0; i < 4; i++)
-        if (!strcasecmp(dot, exts[i]))
-            return 1;
-    return 0;
-}
-
 static int load_mesh_source(source_list *s, const char *path)
 {
     if (s->mesh) {
@@ -108,6 +97,7 @@ static int load_mesh_source(source_list *s, const char *path)
     hv_status st = hv_mesh_read(path, &s->mesh);
     if (st)
         return cli_fail(CMD, path, st);
+    cli_mesh_note(CMD, path, s->mesh);
     return 0;
 }
 
@@ -115,7 +105,7 @@ static int load_mesh_source(source_list *s, const char *path)
 static int read_sources(const char *path, int dim, source_list *s)
 {
     s->dim = dim;
-    if (has_mesh_ext(path))
+    if (hv_mesh_format_by_extension(path))
         return load_mesh_source(s, path);
     FILE *f = fopen(path, "r");
     if (!f) {
@@ -614,6 +604,7 @@ static int read_inputs(const dist_args *A, source_list *src, hv_mesh **om, hv_gr
         hv_status st = hv_mesh_read(A->obst_mesh, om);
         if (st)
             return cli_fail(CMD, A->obst_mesh, st);
+        cli_mesh_note(CMD, A->obst_mesh, *om);
     }
     if (!A->mask)
         return grid_from_bounds(A, src, *om, g);

@@ -10,12 +10,14 @@ static void help(void)
 {
     printf("usage: heatvox info [--json] [-q] MESH...\n"
            "\n"
-           "Reads each mesh (OBJ, PLY, STL or OFF; format from the extension, else the\n"
-           "content), welds vertices by exact position and prints its defect report:\n"
-           "boundary, non-manifold and inconsistently oriented edges, duplicate and\n"
-           "degenerate faces, non-finite vertices, edge-connected components. An oriented\n"
-           "point cloud (.xyz .pts .xyzn, or a PLY of points with normals) gets its point\n"
-           "count and bounds.\n"
+           "Reads each mesh (OBJ, PLY, STL or OFF: format from the extension, else the\n"
+           "content; glTF .gltf/.glb, FBX, 3MF, COLLADA .dae, DirectX .x: through assimp,\n"
+           "by the extension, the scene graph flattened), welds vertices by exact position\n"
+           "and prints its defect report: boundary, non-manifold and inconsistently\n"
+           "oriented edges, duplicate and degenerate faces, non-finite vertices,\n"
+           "edge-connected components; and the unit the file declares, if any. An\n"
+           "oriented point cloud (.xyz .pts .xyzn, or a PLY of points with normals) gets\n"
+           "its point count and bounds.\n"
            "\n"
            "  --json   one JSON object per mesh, one per line, on stdout; a mesh that fails\n"
            "           gives {\"file\": ..., \"error\": ...}\n"
@@ -63,6 +65,11 @@ static void print_json(const char *file, const hv_mesh *m, const hv_mesh_report 
            r->polygons_fanned, r->edges, r->boundary_edges, r->nonmanifold_edges,
            r->inconsistent_edges, r->duplicate_faces, r->degenerate_faces, r->nonfinite_vertices,
            r->components, r->vertex_components);
+    printf(",\"skipped_primitives\":%zu,\"unit_meters\":", m->skipped_primitives);
+    if (m->unit_meters > 0)
+        json_double(m->unit_meters);
+    else
+        printf("null");
     printf(",\"closed\":%s,\"consistent\":%s,\"signed_volume\":",
            r->boundary_edges == 0 && r->nonmanifold_edges == 0 ? "true" : "false",
            r->inconsistent_edges == 0 ? "true" : "false");
@@ -84,6 +91,10 @@ static void print_text(const char *file, const hv_mesh *m, const hv_mesh_report 
     printf("  vertices            %zu (%zu in the file, %zu unused by any face and dropped)\n",
            r->vertices, r->input_vertices, r->unreferenced_vertices);
     printf("  triangles           %zu (%zu polygons fanned)\n", r->triangles, r->polygons_fanned);
+    if (m->skipped_primitives)
+        printf("  points and lines    %zu left out\n", m->skipped_primitives);
+    if (m->unit_meters > 0)
+        printf("  length unit         %g m, from the file\n", m->unit_meters);
     if (has_bounds)
         printf("  bounds              [%g %g %g] .. [%g %g %g]\n", lo[0], lo[1], lo[2], hi[0],
                hi[1], hi[2]);

@@ -18,7 +18,8 @@ static void help(void)
     printf("usage: heatvox sdf MESH [-o OUT.vdb] [--npy FILE] [--mesh-out OUT.obj|.ply|.stl]\n"
            "                   [options]\n"
            "\n"
-           "Computes the signed distance field of a triangle mesh (OBJ, PLY, STL, OFF) with\n"
+           "Computes the signed distance field of a triangle mesh (OBJ, PLY, STL, OFF; glTF\n"
+           "(.gltf, .glb), FBX, 3MF, COLLADA (.dae), DirectX (.x) through assimp) with\n"
            "the signed heat method on a regular grid, robust to holes, flipped faces,\n"
            "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
            "level set (negative inside), a dense .npy array, and/or its zero level set as a\n"
@@ -447,6 +448,8 @@ int cmd_sdf(int argc, char **argv)
     if (st)
         return cli_fail("sdf", mesh_path, st);
     cli_points_note("sdf", mesh_path, &pr);
+    if (!pr.points)
+        cli_mesh_note("sdf", mesh_path, m);
     double t_read = hv_now() - t0;
     hv_grid *g = NULL;
     hv_tiles *T = NULL;
