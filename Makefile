@@ -44,7 +44,7 @@ LDFLAGS  += -fopenmp $(SANFLAGS)
 DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
             python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
             ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format \
-            clang-14 libassimp-dev
+            clang-14 libassimp-dev assimp-testmodels
 # Those of CGAL's reference program alone (make bench), checked with a stamp
 # of their own by the same rule.
 CGAL_PKGS  := libcgal-dev libeigen3-dev
