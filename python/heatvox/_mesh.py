@@ -32,7 +32,9 @@ def _mesh_arrays(ptr):
 
 def read_mesh(path):
     """Reads a triangle mesh: OBJ, PLY (ascii, binary little and big endian),
-    STL (ascii, binary) or OFF, by extension, else by content.
+    STL (ascii, binary) or OFF, by extension, else by content; or, by
+    extension, glTF 2.0 (.gltf, .glb), FBX, 3MF, COLLADA (.dae) or DirectX
+    (.x) through assimp, the scene graph flattened with its transforms.
 
     As the command's readers do, polygons are fanned into triangles, vertices
     at exactly the same position are welded and vertices no face uses are
