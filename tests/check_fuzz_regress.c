@@ -4,6 +4,7 @@
  * message, never a crash. `make sanitize` runs this under ASan and UBSan.
  * The directory is $HEATVOX_FUZZ_REGRESS, else tests/fuzz/regress (make check
  * runs from the repository root). */
+#include "fuzz/fuzz_assimp.h"
 #include "testlib.h"
 
 #include <dirent.h>
@@ -38,16 +39,24 @@ static char *slurp(const char *path, size_t *len)
     return b;
 }
 
-/* A copy of src under a name with the extension the mesh reader dispatches on. */
+/* A copy of src under a name with the extension the mesh reader dispatches
+ * on; the assimp target's inputs start with the byte that picks it
+ * (fuzz/fuzz_assimp.h), which is left out of the copy. */
 static const char *with_ext(const char *src, const char *ext)
 {
     static char path[512];
+    size_t n;
+    char *b = slurp(src, &n), *data = b;
+    if (!ext) {
+        ck_assert_msg(n > 0, "%s: empty (the first byte picks the extension)", src);
+        ext = fz_assimp_ext((uint8_t)b[0]);
+        data++;
+        n--;
+    }
     snprintf(path, sizeof path, "%s/hv_regress_%ld%s", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp",
              (long)getpid(), ext);
-    size_t n;
-    char *b = slurp(src, &n);
     FILE *f = fopen(path, "wb");
-    ck_assert_msg(f && fwrite(b, 1, n, f) == n && fclose(f) == 0, "%s: cannot write", path);
+    ck_assert_msg(f && fwrite(data, 1, n, f) == n && fclose(f) == 0, "%s: cannot write", path);
     free(b);
     return path;
 }
@@ -64,11 +73,11 @@ static void replay(const char *target, const char *file)
 {
     hv_clear_error();
     if (!strcmp(target, "obj") || !strcmp(target, "ply") || !strcmp(target, "stl") ||
-        !strcmp(target, "off") || !strcmp(target, "mesh")) {
+        !strcmp(target, "off") || !strcmp(target, "mesh") || !strcmp(target, "assimp")) {
         char ext[264] = ""; /* mesh: no extension, the format by content */
         if (strcmp(target, "mesh"))
             snprintf(ext, sizeof ext, ".%s", target);
-        const char *p = with_ext(file, ext);
+        const char *p = with_ext(file, strcmp(target, "assimp") ? ext : NULL);
         hv_mesh *m = NULL;
         hv_status st = hv_mesh_read(p, &m);
         check_status(st, file);

@@ -25,13 +25,16 @@ static const char *fz_dir(void)
     return t && *t ? t : "/tmp";
 }
 
-/* Writes data to this process's input file and returns its path (static
- * storage), or NULL when the file cannot be written (the input is skipped). */
+/* Writes data to this process's input file, named with ext (a string of
+ * static storage), and returns its path (static storage), or NULL when the
+ * file cannot be written (the input is skipped). */
 static const char *fz_file(const uint8_t *data, size_t size, const char *ext)
 {
     static char path[512];
-    if (!path[0])
+    static const char *named_for;
+    if (!path[0] || ext != named_for)
         snprintf(path, sizeof path, "%s/hvfz-%ld%s", fz_dir(), (long)getpid(), ext);
+    named_for = ext;
     int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0600);
     if (fd < 0)
         return NULL;

@@ -1,11 +1,16 @@
 /* Writes small seed inputs for the fuzz targets into DIR/<target>/ (one
  * directory per target, created if missing): hand-built meshes in every
- * format and encoding, curve files, and .npy, .exr and .vdb files written by
+ * format and encoding, curve files, scenes in the formats read through
+ * assimp (written by its exporters), and .npy, .exr and .vdb files written by
  * the library itself. `make fuzz` adds the output of `heatvox make-scenes` and
  * the repository's scenes/curves files. Seeds stay small (a few KB) so that
  * the fuzzer's mutations stay cheap. Usage: make_seeds DIR */
+#include "fuzz_assimp.h"
 #include "heatvox/heatvox.h"
 
+#include <assimp/cexport.h>
+#include <assimp/cimport.h>
+#include <assimp/scene.h>
 #include <errno.h>
 #include <math.h>
 #include <stdarg.h>
@@ -244,6 +249,137 @@ static void seeds_curves(void)
             "<g transform=\"scale(2)\"><path d=\"M0 0 L 5 5\"></path></g>\n</svg>\n");
 }
 
+/* ---- scenes for the formats read through assimp, written by its exporters ---- */
+
+static char *slurp(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    buf b = {0};
+    char chunk[4096];
+    size_t n;
+    while ((n = fread(chunk, 1, sizeof chunk, f)) > 0)
+        b_raw(&b, chunk, n);
+    fclose(f);
+    *len = b.n;
+    return b.p;
+}
+
+/* A .gltf with its buffer in a data: URI, so that the one file is the input. */
+static char *gltf_embedded(const char *gltf, const char *bin, size_t *len)
+{
+    size_t glen, blen;
+    char *g = slurp(gltf, &glen), *d = slurp(bin, &blen);
+    char *uri = g ? strstr(g, "\"uri\"") : NULL;
+    char *q1 = uri ? strchr(uri + 5, '"') : NULL, *q2 = q1 ? strchr(q1 + 1, '"') : NULL;
+    if (!d || !q2) {
+        free(g);
+        free(d);
+        return NULL;
+    }
+    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    buf b = {0};
+    b_raw(&b, g, (size_t)(q1 + 1 - g));
+    b_printf(&b, "data:application/octet-stream;base64,");
+    for (size_t i = 0; i < blen; i += 3) {
+        unsigned v = (unsigned char)d[i] << 16;
+        if (i + 1 < blen)
+            v |= (unsigned char)d[i + 1] << 8;
+        if (i + 2 < blen)
+            v |= (unsigned char)d[i + 2];
+        char out[4] = {b64[v >> 18 & 63], b64[v >> 12 & 63], i + 1 < blen ? b64[v >> 6 & 63] : '=',
+                       i + 2 < blen ? b64[v & 63] : '='};
+        b_raw(&b, out, 4);
+    }
+    b_raw(&b, q2, glen - (size_t)(q2 - g));
+    free(g);
+    free(d);
+    *len = b.n;
+    return b.p;
+}
+
+/* Two objects under the root, a tetrahedron and a cube of quads, one turned
+ * and scaled, the other mirrored, with a line and a point; one file per
+ * exporter, each prefixed with the byte that picks its extension. */
+static void seeds_assimp(void)
+{
+    static const struct {
+        const char *id, *ext;
+    } ex[] = {{"gltf2", ".gltf"}, {"glb2", ".glb"},    {"fbxa", ".fbx"}, {"fbx", ".fbx"},
+              {"3mf", ".3mf"},    {"collada", ".dae"}, {"x", ".x"}};
+    char dir[1024], obj[1100], out[1100], bin[1100];
+    snprintf(dir, sizeof dir, "%s/assimp-tmp", root);
+    mkdir(dir, 0777);
+    snprintf(obj, sizeof obj, "%s/scene.obj", dir);
+    buf b = {0};
+    b_printf(&b, "o tetra\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                 "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nl 1 2\np 3\no cube\n");
+    for (int i = 0; i < 8; i++)
+        b_printf(&b, "v %g %g %g\n", cube_v[i][0] + 2, cube_v[i][1], cube_v[i][2]);
+    for (int f = 0; f < 6; f++)
+        b_printf(&b, "f %d %d %d %d\n", cube_q[f][0] + 5, cube_q[f][1] + 5, cube_q[f][2] + 5,
+                 cube_q[f][3] + 5);
+    FILE *fo = fopen(obj, "wb");
+    if (!fo || fwrite(b.p, 1, b.n, fo) != b.n || fclose(fo) != 0) {
+        fprintf(stderr, "make_seeds: %s: cannot write\n", obj);
+        failures++;
+        free(b.p);
+        return;
+    }
+    free(b.p);
+    const struct aiScene *sc = aiImportFile(obj, 0);
+    if (!sc || !sc->mRootNode || sc->mRootNode->mNumChildren != 2) {
+        fprintf(stderr, "make_seeds: assimp: %s: %s\n", obj, aiGetErrorString());
+        failures++;
+        if (sc)
+            aiReleaseImport(sc);
+        return;
+    }
+    const struct aiMatrix4x4 turn = {0, -2, 0, 1, 2, 0, 0, 0, 0, 0, 0.5f, -1, 0, 0, 0, 1};
+    const struct aiMatrix4x4 mirror = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    sc->mRootNode->mChildren[0]->mTransformation = mirror;
+    sc->mRootNode->mChildren[1]->mTransformation = turn;
+    for (size_t k = 0; k < sizeof ex / sizeof ex[0]; k++) {
+        snprintf(out, sizeof out, "%s/scene_%s%s", dir, ex[k].id, ex[k].ext);
+        if (aiExportScene(sc, ex[k].id, out, 0) != aiReturn_SUCCESS) {
+            fprintf(stderr, "make_seeds: assimp export %s: %s\n", ex[k].id, aiGetErrorString());
+            failures++;
+            continue;
+        }
+        size_t len = 0;
+        char *data;
+        if (!strcmp(ex[k].ext, ".gltf")) {
+            snprintf(bin, sizeof bin, "%s/scene_%s.bin", dir, ex[k].id);
+            data = gltf_embedded(out, bin, &len);
+            remove(bin);
+        } else {
+            data = slurp(out, &len);
+        }
+        remove(out);
+        uint8_t sel = 0;
+        while (sel < FZ_ASSIMP_NEXT && strcmp(fz_assimp_exts[sel], ex[k].ext))
+            sel++;
+        if (!data || sel == FZ_ASSIMP_NEXT) {
+            fprintf(stderr, "make_seeds: %s: cannot read it back\n", out);
+            failures++;
+            free(data);
+            continue;
+        }
+        buf s = {0};
+        b_raw(&s, &sel, 1);
+        b_raw(&s, data, len);
+        char name[64];
+        snprintf(name, sizeof name, "scene_%s%s", ex[k].id, ex[k].ext);
+        put("assimp", name, s.p, s.n);
+        free(s.p);
+        free(data);
+    }
+    aiReleaseImport(sc);
+    remove(obj);
+    remove(dir);
+}
+
 /* ---- files the library writes ---- */
 
 static void check(hv_status st, const char *what)
@@ -351,6 +487,7 @@ int main(int argc, char **argv)
     seeds_stl();
     seeds_off();
     seeds_curves();
+    seeds_assimp();
     seeds_written();
     return failures ? 1 : 0;
 }
