@@ -242,7 +242,9 @@ HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts,
  *                vector areas, diffusion time (t_scale max(h, spacing))^2;
  *                normals flipped on part of the cloud are outvoted by their
  *                neighbours in the diffused field
- *   3. surface   phi's zero set as a closed mesh (hv_grid_to_mesh)
+ *   3. surface   phi's zero set as a closed mesh (hv_grid_to_mesh), each
+ *                triangle split in four where the heat grid is the block's
+ *                own (vertices half a voxel apart)
  *   4. project   each vertex moved along phi's gradient onto the local plane
  *                of the points within 2 sigma that face the same way
  *                (Gaussian weights of width sigma = max(the block's voxel,

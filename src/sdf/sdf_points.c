@@ -149,6 +149,8 @@ static hv_status bins_build(pt_bins *B, const double *xyz, size_t n, const doubl
     for (size_t i = 0; i < n; i++) {
         long q[3];
         cell_of(B, xyz + 3 * i, q);
+        for (int a = 0; a < 3; a++) /* a point past the keyed range joins its edge cell */
+            q[a] = q[a] < 0 ? 0 : q[a] >= (1L << PTS_KEY_BITS) ? (1L << PTS_KEY_BITS) - 1 : q[a];
         keys[i] = cell_key(q[0], q[1], q[2]);
     }
     *cells = bins_count(B, keys, n);
@@ -716,6 +718,64 @@ static hv_status points_mesh(const hv_grid *gh, hv_mesh **M)
     return st;
 }
 
+typedef struct edge_ref {
+    uint32_t a, b; /* a < b */
+    uint32_t at;   /* 3 * triangle + corner of the edge's start */
+} edge_ref;
+
+static int cmp_edge(const void *x, const void *y)
+{
+    const edge_ref *e = x, *f = y;
+    return e->a != f->a ? (e->a < f->a ? -1 : 1) : e->b != f->b ? (e->b < f->b ? -1 : 1) : 0;
+}
+
+/* Every triangle of *M split in four at its edges' midpoints, each
+ * midpoint shared by the triangles of its edge: vertices half a voxel
+ * apart for the projection to move onto the points. */
+static hv_status subdivide(hv_mesh **M)
+{
+    const hv_mesh *m = *M;
+    const size_t nt = m->ntris, ne = 3 * nt;
+    edge_ref *E = malloc(ne * sizeof *E);
+    uint32_t *mid = malloc(ne * sizeof *mid), *T = malloc(12 * nt * sizeof *T);
+    double *V = malloc(3 * (m->nverts + ne) * sizeof *V);
+    hv_status st = HV_OK;
+    if (!E || !mid || !T || !V) {
+        st = hv__error(HV_ERR_NOMEM, "points: out of memory subdividing %zu triangles", nt);
+        goto out;
+    }
+    for (size_t i = 0; i < ne; i++) {
+        uint32_t a = m->tris[i], b = m->tris[i - i % 3 + (i % 3 + 1) % 3];
+        E[i] = (edge_ref){a < b ? a : b, a < b ? b : a, (uint32_t)i};
+    }
+    qsort(E, ne, sizeof *E, cmp_edge);
+    memcpy(V, m->verts, 3 * m->nverts * sizeof *V);
+    size_t nv = m->nverts;
+    for (size_t i = 0; i < ne; i++) {
+        if (i == 0 || cmp_edge(&E[i], &E[i - 1])) {
+            for (int c = 0; c < 3; c++)
+                V[3 * nv + c] =
+                    0.5 * (m->verts[3 * (size_t)E[i].a + c] + m->verts[3 * (size_t)E[i].b + c]);
+            nv++;
+        }
+        mid[E[i].at] = (uint32_t)(nv - 1);
+    }
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *v = m->tris + 3 * t, *e = mid + 3 * t; /* e[k]: edge v[k] v[k+1] */
+        const uint32_t four[12] = {v[0], e[0], e[2], v[1], e[1], e[0],
+                                   v[2], e[2], e[1], e[0], e[1], e[2]};
+        memcpy(T + 12 * t, four, sizeof four);
+    }
+    hv_mesh *out = NULL;
+    if (!(st = hv_mesh_from_arrays(&out, V, nv, T, 4 * nt))) {
+        hv_mesh_destroy(M);
+        *M = out;
+    }
+out:
+    free(E), free(mid), free(T), free(V);
+    return st;
+}
+
 static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *w,
                             hv_points_report *R)
 {
@@ -747,7 +807,12 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
     R->t_heat = hv_now() - tt;
     tt = hv_now();
     points_orient(P, w->area, w->gh, w->nrm, R);
-    if ((st = points_mesh(w->gh, &w->M)))
+    /* On a heat grid that is the block's own, the surface's vertices are
+     * a voxel apart: halved, they follow the points between (bunny from
+     * 20 000 points at 64^3: mean distance 0.041 -> 0.034 voxel, the
+     * largest 0.62 -> 0.40); a coarser heat grid is for large blocks, whose
+     * time goes to the band of the surface's triangles. */
+    if ((st = points_mesh(w->gh, &w->M)) || (R->coarsen == 1 && (st = subdivide(&w->M))))
         return st;
     R->t_mesh = hv_now() - tt;
     tt = hv_now();
