@@ -388,7 +388,7 @@ clean:
 # OpenVDB and OpenEXR themselves are not instrumented.
 FZ           := build-fz
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS ?= obj ply stl off mesh assimp svg curves npy exr vdb
+FUZZ_TARGETS ?= obj ply stl off mesh points assimp svg curves npy exr vdb
 FUZZ_FLAGS   ?=
 FUZZ_MAX_LEN ?= 65536
 FUZZ_PKGS    := clang-14 libclang-rt-14-dev libomp-14-dev

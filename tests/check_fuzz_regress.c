@@ -89,6 +89,12 @@ static void replay(const char *target, const char *file)
         }
         hv_mesh_destroy(&m);
         unlink(p);
+    } else if (!strcmp(target, "points")) {
+        const char *p = with_ext(file, ".xyz");
+        hv_points *P = NULL;
+        check_status(hv_points_read(p, &P), file);
+        hv_points_destroy(&P);
+        unlink(p);
     } else if (!strcmp(target, "svg") || !strcmp(target, "curves")) {
         size_t n;
         char *b = slurp(file, &n);

@@ -234,6 +234,44 @@ static void seeds_off(void)
     free(b.p);
 }
 
+/* Oriented points: text with comments and extra columns, and PLY point
+ * clouds in each encoding (the points target names every file .xyz; the
+ * reader takes PLY by content). */
+static void seeds_points(void)
+{
+    put_str("points", "text",
+            "# x y z nx ny nz\n0 0 0 1 0 0\r\n1 0 0 0 1 0 0.5 0.5\n"
+            "0 1 0 0 0 -1  # end\n\n1 1 1 1e-3 2 3\n");
+    put_str("points", "unoriented", "0 0 0\n1 2 3\n");
+    const char *names[3] = {"ascii", "binary_little_endian", "binary_big_endian"};
+    for (int fmt = 0; fmt < 3; fmt++) {
+        buf b = {0};
+        b_printf(&b,
+                 "ply\nformat %s 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                 "property float z\nproperty uchar red\nproperty double nx\nproperty double ny\n"
+                 "property double nz\nend_header\n",
+                 names[fmt]);
+        for (int i = 0; i < 4; i++) {
+            const float x[3] = {(float)(i & 1), (float)(i >> 1), 0.5f};
+            const double n[3] = {i & 1 ? 1.0 : -1.0, 0.0, i > 1 ? 1.0 : 0.0};
+            const unsigned char red = (unsigned char)(60 * i);
+            if (fmt == 0) {
+                b_printf(&b, "%g %g %g %u %g %g %g\n", x[0], x[1], x[2], red, n[0], n[1], n[2]);
+                continue;
+            }
+            for (int a = 0; a < 3; a++)
+                b_num(&b, &x[a], 4, fmt == 2);
+            b_raw(&b, &red, 1);
+            for (int a = 0; a < 3; a++)
+                b_num(&b, &n[a], 8, fmt == 2);
+        }
+        char name[64];
+        snprintf(name, sizeof name, "ply_%s", names[fmt]);
+        put("points", name, b.p, b.n);
+        free(b.p);
+    }
+}
+
 static void seeds_curves(void)
 {
     put_str("curves", "square.txt", "# a square\nM 0 0\nL 1 0\nL 1 1\nL 0 1\nZ\n");
@@ -487,6 +525,7 @@ int main(int argc, char **argv)
     seeds_stl();
     seeds_off();
     seeds_curves();
+    seeds_points();
     seeds_assimp();
     seeds_written();
     return failures ? 1 : 0;
