@@ -149,8 +149,7 @@ static hv_status solver_create(hv_solver **s, const hv_problem *p, const hv_solv
 
 static hv_status stage(double f, const char *name) { return hv__progress(f, name); }
 
-/* Trilinear interpolation of v at x. */
-static double interp(const hv_grid *g, const float *v, const double x[3])
+double hv__sdf_interp(const hv_grid *g, const float *v, const double x[3])
 {
     size_t c0, step[3];
     double wt[8], val = 0;
@@ -240,7 +239,7 @@ static hv_status local_shift(heat_work *w, const hv_grid *g, const hv_sdf_opts *
     }
 #pragma omp parallel for schedule(static)
     for (size_t p = 0; p < w->q->count; p++)
-        res[p] = w->q->area[p] * interp(g, phi, w->q->x + 3 * p);
+        res[p] = w->q->area[p] * hv__sdf_interp(g, phi, w->q->x + 3 * p);
     splat(g, w->q, 1, res, 1, &f0);
     splat(g, w->q, 1, NULL, 1, &f1);
     if (!w->heat) {
@@ -275,7 +274,7 @@ static hv_status local_shift(heat_work *w, const hv_grid *g, const hv_sdf_opts *
     double rms = 0, asum = 0;
 #pragma omp parallel for reduction(+ : rms, asum) schedule(static)
     for (size_t p = 0; p < w->q->count; p++) {
-        double v = interp(g, phi, w->q->x + 3 * p);
+        double v = hv__sdf_interp(g, phi, w->q->x + 3 * p);
         rms += w->q->area[p] * v * v;
         asum += w->q->area[p];
     }
@@ -536,7 +535,7 @@ static hv_status heat_shift(heat_work *w, hv_grid *gh, const hv_sdf_opts *o, int
     double num = 0, den = 0, rms = 0;
 #pragma omp parallel for reduction(+ : num, den, rms) schedule(static)
     for (size_t p = 0; p < w->q->count; p++) {
-        double val = interp(gh, phi, w->q->x + 3 * p);
+        double val = hv__sdf_interp(gh, phi, w->q->x + 3 * p);
         num += w->q->area[p] * val;
         den += w->q->area[p];
         rms += w->q->area[p] * val * val;

@@ -39,6 +39,9 @@ hv_status hv__sdf_morph_grid(hv_grid *g, const hv_sdf_opts *o);
 hv_status hv__sdf_morph_tiles_check(const hv_sdf_opts *o);
 void hv__sdf_morph_tiles(hv_tiles *T, const hv_sdf_opts *o, double band);
 
+/* Trilinear interpolation of v (on g's cells) at world point x (sdf_heat.c). */
+double hv__sdf_interp(const hv_grid *g, const float *v, const double x[3]);
+
 /* out (on g) = trilinear interpolation of v (on gh) at g's cell centres. */
 hv_status hv__sdf_upsample(const hv_grid *gh, const float *v, const hv_grid *g, float *out);
 

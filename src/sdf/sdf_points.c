@@ -504,18 +504,6 @@ static hv_status points_heat(const hv_points *P, const double *area, const hv_sd
     return st;
 }
 
-/* phi at x, trilinear. */
-static double sample(const hv_grid *g, const double x[3])
-{
-    size_t c0, step[3];
-    double wt[8], val = 0;
-    hv__trilinear(g, x, &c0, step, wt);
-    for (int q = 0; q < 8; q++)
-        val += wt[q] *
-               g->v[c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0)];
-    return val;
-}
-
 /* The gradient of phi (trilinear) at x, by central differences half a
  * voxel apart. */
 static void phi_gradient(const hv_grid *g, const double x[3], double grad[3])
@@ -525,7 +513,7 @@ static void phi_gradient(const hv_grid *g, const double x[3], double grad[3])
         double xp[3] = {x[0], x[1], x[2]}, xm[3] = {x[0], x[1], x[2]};
         xp[a] += e;
         xm[a] -= e;
-        grad[a] = (sample(g, xp) - sample(g, xm)) / (2 * e);
+        grad[a] = (hv__sdf_interp(g, g->v, xp) - hv__sdf_interp(g, g->v, xm)) / (2 * e);
     }
 }
 
