@@ -42,6 +42,23 @@ typedef struct hv_tiles {
     size_t active;    /* active voxels in all */
 } hv_tiles;
 
+/* A consumer of tiles handed over as they are finished (hv_sdf_stream_tiles),
+ * so that a narrow band never has to be held whole by its producer:
+ * - begin(user, block, max_tiles): block is the block (count 0, no arrays);
+ *   at most max_tiles tiles will follow, in the producer's order.
+ * - put(user, batch): the next tiles, each listed once across all batches;
+ *   the batch's arrays are the producer's and reused after put returns.
+ * - end(user, ok): called once after begin, whatever begin and put returned;
+ *   ok is 0 when the run failed (the sink drops what it took), 1 when every
+ *   tile was put.
+ * A non-zero status from begin or put stops the producer with that status. */
+typedef struct hv_tiles_sink {
+    void *user;
+    hv_status (*begin)(void *user, const hv_tiles *block, size_t max_tiles);
+    hv_status (*put)(void *user, const hv_tiles *batch);
+    hv_status (*end)(void *user, int ok);
+} hv_tiles_sink;
+
 /* Frees the tiles and sets *t to NULL. Accepts NULL and *t == NULL. */
 HV_API void hv_tiles_destroy(hv_tiles **t);
 

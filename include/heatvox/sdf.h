@@ -184,12 +184,14 @@ typedef struct hv_sdf_stats {
                                     sign counts even where its face's trust was not tested) */
     size_t near_sign_changed; /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
-    hv_sdf_sign sign;     /* the sign's source that ran: HV_SDF_SIGN_HEAT or HV_SDF_SIGN_WINDING
+    hv_sdf_sign sign;       /* the sign's source that ran: HV_SDF_SIGN_HEAT or HV_SDF_SIGN_WINDING
                              (HV_SDF_SIGN_AUTO for unsigned distance and HV_SDF_HEAT) */
-    size_t winding_evals; /* winding-number evaluations of the sign */
-    double t_sign;        /* seconds of the winding-number sign (within t_redistance) */
-    size_t tiles;         /* hv_sdf_compute_tiles: tiles with an active voxel */
-    size_t active_voxels; /* hv_sdf_compute_tiles: voxels within the band */
+    size_t winding_evals;   /* winding-number evaluations of the sign */
+    double t_sign;          /* seconds of the winding-number sign (within t_redistance) */
+    size_t tiles;           /* hv_sdf_compute_tiles: tiles with an active voxel */
+    size_t active_voxels;   /* hv_sdf_compute_tiles: voxels within the band */
+    size_t tiles_in_flight; /* hv_sdf_stream_tiles: the most tiles a batch holds */
+    size_t tiles_bound;     /* hv_sdf_stream_tiles: the bound the sink was given */
 } hv_sdf_stats;
 
 HV_API void hv_sdf_opts_default(hv_sdf_opts *o);
@@ -229,6 +231,17 @@ HV_API hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_gr
  * winding_evals, near_sign_cells, t_repair, t_redistance, t_sign, t_total. */
 HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
                                       hv_tiles **out, hv_sdf_stats *stats);
+
+/* hv_sdf_compute_tiles without ever holding the whole band: the same tiles,
+ * in the same order, handed to sink in batches as they are finished (see
+ * hv_tiles_sink; the batches' arrays are reused), so that a consumer such as
+ * hv_vdb_writer_levelset_sink keeps what it needs and the producer holds one
+ * batch (stats->tiles_in_flight tiles, about 2 kB each) beside its triangle
+ * lists. sink->begin is told an upper bound on the tiles to come. A status
+ * from the sink stops the run and is returned. stats as
+ * hv_sdf_compute_tiles's. */
+HV_API hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
+                                     const hv_tiles_sink *sink, hv_sdf_stats *stats);
 
 /* Oriented point clouds to a closed surface: the signed heat method with
  * the points' normals as the source, then the zero set moved onto the

@@ -63,6 +63,29 @@ HV_API hv_status hv_vdb_writer_add_levelset(hv_vdb_writer *w, const hv_grid *g, 
  * from the active voxels. No dense grid is made. The tiles are copied. */
 HV_API hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t,
                                                   const char *name, double band_voxels);
+/* What a level set taken from a tile sink cost (hv_vdb_writer_levelset_sink). */
+typedef struct hv_vdb_sink_stats {
+    size_t batches, tiles;   /* put calls, tiles they held */
+    size_t leaves;           /* the tree's leaves */
+    double tree_bytes;       /* the tree's memory once whole (OpenVDB's memUsage) */
+    double tree_bytes_bound; /* what begin's bound on the tiles allowed for */
+    double t_leaves; /* seconds building leaves from the batches, within the producer's run */
+    double t_fill;   /* seconds of the signed flood fill at the end */
+} hv_vdb_sink_stats;
+
+/* The narrow band of hv_vdb_writer_add_levelset_tiles from tiles handed over
+ * in batches as a producer finishes them (hv_sdf_stream_tiles): *out is a
+ * sink whose put turns each batch into the tree's leaves at once (the batch
+ * is not kept), and whose end (ok) runs the signed flood fill and adds the
+ * grid under name. The result is the grid add_levelset_tiles makes of all
+ * the tiles at once, voxel for voxel. begin refuses with HV_ERR_NOMEM and
+ * the figure when its bound on the tiles times a leaf's memory (about
+ * 2.2 kB) exceeds this machine's memory. stats (may be NULL) is filled at
+ * end and must live until then. One sink at a time per writer; the writer
+ * must outlive it. */
+HV_API hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double band_voxels,
+                                             hv_vdb_sink_stats *stats, hv_tiles_sink *out);
+
 /* Adds a scalar float grid of class unknown, every voxel active, background 0. */
 HV_API hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
 
@@ -108,7 +131,8 @@ HV_API hv_status hv_vdb_writer_set_grid_meta(hv_vdb_writer *w, const char *grid_
                                              const char *key, const char *value);
 
 /* Writes every grid added so far to path (Blosc compression with active-mask
- * compression, floats stored as 32 bit), through a temporary file in the same
+ * compression, floats stored as 32 bit; level sets from tiles compress their
+ * leaves on all cores), through a temporary file in the same
  * directory that is renamed into place only when complete. The writer stays
  * usable (it can write again). Fails with HV_ERR_INVALID_ARG when no grid was
  * added, HV_ERR_IO when the file cannot be written (no temporary is left). */

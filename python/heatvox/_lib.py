@@ -161,6 +161,29 @@ class hv_tiles(Structure):
     ]
 
 
+class hv_tiles_sink(Structure):
+    # The library's own sinks only (hv_vdb_writer_levelset_sink): their
+    # function pointers go back to C as they came.
+    _fields_ = [
+        ("user", c_void_p),
+        ("begin", c_void_p),
+        ("put", c_void_p),
+        ("end", c_void_p),
+    ]
+
+
+class hv_vdb_sink_stats(Structure):
+    _fields_ = [
+        ("batches", c_size_t),
+        ("tiles", c_size_t),
+        ("leaves", c_size_t),
+        ("tree_bytes", c_double),
+        ("tree_bytes_bound", c_double),
+        ("t_leaves", c_double),
+        ("t_fill", c_double),
+    ]
+
+
 class hv_mesh(Structure):
     _fields_ = [
         ("nverts", c_size_t),
@@ -335,6 +358,8 @@ class hv_sdf_stats(Structure):
         ("t_sign", c_double),
         ("tiles", c_size_t),
         ("active_voxels", c_size_t),
+        ("tiles_in_flight", c_size_t),
+        ("tiles_bound", c_size_t),
     ]
 
 
@@ -463,6 +488,8 @@ class hv_extend_field(Structure):
 STRUCTS = [
     hv_grid,
     hv_tiles,
+    hv_tiles_sink,
+    hv_vdb_sink_stats,
     hv_mesh,
     hv_mesh_report,
     hv_problem,
@@ -542,6 +569,10 @@ _PROTOTYPES = {
         _status,
         [_mesh_p, _P(hv_sdf_opts), c_double, _P(_P(hv_tiles)), _P(hv_sdf_stats)],
     ),
+    "hv_sdf_stream_tiles": (
+        _status,
+        [_mesh_p, _P(hv_sdf_opts), c_double, _P(hv_tiles_sink), _P(hv_sdf_stats)],
+    ),
     "hv_tiles_destroy": (None, [_P(_P(hv_tiles))]),
     # heat.h
     "hv_distance_opts_default": (None, [_P(hv_distance_opts)]),
@@ -566,6 +597,10 @@ _PROTOTYPES = {
     "hv_vdb_writer_add_levelset": (_status, [_writer_p, _grid_p, c_char_p, c_double, c_int]),
     "hv_vdb_writer_add_float": (_status, [_writer_p, _grid_p, c_char_p]),
     "hv_vdb_writer_add_levelset_tiles": (_status, [_writer_p, _P(hv_tiles), c_char_p, c_double]),
+    "hv_vdb_writer_levelset_sink": (
+        _status,
+        [_writer_p, c_char_p, c_double, _P(hv_vdb_sink_stats), _P(hv_tiles_sink)],
+    ),
     "hv_vdb_writer_add_mask": (_status, [_writer_p, _grid_p, c_char_p]),
     "hv_vdb_writer_set_meta": (_status, [_writer_p, c_char_p, c_char_p]),
     "hv_vdb_writer_write": (_status, [_writer_p, c_char_p]),

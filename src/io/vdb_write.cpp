@@ -7,6 +7,7 @@
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/Archive.h>
+#include <openvdb/io/io.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 
@@ -21,6 +22,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 #include <limits>
 #include <memory>
 #include <string>
@@ -200,8 +202,14 @@ openvdb::FloatGrid::Ptr levelset_from(const hv_grid *g, double band_voxels, bool
 
 } // namespace
 
+namespace
+{
+struct LevelsetStream;
+}
+
 struct hv_vdb_writer {
     openvdb::GridPtrVec grids;
+    std::unique_ptr<LevelsetStream> stream; // hv_vdb_writer_levelset_sink's grid under way
     openvdb::MetaMap meta;
     bool has_index0 = false; // hv_vdb_writer_set_index_origin was called
     double index0[3] = {0, 0, 0};
@@ -408,6 +416,223 @@ void add_active_voxels(GridT &grid, const hv_tiles *t, const int off[3], F &&val
             tree.addLeaf(l.release());
 }
 
+// A level set's band width in voxels: positive and finite.
+void check_band(const char *name, double band_voxels)
+{
+    if (!(band_voxels > 0) || !std::isfinite(band_voxels))
+        fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
+                                     "': band width must be positive, got " +
+                                     std::to_string(band_voxels));
+}
+
+// A float grid whose leaf buffers are compressed on all cores, a batch of
+// leaves at a time, and written in the tree's order: the bytes OpenVDB's own
+// Grid::writeBuffers writes (each leaf's buffer depends only on the leaf, the
+// stream's compression flags and the background), which writes leaf by leaf
+// on one core. HEATVOX_VDB_SERIAL_WRITE=1 takes OpenVDB's own, for tests.
+class BatchedFloatGrid final : public openvdb::FloatGrid
+{
+  public:
+    explicit BatchedFloatGrid(float background) : openvdb::FloatGrid(background) {}
+
+    void writeBuffers(std::ostream &os) const override
+    {
+        const char *serial = std::getenv("HEATVOX_VDB_SERIAL_WRITE");
+        if (saveFloatAsHalf() || (serial && *serial == '1')) {
+            openvdb::FloatGrid::writeBuffers(os);
+            return;
+        }
+        using LeafT = openvdb::FloatTree::LeafNodeType;
+        std::vector<const LeafT *> leaves;
+        leaves.reserve(tree().leafCount());
+        for (auto it = tree().cbeginLeaf(); it; ++it)
+            leaves.push_back(it.getLeaf());
+        const uint32_t comp = openvdb::io::getDataCompression(os);
+        const void *bg = openvdb::io::getGridBackgroundValuePtr(os);
+        const size_t batch = 8192;
+        std::vector<std::string> bytes(std::min(batch, leaves.size()));
+        for (size_t b0 = 0; b0 < leaves.size(); b0 += batch) {
+            const size_t b1 = std::min(b0 + batch, leaves.size());
+            tbb::parallel_for(tbb::blocked_range<size_t>(b0, b1),
+                              [&](const tbb::blocked_range<size_t> &r) {
+                                  std::ostringstream ss;
+                                  openvdb::io::setDataCompression(ss, comp);
+                                  openvdb::io::setGridBackgroundValuePtr(ss, bg);
+                                  for (size_t l = r.begin(); l != r.end(); l++) {
+                                      ss.str(std::string());
+                                      leaves[l]->writeBuffers(ss, false);
+                                      bytes[l - b0] = ss.str();
+                                  }
+                              });
+            for (size_t l = b0; l < b1; l++)
+                os.write(bytes[l - b0].data(), (std::streamsize)bytes[l - b0].size());
+        }
+    }
+};
+
+// Adds the voxels of tiles t active with |value| < bg to grid at index offset
+// off; the others of a tile hold bg, inactive, for the flood fill. A tile of
+// the block (at a multiple of 8) is one leaf when off is a multiple of 8 too,
+// built in parallel; otherwise it spans up to 8, which an accessor touches.
+void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[3], float bg)
+{
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    const bool aligned = off[0] % 8 == 0 && off[1] % 8 == 0 && off[2] % 8 == 0;
+    auto voxel = [&](size_t q, int i, int j, int k, float *val) {
+        const int o = i + HV_TILE * (j + HV_TILE * k);
+        *val = t->v[q * HV_TILE * HV_TILE * HV_TILE + o];
+        bool on = t->on[8 * q + k] >> (i + HV_TILE * j) & 1;
+        return on && std::fabs(*val) < bg;
+    };
+    if (!aligned) {
+        auto acc = grid.getAccessor();
+        for (size_t q = 0; q < t->count; q++) {
+            const int32_t *c = t->ijk + 3 * q;
+            for (int k = 0; k < HV_TILE; k++)
+                for (int j = 0; j < HV_TILE; j++)
+                    for (int i = 0; i < HV_TILE; i++) {
+                        float val;
+                        if (voxel(q, i, j, k, &val))
+                            acc.setValueOn(
+                                Coord(c[0] + i + off[0], c[1] + j + off[1], c[2] + k + off[2]),
+                                val);
+                    }
+        }
+        return;
+    }
+    std::vector<std::unique_ptr<LeafT>> leaves(t->count);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, t->count),
+                      [&](const tbb::blocked_range<size_t> &r) {
+                          for (size_t q = r.begin(); q != r.end(); q++) {
+                              const int32_t *c = t->ijk + 3 * q;
+                              Coord o(c[0] + off[0], c[1] + off[1], c[2] + off[2]);
+                              auto leaf = std::make_unique<LeafT>(o, bg, false);
+                              for (int k = 0; k < HV_TILE; k++)
+                                  for (int j = 0; j < HV_TILE; j++)
+                                      for (int i = 0; i < HV_TILE; i++) {
+                                          float val;
+                                          Coord x = o.offsetBy(i, j, k);
+                                          if (voxel(q, i, j, k, &val))
+                                              leaf->setValueOn(x, val);
+                                          else
+                                              leaf->setValueOff(x, bg);
+                                      }
+                              leaves[q] = std::move(leaf);
+                          }
+                      });
+    auto &tree = grid.tree();
+    for (auto &l : leaves)
+        tree.addLeaf(l.release());
+}
+
+// The level set's last steps: inactive voxels and tiles take the sign of the
+// active voxels around them, as in OpenVDB's own mesh-to-level-set
+// conversion; then its transform, class and name.
+void finish_levelset(hv_vdb_writer *w, openvdb::FloatGrid::Ptr grid, const hv_grid *hdr,
+                     const char *name, const Placement &pl)
+{
+    openvdb::tools::signedFloodFill(grid->tree());
+    grid->setTransform(pl.xf);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    finish_grid(w, grid, hdr, name, pl);
+}
+
+// ---- a level set streamed from tiles --------------------------------------
+
+// The grid hv_vdb_writer_levelset_sink builds from the batches it is handed.
+struct LevelsetStream {
+    hv_vdb_writer *w;
+    std::string name;
+    double band_voxels;
+    hv_vdb_sink_stats *stats; // may be NULL
+    hv_vdb_sink_stats S{};
+    hv_grid hdr{};
+    Placement pl;
+    float bg = 0;
+    openvdb::FloatGrid::Ptr grid;
+};
+
+// A bound on the memory of a float tree of `leaves` leaves on block n: the
+// leaves with their buffers; a 16^3-leaf node for every 128 leaves (a surface
+// through such a node fills 300 to 500 of its leaves); and every 32^3-node
+// node the block can meet. About 2.2 kB a leaf.
+double tree_bytes(double leaves, const int n[3])
+{
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
+    using Node2 = openvdb::FloatTree::RootNodeType::ChildNodeType;
+    double top = 1;
+    for (int a = 0; a < 3; a++)
+        top *= n[a] / (double)Node2::DIM + 2;
+    return leaves * ((double)sizeof(LeafT) + LeafT::SIZE * sizeof(float)) +
+           (leaves / 128 + 1) * (double)sizeof(Node1) + top * (double)sizeof(Node2);
+}
+
+hv_status stream_begin(void *user, const hv_tiles *block, size_t max_tiles)
+{
+    auto *ls = static_cast<LevelsetStream *>(user);
+    return guarded("hv_vdb_writer_levelset_sink", [&] {
+        const std::string what = "level set '" + ls->name + "'";
+        ls->hdr = tiles_block(block, what);
+        const double need = tree_bytes((double)max_tiles, block->n);
+        if (need > (double)hv__physical_memory()) {
+            char msg[256];
+            std::snprintf(msg, sizeof msg,
+                          ": its tree of up to %zu leaves needs about %.3g GB, more than this "
+                          "machine's %.3g GB",
+                          max_tiles, need / 1e9, hv__physical_memory() / 1e9);
+            fail(HV_ERR_NOMEM, what + msg);
+        }
+        ls->pl = placement(ls->w, &ls->hdr, ls->name.c_str());
+        ls->bg = (float)(ls->band_voxels * block->h);
+        ls->grid = std::make_shared<BatchedFloatGrid>(ls->bg);
+        ls->S.tree_bytes_bound = need;
+        return HV_OK;
+    });
+}
+
+hv_status stream_put(void *user, const hv_tiles *batch)
+{
+    auto *ls = static_cast<LevelsetStream *>(user);
+    return guarded("hv_vdb_writer_levelset_sink", [&] {
+        if (!ls->grid)
+            fail(HV_ERR_INVALID_ARG, "level set '" + ls->name + "': tiles came before begin");
+        const std::string what = "level set '" + ls->name + "'";
+        tiles_block(batch, what);
+        hv_status st = hv_check_finite(
+            batch->v, batch->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), ls->name.c_str());
+        if (st)
+            return st;
+        const double t0 = hv_now();
+        add_band_leaves(*ls->grid, batch, ls->pl.off, ls->bg);
+        ls->S.t_leaves += hv_now() - t0;
+        ls->S.batches++;
+        ls->S.tiles += batch->count;
+        return HV_OK;
+    });
+}
+
+hv_status stream_end(void *user, int ok)
+{
+    auto *ls = static_cast<LevelsetStream *>(user);
+    hv_vdb_writer *w = ls->w;
+    hv_status st = HV_OK;
+    if (ok && ls->grid)
+        st = guarded("hv_vdb_writer_levelset_sink", [&] {
+            const double t0 = hv_now();
+            check_new_name(w, ls->name.c_str());
+            finish_levelset(w, ls->grid, &ls->hdr, ls->name.c_str(), ls->pl);
+            ls->S.t_fill = hv_now() - t0;
+            ls->S.leaves = ls->grid->tree().leafCount();
+            ls->S.tree_bytes = (double)ls->grid->tree().memUsage();
+            return HV_OK;
+        });
+    if (ls->stats)
+        *ls->stats = ls->S;
+    w->stream.reset(); // ls is gone
+    return st;
+}
+
 } // namespace
 
 extern "C" {
@@ -461,72 +686,40 @@ hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, 
     return guarded("hv_vdb_writer_add_levelset_tiles", [&] {
         check_new_name(w, name);
         const hv_grid hdr = tiles_block(t, std::string("level set '") + name + "'");
-        if (!(band_voxels > 0) || !std::isfinite(band_voxels))
-            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
-                                         "': band width must be positive, got " +
-                                         std::to_string(band_voxels));
+        check_band(name, band_voxels);
         hv_status st =
             hv_check_finite(t->v, t->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), name);
         if (st)
             return st;
         Placement pl = placement(w, &hdr, name);
         const float bg = (float)(band_voxels * t->h);
-        auto grid = openvdb::FloatGrid::create(bg);
-        using LeafT = openvdb::FloatTree::LeafNodeType;
-        std::vector<std::unique_ptr<LeafT>> leaves(t->count);
-        // A tile of the block at a multiple of 8 lands on one leaf when the
-        // index offset is a multiple of 8 too; otherwise it spans up to 8.
-        const bool aligned = pl.off[0] % 8 == 0 && pl.off[1] % 8 == 0 && pl.off[2] % 8 == 0;
-        auto voxel = [&](size_t q, int i, int j, int k, float *val) {
-            const int o = i + HV_TILE * (j + HV_TILE * k);
-            *val = t->v[q * HV_TILE * HV_TILE * HV_TILE + o];
-            bool on = t->on[8 * q + k] >> (i + HV_TILE * j) & 1;
-            return on && std::fabs(*val) < bg;
-        };
-        if (aligned) {
-            tbb::parallel_for(tbb::blocked_range<size_t>(0, t->count),
-                              [&](const tbb::blocked_range<size_t> &r) {
-                                  for (size_t q = r.begin(); q != r.end(); q++) {
-                                      const int32_t *c = t->ijk + 3 * q;
-                                      Coord o(c[0] + pl.off[0], c[1] + pl.off[1], c[2] + pl.off[2]);
-                                      auto leaf = std::make_unique<LeafT>(o, bg, false);
-                                      for (int k = 0; k < HV_TILE; k++)
-                                          for (int j = 0; j < HV_TILE; j++)
-                                              for (int i = 0; i < HV_TILE; i++) {
-                                                  float val;
-                                                  Coord x = o.offsetBy(i, j, k);
-                                                  if (voxel(q, i, j, k, &val))
-                                                      leaf->setValueOn(x, val);
-                                                  else
-                                                      leaf->setValueOff(x, bg);
-                                              }
-                                      leaves[q] = std::move(leaf);
-                                  }
-                              });
-            auto &tree = grid->tree();
-            for (auto &l : leaves)
-                tree.addLeaf(l.release());
-        } else {
-            auto acc = grid->getAccessor();
-            for (size_t q = 0; q < t->count; q++) {
-                const int32_t *c = t->ijk + 3 * q;
-                for (int k = 0; k < HV_TILE; k++)
-                    for (int j = 0; j < HV_TILE; j++)
-                        for (int i = 0; i < HV_TILE; i++) {
-                            float val;
-                            if (voxel(q, i, j, k, &val))
-                                acc.setValueOn(Coord(c[0] + i + pl.off[0], c[1] + j + pl.off[1],
-                                                     c[2] + k + pl.off[2]),
-                                               val);
-                        }
-            }
-        }
-        // Inactive voxels and tiles take the sign of the active voxels
-        // around them, as in OpenVDB's own mesh-to-level-set conversion.
-        openvdb::tools::signedFloodFill(grid->tree());
-        grid->setTransform(pl.xf);
-        grid->setGridClass(openvdb::GRID_LEVEL_SET);
-        finish_grid(w, grid, &hdr, name, pl);
+        auto grid = std::make_shared<BatchedFloatGrid>(bg);
+        add_band_leaves(*grid, t, pl.off, bg);
+        finish_levelset(w, grid, &hdr, name, pl);
+        return HV_OK;
+    });
+}
+
+hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double band_voxels,
+                                      hv_vdb_sink_stats *stats, hv_tiles_sink *out)
+{
+    return guarded("hv_vdb_writer_levelset_sink", [&] {
+        if (!out)
+            fail(HV_ERR_INVALID_ARG, "hv_vdb_writer_levelset_sink: out is NULL");
+        *out = hv_tiles_sink{};
+        check_new_name(w, name);
+        check_band(name, band_voxels);
+        if (w->stream && w->stream->grid)
+            fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
+                                         "': the writer is still taking level set '" +
+                                         w->stream->name + "'");
+        auto ls = std::make_unique<LevelsetStream>();
+        ls->w = w;
+        ls->name = name;
+        ls->band_voxels = band_voxels;
+        ls->stats = stats;
+        *out = hv_tiles_sink{ls.get(), stream_begin, stream_put, stream_end};
+        w->stream = std::move(ls);
         return HV_OK;
     });
 }

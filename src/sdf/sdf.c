@@ -611,42 +611,77 @@ done:
     return st;
 }
 
-hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
-                               hv_tiles **out, hv_sdf_stats *stats)
+/* The sink between the tiles and the caller's: the offset and shell moved
+ * onto each batch (the producer's own arrays, writable), the active voxels
+ * counted after them. */
+typedef struct {
+    const hv_tiles_sink *to;
+    const hv_sdf_opts *o;
+    double band;
+    size_t active;
+} morph_sink;
+
+static hv_status morph_begin(void *user, const hv_tiles *block, size_t max_tiles)
 {
-    if (!out)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute_tiles: out is NULL");
-    *out = NULL;
+    const morph_sink *ms = user;
+    return ms->to->begin(ms->to->user, block, max_tiles);
+}
+
+static hv_status morph_put(void *user, const hv_tiles *batch)
+{
+    morph_sink *ms = user;
+    if (hv__sdf_morph_on(ms->o))
+        hv__sdf_morph_tiles((hv_tiles *)batch, ms->o, ms->band);
+    ms->active += batch->active;
+    return ms->to->put(ms->to->user, batch);
+}
+
+static hv_status morph_end(void *user, int ok)
+{
+    const morph_sink *ms = user;
+    return ms->to->end(ms->to->user, ok);
+}
+
+/* hv_sdf_stream_tiles's checks of its options. */
+static hv_status tiles_check(const hv_sdf_opts *o, double band)
+{
+    if (!(band > 0) || band > 64)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: band half width must be in (0, 64] voxels, got %g", band);
+    if (o->magnitude != HV_SDF_EXACT)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles has the exact distance only (the heat "
+                         "method's own values need the dense grid)");
+    const int unsig = o->unsigned_distance != 0;
+    if (!unsig && o->sign == HV_SDF_SIGN_HEAT)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles takes its sign from the winding number "
+                         "(the heat method's sign needs the dense grid)");
+    if (!unsig && (o->repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
+                      (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "sdf: a narrow band of tiles takes its sign from the winding number, "
+                         "which needs the repair's orientation steps");
+    return hv__sdf_morph_tiles_check(o);
+}
+
+hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
+                              const hv_tiles_sink *sink, hv_sdf_stats *stats)
+{
+    if (!sink || !sink->begin || !sink->put || !sink->end)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_stream_tiles: the sink is incomplete");
     hv_sdf_opts o;
     hv_sdf_stats S;
     sdf_work w;
     double lo[3], hi[3];
     hv_status st = sdf_begin(m, opts, &o, &S, &w, lo, hi);
-    if (st)
-        return st;
-    if (!(band > 0) || band > 64)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: band half width must be in (0, 64] voxels, got %g", band);
-    if (o.magnitude != HV_SDF_EXACT)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles has the exact distance only (the heat "
-                         "method's own values need the dense grid)");
-    const int unsig = o.unsigned_distance != 0;
-    if (!unsig && o.sign == HV_SDF_SIGN_HEAT)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles takes its sign from the winding number "
-                         "(the heat method's sign needs the dense grid)");
-    if (!unsig && (o.repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
-                      (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles takes its sign from the winding number, "
-                         "which needs the repair's orientation steps");
-    if ((st = hv__sdf_morph_tiles_check(&o)))
+    if (st || (st = tiles_check(&o, band)))
         return st;
     if (o.threads > 0)
         hv_set_threads(o.threads);
     const double t0 = hv_now();
     const hv_mesh *M = m;
+    const int unsig = o.unsigned_distance != 0;
     int n[3];
     double h, origin[3];
     grow_bounds(&o, lo, hi);
@@ -661,21 +696,34 @@ hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double
     if ((st = stage(0.1, "tiles")))
         goto done;
     double tt = hv_now();
+    morph_sink ms = {.to = sink, .o = &o, .band = band};
+    const hv_tiles_sink via = {&ms, morph_begin, morph_put, morph_end};
     if ((st = hv__sdf_tiles(M, n, h, origin, band + hv__sdf_morph_reach(&o) / h, unsig, o.near_sign,
-                            out, &S)))
+                            &via, &S)))
         goto done;
-    if (hv__sdf_morph_on(&o))
-        hv__sdf_morph_tiles(*out, &o, band);
-    S.active_voxels = (*out)->active;
+    S.active_voxels = ms.active;
     S.t_redistance = hv_now() - tt;
-    if ((st = stage(1.0, "done"))) {
-        hv_tiles_destroy(out);
+    if ((st = stage(1.0, "done")))
         goto done;
-    }
     S.t_total = hv_now() - t0;
 done:
     work_free(&w);
     if (stats)
         *stats = S;
+    return st;
+}
+
+hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
+                               hv_tiles **out, hv_sdf_stats *stats)
+{
+    if (!out)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_sdf_compute_tiles: out is NULL");
+    *out = NULL;
+    hv__tiles_collect c = {NULL};
+    const hv_tiles_sink sink = hv__tiles_collector(&c);
+    hv_status st = hv_sdf_stream_tiles(m, opts, band, &sink, stats);
+    if (st)
+        hv_tiles_destroy(&c.T);
+    *out = c.T;
     return st;
 }

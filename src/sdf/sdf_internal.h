@@ -61,14 +61,24 @@ hv_status hv__winding_sign(const hv_mesh *m, const hv_grid *g, const float *dist
  * (dipoles refined near 1/2; sign_winding.c); ++*evals per evaluation. */
 double hv__wn_sure(const hv_wn_tree *W, const double p[3], size_t *evals);
 
+/* The sink hv_sdf_compute_tiles collects the batches with: one hv_tiles of
+ * the bound begin is given, shrunk to the tiles that came; T is NULL until
+ * begin and after a failed run. */
+typedef struct {
+    hv_tiles *T;
+} hv__tiles_collect;
+hv_tiles_sink hv__tiles_collector(hv__tiles_collect *c);
+
 /* The narrow band of M (already repaired) on the block (n, h, origin) as
  * tiles (sdf_tiles.c): exact distance where it is below band * h, signed
  * within a voxel by the nearest clean feature's pseudonormal (within
  * near_sign voxels) or the winding number, and beyond by the winding number
- * (flooded from nearer cells where M is closed); *out is
- * new. Counts into S (tiles, active_voxels, band_cells, winding_evals,
- * near_sign_cells, t_sign). */
+ * (flooded from nearer cells where M is closed), handed to sink batch by
+ * batch (sink->end is called once begin was). Counts into S (tiles,
+ * active_voxels, band_cells, winding_evals, near_sign_cells, t_sign,
+ * tiles_in_flight). */
 hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
-                        double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S);
+                        double band, int unsig, double near_sign, const hv_tiles_sink *sink,
+                        hv_sdf_stats *S);
 
 #endif

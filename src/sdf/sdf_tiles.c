@@ -18,6 +18,13 @@
  *               coarse field is interpolated
  *   4. compact  tiles without an active voxel are dropped
  *
+ * Steps 2-4 run on batches of groups in order, and each batch's tiles go to
+ * a sink (hv_tiles_sink) as soon as it is done: the producer holds the pairs
+ * and one batch, never the whole band. Tiles that no triangle comes near
+ * enough for a voxel of the band (the tile's centre farther than the band
+ * plus its half diagonal from all of its triangles) are neither rasterized
+ * nor counted in the bound the sink is given.
+ *
  * A cell is active where its distance is below band * h, as the level-set
  * writer makes active in a dense grid; other cells of a tile hold +band * h,
  * and the sign of everything not active is left to a flood fill from the
@@ -99,7 +106,7 @@ static int tri_tiles(const hv_mesh *M, size_t t, const int n[3], double h, const
  * itself needs memory in proportion to the band): a plane cuts an 8^3 tile in
  * at most 64 sqrt(2) voxel^2, so the surface's area bounds the band's tiles
  * below. Blocks whose tiles cannot be numbered in 32 bits (past 2^41 cells)
- * are refused with the same figure. */
+ * are refused as such. */
 static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbered)
 {
     double area = 0;
@@ -114,8 +121,13 @@ static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbe
         area += 0.5 * sqrt(x * x + y * y + z * z);
     }
     double tiles = area / (h * h) / (64.0 * sqrt(2.0));
-    double need = tiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
-    if (numbered && need <= (double)hv__physical_memory())
+    double need = tiles * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
+    if (!numbered)
+        return hv__error(HV_ERR_NOMEM,
+                         "sdf: a block of %d x %d x %d cells has more 8^3 tiles than a narrow "
+                         "band can number (2^32 in 2x2x2 groups)",
+                         n[0], n[1], n[2]);
+    if (need <= (double)hv__physical_memory())
         return HV_OK;
     return hv__error(HV_ERR_NOMEM,
                      "sdf: a block of %d x %d x %d cells: its narrow band alone needs at least "
@@ -198,20 +210,17 @@ out:
     return st;
 }
 
-/* The memory of the tiles, and of the .vdb writer's copy of them. */
-static hv_status band_memory(size_t ntiles, size_t npairs, const int n[3])
+/* The producer's own memory: the pairs (twice while sorted), the tiles'
+ * starts and one batch of tiles. */
+static hv_status band_memory(size_t ntiles, size_t npairs, size_t batch, const int n[3])
 {
-    double need =
-        (double)ntiles * 2 * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12) + (double)npairs * 8;
-    /* Checked before the conversion: an int holds up to 2 PB in MiB. */
-    int dims[3] = {need > 1e18 ? 1 : (int)(need / 1048576.0) + 1, 1, 1};
-    if (need > 1e18 || hv_check_dims(3, dims, 1.0, 1048576)) {
-        hv_clear_error();
+    double need = (double)npairs * 16 + (double)ntiles * (sizeof(size_t) + 1) +
+                  (double)batch * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 13);
+    if (need > 1e18 || need > (double)hv__physical_memory())
         return hv__error(HV_ERR_NOMEM,
-                         "sdf: a block of %d x %d x %d cells: its narrow band needs about "
-                         "%.3g GB, more than this machine's %.3g GB",
+                         "sdf: a block of %d x %d x %d cells: its narrow band's triangle lists "
+                         "need about %.3g GB, more than this machine's %.3g GB",
                          n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
-    }
     return HV_OK;
 }
 
@@ -272,6 +281,51 @@ static hv_tiles *tiles_alloc(const int n[3], double h, const double origin[3], s
     return T;
 }
 
+static hv_status collect_begin(void *user, const hv_tiles *block, size_t max_tiles)
+{
+    hv__tiles_collect *c = user;
+    if (!(c->T = tiles_alloc(block->n, block->h, block->origin, max_tiles ? max_tiles : 1)))
+        return tiles_nomem();
+    return HV_OK;
+}
+
+static hv_status collect_put(void *user, const hv_tiles *b)
+{
+    hv_tiles *T = ((hv__tiles_collect *)user)->T;
+    memcpy(T->ijk + 3 * T->count, b->ijk, 3 * b->count * sizeof *b->ijk);
+    memcpy(T->v + (size_t)T3 * T->count, b->v, (size_t)T3 * b->count * sizeof *b->v);
+    memcpy(T->on + 8 * T->count, b->on, 8 * b->count * sizeof *b->on);
+    T->count += b->count;
+    T->active += b->active;
+    return HV_OK;
+}
+
+/* Gives back what the bound held beyond the tiles that came (in place for
+ * blocks this large). */
+static hv_status collect_end(void *user, int ok)
+{
+    hv__tiles_collect *c = user;
+    hv_tiles *T = c->T;
+    if (!ok || !T) {
+        hv_tiles_destroy(&c->T);
+        return HV_OK;
+    }
+    const size_t n = T->count ? T->count : 1;
+    int32_t *ijk = realloc(T->ijk, 3 * n * sizeof *ijk);
+    float *v = realloc(T->v, (size_t)T3 * n * sizeof *v);
+    uint64_t *on = realloc(T->on, 8 * n * sizeof *on);
+    T->ijk = ijk ? ijk : T->ijk;
+    T->v = v ? v : T->v;
+    T->on = on ? on : T->on;
+    return HV_OK;
+}
+
+hv_tiles_sink hv__tiles_collector(hv__tiles_collect *c)
+{
+    c->T = NULL;
+    return (hv_tiles_sink){c, collect_begin, collect_put, collect_end};
+}
+
 /* What the threads read while they rasterize and sign the groups of tiles. */
 typedef struct {
     const hv_mesh *M;
@@ -283,8 +337,10 @@ typedef struct {
     int unsig, closed;             /* closed: the sign floods between neighbours */
     const uint64_t *pairs;         /* (tile << 32 | triangle), sorted */
     const size_t *tstart, *gstart; /* each tile's first pair, each group's first tile */
-    hv_tiles *T;
-    uint8_t *keep; /* per tile: whether it holds an active voxel */
+    const uint8_t *near;           /* per tile: whether a triangle comes near enough */
+    hv_tiles *T;                   /* the batch: tile q is T's q - q0 */
+    size_t q0;
+    uint8_t *keep; /* per tile of the batch: whether it holds an active voxel */
 } band_ctx;
 
 /* A thread's sums over its tiles. */
@@ -330,7 +386,7 @@ static void tile_nearest(const band_ctx *c, size_t q, const int gc[3], const int
     for (int a = 0; a < 3; a++) {
         blo[a] = tc[a] * HV_TILE;
         bhi[a] = blo[a] + HV_TILE - 1 < c->n[a] - 1 ? blo[a] + HV_TILE - 1 : c->n[a] - 1;
-        c->T->ijk[3 * q + a] = blo[a];
+        c->T->ijk[3 * (q - c->q0) + a] = blo[a];
     }
     const int ex = bhi[0] - blo[0] + 1, ey = bhi[1] - blo[1] + 1, ez = bhi[2] - blo[2] + 1;
     ext[0] = ex;
@@ -463,9 +519,12 @@ static void sign_tile(const band_ctx *c, size_t q, const int gc[3], const int gl
 {
     uint64_t best[T3];
     int blo[3], ext[3];
+    if (!c->near[q])
+        return;
     tile_nearest(c, q, gc, glo, ghi, big, blo, ext, best);
-    float *v = c->T->v + (size_t)T3 * q;
-    uint64_t *on = c->T->on + 8 * q;
+    const size_t b = q - c->q0;
+    float *v = c->T->v + (size_t)T3 * b;
+    uint64_t *on = c->T->on + 8 * b;
     double t0 = hv_now();
     float d[T3];
     int8_t sg[T3];
@@ -473,7 +532,7 @@ static void sign_tile(const band_ctx *c, size_t q, const int gc[3], const int gl
     sign_far(c, blo, d, sg, todo, &cnt->evals);
     int any = write_band(c->bg, d, sg, v, on, &cnt->active);
     cnt->ts += hv_now() - t0;
-    c->keep[q] = (uint8_t)any;
+    c->keep[b] = (uint8_t)any;
 }
 
 /* 2-3. Group gq: its triangles, each once, rasterized into its 16^3 box
@@ -481,6 +540,11 @@ static void sign_tile(const band_ctx *c, size_t q, const int gc[3], const int gl
  * tiles signed. 0 when out of memory. */
 static int sign_group(const band_ctx *c, size_t gq, band_counts *cnt)
 {
+    int any = 0;
+    for (size_t q = c->gstart[gq]; q < c->gstart[gq + 1]; q++)
+        any |= c->near[q];
+    if (!any)
+        return 1;
     const size_t p0 = c->tstart[c->gstart[gq]], p1 = c->tstart[c->gstart[gq + 1]];
     uint32_t *tl = malloc((p1 - p0) * sizeof *tl);
     uint64_t *big = malloc(8 * T3 * sizeof *big);
@@ -508,26 +572,24 @@ static int sign_group(const band_ctx *c, size_t gq, band_counts *cnt)
     return 1;
 }
 
-/* 2-3. Every group, in parallel; the sums into *sum. Returns how many groups
- * ran out of memory. */
-static int sign_groups(const band_ctx *c, size_t ngroups, band_counts *sum)
+/* 2-3. Groups g0..g1 of ngroups, in parallel; the sums added to *sum.
+ * Returns how many groups ran out of memory; *cancelled when the progress
+ * callback asked to stop (the groups after it are skipped). */
+static int sign_groups(const band_ctx *c, size_t g0, size_t g1, size_t ngroups, band_counts *sum,
+                       int *cancelled)
 {
-    size_t band_cells = 0, active = 0, evals = 0, used = 0;
-    double ts = 0;
+    size_t band_cells = sum->band_cells, active = sum->active, evals = sum->evals, used = sum->used;
+    double ts = sum->ts;
     int failed = 0;
-    /* Progress from the first thread alone, which also notes a cancel; the
-     * groups after it are skipped. */
-    _Atomic size_t groups_done = 0;
-    _Atomic int cancelled = 0;
-    hv__progress_span(0.3, 0.9);
+    /* Progress from the first thread alone, which also notes a cancel. */
+    _Atomic int stop = 0;
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : band_cells, active, evals, used, ts, failed)
-    for (size_t gq = 0; gq < ngroups; gq++) {
-        size_t done = atomic_fetch_add(&groups_done, 1);
-        if (atomic_load(&cancelled))
+    for (size_t gq = g0; gq < g1; gq++) {
+        if (atomic_load(&stop))
             continue;
-        if (omp_get_thread_num() == 0 && done % 64 == 0 &&
-            hv__progress_part((double)done / ngroups, "tiles"))
-            atomic_store(&cancelled, 1);
+        if (omp_get_thread_num() == 0 && gq % 64 == 0 &&
+            hv__progress_part((double)gq / ngroups, "tiles"))
+            atomic_store(&stop, 1);
         /* The thread's own sums go through cnt and back: they add up tile by
          * tile, as one running sum per thread. */
         band_counts cnt = {band_cells, active, evals, used, ts};
@@ -539,6 +601,7 @@ static int sign_groups(const band_ctx *c, size_t ngroups, band_counts *sum)
         ts = cnt.ts;
     }
     *sum = (band_counts){band_cells, active, evals, used, ts};
+    *cancelled = atomic_load(&stop);
     return failed;
 }
 
@@ -570,10 +633,99 @@ static void band_stats(hv_sdf_stats *S, size_t kept, const band_counts *sum)
     S->t_sign = sum->ts / (hv_get_threads() > 0 ? hv_get_threads() : 1);
 }
 
-hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
-                        double band, int unsig, double near_sign, hv_tiles **out, hv_sdf_stats *S)
+/* Whether a voxel of tile q can lie within the band: the distance from the
+ * tile's centre to its nearest triangle at most the band plus the half
+ * diagonal of the tile's cell centres (with a margin for rounding). */
+static int tile_near(const band_ctx *c, size_t q)
 {
-    *out = NULL;
+    const uint64_t key = c->pairs[c->tstart[q]] >> 32;
+    const uint64_t gk = key >> 3, nb0 = (uint64_t)c->nb[0], nb1 = (uint64_t)c->nb[1];
+    const int oc = (int)(key & 7);
+    const int tc[3] = {2 * (int)(gk % nb0) + (oc & 1), 2 * (int)(gk / nb0 % nb1) + (oc >> 1 & 1),
+                       2 * (int)(gk / nb0 / nb1) + (oc >> 2)};
+    double p[3];
+    for (int a = 0; a < 3; a++)
+        p[a] = c->origin[a] + (tc[a] * HV_TILE + 0.5 * HV_TILE) * c->h;
+    const double r = c->bg + (0.5 * sqrt(3.0) * (HV_TILE - 1) + 1e-3) * c->h, r2 = r * r;
+    for (size_t i = c->tstart[q]; i < c->tstart[q + 1]; i++) {
+        const uint32_t *v = c->M->tris + 3 * (size_t)(uint32_t)c->pairs[i];
+        double x[3];
+        int region;
+        if (hv_closest(p, c->M->verts + 3 * (size_t)v[0], c->M->verts + 3 * (size_t)v[1],
+                       c->M->verts + 3 * (size_t)v[2], x, &region) <= r2)
+            return 1;
+    }
+    return 0;
+}
+
+/* 1b. near[q] for every tile; returns how many are near. */
+static size_t near_tiles(const band_ctx *c, size_t ntiles, uint8_t *near)
+{
+    size_t count = 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : count)
+    for (size_t q = 0; q < ntiles; q++) {
+        near[q] = (uint8_t)tile_near(c, q);
+        count += near[q];
+    }
+    return count;
+}
+
+/* The tiles a batch holds: HEATVOX_TILE_BATCH where set (a test's way to
+ * cut a small band into many batches), else 16384 (34 MB). */
+static size_t batch_tiles(void)
+{
+    const char *e = getenv("HEATVOX_TILE_BATCH");
+    long b = e ? strtol(e, NULL, 10) : 0;
+    return b >= 1 ? (size_t)b : 16384;
+}
+
+/* 2-4. The groups in batches of whole groups, about `batch` tiles each:
+ * each signed in parallel, its tiles with an active voxel put into the sink.
+ * *kept counts them. */
+static hv_status stream_batches(band_ctx *c, size_t ngroups, size_t batch, hv_tiles *B,
+                                const hv_tiles_sink *sink, band_counts *sum, size_t *kept)
+{
+    hv_status st = HV_OK;
+    *kept = 0;
+    hv__progress_span(0.3, 0.9);
+    for (size_t g0 = 0, g1; g0 < ngroups && !st; g0 = g1) {
+        for (g1 = g0 + 1; g1 < ngroups && c->gstart[g1 + 1] - c->gstart[g0] <= batch; g1++)
+            ;
+        const size_t nt = c->gstart[g1] - c->gstart[g0];
+        c->q0 = c->gstart[g0];
+        memset(c->keep, 0, nt);
+        memset(B->on, 0, 8 * nt * sizeof *B->on);
+        const size_t active0 = sum->active;
+        int cancelled = 0;
+        if (sign_groups(c, g0, g1, ngroups, sum, &cancelled))
+            return tiles_nomem();
+        /* A cancel inside the loop is the callback's answer again here. */
+        if (cancelled && (st = hv__progress(0.9, "tiles")))
+            break;
+        B->count = compact_tiles(B, c->keep, nt);
+        B->active = sum->active - active0;
+        *kept += B->count;
+        if (B->count)
+            st = sink->put(sink->user, B);
+    }
+    return st;
+}
+
+/* The tiles' block, count 0. */
+static hv_tiles block_of(const int n[3], double h, const double origin[3])
+{
+    hv_tiles b = {.h = h};
+    for (int a = 0; a < 3; a++) {
+        b.n[a] = n[a];
+        b.origin[a] = origin[a];
+    }
+    return b;
+}
+
+hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double origin[3],
+                        double band, int unsig, double near_sign, const hv_tiles_sink *sink,
+                        hv_sdf_stats *S)
+{
     const int nt[3] = {(n[0] + HV_TILE - 1) / HV_TILE, (n[1] + HV_TILE - 1) / HV_TILE,
                        (n[2] + HV_TILE - 1) / HV_TILE};
     const int nb[3] = {(nt[0] + 1) / 2, (nt[1] + 1) / 2, (nt[2] + 1) / 2};
@@ -585,18 +737,20 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
     const double bandw = band * h, W = fmax(band, 2.0) * h;
     uint64_t *pairs = NULL;
     size_t *tstart = NULL, *gstart = NULL;
-    hv_tiles *T = NULL;
-    uint8_t *keep = NULL;
+    hv_tiles *B = NULL;
+    uint8_t *keep = NULL, *near = NULL;
     hv_pseudo ps;
-    int have_ps = 0;
-    size_t npairs = 0, ngroups = 0;
+    int have_ps = 0, begun = 0;
+    size_t npairs = 0, ngroups = 0, kept = 0;
     if ((st = bin_triangles(M, n, h, origin, W, nt, nb, &pairs, &npairs)))
         goto out;
     const size_t ntiles = tile_runs(pairs, npairs, NULL);
-    if ((st = hv__progress(0.3, "tiles")) || (st = band_memory(ntiles, npairs, n)))
+    const size_t batch = batch_tiles();
+    const size_t cap = (batch < ntiles ? batch : ntiles) + 7; /* whole groups of up to 8 */
+    if ((st = hv__progress(0.3, "tiles")) || (st = band_memory(ntiles, npairs, cap, n)))
         goto out;
-    if (!(tstart = hv_malloc((ntiles + 1) * sizeof *tstart)) ||
-        !(T = tiles_alloc(n, h, origin, ntiles)) || !(keep = hv_calloc(ntiles, 1)))
+    if (!(tstart = hv_malloc((ntiles + 1) * sizeof *tstart)) || !(near = hv_malloc(ntiles)) ||
+        !(B = tiles_alloc(n, h, origin, cap)) || !(keep = hv_calloc(cap, 1)))
         goto nomem;
     tile_runs(pairs, npairs, tstart);
     if (!unsig) {
@@ -606,40 +760,39 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
     }
     if (!group_runs(pairs, tstart, ntiles, &gstart, &ngroups))
         goto nomem;
-    const band_ctx c = {.M = M,
-                        .ps = &ps,
-                        .n = n,
-                        .nb = nb,
-                        .origin = origin,
-                        .h = h,
-                        .W = W,
-                        .hf = (float)h,
-                        .dlim = (float)(near_sign * h),
-                        .bg = (float)bandw,
-                        .unsig = unsig,
-                        .closed = !unsig && ps.balanced,
-                        .pairs = pairs,
-                        .tstart = tstart,
-                        .gstart = gstart,
-                        .T = T,
-                        .keep = keep};
-    band_counts sum;
-    if (sign_groups(&c, ngroups, &sum))
-        goto nomem;
-    /* A cancel inside the loop is the callback's answer again here. */
-    if ((st = hv__progress(0.9, "tiles")))
+    band_ctx c = {.M = M,
+                  .ps = &ps,
+                  .n = n,
+                  .nb = nb,
+                  .origin = origin,
+                  .h = h,
+                  .W = W,
+                  .hf = (float)h,
+                  .dlim = (float)(near_sign * h),
+                  .bg = (float)bandw,
+                  .unsig = unsig,
+                  .closed = !unsig && ps.balanced,
+                  .pairs = pairs,
+                  .tstart = tstart,
+                  .gstart = gstart,
+                  .near = near,
+                  .T = B,
+                  .keep = keep};
+    const hv_tiles blk = block_of(n, h, origin);
+    begun = 1;
+    band_counts sum = {0};
+    S->tiles_bound = near_tiles(&c, ntiles, near);
+    if ((st = sink->begin(sink->user, &blk, S->tiles_bound)) ||
+        (st = stream_batches(&c, ngroups, batch, B, sink, &sum, &kept)) ||
+        (st = hv__progress(0.9, "tiles")))
         goto out;
-    const size_t kept = compact_tiles(T, keep, ntiles);
     if (kept == 0) {
         st = hv__error(HV_ERR_INVALID_ARG,
                        "sdf: no part of the mesh's narrow band lies inside the grid block");
         goto out;
     }
-    T->count = kept;
-    T->active = sum.active;
     band_stats(S, kept, &sum);
-    *out = T;
-    T = NULL;
+    S->tiles_in_flight = cap;
     goto out;
 nomem:
     st = tiles_nomem();
@@ -650,6 +803,11 @@ out:
     hv_free(tstart);
     hv_free(gstart);
     hv_free(keep);
-    hv_tiles_destroy(&T);
+    hv_free(near);
+    hv_tiles_destroy(&B);
+    if (begun) {
+        hv_status e = sink->end(sink->user, !st);
+        st = st ? st : e;
+    }
     return st;
 }

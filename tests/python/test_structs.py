@@ -38,7 +38,7 @@ class Layout(unittest.TestCase):
         self.assertEqual(p.returncode, 0, p.stderr)
         got = subprocess.run([exe], capture_output=True, text=True, check=True).stdout.split("\n")[:-1]
         self.assertEqual(got, expect)
-        self.assertEqual(len(_lib.STRUCTS), 18)
+        self.assertEqual(len(_lib.STRUCTS), 20)
 
 
 if __name__ == "__main__":
