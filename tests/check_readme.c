@@ -219,20 +219,13 @@ START_TEST(every_readme_command_should_exit_as_documented)
 }
 END_TEST
 
-START_TEST(the_library_example_should_build_against_an_installed_copy_and_run)
+/* Builds the ```c block that starts at `start` (after its fence) in a new
+ * work directory against the staged install, runs it there, and checks that
+ * it ran against the staged library in under 5 s. */
+static void build_and_run(const char *start, int k)
 {
-    char *readme = slurp(readme_path());
-    ck_assert_msg(readme != NULL, "%s: cannot read", readme_path());
-    const char *start = strstr(readme, "\n```c\n");
-    ck_assert_msg(start != NULL, "%s has no ```c block", readme_path());
-    start += 6;
     const char *end = strstr(start, "\n```");
     ck_assert_ptr_nonnull(end);
-    char pc[PATH_MAX + 64];
-    snprintf(pc, sizeof pc, "%s/stage/lib/pkgconfig/heatvox.pc", build_dir);
-    ck_assert_msg(access(pc, R_OK) == 0,
-                  "%s missing: make check stages `make install PREFIX=BUILD/stage` first", pc);
-
     char dir[256];
     make_workdir(dir, sizeof dir);
     char src[PATH_MAX];
@@ -241,7 +234,6 @@ START_TEST(the_library_example_should_build_against_an_installed_copy_and_run)
     ck_assert_ptr_nonnull(f);
     fwrite(start, 1, (size_t)(end - start) + 1, f);
     ck_assert_int_eq(fclose(f), 0);
-    free(readme);
 
     /* A sanitized library (make sanitize) needs its runtime in the program. */
     const char *san = "";
@@ -257,17 +249,33 @@ START_TEST(the_library_example_should_build_against_an_installed_copy_and_run)
         "-Wl,-rpath,\"$libdir\"",
         build_dir, san);
     int rc = run_in(dir, cmd, err, sizeof err);
-    ck_assert_msg(rc == 0, "compiling the README's C example (%s/prog.c): exit %d: %s", dir, rc,
-                  err);
+    ck_assert_msg(rc == 0, "compiling the README's C example %d (%s/prog.c): exit %d: %s", k, dir,
+                  rc, err);
     double t0 = hv_now();
     rc = run_in(dir, "./prog", err, sizeof err);
     double dt = hv_now() - t0;
-    ck_assert_msg(rc == 0, "the README's C example exited %d: %s", rc, err);
-    ck_assert_msg(dt < 5.0, "the README's C example took %.1f s; keep its grid small", dt);
+    ck_assert_msg(rc == 0, "the README's C example %d exited %d: %s", k, rc, err);
+    ck_assert_msg(dt < 5.0, "the README's C example %d took %.1f s; keep its grid small", k, dt);
     /* It must have run against the staged library, not another copy. */
     rc = run_in(dir, "ldd ./prog | grep -q '/stage/lib/libheatvox\\.so'", err, sizeof err);
     ck_assert_msg(rc == 0, "prog is not linked against %s/stage/lib", build_dir);
     tl_rm_rf(dir);
+}
+
+START_TEST(the_library_examples_should_build_against_an_installed_copy_and_run)
+{
+    char *readme = slurp(readme_path());
+    ck_assert_msg(readme != NULL, "%s: cannot read", readme_path());
+    char pc[PATH_MAX + 64];
+    snprintf(pc, sizeof pc, "%s/stage/lib/pkgconfig/heatvox.pc", build_dir);
+    ck_assert_msg(access(pc, R_OK) == 0,
+                  "%s missing: make check stages `make install PREFIX=BUILD/stage` first", pc);
+    int k = 0;
+    for (const char *at = strstr(readme, "\n```c\n"); at; at = strstr(at + 6, "\n```c\n"))
+        build_and_run(at + 6, ++k);
+    ck_assert_msg(k >= 2, "%s has %d ```c blocks, expected the library's examples", readme_path(),
+                  k);
+    free(readme);
 }
 END_TEST
 
@@ -294,7 +302,7 @@ int main(int argc, char **argv)
     TCase *tc = tcase_create("readme");
     tcase_set_timeout(tc, 600);
     tcase_add_test(tc, every_readme_command_should_exit_as_documented);
-    tcase_add_test(tc, the_library_example_should_build_against_an_installed_copy_and_run);
+    tcase_add_test(tc, the_library_examples_should_build_against_an_installed_copy_and_run);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

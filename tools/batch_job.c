@@ -470,19 +470,17 @@ static int wants_tiles(const batch_opts *o)
            (o->sdf.repair & orient) == orient;
 }
 
-static int write_volume(const char *output, const hv_grid *g, const hv_tiles *T,
-                        const batch_opts *o, const char *input, const char *canon, char *err,
-                        size_t errsize)
+/* The volume: w already holds the band streamed into it (wants_tiles), else
+ * the dense grid g goes in. */
+static int write_volume(const char *output, const hv_grid *g, hv_vdb_writer *w, const batch_opts *o,
+                        const char *input, const char *canon, char *err, size_t errsize)
 {
-    hv_status st;
+    hv_status st = HV_OK;
     if (o->format == BATCH_EXR) {
         st = hv_exr_write(output, g, "distance");
     } else {
-        hv_vdb_writer *w = NULL;
-        st = hv_vdb_writer_create(&w);
-        if (!st)
-            st = T ? hv_vdb_writer_add_levelset_tiles(w, T, "sdf", o->band)
-                   : hv_vdb_writer_add_levelset(w, g, "sdf", o->band, o->dense);
+        if (!w && !(st = hv_vdb_writer_create(&w)))
+            st = hv_vdb_writer_add_levelset(w, g, "sdf", o->band, o->dense);
         if (!st)
             st = hv_vdb_writer_set_meta(w, "source", input);
         if (!st)
@@ -510,7 +508,7 @@ typedef struct job {
     int have_mesh, have_rep, have_stats;
     hv_mesh *m;
     hv_grid *g;
-    hv_tiles *T;
+    hv_vdb_writer *w; /* the band streamed in as it was computed (wants_tiles) */
     hv_mesh_report rep;
     hv_sdf_stats stats;
     hv_points_report points; /* points.points > 0 for a point cloud */
@@ -550,8 +548,8 @@ static int job_write(job *J)
         return -1;
     }
     double t = hv_now();
-    int wr = write_volume(J->output, J->g, J->T, &J->o, J->input, J->canon, J->err, sizeof J->err);
-    hv_tiles_destroy(&J->T);
+    int wr = write_volume(J->output, J->g, J->w, &J->o, J->input, J->canon, J->err, sizeof J->err);
+    J->w = NULL; /* write_volume took it */
     J->t_write = hv_now() - t;
     if (wr)
         return -1;
@@ -574,6 +572,17 @@ static int job_write(job *J)
                          sizeof J->err);
 }
 
+/* The narrow band, in tiles streamed into the .vdb writer's level set. */
+static hv_status job_stream(job *J)
+{
+    hv_tiles_sink sink;
+    hv_status st;
+    if ((st = hv_vdb_writer_create(&J->w)) ||
+        (st = hv_vdb_writer_levelset_sink(J->w, "sdf", J->o.band, NULL, &sink)))
+        return st;
+    return hv_sdf_stream_tiles(J->m, &J->o.sdf, J->o.band, &sink, &J->stats);
+}
+
 /* Reads the mesh, reports its defects, computes the distance and writes. */
 static int job_run(job *J)
 {
@@ -589,8 +598,7 @@ static int job_run(job *J)
     J->have_rep = hv_mesh_report_compute(J->m, &J->rep) == HV_OK;
     J->t_report = hv_now() - t;
     J->stage = "sdf";
-    st = wants_tiles(&J->o) ? hv_sdf_compute_tiles(J->m, &J->o.sdf, J->o.band, &J->T, &J->stats)
-                            : hv_sdf_compute(J->m, &J->o.sdf, &J->g, &J->stats);
+    st = wants_tiles(&J->o) ? job_stream(J) : hv_sdf_compute(J->m, &J->o.sdf, &J->g, &J->stats);
     if (st) {
         error_text(st, J->input, J->err, sizeof J->err);
         return -1;
@@ -744,7 +752,7 @@ int batch_job_main(int argc, char **argv)
     report_line(J);
     const int ok = J->stage == NULL;
     hv_grid_destroy(&J->g);
-    hv_tiles_destroy(&J->T);
+    hv_vdb_writer_destroy(&J->w);
     hv_mesh_destroy(&J->m);
     free(J);
     return ok ? HV_EXIT_OK : HV_EXIT_FAIL;

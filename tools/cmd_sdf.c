@@ -364,8 +364,8 @@ static int parse_args(int argc, char **argv, sdf_args *A)
 
 /* The closing line on stdout (and with -v the solver's details on stderr);
  * t: seconds to read, to make the mesh, to write, in all. */
-static void report(const sdf_args *A, const hv_sdf_stats *Sp, int tiles, size_t tris,
-                   size_t mesh_tris, const double t[4])
+static void report(const sdf_args *A, const hv_sdf_stats *Sp, const hv_vdb_sink_stats *vs,
+                   int tiles, size_t tris, size_t mesh_tris, const double t[4])
 {
     const hv_sdf_stats S = *Sp;
     const char *mesh_path = A->mesh_path, *out = A->out, *npy = A->npy, *mesh_out = A->mesh_out;
@@ -380,6 +380,16 @@ static void report(const sdf_args *A, const hv_sdf_stats *Sp, int tiles, size_t 
                 "by pseudonormals, %zu winding-number evaluations (%.2f s)\n",
                 tris, R->triangles_out, band, S.tiles, S.active_voxels, S.band_cells,
                 cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign);
+    if (cli_verbose >= 1 && tiles)
+        fprintf(stderr,
+                "heatvox sdf: the band went into the .vdb's tree as it was computed: %zu "
+                "batches, at most %zu tiles in flight (%.0f MB); tree of %zu leaves, %.0f MB "
+                "(allowed for: %.0f MB, %zu tiles near enough); leaves built in %.2f s, flood "
+                "fill %.2f s; file written in %.2f s\n",
+                vs->batches, S.tiles_in_flight,
+                S.tiles_in_flight * (HV_TILE * HV_TILE * HV_TILE * 4.0 + 8 * 8 + 12) / 1e6,
+                vs->leaves, vs->tree_bytes / 1e6, vs->tree_bytes_bound / 1e6, S.tiles_bound,
+                vs->t_leaves, vs->t_fill, t[2]);
     else if (cli_verbose >= 1)
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "
@@ -412,13 +422,53 @@ static void report(const sdf_args *A, const hv_sdf_stats *Sp, int tiles, size_t 
             R->inconsistent_before, R->inconsistent_after, mesh_note);
 }
 
+/* What a run made: the dense field, or (in tiles) the .vdb writer that took
+ * the band as it was computed, with what that cost. */
+typedef struct {
+    hv_grid *g;
+    hv_vdb_writer *w;
+    hv_vdb_sink_stats vs;
+} sdf_result;
+
+/* The field of m: in tiles streamed into a .vdb writer's level set (so that
+ * the band is never held twice), else the dense grid. */
+static hv_status compute(const sdf_args *A, const hv_mesh *m, const hv_sdf_opts *o, int tiles,
+                         sdf_result *r, hv_sdf_stats *S)
+{
+    if (!tiles)
+        return hv_sdf_compute(m, o, &r->g, S);
+    hv_tiles_sink sink;
+    hv_status st;
+    if ((st = hv_vdb_writer_create(&r->w)) ||
+        (st = hv_vdb_writer_levelset_sink(r->w, A->name, A->band, &r->vs, &sink)))
+        return st;
+    return hv_sdf_stream_tiles(m, o, A->band, &sink, S);
+}
+
+/* The .vdb into tmp: the writer's level set from tiles, else the dense
+ * grid's (an unsigned distance is no level set: a plain float grid). */
+static hv_status write_vdb(const sdf_args *A, sdf_result *r, const char *params, const char *tmp)
+{
+    hv_status st = HV_OK;
+    if (!r->w && !(st = hv_vdb_writer_create(&r->w)))
+        st = A->o.unsigned_distance
+                 ? hv_vdb_writer_add_float(r->w, r->g, A->name)
+                 : hv_vdb_writer_add_levelset(r->w, r->g, A->name, A->band, A->dense);
+    if (st || (st = hv_vdb_writer_set_meta(r->w, "source", A->mesh_path)) ||
+        (st = hv_vdb_writer_set_meta(r->w, "heatvox_version", hv_version())) ||
+        (st = hv_vdb_writer_set_meta(r->w, "heatvox_command", "sdf")) ||
+        (st = hv_vdb_writer_set_meta(r->w, "parameters", params)))
+        return st;
+    return hv_vdb_writer_write(r->w, tmp);
+}
+
 int cmd_sdf(int argc, char **argv)
 {
     sdf_args A;
     int rc = parse_args(argc, argv, &A);
     if (rc >= 0)
         return rc;
-    const char *mesh_path = A.mesh_path, *out = A.out, *npy = A.npy, *name = A.name;
+    const char *mesh_path = A.mesh_path, *out = A.out, *npy = A.npy;
     const char *preview = A.preview, *mesh_out = A.mesh_out;
     const double band = A.band, adaptivity = A.adaptivity;
     const int dense = A.dense, have_h = A.have_h, no_tiles = A.no_tiles;
@@ -451,14 +501,15 @@ int cmd_sdf(int argc, char **argv)
     if (!pr.points)
         cli_mesh_note("sdf", mesh_path, m);
     double t_read = hv_now() - t0;
-    hv_grid *g = NULL;
-    hv_tiles *T = NULL;
+    sdf_result r = {0};
     hv_sdf_stats S;
-    st = tiles ? hv_sdf_compute_tiles(m, &o, band, &T, &S) : hv_sdf_compute(m, &o, &g, &S);
+    st = compute(&A, m, &o, tiles, &r, &S);
+    hv_grid *g = r.g;
     hv_set_progress(NULL, NULL);
     if (st) {
         if (st == HV_ERR_CANCELLED)
             fputc('\n', stderr);
+        hv_vdb_writer_destroy(&r.w);
         hv_mesh_destroy(&m);
         if (st == HV_ERR_NOMEM)
             return too_large(&o, have_h, tiles, out);
@@ -492,28 +543,14 @@ int cmd_sdf(int argc, char **argv)
         if (outs[k] && !(tmp[k] = cli_stage("sdf", &co, outs[k]))) {
             cli_discard(&co);
             hv_grid_destroy(&g);
-            hv_tiles_destroy(&T);
+            hv_vdb_writer_destroy(&r.w);
             hv_mesh_destroy(&m);
             return HV_EXIT_FAIL;
         }
     const char *failed = NULL;
-    if (out) {
-        hv_vdb_writer *w = NULL;
-        /* An unsigned distance is no level set (no inside): a plain float grid. */
-        if (!(st = hv_vdb_writer_create(&w)) &&
-            !(st = T                     ? hv_vdb_writer_add_levelset_tiles(w, T, name, band)
-                   : o.unsigned_distance ? hv_vdb_writer_add_float(w, g, name)
-                                         : hv_vdb_writer_add_levelset(w, g, name, band, dense)) &&
-            !(st = hv_vdb_writer_set_meta(w, "source", mesh_path)) &&
-            !(st = hv_vdb_writer_set_meta(w, "heatvox_version", hv_version())) &&
-            !(st = hv_vdb_writer_set_meta(w, "heatvox_command", "sdf")) &&
-            !(st = hv_vdb_writer_set_meta(w, "parameters", params)))
-            st = hv_vdb_writer_write(w, tmp[0]);
-        hv_vdb_writer_destroy(&w);
-        hv_tiles_destroy(&T);
-        if (st)
-            failed = out;
-    }
+    if (out && (st = write_vdb(&A, &r, params, tmp[0])))
+        failed = out;
+    hv_vdb_writer_destroy(&r.w);
     if (!st && npy && (st = hv_write_npy(tmp[1], g)))
         failed = npy;
     if (!st && preview &&
@@ -553,6 +590,6 @@ int cmd_sdf(int argc, char **argv)
     tw = hv_now() - tw - t_mesh;
 
     const double t[4] = {t_read, t_mesh, tw, hv_now() - t0};
-    report(&A, &S, tiles, tris, mesh_tris, t);
+    report(&A, &S, &r.vs, tiles, tris, mesh_tris, t);
     return HV_EXIT_OK;
 }

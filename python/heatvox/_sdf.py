@@ -18,7 +18,7 @@ from ._lib import (
     fspath,
     hv_grid,
     hv_sdf_opts,
-    hv_tiles,
+    hv_tiles_sink,
     hv_sdf_stats,
     progress_scope,
     struct_dict,
@@ -250,21 +250,21 @@ def sdf_vdb(
         vertices, faces = _shape(vertices, o)
     if not str(name):
         raise ValueError("name must not be empty")
-    tiles = ctypes.POINTER(hv_tiles)()
     st = hv_sdf_stats()
     w = ctypes.c_void_p()
+    sink = hv_tiles_sink()
+    # The tiles go into the writer's tree as they are computed: the band is
+    # never held twice.
     try:
-        with c_mesh(vertices, faces) as mesh, progress_scope(progress):
-            fn.hv_sdf_compute_tiles(mesh, ctypes.byref(o), band, ctypes.byref(tiles), ctypes.byref(st))
         fn.hv_vdb_writer_create(ctypes.byref(w))
-        fn.hv_vdb_writer_add_levelset_tiles(w, tiles, str(name).encode(), band)
-        fn.hv_tiles_destroy(ctypes.byref(tiles))
+        fn.hv_vdb_writer_levelset_sink(w, str(name).encode(), band, None, ctypes.byref(sink))
+        with c_mesh(vertices, faces) as mesh, progress_scope(progress):
+            fn.hv_sdf_stream_tiles(mesh, ctypes.byref(o), band, ctypes.byref(sink), ctypes.byref(st))
         fn.hv_vdb_writer_set_meta(w, b"heatvox_version", fn.hv_version())
         for k, v in (metadata or {}).items():
             fn.hv_vdb_writer_set_meta(w, str(k).encode(), str(v).encode())
         fn.hv_vdb_writer_write(w, fspath(path))
     finally:
-        fn.hv_tiles_destroy(ctypes.byref(tiles))
         fn.hv_vdb_writer_destroy(ctypes.byref(w))
     stats = struct_dict(st)
     stats["backend"] = None
