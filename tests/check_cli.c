@@ -43,11 +43,13 @@ static int count(const char *hay, const char *needle)
     return n;
 }
 
+/* The narrow band's own check refuses --res 20000 on machines under 64 GB
+ * (its tree), after the binning (5 s); the others fail before any work. */
 START_TEST(a_resolution_too_large_should_be_a_usage_error_naming_the_option)
 {
     const char *cases[] = {
         "sdf sc/meshes/torus_holes.obj -o t.vdb --res 100000",
-        "sdf sc/meshes/torus_holes.obj -o t.vdb --res 12000",
+        "sdf sc/meshes/torus_holes.obj -o t.vdb --res 20000",
         "sdf sc/meshes/torus_holes.obj -o t.vdb --res 100000 --dense",
         "sdf sc/meshes/torus_holes.obj -o t.vdb --voxel-size 1e-6",
     };

@@ -106,7 +106,7 @@ static int tri_tiles(const hv_mesh *M, size_t t, const int n[3], double h, const
  * itself needs memory in proportion to the band): a plane cuts an 8^3 tile in
  * at most 64 sqrt(2) voxel^2, so the surface's area bounds the band's tiles
  * below. Blocks whose tiles cannot be numbered in 32 bits (past 2^41 cells)
- * are refused as such. */
+ * are refused with that figure, or as such where it fits. */
 static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbered)
 {
     double area = 0;
@@ -122,13 +122,13 @@ static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbe
     }
     double tiles = area / (h * h) / (64.0 * sqrt(2.0));
     double need = tiles * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
-    if (!numbered)
-        return hv__error(HV_ERR_NOMEM,
-                         "sdf: a block of %d x %d x %d cells has more 8^3 tiles than a narrow "
-                         "band can number (2^32 in 2x2x2 groups)",
-                         n[0], n[1], n[2]);
-    if (need <= (double)hv__physical_memory())
+    if (numbered && need <= (double)hv__physical_memory())
         return HV_OK;
+    if (need <= (double)hv__physical_memory())
+        return hv__error(HV_ERR_NOMEM,
+                         "sdf: a block of %d x %d x %d cells is more than a narrow band can "
+                         "address (2.2e12 cells, about 13000^3)",
+                         n[0], n[1], n[2]);
     return hv__error(HV_ERR_NOMEM,
                      "sdf: a block of %d x %d x %d cells: its narrow band alone needs at least "
                      "%.3g GB, more than this machine's %.3g GB",
@@ -150,6 +150,60 @@ static hv_status tiles_nomem(void)
     return hv__error(HV_ERR_NOMEM, "sdf: out of memory for the narrow band's tiles");
 }
 
+/* A triangle's plane, to skip the tiles of its box that it cannot reach: a
+ * tile whose centre is farther than R from the plane has no cell within W of
+ * the triangle (R = W plus the half diagonal of the tile's cell centres), so
+ * no raster of its group writes a cell for it. n = 0 (a degenerate
+ * triangle) keeps every tile. */
+typedef struct {
+    double n[3], d, R;
+} tri_plane;
+
+static tri_plane plane_of(const hv_mesh *M, size_t t, double W, double h)
+{
+    const uint32_t *v = M->tris + 3 * t;
+    const double *a = M->verts + 3 * (size_t)v[0], *b = M->verts + 3 * (size_t)v[1],
+                 *c = M->verts + 3 * (size_t)v[2];
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+                 w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+    const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    tri_plane p = {.R = W + (0.5 * sqrt(3.0) * (HV_TILE - 1) + 1e-3) * h};
+    if (!(len > 0) || !isfinite(len))
+        return p;
+    for (int k = 0; k < 3; k++)
+        p.n[k] = n[k] / len;
+    p.d = p.n[0] * a[0] + p.n[1] * a[1] + p.n[2] * a[2];
+    return p;
+}
+
+/* Whether tile (x, y, z) is within the plane's reach. */
+static int plane_reaches(const tri_plane *p, const double origin[3], double h, int x, int y, int z)
+{
+    const double c[3] = {origin[0] + (x + 0.5) * HV_TILE * h, origin[1] + (y + 0.5) * HV_TILE * h,
+                         origin[2] + (z + 0.5) * HV_TILE * h};
+    return fabs(p->n[0] * c[0] + p->n[1] * c[1] + p->n[2] * c[2] - p->d) <= p->R;
+}
+
+/* The tiles of triangle t's box [lo, hi] that its plane reaches, into keys
+ * (when not NULL); returns how many. */
+static size_t tri_keys(const hv_mesh *M, size_t t, const double origin[3], double h, double W,
+                       const int nb[3], const int lo[3], const int hi[3], uint64_t *keys)
+{
+    const tri_plane p = plane_of(M, t, W, h);
+    size_t k = 0;
+    for (int z = lo[2]; z <= hi[2]; z++)
+        for (int y = lo[1]; y <= hi[1]; y++)
+            for (int x = lo[0]; x <= hi[0]; x++) {
+                if (!plane_reaches(&p, origin, h, x, y, z))
+                    continue;
+                if (keys)
+                    keys[k] = tile_key(nb, x, y, z) << 32 | (uint64_t)t;
+                k++;
+            }
+    return k;
+}
+
 /* 1. Bin: every (tile << 32 | triangle) pair, counted first, then filled,
  * sorted by tile. *pairs_out is new; NULL on failure. */
 static hv_status bin_triangles(const hv_mesh *M, const int n[3], double h, const double origin[3],
@@ -168,7 +222,7 @@ static hv_status bin_triangles(const hv_mesh *M, const int n[3], double h, const
     for (size_t t = 0; t < ntri; t++) {
         int lo[3], hi[3];
         first[t + 1] = tri_tiles(M, t, n, h, origin, W, nt, lo, hi)
-                           ? (size_t)(hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)
+                           ? tri_keys(M, t, origin, h, W, nb, lo, hi, NULL)
                            : 0;
     }
     for (size_t t = 0; t < ntri; t++)
@@ -183,14 +237,8 @@ static hv_status bin_triangles(const hv_mesh *M, const int n[3], double h, const
 #pragma omp parallel for schedule(static)
     for (size_t t = 0; t < ntri; t++) {
         int lo[3], hi[3];
-        if (!tri_tiles(M, t, n, h, origin, W, nt, lo, hi))
-            continue;
-        size_t at = first[t];
-        for (int z = lo[2]; z <= hi[2]; z++)
-            for (int y = lo[1]; y <= hi[1]; y++)
-                for (int x = lo[0]; x <= hi[0]; x++) {
-                    pairs[at++] = tile_key(nb, x, y, z) << 32 | (uint64_t)t;
-                }
+        if (tri_tiles(M, t, n, h, origin, W, nt, lo, hi))
+            tri_keys(M, t, origin, h, W, nb, lo, hi, pairs + first[t]);
     }
     /* The counts go before the sort, which holds the pairs twice. */
     hv_free(first);
