@@ -541,30 +541,34 @@ static void points_orient(const hv_points *P, const double *area, const hv_grid 
 }
 
 /* How far along u (unit) vertex v moves onto the points near it: the
- * weighted mean of (p - v) . u over the candidates cand[0..m) within 2
- * sigma that face u's way, Gaussian weights times their areas, corrected
- * for the surface's curvature: on a surface of mean curvature H = div(u)/2
- * a point at tangential distance r lies H r^2 / 2 below the tangent plane,
- * so the mean is low by H E[r^2] / 2. NAN where no point faces u's way. */
+ * weighted mean of the points' heights over the tangent plane of v, over
+ * the candidates cand[0..m) within 2 sigma that face u's way, Gaussian
+ * weights times their areas. On a curved surface a point at tangential
+ * offset r lies r.S.r / 2 below that plane (S the shape operator) and its
+ * normal leans out by S r, so r . n / 2 puts it back: each point's height
+ * is taken halfway between the plane of u and its own tangent plane,
+ * exact to second order whatever the curvatures and however the points
+ * spread around v. NAN where no point faces u's way. */
 static double vertex_offset(const hv_points *P, const double *area, const double *nrm,
                             const uint32_t *cand, size_t m, const double v[3], const double u[3],
-                            double div_u, double sigma)
+                            double sigma)
 {
     const double reach2 = 4 * sigma * sigma, inv2 = 1 / (sigma * sigma);
-    double num = 0, den = 0, r2 = 0;
+    double num = 0, den = 0;
     for (size_t c = 0; c < m; c++) {
         const uint32_t j = cand[c];
         const double *p = P->xyz + 3 * (size_t)j, *n = nrm + 3 * (size_t)j;
-        const double d2 = dist2(p, v);
-        if (d2 > reach2 || n[0] * u[0] + n[1] * u[1] + n[2] * u[2] < PTS_FACING)
+        const double d2 = dist2(p, v), nu = n[0] * u[0] + n[1] * u[1] + n[2] * u[2];
+        if (d2 > reach2 || nu < PTS_FACING)
             continue;
+        const double r[3] = {p[0] - v[0], p[1] - v[1], p[2] - v[2]};
+        const double z = r[0] * u[0] + r[1] * u[1] + r[2] * u[2];
+        const double rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2] - z * nu; /* r_t . n */
         const double w = area[j] * exp(-d2 * inv2);
-        const double z = (p[0] - v[0]) * u[0] + (p[1] - v[1]) * u[1] + (p[2] - v[2]) * u[2];
-        num += w * z;
-        r2 += w * (d2 - z * z);
+        num += w * (z + 0.5 * rn);
         den += w;
     }
-    return den > 0 ? (num + 0.25 * div_u * r2) / den : NAN;
+    return den > 0 ? num / den : NAN;
 }
 
 /* The unit normal of phi's level set at x (NAN components where phi is
@@ -577,23 +581,6 @@ static void unit_normal(const hv_grid *gh, const double x[3], double u[3])
         u[a] = len > 0 ? u[a] / len : NAN;
 }
 
-/* div(grad phi / |grad phi|) at x: the sum of the principal curvatures of
- * the level set through x, by central differences two voxels apart. */
-static double normal_divergence(const hv_grid *gh, const double x[3])
-{
-    const double e = gh->h;
-    double div = 0;
-    for (int a = 0; a < 3; a++) {
-        double xp[3] = {x[0], x[1], x[2]}, xm[3] = {x[0], x[1], x[2]}, up[3], um[3];
-        xp[a] += e;
-        xm[a] -= e;
-        unit_normal(gh, xp, up);
-        unit_normal(gh, xm, um);
-        div += (up[a] - um[a]) / (2 * e);
-    }
-    return isfinite(div) ? div : 0;
-}
-
 /* Moves vertex v along phi's normal by its offset (at most one heat voxel);
  * the distance moved in voxels, NAN where no point supports it. */
 static double move_vertex(const hv_points *P, const double *area, const double *nrm,
@@ -604,9 +591,7 @@ static double move_vertex(const hv_points *P, const double *area, const double *
     unit_normal(gh, v, u);
     if (isnan(u[0]))
         return NAN;
-    /* Curvature above one per voxel is no surface the grid resolves. */
-    const double div_u = fmax(-2 / gh->h, fmin(2 / gh->h, normal_divergence(gh, v)));
-    double d = vertex_offset(P, area, nrm, cand, m, v, u, div_u, sigma);
+    double d = vertex_offset(P, area, nrm, cand, m, v, u, sigma);
     if (isnan(d))
         return NAN;
     d = fmax(-gh->h, fmin(gh->h, d));
