@@ -323,13 +323,14 @@ static hv_grid *sphere_truth(int n, double L, double r)
 
 /* Points on a unit sphere (a fine icosphere, faceting < 1e-3 voxel) at 64^3,
  * 49 voxels across: clean and with every defect. The surface's mean error
- * is bounded per case; the inside-IoU of so small a sphere moves by 0.012
- * per 0.1 voxel of error, so it is held to 0.985. */
+ * is bounded per case (measured 0.004, 0.041, 0.064, 0.004, 0.005, 0.020);
+ * the inside-IoU of so small a sphere moves by 0.012 per 0.1 voxel of
+ * error, so it is held to 0.988. */
 START_TEST(sphere_defects)
 {
     static const defects cases[] = {{0, 0, 0, 0},   {0.25, 0, 0, 0}, {0.5, 0, 0, 0},
                                     {0, 0.1, 0, 0}, {0, 0, 1, 0},    {0, 0, 0, 0.3}};
-    static const double mean_max[] = {0.01, 0.07, 0.12, 0.01, 0.02, 0.06};
+    static const double mean_max[] = {0.01, 0.06, 0.09, 0.01, 0.01, 0.04};
     hv_mesh *m = NULL;
     TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 6));
     hv_grid *truth = sphere_truth(64, 1.3, 1.0);
@@ -339,9 +340,11 @@ START_TEST(sphere_defects)
         double j, mean, max;
         score(P, truth, &j, &mean, &max, &R);
         printf("points: sphere case %zu: IoU %.5f, surface error mean %.3f max %.3f voxels; "
-               "%zu normals turned, agreement %.3f, %zu vertices without points\n",
-               c, j, mean, max, R.normals_against, R.normal_agreement, R.vertices_unsupported);
-        ck_assert_msg(j >= 0.985 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
+               "%zu normals turned, agreement %.3f, %zu vertices without points, noise %.3f "
+               "voxels\n",
+               c, j, mean, max, R.normals_against, R.normal_agreement, R.vertices_unsupported,
+               R.noise / truth->h);
+        ck_assert_msg(j >= 0.988 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
                       mean);
         ck_assert_uint_eq(R.points, 40000);
         if (cases[c].flip > 0)
@@ -350,6 +353,14 @@ START_TEST(sphere_defects)
             ck_assert_uint_le(R.normals_against, 40);
         if (cases[c].hole > 0)
             ck_assert_uint_gt(R.vertices_unsupported, 0);
+        /* The noise the projection measures: none on clean points (a fit's
+         * residual stays under its floor), within a third of what was
+         * added on noisy ones. */
+        if (cases[c].noise > 0)
+            ck_assert_msg(fabs(R.noise / truth->h - cases[c].noise) < cases[c].noise / 3,
+                          "case %zu: noise %g voxels", c, R.noise / truth->h);
+        else
+            ck_assert_double_eq(R.noise, 0);
         hv_points_destroy(&P);
     }
     hv_grid_destroy(&truth);
@@ -358,7 +369,8 @@ START_TEST(sphere_defects)
 END_TEST
 
 /* Points sampled from the intact bunny (shared meshes) at 128^3: inside-IoU
- * against its solid and the surface's distance to it. */
+ * against its solid and the surface's distance to it, bounded per case
+ * (measured 0.018, 0.019, 0.047, 0.074, 0.018, 0.058 voxel). */
 START_TEST(bunny_defects)
 {
     const char *data = tl_test_data();
@@ -376,6 +388,7 @@ START_TEST(bunny_defects)
     TL_ASSERT_OK(hv_sdf_compute(m, &o, &truth, NULL));
     static const defects cases[] = {{0, 0, 0, 0},   {0, 0, 1, 0},   {0.25, 0, 0, 0},
                                     {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 0, 0.15}};
+    static const double mean_max[] = {0.025, 0.025, 0.065, 0.1, 0.025, 0.08};
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         hv_points *P = sample(m, 200000, &cases[c], truth->h, 11 + c);
         hv_points_report R;
@@ -384,7 +397,8 @@ START_TEST(bunny_defects)
         printf("points: bunny case %zu: IoU %.5f, surface error mean %.3f max %.3f voxels; "
                "%zu normals turned; %.2f s\n",
                c, j, mean, max, R.normals_against, R.t_total);
-        ck_assert_msg(j >= 0.99 && mean <= 0.5, "case %zu: IoU %g, mean error %g", c, j, mean);
+        ck_assert_msg(j >= 0.99 && mean <= mean_max[c], "case %zu: IoU %g, mean error %g", c, j,
+                      mean);
         hv_points_destroy(&P);
     }
     hv_grid_destroy(&truth);

@@ -26,10 +26,10 @@ void cli_points_note(const char *cmd, const char *path, const hv_points_report *
     cli_info("heatvox %s: %s: %zu oriented points, spacing %.4g (%.4g to %.4g); %zu normals "
              "(%.1f%% of the area) pointed into the surface and were turned; heat grid "
              "%dx%dx%d h=%.6g; surface of %zu vertices, %zu with no point within reach, moved "
-             "%.3f voxels on average (at most %.3f); s: spacing %.2f heat %.2f mesh %.2f project "
-             "%.2f\n",
+             "%.3f voxels on average (at most %.3f), noise %.3g, kernel %.3g; s: spacing %.2f "
+             "heat %.2f mesh %.2f project %.2f\n",
              cmd, path, pr->points, pr->spacing_median, pr->spacing_min, pr->spacing_max,
              pr->normals_against, 100 * (1 - pr->normal_agreement), pr->n[0], pr->n[1], pr->n[2],
-             pr->h, pr->vertices, pr->vertices_unsupported, pr->move_mean, pr->move_max,
-             pr->t_spacing, pr->t_heat, pr->t_mesh, pr->t_project);
+             pr->h, pr->vertices, pr->vertices_unsupported, pr->move_mean, pr->move_max, pr->noise,
+             pr->sigma, pr->t_spacing, pr->t_heat, pr->t_mesh, pr->t_project);
 }

@@ -261,9 +261,11 @@ HV_API hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, 
  *   4. project   each vertex moved along phi's gradient onto the local plane
  *                of the points within 2 sigma that face the same way
  *                (Gaussian weights of width sigma = max(the block's voxel,
- *                the spacing), corrected for the curvature, at most one
- *                heat voxel): noise averages out, and where the cloud has
- *                a gap the heat method's surface stays
+ *                the spacing), corrected for the curvature by the points'
+ *                normals, at most one heat voxel); on noisy points the
+ *                kernel widens (to 1.5 sigma) and each move is weighed
+ *                against the heat method's surface by its uncertainty;
+ *                where the cloud has a gap the heat method's surface stays
  * The result is closed and oriented outward; its signed distance
  * (hv_sdf_compute, hv_sdf_compute_tiles) is the cloud's. */
 typedef struct hv_points_report {
@@ -274,6 +276,8 @@ typedef struct hv_points_report {
     size_t vertices;             /* surface vertices */
     size_t vertices_unsupported; /* no point within reach: left where the heat method put them */
     double move_mean, move_max;  /* projection distances, voxels of the heat grid */
+    double noise;                /* the points' scatter along the normal (world units; 0: clean) */
+    double sigma;                /* the projection's kernel width (world units) */
     int n[3];                    /* the heat method's grid */
     double h;
     int coarsen;       /* it is this many times coarser than the block */

@@ -384,6 +384,8 @@ class hv_points_report(Structure):
         ("vertices_unsupported", c_size_t),
         ("move_mean", c_double),
         ("move_max", c_double),
+        ("noise", c_double),
+        ("sigma", c_double),
         ("n", c_int * 3),
         ("h", c_double),
         ("coarsen", c_int),
