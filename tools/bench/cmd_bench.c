@@ -84,6 +84,35 @@ static void fill_rhs(float *f, size_t n)
     }
 }
 
+/* A maze's walls (--obstacle maze): planes one cell thick across x and
+ * across y every `pitch` cells (pitch = max(N/8, 4), the first at pitch/2),
+ * each panel of pitch x pitch cells of a wall with one square gap of side
+ * pitch/4 at a place drawn from a fixed seed: every room opens into its
+ * neighbours, through holes that geometric coarsening loses. */
+static int maze_wall(int n, int dim, int i, int j, int k)
+{
+    const int pitch = n / 8 > 4 ? n / 8 : 4, g = pitch / 4 > 1 ? pitch / 4 : 1;
+    const int across[2] = {i, j}, along[2] = {j, i};
+    for (int a = 0; a < 2; a++) {
+        const int x = across[a];
+        if (x < pitch / 2 || (x - pitch / 2) % pitch)
+            continue;
+        const int y = along[a], z = dim == 3 ? k : 0;
+        /* The panel (wall, y / pitch, z / pitch) and its gap. */
+        uint64_t key = ((uint64_t)a << 60) ^ ((uint64_t)x << 40) ^ ((uint64_t)(y / pitch) << 20) ^
+                       (uint64_t)(z / pitch);
+        key = (key ^ (key >> 31)) * 0x94d049bb133111ebull;
+        key = (key ^ (key >> 29)) * 0xbf58476d1ce4e5b9ull;
+        const int span = pitch - g > 1 ? pitch - g : 1;
+        const int gy = (int)(key % (uint64_t)span), gz = (int)(key / 1024 % (uint64_t)span);
+        const int in_gap = y % pitch >= gy && y % pitch < gy + g &&
+                           (dim == 2 || (z % pitch >= gz && z % pitch < gz + g));
+        if (!in_gap)
+            return 1;
+    }
+    return 0;
+}
+
 /* Solid cells of an n^dim box for --obstacle (dim 2: one layer). */
 static uint8_t *make_obstacle(const char *kind, int dim, int n)
 {
@@ -100,6 +129,8 @@ static uint8_t *make_obstacle(const char *kind, int dim, int n)
                     double x = i + 0.5 - 0.5 * n, y = j + 0.5 - 0.5 * n,
                            z = dim == 3 ? k + 0.5 - 0.5 * n : 0;
                     solid[c] = x * x + y * y + z * z < 0.0625 * n * n;
+                } else if (!strcmp(kind, "maze")) {
+                    solid[c] = (uint8_t)maze_wall(n, dim, i, j, k);
                 } else { /* baffles: wall at w1 open at high y, wall at w2 open at low y */
                     solid[c] = (i == w1 && j < n - gap) || (i == w2 && j >= gap);
                 }
@@ -174,11 +205,12 @@ static int usage_solve(FILE *out)
             "                           [--smoother rbgs|jacobi|chebyshev] [--pc "
             "auto|boomeramg|pfmg|gamg]\n"
             "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
-            "                           [--obstacle none|ball|baffles]\n"
+            "                           [--obstacle none|ball|baffles|maze]\n"
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
-            "cycles (V-cycles; mg may run several per iteration), relres, copy_gbs (threaded\n"
+            "cycles (V-cycles; mg may run several per iteration), relres, reduction (the\n"
+            "residual's mean factor per iteration, relres^(1/iterations)), copy_gbs (threaded\n"
             "streaming copy in the same process, best of trials run between the timed solves;\n"
             "copy1_gbs the same on one thread), cycle_gbs (modelled bytes of the timed V-cycles /\n"
             "their wall time, best of the timed solves; mg times every cycle but the FMG start,\n"
@@ -199,7 +231,9 @@ static int usage_solve(FILE *out)
             "(3D), or PETSc's GAMG.\n"
             "--obstacle: solid cells (mg and opencl then run PCG with the V-cycle inside): ball,\n"
             "a solid ball of radius N/4 in the middle; baffles, walls one cell thick across x at\n"
-            "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor). The reference\n"
+            "N/3 and 2N/3, each with a gap of N/8 at opposite ends (a corridor); maze, walls one\n"
+            "cell thick across x and across y every max(N/8, 4) cells, each panel of the walls\n"
+            "with one square gap of a quarter of that at a fixed random place. The reference\n"
             "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n"
             "--backend opencl adds the device's own figures, from a context and profiling\n"
             "queue of the benchmark's: device, device_setup_seconds, device_seconds (best\n"
@@ -227,7 +261,7 @@ typedef struct solve_args {
 } solve_args;
 
 static const char *const PCS[] = {"auto", "boomeramg", "pfmg", "gamg"};
-static const char *const OBSTACLES[] = {"none", "ball", "baffles"};
+static const char *const OBSTACLES[] = {"none", "ball", "baffles", "maze"};
 
 static void help_solve(void) { usage_solve(stdout); }
 
@@ -283,8 +317,8 @@ static int parse_solve(int argc, char **argv, solve_args *A)
         {.names = "--obstacle",
          .kind = CLI_CHOICE,
          .dst = &A->obstacle,
-         .choices = "none|ball|baffles",
-         .needs = "none, ball or baffles"},
+         .choices = "none|ball|baffles|maze",
+         .needs = "none, ball, baffles or maze"},
         {.names = NULL},
     };
     const char *stray = NULL;
@@ -477,15 +511,16 @@ static void print_row(const solve_args *A, const solve_problem *P, hv_solver_opt
         "{\"bench\":\"solve\",\"n\":%d,\"ranks\":%d,\"dim\":%d,\"problem\":\"%s\",\"t_scale\":%g,"
         "\"backend\":\"%s\",\"smoother\":\"%s\",\"threads\":%d,\"tol\":%g,\"setup_seconds\":%.4f,"
         "\"seconds\":%.5f,\"peak_rss_mb\":%.1f,\"iterations\":%d,\"cycles\":%d,\"relres\":%.3e,"
-        "\"reason\":\"%s\","
+        "\"reduction\":%.4f,\"reason\":\"%s\","
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
         "\"obstacle\":\"%s\"",
         A->n, hv_mpi_size(), A->dim, A->poisson ? "poisson" : "heat", A->poisson ? 0.0 : A->tscale,
         hv_backend_name(A->backend), smoother_name(A), A->threads, A->tol, R->setup, R->seconds,
-        R->peak_mb, info->iterations, info->cycles, info->relres, hv_stop_reason_str(info->reason),
-        R->levels, R->copy_gbs, R->cycle_gbs, info->cycles_timed, R->solve_gbs,
-        OBSTACLES[A->obstacle]);
+        R->peak_mb, info->iterations, info->cycles, info->relres,
+        info->iterations > 0 && info->relres > 0 ? pow(info->relres, 1.0 / info->iterations) : 0.0,
+        hv_stop_reason_str(info->reason), R->levels, R->copy_gbs, R->cycle_gbs, info->cycles_timed,
+        R->solve_gbs, OBSTACLES[A->obstacle]);
     print_reference(A, P, *o, R, M);
     if (A->backend != HV_BACKEND_PETSC)
         printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", R->copy1_gbs, R->copy_mb);
