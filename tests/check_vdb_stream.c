@@ -216,6 +216,15 @@ static hv_status count_begin(void *u, const hv_tiles *b, size_t max_tiles)
     return HV_OK;
 }
 
+static hv_status count_begin_empty(void *u, const hv_tiles *b, size_t max_tiles)
+{
+    counting *c = u;
+    c->begins++;
+    ck_assert_int_eq(b->count, 0);
+    ck_assert_uint_eq(max_tiles, 0);
+    return HV_OK;
+}
+
 static hv_status count_put(void *u, const hv_tiles *b)
 {
     counting *c = u;
@@ -231,9 +240,11 @@ static hv_status count_end(void *u, int ok)
     return HV_OK;
 }
 
-/* The sink's failure stops the run with its status, end(0) once; a band
- * that misses the block fails after begin with end(0) too; and a vdb sink
- * whose run failed leaves the writer without the grid, ready for another. */
+/* The sink's failure stops the run with its status, end(0) once; a run
+ * that fails before begin (a bad band, a block far from the mesh) still
+ * ends the sink once; a second vdb sink is refused while the first is
+ * taking tiles; and one whose run failed leaves the writer without the
+ * grid, ready for another. */
 START_TEST(failing_sink_should_stop_the_run_and_hear_of_it_once)
 {
     hv_mesh *m = torus();
@@ -246,6 +257,29 @@ START_TEST(failing_sink_should_stop_the_run_and_hear_of_it_once)
     ck_assert(c.begins == 1 && c.puts == 3 && c.ends == 1 && c.last_ok == 0);
     hv_tiles_sink partial = {&c, count_begin, NULL, count_end};
     ck_assert_int_eq(hv_sdf_stream_tiles(m, &o, 3, &partial, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_int_eq(hv_sdf_stream_tiles(m, &o, 0, &sink, NULL), HV_ERR_INVALID_ARG);
+    ck_assert(c.begins == 1 && c.ends == 2 && c.last_ok == 0);
+
+    /* A block that a triangle's box and plane reach but its band does not:
+     * begun with a bound of 0, no tile put, ended with 0. */
+    const double V[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const uint32_t F[3] = {0, 1, 2};
+    hv_mesh *tri = NULL;
+    TL_ASSERT_OK(hv_mesh_from_arrays(&tri, V, 3, F, 1));
+    hv_sdf_opts t;
+    hv_sdf_opts_default(&t);
+    t.res = 0;
+    t.voxel_size = 0.01;
+    t.use_bbox = 1;
+    const double corner[6] = {0.8, 0.8, -0.05, 1.0, 1.0, 0.05};
+    memcpy(t.bbox, corner, sizeof corner);
+    counting d = {0};
+    hv_tiles_sink none = {&d, count_begin_empty, count_put, count_end};
+    ck_assert_int_eq(hv_sdf_stream_tiles(tri, &t, 3, &none, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_msg(strstr(hv_last_error(), "narrow band lies inside the grid block"), "%s",
+                  hv_last_error());
+    ck_assert(d.begins == 1 && d.puts == 0 && d.ends == 1 && d.last_ok == 0);
+    hv_mesh_destroy(&tri);
 
     hv_vdb_writer *w = NULL;
     TL_ASSERT_OK(hv_vdb_writer_create(&w));
@@ -253,6 +287,8 @@ START_TEST(failing_sink_should_stop_the_run_and_hear_of_it_once)
     TL_ASSERT_OK(hv_vdb_writer_levelset_sink(w, "sdf", 3, NULL, &vs));
     hv_tiles_sink again;
     ck_assert_int_eq(hv_vdb_writer_levelset_sink(w, "sdf", 0, NULL, &again), HV_ERR_INVALID_ARG);
+    ck_assert_int_eq(hv_vdb_writer_levelset_sink(w, "other", 3, NULL, &again), HV_ERR_INVALID_ARG);
+    ck_assert_msg(strstr(hv_last_error(), "still taking level set 'sdf'"), "%s", hv_last_error());
     /* A block far from the mesh: no band voxel in it. */
     o.res = 0;
     o.voxel_size = 0.05;

@@ -48,9 +48,9 @@ typedef struct hv_tiles {
  *   at most max_tiles tiles will follow, in the producer's order.
  * - put(user, batch): the next tiles, each listed once across all batches;
  *   the batch's arrays are the producer's and reused after put returns.
- * - end(user, ok): called once after begin, whatever begin and put returned;
- *   ok is 0 when the run failed (the sink drops what it took), 1 when every
- *   tile was put.
+ * - end(user, ok): called once per run, whatever begin and put returned and
+ *   also when the run failed before begin; ok is 0 when the run failed (the
+ *   sink drops what it took), 1 when every tile was put.
  * A non-zero status from begin or put stops the producer with that status. */
 typedef struct hv_tiles_sink {
     void *user;

@@ -184,14 +184,15 @@ typedef struct hv_sdf_stats {
                                     sign counts even where its face's trust was not tested) */
     size_t near_sign_changed; /* of those, cells where it disagreed with the heat sign */
     hv_sdf_repair_report repair;
-    hv_sdf_sign sign;       /* the sign's source that ran: HV_SDF_SIGN_HEAT or HV_SDF_SIGN_WINDING
+    hv_sdf_sign sign;     /* the sign's source that ran: HV_SDF_SIGN_HEAT or HV_SDF_SIGN_WINDING
                              (HV_SDF_SIGN_AUTO for unsigned distance and HV_SDF_HEAT) */
-    size_t winding_evals;   /* winding-number evaluations of the sign */
-    double t_sign;          /* seconds of the winding-number sign (within t_redistance) */
-    size_t tiles;           /* hv_sdf_compute_tiles: tiles with an active voxel */
-    size_t active_voxels;   /* hv_sdf_compute_tiles: voxels within the band */
-    size_t tiles_in_flight; /* hv_sdf_stream_tiles: the most tiles a batch holds */
-    size_t tiles_bound;     /* hv_sdf_stream_tiles: the bound the sink was given */
+    size_t winding_evals; /* winding-number evaluations of the sign */
+    double t_sign;        /* seconds of the winding-number sign (within t_redistance) */
+    /* In tiles (hv_sdf_compute_tiles, hv_sdf_stream_tiles): */
+    size_t tiles;           /* tiles with an active voxel */
+    size_t active_voxels;   /* voxels within the band */
+    size_t tiles_in_flight; /* what a batch's arrays hold (whole groups of 8, about 16384) */
+    size_t tiles_bound;     /* the bound the sink was given */
 } hv_sdf_stats;
 
 HV_API void hv_sdf_opts_default(hv_sdf_opts *o);
@@ -237,9 +238,12 @@ HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts,
  * hv_tiles_sink; the batches' arrays are reused), so that a consumer such as
  * hv_vdb_writer_levelset_sink keeps what it needs and the producer holds one
  * batch (stats->tiles_in_flight tiles, about 2 kB each) beside its triangle
- * lists. sink->begin is told an upper bound on the tiles to come. A status
- * from the sink stops the run and is returned. stats as
- * hv_sdf_compute_tiles's. */
+ * lists. sink->begin is told an upper bound on the tiles to come; sink->end
+ * is called once, also when the run fails before begin. A status from the
+ * sink stops the run and is returned; a cancel through the progress
+ * callback stops it with HV_ERR_CANCELLED (once the sink has ended with ok,
+ * the run stands). stats as hv_sdf_compute_tiles's (band_cells, winding_evals
+ * and near_sign_cells over the tiles that can hold a band voxel). */
 HV_API hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
                                      const hv_tiles_sink *sink, hv_sdf_stats *stats);
 

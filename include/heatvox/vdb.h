@@ -81,8 +81,8 @@ typedef struct hv_vdb_sink_stats {
  * the tiles at once, voxel for voxel. begin refuses with HV_ERR_NOMEM and
  * the figure when its bound on the tiles times a leaf's memory (about
  * 2.2 kB) exceeds this machine's memory. stats (may be NULL) is filled at
- * end and must live until then. One sink at a time per writer; the writer
- * must outlive it. */
+ * end and must live until then. One sink at a time per writer (another is
+ * refused until the first has ended); the writer must outlive it. */
 HV_API hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double band_voxels,
                                              hv_vdb_sink_stats *stats, hv_tiles_sink *out);
 

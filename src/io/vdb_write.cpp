@@ -598,7 +598,10 @@ hv_status stream_put(void *user, const hv_tiles *batch)
         if (!ls->grid)
             fail(HV_ERR_INVALID_ARG, "level set '" + ls->name + "': tiles came before begin");
         const std::string what = "level set '" + ls->name + "'";
-        tiles_block(batch, what);
+        const hv_grid b = tiles_block(batch, what);
+        for (int k = 0; k < 3; k++)
+            if (b.n[k] != ls->hdr.n[k] || b.origin[k] != ls->hdr.origin[k] || b.h != ls->hdr.h)
+                fail(HV_ERR_INVALID_ARG, what + ": a batch of tiles on another block than begin's");
         hv_status st = hv_check_finite(
             batch->v, batch->count * (size_t)(HV_TILE * HV_TILE * HV_TILE), ls->name.c_str());
         if (st)
@@ -709,7 +712,7 @@ hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double
         *out = hv_tiles_sink{};
         check_new_name(w, name);
         check_band(name, band_voxels);
-        if (w->stream && w->stream->grid)
+        if (w->stream)
             fail(HV_ERR_INVALID_ARG, std::string("level set '") + name +
                                          "': the writer is still taking level set '" +
                                          w->stream->name + "'");

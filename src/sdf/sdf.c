@@ -619,6 +619,7 @@ typedef struct {
     const hv_sdf_opts *o;
     double band;
     size_t active;
+    int ended; /* end was passed on */
 } morph_sink;
 
 static hv_status morph_begin(void *user, const hv_tiles *block, size_t max_tiles)
@@ -638,7 +639,8 @@ static hv_status morph_put(void *user, const hv_tiles *batch)
 
 static hv_status morph_end(void *user, int ok)
 {
-    const morph_sink *ms = user;
+    morph_sink *ms = user;
+    ms->ended = 1;
     return ms->to->end(ms->to->user, ok);
 }
 
@@ -665,6 +667,42 @@ static hv_status tiles_check(const hv_sdf_opts *o, double band)
     return hv__sdf_morph_tiles_check(o);
 }
 
+/* hv_sdf_stream_tiles once its options are checked: the repair, the
+ * placement and the tiles through ms. */
+static hv_status stream_run(const hv_mesh *m, hv_sdf_opts *o, double band, morph_sink *ms,
+                            sdf_work *w, double lo[3], double hi[3], hv_sdf_stats *S)
+{
+    const double t0 = hv_now();
+    const hv_mesh *M = m;
+    const int unsig = o->unsigned_distance != 0;
+    int n[3];
+    double h, origin[3];
+    hv_status st;
+    grow_bounds(o, lo, hi);
+    if ((st = sdf_repair(m, o, unsig, w, &M, S)) ||
+        (st = hv__sdf_grid_place(o, lo, hi, n, &h, origin)))
+        return st;
+    memcpy(S->n, n, sizeof S->n);
+    S->h = h;
+    memcpy(S->origin, origin, sizeof S->origin);
+    S->sign = unsig ? HV_SDF_SIGN_AUTO : HV_SDF_SIGN_WINDING;
+    S->backend = HV_BACKEND_AUTO;
+    if ((st = stage(0.1, "tiles")))
+        return st;
+    const double tt = hv_now();
+    const hv_tiles_sink via = {ms, morph_begin, morph_put, morph_end};
+    if ((st = hv__sdf_tiles(M, n, h, origin, band + hv__sdf_morph_reach(o) / h, unsig, o->near_sign,
+                            &via, S)))
+        return st;
+    S->active_voxels = ms->active;
+    S->t_redistance = hv_now() - tt;
+    /* The sink has taken the band: a cancel now would undo nothing. */
+    (void)stage(1.0, "done");
+    hv_clear_error();
+    S->t_total = hv_now() - t0;
+    return HV_OK;
+}
+
 hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
                               const hv_tiles_sink *sink, hv_sdf_stats *stats)
 {
@@ -674,40 +712,18 @@ hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double 
     hv_sdf_stats S;
     sdf_work w;
     double lo[3], hi[3];
-    hv_status st = sdf_begin(m, opts, &o, &S, &w, lo, hi);
-    if (st || (st = tiles_check(&o, band)))
-        return st;
-    if (o.threads > 0)
-        hv_set_threads(o.threads);
-    const double t0 = hv_now();
-    const hv_mesh *M = m;
-    const int unsig = o.unsigned_distance != 0;
-    int n[3];
-    double h, origin[3];
-    grow_bounds(&o, lo, hi);
-    if ((st = sdf_repair(m, &o, unsig, &w, &M, &S)) ||
-        (st = hv__sdf_grid_place(&o, lo, hi, n, &h, origin)))
-        goto done;
-    memcpy(S.n, n, sizeof S.n);
-    S.h = h;
-    memcpy(S.origin, origin, sizeof S.origin);
-    S.sign = unsig ? HV_SDF_SIGN_AUTO : HV_SDF_SIGN_WINDING;
-    S.backend = HV_BACKEND_AUTO;
-    if ((st = stage(0.1, "tiles")))
-        goto done;
-    double tt = hv_now();
     morph_sink ms = {.to = sink, .o = &o, .band = band};
-    const hv_tiles_sink via = {&ms, morph_begin, morph_put, morph_end};
-    if ((st = hv__sdf_tiles(M, n, h, origin, band + hv__sdf_morph_reach(&o) / h, unsig, o.near_sign,
-                            &via, &S)))
-        goto done;
-    S.active_voxels = ms.active;
-    S.t_redistance = hv_now() - tt;
-    if ((st = stage(1.0, "done")))
-        goto done;
-    S.t_total = hv_now() - t0;
-done:
-    work_free(&w);
+    hv_status st = sdf_begin(m, opts, &o, &S, &w, lo, hi);
+    if (!st && !(st = tiles_check(&o, band))) {
+        if (o.threads > 0)
+            hv_set_threads(o.threads);
+        st = stream_run(m, &o, band, &ms, &w, lo, hi, &S);
+        work_free(&w);
+    }
+    /* The sink hears once of every run, also of one that failed before it
+     * began. */
+    if (!ms.ended)
+        sink->end(sink->user, 0);
     if (stats)
         *stats = S;
     return st;

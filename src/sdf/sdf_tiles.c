@@ -332,6 +332,13 @@ static hv_tiles *tiles_alloc(const int n[3], double h, const double origin[3], s
 static hv_status collect_begin(void *user, const hv_tiles *block, size_t max_tiles)
 {
     hv__tiles_collect *c = user;
+    const double need = (double)max_tiles * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
+    if (need > (double)hv__physical_memory())
+        return hv__error(HV_ERR_NOMEM,
+                         "sdf: a block of %d x %d x %d cells: its narrow band of up to %zu tiles "
+                         "needs about %.3g GB, more than this machine's %.3g GB",
+                         block->n[0], block->n[1], block->n[2], max_tiles, need / 1e9,
+                         hv__physical_memory() / 1e9);
     if (!(c->T = tiles_alloc(block->n, block->h, block->origin, max_tiles ? max_tiles : 1)))
         return tiles_nomem();
     return HV_OK;
@@ -348,23 +355,14 @@ static hv_status collect_put(void *user, const hv_tiles *b)
     return HV_OK;
 }
 
-/* Gives back what the bound held beyond the tiles that came (in place for
- * blocks this large). */
+/* The arrays keep the bound's length: what lies beyond the tiles that came
+ * was never written, so it holds no memory but its address space (and the
+ * active bits, 64 bytes a tile). */
 static hv_status collect_end(void *user, int ok)
 {
     hv__tiles_collect *c = user;
-    hv_tiles *T = c->T;
-    if (!ok || !T) {
+    if (!ok)
         hv_tiles_destroy(&c->T);
-        return HV_OK;
-    }
-    const size_t n = T->count ? T->count : 1;
-    int32_t *ijk = realloc(T->ijk, 3 * n * sizeof *ijk);
-    float *v = realloc(T->v, (size_t)T3 * n * sizeof *v);
-    uint64_t *on = realloc(T->on, 8 * n * sizeof *on);
-    T->ijk = ijk ? ijk : T->ijk;
-    T->v = v ? v : T->v;
-    T->on = on ? on : T->on;
     return HV_OK;
 }
 
@@ -747,9 +745,9 @@ static hv_status stream_batches(band_ctx *c, size_t ngroups, size_t batch, hv_ti
         int cancelled = 0;
         if (sign_groups(c, g0, g1, ngroups, sum, &cancelled))
             return tiles_nomem();
-        /* A cancel inside the loop is the callback's answer again here. */
-        if (cancelled && (st = hv__progress(0.9, "tiles")))
-            break;
+        /* The groups after a cancel were skipped: the band stops here. */
+        if (cancelled)
+            return hv__error(HV_ERR_CANCELLED, "cancelled during tiles");
         B->count = compact_tiles(B, c->keep, nt);
         B->active = sum->active - active0;
         *kept += B->count;
