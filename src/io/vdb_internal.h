@@ -13,6 +13,7 @@ extern "C" {
 }
 
 #include <openvdb/openvdb.h>
+#include <tbb/task_arena.h>
 
 #include <mutex>
 #include <new>
@@ -34,11 +35,15 @@ struct Fail {
 [[noreturn]] inline void fail(hv_status st, const std::string &msg) { throw Fail{st, msg}; }
 
 // `where` names the file or operation, so that OpenVDB's own messages (which
-// often omit it) still say which input failed.
+// often omit it) still say which input failed. The body's parallel work
+// (TBB's, OpenVDB's own included) runs on hv_get_threads() threads, as the
+// library's OpenMP loops do.
 template <class F> hv_status guarded(const char *where, F &&body)
 {
     try {
-        return body();
+        const int threads = hv_get_threads();
+        tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+        return arena.execute([&] { return body(); });
     } catch (const Fail &e) {
         return hv__error(e.st, "%s", e.msg.c_str());
     } catch (const openvdb::IoError &e) {
