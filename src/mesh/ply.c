@@ -431,7 +431,8 @@ static hv_status read_strips(ply_reader *r, ply_state *s, const ply_elem *e)
 static hv_status skip_element(ply_reader *r, const ply_elem *e)
 {
     hv_status st = HV_OK;
-    for (uint64_t n = 0; n < e->count && !st; n++)
+    /* Records without properties hold nothing, however many are declared. */
+    for (uint64_t n = 0; n < e->count && e->nprops && !st; n++)
         for (size_t k = 0; k < e->nprops && !st; k++)
             st = skip_prop(r, &e->props[k]);
     return st;
