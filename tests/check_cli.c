@@ -59,7 +59,7 @@ START_TEST(a_resolution_too_large_should_be_a_usage_error_naming_the_option)
         ck_assert_msg(rc == 2, "%s: exit %d (%s)", cases[c], rc, err);
         ck_assert_msg(strstr(err, strstr(cases[c], "--res") ? "--res " : "--voxel-size "),
                       "%s: the option is not named: %s", cases[c], err);
-        ck_assert_msg(strstr(err, " GB, more than this machine's "), "%s: %s", cases[c], err);
+        ck_assert_msg(strstr(err, " GB, more than "), "%s: %s", cases[c], err);
         ck_assert_msg(!strstr(err, "tiles") && !strstr(err, "2^32"), "%s: jargon: %s", cases[c],
                       err);
         ck_assert_msg(!strstr(err, "torus_holes.obj:"), "%s: blames the mesh: %s", cases[c], err);

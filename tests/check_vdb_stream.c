@@ -320,8 +320,7 @@ START_TEST(sink_should_refuse_a_tree_larger_than_the_machine)
     const size_t tiles = (size_t)1 << 40; /* 2 PB of leaves */
     ck_assert_int_eq(sink.begin(sink.user, &block, tiles), HV_ERR_NOMEM);
     const char *msg = hv_last_error();
-    ck_assert_msg(strstr(msg, "level set 'sdf'") && strstr(msg, "GB, more than this machine's"),
-                  "%s", msg);
+    ck_assert_msg(strstr(msg, "level set 'sdf'") && strstr(msg, "GB, more than "), "%s", msg);
     TL_ASSERT_OK(sink.end(sink.user, 0));
     char dir[] = "/tmp/hv_vdb_stream_XXXXXX", file[256];
     ck_assert_ptr_nonnull(mkdtemp(dir));

@@ -21,9 +21,15 @@ hv_status hv__progress(double fraction, const char *stage);
 void hv__progress_span(double lo, double hi);
 hv_status hv__progress_part(double part, const char *stage);
 
-/* Bytes of physical memory (SIZE_MAX where unknown): what size checks such as
- * hv_check_dims compare a run's needs against. */
-size_t hv__physical_memory(void);
+/* Bytes a run may take (SIZE_MAX where unknown): the least of the machine's
+ * physical memory, the memory limit of the process's cgroup and its
+ * address-space limit (ulimit -v). Size checks such as hv_check_dims compare
+ * a run's needs against it. what, when not NULL, gets "machine", "cgroup" or
+ * "ulimit": which one is the least. */
+size_t hv__memory_limit(const char **what);
+/* That limit for a message that ends "more than %s": "this machine's 25.3
+ * GB", "the 8 GB its cgroup allows", ...; buf of 96 bytes is enough. */
+const char *hv__memory_limit_text(char *buf, size_t size);
 
 /* The temporary of an output file (hv_tmp_name) opened for writing, its name
  * in tmp; NULL with *st set (the file named) when it cannot be made. The

@@ -45,14 +45,6 @@ void *hv_calloc(size_t count, size_t size)
 
 void hv_free(void *p) { free(p); }
 
-size_t hv__physical_memory(void)
-{
-    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
-    if (pages <= 0 || page <= 0)
-        return SIZE_MAX;
-    return (size_t)pages * (size_t)page;
-}
-
 hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell)
 {
     if (dim != 2 && dim != 3)
@@ -67,10 +59,11 @@ hv_status hv_check_dims(int dim, const int n[3], double h, size_t bytes_per_cell
         return hv__error(HV_ERR_INVALID_ARG, "voxel size must be positive and finite, got %g", h);
     double cells = (double)n[0] * n[1] * (dim == 3 ? n[2] : 1);
     double bytes = cells * (double)(bytes_per_cell ? bytes_per_cell : 1);
-    if (bytes >= (double)SIZE_MAX / 2 || bytes > (double)hv__physical_memory())
-        return hv__error(HV_ERR_NOMEM,
-                         "grid %d x %d x %d needs %.3g GB, more than this machine's %.3g GB", n[0],
-                         n[1], dim == 3 ? n[2] : 1, bytes / 1e9, hv__physical_memory() / 1e9);
+    if (bytes >= (double)SIZE_MAX / 2 || bytes > (double)hv__memory_limit(NULL)) {
+        char lim[96];
+        return hv__error(HV_ERR_NOMEM, "grid %d x %d x %d needs %.3g GB, more than %s", n[0], n[1],
+                         dim == 3 ? n[2] : 1, bytes / 1e9, hv__memory_limit_text(lim, sizeof lim));
+    }
     return HV_OK;
 }
 

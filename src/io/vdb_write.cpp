@@ -575,12 +575,11 @@ hv_status stream_begin(void *user, const hv_tiles *block, size_t max_tiles)
         const std::string what = "level set '" + ls->name + "'";
         ls->hdr = tiles_block(block, what);
         const double need = tree_bytes((double)max_tiles, block->n);
-        if (need > (double)hv__physical_memory()) {
-            char msg[256];
+        if (need > (double)hv__memory_limit(nullptr)) {
+            char msg[256], lim[96];
             std::snprintf(msg, sizeof msg,
-                          ": its tree of up to %zu leaves needs about %.3g GB, more than this "
-                          "machine's %.3g GB",
-                          max_tiles, need / 1e9, hv__physical_memory() / 1e9);
+                          ": its tree of up to %zu leaves needs about %.3g GB, more than %s",
+                          max_tiles, need / 1e9, hv__memory_limit_text(lim, sizeof lim));
             fail(HV_ERR_NOMEM, what + msg);
         }
         ls->pl = placement(ls->w, &ls->hdr, ls->name.c_str());

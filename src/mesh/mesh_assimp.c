@@ -309,12 +309,13 @@ hv_status hv__mesh_read_assimp(const char *path, const char *buf, size_t len, ui
      * against the memory before it is allocated (the other readers check
      * declared counts against the file's size, which says nothing here). */
     const double bytes = 24.0 * (double)c.verts + 12.0 * (double)c.tris;
-    if (!st && bytes > (double)hv__physical_memory())
+    char lim[96];
+    if (!st && bytes > (double)hv__memory_limit(NULL))
         st = hv__error(HV_ERR_NOMEM,
                        "%s: the scene places %llu vertices and %llu triangles (its meshes times "
-                       "the nodes that place them): %.1f GiB, more than this machine's memory",
-                       path, (unsigned long long)c.verts, (unsigned long long)c.tris,
-                       bytes / 1073741824.0);
+                       "the nodes that place them): %.3g GB, more than %s",
+                       path, (unsigned long long)c.verts, (unsigned long long)c.tris, bytes / 1e9,
+                       hv__memory_limit_text(lim, sizeof lim));
     if (!st)
         st = hv__mb_reserve_verts(&b, (size_t)c.verts);
     if (!st)

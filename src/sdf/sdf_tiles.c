@@ -122,17 +122,18 @@ static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbe
     }
     double tiles = area / (h * h) / (64.0 * sqrt(2.0));
     double need = tiles * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
-    if (numbered && need <= (double)hv__physical_memory())
+    if (numbered && need <= (double)hv__memory_limit(NULL))
         return HV_OK;
-    if (need <= (double)hv__physical_memory())
+    if (need <= (double)hv__memory_limit(NULL))
         return hv__error(HV_ERR_NOMEM,
                          "sdf: a block of %d x %d x %d cells is more than a narrow band can "
                          "address (2.2e12 cells, about 13000^3)",
                          n[0], n[1], n[2]);
+    char lim[96];
     return hv__error(HV_ERR_NOMEM,
                      "sdf: a block of %d x %d x %d cells: its narrow band alone needs at least "
-                     "%.3g GB, more than this machine's %.3g GB",
-                     n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
+                     "%.3g GB, more than %s",
+                     n[0], n[1], n[2], need / 1e9, hv__memory_limit_text(lim, sizeof lim));
 }
 
 /* A tile's key: its 2x2x2 group of tiles (16^3 cells, rasterized together)
@@ -264,11 +265,12 @@ static hv_status band_memory(size_t ntiles, size_t npairs, size_t batch, const i
 {
     double need = (double)npairs * 16 + (double)ntiles * (sizeof(size_t) + 1) +
                   (double)batch * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 13);
-    if (need > 1e18 || need > (double)hv__physical_memory())
+    char lim[96];
+    if (need > 1e18 || need > (double)hv__memory_limit(NULL))
         return hv__error(HV_ERR_NOMEM,
                          "sdf: a block of %d x %d x %d cells: its narrow band's triangle lists "
-                         "need about %.3g GB, more than this machine's %.3g GB",
-                         n[0], n[1], n[2], need / 1e9, hv__physical_memory() / 1e9);
+                         "need about %.3g GB, more than %s",
+                         n[0], n[1], n[2], need / 1e9, hv__memory_limit_text(lim, sizeof lim));
     return HV_OK;
 }
 
@@ -333,12 +335,13 @@ static hv_status collect_begin(void *user, const hv_tiles *block, size_t max_til
 {
     hv__tiles_collect *c = user;
     const double need = (double)max_tiles * (T3 * sizeof(float) + 8 * sizeof(uint64_t) + 12);
-    if (need > (double)hv__physical_memory())
+    char lim[96];
+    if (need > (double)hv__memory_limit(NULL))
         return hv__error(HV_ERR_NOMEM,
                          "sdf: a block of %d x %d x %d cells: its narrow band of up to %zu tiles "
-                         "needs about %.3g GB, more than this machine's %.3g GB",
+                         "needs about %.3g GB, more than %s",
                          block->n[0], block->n[1], block->n[2], max_tiles, need / 1e9,
-                         hv__physical_memory() / 1e9);
+                         hv__memory_limit_text(lim, sizeof lim));
     if (!(c->T = tiles_alloc(block->n, block->h, block->origin, max_tiles ? max_tiles : 1)))
         return tiles_nomem();
     return HV_OK;
