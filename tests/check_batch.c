@@ -128,7 +128,9 @@ static int count_temps(const char *d)
 }
 
 /* Processes whose command line mentions text (workers of a batch). */
-static int processes_mentioning(const char *text)
+/* Counts the processes whose command line holds text and also, when also is
+ * not NULL, that; *first gets the pid of the first (may be NULL). */
+static int processes_with(const char *text, const char *also, pid_t *first)
 {
     DIR *d = opendir("/proc");
     struct dirent *e;
@@ -147,12 +149,18 @@ static int processes_mentioning(const char *text)
             if (!buf[i])
                 buf[i] = ' ';
         buf[k] = '\0';
-        n += strstr(buf, text) != NULL;
+        if (strstr(buf, text) && (!also || strstr(buf, also))) {
+            if (first && n == 0)
+                *first = (pid_t)atol(e->d_name);
+            n++;
+        }
     }
     if (d)
         closedir(d);
     return n;
 }
+
+static int processes_mentioning(const char *text) { return processes_with(text, NULL, NULL); }
 
 /* in/sphere.obj, in/sub/torus.obj, in/broken.obj (index out of range),
  * in/empty.obj, and a manifest naming the sphere with its own options, a
@@ -475,6 +483,66 @@ START_TEST(interrupted_batch_should_leave_no_partial_outputs)
 }
 END_TEST
 
+/* A worker killed by SIGKILL beside another (what the OOM killer does when
+ * the jobs together pass the memory) costs nothing: its job runs again alone
+ * once the other is done, and both outputs are whole. */
+START_TEST(worker_killed_beside_others_should_run_again_alone)
+{
+    make_inputs();
+    ck_assert_int_eq(mkdir(path("two"), 0777), 0);
+    char *torus = read_text(path("in/sub/torus.obj"));
+    write_text(path("two/t0.obj"), torus);
+    write_text(path("two/t1.obj"), torus);
+    free(torus);
+    ck_assert_int_eq(mkdir(path("out"), 0777), 0);
+    char errf[700];
+    snprintf(errf, sizeof errf, "%s", path("killed.txt"));
+    pid_t pid = fork();
+    if (pid == 0) {
+        int out = open("/dev/null", O_WRONLY);
+        int err = open(errf, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(out, 1);
+        dup2(err, 2);
+        execl(bin, "heatvox", "batch", path("two"), "-o", path("out"), "-j", "2", "--res", "160",
+              "--format", "exr", "--report", path("report.jsonl"), (char *)NULL);
+        _exit(127);
+    }
+    ck_assert_int_gt(pid, 0);
+    double t0 = hv_now();
+    while (hv_now() - t0 < 20 && processes_mentioning("--job") < 2)
+        usleep(2000);
+    pid_t victim = 0;
+    ck_assert_int_eq(processes_with("--job", "t0.obj", &victim), 1);
+    ck_assert_int_eq(processes_mentioning("--job"), 2);
+    kill(victim, SIGKILL);
+    int st = 0;
+    ck_assert_int_eq(waitpid(pid, &st, 0), pid);
+    char *err = read_text(errf);
+    ck_assert_msg(WIFEXITED(st) && WEXITSTATUS(st) == 0, "status %#x: %s", st, err);
+    ck_assert_msg(strstr(err, "t0.obj: its worker was killed (SIGKILL) while 1 other ran, most "
+                              "likely for memory; it runs again alone after them"),
+                  "%s", err);
+    free(err);
+    char *report = read_text(path("report.jsonl"));
+    for (int i = 0; i < 2; i++) {
+        char in[1024], out[1024];
+        snprintf(in, sizeof in, "%s", path("two/t%d.obj", i));
+        snprintf(out, sizeof out, "%s", path("out/t%d.exr", i));
+        char *line = report_line(report, in, out);
+        ck_assert_msg(line && strstr(line, "\"status\":\"ok\""), "t%d: %s", i, report);
+        free(line);
+        hv_grid *g = NULL;
+        TL_ASSERT_OK(hv_exr_read(out, NULL, &g));
+        const int longest = g->n[0] > g->n[1] ? g->n[0] : g->n[1];
+        ck_assert_int_eq(longest > g->n[2] ? longest : g->n[2], 160);
+        hv_grid_destroy(&g);
+    }
+    ck_assert_int_eq(count_temps(path("out")), 0);
+    free(report);
+    remove_inputs();
+}
+END_TEST
+
 /* numpy's view of an .npy file against OpenEXR's C++ reader's view of an EXR
  * volume (tests/exr_values.cpp: parts in z order, top image row first): the
  * script prints the number of voxels whose bits differ. */
@@ -580,6 +648,7 @@ int main(void)
     tcase_add_test(tc, dry_run_should_list_jobs_and_write_nothing);
     tcase_add_test(tc, usage_errors_should_exit_2);
     tcase_add_test(tc, interrupted_batch_should_leave_no_partial_outputs);
+    tcase_add_test(tc, worker_killed_beside_others_should_run_again_alone);
     suite_add_tcase(s, tc);
     tc = tcase_create("exr volumes");
     tcase_set_timeout(tc, 600);

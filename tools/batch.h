@@ -103,6 +103,7 @@ typedef struct batch_job {
     char *error; /* planning error: the job fails without running */
     int skip;
     int state; /* 0 pending, 1 running, 2 done */
+    int again; /* its worker was killed beside others: it runs once more, alone */
 } batch_job;
 
 typedef struct batch_joblist {

@@ -2,7 +2,12 @@
  * process (`heatvox batch --job ...`, exec'd from /proc/self/exe) whose stdout
  * (the report line) and stderr are read through pipes; a worker that crashes or
  * is killed costs only its job, and its temporaries are removed. SIGINT, SIGTERM
- * and SIGHUP stop the workers. */
+ * and SIGHUP stop the workers.
+ *
+ * A worker killed by SIGKILL while other workers ran was most likely taken by
+ * the kernel's OOM killer for the memory of all of them together (each job
+ * checks its own needs against the whole limit, not against what the others
+ * use): its job runs again, once, after the others, alone and on every core. */
 #include "batch.h"
 
 #include <dirent.h>
@@ -203,6 +208,28 @@ static char *last_json_line(const batch_buf *b)
     char *nl = strchr(best, '\n');
     return batch_xprintf("%.*s", nl ? (int)(nl - best) : (int)strlen(best), best);
 }
+/* Whether the job of w, whose worker died with status while `others` workers
+ * ran, is to run again alone; if so its temporaries are removed and a line
+ * says why. */
+static int run_again(batch_progress *p, worker *w, int status, int others)
+{
+    batch_job *j = w->job;
+    if (!WIFSIGNALED(status) || WTERMSIG(status) != SIGKILL || others == 0 || j->again ||
+        stop_signal)
+        return 0;
+    remove_job_temps(j, w->pid);
+    bb_free(&w->buf[0]);
+    bb_free(&w->buf[1]);
+    j->again = 1;
+    j->state = 0;
+    batch_bar_clear(p);
+    fprintf(stderr,
+            "heatvox batch: %s: its worker was killed (SIGKILL) while %d other%s ran, most "
+            "likely for memory; it runs again alone after them\n",
+            j->input, others, others == 1 ? "" : "s");
+    return 1;
+}
+
 static void reap(batch_progress *p, worker *w, int status)
 {
     batch_job *j = w->job;
@@ -262,11 +289,26 @@ int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nwo
     int threads = batch_ncpus() / nworkers;
     if (threads < 1)
         threads = 1;
-    size_t next = 0;
+    size_t next = 0, again = 0;
     int active = 0;
     set_handlers(on_stop);
     for (;;) {
-        /* Dispatch. */
+        /* Dispatch; the jobs to run again, alone, once every other is done. */
+        while (!stop_signal && next >= l->n && active == 0 && again < l->n) {
+            batch_job *j = &l->v[again++];
+            if (!j->again || j->state != 0)
+                continue;
+            if (start_worker(&ws[0], 0, j, exe, gargc, gargv, batch_ncpus()) != 0) {
+                char *err =
+                    batch_xprintf("%s: cannot start a worker: %s", j->input, strerror(errno));
+                batch_report_simple(p, j, "failed", err, "worker");
+                batch_finish(p, j, 0, 0, err, 0);
+                free(err);
+                continue;
+            }
+            p->current = j->input;
+            active++;
+        }
         while (!stop_signal && next < l->n && active < nworkers) {
             batch_job *j = &l->v[next++];
             if (j->error) {
@@ -293,7 +335,7 @@ int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nwo
             p->current = j->input;
             active++;
         }
-        if (active == 0 && (next >= l->n || stop_signal))
+        if (active == 0 && ((next >= l->n && again >= l->n) || stop_signal))
             break;
         batch_bar_draw(p, 0);
         int nf = 0;
@@ -329,7 +371,8 @@ int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nwo
             if (waitpid(w->pid, &status, 0) < 0 && errno == EINTR)
                 continue;
             worker_pids[s] = 0;
-            reap(p, w, status);
+            if (!run_again(p, w, status, active - 1))
+                reap(p, w, status);
             w->pid = 0;
             active--;
         }
