@@ -278,6 +278,25 @@ int batch_ncpus(void)
     return n > 0 ? (int)n : 1;
 }
 
+/* Starts job j in the first free slot of ws (the caller knows there is one);
+ * returns 1, or 0 with the job reported failed when no worker could start. */
+static int launch(batch_progress *p, worker *ws, batch_job *j, const char *exe, int gargc,
+                  char **gargv, int threads)
+{
+    int slot = 0;
+    while (ws[slot].pid > 0)
+        slot++;
+    if (start_worker(&ws[slot], slot, j, exe, gargc, gargv, threads) != 0) {
+        char *err = batch_xprintf("%s: cannot start a worker: %s", j->input, strerror(errno));
+        batch_report_simple(p, j, "failed", err, "worker");
+        batch_finish(p, j, 0, 0, err, 0);
+        free(err);
+        return 0;
+    }
+    p->current = j->input;
+    return 1;
+}
+
 /* Runs every job with at most nworkers at once; returns the stop signal (0 when
  * all finished). */
 int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nworkers, int gargc,
@@ -296,18 +315,8 @@ int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nwo
         /* Dispatch; the jobs to run again, alone, once every other is done. */
         while (!stop_signal && next >= l->n && active == 0 && again < l->n) {
             batch_job *j = &l->v[again++];
-            if (!j->again || j->state != 0)
-                continue;
-            if (start_worker(&ws[0], 0, j, exe, gargc, gargv, batch_ncpus()) != 0) {
-                char *err =
-                    batch_xprintf("%s: cannot start a worker: %s", j->input, strerror(errno));
-                batch_report_simple(p, j, "failed", err, "worker");
-                batch_finish(p, j, 0, 0, err, 0);
-                free(err);
-                continue;
-            }
-            p->current = j->input;
-            active++;
+            if (j->again && j->state == 0)
+                active += launch(p, ws, j, exe, gargc, gargv, batch_ncpus());
         }
         while (!stop_signal && next < l->n && active < nworkers) {
             batch_job *j = &l->v[next++];
@@ -321,19 +330,7 @@ int batch_pool_run(batch_joblist *l, batch_progress *p, const char *exe, int nwo
                 batch_finish(p, j, 1, 1, NULL, 0);
                 continue;
             }
-            int slot = 0;
-            while (ws[slot].pid > 0)
-                slot++;
-            if (start_worker(&ws[slot], slot, j, exe, gargc, gargv, threads) != 0) {
-                char *err =
-                    batch_xprintf("%s: cannot start a worker: %s", j->input, strerror(errno));
-                batch_report_simple(p, j, "failed", err, "worker");
-                batch_finish(p, j, 0, 0, err, 0);
-                free(err);
-                continue;
-            }
-            p->current = j->input;
-            active++;
+            active += launch(p, ws, j, exe, gargc, gargv, threads);
         }
         if (active == 0 && ((next >= l->n && again >= l->n) || stop_signal))
             break;
