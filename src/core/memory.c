@@ -7,6 +7,7 @@
 #include "error.h"
 #include "memory.h"
 
+#include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -102,17 +103,28 @@ size_t hv__cgroup_memory_limit(const char *proc_cgroup, const char *sys_root)
     return least < NO_LIMIT && least <= SIZE_MAX ? (size_t)least : SIZE_MAX;
 }
 
-size_t hv__memory_limit(const char **what)
+/* The machine's memory and the cgroup's limit, read once: grids are checked
+ * on every hv_grid_create, and the files cost some 30 us a read. */
+static size_t machine_bytes, cgroup_bytes;
+static pthread_once_t read_once = PTHREAD_ONCE_INIT;
+
+static void read_limits(void)
 {
     long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
-    size_t least = pages > 0 && page > 0 ? (size_t)pages * (size_t)page : SIZE_MAX;
+    machine_bytes = pages > 0 && page > 0 ? (size_t)pages * (size_t)page : SIZE_MAX;
+    cgroup_bytes = hv__cgroup_memory_limit("/proc/self/cgroup", "/sys/fs/cgroup");
+}
+
+size_t hv__memory_limit(const char **what)
+{
+    pthread_once(&read_once, read_limits);
+    size_t least = machine_bytes;
     const char *why = "machine";
-    size_t cg = hv__cgroup_memory_limit("/proc/self/cgroup", "/sys/fs/cgroup");
-    if (cg < least) {
-        least = cg;
+    if (cgroup_bytes < least) {
+        least = cgroup_bytes;
         why = "cgroup";
     }
-    struct rlimit rl;
+    struct rlimit rl; /* a call of its own: setrlimit may lower it at any time */
     if (!getrlimit(RLIMIT_AS, &rl) && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < least) {
         least = (size_t)rl.rlim_cur;
         why = "ulimit";
