@@ -43,6 +43,14 @@ typedef enum hv_smoother {
     HV_SMOOTH_AUTO       /* the backend's default: RBGS (mg), CHEBYSHEV (opencl) */
 } hv_smoother;
 
+typedef enum hv_coarse {
+    HV_COARSE_AUTO = 0,   /* geometric; mg with solid cells changes to aggregation after a
+                              solve of more than 16 iterations, for the solves that follow */
+    HV_COARSE_GEOMETRIC,  /* halved grids with averaged coefficients (every backend) */
+    HV_COARSE_AGGREGATION /* mg with solid cells: smoothed aggregation, Galerkin coarse
+                              operators that keep every wall (docs/METHOD.md) */
+} hv_coarse;
+
 typedef enum hv_stop_reason {
     HV_STOP_NONE = 0,
     HV_STOP_CONVERGED, /* relative residual <= tol */
@@ -96,6 +104,7 @@ typedef struct hv_solver_opts {
     int cycles_per_iteration; /* mg, plain grid: V-cycles per double-precision correction;
                                  0 (default) = as many as the tolerance needs (1..3, RBGS),
                                  else that many (1..8) */
+    hv_coarse coarse;         /* mg's coarse levels, default AUTO */
 } hv_solver_opts;
 
 #define HV_MAX_HISTORY 64
@@ -146,6 +155,7 @@ typedef struct hv_solver_stats {
     double bytes_per_iteration; /* modelled memory traffic of one outer iteration (one cycle) */
     double bytes_per_cycle;     /* of each further V-cycle in an iteration (0: not modelled) */
     size_t memory_bytes;        /* memory held by the backend's arrays */
+    int aggregation_levels;     /* mg: levels of the aggregation hierarchy in use, 0 if none */
 } hv_solver_stats;
 
 /* Describes the backend's data structures (for benchmarks and tests). */

@@ -51,12 +51,62 @@ static void mg_destroy(void *state)
         free(L->region);
         free(L->bwork);
     }
+    hv__mg_agg_free(m->agg);
     hv_free(m->rt_work);
     hv_free(m->rd);
     hv_free(m->p);
     hv_free(m->z);
     hv_free(m->q);
     free(m);
+}
+
+/* A solver with AUTO coarse levels whose solve took more iterations than this
+ * builds aggregation levels before its next solve (docs/METHOD.md, "Coarse
+ * levels that keep the walls"): their setup pays off only over several solves. */
+#define MG_AGG_SWITCH 16
+
+/* Frees the geometric levels under the fine one and what only they use. */
+static void drop_geometric(mg_state *m)
+{
+    for (int l = 0; l < m->nlev; l++) {
+        hv_free(m->pnorm[l]);
+        m->pnorm[l] = NULL;
+    }
+    hv_free(m->rt_work);
+    m->rt_work = NULL;
+    free(m->lv[m->nlev - 1].bwork);
+    m->lv[m->nlev - 1].bwork = NULL;
+    for (int l = 1; l < m->nlev; l++) {
+        mg_level *L = &m->lv[l];
+        hv__mg_level_free_coeffs(L);
+        hv_free(L->u);
+        hv_free(L->f);
+        hv_free(L->r);
+        hv_free(L->d);
+        free(L->region);
+        memset(L, 0, sizeof *L);
+    }
+    m->nlev = 1;
+}
+
+/* Coarse levels by smoothed aggregation under the fine level (mg_agg.h), in
+ * place of the geometric ones; where aggregation does not apply (or, when
+ * `soft`, does not fit in memory) the geometric levels stay. */
+static hv_status use_aggregation(mg_state *m, int soft)
+{
+    m->agg_tried = 1;
+    if (!m->use_pcg || m->nlev < 2)
+        return HV_OK;
+    hv_status st = hv__mg_agg_build(&m->agg, &m->lv[0], m->dim, m->alpha);
+    if (st == HV_ERR_NOMEM && soft)
+        return HV_OK;
+    if (st || !m->agg)
+        return st;
+    drop_geometric(m);
+    hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg,
+                           &m->model);
+    m->model.memory_bytes += m->agg->bytes;
+    return HV_OK;
 }
 
 static hv_status mg_create(void **state, const hv_setup *s)
@@ -138,6 +188,8 @@ static hv_status mg_create(void **state, const hv_setup *s)
     }
     hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg,
                            &m->model);
+    if (s->o.coarse == HV_COARSE_AGGREGATION && (st = use_aggregation(m, 0)))
+        goto fail;
     *state = m;
     return HV_OK;
 fail:
@@ -491,6 +543,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
 {
     mg_state *m = state;
     const hv_setup *s = m->s;
+    hv_status st0;
     if (!m->use_pcg)
         return mg_solve_stationary(m, f, u, info);
     if (!s->o.nonzero_guess)
@@ -502,7 +555,13 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
         info->reason = HV_STOP_CONVERGED;
         return HV_OK;
     }
+    if (m->agg_pending && (st0 = use_aggregation(m, 1)))
+        return st0;
+    m->agg_pending = 0;
     hv_status st = mg_solve_pcg(m, f, u, info, fn);
+    if (st == HV_OK && s->o.coarse == HV_COARSE_AUTO && !m->agg_tried &&
+        info->iterations > MG_AGG_SWITCH)
+        m->agg_pending = 1;
     if (st == HV_OK && s->p.solid)
         for (size_t c = 0; c < s->count; c++)
             if (s->p.solid[c])
@@ -513,7 +572,8 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
 static void mg_stats(const void *state, hv_solver_stats *st)
 {
     const mg_state *m = state;
-    hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg, st);
+    *st = m->model;
+    st->aggregation_levels = m->agg ? m->agg->nlev : 0;
 }
 
 const hv_backend_ops hv__backend_mg_ops = {"mg",       mg_create, mg_solve, NULL,

@@ -58,11 +58,32 @@ static void bottom_solve(const mg_state *m, mg_level *L)
     hv__mg_bottom_cg(L, m->dim, m->alpha, L->f, L->u, L->bwork);
 }
 
+/* The V-cycle of the aggregation hierarchy: the fine level smooths as the
+ * geometric cycle does, the coarse levels correct its residual (mg_agg.c). */
+static void vcycle_agg(const mg_state *m, int guess, int sym)
+{
+    mg_level *L = (mg_level *)&m->lv[0];
+    if (!guess)
+        mg_zero_f(L->u, L->count);
+    if (m->smoother != HV_SMOOTH_RBGS)
+        mg_zero_f(L->d, L->count);
+    smooth(m, L, m->pre, 0);
+    hv__mg_level_residual(m, L);
+    hv__mg_agg_correct(m->agg, L->r, L->u);
+    if (m->smoother != HV_SMOOTH_RBGS)
+        mg_zero_f(L->d, L->count);
+    smooth(m, L, m->post, sym);
+}
+
 /* One V-cycle on level l for A u_l = f_l; u_l holds the initial guess when
  * `guess`, else starts from zero. `sym` reverses the post-smoothing order. */
 void hv__mg_vcycle(const mg_state *m, int l, int guess, int sym)
 {
     mg_level *L = (mg_level *)&m->lv[l];
+    if (m->agg && l == 0) {
+        vcycle_agg(m, guess, sym);
+        return;
+    }
     if (l == m->nlev - 1) {
         bottom_solve(m, L);
         return;

@@ -7,12 +7,14 @@
  *   mg_transfer.c  restriction, prolongation and the PCG's weighted P^T
  *   mg_fused.c     the fused one-pass sweeps of plain 3D levels
  *   mg_cycle.c     smoothing, the V-cycle and full multigrid
+ *   mg_agg.c       the coarse levels by smoothed aggregation (mg_agg.h)
  *   mg.c           the backend's entry points and its steps of the outer
  *                  iterations (iterate.h)
  */
 #ifndef HV_SOLVE_MG_INTERNAL_H
 #define HV_SOLVE_MG_INTERNAL_H
 
+#include "mg_agg.h"
 #include "mg_level.h"
 
 #include <stddef.h>
@@ -46,6 +48,9 @@ typedef struct mg_state {
     float *rt_work;              /* PCG: hv__mg_restrict_transpose's work, rt_threads slices */
     int rt_threads;
     hv_solver_stats model; /* traffic model (hv__mg_model_stats_cpu) */
+    mg_agg *agg;           /* coarse levels by aggregation (solid cells), or NULL */
+    int agg_tried;         /* aggregation was built or tried */
+    int agg_pending;       /* AUTO: build it before the next solve */
 } mg_state;
 
 #if MG_AVX512

@@ -206,6 +206,7 @@ static int usage_solve(FILE *out)
             "auto|boomeramg|pfmg|gamg]\n"
             "                           [--tol 1e-6] [--threads T] [--repeat R] [--wisdom FILE]\n"
             "                           [--obstacle none|ball|baffles|maze]\n"
+            "                           [--coarse auto|geometric|aggregation]\n"
             "Solves (I - t Lap) u = f with t = K h^2 (default K = 4), or Neumann Poisson with\n"
             "--poisson, on an N^dim box with a random right-hand side, and prints one JSON line:\n"
             "bench, n, dim, problem, backend, seconds (best of R after a warm-up), iterations,\n"
@@ -235,6 +236,10 @@ static int usage_solve(FILE *out)
             "cell thick across x and across y every max(N/8, 4) cells, each panel of the walls\n"
             "with one square gap of a quarter of that at a fixed random place. The reference\n"
             "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n"
+            "--coarse: mg's coarse levels with solid cells: aggregation (auto's choice there;\n"
+            "Galerkin operators that keep the walls) or geometric (halved grids, averaged\n"
+            "coefficients; what opencl runs); the JSON's history has the residual after each\n"
+            "iteration.\n"
             "--backend opencl adds the device's own figures, from a context and profiling\n"
             "queue of the benchmark's: device, device_setup_seconds, device_seconds (best\n"
             "solve with f and u already on the device, hv_opencl_solve), device_event_seconds\n"
@@ -257,11 +262,13 @@ typedef struct solve_args {
     int smoother, smoother_set; /* hv_smoother */
     int pc;                     /* index in PCS: backend petsc's preconditioner */
     int obstacle;               /* index in OBSTACLES */
+    int coarse;                 /* hv_coarse */
     const char *wisdom;
 } solve_args;
 
 static const char *const PCS[] = {"auto", "boomeramg", "pfmg", "gamg"};
 static const char *const OBSTACLES[] = {"none", "ball", "baffles", "maze"};
+static const char *const COARSE[] = {"auto", "geometric", "aggregation"};
 
 static void help_solve(void) { usage_solve(stdout); }
 
@@ -319,6 +326,11 @@ static int parse_solve(int argc, char **argv, solve_args *A)
          .dst = &A->obstacle,
          .choices = "none|ball|baffles|maze",
          .needs = "none, ball, baffles or maze"},
+        {.names = "--coarse",
+         .kind = CLI_CHOICE,
+         .dst = &A->coarse,
+         .choices = "auto|geometric|aggregation",
+         .needs = "auto, geometric or aggregation"},
         {.names = NULL},
     };
     const char *stray = NULL;
@@ -514,13 +526,13 @@ static void print_row(const solve_args *A, const solve_problem *P, hv_solver_opt
         "\"reduction\":%.4f,\"reason\":\"%s\","
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
-        "\"obstacle\":\"%s\"",
+        "\"obstacle\":\"%s\",\"coarse\":\"%s\"",
         A->n, hv_mpi_size(), A->dim, A->poisson ? "poisson" : "heat", A->poisson ? 0.0 : A->tscale,
         hv_backend_name(A->backend), smoother_name(A), A->threads, A->tol, R->setup, R->seconds,
         R->peak_mb, info->iterations, info->cycles, info->relres,
         info->iterations > 0 && info->relres > 0 ? pow(info->relres, 1.0 / info->iterations) : 0.0,
         hv_stop_reason_str(info->reason), R->levels, R->copy_gbs, R->cycle_gbs, info->cycles_timed,
-        R->solve_gbs, OBSTACLES[A->obstacle]);
+        R->solve_gbs, OBSTACLES[A->obstacle], COARSE[A->coarse]);
     print_reference(A, P, *o, R, M);
     if (A->backend != HV_BACKEND_PETSC)
         printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", R->copy1_gbs, R->copy_mb);
@@ -551,6 +563,7 @@ static int bench_solve(int argc, char **argv)
     hv_solver_opts_default(&o);
     o.backend = A.backend;
     o.smoother = (hv_smoother)A.smoother;
+    o.coarse = (hv_coarse)A.coarse;
     o.tol = A.tol;
     o.fftw_double = 0;
     o.fftw_measure = 1;

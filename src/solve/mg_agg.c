@@ -1,0 +1,1149 @@
+/*
+ * Smoothed aggregation under the CPU multigrid's fine level (mg_agg.h,
+ * docs/METHOD.md "Coarse levels that keep the walls"): the aggregates, the
+ * Galerkin coarse operators, the transfers and the cycle on the coarse levels.
+ */
+#include "mg_agg.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#define AGG_OMEGA (4.0 / 3.0) /* prolongation smoothing: omega / lmax(D^-1 A) */
+#define AGG_BOTTOM 600        /* a level this small is solved by Cholesky */
+#define AGG_STALL 1200        /* more than this and not coarsening: give up */
+#define AGG_STRONG 1e-6       /* |a_ij| below this times sqrt(a_ii a_jj) joins nothing */
+#define AGG_DEGREE 2          /* Chebyshev degree on the coarse levels */
+#define AGG_PAR_MIN 16384     /* levels below this many unknowns run on one thread */
+
+/* ---------- a level's operator as rows ---------- */
+
+/* The operator of level l: the fine level's stencil (F) or a sparse matrix. */
+typedef struct agg_op {
+    const mg_level *F;
+    int dim;
+    double alpha;
+    const mg_csr *A;
+    const float *dinv;
+    int32_t n;
+    const uint8_t *faces; /* fine level of a mask: bit 2b+hi for each open face */
+} agg_op;
+
+static agg_op level_op(const mg_agg *g, int l)
+{
+    agg_op o = {NULL, g->dim, g->alpha, NULL, NULL, g->lv[l].n, NULL};
+    if (l == 0) {
+        o.F = g->fine;
+        o.dinv = g->fine->dinv;
+        o.faces = g->faces;
+    } else {
+        o.A = &g->lv[l].A;
+        o.dinv = g->lv[l].dinv;
+    }
+    return o;
+}
+
+/* Row c: its entries (the diagonal first on the fine level), in bc/bv (7
+ * entries) for the fine level or pointers into the matrix. */
+static int op_row(const agg_op *o, int32_t c, int32_t *bc, float *bv, const int32_t **col,
+                  const float **val)
+{
+    if (!o->F) {
+        size_t b = o->A->rp[c];
+        *col = o->A->ci + b;
+        *val = o->A->v + b;
+        return (int)(o->A->rp[c + 1] - b);
+    }
+    const mg_level *L = o->F;
+    size_t stride[3] = {1, L->sy, L->sz};
+    if (o->faces) {
+        unsigned f = o->faces[c];
+        double d = o->alpha * L->a[c];
+        int m = 1;
+        for (int b = 0; b < 3; b++)
+            for (int hi = 0; hi < 2; hi++)
+                if (f & (1u << (2 * b + hi))) {
+                    bc[m] = hi ? c + (int32_t)stride[b] : c - (int32_t)stride[b];
+                    bv[m] = (float)-L->c[b];
+                    d += L->c[b];
+                    m++;
+                }
+        bc[0] = c;
+        bv[0] = (float)d;
+        *col = bc;
+        *val = bv;
+        return m;
+    }
+    int idx[3] = {(int)(c % L->n[0]), (int)((c / L->n[0]) % L->n[1]), (int)(c / L->sz)};
+    double d = o->alpha * L->a[c];
+    int m = 1;
+    for (int b = 0; b < o->dim; b++)
+        for (int hi = 0; hi < 2; hi++) {
+            int f[3] = {idx[0], idx[1], idx[2]};
+            f[b] += hi;
+            if (f[b] <= 0 || f[b] >= L->n[b])
+                continue;
+            float w = L->w[b][mg_face_index(L, b, f[0], f[1], f[2])];
+            if (w == 0.0f)
+                continue;
+            double cw = L->c[b] * w;
+            bc[m] = hi ? c + (int32_t)stride[b] : c - (int32_t)stride[b];
+            bv[m] = (float)-cw;
+            d += cw;
+            m++;
+        }
+    bc[0] = c;
+    bv[0] = (float)d;
+    *col = bc;
+    *val = bv;
+    return m;
+}
+
+/* y = A x on the fine level, row by row (faces on the grid's walls weigh 0;
+ * the neighbour read there is the cell itself). */
+static void fine_apply(const agg_op *o, const float *x, float *y)
+{
+    const mg_level *L = o->F;
+    const int nx = L->n[0], ny = L->n[1], nz = L->n[2];
+    const double cx = L->c[0], cy = L->c[1], cz = L->c[2];
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > AGG_PAR_MIN)
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < ny; j++) {
+            size_t base = L->sy * (size_t)j + L->sz * (size_t)k;
+            const float *wx = L->w[0] + (size_t)(nx + 1) * ((size_t)j + (size_t)ny * k);
+            const float *wy = L->w[1] + (size_t)nx * ((size_t)j + (size_t)(ny + 1) * k);
+            const float *wz = o->dim == 3 ? L->w[2] + base : NULL;
+            const float *xm = x + base - (j > 0 ? L->sy : 0),
+                        *xp = x + base + (j < ny - 1 ? L->sy : 0);
+            const float *zm = x + base - (k > 0 ? L->sz : 0),
+                        *zp = x + base + (k < nz - 1 ? L->sz : 0);
+            const float *xc = x + base;
+            for (int i = 0; i < nx; i++) {
+                double d = o->alpha * L->a[base + i], s = 0;
+                double wl = wx[i], wh = wx[i + 1];
+                d += cx * (wl + wh);
+                s += cx * (wl * xc[i > 0 ? i - 1 : i] + wh * xc[i < nx - 1 ? i + 1 : i]);
+                double yl = wy[i], yh = wy[i + nx];
+                d += cy * (yl + yh);
+                s += cy * (yl * xm[i] + yh * xp[i]);
+                if (wz) {
+                    double zl = wz[i], zh = wz[i + (size_t)nx * ny];
+                    d += cz * (zl + zh);
+                    s += cz * (zl * zm[i] + zh * zp[i]);
+                }
+                y[base + i] = (float)(d * xc[i] - s);
+            }
+        }
+}
+
+/* y = A x on a level. */
+static void op_apply(const agg_op *o, const float *x, float *y)
+{
+    if (o->F) {
+        fine_apply(o, x, y);
+        return;
+    }
+#pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o->n; c++) {
+        int32_t bc[7];
+        float bv[7];
+        const int32_t *col;
+        const float *val;
+        int k = op_row(o, c, bc, bv, &col, &val);
+        double s = 0;
+        for (int e = 0; e < k; e++)
+            s += (double)val[e] * x[col[e]];
+        y[c] = (float)s;
+    }
+}
+
+/* Largest eigenvalue of D^-1 A by power iteration (times 1.1, as the
+ * geometric levels' bound). */
+static double op_lmax(const agg_op *o, float *x, float *y)
+{
+    for (int32_t c = 0; c < o->n; c++) {
+        uint64_t h = ((uint64_t)c + 1) * 0x9E3779B97F4A7C15ull;
+        h ^= h >> 31;
+        h *= 0xBF58476D1CE4E5B9ull;
+        h ^= h >> 29;
+        x[c] = o->dinv[c] > 0 ? (float)((double)(h >> 40) / (double)(1u << 24) - 0.5) : 0.0f;
+    }
+    double lam = 2.0;
+    for (int it = 0; it < 15; it++) {
+        op_apply(o, x, y);
+        double xy = 0, xx = 0, yy = 0;
+#pragma omp parallel for schedule(static) reduction(+ : xy, xx, yy) if (o->n > AGG_PAR_MIN)
+        for (int32_t c = 0; c < o->n; c++) {
+            double yc = (double)o->dinv[c] * y[c];
+            xy += (double)x[c] * yc / (o->dinv[c] > 0 ? o->dinv[c] : 1.0f);
+            xx += (double)x[c] * x[c] / (o->dinv[c] > 0 ? o->dinv[c] : 1.0f);
+            yy += yc * yc;
+            y[c] = (float)yc;
+        }
+        if (!(xx > 0) || !(yy > 0))
+            break;
+        lam = xy / xx;
+        double s = 1.0 / sqrt(yy);
+        for (int32_t c = 0; c < o->n; c++)
+            x[c] = (float)(y[c] * s);
+    }
+    return 1.1 * lam;
+}
+
+/* ---------- aggregates ---------- */
+
+/* Block coordinates of unknown c of level l. */
+static void unknown_xyz(const mg_agg *g, int l, int32_t c, int xyz[3])
+{
+    if (l == 0) {
+        const mg_level *L = g->fine;
+        xyz[0] = (int)(c % L->n[0]);
+        xyz[1] = (int)((c / L->n[0]) % L->n[1]);
+        xyz[2] = (int)(c / L->sz);
+        return;
+    }
+    for (int b = 0; b < 3; b++)
+        xyz[b] = g->lv[l].xyz[3 * (size_t)c + b];
+}
+
+static int strong(float aij, float dii_inv, float djj_inv)
+{
+    double q = (double)aij * aij * dii_inv * djj_inv;
+    return q > AGG_STRONG * AGG_STRONG;
+}
+
+/* The parts of one block (unknowns u[0..m) of level l) that couplings within
+ * it connect: lab[q] = part of u[q]; returns the number of parts. */
+static int block_parts(const agg_op *o, const int32_t *u, int m, int *lab)
+{
+    int parts = 0, stack[64];
+    for (int q = 0; q < m; q++)
+        lab[q] = -1;
+    for (int q0 = 0; q0 < m; q0++) {
+        if (lab[q0] >= 0)
+            continue;
+        int top = 0;
+        stack[top++] = q0;
+        lab[q0] = parts;
+        while (top) {
+            int q = stack[--top];
+            int32_t bc[7];
+            float bv[7];
+            const int32_t *col;
+            const float *val;
+            int k = op_row(o, u[q], bc, bv, &col, &val);
+            for (int e = 0; e < k; e++) {
+                if (col[e] == u[q] || !strong(val[e], o->dinv[u[q]], o->dinv[col[e]]))
+                    continue;
+                for (int p = 0; p < m; p++)
+                    if (u[p] == col[e] && lab[p] < 0) {
+                        lab[p] = parts;
+                        if (top < 64)
+                            stack[top++] = p;
+                    }
+            }
+        }
+        parts++;
+    }
+    return parts;
+}
+
+/* Aggregates of level l: L->agg, members (mrp, mem) and level l+1's size,
+ * coordinates and extent. */
+static hv_status aggregate(mg_agg *g, int l)
+{
+    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    agg_op o = level_op(g, l);
+    int bx = (L->ext[0] + 1) / 2, by = (L->ext[1] + 1) / 2, bz = (L->ext[2] + 1) / 2;
+    size_t nblk = (size_t)bx * by * bz;
+    size_t *start = calloc(nblk + 1, sizeof *start);
+    int32_t *order = malloc((size_t)L->n * sizeof *order);
+    L->agg = malloc((size_t)L->n * sizeof *L->agg);
+    if (!start || !order || !L->agg) {
+        free(start);
+        free(order);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates of level %d", l);
+    }
+    /* Counting sort of the live unknowns by block. */
+    for (int32_t c = 0; c < L->n; c++) {
+        L->agg[c] = -1;
+        if (!(o.dinv[c] > 0))
+            continue;
+        int x[3];
+        unknown_xyz(g, l, c, x);
+        start[(size_t)x[0] / 2 + bx * ((size_t)x[1] / 2 + by * ((size_t)x[2] / 2)) + 1]++;
+    }
+    for (size_t b = 0; b < nblk; b++)
+        start[b + 1] += start[b];
+    size_t live = start[nblk];
+    size_t *fill = malloc(nblk * sizeof *fill);
+    if (!fill) {
+        free(start);
+        free(order);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates of level %d", l);
+    }
+    memcpy(fill, start, nblk * sizeof *fill);
+    for (int32_t c = 0; c < L->n; c++) {
+        if (!(o.dinv[c] > 0))
+            continue;
+        int x[3];
+        unknown_xyz(g, l, c, x);
+        order[fill[(size_t)x[0] / 2 + bx * ((size_t)x[1] / 2 + by * ((size_t)x[2] / 2))]++] = c;
+    }
+    free(fill);
+    /* Parts of each block, numbered in block order; members grouped by part. */
+    size_t cap = nblk + 16;
+    L->mrp = malloc((cap + 1) * sizeof *L->mrp);
+    L->mem = malloc((live ? live : 1) * sizeof *L->mem);
+    C->xyz = malloc(3 * cap * sizeof *C->xyz);
+    hv_status st = HV_OK;
+    if (!L->mrp || !L->mem || !C->xyz) {
+        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates of level %d", l);
+        goto done;
+    }
+    int32_t nc = 0;
+    size_t out = 0;
+    for (size_t b = 0; b < nblk; b++) {
+        const int32_t *u = order + start[b];
+        int m = (int)(start[b + 1] - start[b]), lab[64];
+        for (int q0 = 0; q0 < m; q0 += 64) {
+            int mm = m - q0 < 64 ? m - q0 : 64;
+            int parts = block_parts(&o, u + q0, mm, lab);
+            for (int p = 0; p < parts; p++) {
+                if ((size_t)nc >= cap) {
+                    cap *= 2;
+                    size_t *r2 = realloc(L->mrp, (cap + 1) * sizeof *r2);
+                    int32_t *x2 = r2 ? realloc(C->xyz, 3 * cap * sizeof *x2) : NULL;
+                    if (r2)
+                        L->mrp = r2;
+                    if (x2)
+                        C->xyz = x2;
+                    if (!r2 || !x2) {
+                        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates");
+                        goto done;
+                    }
+                }
+                L->mrp[nc] = out;
+                for (int q = 0; q < mm; q++)
+                    if (lab[q] == p) {
+                        L->mem[out++] = u[q0 + q];
+                        L->agg[u[q0 + q]] = nc;
+                    }
+                C->xyz[3 * (size_t)nc + 0] = (int32_t)(b % bx);
+                C->xyz[3 * (size_t)nc + 1] = (int32_t)((b / bx) % by);
+                C->xyz[3 * (size_t)nc + 2] = (int32_t)(b / ((size_t)bx * by));
+                nc++;
+            }
+        }
+    }
+    L->mrp[nc] = out;
+    C->n = nc;
+    C->ext[0] = bx;
+    C->ext[1] = by;
+    C->ext[2] = bz;
+done:
+    free(start);
+    free(order);
+    return st;
+}
+
+/* ---------- Galerkin coarse operators ---------- */
+
+/* A sparse accumulator over a level's unknowns, with the list of those touched. */
+typedef struct spa {
+    double *acc;
+    int32_t *mark, gen;
+    int32_t *idx;
+    size_t nidx, cap;
+} spa;
+
+static int spa_init(spa *s, int32_t n)
+{
+    memset(s, 0, sizeof *s);
+    s->acc = malloc((size_t)n * sizeof *s->acc);
+    s->mark = malloc((size_t)n * sizeof *s->mark);
+    s->cap = 256;
+    s->idx = malloc(s->cap * sizeof *s->idx);
+    if (!s->acc || !s->mark || !s->idx)
+        return -1;
+    for (int32_t c = 0; c < n; c++)
+        s->mark[c] = -1;
+    return 0;
+}
+
+static void spa_free(spa *s)
+{
+    free(s->acc);
+    free(s->mark);
+    free(s->idx);
+}
+
+static void spa_start(spa *s)
+{
+    s->gen++;
+    s->nidx = 0;
+}
+
+static int spa_add(spa *s, int32_t c, double v)
+{
+    if (s->mark[c] != s->gen) {
+        if (s->nidx == s->cap) {
+            int32_t *p = realloc(s->idx, 2 * s->cap * sizeof *p);
+            if (!p)
+                return -1;
+            s->idx = p;
+            s->cap *= 2;
+        }
+        s->mark[c] = s->gen;
+        s->acc[c] = 0;
+        s->idx[s->nidx++] = c;
+    }
+    s->acc[c] += v;
+    return 0;
+}
+
+/* Growing arrays of one thread's rows. */
+typedef struct rows_out {
+    int32_t *ci;
+    float *v;
+    size_t n, cap;
+    int32_t *len;
+} rows_out;
+
+static int rows_push(rows_out *r, int32_t c, float v)
+{
+    if (r->n == r->cap) {
+        size_t cap = r->cap ? 2 * r->cap : 4096;
+        int32_t *ci = realloc(r->ci, cap * sizeof *ci);
+        if (ci)
+            r->ci = ci;
+        float *vv = ci ? realloc(r->v, cap * sizeof *vv) : NULL;
+        if (vv)
+            r->v = vv;
+        if (!ci || !vv)
+            return -1;
+        r->cap = cap;
+    }
+    r->ci[r->n] = c;
+    r->v[r->n++] = v;
+    return 0;
+}
+
+/* Row J of A_c = P^T A P, i.e. P^T A (P e_J), into out: v = P e_J on the
+ * members of J and their neighbours, w = A v, then w - wp A D^-1 w summed per
+ * aggregate (P^T = P0^T (I - wp A D^-1)). */
+static int galerkin_row(const agg_op *o, const mg_alevel *L, double wp, int32_t J, spa *vs, spa *ws,
+                        double **tvp, size_t *tcap, spa *cs, rows_out *out)
+{
+    int32_t bc[7], bc2[7];
+    float bv[7], bv2[7];
+    const int32_t *col, *col2;
+    const float *val, *val2;
+    spa_start(vs);
+    for (size_t q = L->mrp[J]; q < L->mrp[J + 1]; q++) {
+        int k = op_row(o, L->mem[q], bc, bv, &col, &val);
+        for (int e = 0; e < k; e++)
+            if (L->agg[col[e]] >= 0 && spa_add(vs, col[e], 0.0))
+                return -1;
+    }
+    /* P(c, J) = [agg c = J] - wp dinv_c sum over row c of a_cx [agg x = J],
+     * and w = A v = sum over c of P(c, J) times row c (A is symmetric). */
+    spa_start(ws);
+    for (size_t q = 0; q < vs->nidx; q++) {
+        int32_t c = vs->idx[q];
+        int k = op_row(o, c, bc, bv, &col, &val);
+        double s = 0;
+        for (int e = 0; e < k; e++)
+            if (L->agg[col[e]] == J)
+                s += val[e];
+        double pc = (L->agg[c] == J) - wp * o->dinv[c] * s;
+        if (pc == 0)
+            continue;
+        for (int e = 0; e < k; e++)
+            if (spa_add(ws, col[e], val[e] * pc))
+                return -1;
+    }
+    size_t nw = ws->nidx;
+    if (nw > *tcap) {
+        double *p = realloc(*tvp, 2 * nw * sizeof *p);
+        if (!p)
+            return -1;
+        *tvp = p;
+        *tcap = 2 * nw;
+    }
+    double *tv = *tvp;
+    for (size_t q = 0; q < nw; q++)
+        tv[q] = wp * o->dinv[ws->idx[q]] * ws->acc[ws->idx[q]];
+    for (size_t q = 0; q < nw; q++) {
+        if (tv[q] == 0)
+            continue;
+        int k = op_row(o, ws->idx[q], bc2, bv2, &col2, &val2);
+        for (int e = 0; e < k; e++)
+            if (spa_add(ws, col2[e], -val2[e] * tv[q]))
+                return -1;
+    }
+    spa_start(cs);
+    for (size_t q = 0; q < ws->nidx; q++) {
+        int32_t y = ws->idx[q], I = L->agg[y];
+        if (I >= 0 && spa_add(cs, I, ws->acc[y]))
+            return -1;
+    }
+    double diag = cs->mark[J] == cs->gen ? cs->acc[J] : 0.0;
+    int32_t len = 0;
+    for (size_t q = 0; q < cs->nidx; q++) {
+        int32_t I = cs->idx[q];
+        double v = cs->acc[I];
+        if (I != J && !(fabs(v) > 1e-9 * fabs(diag)))
+            continue;
+        if (rows_push(out, I, (float)v))
+            return -1;
+        len++;
+    }
+    out->len[J] = len;
+    return 0;
+}
+
+/* Level l+1's operator from level l's (aggregates built). */
+static hv_status galerkin(mg_agg *g, int l, double wp)
+{
+    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    agg_op o = level_op(g, l);
+    int nthr = 1;
+#ifdef _OPENMP
+    nthr = C->n > 4096 ? omp_get_max_threads() : 1;
+#endif
+    rows_out *outs = calloc((size_t)nthr, sizeof *outs);
+    int32_t *len = malloc(((size_t)C->n + 1) * sizeof *len);
+    int failed = !outs || !len;
+#pragma omp parallel num_threads(nthr) if (nthr > 1)
+    {
+        int t = 0;
+#ifdef _OPENMP
+        t = omp_get_thread_num();
+#endif
+        spa vs = {0}, ws = {0}, cs = {0};
+        double *tv = NULL;
+        size_t tcap = 0;
+        int bad = failed || spa_init(&vs, L->n) || spa_init(&ws, L->n) || spa_init(&cs, C->n);
+        int32_t J0 = (int32_t)((int64_t)C->n * t / nthr),
+                J1 = (int32_t)((int64_t)C->n * (t + 1) / nthr);
+        if (!bad)
+            outs[t].len = len;
+        for (int32_t J = J0; J < J1 && !bad; J++)
+            if (galerkin_row(&o, L, wp, J, &vs, &ws, &tv, &tcap, &cs, &outs[t]))
+                bad = 1;
+        free(tv);
+        spa_free(&vs);
+        spa_free(&ws);
+        spa_free(&cs);
+        if (bad) {
+#pragma omp atomic write
+            failed = 1;
+        }
+    }
+    hv_status st = HV_OK;
+    if (!failed) {
+        size_t nnz = 0;
+        for (int t = 0; t < nthr; t++)
+            nnz += outs[t].n;
+        C->A.n = C->n;
+        C->A.rp = malloc(((size_t)C->n + 1) * sizeof *C->A.rp);
+        C->A.ci = malloc((nnz ? nnz : 1) * sizeof *C->A.ci);
+        C->A.v = malloc((nnz ? nnz : 1) * sizeof *C->A.v);
+        failed = !C->A.rp || !C->A.ci || !C->A.v;
+        if (!failed) {
+            C->A.rp[0] = 0;
+            for (int32_t J = 0; J < C->n; J++)
+                C->A.rp[J + 1] = C->A.rp[J] + (size_t)len[J];
+            size_t at = 0;
+            for (int t = 0; t < nthr; t++) {
+                memcpy(C->A.ci + at, outs[t].ci, outs[t].n * sizeof *C->A.ci);
+                memcpy(C->A.v + at, outs[t].v, outs[t].n * sizeof *C->A.v);
+                at += outs[t].n;
+            }
+        }
+    }
+    if (failed)
+        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the coarse operator of level %d",
+                       l + 1);
+    for (int t = 0; outs && t < nthr; t++) {
+        free(outs[t].ci);
+        free(outs[t].v);
+    }
+    free(outs);
+    free(len);
+    return st;
+}
+
+/* ---------- Galerkin on the coarse levels: sparse products ---------- */
+
+/* One row of a product into a sparse accumulator (after spa_start). */
+typedef int (*row_fn)(const void *ctx, int32_t row, spa *s);
+
+/* out = the nrows rows that fn makes, over ncols columns; with `drop`,
+ * entries off the diagonal below drop times the diagonal are left out. */
+static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn, const void *ctx,
+                           double drop)
+{
+    memset(out, 0, sizeof *out);
+    int nthr = 1;
+#ifdef _OPENMP
+    nthr = nrows > 2048 ? omp_get_max_threads() : 1;
+#endif
+    rows_out *outs = calloc((size_t)nthr, sizeof *outs);
+    int32_t *len = malloc(((size_t)nrows + 1) * sizeof *len);
+    int failed = !outs || !len;
+#pragma omp parallel num_threads(nthr) if (nthr > 1)
+    {
+        int t = 0;
+#ifdef _OPENMP
+        t = omp_get_thread_num();
+#endif
+        spa cs = {0};
+        int bad = failed || spa_init(&cs, ncols);
+        int32_t r0 = (int32_t)((int64_t)nrows * t / nthr),
+                r1 = (int32_t)((int64_t)nrows * (t + 1) / nthr);
+        for (int32_t r = r0; r < r1 && !bad; r++) {
+            spa_start(&cs);
+            if (fn(ctx, r, &cs)) {
+                bad = 1;
+                break;
+            }
+            double diag = r < ncols && cs.mark[r] == cs.gen ? fabs(cs.acc[r]) : 0.0;
+            int32_t n = 0;
+            for (size_t q = 0; q < cs.nidx && !bad; q++) {
+                int32_t c = cs.idx[q];
+                double v = cs.acc[c];
+                if (c != r && (v == 0 || (drop > 0 && !(fabs(v) > drop * diag))))
+                    continue;
+                bad = rows_push(&outs[t], c, (float)v) != 0;
+                n++;
+            }
+            len[r] = n;
+        }
+        spa_free(&cs);
+        if (bad) {
+#pragma omp atomic write
+            failed = 1;
+        }
+    }
+    size_t nnz = 0;
+    for (int t = 0; !failed && t < nthr; t++)
+        nnz += outs[t].n;
+    if (!failed) {
+        out->n = nrows;
+        out->rp = malloc(((size_t)nrows + 1) * sizeof *out->rp);
+        out->ci = malloc((nnz ? nnz : 1) * sizeof *out->ci);
+        out->v = malloc((nnz ? nnz : 1) * sizeof *out->v);
+        failed = !out->rp || !out->ci || !out->v;
+    }
+    if (!failed) {
+        out->rp[0] = 0;
+        for (int32_t r = 0; r < nrows; r++)
+            out->rp[r + 1] = out->rp[r] + (size_t)len[r];
+        size_t at = 0;
+        for (int t = 0; t < nthr; t++) {
+            memcpy(out->ci + at, outs[t].ci, outs[t].n * sizeof *out->ci);
+            memcpy(out->v + at, outs[t].v, outs[t].n * sizeof *out->v);
+            at += outs[t].n;
+        }
+    }
+    for (int t = 0; outs && t < nthr; t++) {
+        free(outs[t].ci);
+        free(outs[t].v);
+    }
+    free(outs);
+    free(len);
+    if (failed)
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for a coarse level's products");
+    return HV_OK;
+}
+
+static void csr_free(mg_csr *m)
+{
+    free(m->rp);
+    free(m->ci);
+    free(m->v);
+    memset(m, 0, sizeof *m);
+}
+
+/* P = (I - wp D^-1 A) P0 of a coarse level, row by row. */
+typedef struct p_ctx {
+    const mg_csr *A;
+    const int32_t *agg;
+    const float *dinv;
+    double wp;
+} p_ctx;
+
+static int p_row(const void *ctx, int32_t c, spa *s)
+{
+    const p_ctx *x = ctx;
+    if (x->agg[c] < 0)
+        return 0;
+    if (spa_add(s, x->agg[c], 1.0))
+        return -1;
+    double f = -x->wp * x->dinv[c];
+    for (size_t q = x->A->rp[c]; q < x->A->rp[c + 1]; q++) {
+        int32_t e = x->A->ci[q];
+        if (x->agg[e] >= 0 && spa_add(s, x->agg[e], f * x->A->v[q]))
+            return -1;
+    }
+    return 0;
+}
+
+/* Row r of X Y. */
+typedef struct mul_ctx {
+    const mg_csr *X, *Y;
+} mul_ctx;
+
+static int mul_row(const void *ctx, int32_t r, spa *s)
+{
+    const mul_ctx *m = ctx;
+    for (size_t q = m->X->rp[r]; q < m->X->rp[r + 1]; q++) {
+        int32_t k = m->X->ci[q];
+        double x = m->X->v[q];
+        for (size_t p = m->Y->rp[k]; p < m->Y->rp[k + 1]; p++)
+            if (spa_add(s, m->Y->ci[p], x * m->Y->v[p]))
+                return -1;
+    }
+    return 0;
+}
+
+/* T = M^T for M with ncols columns. */
+static hv_status csr_transpose(const mg_csr *M, int32_t ncols, mg_csr *T)
+{
+    size_t nnz = M->rp[M->n];
+    T->n = ncols;
+    T->rp = calloc((size_t)ncols + 1, sizeof *T->rp);
+    T->ci = malloc((nnz ? nnz : 1) * sizeof *T->ci);
+    T->v = malloc((nnz ? nnz : 1) * sizeof *T->v);
+    size_t *fill = malloc(((size_t)ncols + 1) * sizeof *fill);
+    if (!T->rp || !T->ci || !T->v || !fill) {
+        free(fill);
+        csr_free(T);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for a coarse level's products");
+    }
+    for (size_t q = 0; q < nnz; q++)
+        T->rp[M->ci[q] + 1]++;
+    for (int32_t c = 0; c < ncols; c++)
+        T->rp[c + 1] += T->rp[c];
+    memcpy(fill, T->rp, ((size_t)ncols + 1) * sizeof *fill);
+    for (int32_t r = 0; r < M->n; r++)
+        for (size_t q = M->rp[r]; q < M->rp[r + 1]; q++) {
+            size_t at = fill[M->ci[q]]++;
+            T->ci[at] = r;
+            T->v[at] = M->v[q];
+        }
+    free(fill);
+    return HV_OK;
+}
+
+/* Level l+1's operator P^T (A P) from a coarse level l by sparse products. */
+static hv_status galerkin_csr(mg_agg *g, int l, double wp)
+{
+    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    mg_csr P = {0}, AP = {0}, R = {0};
+    p_ctx pc = {&L->A, L->agg, L->dinv, wp};
+    hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0);
+    mul_ctx ap = {&L->A, &P}, rap = {&R, &AP};
+    if (!st)
+        st = build_csr(&AP, L->n, C->n, mul_row, &ap, 0);
+    if (!st)
+        st = csr_transpose(&P, C->n, &R);
+    if (!st)
+        st = build_csr(&C->A, C->n, C->n, mul_row, &rap, 1e-9);
+    csr_free(&P);
+    csr_free(&AP);
+    csr_free(&R);
+    return st;
+}
+
+/* ---------- the bottom level ---------- */
+
+/* Connected regions of the bottom operator (Poisson: each its own null space). */
+static hv_status bottom_regions(mg_agg *g, const agg_op *o)
+{
+    int32_t n = o->n, *stack = malloc((size_t)n * sizeof *stack);
+    g->region = malloc((size_t)n * sizeof *g->region);
+    if (!stack || !g->region) {
+        free(stack);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom level");
+    }
+    for (int32_t c = 0; c < n; c++)
+        g->region[c] = -1;
+    g->nregion = 0;
+    for (int32_t c0 = 0; c0 < n; c0++) {
+        if (g->region[c0] >= 0 || !(o->dinv[c0] > 0))
+            continue;
+        int32_t top = 0;
+        stack[top++] = c0;
+        g->region[c0] = g->nregion;
+        while (top) {
+            int32_t c = stack[--top];
+            int32_t bc[7];
+            float bv[7];
+            const int32_t *col;
+            const float *val;
+            int k = op_row(o, c, bc, bv, &col, &val);
+            for (int e = 0; e < k; e++)
+                if (g->region[col[e]] < 0 && o->dinv[col[e]] > 0 && val[e] != 0) {
+                    g->region[col[e]] = g->nregion;
+                    stack[top++] = col[e];
+                }
+        }
+        g->nregion++;
+    }
+    free(stack);
+    return HV_OK;
+}
+
+/* The bottom level's dense Cholesky factor. Poisson adds sigma/|R| on every
+ * pair of a region R (sigma: the mean diagonal), which leaves the mean-free
+ * solution of a mean-free right-hand side unchanged and makes the matrix
+ * definite; empty rows get a one on the diagonal. */
+static hv_status bottom_factor(mg_agg *g)
+{
+    int l = g->nlev - 1;
+    agg_op o = level_op(g, l);
+    int32_t n = g->nb = o.n;
+    hv_status st = bottom_regions(g, &o);
+    if (st)
+        return st;
+    g->chol = calloc((size_t)n * n, sizeof *g->chol);
+    g->bx = malloc(((size_t)n + 1) * sizeof *g->bx);
+    double *cnt = calloc((size_t)g->nregion + 1, sizeof *cnt);
+    if (!g->chol || !g->bx || !cnt) {
+        free(cnt);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom level");
+    }
+    double *M = g->chol, dsum = 0;
+    for (int32_t c = 0; c < n; c++) {
+        int32_t bc[7];
+        float bv[7];
+        const int32_t *col;
+        const float *val;
+        int k = op_row(&o, c, bc, bv, &col, &val);
+        for (int e = 0; e < k; e++)
+            M[(size_t)c * n + col[e]] += val[e];
+        if (g->region[c] >= 0) {
+            cnt[g->region[c]] += 1;
+            dsum += M[(size_t)c * n + c];
+        }
+    }
+    double sigma = n ? dsum / n : 1.0;
+    for (int32_t i = 0; i < n; i++) {
+        if (g->region[i] < 0) {
+            for (int32_t j = 0; j < n; j++)
+                M[(size_t)i * n + j] = M[(size_t)j * n + i] = 0;
+            M[(size_t)i * n + i] = 1;
+            continue;
+        }
+        for (int32_t j = 0; g->alpha == 0 && j < n; j++)
+            if (g->region[j] == g->region[i])
+                M[(size_t)i * n + j] += sigma / cnt[g->region[i]];
+    }
+    free(cnt);
+    /* Symmetrize (float coarse rows), then factor in place (lower). */
+    for (int32_t i = 0; i < n; i++)
+        for (int32_t j = 0; j < i; j++) {
+            double v = 0.5 * (M[(size_t)i * n + j] + M[(size_t)j * n + i]);
+            M[(size_t)i * n + j] = M[(size_t)j * n + i] = v;
+        }
+    for (int32_t j = 0; j < n; j++) {
+        double d = M[(size_t)j * n + j];
+        for (int32_t k = 0; k < j; k++)
+            d -= M[(size_t)j * n + k] * M[(size_t)j * n + k];
+        if (!(d > 1e-12 * sigma))
+            d = sigma; /* a direction float rounding left singular: damp it */
+        d = sqrt(d);
+        M[(size_t)j * n + j] = d;
+#pragma omp parallel for schedule(static) if (n - j > 256)
+        for (int32_t i = j + 1; i < n; i++) {
+            double s = M[(size_t)i * n + j];
+            for (int32_t k = 0; k < j; k++)
+                s -= M[(size_t)i * n + k] * M[(size_t)j * n + k];
+            M[(size_t)i * n + j] = s / d;
+        }
+    }
+    return HV_OK;
+}
+
+/* u = A^-1 f on the bottom level (Poisson: mean-free per region). */
+static void bottom_solve(mg_agg *g, const float *f, float *u)
+{
+    int32_t n = g->nb;
+    const double *M = g->chol;
+    double *x = g->bx;
+    for (int32_t i = 0; i < n; i++) {
+        double s = g->region[i] >= 0 ? f[i] : 0.0;
+        for (int32_t k = 0; k < i; k++)
+            s -= M[(size_t)i * n + k] * x[k];
+        x[i] = s / M[(size_t)i * n + i];
+    }
+    for (int32_t i = n - 1; i >= 0; i--) {
+        double s = x[i];
+        for (int32_t k = i + 1; k < n; k++)
+            s -= M[(size_t)k * n + i] * x[k];
+        x[i] = s / M[(size_t)i * n + i];
+    }
+    for (int32_t i = 0; i < n; i++)
+        u[i] = g->region[i] >= 0 ? (float)x[i] : 0.0f;
+}
+
+/* ---------- the cycle ---------- */
+
+/* r = f - A u on a coarse level. */
+static void level_residual(const agg_op *o, const float *f, const float *u, float *r)
+{
+    op_apply(o, u, r);
+#pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o->n; c++)
+        r[c] = f[c] - r[c];
+}
+
+/* Chebyshev smoothing of degree AGG_DEGREE on [lmax/8, lmax] (u from zero
+ * when `zero`): the same polynomial before and after, so the cycle is
+ * symmetric. */
+static void level_smooth(const agg_op *o, mg_alevel *L, int zero)
+{
+    double lmax = L->lmax, lmin = lmax / 8;
+    double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin);
+    double sigma = theta / delta, rho_old = 1.0 / sigma;
+    int32_t n = o->n;
+    for (int s = 0; s < AGG_DEGREE; s++) {
+        double cd = 0, cr = 1.0 / theta;
+        if (s > 0) {
+            double rho = 1.0 / (2 * sigma - rho_old);
+            cd = rho * rho_old;
+            cr = 2 * rho / delta;
+            rho_old = rho;
+        }
+        if (s == 0 && zero) {
+#pragma omp parallel for schedule(static) if (n > AGG_PAR_MIN)
+            for (int32_t c = 0; c < n; c++)
+                L->r[c] = L->f[c];
+        } else {
+            level_residual(o, L->f, L->u, L->r);
+        }
+#pragma omp parallel for schedule(static) if (n > AGG_PAR_MIN)
+        for (int32_t c = 0; c < n; c++) {
+            float d = (float)((s ? cd * L->d[c] : 0.0) + cr * o->dinv[c] * L->r[c]);
+            L->d[c] = d;
+            L->u[c] = (s == 0 && zero ? 0.0f : L->u[c]) + d;
+        }
+    }
+}
+
+/* f_{l+1} = P^T r = P0^T (r - wp A D^-1 r) from level l's residual r. */
+static void restrict_to(mg_agg *g, int l, const float *r)
+{
+    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    agg_op o = level_op(g, l);
+    double wp = AGG_OMEGA / L->lmax;
+#pragma omp parallel for schedule(static) if (o.n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o.n; c++)
+        L->t[c] = o.dinv[c] * r[c];
+    op_apply(&o, L->t, L->s);
+#pragma omp parallel for schedule(static) if (C->n > AGG_PAR_MIN)
+    for (int32_t I = 0; I < C->n; I++) {
+        double s = 0;
+        for (size_t q = L->mrp[I]; q < L->mrp[I + 1]; q++) {
+            int32_t c = L->mem[q];
+            s += r[c] - wp * L->s[c];
+        }
+        C->f[I] = (float)s;
+    }
+}
+
+/* u_l += P u_{l+1} = v - wp D^-1 A v with v = P0 u_{l+1}. */
+static void prolong_add(mg_agg *g, int l, float *u)
+{
+    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    agg_op o = level_op(g, l);
+    double wp = AGG_OMEGA / L->lmax;
+#pragma omp parallel for schedule(static) if (o.n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o.n; c++)
+        L->t[c] = L->agg[c] >= 0 ? C->u[L->agg[c]] : 0.0f;
+    op_apply(&o, L->t, L->s);
+#pragma omp parallel for schedule(static) if (o.n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o.n; c++)
+        u[c] += (float)(L->t[c] - wp * o.dinv[c] * L->s[c]);
+}
+
+/* One symmetric V-cycle from zero on level l >= 1 for lv[l].f into lv[l].u. */
+static void cycle(mg_agg *g, int l)
+{
+    mg_alevel *L = &g->lv[l];
+    if (l == g->nlev - 1) {
+        bottom_solve(g, L->f, L->u);
+        return;
+    }
+    agg_op o = level_op(g, l);
+    level_smooth(&o, L, 1);
+    level_residual(&o, L->f, L->u, L->r);
+    restrict_to(g, l, L->r);
+    cycle(g, l + 1);
+    prolong_add(g, l, L->u);
+    level_smooth(&o, L, 0);
+}
+
+void hv__mg_agg_correct(mg_agg *g, const float *r, float *u)
+{
+    restrict_to(g, 0, r);
+    cycle(g, 1);
+    prolong_add(g, 0, u);
+}
+
+/* ---------- building and freeing ---------- */
+
+static hv_status level_work(mg_agg *g, int l)
+{
+    mg_alevel *L = &g->lv[l];
+    size_t n = (size_t)L->n + 1;
+    if (l > 0) {
+        L->dinv = malloc(n * sizeof(float));
+        L->u = calloc(n, sizeof(float));
+        L->f = calloc(n, sizeof(float));
+        L->r = calloc(n, sizeof(float));
+        L->d = calloc(n, sizeof(float));
+        if (!L->dinv || !L->u || !L->f || !L->r || !L->d)
+            return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d", l);
+        for (int32_t c = 0; c < L->n; c++) {
+            double d = 0;
+            for (size_t q = L->A.rp[c]; q < L->A.rp[c + 1]; q++)
+                if (L->A.ci[q] == c)
+                    d += L->A.v[q];
+            L->dinv[c] = d > 0 ? (float)(1.0 / d) : 0.0f;
+        }
+        g->bytes += 5 * n * sizeof(float) + 3 * n * sizeof(int32_t) + n * sizeof(size_t) +
+                    L->A.rp[L->n] * (sizeof(int32_t) + sizeof(float));
+    }
+    L->t = calloc(n, sizeof(float));
+    L->s = calloc(n, sizeof(float));
+    if (!L->t || !L->s)
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d", l);
+    g->bytes += 2 * n * sizeof(float);
+    return HV_OK;
+}
+
+void hv__mg_agg_free(mg_agg *g)
+{
+    if (!g)
+        return;
+    for (int l = 0; l < MG_AGG_MAX_LEVELS; l++) {
+        mg_alevel *L = &g->lv[l];
+        free(L->A.rp);
+        free(L->A.ci);
+        free(L->A.v);
+        free(L->dinv);
+        free(L->agg);
+        free(L->mrp);
+        free(L->mem);
+        free(L->xyz);
+        free(L->u);
+        free(L->f);
+        free(L->r);
+        free(L->d);
+        free(L->t);
+        free(L->s);
+    }
+    free(g->faces);
+    free(g->chol);
+    free(g->region);
+    free(g->bx);
+    free(g);
+}
+
+/* The open faces of each fine cell, for op_row without index arithmetic
+ * (binary levels only: their open faces all weigh one). */
+static hv_status fine_faces(mg_agg *g)
+{
+    const mg_level *L = g->fine;
+    if (!L->binary)
+        return HV_OK;
+    if (!(g->faces = malloc(L->count)))
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the fine level's faces");
+#pragma omp parallel for collapse(2) schedule(static) if (L->count > AGG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++)
+            for (int i = 0; i < L->n[0]; i++) {
+                unsigned f = 0;
+                for (int b = 0; b < g->dim; b++)
+                    for (int hi = 0; hi < 2; hi++) {
+                        int x[3] = {i, j, k};
+                        x[b] += hi;
+                        if (x[b] > 0 && x[b] < L->n[b] &&
+                            L->w[b][mg_face_index(L, b, x[0], x[1], x[2])] != 0.0f)
+                            f |= 1u << (2 * b + hi);
+                    }
+                g->faces[(size_t)i + L->sy * j + L->sz * k] = (uint8_t)f;
+            }
+    g->bytes += L->count;
+    return HV_OK;
+}
+
+hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alpha)
+{
+    *out = NULL;
+    if (F->plain || !F->dinv || F->count >= (size_t)INT32_MAX)
+        return HV_OK;
+    mg_agg *g = calloc(1, sizeof *g);
+    if (!g)
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory");
+    g->dim = dim;
+    g->alpha = alpha;
+    g->fine = F;
+    g->lv[0].n = (int32_t)F->count;
+    for (int b = 0; b < 3; b++)
+        g->lv[0].ext[b] = F->n[b];
+    hv_status st = fine_faces(g);
+    if (st)
+        goto fail;
+    int l = 0;
+    for (;; l++) {
+        mg_alevel *L = &g->lv[l];
+        if ((st = level_work(g, l)))
+            goto fail;
+        agg_op o = level_op(g, l);
+        /* The fine level's bound is Gershgorin's (its rows are diagonally
+         * dominant); the coarse levels' by power iteration. */
+        L->lmax = l == 0 ? 2.0 : op_lmax(&o, L->t, L->s);
+        if (L->n <= AGG_BOTTOM || l + 1 == MG_AGG_MAX_LEVELS)
+            break;
+        if ((st = aggregate(g, l)))
+            goto fail;
+        if ((double)g->lv[l + 1].n > 0.8 * L->n) {
+            if (L->n > AGG_STALL || l == 0)
+                goto none; /* not coarsening: keep the geometric levels */
+            free(L->agg);
+            free(L->mrp);
+            free(L->mem);
+            L->agg = NULL;
+            L->mrp = NULL;
+            L->mem = NULL;
+            break;
+        }
+        g->bytes += (size_t)L->n * 2 * sizeof(int32_t) + (size_t)g->lv[l + 1].n * sizeof(size_t);
+        if ((st = l == 0 ? galerkin(g, l, AGG_OMEGA / L->lmax)
+                         : galerkin_csr(g, l, AGG_OMEGA / L->lmax)))
+            goto fail;
+    }
+    g->nlev = l + 1;
+    if (g->nlev < 2)
+        goto none;
+    if ((st = bottom_factor(g)))
+        goto fail;
+    g->bytes += (size_t)g->nb * g->nb * sizeof(double);
+    *out = g;
+    return HV_OK;
+none:
+    hv__mg_agg_free(g);
+    return HV_OK;
+fail:
+    hv__mg_agg_free(g);
+    return st;
+}

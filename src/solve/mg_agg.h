@@ -1,0 +1,73 @@
+/*
+ * Private: the coarse levels of the CPU multigrid on grids with solid cells,
+ * by smoothed aggregation (docs/METHOD.md, "Coarse levels that keep the
+ * walls").
+ *
+ * Each level's unknowns are grouped by the 2x2x2 (2x2) blocks of their
+ * coordinates, and a block's unknowns split into the parts that its own
+ * couplings connect: cells on the two sides of a wall never share an
+ * aggregate. The prolongation is the aggregates' indicator smoothed by one
+ * damped Jacobi step, P = (I - omega/lmax D^-1 A) P0, and the coarse operator
+ * is Galerkin's, A_c = P^T A P. Neither P nor A reaches through a wall, so the
+ * coarse operators keep every wall and every region cut off by walls (its own
+ * null space for Poisson). Coarse operators are sparse rows (CSR) of up to a
+ * few hundred entries; P and P^T are applied from A, the aggregates and D.
+ */
+#ifndef HV_SOLVE_MG_AGG_H
+#define HV_SOLVE_MG_AGG_H
+
+#include "mg_level.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define MG_AGG_MAX_LEVELS 24
+
+typedef struct mg_csr {
+    int32_t n;  /* rows */
+    size_t *rp; /* n + 1 row starts */
+    int32_t *ci;
+    float *v;
+} mg_csr;
+
+/* Level l of the aggregation hierarchy; lv[0] is the grid's fine level, whose
+ * operator is the matrix-free stencil of an mg_level (A unused there). */
+typedef struct mg_alevel {
+    int32_t n;    /* unknowns */
+    mg_csr A;     /* levels >= 1 */
+    float *dinv;  /* levels >= 1 (the fine level's is the mg_level's) */
+    double lmax;  /* eigenvalue bound of D^-1 A */
+    int32_t *agg; /* unknown -> aggregate (next level's unknown), -1 for empty rows */
+    size_t *mrp;  /* next level's unknown I: members mem[mrp[I] .. mrp[I+1]) */
+    int32_t *mem; /* (n_next + 1 starts) */
+    int32_t *xyz; /* levels >= 1: 3 block coordinates per unknown */
+    int ext[3];   /* coordinate extent of the level */
+    float *u, *f, *r, *d, *t, *s; /* work: t, s for the transfers */
+} mg_alevel;
+
+typedef struct mg_agg {
+    int dim;
+    double alpha;
+    const mg_level *fine;
+    uint8_t *faces; /* binary fine level: bit 2b+hi per open face of each cell */
+    int nlev;       /* levels, the fine one included; the last is solved directly */
+    mg_alevel lv[MG_AGG_MAX_LEVELS];
+    int32_t nb;   /* bottom unknowns */
+    double *chol; /* bottom: Cholesky factor (nb x nb, lower), Poisson regularized per region */
+    int32_t *region;
+    int nregion;
+    double *bx;   /* nb doubles of work */
+    size_t bytes; /* memory held */
+} mg_agg;
+
+/* Builds the aggregation hierarchy under fine level F (weighted, with dinv).
+ * Returns HV_OK with *out NULL where aggregation does not apply (grids of 2^31
+ * cells or more, or levels that stop coarsening early); the caller then keeps
+ * its geometric levels. */
+hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alpha);
+void hv__mg_agg_free(mg_agg *g);
+/* u += the coarse-grid correction of residual r on the fine level: P (one
+ * symmetric V-cycle on levels 1..) P^T r. */
+void hv__mg_agg_correct(mg_agg *g, const float *r, float *u);
+
+#endif

@@ -1,0 +1,296 @@
+/* The CPU multigrid's coarse levels by smoothed aggregation (mg_agg.c): walls
+ * one cell thick, mazes, regions cut apart, odd sizes, 2D, heat steps, the
+ * AUTO change after a slow solve, and agreement with the geometric levels. */
+#include "testlib.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Walls one cell thick across x at n/3 and 2n/3, with gaps of n/8 at
+ * opposite ends in y (bench solve's baffles), in a dim-D box. */
+static uint8_t *baffles(int dim, const int n[3])
+{
+    int nz = dim == 3 ? n[2] : 1;
+    uint8_t *m = calloc((size_t)n[0] * n[1] * nz, 1);
+    int w1 = n[0] / 3, w2 = 2 * n[0] / 3, gap = n[1] / 8 > 1 ? n[1] / 8 : 1;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < n[1]; j++) {
+            size_t row = (size_t)n[0] * (j + (size_t)n[1] * k);
+            if (j < n[1] - gap)
+                m[row + w1] = 1;
+            if (j >= gap)
+                m[row + w2] = 1;
+        }
+    return m;
+}
+
+/* Walls across x and y every `pitch` cells, each panel with one square gap. */
+static uint8_t *maze(const int n[3], int pitch)
+{
+    uint8_t *m = calloc((size_t)n[0] * n[1] * n[2], 1);
+    uint64_t seed = 7;
+    int g = pitch / 4 > 1 ? pitch / 4 : 1;
+    for (int axis = 0; axis < 2; axis++)
+        for (int x = pitch / 2; x < n[axis]; x += pitch)
+            for (int y0 = 0; y0 < n[1 - axis]; y0 += pitch)
+                for (int z0 = 0; z0 < n[2]; z0 += pitch) {
+                    int gy = y0 + (int)((tl_rand(&seed) + 0.5) * (pitch - g));
+                    int gz = z0 + (int)((tl_rand(&seed) + 0.5) * (pitch - g));
+                    for (int z = z0; z < z0 + pitch && z < n[2]; z++)
+                        for (int y = y0; y < y0 + pitch && y < n[1 - axis]; y++) {
+                            if (y >= gy && y < gy + g && z >= gz && z < gz + g)
+                                continue;
+                            int i = axis == 0 ? x : y, j = axis == 0 ? y : x;
+                            m[i + (size_t)n[0] * (j + (size_t)n[1] * z)] = 1;
+                        }
+                }
+    return m;
+}
+
+typedef struct run {
+    hv_solve_info info;
+    hv_solver_stats stats;
+    float *u;
+} run;
+
+/* Solves p for f to tol with the given coarse levels; r->u is malloc'ed. */
+static void solve(const hv_problem *p, hv_coarse coarse, double tol, const float *f, run *r)
+{
+    size_t n = (size_t)p->n[0] * p->n[1] * (p->dim == 3 ? p->n[2] : 1);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    o.coarse = coarse;
+    o.tol = tol;
+    o.max_iter = 300;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, p, &o));
+    r->u = calloc(n, sizeof *r->u);
+    TL_ASSERT_OK(hv_solver_solve(s, f, r->u, &r->info));
+    TL_ASSERT_OK(hv_solver_get_stats(s, &r->stats));
+    ck_assert_msg(r->info.reason == HV_STOP_CONVERGED, "%s after %d iterations at %g",
+                  hv_stop_reason_str(r->info.reason), r->info.iterations, r->info.relres);
+    for (size_t c = 0; c < n; c++)
+        ck_assert(isfinite(r->u[c]) && (!p->solid || !p->solid[c] || r->u[c] == 0));
+    hv_solver_destroy(&s);
+}
+
+/* max |a - b| over max |b|. */
+static double rel_diff(const float *a, const float *b, size_t n)
+{
+    double d = 0, m = 0;
+    for (size_t c = 0; c < n; c++) {
+        d = fmax(d, fabs((double)a[c] - b[c]));
+        m = fmax(m, fabs((double)b[c]));
+    }
+    return m > 0 ? d / m : d;
+}
+
+static float *random_rhs(size_t n, uint64_t seed)
+{
+    float *f = malloc(n * sizeof *f);
+    tl_fill_random(f, n, seed);
+    return f;
+}
+
+/* Baffles and a maze, Poisson to 1e-9: aggregation takes few iterations where
+ * the geometric levels take many, and both give the same solution. */
+START_TEST(aggregation_should_see_thin_walls)
+{
+    const int n[3] = {48, 48, 48};
+    size_t N = (size_t)n[0] * n[1] * n[2];
+    uint8_t *masks[2] = {baffles(3, n), maze(n, 8)};
+    const char *names[2] = {"baffles", "maze"};
+    float *f = random_rhs(N, 11);
+    for (int q = 0; q < 2; q++) {
+        hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / n[0], masks[q], 0.0, 1.0};
+        run a, g;
+        solve(&p, HV_COARSE_AGGREGATION, 1e-9, f, &a);
+        solve(&p, HV_COARSE_GEOMETRIC, 1e-9, f, &g);
+        ck_assert_msg(a.stats.aggregation_levels >= 3, "%s: %d aggregation levels", names[q],
+                      a.stats.aggregation_levels);
+        ck_assert_int_eq(g.stats.aggregation_levels, 0);
+        /* To 1e-9 (1e-6 takes about two thirds of these). */
+        ck_assert_msg(a.info.iterations <= (q ? 14 : 10) &&
+                          g.info.iterations >= a.info.iterations + 5,
+                      "%s: %d iterations with aggregation, %d geometric", names[q],
+                      a.info.iterations, g.info.iterations);
+        double d = rel_diff(a.u, g.u, N);
+        ck_assert_msg(d < 1e-5, "%s: solutions differ by %g", names[q], d);
+        free(a.u);
+        free(g.u);
+        free(masks[q]);
+    }
+    free(f);
+}
+END_TEST
+
+/* Iterations do not grow with the grid: baffles at 32^3 and 64^3. */
+START_TEST(aggregation_iterations_should_not_grow_with_n)
+{
+    int its[2];
+    for (int q = 0; q < 2; q++) {
+        int m = q ? 64 : 32;
+        const int n[3] = {m, m, m};
+        size_t N = (size_t)m * m * m;
+        uint8_t *mask = baffles(3, n);
+        float *f = random_rhs(N, 3);
+        hv_problem p = {3, {m, m, m}, 1.0 / m, mask, 0.0, 1.0};
+        run a;
+        solve(&p, HV_COARSE_AGGREGATION, 1e-6, f, &a);
+        its[q] = a.info.iterations;
+        free(a.u);
+        free(f);
+        free(mask);
+    }
+    ck_assert_msg(its[0] <= 9 && its[1] <= its[0] + 1, "iterations %d (32^3), %d (64^3)", its[0],
+                  its[1]);
+}
+END_TEST
+
+/* A wall across the whole box, a sealed pocket and a lone cell: each fluid
+ * region keeps its own null space on every level, so incompatible data is
+ * projected per region and the solution is mean-free in each. */
+START_TEST(regions_cut_apart_should_each_stay_mean_free)
+{
+    const int n[3] = {40, 36, 30};
+    size_t N = (size_t)n[0] * n[1] * n[2];
+    uint8_t *mask = calloc(N, 1);
+    int32_t *region = malloc(N * sizeof *region);
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                size_t c = i + (size_t)n[0] * (j + (size_t)n[1] * k);
+                int pocket = i >= 26 && i <= 32 && j >= 4 && j <= 10 && k >= 4 && k <= 10;
+                int inside = i >= 27 && i <= 31 && j >= 5 && j <= 9 && k >= 5 && k <= 9;
+                int lone = i >= 5 && i <= 7 && j >= 5 && j <= 7 && k >= 5 && k <= 7;
+                mask[c] = i == 17 || (pocket && !inside) || (lone && !(i == 6 && j == 6 && k == 6));
+                region[c] = mask[c] ? -1 : inside ? 2 : (i == 6 && j == 6 && k == 6) ? 3 : i > 17;
+            }
+    float *f = random_rhs(N, 17);
+    for (size_t c = 0; c < N; c++)
+        f[c] += region[c] == 1 ? 2.0f : region[c] == 2 ? -5.0f : 0.0f;
+    hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / n[0], mask, 0.0, 1.0};
+    run a;
+    solve(&p, HV_COARSE_AGGREGATION, 1e-8, f, &a);
+    ck_assert_int_gt(a.stats.aggregation_levels, 1);
+    ck_assert_int_le(a.info.iterations, 12);
+    double sum[4] = {0}, cnt[4] = {0};
+    for (size_t c = 0; c < N; c++)
+        if (region[c] >= 0) {
+            sum[region[c]] += a.u[c];
+            cnt[region[c]] += 1;
+        }
+    for (int r = 0; r < 4; r++)
+        ck_assert_msg(fabs(sum[r]) / cnt[r] < 1e-5, "region %d: mean %g over %g cells", r,
+                      sum[r] / cnt[r], cnt[r]);
+    free(a.u);
+    free(f);
+    free(region);
+    free(mask);
+}
+END_TEST
+
+/* 2D (a serpentine corridor, odd sizes) and an odd 3D box with baffles, as
+ * heat steps and Poisson. */
+START_TEST(aggregation_should_solve_2d_odd_sizes_and_heat_steps)
+{
+    const int n2[3] = {101, 77, 1};
+    size_t N2 = (size_t)n2[0] * n2[1];
+    uint8_t *m2 = calloc(N2, 1);
+    for (int j = 0; j < n2[1]; j++)
+        for (int i = 0; i < n2[0]; i++)
+            if (j % 8 == 7 && j < n2[1] - 2 && !((j / 8) % 2 ? i < 3 : i >= n2[0] - 3))
+                m2[i + (size_t)n2[0] * j] = 1;
+    const int n3[3] = {37, 29, 23};
+    size_t N3 = (size_t)n3[0] * n3[1] * n3[2];
+    uint8_t *m3 = baffles(3, n3);
+    float *f = random_rhs(N3, 5);
+    for (int heat = 0; heat < 2; heat++) {
+        double h2 = 1.0 / n2[0], h3 = 1.0 / n3[0];
+        hv_problem p2 = {2, {n2[0], n2[1], 1}, h2, m2, heat ? 1.0 : 0.0, heat ? 4 * h2 * h2 : 1.0};
+        hv_problem p3 = {3,  {n3[0], n3[1], n3[2]}, h3,
+                         m3, heat ? 1.0 : 0.0,      heat ? 4 * h3 * h3 : 1.0};
+        run a, g;
+        solve(&p2, HV_COARSE_AGGREGATION, 1e-9, f, &a);
+        solve(&p2, HV_COARSE_GEOMETRIC, 1e-9, f, &g);
+        ck_assert_int_gt(a.stats.aggregation_levels, 1);
+        ck_assert_msg(a.info.iterations <= (heat ? 8 : 14), "2D: %d iterations", a.info.iterations);
+        ck_assert_msg(rel_diff(a.u, g.u, N2) < 1e-5, "2D: solutions differ");
+        free(a.u);
+        free(g.u);
+        solve(&p3, HV_COARSE_AGGREGATION, 1e-9, f, &a);
+        solve(&p3, HV_COARSE_GEOMETRIC, 1e-9, f, &g);
+        ck_assert_msg(a.info.iterations <= (heat ? 8 : 12), "3D odd: %d iterations",
+                      a.info.iterations);
+        ck_assert_msg(rel_diff(a.u, g.u, N3) < 1e-5, "3D odd: solutions differ");
+        free(a.u);
+        free(g.u);
+    }
+    free(f);
+    free(m2);
+    free(m3);
+}
+END_TEST
+
+/* AUTO keeps the geometric levels for its first solve and, after one of more
+ * than 16 iterations, changes to aggregation for the next; a grid too small
+ * to aggregate keeps the geometric levels even when aggregation is asked. */
+START_TEST(auto_should_change_to_aggregation_after_a_slow_solve)
+{
+    const int n[3] = {48, 48, 48};
+    size_t N = (size_t)n[0] * n[1] * n[2];
+    uint8_t *mask = baffles(3, n);
+    float *f = random_rhs(N, 23);
+    hv_problem p = {3, {n[0], n[1], n[2]}, 1.0 / n[0], mask, 0.0, 1.0};
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_solver *s = NULL;
+    TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+    float *u0 = calloc(N, sizeof *u0), *u1 = calloc(N, sizeof *u1);
+    hv_solve_info i0, i1;
+    hv_solver_stats s0, s1;
+    TL_ASSERT_OK(hv_solver_solve(s, f, u0, &i0));
+    TL_ASSERT_OK(hv_solver_get_stats(s, &s0));
+    TL_ASSERT_OK(hv_solver_solve(s, f, u1, &i1));
+    TL_ASSERT_OK(hv_solver_get_stats(s, &s1));
+    ck_assert_int_eq(s0.aggregation_levels, 0);
+    ck_assert_msg(i0.iterations > 16, "first solve: %d iterations", i0.iterations);
+    ck_assert_int_gt(s1.aggregation_levels, 1);
+    ck_assert_msg(i1.iterations <= 8, "second solve: %d iterations", i1.iterations);
+    ck_assert(i1.relres <= 1e-6);
+    ck_assert_msg(rel_diff(u1, u0, N) < 1e-4, "solutions differ by %g", rel_diff(u1, u0, N));
+    hv_solver_destroy(&s);
+    free(mask);
+    free(f);
+
+    const int m[3] = {8, 8, 8};
+    mask = baffles(3, m);
+    f = random_rhs(512, 2);
+    hv_problem small = {3, {8, 8, 8}, 1.0 / 8, mask, 0.0, 1.0};
+    run a;
+    solve(&small, HV_COARSE_AGGREGATION, 1e-8, f, &a);
+    ck_assert_int_eq(a.stats.aggregation_levels, 0);
+    free(a.u);
+    free(mask);
+    free(f);
+    free(u0);
+    free(u1);
+}
+END_TEST
+
+int main(void)
+{
+    Suite *s = suite_create("mg_agg");
+    TCase *tc = tcase_create("core");
+    tcase_set_timeout(tc, 240);
+    tcase_add_test(tc, aggregation_should_see_thin_walls);
+    tcase_add_test(tc, aggregation_iterations_should_not_grow_with_n);
+    tcase_add_test(tc, regions_cut_apart_should_each_stay_mean_free);
+    tcase_add_test(tc, aggregation_should_solve_2d_odd_sizes_and_heat_steps);
+    tcase_add_test(tc, auto_should_change_to_aggregation_after_a_slow_solve);
+    suite_add_tcase(s, tc);
+    return tl_run(s);
+}
