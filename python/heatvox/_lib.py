@@ -245,6 +245,7 @@ class hv_solver_opts(Structure):
         ("wisdom_file", c_char_p),
         ("fftw_measure", c_int),
         ("cycles_per_iteration", c_int),
+        ("coarse", c_int),
     ]
 
 

@@ -18,6 +18,7 @@ from ._lib import (
 )
 
 _SMOOTHERS = {"rbgs": 0, "jacobi": 1, "chebyshev": 2, "auto": 3}
+_COARSE = {"auto": 0, "geometric": 1, "aggregation": 2}
 
 
 @dataclass
@@ -59,11 +60,14 @@ class Solver:
     ``Solver(shape, voxel_size, alpha=1.0, beta=1.0, solid=None,
     backend="auto", tol=1e-6, max_iter=50, smoother="auto", pre_smooth=2,
     post_smooth=2, nonzero_guess=False, fftw_double=True,
-    fftw_measure=False, wisdom_file=None, cycles_per_iteration=0)``:
+    fftw_measure=False, wisdom_file=None, cycles_per_iteration=0,
+    coarse="auto")``:
     ``shape`` (nz, ny, nx) or (ny, nx); the options are hv_solver_opts'
     (solve.h); ``backend`` "auto" (FFTW on plain boxes, multigrid with solid
     cells, an OpenCL GPU for large grids), "mg", "fftw", "opencl";
-    ``nonzero_guess=True`` makes ``solve(f, out=u)`` start from u. See also
+    ``nonzero_guess=True`` makes ``solve(f, out=u)`` start from u;
+    ``coarse`` "auto", "geometric" or "aggregation" picks mg's coarse
+    levels with solid cells (aggregation keeps thin walls). See also
     ``Solver.heat`` and ``Solver.poisson``. ``info`` holds the last solve's
     :class:`SolveInfo`.
     """
@@ -87,6 +91,7 @@ class Solver:
         fftw_measure=False,
         wisdom_file=None,
         cycles_per_iteration=0,
+        coarse="auto",
     ):
         self._s = ctypes.c_void_p()
         dim, n = _arrays.grid_shape(shape)
@@ -104,6 +109,9 @@ class Solver:
         if smoother not in _SMOOTHERS:
             raise ValueError("smoother must be one of %s, got %r" % (", ".join(_SMOOTHERS), smoother))
         o.smoother = _SMOOTHERS[smoother]
+        if coarse not in _COARSE:
+            raise ValueError("coarse must be one of %s, got %r" % (", ".join(_COARSE), coarse))
+        o.coarse = _COARSE[coarse]
         o.tol = _arrays.positive(tol, "tol")
         o.max_iter = _arrays.integer(max_iter, "max_iter", 1)
         o.pre_smooth = _arrays.integer(pre_smooth, "pre_smooth", 0)

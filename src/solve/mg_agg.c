@@ -364,10 +364,10 @@ typedef struct spa {
 static int spa_init(spa *s, int32_t n)
 {
     memset(s, 0, sizeof *s);
-    s->acc = malloc((size_t)n * sizeof *s->acc);
-    s->mark = malloc((size_t)n * sizeof *s->mark);
-    s->cap = 256;
-    s->idx = malloc(s->cap * sizeof *s->idx);
+    s->acc = malloc(((size_t)n + 1) * sizeof *s->acc);
+    s->mark = malloc(((size_t)n + 1) * sizeof *s->mark);
+    s->idx = malloc(((size_t)n + 1) * sizeof *s->idx);
+    s->cap = (size_t)n + 1;
     if (!s->acc || !s->mark || !s->idx)
         return -1;
     for (int32_t c = 0; c < n; c++)
@@ -388,21 +388,16 @@ static void spa_start(spa *s)
     s->nidx = 0;
 }
 
-static int spa_add(spa *s, int32_t c, double v)
+/* acc[c] += v (every column has room: idx holds n entries). Returns 0. */
+static inline int spa_add(spa *s, int32_t c, double v)
 {
     if (s->mark[c] != s->gen) {
-        if (s->nidx == s->cap) {
-            int32_t *p = realloc(s->idx, 2 * s->cap * sizeof *p);
-            if (!p)
-                return -1;
-            s->idx = p;
-            s->cap *= 2;
-        }
         s->mark[c] = s->gen;
-        s->acc[c] = 0;
+        s->acc[c] = v;
         s->idx[s->nidx++] = c;
+    } else {
+        s->acc[c] += v;
     }
-    s->acc[c] += v;
     return 0;
 }
 
@@ -433,161 +428,16 @@ static int rows_push(rows_out *r, int32_t c, float v)
     return 0;
 }
 
-/* Row J of A_c = P^T A P, i.e. P^T A (P e_J), into out: v = P e_J on the
- * members of J and their neighbours, w = A v, then w - wp A D^-1 w summed per
- * aggregate (P^T = P0^T (I - wp A D^-1)). */
-static int galerkin_row(const agg_op *o, const mg_alevel *L, double wp, int32_t J, spa *vs, spa *ws,
-                        double **tvp, size_t *tcap, spa *cs, rows_out *out)
-{
-    int32_t bc[7], bc2[7];
-    float bv[7], bv2[7];
-    const int32_t *col, *col2;
-    const float *val, *val2;
-    spa_start(vs);
-    for (size_t q = L->mrp[J]; q < L->mrp[J + 1]; q++) {
-        int k = op_row(o, L->mem[q], bc, bv, &col, &val);
-        for (int e = 0; e < k; e++)
-            if (L->agg[col[e]] >= 0 && spa_add(vs, col[e], 0.0))
-                return -1;
-    }
-    /* P(c, J) = [agg c = J] - wp dinv_c sum over row c of a_cx [agg x = J],
-     * and w = A v = sum over c of P(c, J) times row c (A is symmetric). */
-    spa_start(ws);
-    for (size_t q = 0; q < vs->nidx; q++) {
-        int32_t c = vs->idx[q];
-        int k = op_row(o, c, bc, bv, &col, &val);
-        double s = 0;
-        for (int e = 0; e < k; e++)
-            if (L->agg[col[e]] == J)
-                s += val[e];
-        double pc = (L->agg[c] == J) - wp * o->dinv[c] * s;
-        if (pc == 0)
-            continue;
-        for (int e = 0; e < k; e++)
-            if (spa_add(ws, col[e], val[e] * pc))
-                return -1;
-    }
-    size_t nw = ws->nidx;
-    if (nw > *tcap) {
-        double *p = realloc(*tvp, 2 * nw * sizeof *p);
-        if (!p)
-            return -1;
-        *tvp = p;
-        *tcap = 2 * nw;
-    }
-    double *tv = *tvp;
-    for (size_t q = 0; q < nw; q++)
-        tv[q] = wp * o->dinv[ws->idx[q]] * ws->acc[ws->idx[q]];
-    for (size_t q = 0; q < nw; q++) {
-        if (tv[q] == 0)
-            continue;
-        int k = op_row(o, ws->idx[q], bc2, bv2, &col2, &val2);
-        for (int e = 0; e < k; e++)
-            if (spa_add(ws, col2[e], -val2[e] * tv[q]))
-                return -1;
-    }
-    spa_start(cs);
-    for (size_t q = 0; q < ws->nidx; q++) {
-        int32_t y = ws->idx[q], I = L->agg[y];
-        if (I >= 0 && spa_add(cs, I, ws->acc[y]))
-            return -1;
-    }
-    double diag = cs->mark[J] == cs->gen ? cs->acc[J] : 0.0;
-    int32_t len = 0;
-    for (size_t q = 0; q < cs->nidx; q++) {
-        int32_t I = cs->idx[q];
-        double v = cs->acc[I];
-        if (I != J && !(fabs(v) > 1e-9 * fabs(diag)))
-            continue;
-        if (rows_push(out, I, (float)v))
-            return -1;
-        len++;
-    }
-    out->len[J] = len;
-    return 0;
-}
-
-/* Level l+1's operator from level l's (aggregates built). */
-static hv_status galerkin(mg_agg *g, int l, double wp)
-{
-    mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
-    agg_op o = level_op(g, l);
-    int nthr = 1;
-#ifdef _OPENMP
-    nthr = C->n > 4096 ? omp_get_max_threads() : 1;
-#endif
-    rows_out *outs = calloc((size_t)nthr, sizeof *outs);
-    int32_t *len = malloc(((size_t)C->n + 1) * sizeof *len);
-    int failed = !outs || !len;
-#pragma omp parallel num_threads(nthr) if (nthr > 1)
-    {
-        int t = 0;
-#ifdef _OPENMP
-        t = omp_get_thread_num();
-#endif
-        spa vs = {0}, ws = {0}, cs = {0};
-        double *tv = NULL;
-        size_t tcap = 0;
-        int bad = failed || spa_init(&vs, L->n) || spa_init(&ws, L->n) || spa_init(&cs, C->n);
-        int32_t J0 = (int32_t)((int64_t)C->n * t / nthr),
-                J1 = (int32_t)((int64_t)C->n * (t + 1) / nthr);
-        if (!bad)
-            outs[t].len = len;
-        for (int32_t J = J0; J < J1 && !bad; J++)
-            if (galerkin_row(&o, L, wp, J, &vs, &ws, &tv, &tcap, &cs, &outs[t]))
-                bad = 1;
-        free(tv);
-        spa_free(&vs);
-        spa_free(&ws);
-        spa_free(&cs);
-        if (bad) {
-#pragma omp atomic write
-            failed = 1;
-        }
-    }
-    hv_status st = HV_OK;
-    if (!failed) {
-        size_t nnz = 0;
-        for (int t = 0; t < nthr; t++)
-            nnz += outs[t].n;
-        C->A.n = C->n;
-        C->A.rp = malloc(((size_t)C->n + 1) * sizeof *C->A.rp);
-        C->A.ci = malloc((nnz ? nnz : 1) * sizeof *C->A.ci);
-        C->A.v = malloc((nnz ? nnz : 1) * sizeof *C->A.v);
-        failed = !C->A.rp || !C->A.ci || !C->A.v;
-        if (!failed) {
-            C->A.rp[0] = 0;
-            for (int32_t J = 0; J < C->n; J++)
-                C->A.rp[J + 1] = C->A.rp[J] + (size_t)len[J];
-            size_t at = 0;
-            for (int t = 0; t < nthr; t++) {
-                memcpy(C->A.ci + at, outs[t].ci, outs[t].n * sizeof *C->A.ci);
-                memcpy(C->A.v + at, outs[t].v, outs[t].n * sizeof *C->A.v);
-                at += outs[t].n;
-            }
-        }
-    }
-    if (failed)
-        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the coarse operator of level %d",
-                       l + 1);
-    for (int t = 0; outs && t < nthr; t++) {
-        free(outs[t].ci);
-        free(outs[t].v);
-    }
-    free(outs);
-    free(len);
-    return st;
-}
-
 /* ---------- Galerkin on the coarse levels: sparse products ---------- */
 
-/* One row of a product into a sparse accumulator (after spa_start). */
-typedef int (*row_fn)(const void *ctx, int32_t row, spa *s);
+/* One row of a product into a sparse accumulator (after spa_start), with
+ * scratch: zeroed memory of its own for each thread. */
+typedef int (*row_fn)(const void *ctx, void *scratch, int32_t row, spa *s);
 
 /* out = the nrows rows that fn makes, over ncols columns; with `drop`,
  * entries off the diagonal below drop times the diagonal are left out. */
 static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn, const void *ctx,
-                           double drop)
+                           size_t scratch_bytes, double drop)
 {
     memset(out, 0, sizeof *out);
     int nthr = 1;
@@ -604,12 +454,13 @@ static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn,
         t = omp_get_thread_num();
 #endif
         spa cs = {0};
-        int bad = failed || spa_init(&cs, ncols);
+        void *scratch = scratch_bytes ? calloc(1, scratch_bytes) : NULL;
+        int bad = failed || spa_init(&cs, ncols) || (scratch_bytes && !scratch);
         int32_t r0 = (int32_t)((int64_t)nrows * t / nthr),
                 r1 = (int32_t)((int64_t)nrows * (t + 1) / nthr);
         for (int32_t r = r0; r < r1 && !bad; r++) {
             spa_start(&cs);
-            if (fn(ctx, r, &cs)) {
+            if (fn(ctx, scratch, r, &cs)) {
                 bad = 1;
                 break;
             }
@@ -626,6 +477,7 @@ static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn,
             len[r] = n;
         }
         spa_free(&cs);
+        free(scratch);
         if (bad) {
 #pragma omp atomic write
             failed = 1;
@@ -679,8 +531,9 @@ typedef struct p_ctx {
     double wp;
 } p_ctx;
 
-static int p_row(const void *ctx, int32_t c, spa *s)
+static int p_row(const void *ctx, void *scratch, int32_t c, spa *s)
 {
+    (void)scratch;
     const p_ctx *x = ctx;
     if (x->agg[c] < 0)
         return 0;
@@ -700,8 +553,9 @@ typedef struct mul_ctx {
     const mg_csr *X, *Y;
 } mul_ctx;
 
-static int mul_row(const void *ctx, int32_t r, spa *s)
+static int mul_row(const void *ctx, void *scratch, int32_t r, spa *s)
 {
+    (void)scratch;
     const mul_ctx *m = ctx;
     for (size_t q = m->X->rp[r]; q < m->X->rp[r + 1]; q++) {
         int32_t k = m->X->ci[q];
@@ -748,17 +602,273 @@ static hv_status galerkin_csr(mg_agg *g, int l, double wp)
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
     mg_csr P = {0}, AP = {0}, R = {0};
     p_ctx pc = {&L->A, L->agg, L->dinv, wp};
-    hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0);
+    hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0);
     mul_ctx ap = {&L->A, &P}, rap = {&R, &AP};
     if (!st)
-        st = build_csr(&AP, L->n, C->n, mul_row, &ap, 0);
+        st = build_csr(&AP, L->n, C->n, mul_row, &ap, 0, 0);
     if (!st)
         st = csr_transpose(&P, C->n, &R);
     if (!st)
-        st = build_csr(&C->A, C->n, C->n, mul_row, &rap, 1e-9);
-    csr_free(&P);
+        st = build_csr(&C->A, C->n, C->n, mul_row, &rap, 0, 1e-9);
     csr_free(&AP);
-    csr_free(&R);
+    if (st) {
+        csr_free(&P);
+        csr_free(&R);
+        return st;
+    }
+    L->P = P; /* kept for the transfers */
+    L->R = R;
+    g->bytes += (P.rp[P.n] + R.rp[R.n]) * (sizeof(int32_t) + sizeof(float)) +
+                ((size_t)P.n + R.n + 2) * sizeof(size_t);
+    return HV_OK;
+}
+
+/* ---------- Galerkin from the fine level ---------- */
+
+/* A small open-addressing accumulator over fine cells: the supports of one
+ * coarse column's products on the fine level lie in an 8^3 box of cells. */
+#define HASH_BITS 11
+#define HASH_SIZE (1 << HASH_BITS)
+
+typedef struct hacc {
+    int32_t key[HASH_SIZE]; /* cell + 1; 0: empty */
+    double val[HASH_SIZE];
+    int32_t used[HASH_SIZE]; /* slots in insertion order */
+    int n;
+} hacc;
+
+static inline int hacc_slot(hacc *h, int32_t c)
+{
+    uint32_t s = ((uint32_t)c * 2654435761u) >> (32 - HASH_BITS);
+    for (;;) {
+        if (h->key[s] == c + 1)
+            return (int)s;
+        if (h->key[s] == 0) {
+            if (h->n >= HASH_SIZE / 2)
+                return -1;
+            h->key[s] = c + 1;
+            h->val[s] = 0;
+            h->used[h->n++] = (int32_t)s;
+            return (int)s;
+        }
+        s = (s + 1) & (HASH_SIZE - 1);
+    }
+}
+
+static void hacc_clear(hacc *h)
+{
+    for (int q = 0; q < h->n; q++)
+        h->key[h->used[q]] = 0;
+    h->n = 0;
+}
+
+typedef struct g0_scratch {
+    hacc v, w;
+    double t[HASH_SIZE];
+} g0_scratch;
+
+/* A coarse row copied from a template: the row of a block whose neighbourhood
+ * is plain fluid, as offsets to the neighbouring blocks. */
+typedef struct g0_template {
+    int n;
+    int off[125][3];
+    double val[125];
+} g0_template;
+
+typedef struct g0_ctx {
+    agg_op o;
+    const mg_alevel *L, *C;
+    double wp;
+    const uint8_t *plain;    /* per level-1 unknown: a plain neighbourhood (or NULL) */
+    const int32_t *blockagg; /* block -> its one aggregate */
+    const g0_template *tmpl; /* NULL until made */
+} g0_ctx;
+
+/* Row J of A_c = P^T A (P e_J): v = P e_J on the members of J and their
+ * neighbours, w = A v, then w - wp A D^-1 w summed per aggregate
+ * (P^T = P0^T (I - wp A D^-1)). */
+static int g0_row(const void *ctx, void *scratch, int32_t J, spa *cs)
+{
+    const g0_ctx *x = ctx;
+    const agg_op *o = &x->o;
+    const mg_alevel *L = x->L;
+    if (x->tmpl && x->plain[J]) {
+        const int32_t *p = x->C->xyz + 3 * (size_t)J;
+        int bx = x->C->ext[0], by = x->C->ext[1];
+        for (int e = 0; e < x->tmpl->n; e++) {
+            const int *d = x->tmpl->off[e];
+            size_t b =
+                (size_t)(p[0] + d[0]) + bx * ((size_t)(p[1] + d[1]) + by * (size_t)(p[2] + d[2]));
+            if (spa_add(cs, x->blockagg[b], x->tmpl->val[e]))
+                return -1;
+        }
+        return 0;
+    }
+    g0_scratch *S = scratch;
+    int32_t bc[7];
+    float bv[7];
+    const int32_t *col;
+    const float *val;
+    hacc_clear(&S->v);
+    hacc_clear(&S->w);
+    for (size_t q = L->mrp[J]; q < L->mrp[J + 1]; q++) {
+        int k = op_row(o, L->mem[q], bc, bv, &col, &val);
+        for (int e = 0; e < k; e++)
+            if (L->agg[col[e]] >= 0 && hacc_slot(&S->v, col[e]) < 0)
+                return -1;
+    }
+    /* P(c, J) = [agg c = J] - wp dinv_c sum over row c of a_cx [agg x = J],
+     * and w = A v = sum over c of P(c, J) times row c (A is symmetric). */
+    for (int q = 0; q < S->v.n; q++) {
+        int32_t c = S->v.key[S->v.used[q]] - 1;
+        int k = op_row(o, c, bc, bv, &col, &val);
+        double sum = 0;
+        for (int e = 0; e < k; e++)
+            if (L->agg[col[e]] == J)
+                sum += val[e];
+        double pc = (L->agg[c] == J) - x->wp * o->dinv[c] * sum;
+        if (pc == 0)
+            continue;
+        for (int e = 0; e < k; e++) {
+            int h = hacc_slot(&S->w, col[e]);
+            if (h < 0)
+                return -1;
+            S->w.val[h] += val[e] * pc;
+        }
+    }
+    int nw = S->w.n;
+    for (int q = 0; q < nw; q++) {
+        int h = S->w.used[q];
+        S->t[q] = x->wp * o->dinv[S->w.key[h] - 1] * S->w.val[h];
+    }
+    for (int q = 0; q < nw; q++) {
+        if (S->t[q] == 0)
+            continue;
+        int k = op_row(o, S->w.key[S->w.used[q]] - 1, bc, bv, &col, &val);
+        for (int e = 0; e < k; e++) {
+            int h = hacc_slot(&S->w, col[e]);
+            if (h < 0)
+                return -1;
+            S->w.val[h] -= val[e] * S->t[q];
+        }
+    }
+    for (int q = 0; q < S->w.n; q++) {
+        int h = S->w.used[q];
+        int32_t I = L->agg[S->w.key[h] - 1];
+        if (I >= 0 && spa_add(cs, I, S->w.val[h]))
+            return -1;
+    }
+    return 0;
+}
+
+/* Blocks of level 1 whose 5^3 neighbourhood of blocks is whole and all fluid
+ * (3D binary fine levels): their rows are all the same, up to the columns.
+ * plain[J] per level-1 unknown, blockagg per block; both NULL when none. */
+static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out, int32_t **blockagg_out)
+{
+    const mg_level *F = g->fine;
+    const mg_alevel *C = &g->lv[1];
+    *plain_out = NULL;
+    *blockagg_out = NULL;
+    if (g->dim != 3 || !F->binary)
+        return HV_OK;
+    int e[3] = {C->ext[0], C->ext[1], C->ext[2]};
+    size_t nb = (size_t)e[0] * e[1] * e[2];
+    uint8_t *full = malloc(nb), *tmp = malloc(nb), *plain = malloc((size_t)C->n + 1);
+    int32_t *blockagg = malloc(nb * sizeof *blockagg);
+    if (!full || !tmp || !plain || !blockagg) {
+        free(full);
+        free(tmp);
+        free(plain);
+        free(blockagg);
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the coarse operator");
+    }
+    /* full: the block's 8 cells are in the grid and fluid with every face open. */
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+    for (size_t b = 0; b < nb; b++) {
+        int bx = (int)(b % e[0]), by = (int)((b / e[0]) % e[1]),
+            bz = (int)(b / ((size_t)e[0] * e[1]));
+        int ok = 2 * bx + 1 < F->n[0] && 2 * by + 1 < F->n[1] && 2 * bz + 1 < F->n[2];
+        for (int q = 0; ok && q < 8; q++) {
+            size_t c = (size_t)(2 * bx + (q & 1)) + F->sy * (size_t)(2 * by + ((q >> 1) & 1)) +
+                       F->sz * (size_t)(2 * bz + (q >> 2));
+            ok = F->a[c] != 0.0f && g->faces[c] == 0x3f;
+        }
+        full[b] = (uint8_t)ok;
+        blockagg[b] = -1;
+    }
+    for (int32_t I = 0; I < C->n; I++) {
+        const int32_t *p = C->xyz + 3 * (size_t)I;
+        size_t b = (size_t)p[0] + e[0] * ((size_t)p[1] + e[1] * (size_t)p[2]);
+        blockagg[b] = full[b] ? I : -1;
+    }
+    /* An AND over a window of 5 blocks along each axis, out of range counting as 0. */
+    size_t stride[3] = {1, (size_t)e[0], (size_t)e[0] * e[1]};
+    for (int a = 0; a < 3; a++) {
+        uint8_t *src = a % 2 ? tmp : full, *dst = a % 2 ? full : tmp;
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+        for (size_t b = 0; b < nb; b++) {
+            int x = (int)(b / stride[a] % e[a]), ok = x >= 2 && x + 2 < e[a];
+            for (int d = -2; ok && d <= 2; d++)
+                ok = src[b + (ptrdiff_t)d * (ptrdiff_t)stride[a]];
+            dst[b] = (uint8_t)ok;
+        }
+    }
+    /* After three passes the result is in tmp. */
+    for (int32_t I = 0; I < C->n; I++) {
+        const int32_t *p = C->xyz + 3 * (size_t)I;
+        plain[I] = tmp[(size_t)p[0] + e[0] * ((size_t)p[1] + e[1] * (size_t)p[2])];
+    }
+    free(full);
+    free(tmp);
+    *plain_out = plain;
+    *blockagg_out = blockagg;
+    return HV_OK;
+}
+
+/* Level 1's operator from the fine level (aggregates built). */
+static hv_status galerkin0(mg_agg *g, double wp)
+{
+    mg_alevel *C = &g->lv[1];
+    g0_ctx x = {level_op(g, 0), &g->lv[0], C, wp, NULL, NULL, NULL};
+    uint8_t *plain;
+    int32_t *blockagg;
+    hv_status st = plain_blocks(g, &plain, &blockagg);
+    if (st)
+        return st;
+    g0_template *T = NULL;
+    int32_t J0 = -1;
+    for (int32_t J = 0; plain && J < C->n && J0 < 0; J++)
+        if (plain[J])
+            J0 = J;
+    if (J0 >= 0) {
+        /* The template: one plain row, computed. */
+        spa cs = {0};
+        g0_scratch *S = calloc(1, sizeof *S);
+        T = calloc(1, sizeof *T);
+        if (!S || !T || spa_init(&cs, C->n) || (spa_start(&cs), g0_row(&x, S, J0, &cs)) ||
+            cs.nidx > 125) {
+            free(T);
+            T = NULL;
+        } else {
+            const int32_t *p0 = C->xyz + 3 * (size_t)J0;
+            for (size_t q = 0; q < cs.nidx; q++) {
+                const int32_t *p = C->xyz + 3 * (size_t)cs.idx[q];
+                for (int a = 0; a < 3; a++)
+                    T->off[T->n][a] = p[a] - p0[a];
+                T->val[T->n++] = cs.acc[cs.idx[q]];
+            }
+        }
+        spa_free(&cs);
+        free(S);
+    }
+    x.plain = plain;
+    x.blockagg = blockagg;
+    x.tmpl = T;
+    st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 1e-9);
+    free(T);
+    free(plain);
+    free(blockagg);
     return st;
 }
 
@@ -939,9 +1049,25 @@ static void level_smooth(const agg_op *o, mg_alevel *L, int zero)
 }
 
 /* f_{l+1} = P^T r = P0^T (r - wp A D^-1 r) from level l's residual r. */
+/* y = M x (rows of M). */
+static void csr_apply(const mg_csr *M, const float *x, float *y)
+{
+#pragma omp parallel for schedule(static) if (M->n > AGG_PAR_MIN)
+    for (int32_t r = 0; r < M->n; r++) {
+        double s = 0;
+        for (size_t q = M->rp[r]; q < M->rp[r + 1]; q++)
+            s += (double)M->v[q] * x[M->ci[q]];
+        y[r] = (float)s;
+    }
+}
+
 static void restrict_to(mg_agg *g, int l, const float *r)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    if (L->R.rp) {
+        csr_apply(&L->R, r, C->f);
+        return;
+    }
     agg_op o = level_op(g, l);
     double wp = AGG_OMEGA / L->lmax;
 #pragma omp parallel for schedule(static) if (o.n > AGG_PAR_MIN)
@@ -963,6 +1089,13 @@ static void restrict_to(mg_agg *g, int l, const float *r)
 static void prolong_add(mg_agg *g, int l, float *u)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    if (L->P.rp) {
+        csr_apply(&L->P, C->u, L->t);
+#pragma omp parallel for schedule(static) if (L->n > AGG_PAR_MIN)
+        for (int32_t c = 0; c < L->n; c++)
+            u[c] += L->t[c];
+        return;
+    }
     agg_op o = level_op(g, l);
     double wp = AGG_OMEGA / L->lmax;
 #pragma omp parallel for schedule(static) if (o.n > AGG_PAR_MIN)
@@ -1036,9 +1169,9 @@ void hv__mg_agg_free(mg_agg *g)
         return;
     for (int l = 0; l < MG_AGG_MAX_LEVELS; l++) {
         mg_alevel *L = &g->lv[l];
-        free(L->A.rp);
-        free(L->A.ci);
-        free(L->A.v);
+        csr_free(&L->A);
+        csr_free(&L->P);
+        csr_free(&L->R);
         free(L->dinv);
         free(L->agg);
         free(L->mrp);
@@ -1128,7 +1261,7 @@ hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alph
             break;
         }
         g->bytes += (size_t)L->n * 2 * sizeof(int32_t) + (size_t)g->lv[l + 1].n * sizeof(size_t);
-        if ((st = l == 0 ? galerkin(g, l, AGG_OMEGA / L->lmax)
+        if ((st = l == 0 ? galerkin0(g, AGG_OMEGA / L->lmax)
                          : galerkin_csr(g, l, AGG_OMEGA / L->lmax)))
             goto fail;
     }

@@ -11,7 +11,8 @@
  * is Galerkin's, A_c = P^T A P. Neither P nor A reaches through a wall, so the
  * coarse operators keep every wall and every region cut off by walls (its own
  * null space for Poisson). Coarse operators are sparse rows (CSR) of up to a
- * few hundred entries; P and P^T are applied from A, the aggregates and D.
+ * few hundred entries; under the fine level P and P^T are sparse rows too, on
+ * the fine level they are applied from its stencil, the aggregates and D.
  */
 #ifndef HV_SOLVE_MG_AGG_H
 #define HV_SOLVE_MG_AGG_H
@@ -35,6 +36,7 @@ typedef struct mg_csr {
 typedef struct mg_alevel {
     int32_t n;    /* unknowns */
     mg_csr A;     /* levels >= 1 */
+    mg_csr P, R;  /* levels >= 1: the prolongation from the next level, and P^T */
     float *dinv;  /* levels >= 1 (the fine level's is the mg_level's) */
     double lmax;  /* eigenvalue bound of D^-1 A */
     int32_t *agg; /* unknown -> aggregate (next level's unknown), -1 for empty rows */

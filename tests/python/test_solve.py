@@ -105,6 +105,26 @@ class ExactModes(unittest.TestCase):
             s.solve(f, out=cold)
             self.assertGreater(s.info.iterations, 1)
 
+    def test_coarse_levels_should_keep_thin_walls(self):
+        # Walls one cell thick with gaps at opposite ends: aggregation solves
+        # in a few iterations what the geometric levels take many for.
+        n = 40
+        solid = np.zeros((n, n, n), np.uint8)
+        solid[:, : n - 5, n // 3] = 1
+        solid[:, 5:, 2 * n // 3] = 1
+        f = np.random.default_rng(3).standard_normal((n, n, n)) * (solid == 0)
+        its = {}
+        for coarse in ("geometric", "aggregation"):
+            with heatvox.Solver.poisson((n, n, n), 1.0 / n, solid, backend="mg", coarse=coarse, tol=1e-8) as s:
+                u = s.solve(f)
+                its[coarse] = s.info.iterations
+                self.assertLessEqual(s.info.relres, 1e-8)
+                self.assertTrue(np.all(u[solid == 1] == 0))
+        self.assertLessEqual(its["aggregation"], 10)
+        self.assertGreater(its["geometric"], its["aggregation"] + 4)
+        with self.assertRaises(ValueError):
+            heatvox.Solver((8, 8), 1.0, coarse="algebraic")
+
     def test_errors(self):
         with heatvox.Solver.heat((8, 8), 1.0, 1.0) as s:
             f = np.zeros((8, 8))
