@@ -16,7 +16,7 @@ rb=$(sed -n 's/^#define HV_CL_RED_BLOCK \([0-9]*\).*/\1/p' "$here/src/cl/cl_core
 
 # name: sources after common.cl (as in src/cl/cl_core.c and each
 # module's hv_cl_module); "fp64" where the module is built only with fp64.
-programs="solver:mg,reduce,fine,faces,pointwise
+programs="solver:mg,reduce,fine,faces,pointwise,agg
 heat:heat
 extend:extend
 distance:mg,reduce,fine,faces,pointwise,distance:fp64"

@@ -1045,6 +1045,100 @@ START_TEST(masked_corridor_poisson_should_converge_like_mg)
 }
 END_TEST
 
+/* Coarse levels by aggregation on the device (cl_agg.c): the same hierarchy
+ * as the CPU's, so about its iterations, far fewer than the geometric levels
+ * take in a serpentine corridor, and the same solution; also with float
+ * kernels only (double correction on the host). */
+START_TEST(aggregation_should_match_mg_on_the_device)
+{
+    const cfg cs[] = {
+        {"2d serpentine poisson", 2, {128, 96, 1}, 0.0, 1},
+        {"3d serpentine poisson", 3, {40, 36, 12}, 0.0, 1},
+        {"3d serpentine heat", 3, {40, 36, 12}, 1.0, 1},
+    };
+    for (int ci = 0; ci < 3; ci++)
+        for (int fp64 = 1; fp64 >= (ci == 1 ? 0 : 1); fp64--) {
+            const cfg *c = &cs[ci];
+            if (!fp64)
+                setenv("HEATVOX_OPENCL_FP64", "0", 1);
+            uint8_t *solid = make_serpentine(c);
+            hv_problem p = make_problem(c, solid);
+            size_t n = cfg_count(c);
+            double *f = make_rhs(&p, n), *u[3] = {malloc(n * 8), malloc(n * 8), malloc(n * 8)};
+            hv_solve_info info[3];
+            const hv_backend bs[3] = {HV_BACKEND_OPENCL, HV_BACKEND_MG, HV_BACKEND_OPENCL};
+            const hv_coarse co[3] = {HV_COARSE_AGGREGATION, HV_COARSE_AGGREGATION,
+                                     HV_COARSE_GEOMETRIC};
+            for (int b = 0; b < 3; b++) {
+                hv_solver_opts o;
+                hv_solver_opts_default(&o);
+                o.backend = bs[b];
+                o.coarse = co[b];
+                o.smoother = HV_SMOOTH_CHEBYSHEV;
+                o.tol = 1e-8;
+                o.max_iter = 400;
+                hv_solver *s;
+                ck_assert_msg(hv_solver_create(&s, &p, &o) == HV_OK, "%s", hv_last_error());
+                ck_assert_msg(hv_solver_solve_d(s, f, u[b], &info[b]) == HV_OK, "%s",
+                              hv_last_error());
+                hv_solver_stats st;
+                ck_assert_int_eq(hv_solver_get_stats(s, &st), HV_OK);
+                ck_assert_msg((st.aggregation_levels > 1) == (b < 2), "%s: %d aggregation levels",
+                              c->name, st.aggregation_levels);
+                hv_solver_destroy(&s);
+                ck_assert_msg(info[b].reason == HV_STOP_CONVERGED, "%s: %s after %d at %g", c->name,
+                              hv_stop_reason_str(info[b].reason), info[b].iterations,
+                              info[b].relres);
+                ck_assert(true_relres(&p, f, u[b]) <= 1e-8 * 1.01);
+            }
+            printf("  %s%s: PCG iterations to 1e-8: opencl aggregation %d, mg aggregation %d, "
+                   "opencl geometric %d\n",
+                   c->name, fp64 ? "" : " (float kernels)", info[0].iterations, info[1].iterations,
+                   info[2].iterations);
+            ck_assert_msg(info[0].iterations <= info[1].iterations + 2, "%s: opencl %d, mg %d",
+                          c->name, info[0].iterations, info[1].iterations);
+            if (c->alpha == 0)
+                ck_assert_msg(2 * info[0].iterations <= info[2].iterations,
+                              "%s: aggregation %d, geometric %d", c->name, info[0].iterations,
+                              info[2].iterations);
+            ck_assert_msg(rel_diff_d(u[0], u[1], n) < 1e-5, "%s: %g", c->name,
+                          rel_diff_d(u[0], u[1], n));
+            for (int b = 0; b < 3; b++)
+                free(u[b]);
+            free(f);
+            free(solid);
+            unsetenv("HEATVOX_OPENCL_FP64");
+        }
+    /* AUTO: geometric for the first solve, aggregation after its 25 or so. */
+    const cfg *c = &cs[1];
+    uint8_t *solid = make_serpentine(c);
+    hv_problem p = make_problem(c, solid);
+    size_t n = cfg_count(c);
+    double *f = make_rhs(&p, n), *u = malloc(n * 8);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    o.tol = 1e-8;
+    o.max_iter = 400;
+    hv_solver *s;
+    ck_assert_msg(hv_solver_create(&s, &p, &o) == HV_OK, "%s", hv_last_error());
+    hv_solve_info i0, i1;
+    hv_solver_stats s0, s1;
+    ck_assert_int_eq(hv_solver_solve_d(s, f, u, &i0), HV_OK);
+    ck_assert_int_eq(hv_solver_get_stats(s, &s0), HV_OK);
+    ck_assert_int_eq(hv_solver_solve_d(s, f, u, &i1), HV_OK);
+    ck_assert_int_eq(hv_solver_get_stats(s, &s1), HV_OK);
+    ck_assert_msg(s0.aggregation_levels == 0 && i0.iterations > 16 && s1.aggregation_levels > 1 &&
+                      i1.iterations <= 8,
+                  "AUTO: %d iterations on %d aggregation levels, then %d on %d", i0.iterations,
+                  s0.aggregation_levels, i1.iterations, s1.aggregation_levels);
+    hv_solver_destroy(&s);
+    free(f);
+    free(u);
+    free(solid);
+}
+END_TEST
+
 /* A buffer of `bytes` at the start of a larger one filled with a sentinel, so
  * that writes past its end show (on CPU devices they would hit the heap). */
 #define GUARD_BYTES 8192
@@ -1461,6 +1555,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, solves_should_agree_with_mg_and_reach_the_tolerance, have_cl, why);
     TL_ADD_IF(tc, rbgs_and_jacobi_smoothers_should_converge_on_the_device, have_cl, why);
     TL_ADD_IF(tc, chebyshev_should_be_the_default_smoother_and_match_mg_iterations, have_cl, why);
+    TL_ADD_IF(tc, aggregation_should_match_mg_on_the_device, have_cl, why);
     TL_ADD_IF(tc, masked_corridor_poisson_should_converge_like_mg, have_cl, why);
     TL_ADD_IF(tc, kernels_should_write_only_inside_tiny_levels, have_cl, why);
     TL_ADD_IF(tc, tiny_and_degenerate_grids_should_solve_like_mg, have_cl, why);

@@ -42,6 +42,14 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_FACE_NORMALIZE] = "face_normalize",
     [HV_K_PW_RATIO] = "pw_ratio",
     [HV_K_PW_AXPY] = "pw_axpy",
+    [HV_K_AGG_SPMV] = "agg_spmv",
+    [HV_K_AGG_RESIDUAL] = "agg_residual",
+    [HV_K_AGG_CHEB] = "agg_cheb",
+    [HV_K_AGG_PROLONG] = "agg_prolong",
+    [HV_K_AGG_SCALE] = "agg_scale",
+    [HV_K_AGG_RESTRICT0] = "agg_restrict0",
+    [HV_K_AGG_INJECT0] = "agg_inject0",
+    [HV_K_AGG_PROLONG0] = "agg_prolong0",
     [HV_K_FINE_RESIDUAL] = "fine_residual",
     [HV_K_FINE_APPLY] = "fine_apply",
     [HV_K_FINE_ADD] = "fine_add",
@@ -344,7 +352,8 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
                          ctx ? "retain" : "create", devname, hv__cl_strerror(e));
     }
     const char *src[] = {hv__kernel_common, hv__kernel_mg,    hv__kernel_reduce,
-                         hv__kernel_fine,   hv__kernel_faces, hv__kernel_pointwise};
+                         hv__kernel_fine,   hv__kernel_faces, hv__kernel_pointwise,
+                         hv__kernel_agg};
     char opts[128];
     build_options(fp64, opts, sizeof opts);
     hv_status st =

@@ -31,6 +31,7 @@ extern const char hv__kernel_reduce[];
 extern const char hv__kernel_fine[];
 extern const char hv__kernel_faces[];
 extern const char hv__kernel_pointwise[];
+extern const char hv__kernel_agg[];
 
 /* Work-group size of every kernel but the single-group ones (x-major), and
  * the elements a work-item takes in a reduction (HV_WG, HV_RED_BLOCK in
@@ -62,6 +63,14 @@ typedef enum hv_cl_kernel {
     HV_K_FACE_NORMALIZE,
     HV_K_PW_RATIO,
     HV_K_PW_AXPY,
+    HV_K_AGG_SPMV,
+    HV_K_AGG_RESIDUAL,
+    HV_K_AGG_CHEB,
+    HV_K_AGG_PROLONG,
+    HV_K_AGG_SCALE,
+    HV_K_AGG_RESTRICT0,
+    HV_K_AGG_INJECT0,
+    HV_K_AGG_PROLONG0,
     /* built only with fp64 */
     HV_K_FINE_RESIDUAL,
     HV_K_FINE_APPLY,

@@ -194,6 +194,7 @@ hv_status hv__clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoot
 
 void hv__clmg_destroy(hv_clmg *m)
 {
+    hv__clagg_destroy(m);
     for (int l = 0; l < m->nlev; l++) {
         hv_clmg_level *L = &m->lv[l];
         hv__cl_free(&L->a);
@@ -387,6 +388,14 @@ void hv__clmg_bottom(hv_clmg *m)
 void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym)
 {
     hv_clmg_level *L = &m->lv[l];
+    if (m->agg && l == 0) {
+        /* The fine level smooths as below; the aggregation levels correct. */
+        hv__clmg_smooth(m, 0, m->pre, 0, !guess);
+        hv__clmg_residual(m, 0, L->u[L->cur], L->f, m->agg->r0);
+        hv__clagg_correct(m);
+        hv__clmg_smooth(m, 0, m->post, sym, 0);
+        return;
+    }
     if (l == m->nlev - 1) {
         hv__clmg_bottom(m);
         return;

@@ -10,6 +10,7 @@
 #define HV_SOLVE_CL_MG_H
 
 #include "cl/cl_core.h"
+#include "mg_agg.h"
 #include "mg_level.h"
 
 typedef struct hv_clmg_level {
@@ -31,6 +32,28 @@ typedef struct hv_clmg_level {
     size_t g[2], l[2]; /* range over the cells */
 } hv_clmg_level;
 
+/* The coarse levels by smoothed aggregation on the device (cl_agg.c), uploaded
+ * from the host's mg_agg: CSR rows (uint row starts) of A, P and P^T per level
+ * below the fine one, the fine level's aggregates and members, and work. */
+typedef struct hv_clagg_level {
+    int n;
+    cl_mem rp, ci, v;    /* A */
+    cl_mem prp, pci, pv; /* P from the next level (not on the last) */
+    cl_mem rrp, rci, rv; /* P^T */
+    cl_mem dinv, u, f, r, d;
+    double lmax;
+} hv_clagg_level;
+
+typedef struct hv_clagg {
+    mg_agg *host; /* the hierarchy on the host: sizes, the bottom's Cholesky factor */
+    int nlev;
+    hv_clagg_level lv[MG_AGG_MAX_LEVELS];
+    cl_mem agg0, mrp0, mem0, dinv0, r0, t0, s0; /* the fine level's transfers */
+    int n0, n1;
+    double wp0;
+    float *bf, *bu; /* the bottom's right-hand side and solution on the host */
+} hv_clagg;
+
 typedef struct hv_clmg {
     hv_cl *cl;
     int dim;
@@ -51,6 +74,7 @@ typedef struct hv_clmg {
     mg_level hb;
     float *hf;
     double *hw;
+    hv_clagg *agg; /* coarse levels by aggregation (solid cells), or NULL */
 } hv_clmg;
 
 /* Uploads H's coefficients and allocates the level vectors; with sym also
@@ -87,6 +111,15 @@ void hv__clmg_bottom(hv_clmg *m);
  * post-smoothing order), and full multigrid
  * for lv[0].f, as mg.c. The result is lv[0].u[lv[0].cur]. */
 void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
+/* Builds the aggregation hierarchy under host fine level F (as the CPU
+ * backend's, mg_agg.h) and uploads it; the symmetric cycle then uses it in
+ * place of the geometric levels. m->agg stays NULL where aggregation does not
+ * apply (a grid too small). */
+hv_status hv__clagg_create(hv_clmg *m, const mg_level *F, int dim, double alpha);
+void hv__clagg_destroy(hv_clmg *m);
+/* lv[0].u[cur] += the aggregation hierarchy's correction of residual lv[0]'s
+ * r0 (one symmetric V-cycle on the levels below, as mg_agg.c). */
+void hv__clagg_correct(hv_clmg *m);
 void hv__clmg_fmg(hv_clmg *m);
 
 #endif

@@ -60,11 +60,6 @@ static void mg_destroy(void *state)
     free(m);
 }
 
-/* A solver with AUTO coarse levels whose solve took more iterations than this
- * builds aggregation levels before its next solve (docs/METHOD.md, "Coarse
- * levels that keep the walls"): their setup pays off only over several solves. */
-#define MG_AGG_SWITCH 16
-
 /* Frees the geometric levels under the fine one and what only they use. */
 static void drop_geometric(mg_state *m)
 {

@@ -173,7 +173,7 @@ static double op_lmax(const agg_op *o, float *x, float *y)
         x[c] = o->dinv[c] > 0 ? (float)((double)(h >> 40) / (double)(1u << 24) - 0.5) : 0.0f;
     }
     double lam = 2.0;
-    for (int it = 0; it < 15; it++) {
+    for (int it = 0; it < 10; it++) {
         op_apply(o, x, y);
         double xy = 0, xx = 0, yy = 0;
 #pragma omp parallel for schedule(static) reduction(+ : xy, xx, yy) if (o->n > AGG_PAR_MIN)
@@ -431,13 +431,14 @@ static int rows_push(rows_out *r, int32_t c, float v)
 /* ---------- Galerkin on the coarse levels: sparse products ---------- */
 
 /* One row of a product into a sparse accumulator (after spa_start), with
- * scratch: zeroed memory of its own for each thread. */
+ * scratch of its own for each thread: zeroed memory, or a second sparse
+ * accumulator (build_csr's `inner`). */
 typedef int (*row_fn)(const void *ctx, void *scratch, int32_t row, spa *s);
 
 /* out = the nrows rows that fn makes, over ncols columns; with `drop`,
  * entries off the diagonal below drop times the diagonal are left out. */
 static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn, const void *ctx,
-                           size_t scratch_bytes, double drop)
+                           size_t scratch_bytes, int32_t inner, double drop)
 {
     memset(out, 0, sizeof *out);
     int nthr = 1;
@@ -453,9 +454,10 @@ static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn,
 #ifdef _OPENMP
         t = omp_get_thread_num();
 #endif
-        spa cs = {0};
-        void *scratch = scratch_bytes ? calloc(1, scratch_bytes) : NULL;
-        int bad = failed || spa_init(&cs, ncols) || (scratch_bytes && !scratch);
+        spa cs = {0}, in = {0};
+        void *scratch = scratch_bytes ? calloc(1, scratch_bytes) : inner > 0 ? (void *)&in : NULL;
+        int bad = failed || spa_init(&cs, ncols) || (scratch_bytes && !scratch) ||
+                  (inner > 0 && spa_init(&in, inner));
         int32_t r0 = (int32_t)((int64_t)nrows * t / nthr),
                 r1 = (int32_t)((int64_t)nrows * (t + 1) / nthr);
         for (int32_t r = r0; r < r1 && !bad; r++) {
@@ -477,7 +479,9 @@ static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn,
             len[r] = n;
         }
         spa_free(&cs);
-        free(scratch);
+        spa_free(&in);
+        if (scratch_bytes)
+            free(scratch);
         if (bad) {
 #pragma omp atomic write
             failed = 1;
@@ -548,21 +552,28 @@ static int p_row(const void *ctx, void *scratch, int32_t c, spa *s)
     return 0;
 }
 
-/* Row r of X Y. */
-typedef struct mul_ctx {
-    const mg_csr *X, *Y;
-} mul_ctx;
+/* Row I of R A P: the row (R A)(I,:) in the inner accumulator, then times P.
+ * No product is stored between the two. */
+typedef struct rap_ctx {
+    const mg_csr *R, *A, *P;
+} rap_ctx;
 
-static int mul_row(const void *ctx, void *scratch, int32_t r, spa *s)
+static int rap_row(const void *ctx, void *scratch, int32_t I, spa *s)
 {
-    (void)scratch;
-    const mul_ctx *m = ctx;
-    for (size_t q = m->X->rp[r]; q < m->X->rp[r + 1]; q++) {
-        int32_t k = m->X->ci[q];
-        double x = m->X->v[q];
-        for (size_t p = m->Y->rp[k]; p < m->Y->rp[k + 1]; p++)
-            if (spa_add(s, m->Y->ci[p], x * m->Y->v[p]))
-                return -1;
+    const rap_ctx *m = ctx;
+    spa *ra = scratch;
+    spa_start(ra);
+    for (size_t q = m->R->rp[I]; q < m->R->rp[I + 1]; q++) {
+        int32_t c = m->R->ci[q];
+        double r = m->R->v[q];
+        for (size_t p = m->A->rp[c]; p < m->A->rp[c + 1]; p++)
+            spa_add(ra, m->A->ci[p], r * m->A->v[p]);
+    }
+    for (size_t q = 0; q < ra->nidx; q++) {
+        int32_t e = ra->idx[q];
+        double x = ra->acc[e];
+        for (size_t p = m->P->rp[e]; p < m->P->rp[e + 1]; p++)
+            spa_add(s, m->P->ci[p], x * m->P->v[p]);
     }
     return 0;
 }
@@ -596,21 +607,19 @@ static hv_status csr_transpose(const mg_csr *M, int32_t ncols, mg_csr *T)
     return HV_OK;
 }
 
-/* Level l+1's operator P^T (A P) from a coarse level l by sparse products. */
+/* Level l+1's operator P^T A P from a coarse level l by sparse products (row
+ * by row of P^T, (P^T A) then P: nothing of the size of A P is held). */
 static hv_status galerkin_csr(mg_agg *g, int l, double wp)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
-    mg_csr P = {0}, AP = {0}, R = {0};
+    mg_csr P = {0}, R = {0};
     p_ctx pc = {&L->A, L->agg, L->dinv, wp};
-    hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0);
-    mul_ctx ap = {&L->A, &P}, rap = {&R, &AP};
-    if (!st)
-        st = build_csr(&AP, L->n, C->n, mul_row, &ap, 0, 0);
+    hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0, 0);
+    rap_ctx rap = {&R, &L->A, &P};
     if (!st)
         st = csr_transpose(&P, C->n, &R);
     if (!st)
-        st = build_csr(&C->A, C->n, C->n, mul_row, &rap, 0, 1e-9);
-    csr_free(&AP);
+        st = build_csr(&C->A, C->n, C->n, rap_row, &rap, 0, L->n, 1e-9);
     if (st) {
         csr_free(&P);
         csr_free(&R);
@@ -865,7 +874,7 @@ static hv_status galerkin0(mg_agg *g, double wp)
     x.plain = plain;
     x.blockagg = blockagg;
     x.tmpl = T;
-    st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 1e-9);
+    st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 0, 1e-9);
     free(T);
     free(plain);
     free(blockagg);
@@ -1124,6 +1133,8 @@ static void cycle(mg_agg *g, int l)
     level_smooth(&o, L, 0);
 }
 
+void hv__mg_agg_bottom(mg_agg *g, const float *f, float *u) { bottom_solve(g, f, u); }
+
 void hv__mg_agg_correct(mg_agg *g, const float *r, float *u)
 {
     restrict_to(g, 0, r);
@@ -1161,6 +1172,25 @@ static hv_status level_work(mg_agg *g, int l)
         return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d", l);
     g->bytes += 2 * n * sizeof(float);
     return HV_OK;
+}
+
+void hv__mg_agg_keep_bottom(mg_agg *g)
+{
+    for (int l = 0; l < MG_AGG_MAX_LEVELS; l++) {
+        mg_alevel *L = &g->lv[l];
+        void *all[] = {L->dinv, L->agg, L->mrp, L->mem, L->xyz, L->u, L->f, L->r, L->d, L->t, L->s};
+        for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
+            free(all[i]);
+        csr_free(&L->A);
+        csr_free(&L->P);
+        csr_free(&L->R);
+        int32_t n = L->n;
+        memset(L, 0, sizeof *L);
+        L->n = n;
+    }
+    free(g->faces);
+    g->faces = NULL;
+    g->fine = NULL;
 }
 
 void hv__mg_agg_free(mg_agg *g)

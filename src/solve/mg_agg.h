@@ -23,6 +23,10 @@
 #include <stdint.h>
 
 #define MG_AGG_MAX_LEVELS 24
+/* HV_COARSE_AUTO: a solver whose solve took more iterations than this builds
+ * aggregation levels before its next solve (their set-up pays off only over
+ * several solves, or against a slow one). */
+#define MG_AGG_SWITCH 16
 
 typedef struct mg_csr {
     int32_t n;  /* rows */
@@ -68,8 +72,14 @@ typedef struct mg_agg {
  * its geometric levels. */
 hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alpha);
 void hv__mg_agg_free(mg_agg *g);
+/* Frees all but the bottom level's factor and the level sizes (the OpenCL
+ * backend, once it has uploaded the levels). */
+void hv__mg_agg_keep_bottom(mg_agg *g);
 /* u += the coarse-grid correction of residual r on the fine level: P (one
  * symmetric V-cycle on levels 1..) P^T r. */
 void hv__mg_agg_correct(mg_agg *g, const float *r, float *u);
+/* u = the bottom level's solution for f (the Cholesky factor; Poisson:
+ * mean-free per region), nb floats each. */
+void hv__mg_agg_bottom(mg_agg *g, const float *f, float *u);
 
 #endif

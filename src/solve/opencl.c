@@ -10,6 +10,8 @@
  * synchronization per cycle or CG iteration is reading back the residual
  * norm. On devices without fp64 the double part (residuals, CG vectors) runs
  * on the host and each cycle moves the fine residual and correction across.
+ * With solid cells the coarse levels may be the aggregation hierarchy
+ * (cl_agg.c), asked for or, with HV_COARSE_AUTO, after a slow solve (mg.c).
  * The outer iterations are iterate.c's, as on the CPU; this file provides
  * their steps. It also tells HV_BACKEND_AUTO whether there is a device to
  * take (hv__opencl_auto_device).
@@ -38,6 +40,7 @@ typedef struct ocl_state {
     hv_solver_stats stats; /* modelled while the whole hierarchy is at hand */
     int dev64;             /* double defect correction on the device */
     int use_pcg;
+    int agg_tried, agg_pending; /* AUTO coarse levels: as mg.c */
     /* device path */
     cl_mem v[NVEC];    /* double fine vectors */
     cl_mem S;          /* double scalars */
@@ -93,6 +96,11 @@ static hv_status ocl_create(void **state, const hv_setup *s)
         (st = hv__clmg_create(&o->mg, cl, &o->H, s->o.smoother, s->o.pre_smooth, s->o.post_smooth,
                               o->use_pcg)))
         goto fail;
+    if (o->use_pcg && s->o.coarse == HV_COARSE_AGGREGATION) {
+        o->agg_tried = 1;
+        if ((st = hv__clagg_create(&o->mg, &o->H.lv[0], o->H.dim, o->H.alpha)))
+            goto fail;
+    }
     hv__mg_model_stats(o->H.lv, o->H.nlev, o->H.dim, o->mg.smoother, o->mg.pre, o->mg.post,
                        o->use_pcg, &o->stats);
     const size_t n = s->count;
@@ -414,12 +422,35 @@ static const hv_iter_ops ocl_iter_ops = {"OpenCL ",   it_residual, it_correct, i
 
 /* The solve once X holds the initial guess and F the right-hand side (on the
  * device or, without fp64, on the host); fn = ||F|| > 0. */
+/* Aggregation levels under the device's fine level (cl_agg.c), from the host
+ * fine level made again; where they do not fit in memory the geometric ones
+ * stay (AUTO asked for them, not the caller). */
+static hv_status use_aggregation(ocl_state *o)
+{
+    o->agg_tried = 1;
+    o->agg_pending = 0;
+    mg_hierarchy H;
+    hv_status st = hv__mg_hierarchy_build(&H, o->s, 0);
+    if (!st) {
+        st = hv__clagg_create(&o->mg, &H.lv[0], H.dim, H.alpha);
+        hv__mg_hierarchy_free(&H);
+    }
+    return st == HV_ERR_NOMEM ? HV_OK : st;
+}
+
 static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
 {
     ocl_iter c = {o, S_RZ0};
     const hv_solver_opts *opts = &o->s->o;
-    return o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
-                      : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
+    hv_status st;
+    if (o->agg_pending && (st = use_aggregation(o)))
+        return st;
+    st = o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
+                    : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
+    if (!st && o->use_pcg && opts->coarse == HV_COARSE_AUTO && !o->agg_tried &&
+        info->iterations > MG_AGG_SWITCH)
+        o->agg_pending = 1;
+    return st;
 }
 
 static hv_status ocl_solve(void *state, const double *f, double *u, hv_solve_info *info)
@@ -463,6 +494,10 @@ static void ocl_stats(const void *state, hv_solver_stats *st)
 {
     const ocl_state *o = state;
     *st = o->stats;
+    if (o->mg.agg) {
+        st->aggregation_levels = o->mg.agg->nlev;
+        st->memory_bytes += o->mg.agg->host->bytes;
+    }
 }
 
 static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_info *info);
