@@ -19,17 +19,24 @@ __kernel void agg_spmv(int n, __global const uint *rp, __global const int *ci,
     y[r] = s;
 }
 
-/* r = f - M u */
+/* r = f - A u on a coarse level; rows marked in plain (when nt > 0) are the
+ * template: nt entries at index offsets toff with values tval. */
 __kernel void agg_residual(int n, __global const uint *rp, __global const int *ci,
-                           __global const float *v, __global const float *u,
-                           __global const float *f, __global float *r)
+                           __global const float *v, __global const uchar *plain, int nt,
+                           __global const int *toff, __global const float *tval,
+                           __global const float *u, __global const float *f, __global float *r)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
     float s = 0.0f;
-    for (uint q = rp[i]; q < rp[i + 1]; q++)
-        s += v[q] * u[ci[q]];
+    if (nt > 0 && plain[i]) {
+        for (int e = 0; e < nt; e++)
+            s += tval[e] * u[i + toff[e]];
+    } else {
+        for (uint q = rp[i]; q < rp[i + 1]; q++)
+            s += v[q] * u[ci[q]];
+    }
     r[i] = f[i] - s;
 }
 

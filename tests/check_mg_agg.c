@@ -1,6 +1,8 @@
 /* The CPU multigrid's coarse levels by smoothed aggregation (mg_agg.c): walls
  * one cell thick, mazes, regions cut apart, odd sizes, 2D, heat steps, the
  * AUTO change after a slow solve, and agreement with the geometric levels. */
+#include "solve/backend.h"
+#include "solve/mg_agg.h"
 #include "testlib.h"
 
 #include <math.h>
@@ -281,11 +283,94 @@ START_TEST(auto_should_change_to_aggregation_after_a_slow_solve)
 }
 END_TEST
 
+/* Level 1's operator against P^T A P computed from its definition with the
+ * fine level's own apply (double): columns of plain rows (the template) and
+ * of rows next to the walls (the hash-table path), heat and Poisson. */
+START_TEST(galerkin_rows_should_be_p_transpose_a_p)
+{
+    const int n[3] = {40, 38, 36};
+    size_t N = (size_t)n[0] * n[1] * n[2];
+    uint8_t *mask = baffles(3, n);
+    for (int heat = 0; heat < 2; heat++) {
+        hv_setup s;
+        memset(&s, 0, sizeof s);
+        double h = 1.0 / n[0];
+        s.p =
+            (hv_problem){3, {n[0], n[1], n[2]}, h, mask, heat ? 1.0 : 0.0, heat ? 4 * h * h : 1.0};
+        hv_solver_opts_default(&s.o);
+        s.count = N;
+        s.nregion = 1;
+        mg_hierarchy H;
+        TL_ASSERT_OK(hv__mg_hierarchy_build(&H, &s, 0));
+        mg_agg *g = NULL;
+        TL_ASSERT_OK(hv__mg_agg_build(&g, &H.lv[0], 3, s.p.alpha));
+        ck_assert_ptr_nonnull(g);
+        const mg_alevel *L0 = &g->lv[0], *L1 = &g->lv[1];
+        int nplain = 0;
+        for (int32_t J = 0; J < L1->n; J++)
+            nplain += L1->tn && L1->plain[J];
+        ck_assert_msg(L1->tn > 0 && nplain > 50, "%d plain rows of %d", nplain, L1->n);
+        double wp = 4.0 / 3.0 / L0->lmax;
+        double *v = calloc(N, sizeof *v), *w = calloc(N, sizeof *w), *t = calloc(N, sizeof *t);
+        double *col = calloc((size_t)L1->n, sizeof *col);
+        int checked[2] = {0, 0};
+        for (int32_t J = 0; J < L1->n && (checked[0] < 6 || checked[1] < 6); J += 7) {
+            if (L0->mrp[J] == L0->mrp[J + 1])
+                continue; /* a block without fluid */
+            int plain = L1->tn && L1->plain[J];
+            if (checked[plain] >= 6)
+                continue;
+            checked[plain]++;
+            /* v = P e_J = (I - wp D^-1 A) P0 e_J */
+            memset(t, 0, N * sizeof *t);
+            for (size_t q = L0->mrp[J]; q < L0->mrp[J + 1]; q++)
+                t[L0->mem[q]] = 1;
+            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, w);
+            for (size_t c = 0; c < N; c++)
+                v[c] = t[c] - wp * H.lv[0].dinv[c] * w[c];
+            /* column J of P^T A P = P0^T (I - wp A D^-1) A v */
+            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, v, w);
+            for (size_t c = 0; c < N; c++)
+                t[c] = H.lv[0].dinv[c] * w[c];
+            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, v);
+            memset(col, 0, (size_t)L1->n * sizeof *col);
+            for (size_t c = 0; c < N; c++)
+                if (L0->agg[c] >= 0)
+                    col[L0->agg[c]] += w[c] - wp * v[c];
+            /* against row J as stored (symmetric) */
+            double *row = calloc((size_t)L1->n, sizeof *row), scale = fabs(col[J]);
+            if (plain)
+                for (int e = 0; e < L1->tn; e++)
+                    row[J + L1->toff[e]] += L1->tval[e];
+            else
+                for (size_t q = L1->A.rp[J]; q < L1->A.rp[J + 1]; q++)
+                    row[L1->A.ci[q]] += L1->A.v[q];
+            for (int32_t I = 0; I < L1->n; I++)
+                ck_assert_msg(fabs(row[I] - col[I]) <= 1e-5 * scale,
+                              "%s, %s row %d, column %d: %g stored, %g from P^T A P",
+                              heat ? "heat" : "Poisson", plain ? "plain" : "wall", J, I, row[I],
+                              col[I]);
+            free(row);
+        }
+        ck_assert_msg(checked[0] == 6 && checked[1] == 6,
+                      "rows checked: %d next to walls, %d plain", checked[0], checked[1]);
+        free(v);
+        free(w);
+        free(t);
+        free(col);
+        hv__mg_agg_free(g);
+        hv__mg_hierarchy_free(&H);
+    }
+    free(mask);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("mg_agg");
     TCase *tc = tcase_create("core");
     tcase_set_timeout(tc, 240);
+    tcase_add_test(tc, galerkin_rows_should_be_p_transpose_a_p);
     tcase_add_test(tc, aggregation_should_see_thin_walls);
     tcase_add_test(tc, aggregation_iterations_should_not_grow_with_n);
     tcase_add_test(tc, regions_cut_apart_should_each_stay_mean_free);

@@ -1045,6 +1045,21 @@ START_TEST(masked_corridor_poisson_should_converge_like_mg)
 }
 END_TEST
 
+/* Walls one cell thick across x at n/3 and 2n/3 with gaps of n/8 at opposite
+ * ends in y (bench solve's baffles). */
+static uint8_t *make_baffles(const cfg *c)
+{
+    uint8_t *s = calloc(cfg_count(c), 1);
+    int w1 = c->n[0] / 3, w2 = 2 * c->n[0] / 3, gap = c->n[1] / 8;
+    for (int k = 0; k < c->n[2]; k++)
+        for (int j = 0; j < c->n[1]; j++) {
+            size_t row = (size_t)c->n[0] * (j + (size_t)c->n[1] * k);
+            s[row + w1] = j < c->n[1] - gap;
+            s[row + w2] = j >= gap;
+        }
+    return s;
+}
+
 /* Coarse levels by aggregation on the device (cl_agg.c): the same hierarchy
  * as the CPU's, so about its iterations, far fewer than the geometric levels
  * take in a serpentine corridor, and the same solution; also with float
@@ -1055,13 +1070,14 @@ START_TEST(aggregation_should_match_mg_on_the_device)
         {"2d serpentine poisson", 2, {128, 96, 1}, 0.0, 1},
         {"3d serpentine poisson", 3, {40, 36, 12}, 0.0, 1},
         {"3d serpentine heat", 3, {40, 36, 12}, 1.0, 1},
+        {"3d baffles poisson", 3, {40, 38, 36}, 0.0, 1}, /* open space: template rows */
     };
-    for (int ci = 0; ci < 3; ci++)
+    for (int ci = 0; ci < 4; ci++)
         for (int fp64 = 1; fp64 >= (ci == 1 ? 0 : 1); fp64--) {
             const cfg *c = &cs[ci];
             if (!fp64)
                 setenv("HEATVOX_OPENCL_FP64", "0", 1);
-            uint8_t *solid = make_serpentine(c);
+            uint8_t *solid = ci < 3 ? make_serpentine(c) : make_baffles(c);
             hv_problem p = make_problem(c, solid);
             size_t n = cfg_count(c);
             double *f = make_rhs(&p, n), *u[3] = {malloc(n * 8), malloc(n * 8), malloc(n * 8)};

@@ -87,6 +87,14 @@ static hv_status upload_level(hv_cl *cl, hv_clagg *G, const mg_agg *g, int l)
     }
     if (!st)
         st = hv__cl_alloc(cl, (size_t)S->n * sizeof(float), S->dinv, &L->dinv);
+    if (!st && S->tn) {
+        L->tn = S->tn;
+        st = hv__cl_alloc(cl, (size_t)S->n, S->plain, &L->plain);
+        if (!st)
+            st = hv__cl_alloc(cl, (size_t)S->tn * sizeof(cl_int), S->toff, &L->toff);
+        if (!st)
+            st = hv__cl_alloc(cl, (size_t)S->tn * sizeof(float), S->tval, &L->tval);
+    }
     cl_mem *w[] = {&L->u, &L->f, &L->r, &L->d};
     if (!st)
         st = work(cl, (size_t)S->n, w, 4);
@@ -155,7 +163,8 @@ static void residual(hv_cl *cl, hv_clagg_level *L)
 {
     size_t g[1], lw[1];
     range(L->n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_RESIDUAL, "immmmmm", L->n, L->rp, L->ci, L->v, L->u, L->f, L->r);
+    hv__cl_args(cl, HV_K_AGG_RESIDUAL, "immmmimmmmm", L->n, L->rp, L->ci, L->v, L->plain, L->tn,
+                L->toff, L->tval, L->u, L->f, L->r);
     hv__cl_run(cl, HV_K_AGG_RESIDUAL, 1, g, lw);
 }
 

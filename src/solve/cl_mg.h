@@ -37,7 +37,9 @@ typedef struct hv_clmg_level {
  * below the fine one, the fine level's aggregates and members, and work. */
 typedef struct hv_clagg_level {
     int n;
-    cl_mem rp, ci, v;    /* A */
+    cl_mem rp, ci, v;         /* A */
+    cl_mem plain, toff, tval; /* rows that are the template (level 1; NULL elsewhere) */
+    int tn;
     cl_mem prp, pci, pv; /* P from the next level (not on the last) */
     cl_mem rrp, rci, rv; /* P^T */
     cl_mem dinv, u, f, r, d;

@@ -31,11 +31,12 @@ typedef struct agg_op {
     const float *dinv;
     int32_t n;
     const uint8_t *faces; /* fine level of a mask: bit 2b+hi for each open face */
+    const mg_alevel *lv;  /* the level (templates of plain rows) */
 } agg_op;
 
 static agg_op level_op(const mg_agg *g, int l)
 {
-    agg_op o = {NULL, g->dim, g->alpha, NULL, NULL, g->lv[l].n, NULL};
+    agg_op o = {NULL, g->dim, g->alpha, NULL, NULL, g->lv[l].n, NULL, &g->lv[l]};
     if (l == 0) {
         o.F = g->fine;
         o.dinv = g->fine->dinv;
@@ -147,16 +148,18 @@ static void op_apply(const agg_op *o, const float *x, float *y)
         fine_apply(o, x, y);
         return;
     }
+    const mg_alevel *L = o->lv;
+    const uint8_t *plain = L->tn ? L->plain : NULL;
 #pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
     for (int32_t c = 0; c < o->n; c++) {
-        int32_t bc[7];
-        float bv[7];
-        const int32_t *col;
-        const float *val;
-        int k = op_row(o, c, bc, bv, &col, &val);
         double s = 0;
-        for (int e = 0; e < k; e++)
-            s += (double)val[e] * x[col[e]];
+        if (plain && plain[c]) {
+            for (int e = 0; e < L->tn; e++)
+                s += (double)L->tval[e] * x[c + L->toff[e]];
+        } else {
+            for (size_t q = o->A->rp[c]; q < o->A->rp[c + 1]; q++)
+                s += (double)o->A->v[q] * x[o->A->ci[q]];
+        }
         y[c] = (float)s;
     }
 }
@@ -295,53 +298,76 @@ static hv_status aggregate(mg_agg *g, int l)
         order[fill[(size_t)x[0] / 2 + bx * ((size_t)x[1] / 2 + by * ((size_t)x[2] / 2))]++] = c;
     }
     free(fill);
-    /* Parts of each block, numbered in block order; members grouped by part. */
+    /* Parts of each block: the first takes the block's own index (a block
+     * without live unknowns leaves an empty one), the others come after all
+     * blocks. In open space the next level is then a grid whose neighbours
+     * are at fixed offsets. */
     size_t cap = nblk + 16;
-    L->mrp = malloc((cap + 1) * sizeof *L->mrp);
-    L->mem = malloc((live ? live : 1) * sizeof *L->mem);
+    int32_t extra = 0;
     C->xyz = malloc(3 * cap * sizeof *C->xyz);
     hv_status st = HV_OK;
-    if (!L->mrp || !L->mem || !C->xyz) {
+    if (!C->xyz) {
         st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates of level %d", l);
         goto done;
     }
-    int32_t nc = 0;
-    size_t out = 0;
     for (size_t b = 0; b < nblk; b++) {
         const int32_t *u = order + start[b];
         int m = (int)(start[b + 1] - start[b]), lab[64];
+        C->xyz[3 * b + 0] = (int32_t)(b % bx);
+        C->xyz[3 * b + 1] = (int32_t)((b / bx) % by);
+        C->xyz[3 * b + 2] = (int32_t)(b / ((size_t)bx * by));
         for (int q0 = 0; q0 < m; q0 += 64) {
             int mm = m - q0 < 64 ? m - q0 : 64;
             int parts = block_parts(&o, u + q0, mm, lab);
             for (int p = 0; p < parts; p++) {
-                if ((size_t)nc >= cap) {
-                    cap *= 2;
-                    size_t *r2 = realloc(L->mrp, (cap + 1) * sizeof *r2);
-                    int32_t *x2 = r2 ? realloc(C->xyz, 3 * cap * sizeof *x2) : NULL;
-                    if (r2)
-                        L->mrp = r2;
-                    if (x2)
+                int32_t id = (int32_t)b;
+                if (p > 0 || q0 > 0) {
+                    id = (int32_t)(nblk + extra++);
+                    if ((size_t)id >= cap) {
+                        cap *= 2;
+                        int32_t *x2 = realloc(C->xyz, 3 * cap * sizeof *x2);
+                        if (!x2) {
+                            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates");
+                            goto done;
+                        }
                         C->xyz = x2;
-                    if (!r2 || !x2) {
-                        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates");
-                        goto done;
                     }
+                    memcpy(C->xyz + 3 * (size_t)id, C->xyz + 3 * b, 3 * sizeof *C->xyz);
                 }
-                L->mrp[nc] = out;
                 for (int q = 0; q < mm; q++)
-                    if (lab[q] == p) {
-                        L->mem[out++] = u[q0 + q];
-                        L->agg[u[q0 + q]] = nc;
-                    }
-                C->xyz[3 * (size_t)nc + 0] = (int32_t)(b % bx);
-                C->xyz[3 * (size_t)nc + 1] = (int32_t)((b / bx) % by);
-                C->xyz[3 * (size_t)nc + 2] = (int32_t)(b / ((size_t)bx * by));
-                nc++;
+                    if (lab[q] == p)
+                        L->agg[u[q0 + q]] = id;
             }
         }
     }
-    L->mrp[nc] = out;
-    C->n = nc;
+    if (nblk + (size_t)extra >= (size_t)INT32_MAX) {
+        st = hv__error(HV_ERR_UNSUPPORTED, "multigrid: level %d has too many aggregates", l + 1);
+        goto done;
+    }
+    C->n = (int32_t)(nblk + extra);
+    /* Members grouped by aggregate. */
+    L->mrp = calloc((size_t)C->n + 1, sizeof *L->mrp);
+    L->mem = malloc((live ? live : 1) * sizeof *L->mem);
+    if (!L->mrp || !L->mem) {
+        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for aggregates of level %d", l);
+        goto done;
+    }
+    for (int32_t c = 0; c < L->n; c++)
+        if (L->agg[c] >= 0)
+            L->mrp[L->agg[c] + 1]++;
+    L->nagg = 0;
+    for (int32_t I = 0; I < C->n; I++) {
+        L->nagg += L->mrp[I + 1] > 0;
+        L->mrp[I + 1] += L->mrp[I];
+    }
+    L->live = (int32_t)live;
+    for (size_t q = 0; q < live; q++) {
+        int32_t c = order[q];
+        L->mem[L->mrp[L->agg[c]]++] = c;
+    }
+    for (int32_t I = C->n; I > 0; I--)
+        L->mrp[I] = L->mrp[I - 1];
+    L->mrp[0] = 0;
     C->ext[0] = bx;
     C->ext[1] = by;
     C->ext[2] = bz;
@@ -875,10 +901,54 @@ static hv_status galerkin0(mg_agg *g, double wp)
     x.blockagg = blockagg;
     x.tmpl = T;
     st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 0, 1e-9);
+    if (!st && T) {
+        /* Level 1 keeps the template for its plain rows (as build_csr keeps
+         * them: tiny entries off the diagonal left out). */
+        double diag = 0;
+        for (int e = 0; e < T->n; e++)
+            if (!T->off[e][0] && !T->off[e][1] && !T->off[e][2])
+                diag = fabs(T->val[e]);
+        for (int e = 0; e < T->n; e++) {
+            const int *d = T->off[e];
+            int self = !d[0] && !d[1] && !d[2];
+            if (!self && !(fabs(T->val[e]) > 1e-9 * diag))
+                continue;
+            C->toff[C->tn] = d[0] + C->ext[0] * (d[1] + C->ext[1] * d[2]);
+            C->tval[C->tn++] = (float)T->val[e];
+        }
+        C->plain = plain;
+        plain = NULL;
+    }
     free(T);
     free(plain);
     free(blockagg);
     return st;
+}
+
+/* Drops the entries of level 1's plain rows from its matrix: the cycle takes
+ * them from the template, and the setup no longer reads them. */
+static hv_status compress_plain(mg_alevel *L)
+{
+    if (!L->tn)
+        return HV_OK;
+    size_t at = 0;
+    for (int32_t r = 0; r < L->n; r++) {
+        size_t b = L->A.rp[r], e = L->A.rp[r + 1];
+        L->A.rp[r] = at;
+        if (L->plain[r])
+            continue;
+        memmove(L->A.ci + at, L->A.ci + b, (e - b) * sizeof *L->A.ci);
+        memmove(L->A.v + at, L->A.v + b, (e - b) * sizeof *L->A.v);
+        at += e - b;
+    }
+    L->A.rp[L->n] = at;
+    int32_t *ci = realloc(L->A.ci, (at ? at : 1) * sizeof *ci);
+    if (ci)
+        L->A.ci = ci;
+    float *v = realloc(L->A.v, (at ? at : 1) * sizeof *v);
+    if (v)
+        L->A.v = v;
+    return HV_OK;
 }
 
 /* ---------- the bottom level ---------- */
@@ -1184,6 +1254,7 @@ void hv__mg_agg_keep_bottom(mg_agg *g)
         csr_free(&L->A);
         csr_free(&L->P);
         csr_free(&L->R);
+        free(L->plain);
         int32_t n = L->n;
         memset(L, 0, sizeof *L);
         L->n = n;
@@ -1202,6 +1273,7 @@ void hv__mg_agg_free(mg_agg *g)
         csr_free(&L->A);
         csr_free(&L->P);
         csr_free(&L->R);
+        free(L->plain);
         free(L->dinv);
         free(L->agg);
         free(L->mrp);
@@ -1279,7 +1351,7 @@ hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alph
             break;
         if ((st = aggregate(g, l)))
             goto fail;
-        if ((double)g->lv[l + 1].n > 0.8 * L->n) {
+        if ((double)L->nagg > 0.8 * L->live) {
             if (L->n > AGG_STALL || l == 0)
                 goto none; /* not coarsening: keep the geometric levels */
             free(L->agg);
@@ -1301,6 +1373,13 @@ hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alph
     if ((st = bottom_factor(g)))
         goto fail;
     g->bytes += (size_t)g->nb * g->nb * sizeof(double);
+    if (g->nlev > 2 && g->lv[1].tn) {
+        mg_alevel *L1 = &g->lv[1];
+        size_t before = L1->A.rp[L1->n];
+        compress_plain(L1);
+        g->bytes -= (before - L1->A.rp[L1->n]) * (sizeof(int32_t) + sizeof(float));
+        g->bytes += (size_t)L1->n;
+    }
     *out = g;
     return HV_OK;
 none:

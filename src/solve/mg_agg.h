@@ -48,6 +48,15 @@ typedef struct mg_alevel {
     int32_t *mem; /* (n_next + 1 starts) */
     int32_t *xyz; /* levels >= 1: 3 block coordinates per unknown */
     int ext[3];   /* coordinate extent of the level */
+    int32_t live; /* unknowns with a row (the others are blocks without fluid) */
+    /* Level 1 in open space: rows marked in plain[] are the template (tn
+     * entries at index offsets toff with values tval) and hold no entries in
+     * A once the hierarchy is built (mg_agg_compress). */
+    uint8_t *plain;
+    int tn;
+    int32_t toff[125];
+    float tval[125];
+    int32_t nagg;                 /* aggregates made of them (next level's non-empty unknowns) */
     float *u, *f, *r, *d, *t, *s; /* work: t, s for the transfers */
 } mg_alevel;
 
