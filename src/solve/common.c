@@ -2,6 +2,9 @@
 #include "backend.h"
 
 #include <math.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 #include <stdlib.h>
 
 void hv__project_mean(const hv_setup *s, double *u)
@@ -17,14 +20,32 @@ void hv__project_mean(const hv_setup *s, double *u)
             u[c] -= mean;
         return;
     }
-    double *acc = calloc((size_t)s->nregion * 2, sizeof *acc);
+    /* Sums and counts per region, per thread, then added up. */
+    int nt = 1;
+#ifdef _OPENMP
+    nt = omp_get_max_threads();
+#endif
+    const size_t per = (size_t)s->nregion * 2;
+    double *acc = calloc(per * (size_t)nt, sizeof *acc);
     if (!acc)
         return;
-    for (size_t c = 0; c < s->count; c++)
-        if (s->region[c] >= 0) {
-            acc[2 * s->region[c]] += u[c];
-            acc[2 * s->region[c] + 1] += 1;
-        }
+#pragma omp parallel num_threads(nt)
+    {
+        int t = 0;
+#ifdef _OPENMP
+        t = omp_get_thread_num();
+#endif
+        double *a = acc + per * (size_t)t;
+#pragma omp for schedule(static)
+        for (size_t c = 0; c < s->count; c++)
+            if (s->region[c] >= 0) {
+                a[2 * s->region[c]] += u[c];
+                a[2 * s->region[c] + 1] += 1;
+            }
+    }
+    for (int t = 1; t < nt; t++)
+        for (size_t q = 0; q < per; q++)
+            acc[q] += acc[per * (size_t)t + q];
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < s->count; c++) {
         int r = s->region[c];

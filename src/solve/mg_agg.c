@@ -104,41 +104,114 @@ static int op_row(const agg_op *o, int32_t c, int32_t *bc, float *bv, const int3
     return m;
 }
 
-/* y = A x on the fine level, row by row (faces on the grid's walls weigh 0;
- * the neighbour read there is the cell itself). */
+/* Cell i of a fine row: y = D x - S over its faces (weights 0 on walls; the
+ * neighbour read at the row's ends is the cell itself). */
+#define FINE_CELL(i, im, ip)                                                                       \
+    do {                                                                                           \
+        float d_ = alpha * a[i] + cx * (wx[i] + wx[(i) + 1]) + cy * (wy[i] + wy[(i) + nx]);        \
+        float s_ = cx * (wx[i] * xc[im] + wx[(i) + 1] * xc[ip]) +                                  \
+                   cy * (wy[i] * xm[i] + wy[(i) + nx] * xp[i]);                                    \
+        if (wz) {                                                                                  \
+            d_ += cz * (wz[i] + wz[(i) + nxy]);                                                    \
+            s_ += cz * (wz[i] * zm[i] + wz[(i) + nxy] * zp[i]);                                    \
+        }                                                                                          \
+        yr[i] = d_ * xc[i] - s_;                                                                   \
+    } while (0)
+
+/* y = A x on the fine level, row by row in float; the interior of a row
+ * without branches so that it vectorizes. */
 static void fine_apply(const agg_op *o, const float *x, float *y)
 {
     const mg_level *L = o->F;
     const int nx = L->n[0], ny = L->n[1], nz = L->n[2];
-    const double cx = L->c[0], cy = L->c[1], cz = L->c[2];
+    const size_t nxy = (size_t)nx * ny;
+    const float cx = (float)L->c[0], cy = (float)L->c[1], cz = (float)L->c[2];
+    const float alpha = (float)o->alpha;
 #pragma omp parallel for collapse(2) schedule(static) if (L->count > AGG_PAR_MIN)
     for (int k = 0; k < nz; k++)
         for (int j = 0; j < ny; j++) {
             size_t base = L->sy * (size_t)j + L->sz * (size_t)k;
+            const float *a = L->a + base;
             const float *wx = L->w[0] + (size_t)(nx + 1) * ((size_t)j + (size_t)ny * k);
             const float *wy = L->w[1] + (size_t)nx * ((size_t)j + (size_t)(ny + 1) * k);
             const float *wz = o->dim == 3 ? L->w[2] + base : NULL;
-            const float *xm = x + base - (j > 0 ? L->sy : 0),
-                        *xp = x + base + (j < ny - 1 ? L->sy : 0);
-            const float *zm = x + base - (k > 0 ? L->sz : 0),
-                        *zp = x + base + (k < nz - 1 ? L->sz : 0);
             const float *xc = x + base;
-            for (int i = 0; i < nx; i++) {
-                double d = o->alpha * L->a[base + i], s = 0;
-                double wl = wx[i], wh = wx[i + 1];
-                d += cx * (wl + wh);
-                s += cx * (wl * xc[i > 0 ? i - 1 : i] + wh * xc[i < nx - 1 ? i + 1 : i]);
-                double yl = wy[i], yh = wy[i + nx];
-                d += cy * (yl + yh);
-                s += cy * (yl * xm[i] + yh * xp[i]);
-                if (wz) {
-                    double zl = wz[i], zh = wz[i + (size_t)nx * ny];
-                    d += cz * (zl + zh);
-                    s += cz * (zl * zm[i] + zh * zp[i]);
+            const float *xm = xc - (j > 0 ? L->sy : 0), *xp = xc + (j < ny - 1 ? L->sy : 0);
+            const float *zm = xc - (k > 0 ? L->sz : 0), *zp = xc + (k < nz - 1 ? L->sz : 0);
+            float *yr = y + base;
+            FINE_CELL(0, 0, nx > 1 ? 1 : 0);
+            if (nx < 2)
+                continue;
+            if (wz) {
+                for (int i = 1; i < nx - 1; i++) {
+                    float d = alpha * a[i] + cx * (wx[i] + wx[i + 1]) + cy * (wy[i] + wy[i + nx]) +
+                              cz * (wz[i] + wz[i + nxy]);
+                    float s = cx * (wx[i] * xc[i - 1] + wx[i + 1] * xc[i + 1]) +
+                              cy * (wy[i] * xm[i] + wy[i + nx] * xp[i]) +
+                              cz * (wz[i] * zm[i] + wz[i + nxy] * zp[i]);
+                    yr[i] = d * xc[i] - s;
                 }
-                y[base + i] = (float)(d * xc[i] - s);
+            } else {
+                for (int i = 1; i < nx - 1; i++) {
+                    float d = alpha * a[i] + cx * (wx[i] + wx[i + 1]) + cy * (wy[i] + wy[i + nx]);
+                    float s = cx * (wx[i] * xc[i - 1] + wx[i + 1] * xc[i + 1]) +
+                              cy * (wy[i] * xm[i] + wy[i + nx] * xp[i]);
+                    yr[i] = d * xc[i] - s;
+                }
             }
+            FINE_CELL(nx - 1, nx - 2, nx - 1);
         }
+}
+
+/* Row r of M times x, in float with four partial sums (a chain of dependent
+ * additions would bound the loop, not memory). */
+static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
+{
+    size_t q = M->rp[r], e = M->rp[r + 1];
+    float s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    for (; q + 4 <= e; q += 4) {
+        s0 += M->v[q] * x[M->ci[q]];
+        s1 += M->v[q + 1] * x[M->ci[q + 1]];
+        s2 += M->v[q + 2] * x[M->ci[q + 2]];
+        s3 += M->v[q + 3] * x[M->ci[q + 3]];
+    }
+    for (; q < e; q++)
+        s0 += M->v[q] * x[M->ci[q]];
+    return (s0 + s1) + (s2 + s3);
+}
+
+#define AGG_CHUNK 64
+
+/* y = A x on rows [c0, c1) of a level with a template: a chunk of plain rows
+ * as a stencil (vectorized over the rows), the others row by row. */
+static void apply_chunk(const agg_op *o, const float *x, float *y, int32_t c0, int32_t c1)
+{
+    const mg_alevel *L = o->lv;
+    int all = 1;
+    for (int32_t c = c0; c < c1 && all; c++)
+        all = L->plain[c];
+    if (all) {
+        float acc[AGG_CHUNK] = {0};
+        const int m = c1 - c0;
+        for (int e = 0; e < L->tn; e++) {
+            const float t = L->tval[e], *xs = x + c0 + L->toff[e];
+            for (int i = 0; i < m; i++)
+                acc[i] += t * xs[i];
+        }
+        for (int i = 0; i < m; i++)
+            y[c0 + i] = acc[i];
+        return;
+    }
+    for (int32_t c = c0; c < c1; c++) {
+        if (!L->plain[c]) {
+            y[c] = csr_row_dot(o->A, c, x);
+            continue;
+        }
+        float s = 0;
+        for (int e = 0; e < L->tn; e++)
+            s += L->tval[e] * x[c + L->toff[e]];
+        y[c] = s;
+    }
 }
 
 /* y = A x on a level. */
@@ -148,20 +221,15 @@ static void op_apply(const agg_op *o, const float *x, float *y)
         fine_apply(o, x, y);
         return;
     }
-    const mg_alevel *L = o->lv;
-    const uint8_t *plain = L->tn ? L->plain : NULL;
+    if (o->lv->tn) {
 #pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
-    for (int32_t c = 0; c < o->n; c++) {
-        double s = 0;
-        if (plain && plain[c]) {
-            for (int e = 0; e < L->tn; e++)
-                s += (double)L->tval[e] * x[c + L->toff[e]];
-        } else {
-            for (size_t q = o->A->rp[c]; q < o->A->rp[c + 1]; q++)
-                s += (double)o->A->v[q] * x[o->A->ci[q]];
-        }
-        y[c] = (float)s;
+        for (int32_t c0 = 0; c0 < o->n; c0 += AGG_CHUNK)
+            apply_chunk(o, x, y, c0, c0 + AGG_CHUNK < o->n ? c0 + AGG_CHUNK : o->n);
+        return;
     }
+#pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < o->n; c++)
+        y[c] = csr_row_dot(o->A, c, x);
 }
 
 /* Largest eigenvalue of D^-1 A by power iteration (times 1.1, as the
@@ -1132,12 +1200,8 @@ static void level_smooth(const agg_op *o, mg_alevel *L, int zero)
 static void csr_apply(const mg_csr *M, const float *x, float *y)
 {
 #pragma omp parallel for schedule(static) if (M->n > AGG_PAR_MIN)
-    for (int32_t r = 0; r < M->n; r++) {
-        double s = 0;
-        for (size_t q = M->rp[r]; q < M->rp[r + 1]; q++)
-            s += (double)M->v[q] * x[M->ci[q]];
-        y[r] = (float)s;
-    }
+    for (int32_t r = 0; r < M->n; r++)
+        y[r] = csr_row_dot(M, r, x);
 }
 
 static void restrict_to(mg_agg *g, int l, const float *r)
