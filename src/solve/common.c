@@ -20,12 +20,27 @@ void hv__project_mean(const hv_setup *s, double *u)
             u[c] -= mean;
         return;
     }
+    if (s->nregion == 1) {
+        double sum = 0, cnt = 0;
+#pragma omp parallel for reduction(+ : sum, cnt) schedule(static)
+        for (size_t c = 0; c < s->count; c++)
+            if (s->region[c] >= 0) {
+                sum += u[c];
+                cnt += 1;
+            }
+        double mean = cnt > 0 ? sum / cnt : 0.0;
+#pragma omp parallel for schedule(static)
+        for (size_t c = 0; c < s->count; c++)
+            u[c] = s->region[c] >= 0 ? u[c] - mean : 0.0;
+        return;
+    }
     /* Sums and counts per region, per thread, then added up. */
     int nt = 1;
 #ifdef _OPENMP
     nt = omp_get_max_threads();
 #endif
-    const size_t per = (size_t)s->nregion * 2;
+    /* Each thread's slice padded to whole cache lines: no false sharing. */
+    const size_t used = (size_t)s->nregion * 2, per = (used + 15) & ~(size_t)7;
     double *acc = calloc(per * (size_t)nt, sizeof *acc);
     if (!acc)
         return;
@@ -44,7 +59,7 @@ void hv__project_mean(const hv_setup *s, double *u)
             }
     }
     for (int t = 1; t < nt; t++)
-        for (size_t q = 0; q < per; q++)
+        for (size_t q = 0; q < used; q++)
             acc[q] += acc[per * (size_t)t + q];
 #pragma omp parallel for schedule(static)
     for (size_t c = 0; c < s->count; c++) {
