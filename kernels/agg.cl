@@ -40,6 +40,26 @@ __kernel void agg_residual(int n, __global const uint *rp, __global const int *c
     r[i] = f[i] - s;
 }
 
+/* y = A x on a coarse level, with its template rows as agg_residual */
+__kernel void agg_apply(int n, __global const uint *rp, __global const int *ci,
+                        __global const float *v, __global const uchar *plain, int nt,
+                        __global const int *toff, __global const float *tval,
+                        __global const float *x, __global float *y)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    float s = 0.0f;
+    if (nt > 0 && plain[i]) {
+        for (int e = 0; e < nt; e++)
+            s += tval[e] * x[i + toff[e]];
+    } else {
+        for (uint q = rp[i]; q < rp[i + 1]; q++)
+            s += v[q] * x[ci[q]];
+    }
+    y[i] = s;
+}
+
 /* A Chebyshev step: d = cd d + cr dinv r, u += d; with `zero` the step from
  * u = 0 (d and u are not read). */
 __kernel void agg_cheb(int n, __global const float *dinv, __global const float *r,
@@ -66,7 +86,7 @@ __kernel void agg_prolong(int n, __global const uint *rp, __global const int *ci
     u[r] += s;
 }
 
-/* Fine level: t = dinv r */
+/* Fine level (and a coarse level without P and P^T): t = dinv r */
 __kernel void agg_scale(int n, __global const float *dinv, __global const float *r,
                         __global float *t)
 {

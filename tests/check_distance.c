@@ -258,6 +258,30 @@ START_TEST(wall_with_gap_3d_should_be_within_one_voxel_at_48)
 }
 END_TEST
 
+/* The solves' coarse levels by aggregation (hv_distance_opts.coarse): the same
+ * distances as with the geometric levels, to the solves' tolerances, in fewer
+ * Poisson iterations around the serpentine's walls. */
+START_TEST(aggregation_coarse_levels_should_give_the_same_distances)
+{
+    const hv_coarse co[2] = {HV_COARSE_GEOMETRIC, HV_COARSE_AGGREGATION};
+    dist_err e[2];
+    for (int q = 0; q < 2; q++) {
+        hv_distance_opts o;
+        hv_distance_opts_default(&o);
+        o.backend = HV_BACKEND_MG;
+        o.coarse = co[q];
+        e[q] = run_scene(&serpentine, 3, 48, &o);
+        report(q ? "serpentine, aggregation" : "serpentine, geometric", 3, 48, &e[q]);
+    }
+    ck_assert_msg(fabs(e[0].mean - e[1].mean) < 1e-4 && fabs(e[0].max - e[1].max) < 1e-3,
+                  "errors differ: mean %.6f/%.6f, max %.6f/%.6f voxels", e[0].mean, e[1].mean,
+                  e[0].max, e[1].max);
+    ck_assert_msg(2 * e[1].st.poisson_iterations <= e[0].st.poisson_iterations,
+                  "Poisson iterations: %d geometric, %d aggregation", e[0].st.poisson_iterations,
+                  e[1].st.poisson_iterations);
+}
+END_TEST
+
 START_TEST(l_room_3d_error_should_shrink_from_32_to_64)
 {
     dist_err a = run_scene(&l_room, 3, 32, NULL), b = run_scene(&l_room, 3, 64, NULL);
@@ -609,6 +633,7 @@ int main(void)
     tcase_add_test(tc, serpentine_corridor_distance_should_follow_the_corridor);
     tcase_add_test(tc, error_should_shrink_under_refinement_2d);
     tcase_add_test(tc, wall_with_gap_3d_should_be_within_one_voxel_at_48);
+    tcase_add_test(tc, aggregation_coarse_levels_should_give_the_same_distances);
     tcase_add_test(tc, l_room_3d_error_should_shrink_from_32_to_64);
     tcase_add_test(tc, sealed_room_should_be_unreachable_unless_it_has_a_source);
     tcase_add_test(tc, distance_should_go_around_a_mesh_obstacle);

@@ -21,7 +21,8 @@ static int usage(FILE *out)
             "x1 y1 z1]\n"
             "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
             "auto|mg|fftw|opencl|petsc]\n"
-            "                        [--unreachable V] [--threads T] [-q] [-v]\n"
+            "                        [--coarse auto|geometric|aggregation] [--unreachable V]\n"
+            "                        [--threads T] [-q] [-v]\n"
             "\n"
             "Geodesic distance from the sources through free space, around obstacles, by the\n"
             "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
@@ -42,6 +43,10 @@ static int usage(FILE *out)
             "4) with --res cells along the longest axis (default 128) or --voxel-size.\n"
             "--obstacle-mesh marks the cells its triangles touch (a watertight shell).\n"
             "--dim 2: a 2D grid (bbox x0 y0 x1 y1), written as a one-voxel slab.\n"
+            "\n"
+            "--coarse: the solves' coarse levels with obstacles (solve.h): aggregation keeps\n"
+            "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
+            "starts geometric and changes a solver after a slow solve.\n"
             "\n"
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
             "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
@@ -338,6 +343,7 @@ typedef struct dist_args {
     int res, dim, pad, use_bbox, threads, none;
     double vsize, bbox[6];
     hv_distance_opts o;
+    int coarse; /* hv_coarse */
 } dist_args;
 
 /* --bbox: 6 numbers, or 4 with --dim 2 (which may come later: take what
@@ -424,6 +430,11 @@ static int parse_args(int argc, char **argv, dist_args *A)
          .flags = CLI_ABOVE,
          .needs = "a positive number"},
         {.names = "--backend", .kind = CLI_BACKEND, .dst = &A->o.backend, .val = CLI_BACKENDS_ALL},
+        {.names = "--coarse",
+         .kind = CLI_CHOICE,
+         .dst = &A->coarse,
+         .choices = "auto|geometric|aggregation",
+         .needs = "auto, geometric or aggregation"},
         {.names = "--unreachable", .kind = CLI_FN, .dst = &A->o, .fn = take_unreachable},
         {.names = "--threads", .kind = CLI_THREADS, .dst = &A->threads},
         {.names = NULL},
@@ -435,6 +446,7 @@ static int parse_args(int argc, char **argv, dist_args *A)
     if (stray)
         return cli_usage_error(CMD, "unexpected argument '%s' (the sources come with --sources)",
                                stray);
+    A->o.coarse = (hv_coarse)A->coarse;
     return -1;
 }
 

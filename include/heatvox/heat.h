@@ -77,6 +77,8 @@ typedef struct hv_distance_opts {
     float unreachable;  /* value of fluid cells in regions without a source;
                               default +INFINITY */
     float solid_value;  /* value of solid cells; default +INFINITY */
+    hv_coarse coarse;   /* the solves' coarse levels with obstacles (hv_solver_opts.coarse);
+                           default AUTO */
 } hv_distance_opts;
 
 typedef struct hv_distance_stats {

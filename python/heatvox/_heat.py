@@ -9,6 +9,7 @@ from . import _arrays
 from ._grid import Grid, new_grid
 from ._lib import (
     backend_code,
+    coarse_code,
     backend_name,
     fn,
     hv_distance_opts,
@@ -87,6 +88,7 @@ def distance(
     diffuse_tol=1e-11,
     poisson_tol=1e-9,
     progress=None,
+    coarse="auto",
 ):
     """Geodesic distance from sources through free space, around obstacles,
     by the heat method: what ``heatvox distance`` computes, on arrays a
@@ -110,7 +112,9 @@ def distance(
     default 2), ``backend``, ``unreachable`` (value of fluid cells no source
     reaches, default inf), ``solid_value`` (value of solid cells; default
     ``unreachable``, as the command's ``--unreachable`` sets both),
-    ``max_stages``, ``diffuse_tol``, ``poisson_tol``, ``progress``.
+    ``max_stages``, ``diffuse_tol``, ``poisson_tol``, ``progress``, ``coarse``
+    (the solves' coarse levels with obstacles: "auto", "geometric" or
+    "aggregation", as :class:`Solver`).
 
     Returns a :class:`Grid` named "distance" (world units, >= 0; with the
     solid mask when given) with ``stats`` (a dict of hv_distance_stats:
@@ -141,6 +145,7 @@ def distance(
     o.diffuse_tol = _arrays.positive(diffuse_tol, "diffuse_tol")
     o.poisson_tol = _arrays.positive(poisson_tol, "poisson_tol")
     o.backend = backend_code(backend)
+    o.coarse = coarse_code(coarse)
     o.unreachable = _arrays.real(unreachable, "unreachable")
     o.solid_value = o.unreachable if solid_value is None else _arrays.real(solid_value, "solid_value")
 

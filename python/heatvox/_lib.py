@@ -418,6 +418,7 @@ class hv_distance_opts(Structure):
         ("backend", c_int),
         ("unreachable", c_float),
         ("solid_value", c_float),
+        ("coarse", c_int),
     ]
 
 
@@ -695,6 +696,16 @@ class progress_scope:
 
 
 # ---- small helpers ----------------------------------------------------------------
+
+
+_COARSE = {"auto": 0, "geometric": 1, "aggregation": 2}
+
+
+def coarse_code(coarse):
+    """hv_coarse of "auto", "geometric" or "aggregation" (ValueError otherwise)."""
+    if coarse not in _COARSE:
+        raise ValueError("coarse must be one of %s, got %r" % (", ".join(_COARSE), coarse))
+    return _COARSE[coarse]
 
 
 def backend_code(name):

@@ -10,6 +10,7 @@ from . import _arrays
 from ._lib import (
     backend_code,
     backend_name,
+    coarse_code,
     fn,
     fspath,
     hv_problem,
@@ -18,7 +19,7 @@ from ._lib import (
 )
 
 _SMOOTHERS = {"rbgs": 0, "jacobi": 1, "chebyshev": 2, "auto": 3}
-_COARSE = {"auto": 0, "geometric": 1, "aggregation": 2}
+
 
 
 @dataclass
@@ -109,9 +110,7 @@ class Solver:
         if smoother not in _SMOOTHERS:
             raise ValueError("smoother must be one of %s, got %r" % (", ".join(_SMOOTHERS), smoother))
         o.smoother = _SMOOTHERS[smoother]
-        if coarse not in _COARSE:
-            raise ValueError("coarse must be one of %s, got %r" % (", ".join(_COARSE), coarse))
-        o.coarse = _COARSE[coarse]
+        o.coarse = coarse_code(coarse)
         o.tol = _arrays.positive(tol, "tol")
         o.max_iter = _arrays.integer(max_iter, "max_iter", 1)
         o.pre_smooth = _arrays.integer(pre_smooth, "pre_smooth", 0)

@@ -43,6 +43,7 @@ static const char *const kernel_names[HV_K_COUNT] = {
     [HV_K_PW_RATIO] = "pw_ratio",
     [HV_K_PW_AXPY] = "pw_axpy",
     [HV_K_AGG_SPMV] = "agg_spmv",
+    [HV_K_AGG_APPLY] = "agg_apply",
     [HV_K_AGG_RESIDUAL] = "agg_residual",
     [HV_K_AGG_CHEB] = "agg_cheb",
     [HV_K_AGG_PROLONG] = "agg_prolong",

@@ -64,6 +64,7 @@ typedef enum hv_cl_kernel {
     HV_K_PW_RATIO,
     HV_K_PW_AXPY,
     HV_K_AGG_SPMV,
+    HV_K_AGG_APPLY,
     HV_K_AGG_RESIDUAL,
     HV_K_AGG_CHEB,
     HV_K_AGG_PROLONG,

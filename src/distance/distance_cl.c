@@ -222,9 +222,9 @@ static hv_status diffuse(dist_cl_work *k, const hv_grid *g, const hv_distance_op
     if ((st = hv__cl_finish(k->cl)))
         return st;
     for (int q = 0; q < 2; q++) {
-        if (!k->sv[q] &&
-            (st = hv__dist_solver(&k->sv[q], g->dim, g->n, g->h, g->solid, 1.0,
-                                  S->t * (q ? T_RATIO : 1), o->diffuse_tol, HV_BACKEND_OPENCL)))
+        if (!k->sv[q] && (st = hv__dist_solver(&k->sv[q], g->dim, g->n, g->h, g->solid, 1.0,
+                                               S->t * (q ? T_RATIO : 1), o->diffuse_tol,
+                                               HV_BACKEND_OPENCL, o->coarse)))
             return st;
         if ((st = hv__cl_solver_solve_d(k->sv[q], k->w, q ? k->u2 : k->u, &info[q])))
             return st;
@@ -348,7 +348,7 @@ static hv_status poisson(dist_cl_work *k, const hv_grid *g, const int32_t *regio
     hv__cl_module_run(cl, &dist_module, DK_DIV, 2, k->gc, k->lc);
     if ((st = hv__cl_finish(cl)) ||
         (st = hv__dist_solver(&k->sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
-                              HV_BACKEND_OPENCL)))
+                              HV_BACKEND_OPENCL, o->coarse)))
         return st;
     hv_solve_info pinfo;
     if ((st = hv__cl_solver_solve_d(k->sv[0], k->u2, k->u, &pinfo)))

@@ -457,12 +457,14 @@ typedef struct local_solves {
 } local_solves;
 
 hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
-                          double alpha, double beta, double tol, hv_backend backend)
+                          double alpha, double beta, double tol, hv_backend backend,
+                          hv_coarse coarse)
 {
     hv_problem p = {dim, {n[0], n[1], n[2]}, h, solid, alpha, beta};
     hv_solver_opts o;
     hv_solver_opts_default(&o);
     o.backend = backend;
+    o.coarse = coarse;
     o.tol = tol;
     o.max_iter = 200;
     return hv_solver_create(s, &p, &o);
@@ -479,7 +481,7 @@ static hv_status local_poisson(local_solves *L, const double *rhs, double *u, hv
     hv_solver_destroy(&L->sv[0]);
     hv_solver_destroy(&L->sv[1]);
     hv_status st = hv__dist_solver(&L->sv[2], d->dim, d->n, d->h, d->solid, 0.0, 1.0,
-                                   L->o->poisson_tol, L->o->backend);
+                                   L->o->poisson_tol, L->o->backend, L->o->coarse);
     if (st || (st = hv_solver_solve_d(L->sv[2], rhs, u, info)))
         return st;
     double fn = norm2(d, rhs), rel = info->relres;
@@ -517,9 +519,9 @@ static hv_status local_solve(void *user, int q, const double *f, double *u, hv_s
     if (q == 2)
         return local_poisson(L, f, u, info);
     hv_status st;
-    if (!L->sv[q] &&
-        (st = hv__dist_solver(&L->sv[q], L->d->dim, L->d->n, L->d->h, L->d->solid, 1.0,
-                              L->t * (q ? T_RATIO : 1), L->o->diffuse_tol, L->o->backend)))
+    if (!L->sv[q] && (st = hv__dist_solver(&L->sv[q], L->d->dim, L->d->n, L->d->h, L->d->solid, 1.0,
+                                           L->t * (q ? T_RATIO : 1), L->o->diffuse_tol,
+                                           L->o->backend, L->o->coarse)))
         return st;
     return hv_solver_solve_d(L->sv[q], f, u, info);
 }

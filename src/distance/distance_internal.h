@@ -53,9 +53,11 @@ double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
  * when no source landed on a fluid cell (HV_OK when one did). */
 hv_status hv__dist_check_opts(const hv_distance_opts *o, const hv_distance_sources *src);
 /* A solver of (alpha - beta Lap) on the grid (dim, n, h, solid) for the
- * heat method's stages: tolerance tol, at most 200 iterations, on backend. */
+ * heat method's stages: tolerance tol, at most 200 iterations, on backend
+ * with the given coarse levels. */
 hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
-                          double alpha, double beta, double tol, hv_backend backend);
+                          double alpha, double beta, double tol, hv_backend backend,
+                          hv_coarse coarse);
 hv_status hv__dist_no_source(const hv_distance_stats *S);
 
 /* A window of the whole grid: g's cell (0, 0, 0) is the whole grid's cell

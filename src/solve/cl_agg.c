@@ -47,24 +47,32 @@ static hv_status work(hv_cl *cl, size_t n, cl_mem *const *out, int count)
     return HV_OK;
 }
 
+/* A level's aggregates (agg) and the next level's members (mrp, mem). */
+static hv_status upload_members(hv_cl *cl, const mg_alevel *L, int32_t nc, cl_mem *agg,
+                                cl_mem *mrp_out, cl_mem *mem)
+{
+    size_t members = L->mrp[nc];
+    cl_uint *mrp = malloc(((size_t)nc + 1) * sizeof *mrp);
+    if (!mrp)
+        return hv__error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for the aggregates");
+    for (int32_t I = 0; I <= nc; I++)
+        mrp[I] = (cl_uint)L->mrp[I];
+    hv_status st = hv__cl_alloc(cl, ((size_t)nc + 1) * sizeof *mrp, mrp, mrp_out);
+    free(mrp);
+    if (!st)
+        st = hv__cl_alloc(cl, (members ? members : 1) * sizeof(cl_int), L->mem, mem);
+    if (!st)
+        st = hv__cl_alloc(cl, (size_t)L->n * sizeof(cl_int), L->agg, agg);
+    return st;
+}
+
 static hv_status upload_fine(hv_cl *cl, hv_clagg *G, const mg_agg *g)
 {
     const mg_alevel *L = &g->lv[0];
     G->n0 = L->n;
     G->n1 = g->lv[1].n;
     G->wp0 = 4.0 / 3.0 / L->lmax;
-    size_t members = L->mrp[G->n1];
-    cl_uint *mrp = malloc(((size_t)G->n1 + 1) * sizeof *mrp);
-    if (!mrp)
-        return hv__error(HV_ERR_NOMEM, "OpenCL multigrid: out of memory for the aggregates");
-    for (int32_t I = 0; I <= G->n1; I++)
-        mrp[I] = (cl_uint)L->mrp[I];
-    hv_status st = hv__cl_alloc(cl, ((size_t)G->n1 + 1) * sizeof *mrp, mrp, &G->mrp0);
-    free(mrp);
-    if (!st)
-        st = hv__cl_alloc(cl, (members ? members : 1) * sizeof(cl_int), L->mem, &G->mem0);
-    if (!st)
-        st = hv__cl_alloc(cl, (size_t)G->n0 * sizeof(cl_int), L->agg, &G->agg0);
+    hv_status st = upload_members(cl, L, G->n1, &G->agg0, &G->mrp0, &G->mem0);
     if (!st)
         st = hv__cl_alloc(cl, (size_t)G->n0 * sizeof(float), g->fine->dinv, &G->dinv0);
     cl_mem *w[] = {&G->r0, &G->t0, &G->s0};
@@ -80,10 +88,16 @@ static hv_status upload_level(hv_cl *cl, hv_clagg *G, const mg_agg *g, int l)
     L->n = S->n;
     L->lmax = S->lmax;
     hv_status st = upload_csr(cl, &S->A, &L->rp, &L->ci, &L->v);
-    if (!st && l + 1 < g->nlev) {
+    if (!st && l + 1 < g->nlev && S->P.rp) {
         st = upload_csr(cl, &S->P, &L->prp, &L->pci, &L->pv);
         if (!st)
             st = upload_csr(cl, &S->R, &L->rrp, &L->rci, &L->rv);
+    } else if (!st && l + 1 < g->nlev) {
+        st = upload_members(cl, S, g->lv[l + 1].n, &L->agg, &L->mrp, &L->mem);
+        cl_mem *w[] = {&L->t, &L->s};
+        if (!st)
+            st = work(cl, (size_t)S->n, w, 2);
+        L->wp = 4.0 / 3.0 / S->lmax;
     }
     if (!st)
         st = hv__cl_alloc(cl, (size_t)S->n * sizeof(float), S->dinv, &L->dinv);
@@ -108,8 +122,9 @@ void hv__clagg_destroy(hv_clmg *m)
         return;
     for (int l = 0; l < MG_AGG_MAX_LEVELS; l++) {
         hv_clagg_level *L = &G->lv[l];
-        cl_mem *all[] = {&L->rp,  &L->ci, &L->v,    &L->prp, &L->pci, &L->pv, &L->rrp,
-                         &L->rci, &L->rv, &L->dinv, &L->u,   &L->f,   &L->r,  &L->d};
+        cl_mem *all[] = {&L->rp,   &L->ci,   &L->v,   &L->prp, &L->pci, &L->pv, &L->rrp,   &L->rci,
+                         &L->rv,   &L->dinv, &L->u,   &L->f,   &L->r,   &L->d,  &L->plain, &L->toff,
+                         &L->tval, &L->agg,  &L->mrp, &L->mem, &L->t,   &L->s};
         for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
             hv__cl_free(all[i]);
     }
@@ -219,6 +234,51 @@ static void bottom(hv_cl *cl, hv_clagg *G)
     hv__cl_write(cl, L->u, 0, bytes, G->bu);
 }
 
+/* y = A x on coarse level L (template rows included) */
+static void apply(hv_cl *cl, hv_clagg_level *L, cl_mem x, cl_mem y)
+{
+    size_t g[1], lw[1];
+    range(L->n, g, lw);
+    hv__cl_args(cl, HV_K_AGG_APPLY, "immmmimmmm", L->n, L->rp, L->ci, L->v, L->plain, L->tn,
+                L->toff, L->tval, x, y);
+    hv__cl_run(cl, HV_K_AGG_APPLY, 1, g, lw);
+}
+
+/* C->f = P^T L->r: from P and P^T where the level keeps them, else as the
+ * fine level does, P0^T (r - wp A D^-1 r). */
+static void restrict_to(hv_cl *cl, hv_clagg_level *L, hv_clagg_level *C)
+{
+    if (!L->agg) {
+        spmv(cl, C->n, L->rrp, L->rci, L->rv, L->r, C->f);
+        return;
+    }
+    size_t g[1], lw[1], gc[1], lc[1];
+    range(L->n, g, lw);
+    range(C->n, gc, lc);
+    hv__cl_args(cl, HV_K_AGG_SCALE, "immm", L->n, L->dinv, L->r, L->t);
+    hv__cl_run(cl, HV_K_AGG_SCALE, 1, g, lw);
+    apply(cl, L, L->t, L->s);
+    hv__cl_args(cl, HV_K_AGG_RESTRICT0, "immmmfm", C->n, L->mrp, L->mem, L->r, L->s, L->wp, C->f);
+    hv__cl_run(cl, HV_K_AGG_RESTRICT0, 1, gc, lc);
+}
+
+/* L->u += P C->u, as restrict_to. */
+static void prolong(hv_cl *cl, hv_clagg_level *L, hv_clagg_level *C)
+{
+    size_t g[1], lw[1];
+    range(L->n, g, lw);
+    if (!L->agg) {
+        hv__cl_args(cl, HV_K_AGG_PROLONG, "immmmm", L->n, L->prp, L->pci, L->pv, C->u, L->u);
+        hv__cl_run(cl, HV_K_AGG_PROLONG, 1, g, lw);
+        return;
+    }
+    hv__cl_args(cl, HV_K_AGG_INJECT0, "immm", L->n, L->agg, C->u, L->t);
+    hv__cl_run(cl, HV_K_AGG_INJECT0, 1, g, lw);
+    apply(cl, L, L->t, L->s);
+    hv__cl_args(cl, HV_K_AGG_PROLONG0, "immmfm", L->n, L->t, L->s, L->dinv, L->wp, L->u);
+    hv__cl_run(cl, HV_K_AGG_PROLONG0, 1, g, lw);
+}
+
 /* One symmetric V-cycle from zero on level l >= 1 for lv[l].f into lv[l].u. */
 static void cycle(hv_cl *cl, hv_clagg *G, int l)
 {
@@ -229,12 +289,9 @@ static void cycle(hv_cl *cl, hv_clagg *G, int l)
     }
     smooth(cl, L, 1);
     residual(cl, L);
-    spmv(cl, C->n, L->rrp, L->rci, L->rv, L->r, C->f);
+    restrict_to(cl, L, C);
     cycle(cl, G, l + 1);
-    size_t g[1], lw[1];
-    range(L->n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_PROLONG, "immmmm", L->n, L->prp, L->pci, L->pv, C->u, L->u);
-    hv__cl_run(cl, HV_K_AGG_PROLONG, 1, g, lw);
+    prolong(cl, L, C);
     smooth(cl, L, 0);
 }
 

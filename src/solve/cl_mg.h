@@ -40,6 +40,9 @@ typedef struct hv_clagg_level {
     cl_mem rp, ci, v;         /* A */
     cl_mem plain, toff, tval; /* rows that are the template (level 1; NULL elsewhere) */
     int tn;
+    /* without P (a level of template rows): the transfers from A, as the fine level's */
+    cl_mem agg, mrp, mem, t, s;
+    double wp;
     cl_mem prp, pci, pv; /* P from the next level (not on the last) */
     cl_mem rrp, rci, rv; /* P^T */
     cl_mem dinv, u, f, r, d;

@@ -20,25 +20,43 @@ void hv__project_mean(const hv_setup *s, double *u)
             u[c] -= mean;
         return;
     }
+    /* Sums and counts per region, per thread (a static schedule), then added
+     * up in thread order: the same result on every run with as many threads. */
+    int nt = 1;
+#ifdef _OPENMP
+    nt = omp_get_max_threads();
+#endif
     if (s->nregion == 1) {
+        double part[2 * 8 * 64] = {0}; /* a cache line per thread, up to 64 threads */
+        if (nt > 64)
+            nt = 64;
+#pragma omp parallel num_threads(nt)
+        {
+            int t = 0;
+#ifdef _OPENMP
+            t = omp_get_thread_num();
+#endif
+            double sum = 0, cnt = 0;
+#pragma omp for schedule(static)
+            for (size_t c = 0; c < s->count; c++)
+                if (s->region[c] >= 0) {
+                    sum += u[c];
+                    cnt += 1;
+                }
+            part[16 * t] = sum;
+            part[16 * t + 1] = cnt;
+        }
         double sum = 0, cnt = 0;
-#pragma omp parallel for reduction(+ : sum, cnt) schedule(static)
-        for (size_t c = 0; c < s->count; c++)
-            if (s->region[c] >= 0) {
-                sum += u[c];
-                cnt += 1;
-            }
+        for (int t = 0; t < nt; t++) {
+            sum += part[16 * t];
+            cnt += part[16 * t + 1];
+        }
         double mean = cnt > 0 ? sum / cnt : 0.0;
 #pragma omp parallel for schedule(static)
         for (size_t c = 0; c < s->count; c++)
             u[c] = s->region[c] >= 0 ? u[c] - mean : 0.0;
         return;
     }
-    /* Sums and counts per region, per thread, then added up. */
-    int nt = 1;
-#ifdef _OPENMP
-    nt = omp_get_max_threads();
-#endif
     /* Each thread's slice padded to whole cache lines: no false sharing. */
     const size_t used = (size_t)s->nregion * 2, per = (used + 15) & ~(size_t)7;
     double *acc = calloc(per * (size_t)nt, sizeof *acc);

@@ -48,17 +48,37 @@ static agg_op level_op(const mg_agg *g, int l)
     return o;
 }
 
-/* Row c: its entries (the diagonal first on the fine level), in bc/bv (7
- * entries) for the fine level or pointers into the matrix. */
+/* Entries a row of a coarse level can have: a template's at most (5^3). */
+#define ROW_MAX 125
+
+/* Row c of coarse level L: pointers into its matrix, or for a plain row the
+ * template's entries in bc/bv (ROW_MAX each). */
+static int level_row(const mg_alevel *L, int32_t c, int32_t *bc, float *bv, const int32_t **col,
+                     const float **val)
+{
+    if (L->tn && L->plain[c]) {
+        for (int e = 0; e < L->tn; e++) {
+            bc[e] = c + L->toff[e];
+            bv[e] = L->tval[e];
+        }
+        *col = bc;
+        *val = bv;
+        return L->tn;
+    }
+    size_t b = L->A.rp[c];
+    *col = L->A.ci + b;
+    *val = L->A.v + b;
+    return (int)(L->A.rp[c + 1] - b);
+}
+
+/* Row c: its entries (the diagonal first on the fine level), in bc/bv
+ * (ROW_MAX entries) for the fine level and plain rows, else pointers into
+ * the matrix. */
 static int op_row(const agg_op *o, int32_t c, int32_t *bc, float *bv, const int32_t **col,
                   const float **val)
 {
-    if (!o->F) {
-        size_t b = o->A->rp[c];
-        *col = o->A->ci + b;
-        *val = o->A->v + b;
-        return (int)(o->A->rp[c + 1] - b);
-    }
+    if (!o->F)
+        return level_row(o->lv, c, bc, bv, col, val);
     const mg_level *L = o->F;
     size_t stride[3] = {1, L->sy, L->sz};
     if (o->faces) {
@@ -302,8 +322,8 @@ static int block_parts(const agg_op *o, const int32_t *u, int m, int *lab)
         lab[q0] = parts;
         while (top) {
             int q = stack[--top];
-            int32_t bc[7];
-            float bv[7];
+            int32_t bc[ROW_MAX];
+            float bv[ROW_MAX];
             const int32_t *col;
             const float *val;
             int k = op_row(o, u[q], bc, bv, &col, &val);
@@ -623,7 +643,7 @@ static void csr_free(mg_csr *m)
 
 /* P = (I - wp D^-1 A) P0 of a coarse level, row by row. */
 typedef struct p_ctx {
-    const mg_csr *A;
+    const mg_alevel *L;
     const int32_t *agg;
     const float *dinv;
     double wp;
@@ -638,30 +658,39 @@ static int p_row(const void *ctx, void *scratch, int32_t c, spa *s)
     if (spa_add(s, x->agg[c], 1.0))
         return -1;
     double f = -x->wp * x->dinv[c];
-    for (size_t q = x->A->rp[c]; q < x->A->rp[c + 1]; q++) {
-        int32_t e = x->A->ci[q];
-        if (x->agg[e] >= 0 && spa_add(s, x->agg[e], f * x->A->v[q]))
+    int32_t bc[ROW_MAX];
+    float bv[ROW_MAX];
+    const int32_t *col;
+    const float *val;
+    int k = level_row(x->L, c, bc, bv, &col, &val);
+    for (int q = 0; q < k; q++)
+        if (x->agg[col[q]] >= 0 && spa_add(s, x->agg[col[q]], f * val[q]))
             return -1;
-    }
     return 0;
 }
 
 /* Row I of R A P: the row (R A)(I,:) in the inner accumulator, then times P.
  * No product is stored between the two. */
 typedef struct rap_ctx {
-    const mg_csr *R, *A, *P;
+    const mg_csr *R, *P;
+    const mg_alevel *L;
 } rap_ctx;
 
 static int rap_row(const void *ctx, void *scratch, int32_t I, spa *s)
 {
     const rap_ctx *m = ctx;
     spa *ra = scratch;
+    int32_t bc[ROW_MAX];
+    float bv[ROW_MAX];
+    const int32_t *col;
+    const float *val;
     spa_start(ra);
     for (size_t q = m->R->rp[I]; q < m->R->rp[I + 1]; q++) {
         int32_t c = m->R->ci[q];
         double r = m->R->v[q];
-        for (size_t p = m->A->rp[c]; p < m->A->rp[c + 1]; p++)
-            spa_add(ra, m->A->ci[p], r * m->A->v[p]);
+        int k = level_row(m->L, c, bc, bv, &col, &val);
+        for (int p = 0; p < k; p++)
+            spa_add(ra, col[p], r * val[p]);
     }
     for (size_t q = 0; q < ra->nidx; q++) {
         int32_t e = ra->idx[q];
@@ -707,9 +736,9 @@ static hv_status galerkin_csr(mg_agg *g, int l, double wp)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
     mg_csr P = {0}, R = {0};
-    p_ctx pc = {&L->A, L->agg, L->dinv, wp};
+    p_ctx pc = {L, L->agg, L->dinv, wp};
     hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0, 0);
-    rap_ctx rap = {&R, &L->A, &P};
+    rap_ctx rap = {&R, &P, L};
     if (!st)
         st = csr_transpose(&P, C->n, &R);
     if (!st)
@@ -718,6 +747,13 @@ static hv_status galerkin_csr(mg_agg *g, int l, double wp)
         csr_free(&P);
         csr_free(&R);
         return st;
+    }
+    if (L->tn) {
+        /* A level that is mostly template rows applies P and P^T from its
+         * stencil as the fine level does: cheaper than the two matrices. */
+        csr_free(&P);
+        csr_free(&R);
+        return HV_OK;
     }
     L->P = P; /* kept for the transfers */
     L->R = R;
@@ -783,7 +819,6 @@ typedef struct g0_ctx {
     const mg_alevel *L, *C;
     double wp;
     const uint8_t *plain;    /* per level-1 unknown: a plain neighbourhood (or NULL) */
-    const int32_t *blockagg; /* block -> its one aggregate */
     const g0_template *tmpl; /* NULL until made */
 } g0_ctx;
 
@@ -795,21 +830,11 @@ static int g0_row(const void *ctx, void *scratch, int32_t J, spa *cs)
     const g0_ctx *x = ctx;
     const agg_op *o = &x->o;
     const mg_alevel *L = x->L;
-    if (x->tmpl && x->plain[J]) {
-        const int32_t *p = x->C->xyz + 3 * (size_t)J;
-        int bx = x->C->ext[0], by = x->C->ext[1];
-        for (int e = 0; e < x->tmpl->n; e++) {
-            const int *d = x->tmpl->off[e];
-            size_t b =
-                (size_t)(p[0] + d[0]) + bx * ((size_t)(p[1] + d[1]) + by * (size_t)(p[2] + d[2]));
-            if (spa_add(cs, x->blockagg[b], x->tmpl->val[e]))
-                return -1;
-        }
-        return 0;
-    }
+    if (x->tmpl && x->plain[J])
+        return 0; /* the template's row: level 1 takes it from there */
     g0_scratch *S = scratch;
-    int32_t bc[7];
-    float bv[7];
+    int32_t bc[ROW_MAX];
+    float bv[ROW_MAX];
     const int32_t *col;
     const float *val;
     hacc_clear(&S->v);
@@ -866,24 +891,21 @@ static int g0_row(const void *ctx, void *scratch, int32_t J, spa *cs)
 
 /* Blocks of level 1 whose 5^3 neighbourhood of blocks is whole and all fluid
  * (3D binary fine levels): their rows are all the same, up to the columns.
- * plain[J] per level-1 unknown, blockagg per block; both NULL when none. */
-static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out, int32_t **blockagg_out)
+ * plain[J] per level-1 unknown (NULL when there are none). */
+static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out)
 {
     const mg_level *F = g->fine;
     const mg_alevel *C = &g->lv[1];
     *plain_out = NULL;
-    *blockagg_out = NULL;
     if (g->dim != 3 || !F->binary)
         return HV_OK;
     int e[3] = {C->ext[0], C->ext[1], C->ext[2]};
     size_t nb = (size_t)e[0] * e[1] * e[2];
     uint8_t *full = malloc(nb), *tmp = malloc(nb), *plain = malloc((size_t)C->n + 1);
-    int32_t *blockagg = malloc(nb * sizeof *blockagg);
-    if (!full || !tmp || !plain || !blockagg) {
+    if (!full || !tmp || !plain) {
         free(full);
         free(tmp);
         free(plain);
-        free(blockagg);
         return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the coarse operator");
     }
     /* full: the block's 8 cells are in the grid and fluid with every face open. */
@@ -898,12 +920,6 @@ static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out, int32_t **bl
             ok = F->a[c] != 0.0f && g->faces[c] == 0x3f;
         }
         full[b] = (uint8_t)ok;
-        blockagg[b] = -1;
-    }
-    for (int32_t I = 0; I < C->n; I++) {
-        const int32_t *p = C->xyz + 3 * (size_t)I;
-        size_t b = (size_t)p[0] + e[0] * ((size_t)p[1] + e[1] * (size_t)p[2]);
-        blockagg[b] = full[b] ? I : -1;
     }
     /* An AND over a window of 5 blocks along each axis, out of range counting as 0. */
     size_t stride[3] = {1, (size_t)e[0], (size_t)e[0] * e[1]};
@@ -925,7 +941,6 @@ static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out, int32_t **bl
     free(full);
     free(tmp);
     *plain_out = plain;
-    *blockagg_out = blockagg;
     return HV_OK;
 }
 
@@ -933,10 +948,9 @@ static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out, int32_t **bl
 static hv_status galerkin0(mg_agg *g, double wp)
 {
     mg_alevel *C = &g->lv[1];
-    g0_ctx x = {level_op(g, 0), &g->lv[0], C, wp, NULL, NULL, NULL};
+    g0_ctx x = {level_op(g, 0), &g->lv[0], C, wp, NULL, NULL};
     uint8_t *plain;
-    int32_t *blockagg;
-    hv_status st = plain_blocks(g, &plain, &blockagg);
+    hv_status st = plain_blocks(g, &plain);
     if (st)
         return st;
     g0_template *T = NULL;
@@ -966,7 +980,6 @@ static hv_status galerkin0(mg_agg *g, double wp)
         free(S);
     }
     x.plain = plain;
-    x.blockagg = blockagg;
     x.tmpl = T;
     st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 0, 1e-9);
     if (!st && T) {
@@ -989,34 +1002,7 @@ static hv_status galerkin0(mg_agg *g, double wp)
     }
     free(T);
     free(plain);
-    free(blockagg);
     return st;
-}
-
-/* Drops the entries of level 1's plain rows from its matrix: the cycle takes
- * them from the template, and the setup no longer reads them. */
-static hv_status compress_plain(mg_alevel *L)
-{
-    if (!L->tn)
-        return HV_OK;
-    size_t at = 0;
-    for (int32_t r = 0; r < L->n; r++) {
-        size_t b = L->A.rp[r], e = L->A.rp[r + 1];
-        L->A.rp[r] = at;
-        if (L->plain[r])
-            continue;
-        memmove(L->A.ci + at, L->A.ci + b, (e - b) * sizeof *L->A.ci);
-        memmove(L->A.v + at, L->A.v + b, (e - b) * sizeof *L->A.v);
-        at += e - b;
-    }
-    L->A.rp[L->n] = at;
-    int32_t *ci = realloc(L->A.ci, (at ? at : 1) * sizeof *ci);
-    if (ci)
-        L->A.ci = ci;
-    float *v = realloc(L->A.v, (at ? at : 1) * sizeof *v);
-    if (v)
-        L->A.v = v;
-    return HV_OK;
 }
 
 /* ---------- the bottom level ---------- */
@@ -1041,8 +1027,8 @@ static hv_status bottom_regions(mg_agg *g, const agg_op *o)
         g->region[c0] = g->nregion;
         while (top) {
             int32_t c = stack[--top];
-            int32_t bc[7];
-            float bv[7];
+            int32_t bc[ROW_MAX];
+            float bv[ROW_MAX];
             const int32_t *col;
             const float *val;
             int k = op_row(o, c, bc, bv, &col, &val);
@@ -1079,8 +1065,8 @@ static hv_status bottom_factor(mg_agg *g)
     }
     double *M = g->chol, dsum = 0;
     for (int32_t c = 0; c < n; c++) {
-        int32_t bc[7];
-        float bv[7];
+        int32_t bc[ROW_MAX];
+        float bv[ROW_MAX];
         const int32_t *col;
         const float *val;
         int k = op_row(&o, c, bc, bv, &col, &val);
@@ -1291,10 +1277,15 @@ static hv_status level_work(mg_agg *g, int l)
         if (!L->dinv || !L->u || !L->f || !L->r || !L->d)
             return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d", l);
         for (int32_t c = 0; c < L->n; c++) {
+            int32_t bc[ROW_MAX];
+            float bv[ROW_MAX];
+            const int32_t *col;
+            const float *val;
+            int k = level_row(L, c, bc, bv, &col, &val);
             double d = 0;
-            for (size_t q = L->A.rp[c]; q < L->A.rp[c + 1]; q++)
-                if (L->A.ci[q] == c)
-                    d += L->A.v[q];
+            for (int q = 0; q < k; q++)
+                if (col[q] == c)
+                    d += val[q];
             L->dinv[c] = d > 0 ? (float)(1.0 / d) : 0.0f;
         }
         g->bytes += 5 * n * sizeof(float) + 3 * n * sizeof(int32_t) + n * sizeof(size_t) +
@@ -1437,13 +1428,6 @@ hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alph
     if ((st = bottom_factor(g)))
         goto fail;
     g->bytes += (size_t)g->nb * g->nb * sizeof(double);
-    if (g->nlev > 2 && g->lv[1].tn) {
-        mg_alevel *L1 = &g->lv[1];
-        size_t before = L1->A.rp[L1->n];
-        compress_plain(L1);
-        g->bytes -= (before - L1->A.rp[L1->n]) * (sizeof(int32_t) + sizeof(float));
-        g->bytes += (size_t)L1->n;
-    }
     *out = g;
     return HV_OK;
 none:
