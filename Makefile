@@ -505,7 +505,7 @@ fuzz-clean:
 # this build (ThreadSanitizer instruments load-time resolvers); their rows read
 # and write the same cells as the baseline rows it checks.
 TS          := build-tsan
-TSAN_SUITES ?= check_mg check_ops check_distance check_extend check_extend_tiles check_sdf check_sdf2d check_fftw
+TSAN_SUITES ?= check_mg check_mg_agg check_ops check_distance check_extend check_extend_tiles check_sdf check_sdf2d check_fftw
 TS_RUNENV   := OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so ARCHER_OPTIONS=verbose=1 \
                TSAN_OPTIONS='ignore_noninstrumented_modules=1 halt_on_error=0 suppressions=$(CURDIR)/tests/tsan.supp' GOMP_SPINCOUNT=1000
 .PHONY: tsan
