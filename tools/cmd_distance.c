@@ -46,7 +46,7 @@ static int usage(FILE *out)
             "\n"
             "--coarse: the solves' coarse levels with obstacles (solve.h): aggregation keeps\n"
             "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
-            "starts geometric and changes a solver after a slow solve.\n"
+            "(default) takes it for the Poisson solve and geometric levels for the heat steps.\n"
             "\n"
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
             "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"

@@ -78,7 +78,8 @@ typedef struct hv_distance_opts {
                               default +INFINITY */
     float solid_value;  /* value of solid cells; default +INFINITY */
     hv_coarse coarse;   /* the solves' coarse levels with obstacles (hv_solver_opts.coarse);
-                           default AUTO */
+                           default AUTO: aggregation for the Poisson solve, AUTO for the
+                           heat steps */
 } hv_distance_opts;
 
 typedef struct hv_distance_stats {

@@ -222,9 +222,10 @@ static hv_status diffuse(dist_cl_work *k, const hv_grid *g, const hv_distance_op
     if ((st = hv__cl_finish(k->cl)))
         return st;
     for (int q = 0; q < 2; q++) {
-        if (!k->sv[q] && (st = hv__dist_solver(&k->sv[q], g->dim, g->n, g->h, g->solid, 1.0,
-                                               S->t * (q ? T_RATIO : 1), o->diffuse_tol,
-                                               HV_BACKEND_OPENCL, o->coarse)))
+        if (!k->sv[q] &&
+            (st = hv__dist_solver(&k->sv[q], g->dim, g->n, g->h, g->solid, 1.0,
+                                  S->t * (q ? T_RATIO : 1), o->diffuse_tol, HV_BACKEND_OPENCL,
+                                  hv__dist_poisson_coarse(o, g->solid))))
             return st;
         if ((st = hv__cl_solver_solve_d(k->sv[q], k->w, q ? k->u2 : k->u, &info[q])))
             return st;

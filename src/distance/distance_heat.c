@@ -456,6 +456,11 @@ typedef struct local_solves {
     int restarts; /* of the Poisson solve */
 } local_solves;
 
+hv_coarse hv__dist_poisson_coarse(const hv_distance_opts *o, const uint8_t *solid)
+{
+    return o->coarse == HV_COARSE_AUTO && solid ? HV_COARSE_AGGREGATION : o->coarse;
+}
+
 hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
                           double alpha, double beta, double tol, hv_backend backend,
                           hv_coarse coarse)
@@ -480,8 +485,9 @@ static hv_status local_poisson(local_solves *L, const double *rhs, double *u, hv
     const dist_ctx *d = L->d;
     hv_solver_destroy(&L->sv[0]);
     hv_solver_destroy(&L->sv[1]);
-    hv_status st = hv__dist_solver(&L->sv[2], d->dim, d->n, d->h, d->solid, 0.0, 1.0,
-                                   L->o->poisson_tol, L->o->backend, L->o->coarse);
+    hv_status st =
+        hv__dist_solver(&L->sv[2], d->dim, d->n, d->h, d->solid, 0.0, 1.0, L->o->poisson_tol,
+                        L->o->backend, hv__dist_poisson_coarse(L->o, d->solid));
     if (st || (st = hv_solver_solve_d(L->sv[2], rhs, u, info)))
         return st;
     double fn = norm2(d, rhs), rel = info->relres;

@@ -59,6 +59,10 @@ hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, cons
                           double alpha, double beta, double tol, hv_backend backend,
                           hv_coarse coarse);
 hv_status hv__dist_no_source(const hv_distance_stats *S);
+/* The Poisson solve's coarse levels: o->coarse, or with AUTO and obstacles
+ * aggregation (one solve to a tight tolerance around walls, where the
+ * geometric levels take tens to hundreds of iterations). */
+hv_coarse hv__dist_poisson_coarse(const hv_distance_opts *o, const uint8_t *solid);
 
 /* A window of the whole grid: g's cell (0, 0, 0) is the whole grid's cell
  * off; own_lo..own_hi-1 (whole-grid indices) are the cells whose sources

@@ -555,7 +555,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
     m->agg_pending = 0;
     hv_status st = mg_solve_pcg(m, f, u, info, fn);
     if (st == HV_OK && s->o.coarse == HV_COARSE_AUTO && !m->agg_tried &&
-        info->iterations > MG_AGG_SWITCH)
+        mg_agg_slow(info->iterations, info->relres))
         m->agg_pending = 1;
     if (st == HV_OK && s->p.solid)
         for (size_t c = 0; c < s->count; c++)

@@ -19,14 +19,23 @@
 
 #include "mg_level.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
 #define MG_AGG_MAX_LEVELS 24
-/* HV_COARSE_AUTO: a solver whose solve took more iterations than this builds
- * aggregation levels before its next solve (their set-up pays off only over
- * several solves, or against a slow one). */
+/* HV_COARSE_AUTO: a solver whose solve took more than MG_AGG_SWITCH
+ * iterations at a mean residual reduction worse than MG_AGG_SLOW per
+ * iteration (the geometric levels stalling at walls; a tight tolerance alone
+ * is no reason) builds aggregation levels before its next solve: their set-up
+ * pays off only over several solves. */
 #define MG_AGG_SWITCH 16
+#define MG_AGG_SLOW 0.4
+
+static inline int mg_agg_slow(int iterations, double relres)
+{
+    return iterations > MG_AGG_SWITCH && relres > 0 && pow(relres, 1.0 / iterations) > MG_AGG_SLOW;
+}
 
 typedef struct mg_csr {
     int32_t n;  /* rows */

@@ -448,7 +448,7 @@ static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
     st = o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
                     : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
     if (!st && o->use_pcg && opts->coarse == HV_COARSE_AUTO && !o->agg_tried &&
-        info->iterations > MG_AGG_SWITCH)
+        mg_agg_slow(info->iterations, info->relres))
         o->agg_pending = 1;
     return st;
 }
