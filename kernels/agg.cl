@@ -19,36 +19,13 @@ __kernel void agg_spmv(int n, __global const uint *rp, __global const int *ci,
     y[r] = s;
 }
 
-/* r = f - A u on a coarse level; rows marked in plain (when nt > 0) are the
- * template: nt entries at index offsets toff with values tval. */
-__kernel void agg_residual(int n, __global const uint *rp, __global const int *ci,
-                           __global const float *v, __global const uchar *plain, int nt,
-                           __global const int *toff, __global const float *tval,
-                           __global const float *u, __global const float *f, __global float *r)
+/* Row i of a coarse level's A times x: the template (nt entries at index
+ * offsets toff, values tval) where plain[i] is set and nt > 0, else the row. */
+static float agg_row(int i, __global const uint *rp, __global const int *ci,
+                     __global const float *v, __global const uchar *plain, int nt,
+                     __global const int *toff, __global const float *tval,
+                     __global const float *x)
 {
-    const int i = get_global_id(0);
-    if (i >= n)
-        return;
-    float s = 0.0f;
-    if (nt > 0 && plain[i]) {
-        for (int e = 0; e < nt; e++)
-            s += tval[e] * u[i + toff[e]];
-    } else {
-        for (uint q = rp[i]; q < rp[i + 1]; q++)
-            s += v[q] * u[ci[q]];
-    }
-    r[i] = f[i] - s;
-}
-
-/* y = A x on a coarse level, with its template rows as agg_residual */
-__kernel void agg_apply(int n, __global const uint *rp, __global const int *ci,
-                        __global const float *v, __global const uchar *plain, int nt,
-                        __global const int *toff, __global const float *tval,
-                        __global const float *x, __global float *y)
-{
-    const int i = get_global_id(0);
-    if (i >= n)
-        return;
     float s = 0.0f;
     if (nt > 0 && plain[i]) {
         for (int e = 0; e < nt; e++)
@@ -57,7 +34,29 @@ __kernel void agg_apply(int n, __global const uint *rp, __global const int *ci,
         for (uint q = rp[i]; q < rp[i + 1]; q++)
             s += v[q] * x[ci[q]];
     }
-    y[i] = s;
+    return s;
+}
+
+/* r = f - A u on a coarse level */
+__kernel void agg_residual(int n, __global const uint *rp, __global const int *ci,
+                           __global const float *v, __global const uchar *plain, int nt,
+                           __global const int *toff, __global const float *tval,
+                           __global const float *u, __global const float *f, __global float *r)
+{
+    const int i = get_global_id(0);
+    if (i < n)
+        r[i] = f[i] - agg_row(i, rp, ci, v, plain, nt, toff, tval, u);
+}
+
+/* y = A x on a coarse level */
+__kernel void agg_apply(int n, __global const uint *rp, __global const int *ci,
+                        __global const float *v, __global const uchar *plain, int nt,
+                        __global const int *toff, __global const float *tval,
+                        __global const float *x, __global float *y)
+{
+    const int i = get_global_id(0);
+    if (i < n)
+        y[i] = agg_row(i, rp, ci, v, plain, nt, toff, tval, x);
 }
 
 /* A Chebyshev step: d = cd d + cr dinv r, u += d; with `zero` the step from

@@ -11,8 +11,10 @@
  * is Galerkin's, A_c = P^T A P. Neither P nor A reaches through a wall, so the
  * coarse operators keep every wall and every region cut off by walls (its own
  * null space for Poisson). Coarse operators are sparse rows (CSR) of up to a
- * few hundred entries; under the fine level P and P^T are sparse rows too, on
- * the fine level they are applied from its stencil, the aggregates and D.
+ * few hundred entries, except level 1's rows in open space, which are one
+ * template at fixed index offsets. P and P^T are sparse rows on the deeper
+ * levels; the fine level and level 1 apply them from their own operator, the
+ * aggregates and D.
  */
 #ifndef HV_SOLVE_MG_AGG_H
 #define HV_SOLVE_MG_AGG_H
