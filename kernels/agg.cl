@@ -6,17 +6,23 @@
  * stencil's apply (mg_apply). One work-item per row.
  */
 
+/* Row r of a sparse matrix times x. */
+static float csr_row(int r, __global const uint *rp, __global const int *ci,
+                     __global const float *v, __global const float *x)
+{
+    float s = 0.0f;
+    for (uint q = rp[r]; q < rp[r + 1]; q++)
+        s += v[q] * x[ci[q]];
+    return s;
+}
+
 /* y = M x over the n rows of M */
 __kernel void agg_spmv(int n, __global const uint *rp, __global const int *ci,
                        __global const float *v, __global const float *x, __global float *y)
 {
     const int r = get_global_id(0);
-    if (r >= n)
-        return;
-    float s = 0.0f;
-    for (uint q = rp[r]; q < rp[r + 1]; q++)
-        s += v[q] * x[ci[q]];
-    y[r] = s;
+    if (r < n)
+        y[r] = csr_row(r, rp, ci, v, x);
 }
 
 /* Row i of a coarse level's A times x: the template (nt entries at index
@@ -26,14 +32,11 @@ static float agg_row(int i, __global const uint *rp, __global const int *ci,
                      __global const int *toff, __global const float *tval,
                      __global const float *x)
 {
+    if (!(nt > 0 && plain[i]))
+        return csr_row(i, rp, ci, v, x);
     float s = 0.0f;
-    if (nt > 0 && plain[i]) {
-        for (int e = 0; e < nt; e++)
-            s += tval[e] * x[i + toff[e]];
-    } else {
-        for (uint q = rp[i]; q < rp[i + 1]; q++)
-            s += v[q] * x[ci[q]];
-    }
+    for (int e = 0; e < nt; e++)
+        s += tval[e] * x[i + toff[e]];
     return s;
 }
 
@@ -77,12 +80,8 @@ __kernel void agg_prolong(int n, __global const uint *rp, __global const int *ci
                           __global const float *v, __global const float *uc, __global float *u)
 {
     const int r = get_global_id(0);
-    if (r >= n)
-        return;
-    float s = 0.0f;
-    for (uint q = rp[r]; q < rp[r + 1]; q++)
-        s += v[q] * uc[ci[q]];
-    u[r] += s;
+    if (r < n)
+        u[r] += csr_row(r, rp, ci, v, uc);
 }
 
 /* Fine level (and a coarse level without P and P^T): t = dinv r */

@@ -35,21 +35,27 @@ static void level_apply_d(const mg_state *m, const mg_level *L, const double *x,
 
 /* ---------- backend state ---------- */
 
+/* Frees a level's coefficients, vectors, regions and bottom work. */
+static void level_free(mg_level *L)
+{
+    hv__mg_level_free_coeffs(L);
+    hv_free(L->u);
+    hv_free(L->f);
+    hv_free(L->r);
+    hv_free(L->d);
+    free(L->region);
+    free(L->bwork);
+    memset(L, 0, sizeof *L);
+}
+
 static void mg_destroy(void *state)
 {
     mg_state *m = state;
     if (!m)
         return;
     for (int l = 0; l < m->nlev; l++) {
-        mg_level *L = &m->lv[l];
         hv_free(m->pnorm[l]);
-        hv__mg_level_free_coeffs(L);
-        hv_free(L->u);
-        hv_free(L->f);
-        hv_free(L->r);
-        hv_free(L->d);
-        free(L->region);
-        free(L->bwork);
+        level_free(&m->lv[l]);
     }
     hv__mg_agg_free(m->agg);
     hv_free(m->rt_work);
@@ -69,18 +75,8 @@ static void drop_geometric(mg_state *m)
     }
     hv_free(m->rt_work);
     m->rt_work = NULL;
-    free(m->lv[m->nlev - 1].bwork);
-    m->lv[m->nlev - 1].bwork = NULL;
-    for (int l = 1; l < m->nlev; l++) {
-        mg_level *L = &m->lv[l];
-        hv__mg_level_free_coeffs(L);
-        hv_free(L->u);
-        hv_free(L->f);
-        hv_free(L->r);
-        hv_free(L->d);
-        free(L->region);
-        memset(L, 0, sizeof *L);
-    }
+    for (int l = 1; l < m->nlev; l++)
+        level_free(&m->lv[l]);
     m->nlev = 1;
 }
 
