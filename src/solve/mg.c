@@ -169,11 +169,11 @@ static hv_status mg_create(void **state, const hv_setup *s)
     size_t n0 = s->count;
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
-        m->p = hv_malloc(n0 * sizeof(double));
-        m->z = hv_malloc(n0 * sizeof(double));
+        m->p = hv_malloc(n0 * sizeof(float));
+        m->z = m->alpha == 0 ? hv_malloc(n0 * sizeof(double)) : NULL; /* heat: z in lv[0].u */
         m->q = hv_malloc(n0 * sizeof(double));
     }
-    if (!m->rd || (m->use_pcg && (!m->p || !m->z || !m->q))) {
+    if (!m->rd || (m->use_pcg && (!m->p || (m->alpha == 0 && !m->z) || !m->q))) {
         st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
@@ -326,19 +326,19 @@ static double load_rhs(const mg_state *m, const double *f)
     return sqrt(nn);
 }
 
-/* z = M r: one symmetric V-cycle from zero on r (float), projected for Poisson. */
-static void precondition(mg_state *m, const double *r, double *z)
+/* z = M r: one symmetric V-cycle from zero on level 0's f, which holds r in
+ * float (fine_residual and it_pcg_step leave it there). Heat steps leave z in
+ * level 0's u (z == NULL); Poisson's z is copied out in double and projected. */
+static void precondition(mg_state *m, double *z)
 {
     mg_level *L0 = &m->lv[0];
-#pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
-    for (size_t c = 0; c < L0->count; c++)
-        L0->f[c] = (float)r[c];
     hv__mg_vcycle(m, 0, 0, 1);
+    if (!z)
+        return;
 #pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
     for (size_t c = 0; c < L0->count; c++)
         z[c] = L0->u[c];
-    if (m->alpha == 0)
-        hv__project_mean(m->s, z);
+    hv__project_mean(m->s, z);
 }
 
 static double pdot(const double *a, const double *b, size_t n)
@@ -420,53 +420,111 @@ static hv_status it_correct(void *ctx, int it, double rel, hv_solve_info *info, 
     return HV_OK;
 }
 
+/* PCG's next direction from z = M r (precondition): p = z + be p, with
+ * be = (r.z) / rz and rz = r.z after; be = 0 on the first (p = z). Heat
+ * steps read z from level 0's float u, in two passes (r.z, then p). */
+static void pcg_direction(mg_iter *c, int first)
+{
+    mg_state *m = c->m;
+    const size_t n = m->s->count;
+    const double *r = m->rd;
+    float *p = m->p;
+    double rz2, be;
+    if (m->alpha == 0) {
+        const double *z = m->z;
+        rz2 = pdot(r, z, n);
+        be = first ? 0.0 : rz2 / c->rz;
+#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
+        for (size_t i = 0; i < n; i++)
+            p[i] = (float)(first ? z[i] : z[i] + be * p[i]);
+    } else {
+        const float *z = m->lv[0].u;
+        rz2 = 0;
+#pragma omp parallel for reduction(+ : rz2) schedule(static) if (n > MG_PAR_MIN)
+        for (size_t i = 0; i < n; i++)
+            rz2 += r[i] * (double)z[i];
+        be = first ? 0.0 : rz2 / c->rz;
+#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
+        for (size_t i = 0; i < n; i++)
+            p[i] = first ? z[i] : (float)((double)z[i] + be * p[i]);
+    }
+    c->rz = rz2;
+}
+
 static hv_status it_pcg_start(void *ctx, hv_solve_info *info)
 {
     mg_iter *c = ctx;
-    mg_state *m = c->m;
-    const size_t n = m->s->count;
-    precondition(m, m->rd, m->z);
+    precondition(c->m, c->m->alpha == 0 ? c->m->z : NULL);
     info->cycles = 1;
-    memcpy(m->p, m->z, n * sizeof *m->p);
-    c->rz = pdot(m->rd, m->z, n);
+    pcg_direction(c, 1);
     return HV_OK;
 }
 
+/* q = A p and p.q on the fine level, row by row while the row is in cache. */
+static double pcg_pq(const mg_state *m)
+{
+    const mg_level *L = &m->lv[0];
+    const int nx = L->n[0];
+    double s = 0;
+#pragma omp parallel for collapse(2) reduction(+ : s) schedule(static) if (L->count > MG_PAR_MIN)
+    for (int k = 0; k < L->n[2]; k++)
+        for (int j = 0; j < L->n[1]; j++) {
+            const size_t b = L->sy * (size_t)j + L->sz * (size_t)k;
+            const float *p = m->p + b;
+            double *q = m->q + b;
+            hv__mg_level_apply_row_f(L, m->dim, m->alpha, m->p, q, j, k);
+            double part[4] = {0, 0, 0, 0}; /* partial sums: the loop vectorizes */
+            int i = 0;
+            for (; i + 4 <= nx; i += 4)
+                for (int e = 0; e < 4; e++)
+                    part[e] += (double)p[i + e] * q[i + e];
+            for (; i < nx; i++)
+                part[0] += (double)p[i] * q[i];
+            s += (part[0] + part[1]) + (part[2] + part[3]);
+        }
+    return s;
+}
+
+/* x += al p, r -= al q, level 0's f = (float) r (the next cycle's input);
+ * returns ||r||^2. */
+static double pcg_update(const mg_state *m, double *x, double al)
+{
+    const size_t n = m->s->count;
+    const float *p = m->p;
+    const double *q = m->q;
+    double *r = m->rd;
+    float *f = m->lv[0].f;
+    double nn = 0;
+#pragma omp parallel for reduction(+ : nn) schedule(static) if (n > MG_PAR_MIN)
+    for (size_t i = 0; i < n; i++) {
+        x[i] += al * (double)p[i];
+        r[i] -= al * q[i];
+        f[i] = (float)r[i];
+        nn += r[i] * r[i];
+    }
+    return nn;
+}
+
+/* q = A p and *pq = p.q; when positive, x += a p, r -= a q with a = rz / pq,
+ * level 0's f = (float) r, and ||r||. */
 static hv_status it_pcg_step(void *ctx, double *pq_out, double *norm)
 {
     mg_iter *c = ctx;
     mg_state *m = c->m;
-    const size_t n = m->s->count;
-    double *u = c->x, *r = m->rd, *p = m->p, *q = m->q;
-    level_apply_d(m, &m->lv[0], p, q);
-    double pq = pdot(p, q, n);
+    double pq = pcg_pq(m);
     *pq_out = pq;
     if (!(pq > 0))
         return HV_OK;
-    double al = c->rz / pq, nn = 0;
-#pragma omp parallel for reduction(+ : nn) schedule(static) if (n > MG_PAR_MIN)
-    for (size_t i = 0; i < n; i++) {
-        u[i] += al * p[i];
-        r[i] -= al * q[i];
-        nn += r[i] * r[i];
-    }
-    *norm = sqrt(nn);
+    *norm = sqrt(pcg_update(m, c->x, c->rz / pq));
     return HV_OK;
 }
 
 static hv_status it_pcg_next(void *ctx, hv_solve_info *info)
 {
     mg_iter *c = ctx;
-    mg_state *m = c->m;
-    const size_t n = m->s->count;
-    double *r = m->rd, *p = m->p, *z = m->z;
-    precondition(m, r, z);
+    precondition(c->m, c->m->alpha == 0 ? c->m->z : NULL);
     info->cycles++;
-    double rz2 = pdot(r, z, n), be = rz2 / c->rz;
-    c->rz = rz2;
-#pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
-    for (size_t i = 0; i < n; i++)
-        p[i] = z[i] + be * p[i];
+    pcg_direction(c, 0);
     return HV_OK;
 }
 

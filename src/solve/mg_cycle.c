@@ -11,7 +11,7 @@ static void smooth(const mg_state *m, mg_level *L, int steps, int reverse)
     if (steps <= 0)
         return;
     if (m->smoother == HV_SMOOTH_RBGS) {
-        int fused = mg_level_fusable(m, L);
+        int fused = mg_level_sweep_fusable(m, L);
         for (int s = 0; s < steps; s++) {
             if (fused) {
                 hv__mg_fused_pass(m, L, NULL, MG_FS_PLAIN, reverse ? 1 : 0);

@@ -13,17 +13,17 @@
 #include <omp.h>
 #endif
 
-/* Colour col of plane k of a plain level. */
-static void rb_plane_plain(const mg_state *m, const mg_level *L, int k, int col)
+/* Colour col of plane k of a plain or binary level. */
+static void rb_plane(const mg_state *m, const mg_level *L, int k, int col)
 {
 #if MG_AVX512
-    if (mg_avx512()) {
+    if (L->plain && mg_avx512()) {
         hv__mg_rb_plane_avx512(m, L, k, col);
         return;
     }
 #endif
     for (int j = 0; j < L->n[1]; j++)
-        hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
+        hv__mg_rb_row(m, L, j, k, col);
 }
 
 /* First colour of a sweep from u = 0 along one row: this colour's cells take
@@ -286,11 +286,11 @@ static void rb_pair(const mg_state *m, mg_level *L, int k, int A, int zero, cons
         if (zero)
             rb_row_zero(m, L, j, k, A);
         else
-            hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, A);
+            hv__mg_rb_row(m, L, j, k, A);
         if (j > 0)
-            hv__mg_rb_row_plain(m, L, L->u, L->f, j - 1, k - 1, !A);
+            hv__mg_rb_row(m, L, j - 1, k - 1, !A);
     }
-    hv__mg_rb_row_plain(m, L, L->u, L->f, ny - 1, k - 1, !A);
+    hv__mg_rb_row(m, L, ny - 1, k - 1, !A);
 }
 
 /* One red-black sweep of a plain 3D level in a single pass over memory, with
@@ -360,7 +360,7 @@ void hv__mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
             for (int j = 0; j < ny; j++)
                 rb_row_zero(m, L, j, k0, A);
         else if (own)
-            rb_plane_plain(m, L, k0, A);
+            rb_plane(m, L, k0, A);
 #pragma omp barrier
         if (own) {
             for (int k = k0 + 1; k < k1; k++) {
@@ -381,11 +381,11 @@ void hv__mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
                         for (int j = 0; j < ny; j++)
                             rb_row_zero(m, L, j, k, A);
                     else
-                        rb_plane_plain(m, L, k, A);
+                        rb_plane(m, L, k, A);
                 }
             }
             if (k1 - 1 > k0)
-                rb_plane_plain(m, L, k1 - 1, B);
+                rb_plane(m, L, k1 - 1, B);
             while (mode == MG_FS_RESTRICT && coarse_first(L, Knext) < k1 &&
                    coarse_last(L, Knext) <= k1 - 2)
                 restrict_residual_plane(m, L, C, Knext++, scale);
@@ -393,7 +393,7 @@ void hv__mg_fused_pass(const mg_state *m, mg_level *L, mg_level *C, int mode, in
 #pragma omp barrier
         /* colour B on the first plane (its neighbour k0-1 is final now) */
         if (own)
-            rb_plane_plain(m, L, k0, B);
+            rb_plane(m, L, k0, B);
         if (mode == MG_FS_RESTRICT) {
 #pragma omp barrier
             if (own) {

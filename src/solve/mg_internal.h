@@ -42,7 +42,9 @@ typedef struct mg_state {
     hv_smoother smoother;
     int pre, post;
     int use_pcg;
-    double *rd, *p, *z, *q;      /* fine double work */
+    double *rd, *z;              /* fine double work: the residual, Poisson's z = M r */
+    float *p;                    /* PCG's direction (A p is formed in double) */
+    double *q;                   /* PCG: A p */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
                                     the coarse level is weighted (renormalized) */
     float *rt_work;              /* PCG: hv__mg_restrict_transpose's work, rt_threads slices */
@@ -134,10 +136,17 @@ static inline mg_plain_row mg_plain_row_at(const mg_state *m, const mg_level *L,
         }                                                                                          \
     } while (0)
 
-/* Levels whose red-black sweeps run plane by plane in one pass (hv__mg_fused_pass). */
+/* Levels whose red-black sweeps run plane by plane in one pass (hv__mg_fused_pass
+ * in MG_FS_PLAIN mode): 3D levels, plain or weighted. */
+static inline int mg_level_sweep_fusable(const mg_state *m, const mg_level *L)
+{
+    return m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8 && L->n[0] <= MG_ROW_BUF;
+}
+
+/* Plain levels, whose fused passes also start from zero, restrict and prolong. */
 static inline int mg_level_fusable(const mg_state *m, const mg_level *L)
 {
-    return L->plain && m->dim == 3 && L->n[2] >= 3 && L->n[1] >= 8 && L->n[0] <= MG_ROW_BUF;
+    return L->plain && mg_level_sweep_fusable(m, L);
 }
 
 /* ---------- mg_rows.c ---------- */
@@ -150,6 +159,8 @@ void hv__mg_rb_row_plain(const mg_state *m, const mg_level *L, float *u, const f
 __attribute__((target("avx512f"))) void hv__mg_rb_plane_avx512(const mg_state *m, const mg_level *L,
                                                                int k, int col);
 #endif
+/* One colour of row (j,k) of a plain or weighted level, in place on L->u. */
+void hv__mg_rb_row(const mg_state *m, const mg_level *L, int j, int k, int col);
 /* One colour of a red-black Gauss-Seidel sweep over a level. */
 void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col);
 /* L->r = L->f - A L->u (float). */

@@ -26,9 +26,12 @@
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define MG_MULTIVERSION 1
 #define MG_KERNEL __attribute__((target_clones("avx2", "default")))
+/* and for double rows, which AVX-512 takes in half the instructions */
+#define MG_KERNEL_512 __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define MG_MULTIVERSION 0
 #define MG_KERNEL
+#define MG_KERNEL_512
 #endif
 
 #define MG_MAX_LEVELS 40
@@ -87,6 +90,9 @@ void hv__mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother s
 double hv__mg_level_diag(const mg_level *L, int dim, double alpha, int i, int j, int k);
 /* y = A x in double on a level. */
 void hv__mg_level_apply_d(const mg_level *L, int dim, double alpha, const double *x, double *y);
+/* Row (j,k) of y = A x in double from x in float, into yrow (n[0] values). */
+void hv__mg_level_apply_row_f(const mg_level *L, int dim, double alpha, const float *x,
+                              double *yrow, int j, int k);
 
 /* Doubles per bottom cell that hv__mg_bottom_cg needs as work. */
 #define MG_BOTTOM_WORK 5
@@ -110,7 +116,7 @@ void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, co
  * runs on at most nthreads threads, each with its own slice of work). */
 static inline size_t mg_restrict_transpose_work(const mg_level *F, const mg_level *C)
 {
-    size_t n = (size_t)F->n[0] + (size_t)C->n[0] + (size_t)C->n[0] * (size_t)C->n[1];
+    size_t n = (size_t)F->n[0] + (size_t)C->n[0] + 2 * (size_t)C->n[0] * (size_t)C->n[1];
     return (n + 15) & ~(size_t)15;
 }
 

@@ -32,10 +32,16 @@ int hv__mg_avx512_probe(void)
  * threads are writing in this sweep, and a masked-off lane is not read (a
  * full load would be a data race, harmless on the hardware but undefined in
  * C11's memory model and reported by ThreadSanitizer). cym..czp are the face
- * coefficients, 0 at a y or z wall; dyz = alpha + the open y and z faces. */
-__attribute__((target("avx512f"))) static void rb_row_avx512(
-    float *ur, const float *fr, const float *ym, const float *yp, const float *zm, const float *zp,
-    int nx, int i0, float cx, float cym, float cyp, float czm, float czp, float dyz)
+ * coefficients, 0 at a y or z wall; dyz = alpha + the open y and z faces.
+ * With dinv (a binary level's row: solid cells hold u = 0, so the plain
+ * stencil serves once each cell takes its own inverse diagonal) the lanes
+ * take dinv instead, 0 on solid cells, and dyz is unused. */
+__attribute__((target("avx512f"))) static void rb_row_avx512(float *ur, const float *fr,
+                                                             const float *ym, const float *yp,
+                                                             const float *zm, const float *zp,
+                                                             int nx, int i0, float cx, float cym,
+                                                             float cyp, float czm, float czp,
+                                                             float dyz, const float *dinv)
 {
     const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
                  vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp),
@@ -61,9 +67,11 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(
         sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(own, zm + q), sm);
         sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(own, zp + q), sm);
         __m512 inv = vinv;
-        if (c == 0)
+        if (dinv)
+            inv = _mm512_maskz_loadu_ps(own, dinv + q);
+        else if (c == 0)
             inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
-        if (c + 1 == nq && last > 0)
+        if (!dinv && c + 1 == nq && last > 0)
             inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
         _mm512_mask_storeu_ps(ur + q, own, _mm512_mul_ps(sm, inv));
         prev = cur;
@@ -91,7 +99,7 @@ MG_KERNEL void hv__mg_rb_row_plain(const mg_state *m, const mg_level *L, float *
 #if MG_AVX512
     if (mg_avx512()) {
         rb_row_avx512(ur, fr, ym, yp, zm, zp, nx, i0, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp,
-                      dyz);
+                      dyz, NULL);
         return;
     }
 #endif
@@ -134,7 +142,7 @@ __attribute__((target("avx512f"))) void hv__mg_rb_plane_avx512(const mg_state *m
         const float wym = j > 0, wyp = j < ny - 1;
         const float dyz = (float)m->alpha + cy * (wym + wyp) + cz * (wzm + wzp);
         rb_row_avx512(ur, fr, wym ? ur - L->sy : ur, wyp ? ur + L->sy : ur, ur + zmo, ur + zpo, nx,
-                      (j + k + col) & 1, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz);
+                      (j + k + col) & 1, cx, cy * wym, cy * wyp, cz * wzm, cz * wzp, dyz, NULL);
     }
 }
 #endif
@@ -165,6 +173,52 @@ static inline float wrow_edge_sum(const mg_wrow *R, const float *u, int q, int n
     return s;
 }
 
+#if MG_AVX512
+/* One colour (cells of parity i0) of a weighted row in 16-lane chunks, as
+ * rb_row_avx512, each face with its own weight (walls and the box's faces
+ * weigh 0, so the zero lanes beyond the row's ends add nothing). */
+__attribute__((target("avx512f"))) static void rb_wrow_avx512(const mg_wrow *R, float *u,
+                                                              const float *f, const float *dinv,
+                                                              int nx, int i0, float cx, float cy,
+                                                              float cz)
+{
+    const __m512 vcx = _mm512_set1_ps(cx), vcy = _mm512_set1_ps(cy), vcz = _mm512_set1_ps(cz);
+    const __mmask16 colour = i0 ? 0xAAAA : 0x5555;
+    const int nq = (nx + 15) / 16;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, u));
+    for (int c = 0, q = 0; c < nq; c++, q += 16) {
+        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+        __m512i next =
+            c + 1 < nq
+                ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, u + q + 16))
+                : _mm512_setzero_si512();
+        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+        const __mmask16 own = colour & valid;
+        __m512 sx = _mm512_mul_ps(_mm512_maskz_loadu_ps(own, R->wx + q), um);
+        sx = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(own, R->wx + q + 1), up, sx);
+        __m512 sy = _mm512_mul_ps(_mm512_maskz_loadu_ps(own, R->wyl + q),
+                                  _mm512_maskz_loadu_ps(own, u + R->ym + q));
+        sy = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(own, R->wyh + q),
+                             _mm512_maskz_loadu_ps(own, u + R->yp + q), sy);
+        __m512 sm = _mm512_fmadd_ps(vcx, sx, _mm512_maskz_loadu_ps(own, f + q));
+        sm = _mm512_fmadd_ps(vcy, sy, sm);
+        if (R->wzl) {
+            __m512 sz = _mm512_mul_ps(_mm512_maskz_loadu_ps(own, R->wzl + q),
+                                      _mm512_maskz_loadu_ps(own, u + R->zm + q));
+            sz = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(own, R->wzh + q),
+                                 _mm512_maskz_loadu_ps(own, u + R->zp + q), sz);
+            sm = _mm512_fmadd_ps(vcz, sz, sm);
+        }
+        _mm512_mask_storeu_ps(u + q, own, _mm512_mul_ps(sm, _mm512_maskz_loadu_ps(own, dinv + q)));
+        prev = cur;
+        cur = next;
+    }
+}
+#endif
+
 /* One colour of row (j,k) of a weighted level: u = (f + S) / D, 0 where the row
  * of A is empty (dinv = 0). The first and last cells are done apart (their
  * missing x neighbour lies outside the row). Only this colour's cells are
@@ -177,6 +231,17 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
     float *u = L->u + R.base;
     const float *f = L->f + R.base, *dinv = L->dinv + R.base;
     int i = (j + k + col) & 1;
+#if MG_AVX512
+    if (L->binary && mg_avx512()) {
+        rb_row_avx512(u, f, u + R.ym, u + R.yp, u + R.zm, u + R.zp, nx, i, cx, R.ym ? cy : 0,
+                      R.yp ? cy : 0, R.zm ? cz : 0, R.zp ? cz : 0, 0, dinv);
+        return;
+    }
+    if (mg_avx512()) {
+        rb_wrow_avx512(&R, u, f, dinv, nx, i, cx, cy, cz);
+        return;
+    }
+#endif
     if (i == 0)
         u[0] = (f[0] + wrow_edge_sum(&R, u, 0, nx, cx, cy, cz)) * dinv[0];
     if (nx > 1 && ((nx - 1) & 1) == i)
@@ -197,6 +262,14 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
     }
 }
 
+void hv__mg_rb_row(const mg_state *m, const mg_level *L, int j, int k, int col)
+{
+    if (L->plain)
+        hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
+    else
+        rb_row_weighted(m, L, j, k, col);
+}
+
 void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col)
 {
     float *u = L->u;
@@ -214,6 +287,43 @@ void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col)
             rb_row_weighted(m, L, j, k, col);
 }
 
+#if MG_AVX512
+/* Row of r = f - A u on a binary level in 16-lane chunks (as rb_row_avx512):
+ * the plain stencil, each cell's diagonal 1 / dinv, r = f on empty rows. */
+__attribute__((target("avx512f"))) static void residual_brow_avx512(
+    const float *ur, const float *fr, const float *dinv, const float *ym, const float *yp,
+    const float *zm, const float *zp, int nx, float cx, float cym, float cyp, float czm, float czp,
+    float *rr)
+{
+    const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
+                 vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp);
+    const int nq = (nx + 15) / 16;
+    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    __m512i prev = _mm512_setzero_si512();
+    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
+    for (int c = 0, q = 0; c < nq; c++, q += 16) {
+        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
+        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
+                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
+                                  : _mm512_setzero_si512();
+        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
+        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+        __m512 f = _mm512_maskz_loadu_ps(valid, fr + q);
+        __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), f);
+        sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
+        sm = _mm512_fmadd_ps(vcyp, _mm512_maskz_loadu_ps(valid, yp + q), sm);
+        sm = _mm512_fmadd_ps(vczm, _mm512_maskz_loadu_ps(valid, zm + q), sm);
+        sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
+        __m512 d = _mm512_maskz_loadu_ps(valid, dinv + q);
+        __mmask16 full = _mm512_cmp_ps_mask(d, _mm512_setzero_ps(), _CMP_GT_OQ);
+        __m512 du = _mm512_maskz_div_ps(full, _mm512_castsi512_ps(cur), d);
+        _mm512_mask_storeu_ps(rr + q, valid, _mm512_mask_sub_ps(f, full, sm, du));
+        prev = cur;
+        cur = next;
+    }
+}
+#endif
+
 /* Row (j,k) of r = f - A u on a weighted level. */
 MG_KERNEL static void residual_row_weighted(const mg_state *m, const mg_level *L, int j, int k)
 {
@@ -223,6 +333,14 @@ MG_KERNEL static void residual_row_weighted(const mg_state *m, const mg_level *L
     const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
     const float *ur = L->u + R.base, *fr = L->f + R.base;
     float *rr = L->r + R.base;
+#if MG_AVX512
+    if (L->binary && mg_avx512()) {
+        residual_brow_avx512(ur, fr, L->dinv + R.base, ur + R.ym, ur + R.yp, ur + R.zm, ur + R.zp,
+                             nx, cx, R.ym ? cy : 0, R.yp ? cy : 0, R.zm ? cz : 0, R.zp ? cz : 0,
+                             rr);
+        return;
+    }
+#endif
     for (int q = 0; q<nx; q += nx - 1> 0 ? nx - 1 : 1) /* the first and last cells */
         rr[q] = fr[q] - (WROW_DIAG(R, L, alpha, q, cx, cy, cz) * ur[q] -
                          wrow_edge_sum(&R, ur, q, nx, cx, cy, cz));

@@ -105,6 +105,72 @@ static inline float prolong_axis_weight(int coarsen, int nc, int i, int I)
  * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
  * corridors stalled near 3e-2). Coarse cell I takes fine cells 2I-1 .. 2I+2
  * along each coarsened axis, weighted as prolong_axis weights them. */
+/* Fine row (j,k) of P^T (pn .* r) along x into xl (ncx coarse cells); g: nfx
+ * floats of work. Coarse I takes 3/4 of fine 2I and 2I+1, 1/4 of 2I-1 and
+ * 2I+2; a fine cell at a wall gives all its weight to I. */
+static void restrict_t_row(const mg_level *F, const mg_level *C, const float *pn, const float *r,
+                           int j, int k, float *g, float *xl)
+{
+    const int nfx = F->n[0], ncx = C->n[0];
+    const size_t fb = F->sy * (size_t)j + F->sz * (size_t)k;
+    const float *rr = r + fb;
+    if (pn) {
+        const float *pr = pn + fb;
+        for (int i = 0; i < nfx; i++)
+            g[i] = pr[i] * rr[i];
+    } else {
+        memcpy(g, rr, (size_t)nfx * sizeof(float));
+    }
+    if (!F->coarsen[0]) {
+        memcpy(xl, g, (size_t)ncx * sizeof(float));
+        return;
+    }
+    for (int I = 0; I < ncx; I++) {
+        const int i0 = 2 * I;
+        float v = 0.75f * g[i0];
+        if (i0 + 1 < nfx)
+            v += 0.75f * g[i0 + 1];
+        if (i0 > 0)
+            v += 0.25f * g[i0 - 1];
+        if (i0 + 2 < nfx)
+            v += 0.25f * g[i0 + 2];
+        xl[I] = v;
+    }
+    xl[0] += 0.25f * g[0];
+    if ((nfx & 1) == 0)
+        xl[ncx - 1] += 0.25f * g[nfx - 1];
+}
+
+/* Coarse plane K from its accumulated sums: scaled, 0 on empty coarse cells. */
+static void restrict_t_flush(const mg_level *C, const float *acc, int K, float scale,
+                             float *fcoarse)
+{
+    const int ncx = C->n[0];
+    for (int J = 0; J < C->n[1]; J++) {
+        const size_t cb = C->sy * (size_t)J + C->sz * (size_t)K;
+        const float *ar = acc + (size_t)ncx * J;
+        float *out = fcoarse + cb;
+        if (C->plain)
+            for (int I = 0; I < ncx; I++)
+                out[I] = ar[I] * scale;
+        else
+            for (int I = 0; I < ncx; I++)
+                out[I] = C->a[cb + I] != 0.0f ? ar[I] * scale : 0.0f;
+    }
+}
+
+/* f_C = P^T r_F / 2^d: the restriction that makes the V-cycle a symmetric
+ * operator, for use as a CG preconditioner (mean-of-children restriction is not
+ * proportional to P^T, and CG then loses conjugacy: measured, Poisson in long
+ * corridors stalled near 3e-2). Coarse cell I takes fine cells 2I-1 .. 2I+2
+ * along each coarsened axis, weighted as prolong_axis weights them.
+ *
+ * Separable: P's weights are products of one weight per axis, so P^T is
+ * applied along x to each fine row, then scattered along y and z into the
+ * coarse planes (the transpose of prolong_axis, axis by axis). Each thread
+ * owns coarse planes [K0,K1) and reads its fine planes once, in order, into
+ * two accumulating coarse planes (a fine plane reaches at most two); a plane
+ * is written out once its last fine plane is in. */
 void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, const float *pn,
                                const float *r, float *fcoarse, float *work, int nthreads)
 {
@@ -113,14 +179,14 @@ void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, co
     for (int b = 0; b < dim; b++)
         nchild *= co[b] ? 2 : 1;
     const float scale = 1.0f / (float)nchild;
-    const int nfx = F->n[0], nfy = F->n[1], ncx = C->n[0], ncy = C->n[1];
-    /* Separable: P's weights are products of one weight per axis, so P^T is
-     * applied along x to each fine row, then scattered along y and z into the
-     * coarse plane (the transpose of prolong_axis, axis by axis). */
+    const int nfy = F->n[1], nfz = F->n[2], ncx = C->n[0], ncy = C->n[1], ncz = C->n[2];
+    const size_t plane = (size_t)ncx * ncy;
     int nt = 1;
 #ifdef _OPENMP
     if (F->count > MG_PAR_MIN)
         nt = omp_get_max_threads() < nthreads ? omp_get_max_threads() : nthreads;
+    if (nt > ncz)
+        nt = ncz;
 #else
     (void)nthreads;
 #endif
@@ -131,51 +197,36 @@ void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, co
         t = omp_get_thread_num();
 #endif
         float *g = work + (size_t)t * mg_restrict_transpose_work(F, C);
-        float *xl = g + nfx, *acc = xl + ncx;
-#pragma omp for schedule(static)
-        for (int K = 0; K < C->n[2]; K++) {
-            memset(acc, 0, (size_t)ncx * ncy * sizeof(float));
-            const int klo = co[2] ? 2 * K - 1 : K, khi = co[2] ? 2 * K + 2 : K;
-            for (int k = klo < 0 ? 0 : klo; k <= khi && k < F->n[2]; k++) {
-                const float wk = prolong_axis_weight(co[2], C->n[2], k, K);
-                if (wk == 0)
+        float *xl = g + F->n[0], *acc = xl + ncx;
+        const int K0 = (int)((int64_t)ncz * t / nt), K1 = (int)((int64_t)ncz * (t + 1) / nt);
+        int owner[2] = {-1, -1}; /* the coarse plane in each accumulator */
+        const int kfirst = co[2] ? (2 * K0 - 1 < 0 ? 0 : 2 * K0 - 1) : K0;
+        const int klast = co[2] ? (2 * K1 > nfz - 1 ? nfz - 1 : 2 * K1) : K1 - 1;
+        for (int k = kfirst; K0 < K1 && k <= klast; k++) {
+            int nT = 0, K, Kb;
+            float wk1, wk[2];
+            float *ak[2];
+            prolong_axis(co[2], ncz, k, &K, &Kb, &wk1);
+            for (int q = 0; q < 2; q++) {
+                const int Kq = q ? Kb : K;
+                if ((q && Kb == K) || Kq < K0 || Kq >= K1)
                     continue;
-                for (int j = 0; j < nfy; j++) {
-                    const size_t fb = F->sy * (size_t)j + F->sz * (size_t)k;
-                    const float *rr = r + fb;
-                    if (pn) {
-                        const float *pr = pn + fb;
-                        for (int i = 0; i < nfx; i++)
-                            g[i] = pr[i] * rr[i];
-                    } else {
-                        memcpy(g, rr, (size_t)nfx * sizeof(float));
-                    }
-                    /* along x: coarse I takes 3/4 of fine 2I and 2I+1, 1/4 of 2I-1
-                     * and 2I+2; a fine cell at a wall gives all its weight to I */
-                    if (co[0]) {
-                        for (int I = 0; I < ncx; I++) {
-                            const int i0 = 2 * I;
-                            float v = 0.75f * g[i0];
-                            if (i0 + 1 < nfx)
-                                v += 0.75f * g[i0 + 1];
-                            if (i0 > 0)
-                                v += 0.25f * g[i0 - 1];
-                            if (i0 + 2 < nfx)
-                                v += 0.25f * g[i0 + 2];
-                            xl[I] = v;
-                        }
-                        xl[0] += 0.25f * g[0];
-                        if ((nfx & 1) == 0)
-                            xl[ncx - 1] += 0.25f * g[nfx - 1];
-                    } else {
-                        memcpy(xl, g, (size_t)ncx * sizeof(float));
-                    }
-                    /* along y: fine row j goes to its two coarse rows */
-                    int J0, J1;
-                    float wj1;
-                    prolong_axis(co[1], ncy, j, &J0, &J1, &wj1);
-                    float *a0 = acc + (size_t)ncx * J0, *a1 = acc + (size_t)ncx * J1;
-                    const float w0 = wk * (1.0f - wj1), w1 = wk * wj1;
+                ak[nT] = acc + plane * (size_t)(Kq & 1);
+                if (owner[Kq & 1] != Kq) {
+                    memset(ak[nT], 0, plane * sizeof(float));
+                    owner[Kq & 1] = Kq;
+                }
+                wk[nT] = prolong_axis_weight(co[2], ncz, k, Kq);
+                nT += wk[nT] != 0;
+            }
+            for (int j = 0; nT > 0 && j < nfy; j++) {
+                restrict_t_row(F, C, pn, r, j, k, g, xl);
+                int J0, J1;
+                float wj1;
+                prolong_axis(co[1], ncy, j, &J0, &J1, &wj1);
+                for (int q = 0; q < nT; q++) {
+                    float *a0 = ak[q] + (size_t)ncx * J0, *a1 = ak[q] + (size_t)ncx * J1;
+                    const float w0 = wk[q] * (1.0f - wj1), w1 = wk[q] * wj1;
                     for (int I = 0; I < ncx; I++)
                         a0[I] += w0 * xl[I];
                     if (w1 != 0)
@@ -183,16 +234,14 @@ void hv__mg_restrict_transpose(const mg_level *F, const mg_level *C, int dim, co
                             a1[I] += w1 * xl[I];
                 }
             }
-            for (int J = 0; J < ncy; J++) {
-                const size_t cb = C->sy * (size_t)J + C->sz * (size_t)K;
-                const float *ar = acc + (size_t)ncx * J;
-                float *out = fcoarse + cb;
-                if (C->plain)
-                    for (int I = 0; I < ncx; I++)
-                        out[I] = ar[I] * scale;
-                else
-                    for (int I = 0; I < ncx; I++)
-                        out[I] = C->a[cb + I] != 0.0f ? ar[I] * scale : 0.0f;
+            /* planes whose last fine plane was k */
+            for (int q = 0; q < 2; q++) {
+                const int Kq = owner[q];
+                const int last = co[2] ? (2 * Kq + 2 > nfz - 1 ? nfz - 1 : 2 * Kq + 2) : Kq;
+                if (Kq >= 0 && (last <= k || k == klast)) {
+                    restrict_t_flush(C, acc + plane * (size_t)q, Kq, scale, fcoarse);
+                    owner[q] = -1;
+                }
             }
         }
     }
@@ -317,7 +366,7 @@ MG_KERNEL static void prolong_row_weighted(mg_level *F, const mg_level *C, int j
     const float a10 = wk1 * (1 - wj1), a11 = wk1 * wj1;
     const float *uc = C->u, *ac = C->a;
     const int nc = C->n[0], nf = F->n[0];
-    float line[MG_ROW_BUF], lw[MG_ROW_BUF];
+    float line[3 * MG_ROW_BUF], lw[MG_ROW_BUF];
     for (int I = 0; I < nc; I++) {
         const float m00 = ac[o00 + I] != 0.0f ? a00 : 0.0f, m01 = ac[o01 + I] != 0.0f ? a01 : 0.0f;
         const float m10 = ac[o10 + I] != 0.0f ? a10 : 0.0f, m11 = ac[o11 + I] != 0.0f ? a11 : 0.0f;
@@ -334,20 +383,21 @@ MG_KERNEL static void prolong_row_weighted(mg_level *F, const mg_level *C, int j
         return;
     }
     /* i = 2I takes 3/4 of I and 1/4 of I-1, i = 2I+1 3/4 of I and 1/4 of I+1;
-     * all of I where that neighbour is beyond a wall */
-    for (int i = 0; i < nf; i++) {
-        const int I = i >> 1, nb = (i & 1) ? I + 1 : I - 1;
-        float s, w;
-        if (nb < 0 || nb >= nc) {
-            s = line[I];
-            w = lw[I];
-        } else {
-            s = 0.75f * line[I] + 0.25f * line[nb];
-            w = 0.75f * lw[I] + 0.25f * lw[nb];
-        }
-        if ((!af || af[i] != 0.0f) && w > 0)
-            uf[i] += s / w;
+     * all of I where that neighbour is beyond a wall. The corrections at fine
+     * resolution first (even and odd cells of each I, without branches inside),
+     * then added where the fine cell is not empty. */
+    float *vf = line + MG_ROW_BUF; /* 2 nc cells: nf, and one beyond when nf is odd */
+    for (int I = 0; I < nc; I++) {
+        const int lo = I > 0 ? I - 1 : I, hi = I + 1 < nc ? I + 1 : I;
+        const float se = I > 0 ? 0.75f * line[I] + 0.25f * line[lo] : line[I];
+        const float we = I > 0 ? 0.75f * lw[I] + 0.25f * lw[lo] : lw[I];
+        const float so = I + 1 < nc ? 0.75f * line[I] + 0.25f * line[hi] : line[I];
+        const float wo = I + 1 < nc ? 0.75f * lw[I] + 0.25f * lw[hi] : lw[I];
+        vf[2 * I] = we > 0 ? se / (we > 0 ? we : 1.0f) : 0.0f;
+        vf[2 * I + 1] = wo > 0 ? so / (wo > 0 ? wo : 1.0f) : 0.0f;
     }
+    for (int i = 0; i < nf; i++)
+        uf[i] += (!af || af[i] != 0.0f) ? vf[i] : 0.0f;
 }
 
 /* u_F += P u_C: cell-centred (bi/tri)linear interpolation. On weighted coarse
