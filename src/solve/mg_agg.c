@@ -202,35 +202,32 @@ static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
 
 #define AGG_CHUNK 64
 
-/* y = A x on rows [c0, c1) of a level with a template: a chunk of plain rows
- * as a stencil (vectorized over the rows), the others row by row. */
+/* y = A x on rows [c0, c1) of a level with a template: each run of plain
+ * rows as a stencil (vectorized over the run), the others from the matrix.
+ * Runs, not whole chunks: the blocks at the ends of every x row of blocks are
+ * not plain, so nearly every chunk holds a few. */
 static void apply_chunk(const agg_op *o, const float *x, float *y, int32_t c0, int32_t c1)
 {
     const mg_alevel *L = o->lv;
-    int all = 1;
-    for (int32_t c = c0; c < c1 && all; c++)
-        all = L->plain[c];
-    if (all) {
-        float acc[AGG_CHUNK] = {0};
-        const int m = c1 - c0;
-        for (int e = 0; e < L->tn; e++) {
-            const float t = L->tval[e], *xs = x + c0 + L->toff[e];
-            for (int i = 0; i < m; i++)
-                acc[i] += t * xs[i];
-        }
-        for (int i = 0; i < m; i++)
-            y[c0 + i] = acc[i];
-        return;
-    }
-    for (int32_t c = c0; c < c1; c++) {
+    for (int32_t c = c0; c < c1;) {
         if (!L->plain[c]) {
             y[c] = csr_row_dot(o->A, c, x);
+            c++;
             continue;
         }
-        float s = 0;
-        for (int e = 0; e < L->tn; e++)
-            s += L->tval[e] * x[c + L->toff[e]];
-        y[c] = s;
+        int32_t e = c + 1;
+        while (e < c1 && L->plain[e])
+            e++;
+        float acc[AGG_CHUNK] = {0};
+        const int m = e - c;
+        for (int t = 0; t < L->tn; t++) {
+            const float v = L->tval[t], *xs = x + c + L->toff[t];
+            for (int i = 0; i < m; i++)
+                acc[i] += v * xs[i];
+        }
+        for (int i = 0; i < m; i++)
+            y[c + i] = acc[i];
+        c = e;
     }
 }
 
