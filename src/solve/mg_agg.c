@@ -1187,11 +1187,131 @@ static void csr_apply(const mg_csr *M, const float *x, float *y)
         y[r] = csr_row_dot(M, r, x);
 }
 
+/* Neighbour rows of row (j,k) of the fine level and their coefficients: the
+ * row itself with coefficient 0 at the box's faces. */
+typedef struct fine_nb {
+    size_t base;
+    ptrdiff_t o[4]; /* y-, y+, z-, z+ */
+    float c[4];
+} fine_nb;
+
+static fine_nb fine_nb_at(const mg_level *F, int dim, int j, int k)
+{
+    fine_nb R;
+    const float cy = (float)F->c[1], cz = (float)F->c[2];
+    R.base = F->sy * (size_t)j + F->sz * (size_t)k;
+    R.o[0] = j > 0 ? -(ptrdiff_t)F->sy : 0;
+    R.o[1] = j < F->n[1] - 1 ? (ptrdiff_t)F->sy : 0;
+    R.o[2] = dim == 3 && k > 0 ? -(ptrdiff_t)F->sz : 0;
+    R.o[3] = dim == 3 && k < F->n[2] - 1 ? (ptrdiff_t)F->sz : 0;
+    R.c[0] = R.o[0] ? cy : 0;
+    R.c[1] = R.o[1] ? cy : 0;
+    R.c[2] = R.o[2] ? cz : 0;
+    R.c[3] = R.o[3] ? cz : 0;
+    return R;
+}
+
+/* sum_b c_b sum_nb x_nb s_nb over the open faces of cell i of a binary fine
+ * row (s NULL: 1), the x neighbours where the row has them. */
+#define FINE_NB_SUM(R, x, s, i, nx, cx)                                                            \
+    ((cx) * (((i) > 0 ? (x)[(R).base + (i)-1] * ((s) ? (s)[(R).base + (i)-1] : 1.0f) : 0.0f) +     \
+             ((i) < (nx)-1 ? (x)[(R).base + (i) + 1] * ((s) ? (s)[(R).base + (i) + 1] : 1.0f)      \
+                           : 0.0f)) +                                                              \
+     (R).c[0] * (x)[(R).base + (i) + (R).o[0]] * ((s) ? (s)[(R).base + (i) + (R).o[0]] : 1.0f) +   \
+     (R).c[1] * (x)[(R).base + (i) + (R).o[1]] * ((s) ? (s)[(R).base + (i) + (R).o[1]] : 1.0f) +   \
+     (R).c[2] * (x)[(R).base + (i) + (R).o[2]] * ((s) ? (s)[(R).base + (i) + (R).o[2]] : 1.0f) +   \
+     (R).c[3] * (x)[(R).base + (i) + (R).o[3]] * ((s) ? (s)[(R).base + (i) + (R).o[3]] : 1.0f))
+
+/* Row (j,k) of v = r - wp D^-1 A D^-1 r on a binary fine level, without
+ * forming D^-1 r: on a fluid cell D^-1 A D^-1 r = dinv r - dinv sum c_b dinv_nb
+ * r_nb times D dinv = 1, so v = r - wp a (r - sum c_b dinv_nb r_nb); dinv is 0
+ * on solid cells, which closes their faces. */
+static void restrict0_row(const mg_level *F, int dim, double wp, const float *r, float *v, int j,
+                          int k)
+{
+    const fine_nb R = fine_nb_at(F, dim, j, k);
+    const int nx = F->n[0];
+    const float cx = (float)F->c[0], w = (float)wp;
+    const float *dv = F->dinv, *a = F->a + R.base, *rr = r + R.base;
+    float *vr = v + R.base;
+    for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
+        vr[i] = rr[i] - w * a[i] * (rr[i] - FINE_NB_SUM(R, r, dv, i, nx, cx));
+    const float *d0 = dv + R.base, *r0 = rr;
+    const float *dm = d0 + R.o[0], *dp = d0 + R.o[1], *dzm = d0 + R.o[2], *dzp = d0 + R.o[3];
+    const float *rm = r0 + R.o[0], *rp = r0 + R.o[1], *rzm = r0 + R.o[2], *rzp = r0 + R.o[3];
+    for (int i = 1; i < nx - 1; i++) {
+        float sn = cx * (d0[i - 1] * r0[i - 1] + d0[i + 1] * r0[i + 1]) + R.c[0] * dm[i] * rm[i] +
+                   R.c[1] * dp[i] * rp[i] + R.c[2] * dzm[i] * rzm[i] + R.c[3] * dzp[i] * rzp[i];
+        vr[i] = rr[i] - w * a[i] * (rr[i] - sn);
+    }
+}
+
+/* Row (j,k) of u += t - wp D^-1 A t on a binary fine level, t = P0 u_1 (0 on
+ * solid cells): D^-1 A t = a (t - dinv sum c_b t_nb). */
+static void prolong0_row(const mg_level *F, int dim, double wp, const float *t, float *u, int j,
+                         int k)
+{
+    const fine_nb R = fine_nb_at(F, dim, j, k);
+    const int nx = F->n[0];
+    const float cx = (float)F->c[0], w = (float)wp;
+    const float *dv = F->dinv + R.base, *a = F->a + R.base, *t0 = t + R.base;
+    float *ur = u + R.base;
+    const float *none = NULL;
+    for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
+        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * FINE_NB_SUM(R, t, none, i, nx, cx));
+    const float *tm = t0 + R.o[0], *tp = t0 + R.o[1], *tzm = t0 + R.o[2], *tzp = t0 + R.o[3];
+    for (int i = 1; i < nx - 1; i++) {
+        float sn = cx * (t0[i - 1] + t0[i + 1]) + R.c[0] * tm[i] + R.c[1] * tp[i] +
+                   R.c[2] * tzm[i] + R.c[3] * tzp[i];
+        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * sn);
+    }
+}
+
+/* f_1 = P^T r on a binary fine level: v = r - wp A D^-1 r row by row (D^-1 r
+ * never stored), then summed over each aggregate's members. */
+static void restrict0_binary(mg_agg *g, const float *r)
+{
+    const mg_level *F = g->fine;
+    mg_alevel *L = &g->lv[0], *C = &g->lv[1];
+    const double wp = AGG_OMEGA / L->lmax;
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > AGG_PAR_MIN)
+    for (int k = 0; k < F->n[2]; k++)
+        for (int j = 0; j < F->n[1]; j++)
+            restrict0_row(F, g->dim, wp, r, L->t, j, k);
+#pragma omp parallel for schedule(static) if (C->n > AGG_PAR_MIN)
+    for (int32_t I = 0; I < C->n; I++) {
+        double s = 0;
+        for (size_t q = L->mrp[I]; q < L->mrp[I + 1]; q++)
+            s += L->t[L->mem[q]];
+        C->f[I] = (float)s;
+    }
+}
+
+/* u += P u_1 on a binary fine level: t = P0 u_1, then u += t - wp D^-1 A t
+ * row by row. */
+static void prolong0_binary(mg_agg *g, float *u)
+{
+    const mg_level *F = g->fine;
+    mg_alevel *L = &g->lv[0], *C = &g->lv[1];
+    const double wp = AGG_OMEGA / L->lmax;
+#pragma omp parallel for schedule(static) if (L->n > AGG_PAR_MIN)
+    for (int32_t c = 0; c < L->n; c++)
+        L->t[c] = L->agg[c] >= 0 ? C->u[L->agg[c]] : 0.0f;
+#pragma omp parallel for collapse(2) schedule(static) if (F->count > AGG_PAR_MIN)
+    for (int k = 0; k < F->n[2]; k++)
+        for (int j = 0; j < F->n[1]; j++)
+            prolong0_row(F, g->dim, wp, L->t, u, j, k);
+}
+
 static void restrict_to(mg_agg *g, int l, const float *r)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
     if (L->R.rp) {
         csr_apply(&L->R, r, C->f);
+        return;
+    }
+    if (l == 0 && g->fine->binary) {
+        restrict0_binary(g, r);
         return;
     }
     agg_op o = level_op(g, l);
@@ -1215,6 +1335,10 @@ static void restrict_to(mg_agg *g, int l, const float *r)
 static void prolong_add(mg_agg *g, int l, float *u)
 {
     mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
+    if (l == 0 && g->fine->binary) {
+        prolong0_binary(g, u);
+        return;
+    }
     if (L->P.rp) {
         csr_apply(&L->P, C->u, L->t);
 #pragma omp parallel for schedule(static) if (L->n > AGG_PAR_MIN)
