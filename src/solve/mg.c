@@ -61,7 +61,7 @@ static void mg_destroy(void *state)
     hv_free(m->rt_work);
     hv_free(m->rd);
     hv_free(m->p);
-    hv_free(m->z);
+    free(m->zsum);
     hv_free(m->q);
     free(m);
 }
@@ -170,10 +170,16 @@ static hv_status mg_create(void **state, const hv_setup *s)
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
         m->p = hv_malloc(n0 * sizeof(float));
-        m->z = m->alpha == 0 ? hv_malloc(n0 * sizeof(double)) : NULL; /* heat: z in lv[0].u */
+        m->zsum_threads = 1;
+#ifdef _OPENMP
+        m->zsum_threads = omp_get_max_threads();
+#endif
+        m->zsum_per = ((size_t)3 * (s->region ? s->nregion : 1) + 1 + 7) & ~(size_t)7;
+        m->zsum =
+            m->alpha == 0 ? calloc(m->zsum_per * (size_t)m->zsum_threads, sizeof(double)) : NULL;
         m->q = hv_malloc(n0 * sizeof(double));
     }
-    if (!m->rd || (m->use_pcg && (!m->p || (m->alpha == 0 && !m->z) || !m->q))) {
+    if (!m->rd || (m->use_pcg && (!m->p || (m->alpha == 0 && !m->zsum) || !m->q))) {
         st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
         goto fail;
     }
@@ -327,28 +333,9 @@ static double load_rhs(const mg_state *m, const double *f)
 }
 
 /* z = M r: one symmetric V-cycle from zero on level 0's f, which holds r in
- * float (fine_residual and it_pcg_step leave it there). Heat steps leave z in
- * level 0's u (z == NULL); Poisson's z is copied out in double and projected. */
-static void precondition(mg_state *m, double *z)
-{
-    mg_level *L0 = &m->lv[0];
-    hv__mg_vcycle(m, 0, 0, 1);
-    if (!z)
-        return;
-#pragma omp parallel for schedule(static) if (L0->count > MG_PAR_MIN)
-    for (size_t c = 0; c < L0->count; c++)
-        z[c] = L0->u[c];
-    hv__project_mean(m->s, z);
-}
-
-static double pdot(const double *a, const double *b, size_t n)
-{
-    double s = 0;
-#pragma omp parallel for reduction(+ : s) schedule(static) if (n > MG_PAR_MIN)
-    for (size_t i = 0; i < n; i++)
-        s += a[i] * b[i];
-    return s;
-}
+ * float (fine_residual and it_pcg_step leave it there); z is left in level
+ * 0's u (Poisson: before its projection, pcg_direction's). */
+static void precondition(mg_state *m) { hv__mg_vcycle(m, 0, 0, 1); }
 
 /* ---------- the outer iterations' steps (iterate.h) ---------- */
 
@@ -420,26 +407,95 @@ static hv_status it_correct(void *ctx, int it, double rel, hv_solve_info *info, 
     return HV_OK;
 }
 
+static int thread_id(void)
+{
+#ifdef _OPENMP
+    return omp_get_thread_num();
+#else
+    return 0;
+#endif
+}
+
+/* Poisson: z = level 0's u made mean-free in each region (as hv__project_mean),
+ * never stored: one pass sums u and r per region and r.u, per thread, added
+ * in thread order (the same on every run). Leaves the regions' means in
+ * zsum[1 + 3 g] and returns r.z = r.u - sum_g mean_g (sum of r over g). */
+static double poisson_rz(mg_state *m)
+{
+    const hv_setup *s = m->s;
+    const float *u = m->lv[0].u;
+    const double *r = m->rd;
+    const int32_t *reg = s->region;
+    const int ng = reg ? s->nregion : 1;
+    const size_t per = m->zsum_per;
+    double *acc = m->zsum;
+    memset(acc, 0, per * (size_t)m->zsum_threads * sizeof *acc);
+#pragma omp parallel num_threads(m->zsum_threads) if (s->count > MG_PAR_MIN)
+    {
+        double *a = acc + per * (size_t)thread_id();
+        if (ng == 1) { /* in registers: the loop vectorizes */
+            double ru = 0, su = 0, sr = 0, cnt = 0;
+#pragma omp for schedule(static)
+            for (size_t c = 0; c < s->count; c++) {
+                const double in = !reg || reg[c] >= 0;
+                ru += in * r[c] * (double)u[c];
+                su += in * (double)u[c];
+                sr += in * r[c];
+                cnt += in;
+            }
+            a[0] = ru;
+            a[1] = su;
+            a[2] = sr;
+            a[3] = cnt;
+        } else {
+#pragma omp for schedule(static)
+            for (size_t c = 0; c < s->count; c++) {
+                int g = reg[c];
+                if (g < 0)
+                    continue;
+                a[0] += r[c] * (double)u[c];
+                a[1 + 3 * g] += u[c];
+                a[2 + 3 * g] += r[c];
+                a[3 + 3 * g] += 1;
+            }
+        }
+    }
+    for (int t = 1; t < m->zsum_threads; t++)
+        for (size_t q = 0; q < 1 + 3 * (size_t)ng; q++)
+            acc[q] += acc[per * (size_t)t + q];
+    double rz = acc[0];
+    for (int g = 0; g < ng; g++) {
+        double mean = acc[3 + 3 * g] > 0 ? acc[1 + 3 * g] / acc[3 + 3 * g] : 0.0;
+        acc[1 + 3 * g] = mean;
+        rz -= mean * acc[2 + 3 * g];
+    }
+    return rz;
+}
+
 /* PCG's next direction from z = M r (precondition): p = z + be p, with
- * be = (r.z) / rz and rz = r.z after; be = 0 on the first (p = z). Heat
- * steps read z from level 0's float u, in two passes (r.z, then p). */
+ * be = (r.z) / rz and rz = r.z after; be = 0 on the first (p = z). z is
+ * level 0's float u, for Poisson less its region's mean; two passes (r.z,
+ * then p). */
 static void pcg_direction(mg_iter *c, int first)
 {
     mg_state *m = c->m;
     const size_t n = m->s->count;
     const double *r = m->rd;
+    const float *z = m->lv[0].u;
     float *p = m->p;
-    double rz2, be;
+    double rz2 = 0, be;
     if (m->alpha == 0) {
-        const double *z = m->z;
-        rz2 = pdot(r, z, n);
+        const int32_t *reg = m->s->region;
+        const double *mean = m->zsum + 1;
+        rz2 = poisson_rz(m);
         be = first ? 0.0 : rz2 / c->rz;
 #pragma omp parallel for schedule(static) if (n > MG_PAR_MIN)
-        for (size_t i = 0; i < n; i++)
-            p[i] = (float)(first ? z[i] : z[i] + be * p[i]);
+        for (size_t i = 0; i < n; i++) {
+            int g = reg ? reg[i] : 0;
+            double zi = g >= 0 ? (double)z[i] - mean[3 * (g > 0 ? g : 0)] : 0.0;
+            p[i] = (float)(first ? zi : zi + be * p[i]);
+        }
     } else {
-        const float *z = m->lv[0].u;
-        rz2 = 0;
 #pragma omp parallel for reduction(+ : rz2) schedule(static) if (n > MG_PAR_MIN)
         for (size_t i = 0; i < n; i++)
             rz2 += r[i] * (double)z[i];
@@ -454,7 +510,7 @@ static void pcg_direction(mg_iter *c, int first)
 static hv_status it_pcg_start(void *ctx, hv_solve_info *info)
 {
     mg_iter *c = ctx;
-    precondition(c->m, c->m->alpha == 0 ? c->m->z : NULL);
+    precondition(c->m);
     info->cycles = 1;
     pcg_direction(c, 1);
     return HV_OK;
@@ -522,7 +578,7 @@ static hv_status it_pcg_step(void *ctx, double *pq_out, double *norm)
 static hv_status it_pcg_next(void *ctx, hv_solve_info *info)
 {
     mg_iter *c = ctx;
-    precondition(c->m, c->m->alpha == 0 ? c->m->z : NULL);
+    precondition(c->m);
     info->cycles++;
     pcg_direction(c, 0);
     return HV_OK;

@@ -42,7 +42,10 @@ typedef struct mg_state {
     hv_smoother smoother;
     int pre, post;
     int use_pcg;
-    double *rd, *z;              /* fine double work: the residual, Poisson's z = M r */
+    double *rd;      /* fine double work: the residual */
+    double *zsum;    /* PCG, Poisson: per-thread sums for z's projection */
+    size_t zsum_per; /* doubles per thread in zsum (whole cache lines) */
+    int zsum_threads;
     float *p;                    /* PCG's direction (A p is formed in double) */
     double *q;                   /* PCG: A p */
     float *pnorm[MG_MAX_LEVELS]; /* PCG: 1 / prolongation weight sum per fine cell, where
