@@ -566,7 +566,9 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
         st->plain[l] = L->plain;
         double cells = (double)L->count;
         double coef = L->plain ? 0 : fused && L->binary ? 4.0 : 4.0 * (2 + dim);
-        int rb_fused = L->plain && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8;
+        /* the CPU fuses every 3D level's sweeps, the device plain levels' */
+        int rb_fused =
+            (L->plain || fused) && dim == 3 && L->n[2] >= 3 && L->n[1] >= 8 && L->n[0] <= 4096;
         double sweep = smoother == HV_SMOOTH_RBGS ? (rb_fused ? 1 : 2) * (12 + coef) : 32 + coef;
         int steps = smoother == HV_SMOOTH_CHEBYSHEV ? 2 * (pre + post) : pre + post;
         mem += L->count * (3 + (smoother != HV_SMOOTH_RBGS)) * sizeof(float);
@@ -600,9 +602,14 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
     st->bytes_per_cycle = fused && !pcg ? bytes : 0;
     if (fused && !pcg)
         bytes += n0 * (8 + 4 + 8 + 8 + 4);
+    else if (fused) /* CPU PCG (mg.c): q = A p with p.q; x, r, f; r.z; p (float) */
+        bytes += n0 * ((4 + 4 + 8) + (8 + 8 + 4 + 8 + 8 + 8 + 4) + (8 + 4) + (4 + 4 + 4));
     else
         bytes += n0 * (8 + 8 + 4 + 8 + 4 + 8);
-    mem += lv[0].count * sizeof(double) * (pcg ? 4 : 1);
+    /* double work on the fine level: the residual; PCG also A p (double) and p
+     * (float on the CPU, double on the device, with z) */
+    mem += lv[0].count * (pcg ? (fused ? 2 * sizeof(double) + sizeof(float) : 4 * sizeof(double))
+                              : sizeof(double));
     st->bytes_per_iteration = bytes;
     st->memory_bytes = mem;
 }
