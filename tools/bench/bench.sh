@@ -36,7 +36,10 @@ for o in ball baffles maze; do
     "$hv" bench solve --n 128 --poisson --obstacle $o --coarse $c --wisdom "$wisdom"
   done
 done
-"$hv" bench solve --n 256 --t-scale 4 --obstacle ball --coarse geometric --wisdom "$wisdom"
+# Heat steps with walls at 256^3, against the plain box's heat step above.
+for o in ball baffles maze; do
+  "$hv" bench solve --n 256 --t-scale 4 --obstacle $o --coarse geometric --wisdom "$wisdom"
+done
 for o in baffles maze; do
   for c in geometric aggregation; do
     "$hv" bench solve --n 256 --poisson --obstacle $o --coarse $c --wisdom "$wisdom"
