@@ -150,17 +150,11 @@ __attribute__((target("avx512f"))) static void residual_row_avx512(const float *
     const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
                  vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp),
                  vdin = _mm512_set1_ps(dyz + 2 * cx);
-    const int nq = (nx + 15) / 16, last = nx - 1;
-    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
-    __m512i prev = _mm512_setzero_si512();
-    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
-    for (int c = 0, q = 0; c < nq; c++, q += 16) {
-        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
-                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                                  : _mm512_setzero_si512();
-        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
-        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+    const int last = nx - 1;
+    mg_x16 X = mg_x16_start(ur, nx);
+    for (int c = 0, q = 0; c < X.nq; c++, q += 16) {
+        __m512 uc, um, up;
+        const __mmask16 valid = mg_x16_next(&X, c, &uc, &um, &up);
         __m512 sm =
             _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(valid, fr + q));
         sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
@@ -170,14 +164,12 @@ __attribute__((target("avx512f"))) static void residual_row_avx512(const float *
         __m512 d = vdin;
         if (c == 0)
             d = _mm512_mask_mov_ps(d, 1, _mm512_set1_ps(nx > 1 ? dyz + cx : dyz));
-        if (c + 1 == nq && last > 0)
+        if (c + 1 == X.nq && last > 0)
             d = _mm512_mask_mov_ps(d, (__mmask16)(1u << (last - q)), _mm512_set1_ps(dyz + cx));
-        __m512 r = _mm512_fnmadd_ps(d, _mm512_castsi512_ps(cur), sm);
+        __m512 r = _mm512_fnmadd_ps(d, uc, sm);
         __m512 l = _mm512_loadu_ps(line + q);
         _mm512_storeu_ps(line + q,
                          _mm512_mask_add_ps(l, valid, l, r)); /* line stays zero beyond nx */
-        prev = cur;
-        cur = next;
     }
 }
 

@@ -27,6 +27,48 @@
 #define MG_AVX512 0
 #endif
 
+#if MG_AVX512
+/* A float row of nx cells walked in 16-lane chunks, each chunk's x neighbours
+ * formed by lane shifts (valignd) of the chunks beside it, zero lanes beyond
+ * the row's ends: one load per chunk instead of two unaligned ones that
+ * straddle cache lines. mg_x16_start, then mg_x16_next for chunks 0 .. nq-1
+ * in order. A kernel may store into the row's cells of one colour between
+ * calls: the neighbours it reads are of the other. */
+typedef struct mg_x16 {
+    const float *row;
+    int nq;
+    __mmask16 tail; /* the last chunk's lanes inside the row */
+    __m512i prev, cur;
+} mg_x16;
+
+__attribute__((target("avx512f"))) static inline mg_x16 mg_x16_start(const float *row, int nx)
+{
+    mg_x16 s;
+    s.row = row;
+    s.nq = (nx + 15) / 16;
+    s.tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
+    s.prev = _mm512_setzero_si512();
+    s.cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(s.nq > 1 ? 0xFFFF : s.tail, row));
+    return s;
+}
+
+/* Chunk c: its cells in *u, their x neighbours in *um and *up; returns the
+ * chunk's lanes inside the row. */
+__attribute__((target("avx512f"))) static inline __mmask16 mg_x16_next(mg_x16 *s, int c, __m512 *u,
+                                                                       __m512 *um, __m512 *up)
+{
+    __m512i next = c + 1 < s->nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
+                                       c + 2 < s->nq ? 0xFFFF : s->tail, s->row + 16 * (c + 1)))
+                                 : _mm512_setzero_si512();
+    *u = _mm512_castsi512_ps(s->cur);
+    *um = _mm512_castsi512_ps(_mm512_alignr_epi32(s->cur, s->prev, 15));
+    *up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, s->cur, 1));
+    s->prev = s->cur;
+    s->cur = next;
+    return c + 1 < s->nq ? (__mmask16)0xFFFF : s->tail;
+}
+#endif
+
 /* Levels below this many cells run on one thread: fork-join and barrier costs
  * dominate there (measured: 84% of a 2048^2 solve spun in barriers without it). */
 #define MG_PAR_MIN 32768

@@ -49,17 +49,11 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(float *ur, const fl
     const float wall = dyz + cx, inv_wall = wall > 0 ? 1.0f / wall : 0.0f;
     const float inv_one = dyz > 0 ? 1.0f / dyz : 0.0f;
     const __mmask16 colour = i0 ? 0xAAAA : 0x5555; /* lane b is cell q + b, q even */
-    const int nq = (nx + 15) / 16, last = nx - 1;
-    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
-    __m512i prev = _mm512_setzero_si512();
-    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
-    for (int c = 0, q = 0; c < nq; c++, q += 16) {
-        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
-                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                                  : _mm512_setzero_si512();
-        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
-        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+    const int last = nx - 1;
+    mg_x16 X = mg_x16_start(ur, nx);
+    for (int c = 0, q = 0; c < X.nq; c++, q += 16) {
+        __m512 uc, um, up;
+        const __mmask16 valid = mg_x16_next(&X, c, &uc, &um, &up);
         const __mmask16 own = colour & valid;
         __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), _mm512_maskz_loadu_ps(own, fr + q));
         sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(own, ym + q), sm);
@@ -71,11 +65,9 @@ __attribute__((target("avx512f"))) static void rb_row_avx512(float *ur, const fl
             inv = _mm512_maskz_loadu_ps(own, dinv + q);
         else if (c == 0)
             inv = _mm512_mask_mov_ps(inv, 1, _mm512_set1_ps(nx > 1 ? inv_wall : inv_one));
-        if (!dinv && c + 1 == nq && last > 0)
+        if (!dinv && c + 1 == X.nq && last > 0)
             inv = _mm512_mask_mov_ps(inv, (__mmask16)(1u << (last - q)), _mm512_set1_ps(inv_wall));
         _mm512_mask_storeu_ps(ur + q, own, _mm512_mul_ps(sm, inv));
-        prev = cur;
-        cur = next;
     }
 }
 #endif
@@ -184,18 +176,10 @@ __attribute__((target("avx512f"))) static void rb_wrow_avx512(const mg_wrow *R, 
 {
     const __m512 vcx = _mm512_set1_ps(cx), vcy = _mm512_set1_ps(cy), vcz = _mm512_set1_ps(cz);
     const __mmask16 colour = i0 ? 0xAAAA : 0x5555;
-    const int nq = (nx + 15) / 16;
-    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
-    __m512i prev = _mm512_setzero_si512();
-    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, u));
-    for (int c = 0, q = 0; c < nq; c++, q += 16) {
-        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next =
-            c + 1 < nq
-                ? _mm512_castps_si512(_mm512_maskz_loadu_ps(c + 2 < nq ? 0xFFFF : tail, u + q + 16))
-                : _mm512_setzero_si512();
-        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
-        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+    mg_x16 X = mg_x16_start(u, nx);
+    for (int c = 0, q = 0; c < X.nq; c++, q += 16) {
+        __m512 uc, um, up;
+        const __mmask16 valid = mg_x16_next(&X, c, &uc, &um, &up);
         const __mmask16 own = colour & valid;
         __m512 sx = _mm512_mul_ps(_mm512_maskz_loadu_ps(own, R->wx + q), um);
         sx = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(own, R->wx + q + 1), up, sx);
@@ -213,8 +197,6 @@ __attribute__((target("avx512f"))) static void rb_wrow_avx512(const mg_wrow *R, 
             sm = _mm512_fmadd_ps(vcz, sz, sm);
         }
         _mm512_mask_storeu_ps(u + q, own, _mm512_mul_ps(sm, _mm512_maskz_loadu_ps(own, dinv + q)));
-        prev = cur;
-        cur = next;
     }
 }
 #endif
@@ -297,17 +279,10 @@ __attribute__((target("avx512f"))) static void residual_brow_avx512(
 {
     const __m512 vcx = _mm512_set1_ps(cx), vcym = _mm512_set1_ps(cym), vcyp = _mm512_set1_ps(cyp),
                  vczm = _mm512_set1_ps(czm), vczp = _mm512_set1_ps(czp);
-    const int nq = (nx + 15) / 16;
-    const __mmask16 tail = (__mmask16)(nx % 16 ? (1u << (nx % 16)) - 1u : 0xFFFFu);
-    __m512i prev = _mm512_setzero_si512();
-    __m512i cur = _mm512_castps_si512(_mm512_maskz_loadu_ps(nq > 1 ? 0xFFFF : tail, ur));
-    for (int c = 0, q = 0; c < nq; c++, q += 16) {
-        __mmask16 valid = c + 1 < nq ? (__mmask16)0xFFFF : tail;
-        __m512i next = c + 1 < nq ? _mm512_castps_si512(_mm512_maskz_loadu_ps(
-                                        c + 2 < nq ? 0xFFFF : tail, ur + q + 16))
-                                  : _mm512_setzero_si512();
-        __m512 um = _mm512_castsi512_ps(_mm512_alignr_epi32(cur, prev, 15));
-        __m512 up = _mm512_castsi512_ps(_mm512_alignr_epi32(next, cur, 1));
+    mg_x16 X = mg_x16_start(ur, nx);
+    for (int c = 0, q = 0; c < X.nq; c++, q += 16) {
+        __m512 uc, um, up;
+        const __mmask16 valid = mg_x16_next(&X, c, &uc, &um, &up);
         __m512 f = _mm512_maskz_loadu_ps(valid, fr + q);
         __m512 sm = _mm512_fmadd_ps(vcx, _mm512_add_ps(um, up), f);
         sm = _mm512_fmadd_ps(vcym, _mm512_maskz_loadu_ps(valid, ym + q), sm);
@@ -316,10 +291,8 @@ __attribute__((target("avx512f"))) static void residual_brow_avx512(
         sm = _mm512_fmadd_ps(vczp, _mm512_maskz_loadu_ps(valid, zp + q), sm);
         __m512 d = _mm512_maskz_loadu_ps(valid, dinv + q);
         __mmask16 full = _mm512_cmp_ps_mask(d, _mm512_setzero_ps(), _CMP_GT_OQ);
-        __m512 du = _mm512_maskz_div_ps(full, _mm512_castsi512_ps(cur), d);
+        __m512 du = _mm512_maskz_div_ps(full, uc, d);
         _mm512_mask_storeu_ps(rr + q, valid, _mm512_mask_sub_ps(f, full, sm, du));
-        prev = cur;
-        cur = next;
     }
 }
 #endif
