@@ -1187,40 +1187,34 @@ static void csr_apply(const mg_csr *M, const float *x, float *y)
         y[r] = csr_row_dot(M, r, x);
 }
 
-/* Neighbour rows of row (j,k) of the fine level and their coefficients: the
- * row itself with coefficient 0 at the box's faces. */
-typedef struct fine_nb {
-    size_t base;
-    ptrdiff_t o[4]; /* y-, y+, z-, z+ */
-    float c[4];
-} fine_nb;
-
-static fine_nb fine_nb_at(const mg_level *F, int dim, int j, int k)
+/* Coefficients of the y-, y+, z-, z+ faces of row R of fine level F: c_b, or 0
+ * at the box's faces (where R's neighbour offset is 0, the row itself). */
+static void fine_cyz(const mg_level *F, const mg_wrow *R, float c[4])
 {
-    fine_nb R;
     const float cy = (float)F->c[1], cz = (float)F->c[2];
-    R.base = F->sy * (size_t)j + F->sz * (size_t)k;
-    R.o[0] = j > 0 ? -(ptrdiff_t)F->sy : 0;
-    R.o[1] = j < F->n[1] - 1 ? (ptrdiff_t)F->sy : 0;
-    R.o[2] = dim == 3 && k > 0 ? -(ptrdiff_t)F->sz : 0;
-    R.o[3] = dim == 3 && k < F->n[2] - 1 ? (ptrdiff_t)F->sz : 0;
-    R.c[0] = R.o[0] ? cy : 0;
-    R.c[1] = R.o[1] ? cy : 0;
-    R.c[2] = R.o[2] ? cz : 0;
-    R.c[3] = R.o[3] ? cz : 0;
-    return R;
+    c[0] = R->ym ? cy : 0;
+    c[1] = R->yp ? cy : 0;
+    c[2] = R->zm ? cz : 0;
+    c[3] = R->zp ? cz : 0;
 }
 
-/* sum_b c_b sum_nb x_nb s_nb over the open faces of cell i of a binary fine
- * row (s NULL: 1), the x neighbours where the row has them. */
-#define FINE_NB_SUM(R, x, s, i, nx, cx)                                                            \
-    ((cx) * (((i) > 0 ? (x)[(R).base + (i)-1] * ((s) ? (s)[(R).base + (i)-1] : 1.0f) : 0.0f) +     \
-             ((i) < (nx)-1 ? (x)[(R).base + (i) + 1] * ((s) ? (s)[(R).base + (i) + 1] : 1.0f)      \
-                           : 0.0f)) +                                                              \
-     (R).c[0] * (x)[(R).base + (i) + (R).o[0]] * ((s) ? (s)[(R).base + (i) + (R).o[0]] : 1.0f) +   \
-     (R).c[1] * (x)[(R).base + (i) + (R).o[1]] * ((s) ? (s)[(R).base + (i) + (R).o[1]] : 1.0f) +   \
-     (R).c[2] * (x)[(R).base + (i) + (R).o[2]] * ((s) ? (s)[(R).base + (i) + (R).o[2]] : 1.0f) +   \
-     (R).c[3] * (x)[(R).base + (i) + (R).o[3]] * ((s) ? (s)[(R).base + (i) + (R).o[3]] : 1.0f))
+/* sum_b c_b sum_nb x_nb s_nb (s NULL: 1) over the faces of cell i of a binary
+ * fine row that the box has: the row's first and last cells, which the
+ * interior loops leave out. */
+static float fine_nb_sum(const mg_wrow *R, const float c[4], float cx, int nx, const float *x,
+                         const float *s, int i)
+{
+    const size_t q = R->base + (size_t)i;
+    const ptrdiff_t o[4] = {R->ym, R->yp, R->zm, R->zp};
+    float v = 0;
+    if (i > 0)
+        v += cx * x[q - 1] * (s ? s[q - 1] : 1.0f);
+    if (i < nx - 1)
+        v += cx * x[q + 1] * (s ? s[q + 1] : 1.0f);
+    for (int e = 0; e < 4; e++)
+        v += c[e] * x[q + o[e]] * (s ? s[q + o[e]] : 1.0f);
+    return v;
+}
 
 /* Row (j,k) of v = r - wp D^-1 A D^-1 r on a binary fine level, without
  * forming D^-1 r: on a fluid cell D^-1 A D^-1 r = dinv r - dinv sum c_b dinv_nb
@@ -1229,20 +1223,21 @@ static fine_nb fine_nb_at(const mg_level *F, int dim, int j, int k)
 static void restrict0_row(const mg_level *F, int dim, double wp, const float *r, float *v, int j,
                           int k)
 {
-    const fine_nb R = fine_nb_at(F, dim, j, k);
+    const mg_wrow R = mg_wrow_at(F, dim, j, k);
+    float c[4];
+    fine_cyz(F, &R, c);
     const int nx = F->n[0];
     const float cx = (float)F->c[0], w = (float)wp;
-    const float *dv = F->dinv, *a = F->a + R.base, *rr = r + R.base;
+    const float *d0 = F->dinv + R.base, *a = F->a + R.base, *r0 = r + R.base;
     float *vr = v + R.base;
     for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
-        vr[i] = rr[i] - w * a[i] * (rr[i] - FINE_NB_SUM(R, r, dv, i, nx, cx));
-    const float *d0 = dv + R.base, *r0 = rr;
-    const float *dm = d0 + R.o[0], *dp = d0 + R.o[1], *dzm = d0 + R.o[2], *dzp = d0 + R.o[3];
-    const float *rm = r0 + R.o[0], *rp = r0 + R.o[1], *rzm = r0 + R.o[2], *rzp = r0 + R.o[3];
+        vr[i] = r0[i] - w * a[i] * (r0[i] - fine_nb_sum(&R, c, cx, nx, r, F->dinv, i));
+    const float *dm = d0 + R.ym, *dp = d0 + R.yp, *dzm = d0 + R.zm, *dzp = d0 + R.zp;
+    const float *rm = r0 + R.ym, *rp = r0 + R.yp, *rzm = r0 + R.zm, *rzp = r0 + R.zp;
     for (int i = 1; i < nx - 1; i++) {
-        float sn = cx * (d0[i - 1] * r0[i - 1] + d0[i + 1] * r0[i + 1]) + R.c[0] * dm[i] * rm[i] +
-                   R.c[1] * dp[i] * rp[i] + R.c[2] * dzm[i] * rzm[i] + R.c[3] * dzp[i] * rzp[i];
-        vr[i] = rr[i] - w * a[i] * (rr[i] - sn);
+        float sn = cx * (d0[i - 1] * r0[i - 1] + d0[i + 1] * r0[i + 1]) + c[0] * dm[i] * rm[i] +
+                   c[1] * dp[i] * rp[i] + c[2] * dzm[i] * rzm[i] + c[3] * dzp[i] * rzp[i];
+        vr[i] = r0[i] - w * a[i] * (r0[i] - sn);
     }
 }
 
@@ -1251,18 +1246,19 @@ static void restrict0_row(const mg_level *F, int dim, double wp, const float *r,
 static void prolong0_row(const mg_level *F, int dim, double wp, const float *t, float *u, int j,
                          int k)
 {
-    const fine_nb R = fine_nb_at(F, dim, j, k);
+    const mg_wrow R = mg_wrow_at(F, dim, j, k);
+    float c[4];
+    fine_cyz(F, &R, c);
     const int nx = F->n[0];
     const float cx = (float)F->c[0], w = (float)wp;
     const float *dv = F->dinv + R.base, *a = F->a + R.base, *t0 = t + R.base;
     float *ur = u + R.base;
-    const float *none = NULL;
     for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
-        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * FINE_NB_SUM(R, t, none, i, nx, cx));
-    const float *tm = t0 + R.o[0], *tp = t0 + R.o[1], *tzm = t0 + R.o[2], *tzp = t0 + R.o[3];
+        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * fine_nb_sum(&R, c, cx, nx, t, NULL, i));
+    const float *tm = t0 + R.ym, *tp = t0 + R.yp, *tzm = t0 + R.zm, *tzp = t0 + R.zp;
     for (int i = 1; i < nx - 1; i++) {
-        float sn = cx * (t0[i - 1] + t0[i + 1]) + R.c[0] * tm[i] + R.c[1] * tp[i] +
-                   R.c[2] * tzm[i] + R.c[3] * tzp[i];
+        float sn = cx * (t0[i - 1] + t0[i + 1]) + c[0] * tm[i] + c[1] * tp[i] + c[2] * tzm[i] +
+                   c[3] * tzp[i];
         ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * sn);
     }
 }
