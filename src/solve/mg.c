@@ -433,7 +433,7 @@ static double poisson_rz(mg_state *m)
 #pragma omp parallel num_threads(m->zsum_threads) if (s->count > MG_PAR_MIN)
     {
         double *a = acc + per * (size_t)thread_id();
-        if (ng == 1) { /* in registers: the loop vectorizes */
+        if (ng == 1) { /* in registers: no store per cell */
             double ru = 0, su = 0, sr = 0, cnt = 0;
 #pragma omp for schedule(static)
             for (size_t c = 0; c < s->count; c++) {
