@@ -48,13 +48,15 @@ static cl_mem buffer(size_t n, const float *init)
     return m;
 }
 
-/* A 3D problem: a heat step, or Neumann Poisson around a solid ball. */
-static void problem(hv_problem *p, int n, int poisson, uint8_t **solid)
+/* A 3D problem (kind 0: a heat step; 1: Neumann Poisson around a solid ball;
+ * 2: a heat step around the ball). */
+static void problem(hv_problem *p, int n, int kind, uint8_t **solid)
 {
     const double h = 1.0 / n;
+    const int poisson = kind == 1;
     hv_problem q = {3, {n, n, n}, h, NULL, poisson ? 0.0 : 1.0, poisson ? 1.0 : 4 * h * h};
     *solid = NULL;
-    if (poisson) {
+    if (kind > 0) {
         *solid = calloc((size_t)n * n * n, 1);
         for (int k = 0; k < n; k++)
             for (int j = 0; j < n; j++)
@@ -78,17 +80,19 @@ static double max_rel_diff(const float *a, const float *b, size_t n)
     return m > 0 ? d / m : d;
 }
 
+static const char *const kind_name[] = {"heat", "poisson", "masked heat"};
+
 START_TEST(device_fields_should_give_what_host_arrays_give)
 {
-    for (int poisson = 0; poisson <= 1; poisson++) {
+    for (int kind = 0; kind <= 2; kind++) {
         const int n = 32;
         const size_t count = (size_t)n * n * n;
         hv_problem p;
         uint8_t *solid;
-        problem(&p, n, poisson, &solid);
+        problem(&p, n, kind, &solid);
         float *f = malloc(count * sizeof *f), *u_host = calloc(count, sizeof *u_host),
               *u_dev = calloc(count, sizeof *u_dev);
-        tl_fill_random(f, count, 7 + poisson);
+        tl_fill_random(f, count, 7 + kind); /* nonzero on solid cells too */
         hv_solver_opts o;
         hv_solver_opts_default(&o);
         o.backend = HV_BACKEND_OPENCL;
@@ -104,8 +108,8 @@ START_TEST(device_fields_should_give_what_host_arrays_give)
         TL_ASSERT_OK(hv_solver_create(&mg, &p, &om));
         TL_ASSERT_OK(hv_solver_solve(mg, f, u_mg, NULL));
         double dm = max_rel_diff(u_host, u_mg, count);
-        ck_assert_msg(dm < 1e-5, "%s: host arrays on opencl differ from mg by %g",
-                      poisson ? "poisson" : "heat", dm);
+        ck_assert_msg(dm < 1e-5, "%s: host arrays on opencl differ from mg by %g", kind_name[kind],
+                      dm);
         hv_solver_destroy(&mg);
         free(u_mg);
         TL_ASSERT_OK(hv_opencl_solver_create(&sv, &p, &o, ctx, dev, queue));
@@ -124,8 +128,8 @@ START_TEST(device_fields_should_give_what_host_arrays_give)
                                                  u_dev, 0, NULL, NULL),
                              CL_SUCCESS);
             double d = max_rel_diff(u_dev, u_host, count);
-            ck_assert_msg(d < 1e-5, "%s: device fields differ by %g (relative)",
-                          poisson ? "poisson" : "heat", d);
+            ck_assert_msg(d < 1e-5, "%s: device fields differ by %g (relative)", kind_name[kind],
+                          d);
             if (solid)
                 for (size_t c = 0; c < count; c++)
                     ck_assert(!solid[c] || u_dev[c] == 0.0f);
@@ -139,6 +143,64 @@ START_TEST(device_fields_should_give_what_host_arrays_give)
         free(u_host);
         free(u_dev);
     }
+}
+END_TEST
+
+/* A heat step with solid cells on fields on the device: f is zeroed on the
+ * solid cells there, not by a round trip through the host's front end. The
+ * profile of a queue of the caller's shows no write from the host in the
+ * solve (the PCG reads back only its few sums). */
+START_TEST(masked_heat_steps_should_stay_on_the_device)
+{
+    const int n = 24;
+    const size_t count = (size_t)n * n * n;
+    hv_problem p;
+    uint8_t *solid;
+    problem(&p, n, 2, &solid);
+    cl_int e;
+    cl_command_queue pq = clCreateCommandQueue(ctx, dev, CL_QUEUE_PROFILING_ENABLE, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    hv_solver_opts o;
+    hv_solver_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    hv_solver *sv = NULL;
+    TL_ASSERT_OK(hv_opencl_solver_create(&sv, &p, &o, ctx, dev, pq));
+    float *f = malloc(count * sizeof *f), *u = malloc(count * sizeof *u);
+    tl_fill_random(f, count, 11);
+    for (size_t c = 0; c < count; c++)
+        u[c] = 1.0f; /* the solve overwrites every cell, solid ones with 0 */
+    cl_mem fd = buffer(count, f), ud = buffer(count, u);
+    hv_opencl_kernel_time t[256];
+    hv_opencl_profile_take(t, 256); /* drops what the set-up moved */
+    hv_solve_info info;
+    TL_ASSERT_OK(hv_opencl_solve(sv, fd, ud, &info));
+    ck_assert(info.reason == HV_STOP_CONVERGED);
+    const int nt = hv_opencl_profile_take(t, 256);
+    ck_assert_msg(nt > 0, "the profiling queue recorded nothing");
+    /* A device without fp64 (or HEATVOX_OPENCL_FP64=0) solves through the host. */
+    hv_opencl_device d;
+    const char *no64 = getenv("HEATVOX_OPENCL_FP64");
+    const int fp64 = hv_opencl_probe(&d) == HV_OK && d.fp64 && !(no64 && !strcmp(no64, "0"));
+    for (int i = 0; fp64 && i < nt && i < 256; i++)
+        ck_assert_msg(strcmp(t[i].name, "write") != 0,
+                      "the solve wrote to the device from the host %ld times", (long)t[i].launches);
+    ck_assert_int_eq(
+        clEnqueueReadBuffer(pq, ud, CL_TRUE, 0, count * sizeof(float), u, 0, NULL, NULL),
+        CL_SUCCESS);
+    size_t nsolid = 0;
+    for (size_t c = 0; c < count; c++)
+        if (solid[c]) {
+            nsolid++;
+            ck_assert_msg(u[c] == 0.0f, "solid cell %zu holds %g", c, (double)u[c]);
+        }
+    ck_assert_uint_gt(nsolid, 0);
+    clReleaseMemObject(fd);
+    clReleaseMemObject(ud);
+    hv_solver_destroy(&sv);
+    clReleaseCommandQueue(pq);
+    free(solid);
+    free(f);
+    free(u);
 }
 END_TEST
 
@@ -457,6 +519,7 @@ int main(int argc, char **argv)
     const int have = open_device();
     const char *why = "no OpenCL device";
     TL_ADD_IF(tc, device_fields_should_give_what_host_arrays_give, have, why);
+    TL_ADD_IF(tc, masked_heat_steps_should_stay_on_the_device, have, why);
     TL_ADD_IF(tc, a_solver_of_hv_solver_create_should_take_buffers_on_its_own_context, have, why);
     TL_ADD_IF(tc, wrong_queues_buffers_and_backends_should_be_refused, have, why);
     TL_ADD_IF(tc, bench_solve_should_report_the_device_and_its_own_figures, have, why);

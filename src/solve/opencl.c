@@ -538,8 +538,7 @@ static void cl_convert(hv_cl *cl, hv_cl_kernel k, cl_mem src, cl_mem dst, size_t
     hv__cl_run(cl, k, 1, g, l);
 }
 
-/* Devices without fp64, and masked heat steps (whose right-hand side would
- * need zeroing on solid cells): through the host front end. */
+/* Devices without fp64: through the host front end. */
 static hv_status solve_cl_via_host(hv_solver *sv, ocl_state *o, cl_mem f, cl_mem u,
                                    hv_solve_info *info)
 {
@@ -607,11 +606,19 @@ static hv_status device_solve(ocl_state *o, hv_solve_info *info)
     return solve_iterate(o, info, fn);
 }
 
-/* Whether float fields solve on the device as they are: fp64 there, and no
- * masked heat step (whose right-hand side needs zeroing on solid cells). */
-static int device_takes_floats(const ocl_state *o)
+/* Whether float fields solve on the device as they are: fp64 there. */
+static int device_takes_floats(const ocl_state *o) { return o->dev64; }
+
+/* v = 0 on solid cells (level-0 weight a == 0); nothing on plain grids. */
+static void fine_mask(ocl_state *o, cl_mem v)
 {
-    return o->dev64 && !(o->s->p.solid && o->s->p.alpha != 0);
+    hv_clmg_level *L0 = &o->mg.lv[0];
+    if (L0->plain || !L0->a)
+        return;
+    size_t g[1], l[1];
+    hv__cl_range1(o->s->count, g, l);
+    hv__cl_args(o->cl, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
+    hv__cl_run(o->cl, HV_K_FINE_MASK, 1, g, l);
 }
 
 /* The float fields f and u on the device solved there (device_takes_floats). */
@@ -620,12 +627,15 @@ static hv_status solve_floats(ocl_state *o, cl_mem f, cl_mem u, hv_solve_info *i
     const hv_setup *s = o->s;
     hv_cl *cl = o->cl;
     const size_t n = s->count;
-    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n); /* Poisson: the projection zeroes solids */
+    cl_convert(cl, HV_K_FINE_F2D, f, o->v[VF], n);
+    fine_mask(o, o->v[VF]); /* the front end's f = 0 on solid cells, on the device */
     if (s->o.nonzero_guess)
         cl_convert(cl, HV_K_FINE_F2D, u, o->v[VX], n);
     hv_status st = device_solve(o, info);
-    if (!st)
+    if (!st) {
+        fine_mask(o, o->v[VX]);
         cl_convert(cl, HV_K_FINE_D2F, o->v[VX], u, n);
+    }
     hv_status st2 = hv__cl_finish(cl);
     return st ? st : st2;
 }
@@ -668,18 +678,6 @@ static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_inf
         return st;
     hv__cl_read(cl, o->uf, 0, bytes, u);
     return hv__cl_check(cl);
-}
-
-/* v = 0 on solid cells (level-0 weight a == 0); nothing on plain grids. */
-static void fine_mask(ocl_state *o, cl_mem v)
-{
-    hv_clmg_level *L0 = &o->mg.lv[0];
-    if (L0->plain || !L0->a)
-        return;
-    size_t g[1], l[1];
-    hv__cl_range1(o->s->count, g, l);
-    hv__cl_args(o->cl, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
-    hv__cl_run(o->cl, HV_K_FINE_MASK, 1, g, l);
 }
 
 hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
