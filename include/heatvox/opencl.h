@@ -79,7 +79,9 @@ HV_API hv_status hv_opencl_solver_create(hv_solver **out, const hv_problem *p,
  * opts->nonzero_guess). The commands go to the solver's queue after what the
  * caller enqueued there and have finished when it returns. Also for solvers
  * of hv_solver_create with the opencl backend, on the context that
- * hv_opencl_solver_queue names. info may be NULL. */
+ * hv_opencl_solver_queue names. info may be NULL. The solve stays on the
+ * device (solid cells of f are ignored and get u = 0 there) except on a device
+ * without fp64, where f and u go through the host's solver. */
 HV_API hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info);
 
 /* The context, device and queue an opencl solver's commands go to (not

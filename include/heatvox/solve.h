@@ -44,11 +44,12 @@ typedef enum hv_smoother {
 } hv_smoother;
 
 typedef enum hv_coarse {
-    HV_COARSE_AUTO = 0,   /* geometric; mg with solid cells changes to aggregation after a
-                              solve of more than 16 iterations, for the solves that follow */
+    HV_COARSE_AUTO = 0,   /* geometric; mg and opencl with solid cells change to aggregation
+                              after a solve of more than 16 iterations, for the solves that
+                              follow */
     HV_COARSE_GEOMETRIC,  /* halved grids with averaged coefficients (every backend) */
-    HV_COARSE_AGGREGATION /* mg with solid cells: smoothed aggregation, Galerkin coarse
-                              operators that keep every wall (docs/METHOD.md) */
+    HV_COARSE_AGGREGATION /* mg and opencl with solid cells: smoothed aggregation, Galerkin
+                              coarse operators that keep every wall (docs/METHOD.md) */
 } hv_coarse;
 
 typedef enum hv_stop_reason {
