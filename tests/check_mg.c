@@ -600,6 +600,82 @@ START_TEST(auto_cycles_should_save_corrections_and_report_the_true_residual)
 }
 END_TEST
 
+/* Two walls across x with a gap at opposite ends (a corridor), 3D. */
+static uint8_t *make_baffles(int n)
+{
+    uint8_t *m = calloc((size_t)n * n * n, 1);
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++) {
+            m[n / 3 + (size_t)n * (j + (size_t)n * k)] = j >= n / 8;
+            m[2 * n / 3 + (size_t)n * (j + (size_t)n * k)] = j < n - n / 8;
+        }
+    return m;
+}
+
+/* Heat steps with solid cells correct by V-cycles as plain boxes do (several
+ * cycles per correction) while a cycle gains 0.3 or more; with t large enough
+ * to be nearly Poisson they hand over to PCG within the solve, and later
+ * solves start with PCG. Either way the reported residual is the true one
+ * and solid cells hold 0. */
+START_TEST(masked_heat_steps_should_correct_then_hand_slow_solves_to_pcg)
+{
+    const int N = 40;
+    const size_t n = (size_t)N * N * N;
+    const double h = 1.0 / N, tscale[2] = {4, 4096};
+    uint8_t *mask = make_baffles(N);
+    double *fd = malloc(n * sizeof *fd), *ud = malloc(n * sizeof *ud), *au = malloc(n * sizeof *au);
+    float *f = malloc(n * sizeof *f);
+    tl_fill_random(f, n, 21);
+    for (size_t c = 0; c < n; c++)
+        fd[c] = f[c];
+    for (int t = 0; t < 2; t++) {
+        hv_problem p = {3, {N, N, N}, h, mask, 1.0, tscale[t] * h * h};
+        hv_solver_opts o;
+        hv_solver_opts_default(&o);
+        o.backend = HV_BACKEND_MG;
+        o.coarse = HV_COARSE_GEOMETRIC;
+        o.tol = 1e-9;
+        hv_solver *s = NULL;
+        TL_ASSERT_OK(hv_solver_create(&s, &p, &o));
+        hv_solve_info info[2];
+        for (int rep = 0; rep < 2; rep++) {
+            TL_ASSERT_OK(hv_solver_solve_d(s, fd, ud, &info[rep]));
+            ck_assert_msg(info[rep].reason == HV_STOP_CONVERGED && info[rep].relres <= o.tol,
+                          "t %g h^2, solve %d: %s at %g", tscale[t], rep,
+                          hv_stop_reason_str(info[rep].reason), info[rep].relres);
+            TL_ASSERT_OK(hv_apply_helmholtz_d(3, p.n, h, mask, p.alpha, p.beta, ud, au));
+            double rr = 0, ff = 0;
+            for (size_t c = 0; c < n; c++) {
+                ck_assert(!mask[c] || ud[c] == 0.0);
+                double r = mask[c] ? 0.0 : fd[c] - au[c];
+                rr += r * r;
+                ff += mask[c] ? 0.0 : fd[c] * fd[c];
+            }
+            double rel = sqrt(rr / ff);
+            ck_assert_msg(fabs(rel - info[rep].relres) <= 1e-6 * rel + 1e-14,
+                          "t %g h^2, solve %d: relres %.9g, true %.9g", tscale[t], rep,
+                          info[rep].relres, rel);
+        }
+        if (t == 0) /* corrections of several cycles, the second solve as the first */
+            ck_assert_msg(info[0].cycles > info[0].iterations && info[0].iterations <= 4 &&
+                              info[1].iterations == info[0].iterations,
+                          "t = 4 h^2: %d corrections, %d cycles; then %d", info[0].iterations,
+                          info[0].cycles, info[1].iterations);
+        else /* the first solve handed over after a slow correction; the next is PCG */
+            ck_assert_msg(info[0].cycles > info[0].iterations &&
+                              info[1].cycles == info[1].iterations,
+                          "t = 4096 h^2: %d/%d, then %d/%d iterations/cycles", info[0].iterations,
+                          info[0].cycles, info[1].iterations, info[1].cycles);
+        hv_solver_destroy(&s);
+    }
+    free(mask);
+    free(f);
+    free(fd);
+    free(ud);
+    free(au);
+}
+END_TEST
+
 /* The fused passes split a level into slabs of planes, one per thread, and
  * order the work at slab edges so that a sweep, its residual and the
  * restriction come out as on one thread: the same cycles on 1, 2, 3 and 5
@@ -761,6 +837,7 @@ int main(void)
     tcase_add_test(tc, cycles_should_not_depend_on_the_thread_count);
     tcase_add_test(tc, restriction_should_be_the_transpose_of_prolongation);
     tcase_add_test(tc, wide_rows_with_solid_cells_should_converge);
+    tcase_add_test(tc, masked_heat_steps_should_correct_then_hand_slow_solves_to_pcg);
     tcase_add_test(tc, gpu_smoothers_should_converge);
     tcase_add_test(tc, auto_cycles_should_save_corrections_and_report_the_true_residual);
     tcase_add_test(tc, solutions_should_converge_at_second_order);

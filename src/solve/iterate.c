@@ -15,8 +15,15 @@ static int stagnated(const hv_solve_info *info)
     return n >= 5 && info->history[n - 1] > 0.95 * info->history[n - 4];
 }
 
+/* Whether the last correction's cycles each reduced the residual by less
+ * than `slow` (which the caller then hands to PCG). */
+static int too_slow(double slow, double before, double after, int cycles)
+{
+    return slow > 0 && before > 0 && cycles > 0 && pow(after / before, 1.0 / cycles) > slow;
+}
+
 hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
-                                 double fn, hv_solve_info *info)
+                                 double fn, double slow, hv_solve_info *info, int *slowed)
 {
     double norm;
     hv_status st = ops->residual(ctx, &norm);
@@ -27,6 +34,8 @@ hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_sol
     for (int it = 0; it < o->max_iter; it++) {
         if (rel <= o->tol)
             break;
+        const double before = rel;
+        const int cycles = info->cycles;
         if ((st = ops->correct(ctx, it, rel, info, &norm)))
             return st;
         rel = norm / fn;
@@ -35,6 +44,11 @@ hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_sol
         if (!isfinite(rel))
             return hv__error(HV_ERR_NUMERIC, "%smultigrid diverged (residual %g)", ops->prefix,
                              rel);
+        if (rel > o->tol && too_slow(slow, before, rel, info->cycles - cycles)) {
+            *slowed = 1;
+            info->reason = HV_STOP_STAGNATED;
+            return HV_OK;
+        }
         if (stagnated(info) && rel > o->tol) {
             info->reason = HV_STOP_STAGNATED;
             return HV_OK;

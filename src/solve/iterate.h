@@ -44,9 +44,11 @@ typedef struct hv_iter_ops {
  * has not fallen below 0.95 of its value three iterations earlier
  * (stagnated). fn = ||f|| > 0. Uses ops->residual (once, first) and
  * ops->correct. Fills info's reason, iterations and history; HV_ERR_NUMERIC
- * when the residual is not finite. */
+ * when the residual is not finite. With slow > 0, it also stops (setting
+ * *slowed) after a correction whose V-cycles reduced the residual by less
+ * than that factor each: the caller goes on with PCG. */
 hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
-                                 double fn, hv_solve_info *info);
+                                 double fn, double slow, hv_solve_info *info, int *slowed);
 
 /* Preconditioned CG to the same tolerance; stagnated after 50 iterations
  * without a 10% gain or when p.q <= 0. Ends with x projected (ops->project)

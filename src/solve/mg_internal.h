@@ -74,6 +74,9 @@ __attribute__((target("avx512f"))) static inline __mmask16 mg_x16_next(mg_x16 *s
 #define MG_PAR_MIN 32768
 /* Rows up to this length take the vectorized smoother path. */
 #define MG_ROW_BUF 4096
+/* Heat steps with solid cells hand over from defect correction to PCG after a
+ * correction whose cycles reduced the residual by less than this each. */
+#define MG_STAT_SLOW 0.3
 
 typedef struct mg_state {
     const hv_setup *s;
@@ -83,7 +86,8 @@ typedef struct mg_state {
     mg_level lv[MG_MAX_LEVELS];
     hv_smoother smoother;
     int pre, post;
-    int use_pcg;
+    int use_pcg;     /* solid cells: PCG (and its vectors) */
+    int stat_masked; /* heat step with solid cells: defect correction first (mg.c) */
     double *rd;      /* fine double work: the residual */
     double *zsum;    /* PCG, Poisson: per-thread sums for z's projection */
     size_t zsum_per; /* doubles per thread in zsum (whole cache lines) */

@@ -93,6 +93,9 @@ void hv__mg_level_apply_d(const mg_level *L, int dim, double alpha, const double
 /* Row (j,k) of y = A x in double from x in float, into yrow (n[0] values). */
 void hv__mg_level_apply_row_f(const mg_level *L, int dim, double alpha, const float *x,
                               double *yrow, int j, int k);
+/* The same from x in double. */
+void hv__mg_level_apply_row_d(const mg_level *L, int dim, double alpha, const double *x,
+                              double *yrow, int j, int k);
 
 /* Doubles per bottom cell that hv__mg_bottom_cg needs as work. */
 #define MG_BOTTOM_WORK 5

@@ -131,6 +131,12 @@ void hv__mg_level_apply_row_f(const mg_level *L, int dim, double alpha, const fl
     apply_row_f(L, dim, alpha, x, yrow, j, k);
 }
 
+void hv__mg_level_apply_row_d(const mg_level *L, int dim, double alpha, const double *x,
+                              double *yrow, int j, int k)
+{
+    apply_row_d(L, dim, alpha, x, yrow, j, k);
+}
+
 static hv_status level_alloc_coeffs(mg_level *L, int dim)
 {
     L->a = hv_malloc(L->count * sizeof(float));
@@ -600,8 +606,8 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
     }
     double n0 = (double)lv[0].count;
     st->bytes_per_cycle = fused && !pcg ? bytes : 0;
-    if (fused && !pcg)
-        bytes += n0 * (8 + 4 + 8 + 8 + 4);
+    if (fused && !pcg) /* x + e and f - A x in one pass; with solid cells two (mg.c) */
+        bytes += n0 * (lv[0].plain ? 8 + 4 + 8 + 8 + 4 : (8 + 4 + 4 + 8) + (8 + 8 + 4 + 4));
     else if (fused) /* CPU PCG (mg.c): q = A p with p.q; x, r, f; r.z; p (float) */
         bytes += n0 * ((4 + 4 + 8) + (8 + 8 + 4 + 8 + 8 + 8 + 4) + (8 + 4) + (4 + 4 + 4));
     else

@@ -446,7 +446,7 @@ static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
     if (o->agg_pending && (st = use_aggregation(o)))
         return st;
     st = o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
-                    : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, info);
+                    : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, 0, info, NULL);
     if (!st && o->use_pcg && opts->coarse == HV_COARSE_AUTO && !o->agg_tried &&
         mg_agg_slow(info->iterations, info->relres))
         o->agg_pending = 1;
