@@ -682,8 +682,12 @@ static hv_status mg_solve_pcg(mg_state *m, const double *f, double *u, hv_solve_
 /* A heat step with solid cells: defect correction, which needs no CG vectors
  * and with the identity term converges as fast as on a plain box (t = 4h^2:
  * about 0.05 per cycle); PCG from where it got when a cycle is slower than
- * MG_STAT_SLOW (large t, where the heat step nears Poisson and the geometric
- * levels lose the walls), and for every later solve; info counts both parts. */
+ * MG_STAT_SLOW. When that happens within the first two corrections (the first
+ * starts with the FMG cycle) the operator is to blame (large t, where the heat
+ * step nears Poisson and the geometric levels lose the walls) and every later
+ * solve starts with PCG; later (what the cycle reduces worst left of a
+ * right-hand side) it hands over only the solve it is in. info counts both
+ * parts. */
 static hv_status mg_solve_masked_heat(mg_state *m, const double *f, double *u, hv_solve_info *info)
 {
     const hv_setup *s = m->s;
@@ -691,8 +695,10 @@ static hv_status mg_solve_masked_heat(mg_state *m, const double *f, double *u, h
     hv_status st = mg_solve_stationary(m, f, u, info, MG_STAT_SLOW, &slowed);
     if (st || !slowed)
         return st;
-    m->stat_masked = 0;
-    hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, 1, &m->model);
+    if (info->iterations <= 2) {
+        m->stat_masked = 0;
+        hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, 1, &m->model);
+    }
     hv_solve_info p = {0};
     st = mg_solve_pcg(m, f, u, &p, hv__norm2(s, f));
     if (st)
