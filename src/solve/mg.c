@@ -717,6 +717,14 @@ static hv_status mg_solve_masked_heat(mg_state *m, const double *f, double *u, h
     return HV_OK;
 }
 
+/* u = 0 on solid cells (a guess that converged as it was may hold values there). */
+static void zero_solid(const hv_setup *s, double *u)
+{
+    for (size_t c = 0; c < s->count; c++)
+        if (s->p.solid[c])
+            u[c] = 0;
+}
+
 static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info *info)
 {
     mg_state *m = state;
@@ -727,9 +735,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
     if (m->stat_masked && !m->agg && !m->agg_pending) {
         hv_status st = mg_solve_masked_heat(m, f, u, info);
         if (st == HV_OK)
-            for (size_t c = 0; c < s->count; c++)
-                if (s->p.solid[c])
-                    u[c] = 0;
+            zero_solid(s, u);
         return st;
     }
     if (!s->o.nonzero_guess)
@@ -749,9 +755,7 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
         mg_agg_slow(info->iterations, info->relres))
         m->agg_pending = 1;
     if (st == HV_OK && s->p.solid)
-        for (size_t c = 0; c < s->count; c++)
-            if (s->p.solid[c])
-                u[c] = 0;
+        zero_solid(s, u);
     return st;
 }
 
