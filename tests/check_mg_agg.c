@@ -365,12 +365,71 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
 }
 END_TEST
 
+/* The coarse cycle once the hierarchy is packed (hv__mg_agg_pack): level 1's
+ * rows that repeat along the faces and walls served by row classes, the
+ * deeper levels' columns as 16-bit offsets. The same correction as before,
+ * to float rounding (the classes sum in another order), for a maze and
+ * baffles. */
+START_TEST(packed_levels_should_give_the_same_cycle)
+{
+    const int n[3] = {56, 44, 40};
+    size_t N = (size_t)n[0] * n[1] * n[2];
+    for (int obstacle = 0; obstacle < 2; obstacle++) {
+        uint8_t *mask = obstacle ? maze(n, 12) : baffles(3, n);
+        hv_setup s;
+        memset(&s, 0, sizeof s);
+        double h = 1.0 / n[0];
+        s.p = (hv_problem){3, {n[0], n[1], n[2]}, h, mask, 0.0, 1.0};
+        hv_solver_opts_default(&s.o);
+        s.count = N;
+        s.nregion = 1;
+        mg_hierarchy H;
+        TL_ASSERT_OK(hv__mg_hierarchy_build(&H, &s, 0));
+        mg_agg *g = NULL;
+        TL_ASSERT_OK(hv__mg_agg_build(&g, &H.lv[0], 3, s.p.alpha));
+        ck_assert_ptr_nonnull(g);
+        ck_assert_int_ge(g->nlev, 4);
+        float *r = random_rhs(N, 11), *u0 = calloc(N, sizeof *u0), *u1 = calloc(N, sizeof *u1);
+        for (size_t c = 0; c < N; c++)
+            r[c] = mask[c] ? 0.0f : r[c];
+        hv__mg_agg_correct(g, r, u0);
+        size_t bytes = g->bytes, stored = g->lv[1].A.rp[g->lv[1].n];
+        hv__mg_agg_pack(g);
+        for (int l = 2; l < g->nlev; l++) {
+            const mg_alevel *L = &g->lv[l];
+            ck_assert_msg(L->A.co && !L->A.ci, "level %d's A not packed", l);
+            ck_assert_msg(!L->P.rp || (L->P.co && !L->P.ci), "level %d's P not packed", l);
+            ck_assert_msg(!L->R.rp || (L->R.co && !L->R.ci), "level %d's R not packed", l);
+        }
+        const mg_alevel *L1 = &g->lv[1];
+        int served = 0;
+        for (int32_t c = 0; L1->cls && c < L1->n; c++)
+            served += L1->cls[c] > 1;
+        if (!obstacle)
+            ck_assert_msg(L1->ncls > 0 && served > 200 && L1->A.rp[L1->n] < stored,
+                          "%d row classes serve %d rows, %zu of %zu entries left", L1->ncls, served,
+                          L1->A.rp[L1->n], stored);
+        ck_assert_msg(g->bytes < bytes, "%zu bytes before, %zu after", bytes, g->bytes);
+        hv__mg_agg_correct(g, r, u1);
+        ck_assert_msg(rel_diff(u1, u0, N) < 1e-5, "%s: packed cycle differs by %g",
+                      obstacle ? "maze" : "baffles", rel_diff(u1, u0, N));
+        free(r);
+        free(u0);
+        free(u1);
+        hv__mg_agg_free(g);
+        hv__mg_hierarchy_free(&H);
+        free(mask);
+    }
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("mg_agg");
     TCase *tc = tcase_create("core");
     tcase_set_timeout(tc, 240);
     tcase_add_test(tc, galerkin_rows_should_be_p_transpose_a_p);
+    tcase_add_test(tc, packed_levels_should_give_the_same_cycle);
     tcase_add_test(tc, aggregation_should_see_thin_walls);
     tcase_add_test(tc, aggregation_iterations_should_not_grow_with_n);
     tcase_add_test(tc, regions_cut_apart_should_each_stay_mean_free);

@@ -93,6 +93,7 @@ static hv_status use_aggregation(mg_state *m, int soft)
         return HV_OK;
     if (st || !m->agg)
         return st;
+    hv__mg_agg_pack(m->agg);
     drop_geometric(m);
     hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post, m->use_pcg,
                            &m->model);

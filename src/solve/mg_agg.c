@@ -3,8 +3,8 @@
  * docs/METHOD.md "Coarse levels that keep the walls"): the aggregates, the
  * Galerkin coarse operators, the transfers and the cycle on the coarse levels.
  */
-#include "mg_agg.h"
 #include "core/error.h"
+#include "mg_internal.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -52,7 +52,8 @@ static agg_op level_op(const mg_agg *g, int l)
 #define ROW_MAX 125
 
 /* Row c of coarse level L: pointers into its matrix, or for a plain row the
- * template's entries in bc/bv (ROW_MAX each). */
+ * template's entries in bc/bv (ROW_MAX each). The hierarchy's set-up only:
+ * hv__mg_agg_pack changes the matrices. */
 static int level_row(const mg_alevel *L, int32_t c, int32_t *bc, float *bv, const int32_t **col,
                      const float **val)
 {
@@ -184,49 +185,195 @@ static void fine_apply(const agg_op *o, const float *x, float *y)
 }
 
 /* Row r of M times x, in float with four partial sums (a chain of dependent
- * additions would bound the loop, not memory). */
-static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
+ * additions would bound the loop, not memory); x[col(q)] is xb[idx[q]]. */
+#define CSR_DOT(xb, idx)                                                                           \
+    do {                                                                                           \
+        for (; q + 4 <= e; q += 4) {                                                               \
+            s0 += M->v[q] * xb[idx[q]];                                                            \
+            s1 += M->v[q + 1] * xb[idx[q + 1]];                                                    \
+            s2 += M->v[q + 2] * xb[idx[q + 2]];                                                    \
+            s3 += M->v[q + 3] * xb[idx[q + 3]];                                                    \
+        }                                                                                          \
+        for (; q < e; q++)                                                                         \
+            s0 += M->v[q] * xb[idx[q]];                                                            \
+    } while (0)
+
+static inline float csr_row_dot_c(const mg_csr *M, int32_t r, const float *x)
 {
     size_t q = M->rp[r], e = M->rp[r + 1];
     float s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-    for (; q + 4 <= e; q += 4) {
-        s0 += M->v[q] * x[M->ci[q]];
-        s1 += M->v[q + 1] * x[M->ci[q + 1]];
-        s2 += M->v[q + 2] * x[M->ci[q + 2]];
-        s3 += M->v[q + 3] * x[M->ci[q + 3]];
+    if (M->co) {
+        const float *xb = x + M->cb[r];
+        CSR_DOT(xb, M->co);
+    } else {
+        CSR_DOT(x, M->ci);
     }
-    for (; q < e; q++)
-        s0 += M->v[q] * x[M->ci[q]];
     return (s0 + s1) + (s2 + s3);
 }
+#undef CSR_DOT
 
-#define AGG_CHUNK 64
+#if MG_AVX512
+/* The same in 16-lane gathers, two sums in flight; the row's last entries
+ * under a mask (a masked-off lane reads nothing; packed offsets are padded,
+ * so their last load stays inside the array). */
+__attribute__((target("avx512f"))) static float csr_row_dot_avx512(const mg_csr *M, int32_t r,
+                                                                   const float *x)
+{
+    size_t q = M->rp[r], e = M->rp[r + 1];
+    __m512 s0 = _mm512_setzero_ps(), s1 = _mm512_setzero_ps();
+    if (M->co) {
+        const float *xb = x + M->cb[r];
+        const __m256i *co = (const __m256i *)(M->co + q);
+        for (; q + 32 <= e; q += 32, co += 2) {
+            const __m512i i0 = _mm512_cvtepu16_epi32(_mm256_loadu_si256(co)),
+                          i1 = _mm512_cvtepu16_epi32(_mm256_loadu_si256(co + 1));
+            s0 = _mm512_fmadd_ps(_mm512_loadu_ps(M->v + q), _mm512_i32gather_ps(i0, xb, 4), s0);
+            s1 =
+                _mm512_fmadd_ps(_mm512_loadu_ps(M->v + q + 16), _mm512_i32gather_ps(i1, xb, 4), s1);
+        }
+        for (; q < e; q += 16, co++) {
+            const __mmask16 k = e - q >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (e - q)) - 1);
+            const __m512i i = _mm512_cvtepu16_epi32(_mm256_loadu_si256(co));
+            const __m512 xv = _mm512_mask_i32gather_ps(_mm512_setzero_ps(), k, i, xb, 4);
+            s0 = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(k, M->v + q), xv, s0);
+        }
+        return _mm512_reduce_add_ps(_mm512_add_ps(s0, s1));
+    }
+    for (; q + 32 <= e; q += 32) {
+        const __m512i i0 = _mm512_loadu_si512(M->ci + q), i1 = _mm512_loadu_si512(M->ci + q + 16);
+        s0 = _mm512_fmadd_ps(_mm512_loadu_ps(M->v + q), _mm512_i32gather_ps(i0, x, 4), s0);
+        s1 = _mm512_fmadd_ps(_mm512_loadu_ps(M->v + q + 16), _mm512_i32gather_ps(i1, x, 4), s1);
+    }
+    for (; q < e; q += 16) {
+        const __mmask16 k = e - q >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (e - q)) - 1);
+        const __m512i i = _mm512_maskz_loadu_epi32(k, M->ci + q);
+        const __m512 xv = _mm512_mask_i32gather_ps(_mm512_setzero_ps(), k, i, x, 4);
+        s0 = _mm512_fmadd_ps(_mm512_maskz_loadu_ps(k, M->v + q), xv, s0);
+    }
+    return _mm512_reduce_add_ps(_mm512_add_ps(s0, s1));
+}
+#endif
 
-/* y = A x on rows [c0, c1) of a level with a template: each run of plain
- * rows as a stencil (vectorized over the run), the others from the matrix.
- * Runs, not whole chunks: the blocks at the ends of every x row of blocks are
- * not plain, so nearly every chunk holds a few. */
+static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
+{
+#if MG_AVX512
+    if (mg_avx512())
+        return csr_row_dot_avx512(M, r, x);
+#endif
+    return csr_row_dot_c(M, r, x);
+}
+
+#define AGG_CHUNK 256
+
+/* A template: tn entries at index offsets off with values val. */
+typedef struct agg_tmpl {
+    int tn;
+    const int32_t *off;
+    const float *val;
+} agg_tmpl;
+
+#if MG_AVX512
+/* Sums of template entries t0, t0 + 2, ... < tn into a[0..nb) over x + off[t]
+ * (+ 16 b for a[b]), lanes of k[b]. */
+#define TEMPLATE_SUMS(a, t0, nb)                                                                   \
+    for (int t = (t0); t < T->tn; t += 2) {                                                        \
+        const __m512 v = _mm512_set1_ps(T->val[t]);                                                \
+        const float *p = xb + T->off[t];                                                           \
+        for (int b = 0; b < (nb); b++)                                                             \
+            a[b] = _mm512_fmadd_ps(v, _mm512_maskz_loadu_ps(k[b], p + 16 * b), a[b]);              \
+    }
+
+/* nb (1..4) blocks of 16 rows from i0 on, of the m rows at c. */
+__attribute__((target("avx512f"))) static inline void template_blocks_avx512(
+    const agg_tmpl *T, const float *x, float *y, int32_t c, int32_t m, int32_t i0, int nb)
+{
+    __mmask16 k[4];
+    __m512 e[4], o[4];
+    for (int b = 0; b < 4; b++) {
+        const int32_t r = m - i0 - 16 * b;
+        k[b] = r >= 16 ? (__mmask16)0xFFFF : r > 0 ? (__mmask16)((1u << r) - 1) : 0;
+        e[b] = o[b] = _mm512_setzero_ps();
+    }
+    const float *xb = x + c + i0;
+    if (nb == 4) {
+        TEMPLATE_SUMS(e, 0, 4)
+        TEMPLATE_SUMS(o, 1, 4)
+    } else {
+        TEMPLATE_SUMS(e, 0, nb)
+        TEMPLATE_SUMS(o, 1, nb)
+    }
+    for (int b = 0; b < nb; b++)
+        _mm512_mask_storeu_ps(y + c + i0 + 16 * b, k[b], _mm512_add_ps(e[b], o[b]));
+}
+#undef TEMPLATE_SUMS
+
+/* y = the template rows c .. c + m - 1, 64 at a time: the sums stay in
+ * registers over the template's entries, in two sets (even and odd entries)
+ * so that eight FMA chains are in flight; masked at the run's end, where a
+ * masked-off lane reads nothing. */
+__attribute__((target("avx512f"))) static void template_run_avx512(const agg_tmpl *T,
+                                                                   const float *x, float *y,
+                                                                   int32_t c, int32_t m)
+{
+    int32_t i0 = 0;
+    for (; i0 + 64 <= m; i0 += 64)
+        template_blocks_avx512(T, x, y, c, m, i0, 4);
+    if (i0 < m)
+        template_blocks_avx512(T, x, y, c, m, i0, (int)((m - i0 + 15) / 16));
+}
+#endif
+
+/* y = the template rows c .. c + m - 1 (m <= AGG_CHUNK), vectorized over the
+ * run. */
+static void template_run(const agg_tmpl *T, const float *x, float *y, int32_t c, int32_t m)
+{
+#if MG_AVX512
+    if (mg_avx512()) {
+        template_run_avx512(T, x, y, c, m);
+        return;
+    }
+#endif
+    float acc[AGG_CHUNK] = {0};
+    for (int t = 0; t < T->tn; t++) {
+        const float v = T->val[t], *xs = x + c + T->off[t];
+        for (int32_t i = 0; i < m; i++)
+            acc[i] += v * xs[i];
+    }
+    memcpy(y + c, acc, (size_t)m * sizeof(float));
+}
+
+/* Row c's template class on level L (cls, else plain): 0 for a row in A,
+ * else the class, its template in *T. */
+static inline int row_template(const mg_alevel *L, int32_t c, agg_tmpl *T)
+{
+    int k = L->cls ? L->cls[c] : L->plain[c];
+    if (k == 1)
+        *T = (agg_tmpl){L->tn, L->toff, L->tval};
+    else if (k > 1)
+        *T = (agg_tmpl){L->cn[k - 2], L->coff + ROW_MAX * (size_t)(k - 2),
+                        L->cval + ROW_MAX * (size_t)(k - 2)};
+    return k;
+}
+
+/* y = A x on rows [c0, c1) of a level with templates: each run of rows of
+ * one template as a stencil (vectorized over the run), the others from the
+ * matrix. Runs, not whole chunks: the blocks at the ends of every x row of
+ * blocks are not plain, so nearly every chunk holds a few. */
 static void apply_chunk(const agg_op *o, const float *x, float *y, int32_t c0, int32_t c1)
 {
     const mg_alevel *L = o->lv;
     for (int32_t c = c0; c < c1;) {
-        if (!L->plain[c]) {
+        agg_tmpl T;
+        const int k = row_template(L, c, &T);
+        if (!k) {
             y[c] = csr_row_dot(o->A, c, x);
             c++;
             continue;
         }
         int32_t e = c + 1;
-        while (e < c1 && L->plain[e])
+        while (e < c1 && (L->cls ? L->cls[e] : L->plain[e]) == k)
             e++;
-        float acc[AGG_CHUNK] = {0};
-        const int m = e - c;
-        for (int t = 0; t < L->tn; t++) {
-            const float v = L->tval[t], *xs = x + c + L->toff[t];
-            for (int i = 0; i < m; i++)
-                acc[i] += v * xs[i];
-        }
-        for (int i = 0; i < m; i++)
-            y[c + i] = acc[i];
+        template_run(&T, x, y, c, e - c);
         c = e;
     }
 }
@@ -383,12 +530,14 @@ static hv_status aggregate(mg_agg *g, int l)
         order[fill[(size_t)x[0] / 2 + bx * ((size_t)x[1] / 2 + by * ((size_t)x[2] / 2))]++] = c;
     }
     free(fill);
-    /* Parts of each block: the first takes the block's own index (a block
-     * without live unknowns leaves an empty one), the others come after all
-     * blocks. In open space the next level is then a grid whose neighbours
-     * are at fixed offsets. */
-    size_t cap = nblk + 16;
-    int32_t extra = 0;
+    /* Parts of each block. Under the fine level, the first takes the block's
+     * own index (a block without live unknowns leaves an empty one) and the
+     * others come after all blocks: in open space level 1 is then a grid whose
+     * neighbours are at fixed offsets (its template rows). Deeper, every
+     * block's parts are numbered in turn, so that a row's columns stay within
+     * a few planes of blocks of it (hv__mg_agg_pack). */
+    const int grid = l == 0;
+    size_t cap = nblk + 16, next = grid ? nblk : 0;
     C->xyz = malloc(3 * cap * sizeof *C->xyz);
     hv_status st = HV_OK;
     if (!C->xyz) {
@@ -398,17 +547,18 @@ static hv_status aggregate(mg_agg *g, int l)
     for (size_t b = 0; b < nblk; b++) {
         const int32_t *u = order + start[b];
         int m = (int)(start[b + 1] - start[b]), lab[64];
-        C->xyz[3 * b + 0] = (int32_t)(b % bx);
-        C->xyz[3 * b + 1] = (int32_t)((b / bx) % by);
-        C->xyz[3 * b + 2] = (int32_t)(b / ((size_t)bx * by));
+        const int32_t bxyz[3] = {(int32_t)(b % bx), (int32_t)((b / bx) % by),
+                                 (int32_t)(b / ((size_t)bx * by))};
+        if (grid)
+            memcpy(C->xyz + 3 * b, bxyz, sizeof bxyz);
         for (int q0 = 0; q0 < m; q0 += 64) {
             int mm = m - q0 < 64 ? m - q0 : 64;
             int parts = block_parts(&o, u + q0, mm, lab);
             for (int p = 0; p < parts; p++) {
-                int32_t id = (int32_t)b;
-                if (p > 0 || q0 > 0) {
-                    id = (int32_t)(nblk + extra++);
-                    if ((size_t)id >= cap) {
+                size_t id = b;
+                if (!grid || p > 0 || q0 > 0) {
+                    id = next++;
+                    if (id >= cap) {
                         cap *= 2;
                         int32_t *x2 = realloc(C->xyz, 3 * cap * sizeof *x2);
                         if (!x2) {
@@ -417,19 +567,19 @@ static hv_status aggregate(mg_agg *g, int l)
                         }
                         C->xyz = x2;
                     }
-                    memcpy(C->xyz + 3 * (size_t)id, C->xyz + 3 * b, 3 * sizeof *C->xyz);
+                    memcpy(C->xyz + 3 * id, bxyz, sizeof bxyz);
                 }
                 for (int q = 0; q < mm; q++)
                     if (lab[q] == p)
-                        L->agg[u[q0 + q]] = id;
+                        L->agg[u[q0 + q]] = (int32_t)id;
             }
         }
     }
-    if (nblk + (size_t)extra >= (size_t)INT32_MAX) {
+    if (next >= (size_t)INT32_MAX) {
         st = hv__error(HV_ERR_UNSUPPORTED, "multigrid: level %d has too many aggregates", l + 1);
         goto done;
     }
-    C->n = (int32_t)(nblk + extra);
+    C->n = (int32_t)next;
     /* Members grouped by aggregate. */
     L->mrp = calloc((size_t)C->n + 1, sizeof *L->mrp);
     L->mem = malloc((live ? live : 1) * sizeof *L->mem);
@@ -635,6 +785,8 @@ static void csr_free(mg_csr *m)
     free(m->rp);
     free(m->ci);
     free(m->v);
+    free(m->cb);
+    free(m->co);
     memset(m, 0, sizeof *m);
 }
 
@@ -1216,10 +1368,11 @@ static float fine_nb_sum(const mg_wrow *R, const float c[4], float cx, int nx, c
     return v;
 }
 
-/* Row (j,k) of v = r - wp D^-1 A D^-1 r on a binary fine level, without
- * forming D^-1 r: on a fluid cell D^-1 A D^-1 r = dinv r - dinv sum c_b dinv_nb
- * r_nb times D dinv = 1, so v = r - wp a (r - sum c_b dinv_nb r_nb); dinv is 0
- * on solid cells, which closes their faces. */
+/* Row (j,k) of v = r - wp A D^-1 r on a binary fine level, without forming
+ * D^-1 r: A D^-1 r = D dinv r - sum c_b dinv_nb r_nb, where D dinv is 1 on
+ * rows with dinv > 0 and 0 on empty ones (solid cells; for Poisson, fluid
+ * cells without an open face); dinv is 0 on solid cells, which closes their
+ * faces. Neither the cell weights nor D are read. */
 static void restrict0_row(const mg_level *F, int dim, double wp, const float *r, float *v, int j,
                           int k)
 {
@@ -1228,21 +1381,23 @@ static void restrict0_row(const mg_level *F, int dim, double wp, const float *r,
     fine_cyz(F, &R, c);
     const int nx = F->n[0];
     const float cx = (float)F->c[0], w = (float)wp;
-    const float *d0 = F->dinv + R.base, *a = F->a + R.base, *r0 = r + R.base;
+    const float *d0 = F->dinv + R.base, *r0 = r + R.base;
     float *vr = v + R.base;
     for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
-        vr[i] = r0[i] - w * a[i] * (r0[i] - fine_nb_sum(&R, c, cx, nx, r, F->dinv, i));
+        vr[i] = r0[i] - (d0[i] > 0 ? w : 0) * (r0[i] - fine_nb_sum(&R, c, cx, nx, r, F->dinv, i));
     const float *dm = d0 + R.ym, *dp = d0 + R.yp, *dzm = d0 + R.zm, *dzp = d0 + R.zp;
     const float *rm = r0 + R.ym, *rp = r0 + R.yp, *rzm = r0 + R.zm, *rzp = r0 + R.zp;
+#pragma omp simd
     for (int i = 1; i < nx - 1; i++) {
         float sn = cx * (d0[i - 1] * r0[i - 1] + d0[i + 1] * r0[i + 1]) + c[0] * dm[i] * rm[i] +
                    c[1] * dp[i] * rp[i] + c[2] * dzm[i] * rzm[i] + c[3] * dzp[i] * rzp[i];
-        vr[i] = r0[i] - w * a[i] * (r0[i] - sn);
+        vr[i] = r0[i] - (d0[i] > 0 ? w : 0) * (r0[i] - sn);
     }
 }
 
 /* Row (j,k) of u += t - wp D^-1 A t on a binary fine level, t = P0 u_1 (0 on
- * solid cells): D^-1 A t = a (t - dinv sum c_b t_nb). */
+ * solid cells): D^-1 A t = t - dinv sum c_b t_nb on rows with dinv > 0, 0 on
+ * empty ones. */
 static void prolong0_row(const mg_level *F, int dim, double wp, const float *t, float *u, int j,
                          int k)
 {
@@ -1251,15 +1406,17 @@ static void prolong0_row(const mg_level *F, int dim, double wp, const float *t, 
     fine_cyz(F, &R, c);
     const int nx = F->n[0];
     const float cx = (float)F->c[0], w = (float)wp;
-    const float *dv = F->dinv + R.base, *a = F->a + R.base, *t0 = t + R.base;
+    const float *dv = F->dinv + R.base, *t0 = t + R.base;
     float *ur = u + R.base;
     for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1)
-        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * fine_nb_sum(&R, c, cx, nx, t, NULL, i));
+        ur[i] +=
+            t0[i] - (dv[i] > 0 ? w : 0) * (t0[i] - dv[i] * fine_nb_sum(&R, c, cx, nx, t, NULL, i));
     const float *tm = t0 + R.ym, *tp = t0 + R.yp, *tzm = t0 + R.zm, *tzp = t0 + R.zp;
+#pragma omp simd
     for (int i = 1; i < nx - 1; i++) {
         float sn = cx * (t0[i - 1] + t0[i + 1]) + c[0] * tm[i] + c[1] * tp[i] + c[2] * tzm[i] +
                    c[3] * tzp[i];
-        ur[i] += t0[i] - w * a[i] * (t0[i] - dv[i] * sn);
+        ur[i] += t0[i] - (dv[i] > 0 ? w : 0) * (t0[i] - dv[i] * sn);
     }
 }
 
@@ -1381,6 +1538,234 @@ void hv__mg_agg_correct(mg_agg *g, const float *r, float *u)
 
 /* ---------- building and freeing ---------- */
 
+static size_t bytes_saved(size_t before, size_t after)
+{
+    return before > after ? before - after : 0;
+}
+
+/* M's columns as 16-bit offsets from each row's smallest where every row
+ * spans fewer than 65536 (mg_csr); returns the bytes saved. */
+static size_t csr_pack(mg_csr *M)
+{
+    if (!M->rp || !M->ci)
+        return 0;
+    const size_t nnz = M->rp[M->n];
+    int32_t *cb = malloc(((size_t)M->n + 1) * sizeof *cb);
+    uint16_t *co = malloc((nnz + MG_CSR_PAD) * sizeof *co);
+    int fits = cb && co;
+#pragma omp parallel for schedule(static) reduction(&& : fits) if (M->n > AGG_PAR_MIN)
+    for (int32_t r = 0; r < M->n; r++) {
+        if (!fits)
+            continue;
+        int32_t lo = INT32_MAX, hi = INT32_MIN;
+        for (size_t q = M->rp[r]; q < M->rp[r + 1]; q++) {
+            lo = M->ci[q] < lo ? M->ci[q] : lo;
+            hi = M->ci[q] > hi ? M->ci[q] : hi;
+        }
+        if (lo > hi)
+            lo = hi = 0;
+        if ((int64_t)hi - lo > UINT16_MAX) {
+            fits = 0;
+            continue;
+        }
+        cb[r] = lo;
+        for (size_t q = M->rp[r]; q < M->rp[r + 1]; q++)
+            co[q] = (uint16_t)(M->ci[q] - lo);
+    }
+    if (!fits) {
+        free(cb);
+        free(co);
+        return 0;
+    }
+    memset(co + nnz, 0, MG_CSR_PAD * sizeof *co);
+    free(M->ci);
+    M->ci = NULL;
+    M->cb = cb;
+    M->co = co;
+    return bytes_saved(nnz * sizeof(int32_t),
+                       (nnz + MG_CSR_PAD) * sizeof(uint16_t) + (size_t)M->n * sizeof(int32_t));
+}
+
+#define CLS_MIN 32    /* rows that a row class needs to become a template */
+#define CLS_MAX 65000 /* row classes at most (cls is 16-bit) */
+#define CLS_RUN 8     /* consecutive rows of a class that it serves at least */
+
+/* Hash of row c's entries, columns relative to c. */
+static uint64_t row_hash(const mg_csr *A, int32_t c)
+{
+    uint64_t h = 1469598103934665603ull ^ (uint64_t)(A->rp[c + 1] - A->rp[c]);
+    for (size_t q = A->rp[c]; q < A->rp[c + 1]; q++) {
+        uint32_t bits;
+        memcpy(&bits, &A->v[q], sizeof bits);
+        h = (h ^ (uint32_t)(A->ci[q] - c)) * 1099511628211ull;
+        h = (h ^ bits) * 1099511628211ull;
+    }
+    return h ^ (h >> 29);
+}
+
+/* Rows a and b hold the same entries (bit for bit) at the same offsets. */
+static int rows_equal(const mg_csr *A, int32_t a, int32_t b)
+{
+    size_t qa = A->rp[a], qb = A->rp[b], len = A->rp[a + 1] - qa;
+    if (A->rp[b + 1] - qb != len)
+        return 0;
+    for (size_t e = 0; e < len; e++)
+        if (A->ci[qa + e] - a != A->ci[qb + e] - b)
+            return 0;
+    return memcmp(A->v + qa, A->v + qb, len * sizeof *A->v) == 0;
+}
+
+/* The slot of row c's class in an open-addressing table of rows (rep, key;
+ * mask + 1 slots), claimed for c where the class is new. */
+static size_t class_slot(const mg_csr *A, int32_t c, int32_t *rep, uint64_t *key, size_t mask)
+{
+    const uint64_t h = row_hash(A, c);
+    size_t s = (size_t)h & mask;
+    while (rep[s] >= 0 && !(key[s] == h && rows_equal(A, rep[s], c)))
+        s = (s + 1) & mask;
+    if (rep[s] < 0) {
+        rep[s] = c;
+        key[s] = h;
+    }
+    return s;
+}
+
+/* A without the rows that a class serves (cls[r] != 0): their ranges empty. */
+static int csr_drop_rows(mg_csr *A, const uint16_t *cls)
+{
+    size_t kept = 0;
+    for (int32_t r = 0; r < A->n; r++)
+        kept += cls[r] ? 0 : A->rp[r + 1] - A->rp[r];
+    int32_t *ci = malloc((kept ? kept : 1) * sizeof *ci);
+    float *v = malloc((kept ? kept : 1) * sizeof *v);
+    if (!ci || !v) {
+        free(ci);
+        free(v);
+        return -1;
+    }
+    size_t at = 0, from = A->rp[0];
+    for (int32_t r = 0; r < A->n; r++) {
+        const size_t b = from, e = A->rp[r + 1];
+        from = e;
+        A->rp[r] = at;
+        if (cls[r])
+            continue;
+        memcpy(ci + at, A->ci + b, (e - b) * sizeof *ci);
+        memcpy(v + at, A->v + b, (e - b) * sizeof *v);
+        at += e - b;
+    }
+    A->rp[A->n] = at;
+    free(A->ci);
+    free(A->v);
+    A->ci = ci;
+    A->v = v;
+    return 0;
+}
+
+/* Row classes of a level with a template (mg_alevel's cls): the stored rows
+ * grouped by their entries relative to the row, each group of CLS_MIN rows
+ * or more a template of its own. Returns the bytes saved (0 where it finds
+ * none or memory is short). */
+static size_t row_classes(mg_alevel *L)
+{
+    const mg_csr *A = &L->A;
+    if (!L->tn || !L->plain || !A->ci)
+        return 0;
+    size_t nstored = 0, slots = 64;
+    for (int32_t c = 0; c < L->n; c++)
+        nstored += !L->plain[c] && A->rp[c + 1] > A->rp[c];
+    while (slots < 2 * nstored)
+        slots *= 2;
+    int32_t *rep = malloc(slots * sizeof *rep), *slot_of = malloc((size_t)L->n * sizeof *slot_of);
+    int32_t *cnt = calloc(slots, sizeof *cnt);
+    uint64_t *key = malloc(slots * sizeof *key);
+    uint16_t *cls = calloc((size_t)L->n, sizeof *cls);
+    size_t saved = 0;
+    if (!rep || !slot_of || !cnt || !key || !cls)
+        goto done;
+    for (size_t s = 0; s < slots; s++)
+        rep[s] = -1;
+    for (int32_t c = 0; c < L->n; c++) {
+        size_t len = A->rp[c + 1] - A->rp[c];
+        slot_of[c] = -1;
+        if (L->plain[c] || len == 0 || len > ROW_MAX)
+            continue;
+        slot_of[c] = (int32_t)class_slot(A, c, rep, key, slots - 1);
+        cnt[slot_of[c]]++;
+    }
+    /* cnt becomes each slot's class (-1: none), in the order of the table */
+    int ncls = 0;
+    for (size_t s = 0; s < slots; s++)
+        cnt[s] = cnt[s] >= CLS_MIN && ncls < CLS_MAX ? ncls++ : -1;
+    if (!ncls)
+        goto done;
+    L->cn = malloc((size_t)ncls * sizeof *L->cn);
+    L->coff = malloc((size_t)ncls * ROW_MAX * sizeof *L->coff);
+    L->cval = malloc((size_t)ncls * ROW_MAX * sizeof *L->cval);
+    if (!L->cn || !L->coff || !L->cval)
+        goto fail;
+    for (size_t s = 0; s < slots; s++) {
+        if (cnt[s] < 0)
+            continue;
+        const int k = cnt[s];
+        const int32_t r = rep[s];
+        L->cn[k] = (int)(A->rp[r + 1] - A->rp[r]);
+        for (int e = 0; e < L->cn[k]; e++) {
+            L->coff[(size_t)k * ROW_MAX + e] = A->ci[A->rp[r] + e] - r;
+            L->cval[(size_t)k * ROW_MAX + e] = A->v[A->rp[r] + e];
+        }
+    }
+    size_t before = A->rp[L->n];
+    for (int32_t c = 0; c < L->n; c++)
+        cls[c] = L->plain[c]                               ? 1
+                 : slot_of[c] >= 0 && cnt[slot_of[c]] >= 0 ? 2 + cnt[slot_of[c]]
+                                                           : 0;
+    /* A class serves runs of CLS_RUN rows or more: a stencil over a few lanes
+     * costs more than the sparse rows. */
+    for (int32_t c = 0; c < L->n;) {
+        int32_t e = c + 1;
+        while (e < L->n && cls[e] == cls[c])
+            e++;
+        if (cls[c] > 1 && e - c < CLS_RUN)
+            memset(cls + c, 0, (size_t)(e - c) * sizeof *cls);
+        c = e;
+    }
+    if (csr_drop_rows(&L->A, cls))
+        goto fail;
+    L->cls = cls;
+    L->ncls = ncls;
+    cls = NULL;
+    saved =
+        bytes_saved((before - L->A.rp[L->n]) * (sizeof(int32_t) + sizeof(float)),
+                    (size_t)L->n * sizeof *L->cls +
+                        (size_t)ncls * (ROW_MAX * (sizeof(int32_t) + sizeof(float)) + sizeof(int)));
+    goto done;
+fail:
+    free(L->cn);
+    free(L->coff);
+    free(L->cval);
+    L->cn = NULL;
+    L->coff = NULL;
+    L->cval = NULL;
+done:
+    free(rep);
+    free(slot_of);
+    free(cnt);
+    free(key);
+    free(cls);
+    return saved;
+}
+
+void hv__mg_agg_pack(mg_agg *g)
+{
+    for (int l = 1; l < g->nlev; l++) {
+        mg_alevel *L = &g->lv[l];
+        size_t saved = row_classes(L);
+        saved += csr_pack(&L->A) + csr_pack(&L->P) + csr_pack(&L->R);
+        g->bytes -= saved < g->bytes ? saved : 0;
+    }
+}
+
 static hv_status level_work(mg_agg *g, int l)
 {
     mg_alevel *L = &g->lv[l];
@@ -1427,6 +1812,10 @@ void hv__mg_agg_keep_bottom(mg_agg *g)
         csr_free(&L->P);
         csr_free(&L->R);
         free(L->plain);
+        free(L->cls);
+        free(L->cn);
+        free(L->coff);
+        free(L->cval);
         int32_t n = L->n;
         memset(L, 0, sizeof *L);
         L->n = n;
@@ -1446,6 +1835,10 @@ void hv__mg_agg_free(mg_agg *g)
         csr_free(&L->P);
         csr_free(&L->R);
         free(L->plain);
+        free(L->cls);
+        free(L->cn);
+        free(L->coff);
+        free(L->cval);
         free(L->dinv);
         free(L->agg);
         free(L->mrp);

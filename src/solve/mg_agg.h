@@ -39,12 +39,19 @@ static inline int mg_agg_slow(int iterations, double relres)
     return iterations > MG_AGG_SWITCH && relres > 0 && pow(relres, 1.0 / iterations) > MG_AGG_SLOW;
 }
 
+/* Sparse rows. Once the hierarchy is built (hv__mg_agg_pack), a matrix whose
+ * every row spans fewer than 65536 columns holds them as 16-bit offsets co
+ * from the row's first column cb[r] instead of ci (then NULL). */
 typedef struct mg_csr {
     int32_t n;  /* rows */
     size_t *rp; /* n + 1 row starts */
     int32_t *ci;
     float *v;
+    int32_t *cb;  /* packed: each row's smallest column */
+    uint16_t *co; /* packed: column - cb[row], MG_CSR_PAD entries past the last */
 } mg_csr;
+
+#define MG_CSR_PAD 16
 
 /* Level l of the aggregation hierarchy; lv[0] is the grid's fine level, whose
  * operator is the matrix-free stencil of an mg_level (A unused there). */
@@ -67,6 +74,17 @@ typedef struct mg_alevel {
     int tn;
     int32_t toff[125];
     float tval[125];
+    /* The CPU cycle's further templates (hv__mg_agg_pack): stored rows that
+     * repeat along the box's faces and the walls, the same entries at the
+     * same offsets. cls[c] = 0 for a row in A, 1 for a plain row, 2 + k for
+     * row class k (cn[k] entries at offsets coff, values cval, each class
+     * 125 apart), whose rows then hold no entries in A. NULL when packing found
+     * none. */
+    uint16_t *cls;
+    int ncls;
+    int *cn;
+    int32_t *coff;
+    float *cval;
     int32_t nagg;                 /* aggregates made of them (next level's non-empty unknowns) */
     float *u, *f, *r, *d, *t, *s; /* work: t, s for the transfers */
 } mg_alevel;
@@ -92,6 +110,11 @@ typedef struct mg_agg {
  * its geometric levels. */
 hv_status hv__mg_agg_build(mg_agg **out, const mg_level *F, int dim, double alpha);
 void hv__mg_agg_free(mg_agg *g);
+/* Packs the hierarchy for the CPU cycle: level 1's rows that repeat into row
+ * classes (mg_alevel's cls), the columns of every matrix whose rows fit into
+ * 16-bit offsets (mg_csr). The OpenCL backend uploads it unpacked. Leaves a
+ * part as it is where memory is short. */
+void hv__mg_agg_pack(mg_agg *g);
 /* Frees all but the bottom level's factor and the level sizes (the OpenCL
  * backend, once it has uploaded the levels). */
 void hv__mg_agg_keep_bottom(mg_agg *g);
