@@ -283,6 +283,25 @@ START_TEST(auto_should_change_to_aggregation_after_a_slow_solve)
 }
 END_TEST
 
+/* The geometric hierarchy (*H) of an n[0] x n[1] x n[2] box with solid cells
+ * `mask`, Poisson or a heat step at 4h^2, and the aggregation levels under
+ * its fine level. */
+static mg_agg *build_levels(const int n[3], const uint8_t *mask, int heat, hv_setup *s,
+                            mg_hierarchy *H)
+{
+    memset(s, 0, sizeof *s);
+    double h = 1.0 / n[0];
+    s->p = (hv_problem){3, {n[0], n[1], n[2]}, h, mask, heat ? 1.0 : 0.0, heat ? 4 * h * h : 1.0};
+    hv_solver_opts_default(&s->o);
+    s->count = (size_t)n[0] * n[1] * n[2];
+    s->nregion = 1;
+    TL_ASSERT_OK(hv__mg_hierarchy_build(H, s, 0));
+    mg_agg *g = NULL;
+    TL_ASSERT_OK(hv__mg_agg_build(&g, &H->lv[0], 3, s->p.alpha));
+    ck_assert_ptr_nonnull(g);
+    return g;
+}
+
 /* Level 1's operator against P^T A P computed from its definition with the
  * fine level's own apply (double): columns of plain rows (the template) and
  * of rows next to the walls (the hash-table path), heat and Poisson. */
@@ -293,18 +312,8 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
     uint8_t *mask = baffles(3, n);
     for (int heat = 0; heat < 2; heat++) {
         hv_setup s;
-        memset(&s, 0, sizeof s);
-        double h = 1.0 / n[0];
-        s.p =
-            (hv_problem){3, {n[0], n[1], n[2]}, h, mask, heat ? 1.0 : 0.0, heat ? 4 * h * h : 1.0};
-        hv_solver_opts_default(&s.o);
-        s.count = N;
-        s.nregion = 1;
         mg_hierarchy H;
-        TL_ASSERT_OK(hv__mg_hierarchy_build(&H, &s, 0));
-        mg_agg *g = NULL;
-        TL_ASSERT_OK(hv__mg_agg_build(&g, &H.lv[0], 3, s.p.alpha));
-        ck_assert_ptr_nonnull(g);
+        mg_agg *g = build_levels(n, mask, heat, &s, &H);
         const mg_alevel *L0 = &g->lv[0], *L1 = &g->lv[1];
         int nplain = 0;
         for (int32_t J = 0; J < L1->n; J++)
@@ -377,17 +386,8 @@ START_TEST(packed_levels_should_give_the_same_cycle)
     for (int obstacle = 0; obstacle < 2; obstacle++) {
         uint8_t *mask = obstacle ? maze(n, 12) : baffles(3, n);
         hv_setup s;
-        memset(&s, 0, sizeof s);
-        double h = 1.0 / n[0];
-        s.p = (hv_problem){3, {n[0], n[1], n[2]}, h, mask, 0.0, 1.0};
-        hv_solver_opts_default(&s.o);
-        s.count = N;
-        s.nregion = 1;
         mg_hierarchy H;
-        TL_ASSERT_OK(hv__mg_hierarchy_build(&H, &s, 0));
-        mg_agg *g = NULL;
-        TL_ASSERT_OK(hv__mg_agg_build(&g, &H.lv[0], 3, s.p.alpha));
-        ck_assert_ptr_nonnull(g);
+        mg_agg *g = build_levels(n, mask, 0, &s, &H);
         ck_assert_int_ge(g->nlev, 4);
         float *r = random_rhs(N, 11), *u0 = calloc(N, sizeof *u0), *u1 = calloc(N, sizeof *u1);
         for (size_t c = 0; c < N; c++)
