@@ -82,7 +82,9 @@ CL_SRC  := $(sort $(wildcard kernels/*.cl))
 OBJ     := $(C_SRC:%.c=$(BUILD)/obj/%.o) $(CXX_SRC:%.cpp=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
 TESTS   := $(patsubst tests/%.c,$(BUILD)/tests/%,$(sort $(wildcard tests/check_*.c)))
 TESTLIB := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/testlib.c))
-STAMP   := $(BUILD)/.deps-ok
+# One stamp per package list: the MPI one (DEPS_TAG=-mpi, make mpi-deps) is
+# checked even where the plain list's stamp is already there.
+STAMP   := $(BUILD)/.deps-ok$(DEPS_TAG)
 
 # The Python package (python/heatvox) goes beside the library, into Debian
 # python3's site directory under PREFIX (for /usr/local one that Debian's
@@ -271,11 +273,11 @@ MPI_RUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rm
 # With the packages installed first (make mpi-deps), the default build links
 # PETSc too, and `make mpi-check MPI_BUILD=build` reuses it.
 mpi-deps:
-	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' deps
+	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEPS_TAG=-mpi DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' deps
 	@pkg-config --exists PETSc ompi-c hdf5-openmpi || \
 	  { echo "heatvox: pkg-config finds no PETSc, OpenMPI or parallel HDF5 after installing $(MPI_PKGS)"; exit 1; }
 mpi: mpi-deps
-	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
+	+@$(MAKE) --no-print-directory BUILD=$(MPI_BUILD) HV_PETSC=1 DEPS_TAG=-mpi DEB_PKGS='$(DEB_PKGS) $(MPI_PKGS)' \
 	  all $(MPI_BUILD)/tests/mpi_solve $(MPI_BUILD)/tests/mpi_dmda $(MPI_BUILD)/advect_dmda \
 	  $(MPI_BUILD)/bench_mpi
 mpi-check: mpi
