@@ -1552,7 +1552,12 @@ static size_t csr_pack(mg_csr *M)
     const size_t nnz = M->rp[M->n];
     int32_t *cb = malloc(((size_t)M->n + 1) * sizeof *cb);
     uint16_t *co = malloc((nnz + MG_CSR_PAD) * sizeof *co);
-    int fits = cb && co;
+    if (!cb || !co) {
+        free(cb);
+        free(co);
+        return 0;
+    }
+    int fits = 1; /* each thread's copy starts at 1 too */
 #pragma omp parallel for schedule(static) reduction(&& : fits) if (M->n > AGG_PAR_MIN)
     for (int32_t r = 0; r < M->n; r++) {
         if (!fits)
