@@ -428,11 +428,8 @@ static void check_one(const char *root, const char *rel)
     snprintf(path, sizeof path, "%s/%s", root, rel);
     const expect *x = find_expect(rel);
     hv_mesh *m = NULL;
-    double t0 = hv_now();
     hv_status st = hv_mesh_read(path, &m);
-    double dt = hv_now() - t0;
     files_seen++;
-    ck_assert_msg(dt < 3.0, "%s took %.2f s", rel, dt);
     if (st == HV_OK) {
         files_loaded++;
         ck_assert_msg(!x || x->tris >= 0, "%s should fail but loaded %zu triangles", rel, m->ntris);
@@ -599,7 +596,8 @@ START_TEST(igea_tristrips_should_become_a_consistent_surface)
 }
 END_TEST
 
-START_TEST(stanford_bunny_should_load_well_under_a_second)
+/* Its times are printed for the log; `heatvox bench` measures speed. */
+START_TEST(stanford_bunny_should_load_and_report)
 {
     const char *root = shared_meshes();
     if (!root)
@@ -614,8 +612,9 @@ START_TEST(stanford_bunny_should_load_well_under_a_second)
     double t2 = hv_now();
     printf("stanford-bunny.obj: read %.3f s, report %.3f s (%zu triangles)\n", t1 - t0, t2 - t1,
            r.triangles);
-    ck_assert_msg(t1 - t0 < 0.5, "read took %.3f s", t1 - t0);
-    ck_assert_msg(t2 - t1 < 0.5, "report took %.3f s", t2 - t1);
+    /* SOURCES.md: 69,451 triangles, 223 boundary edges (holes in the base). */
+    ck_assert_uint_eq(r.triangles, 69451);
+    ck_assert_uint_eq(r.boundary_edges, 223);
     hv_mesh_destroy(&m);
 }
 END_TEST
@@ -708,10 +707,7 @@ START_TEST(huge_declared_counts_should_fail_fast_without_allocating)
     char path[4096];
     snprintf(path, sizeof path, "%s/formats/invalid/OutOfMemory.off", root);
     size_t rss0 = hv_peak_rss();
-    double t0 = hv_now();
     assert_fails(path, "353535235358");
-    double dt = hv_now() - t0;
-    ck_assert_msg(dt < 0.05, "took %.3f s", dt);
     ck_assert_msg(hv_peak_rss() < rss0 + ((size_t)16 << 20), "peak RSS grew");
 }
 END_TEST
@@ -908,9 +904,7 @@ START_TEST(non_regular_inputs_should_be_refused_naming_the_file)
     /* /dev/zero is refused, not read until memory runs out. */
     make_tmpdir();
     hv_mesh *m = NULL;
-    double t0 = hv_now();
     ck_assert_int_eq(hv_mesh_read("/dev/zero", &m), HV_ERR_IO);
-    ck_assert_msg(hv_now() - t0 < 1, "took %.2f s", hv_now() - t0);
     ck_assert_ptr_null(m);
     ck_assert_msg(strstr(hv_last_error(), "/dev/zero") &&
                       strstr(hv_last_error(), "character device"),
@@ -1251,7 +1245,7 @@ static Suite *mesh_suite(void)
     tcase_add_test(tc, clean_shared_meshes_should_be_closed_and_consistent);
     tcase_add_test(tc, broken_shared_meshes_should_report_the_defects_sources_md_lists);
     tcase_add_test(tc, igea_tristrips_should_become_a_consistent_surface);
-    tcase_add_test(tc, stanford_bunny_should_load_well_under_a_second);
+    tcase_add_test(tc, stanford_bunny_should_load_and_report);
     suite_add_tcase(s, tc);
 
     tc = tcase_create("generators and defects");

@@ -221,7 +221,8 @@ END_TEST
 
 /* Builds the ```c block that starts at `start` (after its fence) in a new
  * work directory against the staged install, runs it there, and checks that
- * it ran against the staged library in under 5 s. */
+ * it ran against the staged library. How long it takes is not checked here:
+ * a wall-clock bound fails on a loaded machine or under the sanitizers. */
 static void build_and_run(const char *start, int k)
 {
     const char *end = strstr(start, "\n```");
@@ -251,11 +252,8 @@ static void build_and_run(const char *start, int k)
     int rc = run_in(dir, cmd, err, sizeof err);
     ck_assert_msg(rc == 0, "compiling the README's C example %d (%s/prog.c): exit %d: %s", k, dir,
                   rc, err);
-    double t0 = hv_now();
     rc = run_in(dir, "./prog", err, sizeof err);
-    double dt = hv_now() - t0;
     ck_assert_msg(rc == 0, "the README's C example %d exited %d: %s", k, rc, err);
-    ck_assert_msg(dt < 5.0, "the README's C example %d took %.1f s; keep its grid small", k, dt);
     /* It must have run against the staged library, not another copy. */
     rc = run_in(dir, "ldd ./prog | grep -q '/stage/lib/libheatvox\\.so'", err, sizeof err);
     ck_assert_msg(rc == 0, "prog is not linked against %s/stage/lib", build_dir);
