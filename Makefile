@@ -518,7 +518,8 @@ fuzz-clean:
 TS          := build-tsan
 # Line tables alone for the C++ files, as in the other sanitized builds.
 $(CXX_SRC:%.cpp=$(TS)/obj/%.o): CXXFLAGS += -gline-tables-only
-TSAN_SUITES ?= check_mg check_mg_agg check_ops check_distance check_extend check_extend_tiles check_sdf check_sdf2d check_fftw
+# The longest first: make -j starts them in this order.
+TSAN_SUITES ?= check_distance check_mg check_mg_agg check_sdf check_extend check_extend_tiles check_sdf2d check_fftw check_ops
 TS_RUNENV   := OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so ARCHER_OPTIONS=verbose=1 \
                TSAN_OPTIONS='ignore_noninstrumented_modules=1 halt_on_error=0 suppressions=$(CURDIR)/tests/tsan.supp' GOMP_SPINCOUNT=1000
 .PHONY: tsan
