@@ -14,6 +14,7 @@ CXX     ?= g++
 OPT     ?= -O3
 SAN     ?=
 
+CXX_SANLIGHT := -g1 -fno-sanitize=alignment,null,object-size,vptr
 ifeq ($(SAN),1)
 OPT     := -O1 -g -fno-omit-frame-pointer
 SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=undefined
@@ -22,8 +23,9 @@ SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 # access and full debug information is large: GCC took 212 s on
 # vdb_write.cpp with them, 83 s without them and with line tables alone
 # (-g1, enough for the sanitizers' stack traces). ASan still checks every
-# access there, and UBSan's arithmetic checks stay.
-CXX_SANFLAGS := -g1 -fno-sanitize=alignment,null,object-size,vptr
+# access there, and UBSan's arithmetic checks stay. The fuzzing and
+# ThreadSanitizer builds (below) use the same flags for their C++ files.
+CXX_SANFLAGS := $(CXX_SANLIGHT)
 endif
 
 WARN     := -Wall -Wextra -Wno-unused-parameter
@@ -420,8 +422,8 @@ FZ_RUNENV    := ASAN_OPTIONS=$(FZ_ASAN) \
 # "active" flag straight from the file into a bool (bool; a corrupt byte is
 # UB there). Neither is heatvox's code.
 # Like make sanitize's, the C++ files leave out UBSan's pointer checks and
-# keep line tables alone (CXX_SANFLAGS above).
-$(CXX_SRC:%.cpp=$(FZ)/obj/%.o): CXXFLAGS += -fno-sanitize=alignment,bool,null,object-size,vptr -gline-tables-only
+# keep line tables alone (CXX_SANLIGHT above).
+$(CXX_SRC:%.cpp=$(FZ)/obj/%.o): CXXFLAGS += -fno-sanitize=bool $(CXX_SANLIGHT)
 
 .PHONY: fuzz fuzz-build fuzz-seeds fuzz-clean
 fuzz-build:
@@ -517,7 +519,7 @@ fuzz-clean:
 # and write the same cells as the baseline rows it checks.
 TS          := build-tsan
 # Line tables alone for the C++ files, as in the other sanitized builds.
-$(CXX_SRC:%.cpp=$(TS)/obj/%.o): CXXFLAGS += -gline-tables-only
+$(CXX_SRC:%.cpp=$(TS)/obj/%.o): CXXFLAGS += $(CXX_SANLIGHT)
 # The longest first: make -j starts them in this order.
 TSAN_SUITES ?= check_distance check_mg check_mg_agg check_sdf check_extend check_extend_tiles check_sdf2d check_fftw check_ops
 TS_RUNENV   := OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so ARCHER_OPTIONS=verbose=1 \
