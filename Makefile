@@ -258,14 +258,20 @@ check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed
 check-long: all $(BUILD)/tests/check_batch $(TEST_HELPERS)
 	HEATVOX_TEST_LONG=1 HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} $(BUILD)/tests/check_batch
 
-# One run: its log, exit code and seconds under $(RES).
+# One run: its log, exit code and seconds under $(RES). Every build's runs
+# share one PoCL kernel cache (POCL_CACHE): a kernel's binary depends on its
+# source, options and device, not on how the host code was built, so make
+# check after make sanitize compiles none again.
+POCL_CACHE ?= $(CURDIR)/build/pocl-cache
 $(RES)/%.rc:
+	@mkdir -p $(POCL_CACHE)
 	@run=$*; t=$(BUILD)/tests/$${run%%.*}; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
 	[ $$run != check_kernels ] || t="sh tests/check_kernels.sh $(BUILD)/kernels $(FZ_CC)"; \
 	[ $$run != check_includes ] || t="python3 tests/check_includes.py"; \
 	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; esac; \
 	t0=$$(date +%s%N); \
 	HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
+	  POCL_CACHE_DIR=$${POCL_CACHE_DIR:-$(POCL_CACHE)} \
 	  HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 900 $$t > $(RES)/$$run.log 2>&1; \
 	rc=$$?; ms=$$(( ($$(date +%s%N) - t0) / 1000000 )); \
 	echo "$$ms" > $(RES)/$$run.ms; echo $$rc > $@; \

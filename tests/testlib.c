@@ -33,6 +33,21 @@ const char *tl_test_data(void)
     return d;
 }
 
+int tl_sanitized(void)
+{
+    const char *longrun = getenv("HEATVOX_TEST_LONG");
+    if (longrun && *longrun && strcmp(longrun, "0"))
+        return 0;
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+    return 1;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+    return 1;
+#endif
+#endif
+    return 0;
+}
+
 void tl_skip(const char *fmt, ...)
 {
     va_list ap;

@@ -14,6 +14,12 @@ void tl_fill_random(float *v, size_t n, uint64_t seed);
  * when it does not exist (the caller skips and says so). */
 const char *tl_test_data(void);
 
+/* 1 in a build under AddressSanitizer or ThreadSanitizer (make sanitize,
+ * make tsan) unless HEATVOX_TEST_LONG is set: suites that repeat one path
+ * over many sizes, cases or kill times run a few of them there, since what the
+ * sanitizers look for shows in one pass; make check runs every one. */
+int tl_sanitized(void);
+
 /* Skips: `make check` counts the lines these print and ends with
  * "check: N passed, M failed, K skipped". A test that cannot run here calls
  * TL_SKIP (it prints "SKIP: ..." and returns, so Check's pass is taken back);
