@@ -27,8 +27,18 @@ SANFLAGS := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 # ThreadSanitizer builds (below) use the same flags for their C++ files.
 CXX_SANFLAGS := $(CXX_SANLIGHT)
 endif
+# Two files only run OpenVDB's own algorithms: its mesher (vdb_volmesh.cpp,
+# for vdb_mesh.cpp) and the benchmarks' OpenVDB reference. The sanitized
+# builds (make sanitize, make tsan) compile them as OpenVDB itself is
+# compiled, without instrumentation: under ASan their templates took 124 s
+# and 131 s of GCC's time, half of what the whole build took.
+VDB_ALGO_SRC := src/mesh/vdb_volmesh.cpp tools/bench/bench_ref_vdb.cpp
 
 WARN     := -Wall -Wextra -Wno-unused-parameter
+ifneq ($(SANFLAGS),)
+$(VDB_ALGO_SRC:%.cpp=$(BUILD)/obj/%.o): override SANFLAGS :=
+$(VDB_ALGO_SRC:%.cpp=$(BUILD)/obj/%.o): override CXX_SANFLAGS := -g1
+endif
 CPPFLAGS += -Iinclude -Isrc -I$(BUILD)/gen -D_GNU_SOURCE -DCL_TARGET_OPENCL_VERSION=120
 CFLAGS   += -std=c11 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS)
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS) $(CXX_SANFLAGS) -I/usr/include/OpenEXR

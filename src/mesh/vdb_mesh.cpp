@@ -25,6 +25,7 @@
 // its regions kept apart, the uniform mesh being the last resort).
 #include "heatvox/vdb.h"
 #include "io/vdb_internal.h"
+#include "vdb_volmesh.h"
 
 extern "C" {
 #include "mesh_internal.h"
@@ -32,7 +33,6 @@ extern "C" {
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
-#include <openvdb/tools/VolumeToMesh.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -247,34 +247,25 @@ void run_mesher(const openvdb::FloatGrid &grid, float iso, double adaptivity,
                 const openvdb::BoolTree::Ptr &keep, std::vector<openvdb::Vec3s> &points,
                 std::vector<Tri> &tris)
 {
-    openvdb::tools::VolumeToMesh mesher(iso, adaptivity, true);
-    if (keep)
-        mesher.setAdaptivityMask(keep);
-    mesher(grid);
-    points.assign(mesher.pointList().get(), mesher.pointList().get() + mesher.pointListSize());
+    std::vector<openvdb::Vec4I> quads;
+    std::vector<openvdb::Vec3I> triangles;
+    volume_to_mesh(grid, iso, adaptivity, keep, points, quads, triangles);
     tris.clear();
     auto add = [&](uint32_t a, uint32_t b, uint32_t c) {
         if (a != b && b != c && a != c)
             tris.push_back(Tri{{a, c, b}});
     };
-    openvdb::tools::PolygonPoolList &pools = mesher.polygonPoolList();
-    for (size_t p = 0; p < mesher.polygonPoolListSize(); p++) {
-        const openvdb::tools::PolygonPool &pool = pools[p];
-        for (size_t i = 0; i < pool.numQuads(); i++) {
-            const openvdb::Vec4I &q = pool.quad(i);
-            if (dist2(points[q[0]], points[q[2]]) <= dist2(points[q[1]], points[q[3]])) {
-                add(q[0], q[1], q[2]);
-                add(q[0], q[2], q[3]);
-            } else {
-                add(q[0], q[1], q[3]);
-                add(q[1], q[2], q[3]);
-            }
-        }
-        for (size_t i = 0; i < pool.numTriangles(); i++) {
-            const openvdb::Vec3I &t = pool.triangle(i);
-            add(t[0], t[1], t[2]);
+    for (const openvdb::Vec4I &q : quads) {
+        if (dist2(points[q[0]], points[q[2]]) <= dist2(points[q[1]], points[q[3]])) {
+            add(q[0], q[1], q[2]);
+            add(q[0], q[2], q[3]);
+        } else {
+            add(q[0], q[1], q[3]);
+            add(q[1], q[2], q[3]);
         }
     }
+    for (const openvdb::Vec3I &t : triangles)
+        add(t[0], t[1], t[2]);
 }
 
 // How far a triangle strays from the isosurface: the largest |phi - iso| of the
