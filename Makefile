@@ -40,7 +40,7 @@ $(VDB_ALGO_SRC:%.cpp=$(BUILD)/obj/%.o): override SANFLAGS :=
 $(VDB_ALGO_SRC:%.cpp=$(BUILD)/obj/%.o): override CXX_SANFLAGS := -g1
 endif
 CPPFLAGS += -Iinclude -Isrc -I$(BUILD)/gen -D_GNU_SOURCE -DCL_TARGET_OPENCL_VERSION=120
-CFLAGS   += -std=c11 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS)
+CFLAGS   += -std=c11 $(OPT) $(WARN) -Werror=implicit-function-declaration -fPIC -fopenmp $(SANFLAGS)
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -fPIC -fopenmp $(SANFLAGS) $(CXX_SANFLAGS) -I/usr/include/OpenEXR
 # The library exports only what the public headers mark HV_API: its C code is
 # compiled with hidden visibility, and the shared library's version script

@@ -16,8 +16,9 @@
 static int by_key(const void *a, const void *b)
 {
     const uint64_t *x = a, *y = b;
-    return (x[0] > y[0]) - (x[0] < y[0]) ? (x[0] > y[0]) - (x[0] < y[0])
-                                         : (x[1] > y[1]) - (x[1] < y[1]);
+    if (x[0] != y[0])
+        return (x[0] > y[0]) - (x[0] < y[0]);
+    return (x[1] > y[1]) - (x[1] < y[1]);
 }
 
 /* Points on a dense grid of square cells over their bounds, listed by cell (a

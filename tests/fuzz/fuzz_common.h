@@ -16,7 +16,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-static const char *fz_dir(void)
+static inline const char *fz_dir(void)
 {
     struct stat sb;
     if (stat("/dev/shm", &sb) == 0 && S_ISDIR(sb.st_mode) && access("/dev/shm", W_OK) == 0)
@@ -28,7 +28,7 @@ static const char *fz_dir(void)
 /* Writes data to this process's input file, named with ext (a string of
  * static storage), and returns its path (static storage), or NULL when the
  * file cannot be written (the input is skipped). */
-static const char *fz_file(const uint8_t *data, size_t size, const char *ext)
+static inline const char *fz_file(const uint8_t *data, size_t size, const char *ext)
 {
     static char path[512];
     static const char *named_for;
@@ -52,7 +52,7 @@ static const char *fz_file(const uint8_t *data, size_t size, const char *ext)
     return path;
 }
 
-static void fz_done(const char *path)
+static inline void fz_done(const char *path)
 {
     if (path)
         unlink(path);
