@@ -442,12 +442,12 @@ FZ_RUNENV    := ASAN_OPTIONS=$(FZ_ASAN) \
 $(CXX_SRC:%.cpp=$(FZ)/obj/%.o): CXXFLAGS += -fno-sanitize=bool $(CXX_SANLIGHT)
 
 # The targets link the parsers' objects alone: those of core, io and mesh but
-# the .vdb writer and the mesher (vdb_write.cpp, vdb_mesh.cpp, the two longest
-# compiles), which no target reads with. make_seeds, which writes seeds through
-# the whole library, is a program of the default build, as the command that
-# writes the scenes is.
+# the .vdb writer and the mesher (vdb_write.cpp, vdb_mesh.cpp and
+# vdb_volmesh.cpp, the longest compiles), which no target reads with.
+# make_seeds, which writes seeds through the whole library, is a program of the
+# default build, as the command that writes the scenes is.
 FZ_LIB       := $(FZ)/libheatvox_parsers.a
-FZ_OBJ       := $(patsubst %,$(FZ)/obj/%.o,$(basename $(filter-out src/io/vdb_write.cpp src/mesh/vdb_mesh.cpp,\
+FZ_OBJ       := $(patsubst %,$(FZ)/obj/%.o,$(basename $(filter-out src/io/vdb_write.cpp src/mesh/vdb_mesh.cpp src/mesh/vdb_volmesh.cpp,\
                   $(filter src/core/% src/io/% src/mesh/%,$(C_SRC) $(CXX_SRC)))))
 SEED_TOOL    := $(BUILD)/fuzz/make_seeds
 
