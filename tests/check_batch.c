@@ -598,8 +598,7 @@ START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
     /* Two resolutions in make check, the two smaller ones under the
      * sanitizers; all four in make check-long. */
     const int all_res[] = {32, 64, 96, 128}, quick_res[] = {32, 96};
-    const char *longrun = getenv("HEATVOX_TEST_LONG");
-    const int full = longrun && *longrun && strcmp(longrun, "0");
+    const int full = tl_long();
     const int *res = full || tl_sanitized() ? all_res : quick_res, nres = full ? 4 : 2;
     int volumes = 0;
     for (int r = 0; r < nres; r++) {

@@ -33,10 +33,15 @@ const char *tl_test_data(void)
     return d;
 }
 
-int tl_sanitized(void)
+int tl_long(void)
 {
     const char *longrun = getenv("HEATVOX_TEST_LONG");
-    if (longrun && *longrun && strcmp(longrun, "0"))
+    return longrun && *longrun && strcmp(longrun, "0");
+}
+
+int tl_sanitized(void)
+{
+    if (tl_long())
         return 0;
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
     return 1;

@@ -19,6 +19,8 @@ const char *tl_test_data(void);
  * over many sizes, cases or kill times run a few of them there, since what the
  * sanitizers look for shows in one pass; make check runs every one. */
 int tl_sanitized(void);
+/* 1 when HEATVOX_TEST_LONG is set and not "0" (make check-long). */
+int tl_long(void);
 
 /* Skips: `make check` counts the lines these print and ends with
  * "check: N passed, M failed, K skipped". A test that cannot run here calls
