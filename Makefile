@@ -447,7 +447,7 @@ $(CXX_SRC:%.cpp=$(FZ)/obj/%.o): CXXFLAGS += -fno-sanitize=bool $(CXX_SANLIGHT)
 # make_seeds, which writes seeds through the whole library, is a program of the
 # default build, as the command that writes the scenes is.
 FZ_LIB       := $(FZ)/libheatvox_parsers.a
-FZ_OBJ       := $(patsubst %,$(FZ)/obj/%.o,$(basename $(filter-out src/io/vdb_write.cpp src/mesh/vdb_mesh.cpp src/mesh/vdb_volmesh.cpp,\
+FZ_OBJ       := $(patsubst %,$(FZ)/obj/%.o,$(basename $(filter-out src/io/vdb_write.cpp src/io/vdb_packed.cpp src/mesh/vdb_mesh.cpp src/mesh/vdb_volmesh.cpp,\
                   $(filter src/core/% src/io/% src/mesh/%,$(C_SRC) $(CXX_SRC)))))
 SEED_TOOL    := $(BUILD)/fuzz/make_seeds
 

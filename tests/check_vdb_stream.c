@@ -131,8 +131,17 @@ static void write_band(const hv_mesh *m, const char *path, const char *batch, in
         TL_ASSERT_OK(hv_vdb_writer_levelset_sink(w, "sdf", 3, &vs, &sink));
         TL_ASSERT_OK(hv_sdf_stream_tiles(m, &o, 3, &sink, &S));
         ck_assert_uint_eq(vs.tiles, S.tiles);
-        if (!shift)
+        if (!shift) {
             ck_assert_uint_eq(vs.leaves, S.tiles); /* one leaf a tile on the lattice */
+            const char *serial = getenv("HEATVOX_VDB_SERIAL_WRITE");
+            /* packed, each about 1 kB, but with OpenVDB's own writer */
+            ck_assert_uint_eq(vs.packed_leaves, serial ? 0 : vs.leaves);
+            ck_assert(serial ? vs.packed_bytes == 0
+                             : vs.packed_bytes > 100.0 * vs.leaves &&
+                                   vs.packed_bytes < 2100.0 * vs.leaves);
+        } else {
+            ck_assert_uint_eq(vs.packed_leaves, 0); /* a leaf spans batches */
+        }
         ck_assert_uint_ge(vs.batches, batch ? S.tiles / (size_t)atoi(batch) / 8 : 1);
         ck_assert(vs.tree_bytes > 0 && vs.tree_bytes <= vs.tree_bytes_bound * 1.25);
     } else {
@@ -148,22 +157,26 @@ static void write_band(const hv_mesh *m, const char *path, const char *batch, in
 }
 
 /* Streamed in batches of 3 tiles, or all at once, or all at once through
- * OpenVDB's own serial Grid::writeBuffers: the same bytes. */
+ * OpenVDB's own flood fill and serial writer (leaves not packed): the same
+ * bytes. */
 START_TEST(streamed_file_should_equal_the_file_of_all_tiles_byte_for_byte)
 {
-    char dir[] = "/tmp/hv_vdb_stream_XXXXXX", a[256], b[256], c[256];
+    char dir[] = "/tmp/hv_vdb_stream_XXXXXX", a[256], b[256], c[256], d[256];
     ck_assert_ptr_nonnull(mkdtemp(dir));
     snprintf(a, sizeof a, "%s/streamed.vdb", dir);
     snprintf(b, sizeof b, "%s/whole.vdb", dir);
     snprintf(c, sizeof c, "%s/serial.vdb", dir);
+    snprintf(d, sizeof d, "%s/serial_streamed.vdb", dir);
     hv_mesh *m = torus();
     write_band(m, a, "3", 1, NULL);
     write_band(m, b, NULL, 0, NULL);
     setenv("HEATVOX_VDB_SERIAL_WRITE", "1", 1);
     write_band(m, c, NULL, 0, NULL);
+    write_band(m, d, "3", 1, NULL);
     unsetenv("HEATVOX_VDB_SERIAL_WRITE");
     assert_same_file(a, b);
     assert_same_file(b, c);
+    assert_same_file(c, d);
     hv_mesh_destroy(&m);
     tl_rm_rf(dir);
 }
@@ -198,6 +211,66 @@ START_TEST(streamed_file_off_the_leaf_lattice_should_equal_the_whole_one)
     hv_grid_destroy(&ga);
     hv_grid_destroy(&gb);
     hv_mesh_destroy(&m);
+    tl_rm_rf(dir);
+}
+END_TEST
+
+/* Four hand-made tiles in two columns 8192 voxels apart along z, so in two
+ * 4096^3 nodes of the root. Column (0, 0) goes from outside to inside along
+ * z at the bottom and back at the top, column (0, 8) the other way round;
+ * the voxels 3.5 voxels off the surface are beyond the band and inactive.
+ * Packed leaves keep only their signs for the flood fill of the levels
+ * above them: the file must be OpenVDB's own (its flood fill from the
+ * values, its writer), byte for byte, with the root's inside tile between
+ * the columns. */
+static void write_columns(const char *path)
+{
+    enum { NT = 4 };
+    int32_t ijk[3 * NT] = {0, 0, 0, 0, 0, 8192, 0, 8, 0, 0, 8, 8192};
+    static float v[512 * NT];
+    static uint64_t on[8 * NT];
+    const double h = 0.01;
+    for (int q = 0; q < NT; q++) {
+        const double s = (q == 0 || q == 3) ? 1 : -1; /* outside below: +1 */
+        for (int c = 0; c < 512; c++)
+            v[512 * q + c] = (float)(s * (3.5 - c / 64) * h);
+        for (int k = 0; k < 8; k++)
+            on[8 * q + k] = ~(uint64_t)0;
+    }
+    hv_tiles t = {
+        .n = {8, 16, 8200}, .h = h, .count = NT, .ijk = ijk, .v = v, .on = on, .active = 512 * NT};
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_levelset_tiles(w, &t, "sdf", 3));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, path));
+    hv_vdb_writer_destroy(&w);
+}
+
+static float at(const hv_grid *g, int i, int j, int k)
+{
+    return g->v[i + (size_t)g->n[0] * (j + (size_t)g->n[1] * k)];
+}
+
+START_TEST(packed_leaves_should_flood_fill_every_level_as_openvdb_does)
+{
+    char dir[] = "/tmp/hv_vdb_stream_XXXXXX", a[256], b[256];
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    snprintf(a, sizeof a, "%s/packed.vdb", dir);
+    snprintf(b, sizeof b, "%s/serial.vdb", dir);
+    write_columns(a);
+    setenv("HEATVOX_VDB_SERIAL_WRITE", "1", 1);
+    write_columns(b);
+    unsetenv("HEATVOX_VDB_SERIAL_WRITE");
+    assert_same_file(a, b);
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_vdb_read_float(a, "sdf", NULL, &g, NULL));
+    ck_assert_int_eq(g->n[2], 8200);
+    const float bg = (float)(3 * 0.01);
+    ck_assert_float_eq(at(g, 0, 0, 6000), -bg); /* the root's tile */
+    ck_assert_float_eq(at(g, 0, 0, 0), bg);     /* beyond the band */
+    ck_assert_float_eq(at(g, 0, 8, 0), -bg);
+    ck_assert_float_eq(at(g, 0, 0, 2), (float)(1.5 * 0.01)); /* active */
+    hv_grid_destroy(&g);
     tl_rm_rf(dir);
 }
 END_TEST
@@ -339,6 +412,7 @@ int main(void)
     tcase_add_test(tc, batches_of_any_size_should_give_the_same_tiles);
     tcase_add_test(tc, streamed_file_should_equal_the_file_of_all_tiles_byte_for_byte);
     tcase_add_test(tc, streamed_file_off_the_leaf_lattice_should_equal_the_whole_one);
+    tcase_add_test(tc, packed_leaves_should_flood_fill_every_level_as_openvdb_does);
     tcase_add_test(tc, failing_sink_should_stop_the_run_and_hear_of_it_once);
     tcase_add_test(tc, sink_should_refuse_a_tree_larger_than_the_machine);
     suite_add_tcase(s, tc);

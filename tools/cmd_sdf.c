@@ -383,13 +383,14 @@ static void report(const sdf_args *A, const hv_sdf_stats *Sp, const hv_vdb_sink_
     if (cli_verbose >= 1 && tiles)
         fprintf(stderr,
                 "heatvox sdf: the band went into the .vdb's tree as it was computed: %zu "
-                "batches, at most %zu tiles in flight (%.0f MB); tree of %zu leaves, %.0f MB "
-                "(allowed for: %.0f MB, %zu tiles near enough); leaves built in %.2f s, flood "
-                "fill %.2f s; file written in %.2f s\n",
+                "batches, at most %zu tiles in flight (%.0f MB); tree of %zu leaves, %.0f MB, "
+                "%zu of them packed into %.0f MB of compressed values (allowed for: %.0f MB, "
+                "%zu tiles near enough); leaves built and packed in %.2f s, flood fill %.2f s; "
+                "file written in %.2f s\n",
                 vs->batches, S.tiles_in_flight,
                 S.tiles_in_flight * (HV_TILE * HV_TILE * HV_TILE * 4.0 + 8 * 8 + 12) / 1e6,
-                vs->leaves, vs->tree_bytes / 1e6, vs->tree_bytes_bound / 1e6, S.tiles_bound,
-                vs->t_leaves, vs->t_fill, t[2]);
+                vs->leaves, vs->tree_bytes / 1e6, vs->packed_leaves, vs->packed_bytes / 1e6,
+                vs->tree_bytes_bound / 1e6, S.tiles_bound, vs->t_leaves, vs->t_fill, t[2]);
     else if (cli_verbose >= 1)
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; solver %s: diffuse %d iterations "

@@ -68,9 +68,11 @@ typedef struct hv_vdb_sink_stats {
     size_t batches, tiles;   /* put calls, tiles they held */
     size_t leaves;           /* the tree's leaves */
     double tree_bytes;       /* the tree's memory once whole (OpenVDB's memUsage) */
-    double tree_bytes_bound; /* what begin's bound on the tiles allowed for */
-    double t_leaves; /* seconds building leaves from the batches, within the producer's run */
-    double t_fill;   /* seconds of the signed flood fill at the end */
+    size_t packed_leaves;    /* leaves kept as their compressed bytes alone */
+    double packed_bytes;     /* the memory of those bytes */
+    double tree_bytes_bound; /* what begin allowed for: tree and bytes */
+    double t_leaves;         /* seconds building (and packing) leaves, within the producer's run */
+    double t_fill;           /* seconds of the signed flood fill at the end */
 } hv_vdb_sink_stats;
 
 /* The narrow band of hv_vdb_writer_add_levelset_tiles from tiles handed over
@@ -78,11 +80,15 @@ typedef struct hv_vdb_sink_stats {
  * sink whose put turns each batch into the tree's leaves at once (the batch
  * is not kept), and whose end (ok) runs the signed flood fill and adds the
  * grid under name. The result is the grid add_levelset_tiles makes of all
- * the tiles at once, voxel for voxel. begin refuses with HV_ERR_NOMEM and
- * the figure when its bound on the tiles times a leaf's memory (about
- * 2.2 kB) exceeds this machine's memory. stats (may be NULL) is filled at
- * end and must live until then. One sink at a time per writer (another is
- * refused until the first has ended); the writer must outlive it. */
+ * the tiles at once, voxel for voxel. When the block sits on the writer's
+ * 8^3 leaf lattice (always without an index origin) each leaf is packed as
+ * put makes it, on all cores: compressed to the bytes the file will hold
+ * and its values freed, about 1 kB a leaf at 3 voxels each side against
+ * 2.2 kB. begin refuses with HV_ERR_NOMEM and the figure when its bound on
+ * the tiles times a leaf's estimated memory exceeds this machine's memory.
+ * stats (may be NULL) is filled at end and must live until then. One sink
+ * at a time per writer (another is refused until the first has ended); the
+ * writer must outlive it. */
 HV_API hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double band_voxels,
                                              hv_vdb_sink_stats *stats, hv_tiles_sink *out);
 

@@ -178,6 +178,8 @@ class hv_vdb_sink_stats(Structure):
         ("tiles", c_size_t),
         ("leaves", c_size_t),
         ("tree_bytes", c_double),
+        ("packed_leaves", c_size_t),
+        ("packed_bytes", c_double),
         ("tree_bytes_bound", c_double),
         ("t_leaves", c_double),
         ("t_fill", c_double),

@@ -4,6 +4,7 @@
 #include "heatvox/vdb.h"
 #include "heatvox/io.h"
 #include "vdb_internal.h"
+#include "vdb_packed.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/Archive.h>
@@ -218,18 +219,6 @@ struct hv_vdb_writer {
 namespace
 {
 
-// Archive::write(stream, ...) is protected; File::write opens its own stream
-// and never checks it after closing, so a full disk would go unnoticed.
-class CheckedArchive : public openvdb::io::Archive
-{
-  public:
-    void write_to(std::ostream &os, const openvdb::GridCPtrVec &grids,
-                  const openvdb::MetaMap &meta) const
-    {
-        this->write(os, grids, /*seekable=*/true, meta);
-    }
-};
-
 void check_new_name(hv_vdb_writer *w, const char *name)
 {
     if (!w)
@@ -242,18 +231,15 @@ void check_new_name(hv_vdb_writer *w, const char *name)
                  std::string("vdb writer: a grid named '") + name + "' was already added");
 }
 
-// The placement of block g in this writer's index space: by default index
-// (0,0,0) is the block's first voxel; after hv_vdb_writer_set_index_origin the
-// transform puts index (0,0,0) at that world position and the block is shifted
-// by whole voxels to keep its world position.
-Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
+// Block g's index offset in this writer's index space: 0 by default; after
+// hv_vdb_writer_set_index_origin, the whole voxels that keep the block's
+// world position with index (0,0,0) at that origin.
+void index_offset(const hv_vdb_writer *w, const hv_grid *g, const char *name, int off[3])
 {
-    Placement pl;
-    if (!w->has_index0) {
-        pl.xf = make_transform(g->h, g->origin);
-        return pl;
-    }
     for (int a = 0; a < 3; a++) {
+        off[a] = 0;
+        if (!w->has_index0)
+            continue;
         double s = (g->origin[a] + 0.5 * g->h - w->index0[a]) / g->h;
         double r = std::nearbyint(s);
         if (!(std::fabs(s - r) <= 1e-4) || std::fabs(r) > 1e9) {
@@ -264,11 +250,30 @@ Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
                           name, a, s - r);
             fail(HV_ERR_INVALID_ARG, msg);
         }
-        pl.off[a] = (int)r;
+        off[a] = (int)r;
+    }
+}
+
+// The placement of block g in this writer's index space: by default index
+// (0,0,0) is the block's first voxel; after hv_vdb_writer_set_index_origin the
+// transform puts index (0,0,0) at that world position and the block is shifted
+// by whole voxels to keep its world position.
+Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    Placement pl;
+    index_offset(w, g, name, pl.off);
+    if (!w->has_index0) {
+        pl.xf = make_transform(g->h, g->origin);
+        return pl;
     }
     pl.xf = openvdb::math::Transform::createLinearTransform(g->h);
     pl.xf->postTranslate(Vec3d(w->index0[0], w->index0[1], w->index0[2]));
     return pl;
+}
+
+bool on_leaf_lattice(const int off[3])
+{
+    return off[0] % 8 == 0 && off[1] % 8 == 0 && off[2] % 8 == 0;
 }
 
 void finish_grid(hv_vdb_writer *w, openvdb::GridBase::Ptr grid, const hv_grid *g, const char *name,
@@ -425,59 +430,15 @@ void check_band(const char *name, double band_voxels)
                                      std::to_string(band_voxels));
 }
 
-// A float grid whose leaf buffers are compressed on all cores, a batch of
-// leaves at a time, and written in the tree's order: the bytes OpenVDB's own
-// Grid::writeBuffers writes (each leaf's buffer depends only on the leaf, the
-// stream's compression flags and the background), which writes leaf by leaf
-// on one core. HEATVOX_VDB_SERIAL_WRITE=1 takes OpenVDB's own, for tests.
-class BatchedFloatGrid final : public openvdb::FloatGrid
-{
-  public:
-    explicit BatchedFloatGrid(float background) : openvdb::FloatGrid(background) {}
-
-    void writeBuffers(std::ostream &os) const override
-    {
-        const char *serial = std::getenv("HEATVOX_VDB_SERIAL_WRITE");
-        if (saveFloatAsHalf() || (serial && *serial == '1')) {
-            openvdb::FloatGrid::writeBuffers(os);
-            return;
-        }
-        using LeafT = openvdb::FloatTree::LeafNodeType;
-        std::vector<const LeafT *> leaves;
-        leaves.reserve(tree().leafCount());
-        for (auto it = tree().cbeginLeaf(); it; ++it)
-            leaves.push_back(it.getLeaf());
-        const uint32_t comp = openvdb::io::getDataCompression(os);
-        const void *bg = openvdb::io::getGridBackgroundValuePtr(os);
-        const size_t batch = 8192;
-        std::vector<std::string> bytes(std::min(batch, leaves.size()));
-        for (size_t b0 = 0; b0 < leaves.size(); b0 += batch) {
-            const size_t b1 = std::min(b0 + batch, leaves.size());
-            tbb::parallel_for(tbb::blocked_range<size_t>(b0, b1),
-                              [&](const tbb::blocked_range<size_t> &r) {
-                                  std::ostringstream ss;
-                                  openvdb::io::setDataCompression(ss, comp);
-                                  openvdb::io::setGridBackgroundValuePtr(ss, bg);
-                                  for (size_t l = r.begin(); l != r.end(); l++) {
-                                      ss.str(std::string());
-                                      leaves[l]->writeBuffers(ss, false);
-                                      bytes[l - b0] = ss.str();
-                                  }
-                              });
-            for (size_t l = b0; l < b1; l++)
-                os.write(bytes[l - b0].data(), (std::streamsize)bytes[l - b0].size());
-        }
-    }
-};
-
 // Adds the voxels of tiles t active with |value| < bg to grid at index offset
 // off; the others of a tile hold bg, inactive, for the flood fill. A tile of
 // the block (at a multiple of 8) is one leaf when off is a multiple of 8 too,
-// built in parallel; otherwise it spans up to 8, which an accessor touches.
-void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[3], float bg)
+// built in parallel and packed at once when the grid packs; otherwise it
+// spans up to 8, which an accessor touches (a leaf may then take voxels from
+// later batches, so none is packed).
+void add_band_leaves(LevelsetGrid &grid, const hv_tiles *t, const int off[3], float bg)
 {
-    using LeafT = openvdb::FloatTree::LeafNodeType;
-    const bool aligned = off[0] % 8 == 0 && off[1] % 8 == 0 && off[2] % 8 == 0;
+    const bool aligned = on_leaf_lattice(off);
     auto voxel = [&](size_t q, int i, int j, int k, float *val) {
         const int o = i + HV_TILE * (j + HV_TILE * k);
         *val = t->v[q * HV_TILE * HV_TILE * HV_TILE + o];
@@ -485,6 +446,8 @@ void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[
         return on && std::fabs(*val) < bg;
     };
     if (!aligned) {
+        if (grid.packed_leaves())
+            fail(HV_ERR_INTERNAL, "level set: tiles off the leaf lattice for a packed grid");
         auto acc = grid.getAccessor();
         for (size_t q = 0; q < t->count; q++) {
             const int32_t *c = t->ijk + 3 * q;
@@ -500,13 +463,16 @@ void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[
         }
         return;
     }
-    std::vector<std::unique_ptr<LeafT>> leaves(t->count);
+    const bool pack = grid.packing();
+    const size_t id0 = pack ? grid.reserve_packed(t->count) : 0;
+    std::vector<std::unique_ptr<FloatLeaf>> leaves(t->count);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, t->count),
                       [&](const tbb::blocked_range<size_t> &r) {
+                          std::ostringstream ss = grid.packing_stream();
                           for (size_t q = r.begin(); q != r.end(); q++) {
                               const int32_t *c = t->ijk + 3 * q;
                               Coord o(c[0] + off[0], c[1] + off[1], c[2] + off[2]);
-                              auto leaf = std::make_unique<LeafT>(o, bg, false);
+                              auto leaf = std::make_unique<FloatLeaf>(o, bg, false);
                               for (int k = 0; k < HV_TILE; k++)
                                   for (int j = 0; j < HV_TILE; j++)
                                       for (int i = 0; i < HV_TILE; i++) {
@@ -517,6 +483,8 @@ void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[
                                           else
                                               leaf->setValueOff(x, bg);
                                       }
+                              if (pack)
+                                  grid.pack(*leaf, id0 + q, ss);
                               leaves[q] = std::move(leaf);
                           }
                       });
@@ -528,10 +496,10 @@ void add_band_leaves(openvdb::FloatGrid &grid, const hv_tiles *t, const int off[
 // The level set's last steps: inactive voxels and tiles take the sign of the
 // active voxels around them, as in OpenVDB's own mesh-to-level-set
 // conversion; then its transform, class and name.
-void finish_levelset(hv_vdb_writer *w, openvdb::FloatGrid::Ptr grid, const hv_grid *hdr,
-                     const char *name, const Placement &pl)
+void finish_levelset(hv_vdb_writer *w, LevelsetGrid::Ptr grid, const hv_grid *hdr, const char *name,
+                     const Placement &pl)
 {
-    openvdb::tools::signedFloodFill(grid->tree());
+    grid->flood_fill();
     grid->setTransform(pl.xf);
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     finish_grid(w, grid, hdr, name, pl);
@@ -549,23 +517,39 @@ struct LevelsetStream {
     hv_grid hdr{};
     Placement pl;
     float bg = 0;
-    openvdb::FloatGrid::Ptr grid;
+    LevelsetGrid::Ptr grid;
 };
 
-// A bound on the memory of a float tree of `leaves` leaves on block n: the
-// leaves with their buffers; a 16^3-leaf node for every 128 leaves (a surface
-// through such a node fills 300 to 500 of its leaves); and every 32^3-node
-// node the block can meet. About 2.2 kB a leaf.
-double tree_bytes(double leaves, const int n[3])
+// A bound on the memory of a float tree of `leaves` leaves on block n, the
+// leaves' values aside: the leaves; a 16^3-leaf node for every 128 leaves (a
+// surface through such a node fills 300 to 500 of its leaves); and every
+// 32^3-node node the block can meet.
+double topology_bytes(double leaves, const int n[3])
 {
-    using LeafT = openvdb::FloatTree::LeafNodeType;
     using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
     using Node2 = openvdb::FloatTree::RootNodeType::ChildNodeType;
     double top = 1;
     for (int a = 0; a < 3; a++)
         top *= n[a] / (double)Node2::DIM + 2;
-    return leaves * ((double)sizeof(LeafT) + LeafT::SIZE * sizeof(float)) +
-           (leaves / 128 + 1) * (double)sizeof(Node1) + top * (double)sizeof(Node2);
+    return leaves * (double)sizeof(FloatLeaf) + (leaves / 128 + 1) * (double)sizeof(Node1) +
+           top * (double)sizeof(Node2);
+}
+
+// What a leaf's values take: all of them (2 kB) unpacked; packed, an estimate
+// of its bytes for a band of w voxels each side: the value mask, the
+// mask-compression header (up to a selection mask), the array's size and
+// 4 bytes for each active voxel, of which a leaf holds 64 w on average
+// (190 at w = 3 on the bunny from 256^3 to 8192^3; Blosc saves about a tenth
+// of them) and a quarter more are allowed for; then the string, its
+// allocation and the growth of the vector of strings.
+double leaf_value_bytes(bool packed, double w)
+{
+    if (!packed)
+        return FloatLeaf::SIZE * sizeof(float);
+    const double active = std::min((double)FloatLeaf::SIZE, 1.25 * 64 * w);
+    const double mask = FloatLeaf::NodeMaskType::memUsage();
+    return 2 * mask + 1 + 2 * sizeof(float) + 8 + active * sizeof(float) + 16 +
+           2 * sizeof(std::string);
 }
 
 hv_status stream_begin(void *user, const hv_tiles *block, size_t max_tiles)
@@ -574,7 +558,12 @@ hv_status stream_begin(void *user, const hv_tiles *block, size_t max_tiles)
     return guarded("hv_vdb_writer_levelset_sink", [&] {
         const std::string what = "level set '" + ls->name + "'";
         ls->hdr = tiles_block(block, what);
-        const double need = tree_bytes((double)max_tiles, block->n);
+        int off[3];
+        index_offset(ls->w, &ls->hdr, ls->name.c_str(), off);
+        const bool pack = LevelsetGrid::can_pack() && on_leaf_lattice(off);
+        const double leaves = (double)max_tiles;
+        const double need =
+            topology_bytes(leaves, block->n) + leaves * leaf_value_bytes(pack, ls->band_voxels);
         if (need > (double)hv__memory_limit(nullptr)) {
             char msg[256], lim[96];
             std::snprintf(msg, sizeof msg,
@@ -584,7 +573,7 @@ hv_status stream_begin(void *user, const hv_tiles *block, size_t max_tiles)
         }
         ls->pl = placement(ls->w, &ls->hdr, ls->name.c_str());
         ls->bg = (float)(ls->band_voxels * block->h);
-        ls->grid = std::make_shared<BatchedFloatGrid>(ls->bg);
+        ls->grid = std::make_shared<LevelsetGrid>(ls->bg, pack);
         ls->S.tree_bytes_bound = need;
         return HV_OK;
     });
@@ -627,6 +616,8 @@ hv_status stream_end(void *user, int ok)
             ls->S.t_fill = hv_now() - t0;
             ls->S.leaves = ls->grid->tree().leafCount();
             ls->S.tree_bytes = (double)ls->grid->tree().memUsage();
+            ls->S.packed_leaves = ls->grid->packed_leaves();
+            ls->S.packed_bytes = ls->grid->packed_bytes();
             return HV_OK;
         });
     if (ls->stats)
@@ -695,7 +686,7 @@ hv_status hv_vdb_writer_add_levelset_tiles(hv_vdb_writer *w, const hv_tiles *t, 
             return st;
         Placement pl = placement(w, &hdr, name);
         const float bg = (float)(band_voxels * t->h);
-        auto grid = std::make_shared<BatchedFloatGrid>(bg);
+        auto grid = std::make_shared<LevelsetGrid>(bg, on_leaf_lattice(pl.off));
         add_band_leaves(*grid, t, pl.off, bg);
         finish_levelset(w, grid, &hdr, name, pl);
         return HV_OK;
@@ -912,17 +903,12 @@ hv_status hv_vdb_writer_write(hv_vdb_writer *w, const char *path)
             tmp[0] = '\0';
             return s;
         }
-        CheckedArchive ar;
-        uint32_t comp = openvdb::io::COMPRESS_ACTIVE_MASK;
-        comp |= openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
-                                                            : openvdb::io::COMPRESS_ZIP;
-        ar.setCompression(comp);
         std::ofstream os(tmp, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
         if (!os)
             fail(HV_ERR_IO,
                  std::string(path) + ": cannot create the output file: " + strerror(errno));
         openvdb::GridCPtrVec grids(w->grids.begin(), w->grids.end());
-        ar.write_to(os, grids, w->meta);
+        write_archive(os, grids, w->meta);
         os.flush();
         os.close();
         if (os.fail())
