@@ -404,6 +404,29 @@ START_TEST(sink_should_refuse_a_tree_larger_than_the_machine)
 }
 END_TEST
 
+/* A voxel size OpenVDB's transforms refuse (h^3 below 3e-15) is refused at
+ * begin with the figure, not with OpenVDB's bare "Non-zero scale values". */
+START_TEST(sink_should_refuse_a_voxel_size_openvdb_cannot_hold)
+{
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    hv_tiles_sink sink;
+    TL_ASSERT_OK(hv_vdb_writer_levelset_sink(w, "sdf", 3, NULL, &sink));
+    hv_tiles block = {.n = {64, 64, 64}, .h = 1.2e-5};
+    ck_assert_int_eq(sink.begin(sink.user, &block, 100), HV_ERR_INVALID_ARG);
+    const char *msg = hv_last_error();
+    ck_assert_msg(strstr(msg, "voxel size 1.2e-05 is below the smallest") &&
+                      strstr(msg, "1.44e-05"),
+                  "%s", msg);
+    TL_ASSERT_OK(sink.end(sink.user, 0));
+    block.h = 1.5e-5;
+    TL_ASSERT_OK(hv_vdb_writer_levelset_sink(w, "sdf", 3, NULL, &sink));
+    TL_ASSERT_OK(sink.begin(sink.user, &block, 100));
+    TL_ASSERT_OK(sink.end(sink.user, 0));
+    hv_vdb_writer_destroy(&w);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("vdb_stream");
@@ -415,6 +438,7 @@ int main(void)
     tcase_add_test(tc, packed_leaves_should_flood_fill_every_level_as_openvdb_does);
     tcase_add_test(tc, failing_sink_should_stop_the_run_and_hear_of_it_once);
     tcase_add_test(tc, sink_should_refuse_a_tree_larger_than_the_machine);
+    tcase_add_test(tc, sink_should_refuse_a_voxel_size_openvdb_cannot_hold);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

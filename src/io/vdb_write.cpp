@@ -41,10 +41,27 @@ using openvdb::Vec3i;
 
 // ---- grid geometry ----------------------------------------------------------
 
+// A uniform transform of voxel size h. OpenVDB's scale maps refuse a
+// determinant h^3 below 3 times its double tolerance (1e-15): h under about
+// 1.44e-5 in the mesh's units.
+openvdb::math::Transform::Ptr linear_transform(double h)
+{
+    const double least = std::cbrt(3.0 * openvdb::math::Tolerance<double>::value());
+    if (!(h * h * h >= 3.0 * openvdb::math::Tolerance<double>::value())) {
+        char msg[256];
+        std::snprintf(msg, sizeof msg,
+                      "voxel size %.4g is below the smallest an OpenVDB transform takes (%.3g, "
+                      "its cube %.0e): a coarser grid, or the input in larger units",
+                      h, least, 3.0 * openvdb::math::Tolerance<double>::value());
+        fail(HV_ERR_INVALID_ARG, msg);
+    }
+    return openvdb::math::Transform::createLinearTransform(h);
+}
+
 // Index (i,j,k) maps to the cell centre origin + (i+1/2)h.
 openvdb::math::Transform::Ptr make_transform(double h, const double origin[3])
 {
-    auto xf = openvdb::math::Transform::createLinearTransform(h);
+    auto xf = linear_transform(h);
     xf->postTranslate(Vec3d(origin[0] + 0.5 * h, origin[1] + 0.5 * h, origin[2] + 0.5 * h));
     return xf;
 }
@@ -266,7 +283,7 @@ Placement placement(const hv_vdb_writer *w, const hv_grid *g, const char *name)
         pl.xf = make_transform(g->h, g->origin);
         return pl;
     }
-    pl.xf = openvdb::math::Transform::createLinearTransform(g->h);
+    pl.xf = linear_transform(g->h);
     pl.xf->postTranslate(Vec3d(w->index0[0], w->index0[1], w->index0[2]));
     return pl;
 }
