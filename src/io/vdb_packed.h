@@ -70,7 +70,9 @@ class LevelsetGrid final : public openvdb::FloatGrid
 
 // Writes grids with the file's metadata to os as OpenVDB's Archive::write
 // does (seekable, compression file_compression()); a packed level set's
-// delayed-load metadata comes from its bytes.
+// delayed-load metadata comes from its bytes. The caller owns the stream and
+// checks it once closed (File::write opens its own and never checks it after
+// closing, so a full disk would go unnoticed).
 void write_archive(std::ostream &os, const openvdb::GridCPtrVec &grids,
                    const openvdb::MetaMap &meta);
 

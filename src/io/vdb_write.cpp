@@ -46,13 +46,13 @@ using openvdb::Vec3i;
 // 1.44e-5 in the mesh's units.
 openvdb::math::Transform::Ptr linear_transform(double h)
 {
-    const double least = std::cbrt(3.0 * openvdb::math::Tolerance<double>::value());
-    if (!(h * h * h >= 3.0 * openvdb::math::Tolerance<double>::value())) {
+    const double cube = 3.0 * openvdb::math::Tolerance<double>::value();
+    if (!(h * h * h >= cube)) {
         char msg[256];
         std::snprintf(msg, sizeof msg,
                       "voxel size %.4g is below the smallest an OpenVDB transform takes (%.3g, "
                       "its cube %.0e): a coarser grid, or the input in larger units",
-                      h, least, 3.0 * openvdb::math::Tolerance<double>::value());
+                      h, std::cbrt(cube), cube);
         fail(HV_ERR_INVALID_ARG, msg);
     }
     return openvdb::math::Transform::createLinearTransform(h);
