@@ -232,19 +232,21 @@ $(BUILD)/tests/check_points_sample: $(BUILD)/obj/tests/check_points_sample.o \
 # (docs/METHOD.md, "Testing notes").
 # `timeout` stands in for Check's. The OpenCL suites (solver, device fields,
 # extension, distance) run a second time as on a device without fp64 (float
-# kernels, double correction on the host): the runs named SUITE.fp32; the multigrid suite a second time without its
-# AVX-512 kernels (HV_NO512=1, the path of other CPUs): no512:SUITE.
+# kernels, double correction on the host): the runs named SUITE.fp32; the multigrid suites a second time without their
+# AVX-512 kernels (HV_NO512=1, the path of other CPUs): SUITE.no512; the aggregation suite a third time
+# without the hand-written AVX2 ones either (HV_NOAVX2=1, the baseline C): SUITE.noavx2.
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
 # offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
 # include map of src/README.md), the OpenCL ones again as on a device without
-# fp64 (NAME.fp32) and the multigrid one again without AVX-512 (NAME.no512). make -j runs them
+# fp64 (NAME.fp32), the multigrid ones again without AVX-512 (NAME.no512) and without AVX2 (NAME.noavx2). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
               check_kernels check_includes \
               $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device check_extend_cl check_distance_cl,$(notdir $(TESTS)))) \
-              $(patsubst %,%.no512,$(filter check_mg,$(notdir $(TESTS))))
+              $(patsubst %,%.no512,$(filter check_mg check_mg_agg,$(notdir $(TESTS)))) \
+              $(patsubst %,%.noavx2,$(filter check_mg_agg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a
 # program linked shared and static against an installed copy: make check
@@ -276,11 +278,12 @@ POCL_CACHE ?= $(CURDIR)/build/pocl-cache
 $(RES)/%.rc:
 	@mkdir -p $(POCL_CACHE)
 	@run=$*; t=$(BUILD)/tests/$${run%%.*}; fp64=$${HEATVOX_OPENCL_FP64-}; no512=$${HV_NO512-}; \
+	noavx2=$${HV_NOAVX2-}; \
 	[ $$run != check_kernels ] || t="sh tests/check_kernels.sh $(BUILD)/kernels $(FZ_CC)"; \
 	[ $$run != check_includes ] || t="python3 tests/check_includes.py"; \
-	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; esac; \
+	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; *.noavx2) no512=1; noavx2=1;; esac; \
 	t0=$$(date +%s%N); \
-	HV_NO512=$$no512 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
+	HV_NO512=$$no512 HV_NOAVX2=$$noavx2 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
 	  POCL_CACHE_DIR=$${POCL_CACHE_DIR:-$(POCL_CACHE)} \
 	  HEATVOX_TEST_DATA=$${HEATVOX_TEST_DATA:-../shared/meshes} timeout 900 $$t > $(RES)/$$run.log 2>&1; \
 	rc=$$?; ms=$$(( ($$(date +%s%N) - t0) / 1000000 )); \
@@ -548,7 +551,11 @@ fuzz-clean:
 # documentation advises; heatvox's code is all instrumented. A race report or a
 # failed test fails the target. The GCC-only AVX2/AVX-512 clones are not in
 # this build (ThreadSanitizer instruments load-time resolvers); their rows read
-# and write the same cells as the baseline rows it checks.
+# and write the same cells as the baseline rows it checks, but for the AVX2
+# row of a binary level in the fused pass, which also writes its other colour
+# back unchanged: the pass's slabs keep those cells to one thread at a time
+# (mg_rows.c), and the baseline row that this build checks writes them the
+# same way.
 TS          := build-tsan
 # Line tables alone for the C++ files, as in the other sanitized builds.
 $(CXX_SRC:%.cpp=$(TS)/obj/%.o): CXXFLAGS += $(CXX_SANLIGHT)

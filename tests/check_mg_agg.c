@@ -375,8 +375,9 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
 END_TEST
 
 /* The coarse cycle once the hierarchy is packed (hv__mg_agg_pack): level 1's
- * rows that repeat along the faces and walls served by row classes, the
- * deeper levels' columns as 16-bit offsets. The same correction as before,
+ * rows that repeat along the faces and walls served by row classes (in runs
+ * along x, or in groups of MG_GROUP rows: the rows beside walls across x),
+ * the deeper levels' columns as 16-bit offsets. The same correction as before,
  * to float rounding (the classes sum in another order), for a maze and
  * baffles. */
 START_TEST(packed_levels_should_give_the_same_cycle)
@@ -402,13 +403,30 @@ START_TEST(packed_levels_should_give_the_same_cycle)
             ck_assert_msg(!L->R.rp || (L->R.co && !L->R.ci), "level %d's R not packed", l);
         }
         const mg_alevel *L1 = &g->lv[1];
-        int served = 0;
-        for (int32_t c = 0; L1->cls && c < L1->n; c++)
+        int served = 0, grouped = 0;
+        for (int32_t c = 0; L1->cls && c < L1->n; c++) {
             served += L1->cls[c] > 1;
-        if (!obstacle)
-            ck_assert_msg(L1->ncls > 0 && served > 200 && L1->A.rp[L1->n] < stored,
-                          "%d row classes serve %d rows, %zu of %zu entries left", L1->ncls, served,
-                          L1->A.rp[L1->n], stored);
+            grouped += L1->cls[c] == MG_CLS_GROUP;
+        }
+        ck_assert_msg(L1->ncls > 0 && served > 200 && L1->A.rp[L1->n] < stored,
+                      "%d row classes serve %d rows, %zu of %zu entries left", L1->ncls, served,
+                      L1->A.rp[L1->n], stored);
+        /* the rows beside walls across x, in groups: each grouped row in one
+         * group of its class, each group's rows of one class */
+        if (obstacle)
+            ck_assert_msg(grouped > 200 && L1->ngrp > 0, "%d rows in %d groups", grouped, L1->ngrp);
+        int *seen = calloc((size_t)L1->n, sizeof *seen), in_groups = 0;
+        for (int32_t q = 0; q < L1->ngrp; q++) {
+            const int32_t *gr = L1->grow + (size_t)MG_GROUP * q;
+            for (int i = 0; i < MG_GROUP; i++) {
+                ck_assert_msg(gr[i] >= 0 && gr[i] < L1->n && L1->cls[gr[i]] == MG_CLS_GROUP,
+                              "group %d's row %d", q, gr[i]);
+                ck_assert_msg(L1->gcls[q] >= 0 && L1->gcls[q] < L1->ncls, "group %d", q);
+                in_groups += !seen[gr[i]]++;
+            }
+        }
+        ck_assert_int_eq(in_groups, grouped);
+        free(seen);
         ck_assert_msg(g->bytes < bytes, "%zu bytes before, %zu after", bytes, g->bytes);
         hv__mg_agg_correct(g, r, u1);
         ck_assert_msg(rel_diff(u1, u0, N) < 1e-5, "%s: packed cycle differs by %g",

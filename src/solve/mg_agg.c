@@ -252,6 +252,55 @@ __attribute__((target("avx512f"))) static float csr_row_dot_avx512(const mg_csr 
     }
     return _mm512_reduce_add_ps(_mm512_add_ps(s0, s1));
 }
+
+__attribute__((target("avx2,fma"))) static inline float hsum_avx2(__m256 s)
+{
+    __m128 h = _mm_add_ps(_mm256_castps256_ps128(s), _mm256_extractf128_ps(s, 1));
+    h = _mm_add_ps(h, _mm_movehl_ps(h, h));
+    return _mm_cvtss_f32(_mm_add_ss(h, _mm_movehdup_ps(h)));
+}
+
+/* The same in 8-lane AVX2 gathers, two sums in flight; the row's last
+ * entries (fewer than 8) one by one. */
+__attribute__((target("avx2,fma"))) static float csr_row_dot_avx2(const mg_csr *M, int32_t r,
+                                                                  const float *x)
+{
+    size_t q = M->rp[r], e = M->rp[r + 1];
+    __m256 s0 = _mm256_setzero_ps(), s1 = _mm256_setzero_ps();
+    float t = 0;
+    if (M->co) {
+        const float *xb = x + M->cb[r];
+        for (; q + 16 <= e; q += 16) {
+            const __m256i i0 = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(M->co + q))),
+                          i1 = _mm256_cvtepu16_epi32(
+                              _mm_loadu_si128((const __m128i *)(M->co + q + 8)));
+            s0 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q), _mm256_i32gather_ps(xb, i0, 4), s0);
+            s1 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q + 8), _mm256_i32gather_ps(xb, i1, 4), s1);
+        }
+        if (q + 8 <= e) {
+            const __m256i i0 = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(M->co + q)));
+            s0 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q), _mm256_i32gather_ps(xb, i0, 4), s0);
+            q += 8;
+        }
+        for (; q < e; q++)
+            t += M->v[q] * xb[M->co[q]];
+        return hsum_avx2(_mm256_add_ps(s0, s1)) + t;
+    }
+    for (; q + 16 <= e; q += 16) {
+        const __m256i i0 = _mm256_loadu_si256((const __m256i *)(M->ci + q)),
+                      i1 = _mm256_loadu_si256((const __m256i *)(M->ci + q + 8));
+        s0 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q), _mm256_i32gather_ps(x, i0, 4), s0);
+        s1 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q + 8), _mm256_i32gather_ps(x, i1, 4), s1);
+    }
+    if (q + 8 <= e) {
+        const __m256i i0 = _mm256_loadu_si256((const __m256i *)(M->ci + q));
+        s0 = _mm256_fmadd_ps(_mm256_loadu_ps(M->v + q), _mm256_i32gather_ps(x, i0, 4), s0);
+        q += 8;
+    }
+    for (; q < e; q++)
+        t += M->v[q] * x[M->ci[q]];
+    return hsum_avx2(_mm256_add_ps(s0, s1)) + t;
+}
 #endif
 
 static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
@@ -259,6 +308,8 @@ static inline float csr_row_dot(const mg_csr *M, int32_t r, const float *x)
 #if MG_AVX512
     if (mg_avx512())
         return csr_row_dot_avx512(M, r, x);
+    if (mg_avx2())
+        return csr_row_dot_avx2(M, r, x);
 #endif
     return csr_row_dot_c(M, r, x);
 }
@@ -321,6 +372,73 @@ __attribute__((target("avx512f"))) static void template_run_avx512(const agg_tmp
     if (i0 < m)
         template_blocks_avx512(T, x, y, c, m, i0, (int)((m - i0 + 15) / 16));
 }
+
+/* Sums as TEMPLATE_SUMS in 8-lane blocks, loads under mask k[b] (masked
+ * loads: only in a run's last blocks). */
+#define TEMPLATE_SUMS8(a, t0, nb, LOAD)                                                            \
+    for (int t = (t0); t < T->tn; t += 2) {                                                        \
+        const __m256 v = _mm256_set1_ps(T->val[t]);                                                \
+        const float *p = xb + T->off[t];                                                           \
+        for (int b = 0; b < (nb); b++)                                                             \
+            a[b] = _mm256_fmadd_ps(v, LOAD(p + 8 * b, k[b]), a[b]);                                \
+    }
+#define LOAD_FULL(p, k) _mm256_loadu_ps(p)
+#define LOAD_MASKED(p, k) _mm256_maskload_ps(p, k)
+
+/* nb (1..4, a constant once inlined: the sums stay in registers) blocks of 8
+ * rows from i0 on, of the m rows at c; full blocks alone, or the run's last
+ * blocks, summed under masks and stored through a buffer, so that nothing
+ * outside the run is read or written. */
+__attribute__((target("avx2,fma"), always_inline)) static inline void template_blocks_avx2(
+    const agg_tmpl *T, const float *x, float *y, int32_t c, int32_t m, int32_t i0, const int nb,
+    const int full)
+{
+    const float *xb = x + c + i0;
+    __m256i k[4];
+    __m256 e[4], o[4];
+    for (int b = 0; b < nb; b++) {
+        k[b] = _mm256_cmpgt_epi32(_mm256_set1_epi32(m - i0 - 8 * b),
+                                  _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+        e[b] = o[b] = _mm256_setzero_ps();
+    }
+    if (full) {
+        TEMPLATE_SUMS8(e, 0, nb, LOAD_FULL)
+        TEMPLATE_SUMS8(o, 1, nb, LOAD_FULL)
+    } else {
+        TEMPLATE_SUMS8(e, 0, nb, LOAD_MASKED)
+        TEMPLATE_SUMS8(o, 1, nb, LOAD_MASKED)
+    }
+    for (int b = 0; b < nb; b++) {
+        const __m256 s = _mm256_add_ps(e[b], o[b]);
+        const int32_t left = m - i0 - 8 * b;
+        if (full || left >= 8) {
+            _mm256_storeu_ps(y + c + i0 + 8 * b, s);
+        } else {
+            float buf[8];
+            _mm256_storeu_ps(buf, s);
+            memcpy(y + c + i0 + 8 * b, buf, (size_t)left * sizeof(float));
+        }
+    }
+}
+#undef TEMPLATE_SUMS8
+#undef LOAD_FULL
+#undef LOAD_MASKED
+
+/* y = the template rows c .. c + m - 1, 32 at a time (as
+ * template_run_avx512). */
+__attribute__((target("avx2,fma"))) static void template_run_avx2(const agg_tmpl *T, const float *x,
+                                                                  float *y, int32_t c, int32_t m)
+{
+    int32_t i0 = 0;
+    for (; i0 + 32 <= m; i0 += 32)
+        template_blocks_avx2(T, x, y, c, m, i0, 4, 1);
+    switch ((m - i0 + 7) / 8) {
+    case 1: template_blocks_avx2(T, x, y, c, m, i0, 1, 0); break;
+    case 2: template_blocks_avx2(T, x, y, c, m, i0, 2, 0); break;
+    case 3: template_blocks_avx2(T, x, y, c, m, i0, 3, 0); break;
+    case 4: template_blocks_avx2(T, x, y, c, m, i0, 4, 0); break;
+    }
+}
 #endif
 
 /* y = the template rows c .. c + m - 1 (m <= AGG_CHUNK), vectorized over the
@@ -332,8 +450,13 @@ static void template_run(const agg_tmpl *T, const float *x, float *y, int32_t c,
         template_run_avx512(T, x, y, c, m);
         return;
     }
+    if (mg_avx2()) {
+        template_run_avx2(T, x, y, c, m);
+        return;
+    }
 #endif
-    float acc[AGG_CHUNK] = {0};
+    float acc[AGG_CHUNK];
+    memset(acc, 0, (size_t)m * sizeof *acc);
     for (int t = 0; t < T->tn; t++) {
         const float v = T->val[t], *xs = x + c + T->off[t];
         for (int32_t i = 0; i < m; i++)
@@ -350,8 +473,8 @@ static inline int row_template(const mg_alevel *L, int32_t c, agg_tmpl *T)
     if (k == 1)
         *T = (agg_tmpl){L->tn, L->toff, L->tval};
     else if (k > 1)
-        *T = (agg_tmpl){L->cn[k - 2], L->coff + ROW_MAX * (size_t)(k - 2),
-                        L->cval + ROW_MAX * (size_t)(k - 2)};
+        *T = (agg_tmpl){L->cn[k - 2], L->coff + (size_t)L->cw * (k - 2),
+                        L->cval + (size_t)L->cw * (k - 2)};
     return k;
 }
 
@@ -364,7 +487,7 @@ static void apply_chunk(const agg_op *o, const float *x, float *y, int32_t c0, i
     const mg_alevel *L = o->lv;
     for (int32_t c = c0; c < c1;) {
         agg_tmpl T;
-        const int k = row_template(L, c, &T);
+        const int k = L->cls && L->cls[c] == MG_CLS_GROUP ? MG_CLS_GROUP : row_template(L, c, &T);
         if (!k) {
             y[c] = csr_row_dot(o->A, c, x);
             c++;
@@ -373,10 +496,61 @@ static void apply_chunk(const agg_op *o, const float *x, float *y, int32_t c0, i
         int32_t e = c + 1;
         while (e < c1 && (L->cls ? L->cls[e] : L->plain[e]) == k)
             e++;
-        template_run(&T, x, y, c, e - c);
+        if (k != MG_CLS_GROUP) /* else group_apply's */
+            template_run(&T, x, y, c, e - c);
         c = e;
     }
 }
+
+/* y at the MG_GROUP rows of group g (mg_alevel's grow): their class's
+ * entries, summed for all the rows at once, so that each entry costs one
+ * load of x (a stored row's costs a column and a value too). */
+#define GROUP_APPLY_BODY                                                                           \
+    const int32_t *r = L->grow + (size_t)MG_GROUP * g;                                             \
+    const int k = L->gcls[g], tn = L->cn[k];                                                       \
+    const int32_t *off = L->coff + (size_t)L->cw * k;                                              \
+    const float *val = L->cval + (size_t)L->cw * k;                                                \
+    const float *p[MG_GROUP];                                                                      \
+    float a[MG_GROUP];                                                                             \
+    for (int i = 0; i < MG_GROUP; i++) {                                                           \
+        p[i] = x + r[i];                                                                           \
+        a[i] = 0;                                                                                  \
+    }                                                                                              \
+    for (int t = 0; t < tn; t++) {                                                                 \
+        const int32_t d = off[t];                                                                  \
+        const float v = val[t];                                                                    \
+        for (int i = 0; i < MG_GROUP; i++)                                                         \
+            a[i] += v * p[i][d];                                                                   \
+    }                                                                                              \
+    for (int i = 0; i < MG_GROUP; i++)                                                             \
+        y[r[i]] = a[i];
+
+/* Scalar on purpose: GCC's vectorizers would assemble the eight rows' loads
+ * into vectors lane by lane, which costs more than the FMAs save. */
+#define GROUP_SCALAR optimize("no-tree-vectorize")
+
+#if MG_AVX512
+__attribute__((target("avx2,fma"), GROUP_SCALAR)) static void group_apply_avx2(const mg_alevel *L,
+                                                                               const float *x,
+                                                                               float *y, int32_t g)
+{
+    GROUP_APPLY_BODY
+}
+#endif
+
+__attribute__((GROUP_SCALAR)) static void group_apply(const mg_alevel *L, const float *x, float *y,
+                                                      int32_t g)
+{
+#if MG_AVX512
+    if (mg_avx2()) {
+        group_apply_avx2(L, x, y, g);
+        return;
+    }
+#endif
+    GROUP_APPLY_BODY
+}
+#undef GROUP_APPLY_BODY
+#undef GROUP_SCALAR
 
 /* y = A x on a level. */
 static void op_apply(const agg_op *o, const float *x, float *y)
@@ -385,10 +559,18 @@ static void op_apply(const agg_op *o, const float *x, float *y)
         fine_apply(o, x, y);
         return;
     }
-    if (o->lv->tn) {
-#pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
-        for (int32_t c0 = 0; c0 < o->n; c0 += AGG_CHUNK)
-            apply_chunk(o, x, y, c0, c0 + AGG_CHUNK < o->n ? c0 + AGG_CHUNK : o->n);
+    const mg_alevel *L = o->lv;
+    if (L->tn || L->cls) {
+        /* the chunks leave the grouped rows to the groups: no row is in both */
+#pragma omp parallel if (o->n > AGG_PAR_MIN)
+        {
+#pragma omp for schedule(static) nowait
+            for (int32_t c0 = 0; c0 < o->n; c0 += AGG_CHUNK)
+                apply_chunk(o, x, y, c0, c0 + AGG_CHUNK < o->n ? c0 + AGG_CHUNK : o->n);
+#pragma omp for schedule(static)
+            for (int32_t g = 0; g < L->ngrp; g++)
+                group_apply(L, x, y, g);
+        }
         return;
     }
 #pragma omp parallel for schedule(static) if (o->n > AGG_PAR_MIN)
@@ -1594,6 +1776,7 @@ static size_t csr_pack(mg_csr *M)
 #define CLS_MIN 32    /* rows that a row class needs to become a template */
 #define CLS_MAX 65000 /* row classes at most (cls is 16-bit) */
 #define CLS_RUN 8     /* consecutive rows of a class that it serves at least */
+#define CLS_WIDTH 512 /* entries of a class at most */
 
 /* Hash of row c's entries, columns relative to c. */
 static uint64_t row_hash(const mg_csr *A, int32_t c)
@@ -1667,6 +1850,65 @@ static int csr_drop_rows(mg_csr *A, const uint16_t *cls)
     return 0;
 }
 
+/* Emits the open group of class k (fill rows, padded with its last row). */
+static void group_emit(mg_alevel *L, int32_t *open, int *fill, int k)
+{
+    int32_t *g = L->grow + (size_t)MG_GROUP * L->ngrp;
+    for (int i = 0; i < MG_GROUP; i++)
+        g[i] = open[(size_t)MG_GROUP * k + (i < fill[k] ? i : fill[k] - 1)];
+    L->gcls[L->ngrp++] = k;
+    fill[k] = 0;
+}
+
+/* The rows of classes in runs along x shorter than CLS_RUN (a stencil over
+ * a few lanes costs more than their sparse rows) into groups of MG_GROUP rows
+ * of one class (mg_alevel's grow), marked MG_CLS_GROUP in cls: the rows
+ * beside walls across x, each of its own class but for its neighbours along
+ * y and z. -1 where memory is short. */
+static int class_groups(mg_alevel *L, uint16_t *cls, int ncls)
+{
+    size_t nshort = 0;
+    for (int32_t c = 0; c < L->n;) {
+        int32_t e = c + 1;
+        while (e < L->n && cls[e] == cls[c])
+            e++;
+        nshort += cls[c] > 1 && e - c < CLS_RUN ? (size_t)(e - c) : 0;
+        c = e;
+    }
+    const size_t maxg = nshort / MG_GROUP + (size_t)ncls;
+    int32_t *open = malloc((size_t)ncls * MG_GROUP * sizeof *open);
+    int *fill = calloc((size_t)ncls, sizeof *fill);
+    L->grow = malloc((maxg ? maxg : 1) * MG_GROUP * sizeof *L->grow);
+    L->gcls = malloc((maxg ? maxg : 1) * sizeof *L->gcls);
+    L->ngrp = 0;
+    if (!open || !fill || !L->grow || !L->gcls) {
+        free(open);
+        free(fill);
+        return -1;
+    }
+    for (int32_t c = 0; c < L->n;) {
+        int32_t e = c + 1;
+        while (e < L->n && cls[e] == cls[c])
+            e++;
+        for (int32_t r = c; cls[c] > 1 && e - c < CLS_RUN && r < e; r++) {
+            const int k = cls[r] - 2;
+            open[(size_t)MG_GROUP * k + fill[k]++] = r;
+            if (fill[k] == MG_GROUP)
+                group_emit(L, open, fill, k);
+        }
+        if (cls[c] > 1 && e - c < CLS_RUN)
+            for (int32_t r = c; r < e; r++)
+                cls[r] = MG_CLS_GROUP;
+        c = e;
+    }
+    for (int k = 0; k < ncls; k++)
+        if (fill[k])
+            group_emit(L, open, fill, k);
+    free(open);
+    free(fill);
+    return 0;
+}
+
 /* Row classes of a level with a template (mg_alevel's cls): the stored rows
  * grouped by their entries relative to the row, each group of CLS_MIN rows
  * or more a template of its own. Returns the bytes saved (0 where it finds
@@ -1674,11 +1916,12 @@ static int csr_drop_rows(mg_csr *A, const uint16_t *cls)
 static size_t row_classes(mg_alevel *L)
 {
     const mg_csr *A = &L->A;
-    if (!L->tn || !L->plain || !A->ci)
+    if (!A->ci)
         return 0;
+    const uint8_t *plain = L->plain;
     size_t nstored = 0, slots = 64;
     for (int32_t c = 0; c < L->n; c++)
-        nstored += !L->plain[c] && A->rp[c + 1] > A->rp[c];
+        nstored += !(plain && plain[c]) && A->rp[c + 1] > A->rp[c];
     while (slots < 2 * nstored)
         slots *= 2;
     int32_t *rep = malloc(slots * sizeof *rep), *slot_of = malloc((size_t)L->n * sizeof *slot_of);
@@ -1693,7 +1936,7 @@ static size_t row_classes(mg_alevel *L)
     for (int32_t c = 0; c < L->n; c++) {
         size_t len = A->rp[c + 1] - A->rp[c];
         slot_of[c] = -1;
-        if (L->plain[c] || len == 0 || len > ROW_MAX)
+        if ((plain && plain[c]) || len == 0 || len > CLS_WIDTH)
             continue;
         slot_of[c] = (int32_t)class_slot(A, c, rep, key, slots - 1);
         cnt[slot_of[c]]++;
@@ -1705,8 +1948,12 @@ static size_t row_classes(mg_alevel *L)
     if (!ncls)
         goto done;
     L->cn = malloc((size_t)ncls * sizeof *L->cn);
-    L->coff = malloc((size_t)ncls * ROW_MAX * sizeof *L->coff);
-    L->cval = malloc((size_t)ncls * ROW_MAX * sizeof *L->cval);
+    L->cw = 1;
+    for (size_t s = 0; s < slots; s++)
+        if (cnt[s] >= 0 && A->rp[rep[s] + 1] - A->rp[rep[s]] > (size_t)L->cw)
+            L->cw = (int)(A->rp[rep[s] + 1] - A->rp[rep[s]]);
+    L->coff = malloc((size_t)ncls * L->cw * sizeof *L->coff);
+    L->cval = malloc((size_t)ncls * L->cw * sizeof *L->cval);
     if (!L->cn || !L->coff || !L->cval)
         goto fail;
     for (size_t s = 0; s < slots; s++) {
@@ -1716,42 +1963,38 @@ static size_t row_classes(mg_alevel *L)
         const int32_t r = rep[s];
         L->cn[k] = (int)(A->rp[r + 1] - A->rp[r]);
         for (int e = 0; e < L->cn[k]; e++) {
-            L->coff[(size_t)k * ROW_MAX + e] = A->ci[A->rp[r] + e] - r;
-            L->cval[(size_t)k * ROW_MAX + e] = A->v[A->rp[r] + e];
+            L->coff[(size_t)k * L->cw + e] = A->ci[A->rp[r] + e] - r;
+            L->cval[(size_t)k * L->cw + e] = A->v[A->rp[r] + e];
         }
     }
     size_t before = A->rp[L->n];
     for (int32_t c = 0; c < L->n; c++)
-        cls[c] = L->plain[c]                               ? 1
+        cls[c] = plain && plain[c]                         ? 1
                  : slot_of[c] >= 0 && cnt[slot_of[c]] >= 0 ? 2 + cnt[slot_of[c]]
                                                            : 0;
-    /* A class serves runs of CLS_RUN rows or more: a stencil over a few lanes
-     * costs more than the sparse rows. */
-    for (int32_t c = 0; c < L->n;) {
-        int32_t e = c + 1;
-        while (e < L->n && cls[e] == cls[c])
-            e++;
-        if (cls[c] > 1 && e - c < CLS_RUN)
-            memset(cls + c, 0, (size_t)(e - c) * sizeof *cls);
-        c = e;
-    }
-    if (csr_drop_rows(&L->A, cls))
+    if (class_groups(L, cls, ncls) || csr_drop_rows(&L->A, cls))
         goto fail;
     L->cls = cls;
     L->ncls = ncls;
     cls = NULL;
-    saved =
-        bytes_saved((before - L->A.rp[L->n]) * (sizeof(int32_t) + sizeof(float)),
-                    (size_t)L->n * sizeof *L->cls +
-                        (size_t)ncls * (ROW_MAX * (sizeof(int32_t) + sizeof(float)) + sizeof(int)));
+    saved = bytes_saved((before - L->A.rp[L->n]) * (sizeof(int32_t) + sizeof(float)),
+                        (size_t)L->n * sizeof *L->cls +
+                            (size_t)ncls *
+                                ((size_t)L->cw * (sizeof(int32_t) + sizeof(float)) + sizeof(int)) +
+                            (size_t)L->ngrp * (MG_GROUP + 1) * sizeof(int32_t));
     goto done;
 fail:
     free(L->cn);
     free(L->coff);
     free(L->cval);
+    free(L->grow);
+    free(L->gcls);
     L->cn = NULL;
     L->coff = NULL;
     L->cval = NULL;
+    L->grow = NULL;
+    L->gcls = NULL;
+    L->ngrp = 0;
 done:
     free(rep);
     free(slot_of);
@@ -1821,6 +2064,8 @@ void hv__mg_agg_keep_bottom(mg_agg *g)
         free(L->cn);
         free(L->coff);
         free(L->cval);
+        free(L->grow);
+        free(L->gcls);
         int32_t n = L->n;
         memset(L, 0, sizeof *L);
         L->n = n;
@@ -1844,6 +2089,8 @@ void hv__mg_agg_free(mg_agg *g)
         free(L->cn);
         free(L->coff);
         free(L->cval);
+        free(L->grow);
+        free(L->gcls);
         free(L->dinv);
         free(L->agg);
         free(L->mrp);

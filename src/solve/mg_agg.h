@@ -52,6 +52,8 @@ typedef struct mg_csr {
 } mg_csr;
 
 #define MG_CSR_PAD 16
+#define MG_CLS_GROUP 0xFFFF
+#define MG_GROUP 8
 
 /* Level l of the aggregation hierarchy; lv[0] is the grid's fine level, whose
  * operator is the matrix-free stencil of an mg_level (A unused there). */
@@ -78,13 +80,21 @@ typedef struct mg_alevel {
      * repeat along the box's faces and the walls, the same entries at the
      * same offsets. cls[c] = 0 for a row in A, 1 for a plain row, 2 + k for
      * row class k (cn[k] entries at offsets coff, values cval, each class
-     * 125 apart), whose rows then hold no entries in A. NULL when packing found
+     * cw apart), whose rows then hold no entries in A. NULL when packing found
      * none. */
     uint16_t *cls;
     int ncls;
+    int cw; /* class k's entries at coff, cval + cw k */
     int *cn;
     int32_t *coff;
     float *cval;
+    /* Rows of a class that make no run of a few rows along x (cls[c] =
+     * MG_CLS_GROUP): in groups of MG_GROUP rows of one class, grow[MG_GROUP g
+     * ..] the rows of group g (a class's last group repeats its last row),
+     * gcls[g] its class, the groups in the order their rows filled them. */
+    int32_t ngrp;
+    int32_t *grow;
+    int32_t *gcls;
     int32_t nagg;                 /* aggregates made of them (next level's non-empty unknowns) */
     float *u, *f, *r, *d, *t, *s; /* work: t, s for the transfers */
 } mg_alevel;

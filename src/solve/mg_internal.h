@@ -116,6 +116,18 @@ static inline int mg_avx512(void)
 {
     return hv__mg_avx512_state >= 0 ? hv__mg_avx512_state : hv__mg_avx512_probe();
 }
+
+/* 1: the hand-written AVX2 + FMA kernels (the aggregation levels' products,
+ * the binary rows of the fused pass) run where AVX-512's do not: the CPU has
+ * both, unless HV_NOAVX2 is set to anything but empty or 0 (the tests run the
+ * baseline C that way); 0: they do not; -1: not asked yet. */
+extern int hv__mg_avx2_state;
+int hv__mg_avx2_probe(void);
+
+static inline int mg_avx2(void)
+{
+    return hv__mg_avx2_state >= 0 ? hv__mg_avx2_state : hv__mg_avx2_probe();
+}
 #endif
 
 /* v = 0 (n floats), on several threads on large levels. */

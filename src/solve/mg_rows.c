@@ -20,6 +20,18 @@ int hv__mg_avx512_probe(void)
     return hv__mg_avx512_state;
 }
 
+int hv__mg_avx2_state = -1;
+
+int hv__mg_avx2_probe(void)
+{
+    const char *e = getenv("HV_NOAVX2");
+    hv__mg_avx2_state = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+                                !(e && *e && strcmp(e, "0"))
+                            ? 1
+                            : 0;
+    return hv__mg_avx2_state;
+}
+
 /* One colour (cells of parity i0) of a plain row of nx cells, walls included,
  * in 16-lane chunks aligned to the row start: the row's own values come from
  * one load per chunk, their x-neighbours by lane shifts (valignd) of the chunks
@@ -244,12 +256,129 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
     }
 }
 
+#if MG_AVX512
+/* One colour of a binary level's row in 8-lane AVX2 chunks, for the fused
+ * pass alone: as rb_row_avx512 with dinv, but every lane is loaded and the
+ * chunk stored whole, this colour's cells new and the other's as they were
+ * (AMD's masked stores cost several times a whole one). In the fused pass a
+ * thread owns a slab of planes: the rows it reads in full and the cells it
+ * writes back unchanged are its own, or those of a neighbour slab's edge
+ * plane at a time a barrier sets apart (mg_fused.c), so no other thread
+ * touches them meanwhile. hv__mg_rb_sweep, whose threads share planes, keeps
+ * rb_row_weighted. The row's first and last chunks read under masks: no lane
+ * outside the row is read or written. */
+__attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const float *f,
+                                                             const float *dinv, const mg_wrow *R,
+                                                             int nx, int i0, float cx,
+                                                             const float c[4])
+{
+    const __m256 vcx = _mm256_set1_ps(cx), vcym = _mm256_set1_ps(c[0]), vcyp = _mm256_set1_ps(c[1]),
+                 vczm = _mm256_set1_ps(c[2]), vczp = _mm256_set1_ps(c[3]);
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256 colour = _mm256_castsi256_ps(
+        _mm256_set1_epi64x(i0 ? (int64_t)0xFFFFFFFF00000000LL : (int64_t)0x00000000FFFFFFFFLL));
+    const float *ym = u + R->ym, *yp = u + R->yp, *zm = u + R->zm, *zp = u + R->zp;
+    for (int q = 0; q < nx; q += 8) {
+        __m256 uc, um, up, fv, dv, a, b, cz, dz;
+        if (q > 0 && q + 9 <= nx) {
+            uc = _mm256_loadu_ps(u + q);
+            um = _mm256_loadu_ps(u + q - 1);
+            up = _mm256_loadu_ps(u + q + 1);
+            fv = _mm256_loadu_ps(f + q);
+            dv = _mm256_loadu_ps(dinv + q);
+            a = _mm256_loadu_ps(ym + q);
+            b = _mm256_loadu_ps(yp + q);
+            cz = _mm256_loadu_ps(zm + q);
+            dz = _mm256_loadu_ps(zp + q);
+        } else {
+            /* lanes inside the row; x neighbours inside it */
+            const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q), lane);
+            const __m256i lo =
+                _mm256_and_si256(_mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q + 1), lane),
+                                 _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(-q)));
+            const __m256i hi = _mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q - 1), lane);
+            uc = _mm256_maskload_ps(u + q, in);
+            um = _mm256_maskload_ps(u + q - 1, lo);
+            up = _mm256_maskload_ps(u + q + 1, hi);
+            fv = _mm256_maskload_ps(f + q, in);
+            dv = _mm256_maskload_ps(dinv + q, in);
+            a = _mm256_maskload_ps(ym + q, in);
+            b = _mm256_maskload_ps(yp + q, in);
+            cz = _mm256_maskload_ps(zm + q, in);
+            dz = _mm256_maskload_ps(zp + q, in);
+        }
+        __m256 sm = _mm256_fmadd_ps(vcx, _mm256_add_ps(um, up), fv);
+        sm = _mm256_fmadd_ps(vcym, a, sm);
+        sm = _mm256_fmadd_ps(vcyp, b, sm);
+        sm = _mm256_fmadd_ps(vczm, cz, sm);
+        sm = _mm256_fmadd_ps(vczp, dz, sm);
+        const __m256 out = _mm256_blendv_ps(uc, _mm256_mul_ps(sm, dv), colour);
+        if (q + 8 <= nx) {
+            _mm256_storeu_ps(u + q, out);
+        } else {
+            float buf[8];
+            _mm256_storeu_ps(buf, out);
+            memcpy(u + q, buf, (size_t)(nx - q) * sizeof *buf);
+        }
+    }
+}
+#endif
+
+/* rb_brow_avx2 in C, for the fused pass on CPUs without AVX2 (and in the
+ * ThreadSanitizer build, which checks that pass's whole-row access this way):
+ * every cell computed, this colour's kept; the x neighbours of the ends are
+ * walls. */
+MG_KERNEL static void rb_brow_whole(float *u, const float *f, const float *dinv, const mg_wrow *R,
+                                    int nx, int i0, float cx, const float c[4])
+{
+    const float *ym = u + R->ym, *yp = u + R->yp, *zm = u + R->zm, *zp = u + R->zp;
+    const float cym = c[0], cyp = c[1], czm = c[2], czp = c[3];
+    for (int i = 0; i<nx; i += nx> 1 ? nx - 1 : 1) {
+        const float s = f[i] + cx * ((i > 0 ? u[i - 1] : 0) + (i < nx - 1 ? u[i + 1] : 0)) +
+                        cym * ym[i] + cyp * yp[i] + czm * zm[i] + czp * zp[i];
+        if ((i & 1) == i0)
+            u[i] = s * dinv[i];
+    }
+    /* a cell of the other colour reads its neighbours before this colour's
+     * are written, as the vector row does: its result is dropped */
+#pragma omp simd
+    for (int i = 1; i < nx - 1; i++) {
+        const float s = f[i] + cx * (u[i - 1] + u[i + 1]) + cym * ym[i] + cyp * yp[i] +
+                        czm * zm[i] + czp * zp[i];
+        u[i] = (i & 1) == i0 ? s * dinv[i] : u[i];
+    }
+}
+
+/* One colour of row (j,k) for the fused pass (mg_fused.c). */
 void hv__mg_rb_row(const mg_state *m, const mg_level *L, int j, int k, int col)
 {
-    if (L->plain)
+    if (L->plain) {
         hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
-    else
+        return;
+    }
+#if MG_AVX512
+    if (L->binary && mg_avx512()) {
         rb_row_weighted(m, L, j, k, col);
+        return;
+    }
+#endif
+    if (L->binary && m->dim == 3) {
+        const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+        const float cy = (float)L->c[1], cz = (float)L->c[2];
+        const float c[4] = {R.ym ? cy : 0, R.yp ? cy : 0, R.zm ? cz : 0, R.zp ? cz : 0};
+        float *u = L->u + R.base;
+        const float *f = L->f + R.base, *dinv = L->dinv + R.base;
+        const int i0 = (j + k + col) & 1;
+#if MG_AVX512
+        if (mg_avx2()) {
+            rb_brow_avx2(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
+            return;
+        }
+#endif
+        rb_brow_whole(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
+        return;
+    }
+    rb_row_weighted(m, L, j, k, col);
 }
 
 void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col)
