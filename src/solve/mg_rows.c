@@ -257,6 +257,20 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
 }
 
 #if MG_AVX512
+/* u[q-1 .. q+6] and u[q+1 .. q+8] from the chunks before (p), at (c) and
+ * after (n) q: lane shifts across the two halves (vperm2f128, vpalignr). */
+__attribute__((target("avx2,fma"))) static inline __m256 x_minus(__m256 p, __m256 c)
+{
+    const __m256i t = _mm256_castps_si256(_mm256_permute2f128_ps(p, c, 0x21));
+    return _mm256_castsi256_ps(_mm256_alignr_epi8(_mm256_castps_si256(c), t, 12));
+}
+
+__attribute__((target("avx2,fma"))) static inline __m256 x_plus(__m256 c, __m256 n)
+{
+    const __m256i t = _mm256_castps_si256(_mm256_permute2f128_ps(c, n, 0x21));
+    return _mm256_castsi256_ps(_mm256_alignr_epi8(t, _mm256_castps_si256(c), 4));
+}
+
 /* One colour of a binary level's row in 8-lane AVX2 chunks, for the fused
  * pass alone: as rb_row_avx512 with dinv, but every lane is loaded and the
  * chunk stored whole, this colour's cells new and the other's as they were
@@ -265,8 +279,8 @@ MG_KERNEL static void rb_row_weighted(const mg_state *m, const mg_level *L, int 
  * writes back unchanged are its own, or those of a neighbour slab's edge
  * plane at a time a barrier sets apart (mg_fused.c), so no other thread
  * touches them meanwhile. hv__mg_rb_sweep, whose threads share planes, keeps
- * rb_row_weighted. The row's first and last chunks read under masks: no lane
- * outside the row is read or written. */
+ * rb_row_weighted. The row's last chunk reads under a mask: no lane outside
+ * the row is read or written. */
 __attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const float *f,
                                                              const float *dinv, const mg_wrow *R,
                                                              int nx, int i0, float cx,
@@ -278,12 +292,20 @@ __attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const flo
     const __m256 colour = _mm256_castsi256_ps(
         _mm256_set1_epi64x(i0 ? (int64_t)0xFFFFFFFF00000000LL : (int64_t)0x00000000FFFFFFFFLL));
     const float *ym = u + R->ym, *yp = u + R->yp, *zm = u + R->zm, *zp = u + R->zp;
+    /* the row's own cells as they were before this chunk's store: its x
+     * neighbours come from registers, never from a load that overlaps the
+     * store just made (which the CPU cannot forward) */
+    __m256 prev = _mm256_setzero_ps(),
+           cur = nx >= 8 ? _mm256_loadu_ps(u)
+                         : _mm256_maskload_ps(u, _mm256_cmpgt_epi32(_mm256_set1_epi32(nx), lane));
     for (int q = 0; q < nx; q += 8) {
-        __m256 uc, um, up, fv, dv, a, b, cz, dz;
-        if (q > 0 && q + 9 <= nx) {
-            uc = _mm256_loadu_ps(u + q);
-            um = _mm256_loadu_ps(u + q - 1);
-            up = _mm256_loadu_ps(u + q + 1);
+        __m256 next = _mm256_setzero_ps(), fv, dv, a, b, cz, dz;
+        if (q + 16 <= nx)
+            next = _mm256_loadu_ps(u + q + 8);
+        else if (q + 8 < nx)
+            next = _mm256_maskload_ps(u + q + 8,
+                                      _mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q - 8), lane));
+        if (q + 8 <= nx) {
             fv = _mm256_loadu_ps(f + q);
             dv = _mm256_loadu_ps(dinv + q);
             a = _mm256_loadu_ps(ym + q);
@@ -291,15 +313,7 @@ __attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const flo
             cz = _mm256_loadu_ps(zm + q);
             dz = _mm256_loadu_ps(zp + q);
         } else {
-            /* lanes inside the row; x neighbours inside it */
             const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q), lane);
-            const __m256i lo =
-                _mm256_and_si256(_mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q + 1), lane),
-                                 _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(-q)));
-            const __m256i hi = _mm256_cmpgt_epi32(_mm256_set1_epi32(nx - q - 1), lane);
-            uc = _mm256_maskload_ps(u + q, in);
-            um = _mm256_maskload_ps(u + q - 1, lo);
-            up = _mm256_maskload_ps(u + q + 1, hi);
             fv = _mm256_maskload_ps(f + q, in);
             dv = _mm256_maskload_ps(dinv + q, in);
             a = _mm256_maskload_ps(ym + q, in);
@@ -307,12 +321,12 @@ __attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const flo
             cz = _mm256_maskload_ps(zm + q, in);
             dz = _mm256_maskload_ps(zp + q, in);
         }
-        __m256 sm = _mm256_fmadd_ps(vcx, _mm256_add_ps(um, up), fv);
+        __m256 sm = _mm256_fmadd_ps(vcx, _mm256_add_ps(x_minus(prev, cur), x_plus(cur, next)), fv);
         sm = _mm256_fmadd_ps(vcym, a, sm);
         sm = _mm256_fmadd_ps(vcyp, b, sm);
         sm = _mm256_fmadd_ps(vczm, cz, sm);
         sm = _mm256_fmadd_ps(vczp, dz, sm);
-        const __m256 out = _mm256_blendv_ps(uc, _mm256_mul_ps(sm, dv), colour);
+        const __m256 out = _mm256_blendv_ps(cur, _mm256_mul_ps(sm, dv), colour);
         if (q + 8 <= nx) {
             _mm256_storeu_ps(u + q, out);
         } else {
@@ -320,6 +334,8 @@ __attribute__((target("avx2,fma"))) static void rb_brow_avx2(float *u, const flo
             _mm256_storeu_ps(buf, out);
             memcpy(u + q, buf, (size_t)(nx - q) * sizeof *buf);
         }
+        prev = cur;
+        cur = next;
     }
 }
 #endif
