@@ -365,36 +365,43 @@ MG_KERNEL static void rb_brow_whole(float *u, const float *f, const float *dinv,
     }
 }
 
-/* One colour of row (j,k) for the fused pass (mg_fused.c). */
-void hv__mg_rb_row(const mg_state *m, const mg_level *L, int j, int k, int col)
+/* One colour of row (j,k) of a weighted level in the fused pass: a binary
+ * level's whole-row kernels where AVX-512's masked row does not run. */
+__attribute__((noinline)) static void rb_row_fused_weighted(const mg_state *m, const mg_level *L,
+                                                            int j, int k, int col)
 {
-    if (L->plain) {
-        hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
-        return;
-    }
 #if MG_AVX512
-    if (L->binary && mg_avx512()) {
+    if (mg_avx512()) {
         rb_row_weighted(m, L, j, k, col);
         return;
     }
 #endif
-    if (L->binary && m->dim == 3) {
-        const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
-        const float cy = (float)L->c[1], cz = (float)L->c[2];
-        const float c[4] = {R.ym ? cy : 0, R.yp ? cy : 0, R.zm ? cz : 0, R.zp ? cz : 0};
-        float *u = L->u + R.base;
-        const float *f = L->f + R.base, *dinv = L->dinv + R.base;
-        const int i0 = (j + k + col) & 1;
-#if MG_AVX512
-        if (mg_avx2()) {
-            rb_brow_avx2(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
-            return;
-        }
-#endif
-        rb_brow_whole(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
+    if (!L->binary || m->dim != 3) {
+        rb_row_weighted(m, L, j, k, col);
         return;
     }
-    rb_row_weighted(m, L, j, k, col);
+    const mg_wrow R = mg_wrow_at(L, m->dim, j, k);
+    const float cy = (float)L->c[1], cz = (float)L->c[2];
+    const float c[4] = {R.ym ? cy : 0, R.yp ? cy : 0, R.zm ? cz : 0, R.zp ? cz : 0};
+    float *u = L->u + R.base;
+    const float *f = L->f + R.base, *dinv = L->dinv + R.base;
+    const int i0 = (j + k + col) & 1;
+#if MG_AVX512
+    if (mg_avx2()) {
+        rb_brow_avx2(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
+        return;
+    }
+#endif
+    rb_brow_whole(u, f, dinv, &R, L->n[0], i0, (float)L->c[0], c);
+}
+
+/* One colour of row (j,k) for the fused pass (mg_fused.c). */
+void hv__mg_rb_row(const mg_state *m, const mg_level *L, int j, int k, int col)
+{
+    if (L->plain)
+        hv__mg_rb_row_plain(m, L, L->u, L->f, j, k, col);
+    else
+        rb_row_fused_weighted(m, L, j, k, col);
 }
 
 void hv__mg_rb_sweep(const mg_state *m, mg_level *L, int col)
