@@ -742,10 +742,8 @@ END_TEST
  * is a multiple of 8, is not, and is under 8 (the masked chunk alone). */
 START_TEST(binary_rows_should_agree_across_kernels)
 {
-    if (!hv__mg_avx2_probe()) {
-        printf("  binary rows: no AVX2 here, the C row alone\n");
-        return;
-    }
+    if (!hv__mg_avx2_probe())
+        TL_SKIP("binary rows: no AVX2 and FMA on this CPU, the C row alone runs");
     const shape cases[] = {{3, {40, 24, 20}, 1}, {3, {37, 20, 29}, 2}, {3, {5, 24, 16}, 2}};
     const int saved512 = hv__mg_avx512_state, saved2 = hv__mg_avx2_state;
     for (int c = 0; c < 3; c++) {
