@@ -500,10 +500,8 @@ END_TEST
 START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
 {
     const char *bin = tl_heatvox_bin();
-    if (!bin) {
-        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
-        return;
-    }
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
     char dir[] = "/tmp/hv_distance_XXXXXX";
     ck_assert_ptr_nonnull(mkdtemp(dir));
     char path[512], cmd[2048], err[4096];

@@ -533,10 +533,8 @@ static void write_input(const char *path, int n, double temp_h)
 START_TEST(heatvox_extend_should_round_trip_levelset_and_velocity_through_vdb)
 {
     const char *bin = tl_heatvox_bin();
-    if (!bin) {
-        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
-        return;
-    }
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
     char dir[] = "/tmp/hv_extend_XXXXXX";
     ck_assert_ptr_nonnull(mkdtemp(dir));
     char in[256], out[256], cmd[2048], err[4096];

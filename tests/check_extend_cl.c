@@ -315,10 +315,8 @@ END_TEST
 START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
 {
     const char *bin = tl_heatvox_bin();
-    if (!bin) {
-        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
-        return;
-    }
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
     char dir[] = "/tmp/hv_extend_cl_XXXXXX";
     ck_assert_ptr_nonnull(mkdtemp(dir));
     char in[256], out[2][256], cmd[2048], err[4096];
@@ -402,10 +400,8 @@ END_TEST
 START_TEST(heatvox_without_a_platform_should_fail_clearly)
 {
     const char *bin = tl_heatvox_bin();
-    if (!bin) {
-        printf("  SKIP: no heatvox binary (build/heatvox or $HEATVOX_BIN)\n");
-        return;
-    }
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
     char dir[] = "/tmp/hv_noplat_XXXXXX";
     ck_assert_ptr_nonnull(mkdtemp(dir));
     char in[256], mesh[256], src[256], out[256], cmd[2048], err[4096];
