@@ -95,8 +95,8 @@ $(shell mkdir -p $(BUILD))
 $(file >$(FLAGS),$(FLAGS_NOW))
 endif
 
-C_SRC   := $(sort $(wildcard src/*/*.c))
-CXX_SRC := $(sort $(wildcard src/*/*.cpp))
+C_SRC   := $(sort $(wildcard src/*/*.c src/*/*/*.c))
+CXX_SRC := $(sort $(wildcard src/*/*.cpp src/*/*/*.cpp))
 CL_SRC  := $(sort $(wildcard kernels/*.cl))
 OBJ     := $(C_SRC:%.c=$(BUILD)/obj/%.o) $(CXX_SRC:%.cpp=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
 TESTS   := $(patsubst tests/%.c,$(BUILD)/tests/%,$(sort $(wildcard tests/check_*.c)))
@@ -393,7 +393,7 @@ endif
 
 # make format lays out every C and C++ source by .clang-format; make
 # format-check (run by CI) fails, listing the places, when one differs.
-FORMAT_SRC = $(sort $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h tools/*.c tools/*.h \
+FORMAT_SRC = $(sort $(C_SRC) $(CXX_SRC) $(wildcard include/heatvox/*.h src/*/*.h src/*/*/*.h tools/*.c tools/*.h \
                tools/*.cpp tools/bench/*.c tools/bench/*.h tools/bench/*.cpp tests/*.c tests/*.h tests/*.cpp tests/fuzz/*.c tests/fuzz/*.h))
 format: | $(STAMP)
 	clang-format -i $(FORMAT_SRC)

@@ -1,6 +1,6 @@
 /*
  * The coarse levels by smoothed aggregation on a device, the twins of
- * src/solve/mg_agg.c: sparse rows (CSR: row starts rp, columns ci, values v)
+ * src/solve/mg/agg_*.c: sparse rows (CSR: row starts rp, columns ci, values v)
  * for the coarse operators and the transfers between them, and the fine
  * level's transfers from its aggregates (agg, members mrp/mem) and the
  * stencil's apply (mg_apply). One work-item per row.

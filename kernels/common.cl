@@ -4,7 +4,7 @@
  *
  * Grids are cell-centred, x fastest: cell (i,j,k) has index i + nx*(j + ny*k).
  * Level geometry travels as int4 N = (nx, ny, nz, plain) and float4 (or
- * double4) C = (cx, cy, cz, alpha) with c_b = beta / h_b^2 (src/solve/mg_level.h).
+ * double4) C = (cx, cy, cz, alpha) with c_b = beta / h_b^2 (src/solve/mg/mg_level.h).
  * Stencil kernels run on a 2D range (x, row = j + ny*k); the host pads it to
  * whole work-groups, so every kernel checks its bounds.
  *
@@ -80,7 +80,12 @@ typedef float4 acc4_t;
     } while (0)
 
 /* Sum of v over the work-group (any 1D or 2D shape whose size is a power of
- * two <= HV_WG_MAX); every work-item must call it. */
+ * two <= HV_WG_MAX); every work-item must call it. A program in which one
+ * kernel alone calls a helper like this one, always with the same __local
+ * array, must write the tree into that kernel instead: clang folds the
+ * constant argument into the helper, and PoCL 3.1 then keeps the array as
+ * one static array that every work-group shares (kernels/distance.cl,
+ * dist_front_sums; docs/METHOD.md, "Testing notes"). */
 static acc_t hv_group_sum(acc_t v, __local acc_t *red)
 {
     const int lid = get_local_id(0) + get_local_size(0) * get_local_id(1);

@@ -138,13 +138,18 @@ __kernel void dist_assign(int4 N, int axis, __global const double *psi, __global
 }
 
 /* part[3g..3g+2] = group g's sums of w psi, w lu and w over the trusted cells
- * with w > 0 (blocks as red_dot_f). */
+ * with w > 0 (blocks as red_dot_f). The tree is hv_group_sum's, written out
+ * here: where this kernel is hv_group_sum's only caller (a program of
+ * common.cl and this file), clang folds its constant argument red into the
+ * helper, and PoCL then keeps red as one static array shared by every
+ * work-group, not a __local per group, so concurrent groups race on it. */
 __kernel void dist_front_sums(ulong n, __global const double *w, __global const double *psi,
                               __global const double *lu, __global const uchar *ok,
                               __global double *part)
 {
-    __local double red[HV_WG_MAX];
-    const size_t base = get_group_id(0) * (HV_WG * HV_RED_BLOCK) + get_local_id(0);
+    __local double red[3][HV_WG_MAX];
+    const int lid = get_local_id(0);
+    const size_t base = get_group_id(0) * (HV_WG * HV_RED_BLOCK) + lid;
     double s0 = 0, s1 = 0, sw = 0;
     for (int q = 0; q < HV_RED_BLOCK; q++) {
         const size_t c = base + q * HV_WG;
@@ -154,14 +159,23 @@ __kernel void dist_front_sums(ulong n, __global const double *w, __global const 
             sw += w[c];
         }
     }
-    s0 = hv_group_sum(s0, red);
-    s1 = hv_group_sum(s1, red);
-    sw = hv_group_sum(sw, red);
-    if (get_local_id(0) == 0) {
+    red[0][lid] = s0;
+    red[1][lid] = s1;
+    red[2][lid] = sw;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int h = (int)get_local_size(0) >> 1; h > 0; h >>= 1) {
+        if (lid < h) {
+            red[0][lid] += red[0][lid + h];
+            red[1][lid] += red[1][lid + h];
+            red[2][lid] += red[2][lid + h];
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) {
         const size_t g = get_group_id(0);
-        part[3 * g] = s0;
-        part[3 * g + 1] = s1;
-        part[3 * g + 2] = sw;
+        part[3 * g] = red[0][0];
+        part[3 * g + 1] = red[1][0];
+        part[3 * g + 2] = red[2][0];
     }
 }
 

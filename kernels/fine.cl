@@ -8,7 +8,7 @@
 
 /* r = f - A x on fluid cells (0 on solid ones) and rf = (float)r for the
  * V-cycle. (A reduction fused in here cost more on PoCL, one tree per 64
- * cells, than the separate fine_dot pass.) */
+ * cells, than the separate red_dot_d pass, reduce.cl.) */
 __kernel void fine_residual(int4 N, double4 C, __global const float *a,
                             __global const float *w0, __global const float *w1,
                             __global const float *w2, __global const double *x,
@@ -67,23 +67,6 @@ __kernel void fine_d2f(__global const double *x, __global float *u, ulong n)
         u[c] = (float)x[c];
 }
 
-/* part[group] = sum of a*b over the group's elements (blocks as red_dot_f). */
-__kernel void fine_dot(__global const double *a, __global const double *b, ulong n,
-                       __global double *part)
-{
-    __local double red[HV_WG_MAX];
-    const size_t base = get_group_id(0) * (HV_WG * HV_RED_BLOCK) + get_local_id(0);
-    double s = 0;
-    for (int q = 0; q < HV_RED_BLOCK; q++) {
-        const size_t c = base + q * HV_WG;
-        if (c < n)
-            s += a[c] * b[c];
-    }
-    s = hv_group_sum(s, red);
-    if (get_local_id(0) == 0)
-        part[get_group_id(0)] = s;
-}
-
 /* CG step with al = S[irz] / S[ipq] (0 when p.q <= 0, which the host then
  * reports): x += al p, r -= al q, rf = (float)r, partial sums of r*r. */
 __kernel void fine_pcg_update(__global double *x, __global double *r, __global const double *p,
@@ -126,9 +109,5 @@ __kernel void fine_mask(__global double *v, __global const float *a, ulong n)
     if (c < n && a[c] == 0.0f)
         v[c] = 0.0;
 }
-
-/* Double twins of red_chunk_f and region_sub_f (reduce.cl). */
-HV_RED_CHUNK(red_chunk_d, double, double)
-HV_REGION_SUB(region_sub_d, double, double)
 
 #endif

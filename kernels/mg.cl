@@ -1,6 +1,6 @@
 /*
  * Multigrid level kernels (float storage), the device twins of the CPU code in
- * src/solve/mg_rows.c and mg_transfer.c: operator apply and residual, red-black Gauss-Seidel by
+ * src/solve/mg/mg_rows.c and mg_transfer.c: operator apply and residual, red-black Gauss-Seidel by
  * colour, the Jacobi/Chebyshev update (fused with its residual), restriction
  * (mean of children, fused with the residual; or P^T for the symmetric cycle
  * of PCG), cell-centred linear

@@ -115,3 +115,26 @@ __kernel void red_region(__global const acc_t *part, __global const uint *rc,
         }                                                                                          \
     }
 HV_REGION_SUB(region_sub_f, float, acc_t)
+
+#ifdef HV_FP64
+/* Double twins of red_chunk_f and region_sub_f. */
+HV_RED_CHUNK(red_chunk_d, double, double)
+HV_REGION_SUB(region_sub_d, double, double)
+
+/* part[group] = sum of a*b over the group's elements (blocks as red_dot_f). */
+__kernel void red_dot_d(__global const double *a, __global const double *b, ulong n,
+                        __global double *part)
+{
+    __local double red[HV_WG_MAX];
+    const size_t base = get_group_id(0) * (HV_WG * HV_RED_BLOCK) + get_local_id(0);
+    double s = 0;
+    for (int q = 0; q < HV_RED_BLOCK; q++) {
+        const size_t c = base + q * HV_WG;
+        if (c < n)
+            s += a[c] * b[c];
+    }
+    s = hv_group_sum(s, red);
+    if (get_local_id(0) == 0)
+        part[get_group_id(0)] = s;
+}
+#endif

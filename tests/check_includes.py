@@ -2,7 +2,9 @@
 """The include map of src/README.md, checked: every #include "..." of src/,
 include/heatvox/ and tools/ (the command includes public headers and its
 own only) against the layers and interfaces that the two
-tables of src/README.md give. Prints one line per broken include and a
+tables of src/README.md give. A folder may hold folders of its own
+(src/solve/mg/): each is a folder of the map, named by its path under src/,
+and an include names a header by the path of its folder. Prints one line per broken include and a
 closing line in the test framework's format.
 
 Usage: tests/check_includes.py [ROOT]   (default: the project root)
@@ -55,18 +57,22 @@ def main():
     if not folders or not public:
         print("check_includes: no tables in src/README.md")
         return 1
-    for d in sorted(glob.glob(os.path.join(ROOT, "src", "*", ""))):
-        if os.path.basename(d.rstrip("/")) not in folders:
+    src = os.path.join(ROOT, "src")
+    dirs = glob.glob(os.path.join(src, "*", "")) + glob.glob(os.path.join(src, "*", "*", ""))
+    for d in sorted(dirs):
+        name = os.path.relpath(d, src)
+        if name not in folders:
             failed.add("folders")
-            bad.append("src/%s: a folder src/README.md does not list" % os.path.basename(d.rstrip("/")))
+            bad.append("src/%s: a folder src/README.md does not list" % name)
     for h in sorted(glob.glob(os.path.join(ROOT, "include", "heatvox", "*.h"))):
         if os.path.basename(h) not in public:
             failed.add("headers")
             bad.append("include/heatvox/%s: a header src/README.md does not list" % os.path.basename(h))
     kind[0] = "src"
-    files = [f for e in ("c", "h", "cpp") for f in glob.glob(os.path.join(ROOT, "src", "*", "*." + e))]
+    files = [f for d in ("*", os.path.join("*", "*")) for e in ("c", "h", "cpp")
+             for f in glob.glob(os.path.join(src, d, "*." + e))]
     for path in sorted(files):
-        folder = os.path.basename(os.path.dirname(path))
+        folder = os.path.relpath(os.path.dirname(path), src)
         if folder not in folders:
             continue
         layer = folders[folder][0]
@@ -76,7 +82,10 @@ def main():
                 if not os.path.exists(os.path.join(os.path.dirname(path), name)):
                     fail(path, name, "not in this folder (name its folder)")
                 continue
+            # The folder an include names: the longest listed path before its file.
             top, base = name.split("/", 1)
+            if name.rsplit("/", 1)[0] in folders:
+                top, base = name.rsplit("/", 1)
             if top == "heatvox":
                 if base not in public:
                     fail(path, name, "no such public header")

@@ -1,7 +1,7 @@
 #!/bin/sh
 # Compiles every OpenCL program heatvox builds, assembled as the library
-# assembles it (kernels/common.cl first, then the program's sources, with its
-# build options), offline with clang as strict OpenCL C 1.2 and as OpenCL C
+# assembles it (kernels/common.cl first, then the module's sources, with its
+# build options; the modules as the code describes them), offline with clang as strict OpenCL C 1.2 and as OpenCL C
 # 3.0, with and without fp64: -Werror -pedantic, so that what NVIDIA's
 # compiler refuses (variadic macros, extensions) fails here, on a machine
 # without a GPU. Usage: check_kernels.sh OUTDIR [CLANG]
@@ -14,19 +14,20 @@ wg=$(sed -n 's/^#define HV_CL_WG \([0-9]*\).*/\1/p' "$here/src/cl/cl_core.h")
 rb=$(sed -n 's/^#define HV_CL_RED_BLOCK \([0-9]*\).*/\1/p' "$here/src/cl/cl_core.h")
 [ -n "$wg" ] && [ -n "$rb" ] || { echo "check_kernels: HV_CL_WG or HV_CL_RED_BLOCK not found"; exit 1; }
 
-# name: sources after common.cl (as in src/cl/cl_core.c and each
-# module's hv_cl_module); "fp64" where the module is built only with fp64.
-programs="solver:mg,reduce,fine,faces,pointwise,agg
-heat:heat
-extend:extend
-distance:mg,reduce,fine,faces,pointwise,distance:fp64"
+# name:sources after common.cl[:fp64], one line per module, read from the
+# code's hv_cl_module descriptions (tests/cl_programs.py); "fp64" where the
+# module is built only with fp64.
+programs=$(python3 "$here/tests/cl_programs.py" "$here") || {
+    echo "check_kernels: the programs could not be read from src/"
+    exit 1
+}
 
 # Every kernel file is in some program.
 for f in "$here"/kernels/*.cl; do
     k=$(basename "$f" .cl)
     [ "$k" = common ] && continue
     echo "$programs" | grep -Eq "[:,]$k(,|:|\$)" || {
-        echo "check_kernels: kernels/$k.cl is in no program listed here"
+        echo "check_kernels: kernels/$k.cl is in no program of the code"
         exit 1
     }
 done
@@ -73,4 +74,4 @@ if [ "$bad" -ne 0 ]; then
     echo "check_kernels: $bad of $n compiles failed (logs in $out)"
     exit 1
 fi
-echo "check_kernels: $n compiles of 4 programs, strict OpenCL C 1.2 and 3.0"
+echo "check_kernels: $n compiles of $(echo "$programs" | wc -l) programs, strict OpenCL C 1.2 and 3.0"

@@ -2,8 +2,8 @@
  * analytic solutions and the FFTW oracle, null spaces, and bad input. */
 #include "heatvox/petsc.h"
 #include "solve/backend.h"
-#include "solve/mg_internal.h"
-#include "solve/mg_level.h"
+#include "solve/mg/mg_internal.h"
+#include "solve/mg/mg_level.h"
 #include "testlib.h"
 
 #include <math.h>

@@ -1,8 +1,8 @@
-/* The CPU multigrid's coarse levels by smoothed aggregation (mg_agg.c): walls
+/* The CPU multigrid's coarse levels by smoothed aggregation (agg_*.c): walls
  * one cell thick, mazes, regions cut apart, odd sizes, 2D, heat steps, the
  * AUTO change after a slow solve, and agreement with the geometric levels. */
 #include "solve/backend.h"
-#include "solve/mg_agg.h"
+#include "solve/mg/mg_agg.h"
 #include "testlib.h"
 
 #include <math.h>

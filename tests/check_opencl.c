@@ -6,7 +6,7 @@
  * in CI); without any OpenCL platform it only checks that the backend says so.
  */
 #include "heatvox/heatvox.h"
-#include "solve/cl_mg.h"
+#include "solve/cl/cl_mg.h"
 #include "cl/cl_ops.h"
 #include "testlib.h"
 

@@ -8,7 +8,7 @@
  */
 #include "sdf/sdf_cl.h"
 #include "sdf/sdf_internal.h"
-#include "solve/solve_cl.h"
+#include "solve/cl/solve_cl.h"
 #include "heatvox/heatvox.h"
 #include "cl/cl_ops.h"
 #include "testlib.h"

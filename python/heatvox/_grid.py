@@ -42,7 +42,7 @@ class Grid:
         # An hv_grid struct in Python memory over the NumPy buffer, never given to
         # hv_grid_destroy. grid.h allocates its values 64-byte aligned, but no
         # code reading a grid needs that: the vector kernels use unaligned loads
-        # (_mm512_loadu_ps in src/solve/mg_fused.c), the solvers copy right-hand
+        # (_mm512_loadu_ps in src/solve/mg/mg_fused.c), the solvers copy right-hand
         # sides into their own (aligned) arrays and FFTW plans on its own
         # buffers. So NumPy's alignment will do and nothing is copied.
         self._ptr = None

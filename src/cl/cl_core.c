@@ -1,5 +1,5 @@
-/* OpenCL devices, the shared context, the solver program and the modules'
- * programs, and launch helpers (cl_core.h). */
+/* OpenCL devices, the shared context, the modules' programs and launch
+ * helpers (cl_core.h). */
 #include "cl_core.h"
 #include "core/error.h"
 
@@ -17,52 +17,6 @@
 
 #define MAX_PLATFORMS 16
 #define MAX_DEVICES 64
-
-static const char *const kernel_names[HV_K_COUNT] = {
-    [HV_K_MG_APPLY] = "mg_apply",
-    [HV_K_MG_RESIDUAL] = "mg_residual",
-    [HV_K_MG_RBGS] = "mg_rbgs",
-    [HV_K_MG_CHEB] = "mg_cheb",
-    [HV_K_MG_JACOBI] = "mg_jacobi",
-    [HV_K_MG_JACOBI0] = "mg_jacobi0",
-    [HV_K_MG_RESTRICT_RESIDUAL] = "mg_restrict_residual",
-    [HV_K_MG_RESTRICT] = "mg_restrict",
-    [HV_K_MG_RESTRICT_TRANSPOSE] = "hv__mg_restrict_transpose",
-    [HV_K_MG_PROLONG] = "mg_prolong",
-    [HV_K_MG_PROLONG_W] = "mg_prolong_w",
-    [HV_K_MG_PROLONG_X2] = "mg_prolong_x2",
-    [HV_K_MG_BOTTOM_CG] = "hv__mg_bottom_cg",
-    [HV_K_RED_DOT_F] = "red_dot_f",
-    [HV_K_RED_FINISH] = "red_finish",
-    [HV_K_RED_CHUNK_F] = "red_chunk_f",
-    [HV_K_RED_REGION] = "red_region",
-    [HV_K_REGION_SUB_F] = "region_sub_f",
-    [HV_K_FACE_GRADIENT] = "face_gradient",
-    [HV_K_FACE_DIVERGENCE] = "face_divergence",
-    [HV_K_FACE_NORMALIZE] = "face_normalize",
-    [HV_K_PW_RATIO] = "pw_ratio",
-    [HV_K_PW_AXPY] = "pw_axpy",
-    [HV_K_AGG_SPMV] = "agg_spmv",
-    [HV_K_AGG_APPLY] = "agg_apply",
-    [HV_K_AGG_RESIDUAL] = "agg_residual",
-    [HV_K_AGG_CHEB] = "agg_cheb",
-    [HV_K_AGG_PROLONG] = "agg_prolong",
-    [HV_K_AGG_SCALE] = "agg_scale",
-    [HV_K_AGG_RESTRICT0] = "agg_restrict0",
-    [HV_K_AGG_INJECT0] = "agg_inject0",
-    [HV_K_AGG_PROLONG0] = "agg_prolong0",
-    [HV_K_FINE_RESIDUAL] = "fine_residual",
-    [HV_K_FINE_APPLY] = "fine_apply",
-    [HV_K_FINE_ADD] = "fine_add",
-    [HV_K_FINE_F2D] = "fine_f2d",
-    [HV_K_FINE_DOT] = "fine_dot",
-    [HV_K_FINE_PCG_UPDATE] = "fine_pcg_update",
-    [HV_K_FINE_XPAY] = "fine_xpay",
-    [HV_K_RED_CHUNK_D] = "red_chunk_d",
-    [HV_K_REGION_SUB_D] = "region_sub_d",
-    [HV_K_FINE_D2F] = "fine_d2f",
-    [HV_K_FINE_MASK] = "fine_mask",
-};
 
 const char *hv__cl_strerror(cl_int e)
 {
@@ -274,9 +228,8 @@ struct hv_cl_shared {
     cl_device_id dev;
     int fp64;
     cl_context ctx;
-    int adopted;     /* ctx is a caller's (retained), not one heatvox made */
-    cl_program prog; /* the solver's kernels */
-    modprog *mods;   /* modules' programs, built on first use */
+    int adopted;   /* ctx is a caller's (retained), not one heatvox made */
+    modprog *mods; /* modules' programs, built on first use */
 };
 
 static pthread_mutex_t shared_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -352,18 +305,6 @@ static hv_status shared_get(cl_platform_id plat, cl_device_id dev, int fp64, con
         return hv__error(HV_ERR_BACKEND, "OpenCL: cannot %s a context on '%s': %s",
                          ctx ? "retain" : "create", devname, hv__cl_strerror(e));
     }
-    const char *src[] = {hv__kernel_common, hv__kernel_mg,    hv__kernel_reduce,
-                         hv__kernel_fine,   hv__kernel_faces, hv__kernel_pointwise,
-                         hv__kernel_agg};
-    char opts[128];
-    build_options(fp64, opts, sizeof opts);
-    hv_status st =
-        build_program(s->ctx, dev, devname, src, (int)(sizeof src / sizeof src[0]), opts, &s->prog);
-    if (st) {
-        clReleaseContext(s->ctx);
-        free(s);
-        return st;
-    }
     s->dev = dev;
     s->fp64 = fp64;
     s->refs = 1;
@@ -388,7 +329,6 @@ static void shared_put(hv_cl_shared *s)
             clReleaseProgram(mp->prog);
             free(mp);
         }
-        clReleaseProgram(s->prog);
         clReleaseContext(s->ctx);
         free(s);
     }
@@ -404,9 +344,6 @@ void hv__cl_close(hv_cl **pcl)
     free(cl->ev);
     free(cl->evname);
     hv__cl_free(&cl->part);
-    for (int k = 0; k < HV_K_COUNT; k++)
-        if (cl->k[k])
-            clReleaseKernel(cl->k[k]);
     for (int i = 0; i < cl->nmod; i++) {
         for (int k = 0; cl->mod[i].m->kernels[k]; k++)
             if (cl->mod[i].k[k])
@@ -421,7 +358,7 @@ void hv__cl_close(hv_cl **pcl)
     *pcl = NULL;
 }
 
-static hv_status open_kernels(hv_cl *cl, hv_cl **out);
+static hv_status open_finish(hv_cl *cl, hv_cl **out);
 
 /* A context, device and queue of the caller's that the next hv__cl_open on
  * this thread takes (hv__cl_adopt), instead of heatvox's own. */
@@ -503,7 +440,7 @@ static hv_status open_adopted(hv_cl *cl, hv_cl **out)
     cl_command_queue_properties props = 0;
     clGetCommandQueueInfo(q, CL_QUEUE_PROPERTIES, sizeof props, &props, NULL);
     cl->profile = (props & CL_QUEUE_PROFILING_ENABLE) != 0;
-    return open_kernels(cl, out);
+    return open_finish(cl, out);
 }
 
 hv_status hv__cl_open(hv_cl **out)
@@ -546,14 +483,13 @@ hv_status hv__cl_open(hv_cl **out)
         return hv__error(HV_ERR_BACKEND, "OpenCL: cannot create a command queue: %s",
                          hv__cl_strerror(e));
     }
-    return open_kernels(cl, out);
+    return open_finish(cl, out);
 }
 
-/* The end of opening a handle on its context and queue: the solver's kernels
- * and the device's limits. Closes cl on failure. */
-static hv_status open_kernels(hv_cl *cl, hv_cl **out)
+/* The end of opening a handle on its context and queue: profiling and the
+ * device's limits. Closes cl on failure. */
+static hv_status open_finish(hv_cl *cl, hv_cl **out)
 {
-    cl_int e;
     cl->acc = cl->fp64 ? sizeof(cl_double) : sizeof(cl_float);
     if (cl->profile) {
         cl->ev = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->ev);
@@ -561,16 +497,6 @@ static hv_status open_kernels(hv_cl *cl, hv_cl **out)
         if (!cl->ev || !cl->evname) {
             hv__cl_close(&cl);
             return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
-        }
-    }
-    for (int k = 0; k < HV_K_COUNT; k++) {
-        if (k >= HV_K_FIRST_FP64 && !cl->fp64)
-            continue;
-        cl->k[k] = clCreateKernel(cl->sh->prog, kernel_names[k], &e);
-        if (e != CL_SUCCESS) {
-            hv__cl_close(&cl);
-            return hv__error(HV_ERR_BACKEND, "OpenCL: kernel '%s' is missing: %s", kernel_names[k],
-                             hv__cl_strerror(e));
         }
     }
     size_t wg = 0;
@@ -667,6 +593,8 @@ hv_status hv__cl_module_open(hv_cl *cl, const hv_cl_module *m)
     if (!k)
         return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
     for (int i = 0; i < nk; i++) {
+        if (m->first_fp64 > 0 && i >= m->first_fp64 && !cl->fp64)
+            continue;
         cl_int e;
         k[i] = clCreateKernel(prog, m->kernels[i], &e);
         if (e != CL_SUCCESS) {
@@ -914,20 +842,7 @@ static void enqueue(hv_cl *cl, cl_kernel kk, const char *name, int dims, const s
     }
 }
 
-void hv__cl_args(hv_cl *cl, hv_cl_kernel k, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    set_args(cl, cl->k[k], kernel_names[k], fmt, ap);
-    va_end(ap);
-}
-
-void hv__cl_run(hv_cl *cl, hv_cl_kernel k, int dims, const size_t *global, const size_t *local)
-{
-    enqueue(cl, cl->k[k], kernel_names[k], dims, global, local);
-}
-
-void hv__cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt, ...)
+void hv__cl_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt, ...)
 {
     cl_kernel kk = module_kernel(cl, m, k);
     if (!kk)
@@ -938,8 +853,8 @@ void hv__cl_module_args(hv_cl *cl, const hv_cl_module *m, int k, const char *fmt
     va_end(ap);
 }
 
-void hv__cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const size_t *global,
-                       const size_t *local)
+void hv__cl_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const size_t *global,
+                const size_t *local)
 {
     for (int d = 0; d < dims; d++)
         if (global[d] == 0)
@@ -949,11 +864,12 @@ void hv__cl_module_run(hv_cl *cl, const hv_cl_module *m, int k, int dims, const 
         enqueue(cl, kk, m->kernels[k], dims, global, local);
 }
 
-size_t hv__cl_group_limit(hv_cl *cl, hv_cl_kernel k, size_t want)
+size_t hv__cl_group_limit(hv_cl *cl, const hv_cl_module *m, int k, size_t want)
 {
     size_t kwg = 0;
-    if (!cl->k[k] || clGetKernelWorkGroupInfo(cl->k[k], cl->dev, CL_KERNEL_WORK_GROUP_SIZE,
-                                              sizeof kwg, &kwg, NULL) != CL_SUCCESS)
+    cl_kernel kk = module_kernel(cl, m, k);
+    if (!kk || clGetKernelWorkGroupInfo(kk, cl->dev, CL_KERNEL_WORK_GROUP_SIZE, sizeof kwg, &kwg,
+                                        NULL) != CL_SUCCESS)
         kwg = cl->max_wg;
     while (want > 1 && want > kwg)
         want >>= 1;
@@ -986,31 +902,6 @@ size_t hv__cl_range_red(size_t n, size_t g[1], size_t l[1])
     l[0] = HV_CL_WG;
     g[0] = groups * HV_CL_WG;
     return groups;
-}
-
-void hv__cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
-{
-    size_t l = hv__cl_group_limit(cl, HV_K_RED_FINISH, 256);
-    hv__cl_args(cl, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
-    hv__cl_run(cl, HV_K_RED_FINISH, 1, &l, &l);
-}
-
-void hv__cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot)
-{
-    size_t g[1], l[1];
-    size_t groups = hv__cl_range_red(n, g, l);
-    if (groups > cl->part_cap) {
-        hv__cl_free(&cl->part);
-        cl->part_cap = 0;
-        if (hv__cl_alloc(cl, groups * cl->acc, NULL, &cl->part) != HV_OK) {
-            hv__cl_fail(cl, CL_MEM_OBJECT_ALLOCATION_FAILURE, "partial sums of a reduction");
-            return;
-        }
-        cl->part_cap = groups;
-    }
-    hv__cl_args(cl, HV_K_RED_DOT_F, "mmlm", a, b, n, cl->part);
-    hv__cl_run(cl, HV_K_RED_DOT_F, 1, g, l);
-    hv__cl_finish_sum(cl, cl->part, groups, S, slot);
 }
 
 void hv__cl_read_acc(hv_cl *cl, cl_mem S, int first, int n, double *out)

@@ -1,9 +1,39 @@
-/* Grid operations on an OpenCL device (cl_ops.h). */
+/* Grid operations on an OpenCL device (cl_ops.h) and their kernels' module. */
 #include "cl_ops.h"
 #include "core/error.h"
 
 #include <stdlib.h>
 #include <string.h>
+
+/* kernels/, embedded by the Makefile */
+extern const char hv__kernel_reduce[], hv__kernel_faces[], hv__kernel_pointwise[];
+
+static const char *const ops_sources[] = {hv__kernel_reduce, hv__kernel_faces, hv__kernel_pointwise,
+                                          NULL};
+enum {
+    HV_K_RED_DOT_F,
+    HV_K_RED_FINISH,
+    HV_K_RED_CHUNK_F,
+    HV_K_RED_REGION,
+    HV_K_REGION_SUB_F,
+    HV_K_FACE_GRADIENT,
+    HV_K_FACE_DIVERGENCE,
+    HV_K_FACE_NORMALIZE,
+    HV_K_PW_RATIO,
+    HV_K_PW_AXPY,
+    HV_K_RED_CHUNK_D, /* fp64 only from here */
+    HV_K_REGION_SUB_D,
+    HV_K_RED_DOT_D
+};
+static const char *const ops_kernels[] = {
+    "red_dot_f",     "red_finish",      "red_chunk_f",    "red_region", "region_sub_f",
+    "face_gradient", "face_divergence", "face_normalize", "pw_ratio",   "pw_axpy",
+    "red_chunk_d",   "region_sub_d",    "red_dot_d",      NULL};
+const hv_cl_module hv__cl_ops_module = {"grid operation", ops_sources, ops_kernels, 0,
+                                        HV_K_RED_CHUNK_D};
+#define OPS (&hv__cl_ops_module)
+
+hv_status hv__cl_ops_open(hv_cl *cl) { return hv__cl_module_open(cl, OPS); }
 
 /* Cells per chunk: what one work-group of a block reduction takes. */
 #define CHUNK (HV_CL_WG * HV_CL_RED_BLOCK)
@@ -104,14 +134,14 @@ done:
     return st;
 }
 
-static void region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean, hv_cl_kernel chunk)
+static void region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean, int chunk)
 {
     size_t l = HV_CL_WG, g = R->nchunk * HV_CL_WG;
-    hv__cl_args(cl, chunk, "mmmm", v, R->perm, R->cb, R->part);
-    hv__cl_run(cl, chunk, 1, &g, &l);
+    hv__cl_args(cl, OPS, chunk, "mmmm", v, R->perm, R->cb, R->part);
+    hv__cl_run(cl, OPS, chunk, 1, &g, &l);
     size_t gr = (size_t)R->nregion * HV_CL_WG;
-    hv__cl_args(cl, HV_K_RED_REGION, "mmmm", R->part, R->rc, mean ? R->rinv : NULL, R->sum);
-    hv__cl_run(cl, HV_K_RED_REGION, 1, &gr, &l);
+    hv__cl_args(cl, OPS, HV_K_RED_REGION, "mmmm", R->part, R->rc, mean ? R->rinv : NULL, R->sum);
+    hv__cl_run(cl, OPS, HV_K_RED_REGION, 1, &gr, &l);
 }
 
 void hv__cl_region_sums(hv_cl *cl, hv_cl_regions *R, cl_mem v, int mean)
@@ -124,8 +154,8 @@ void hv__cl_project(hv_cl *cl, hv_cl_regions *R, cl_mem v)
     region_sums(cl, R, v, 1, HV_K_RED_CHUNK_F);
     size_t g[1], l[1];
     hv__cl_range1(R->count, g, l);
-    hv__cl_args(cl, HV_K_REGION_SUB_F, "mmml", v, R->region, R->sum, R->count);
-    hv__cl_run(cl, HV_K_REGION_SUB_F, 1, g, l);
+    hv__cl_args(cl, OPS, HV_K_REGION_SUB_F, "mmml", v, R->region, R->sum, R->count);
+    hv__cl_run(cl, OPS, HV_K_REGION_SUB_F, 1, g, l);
 }
 
 void hv__cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v)
@@ -133,8 +163,8 @@ void hv__cl_project_d(hv_cl *cl, hv_cl_regions *R, cl_mem v)
     region_sums(cl, R, v, 1, HV_K_RED_CHUNK_D);
     size_t g[1], l[1];
     hv__cl_range1(R->count, g, l);
-    hv__cl_args(cl, HV_K_REGION_SUB_D, "mmml", v, R->region, R->sum, R->count);
-    hv__cl_run(cl, HV_K_REGION_SUB_D, 1, g, l);
+    hv__cl_args(cl, OPS, HV_K_REGION_SUB_D, "mmml", v, R->region, R->sum, R->count);
+    hv__cl_run(cl, OPS, HV_K_REGION_SUB_D, 1, g, l);
 }
 
 static void face_range(int a, const int n[3], size_t g[2], size_t l[2])
@@ -159,9 +189,9 @@ void hv__cl_face_gradient(hv_cl *cl, int dim, const int n[3], double h, cl_mem s
     for (int a = 0; a < dim; a++) {
         size_t gs[2], ls[2];
         face_range(a, N, gs, ls);
-        hv__cl_args(cl, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u,
+        hv__cl_args(cl, OPS, HV_K_FACE_GRADIENT, "Iifmmm", N, a, (double)(float)(1.0 / h), solid, u,
                     g[a]);
-        hv__cl_run(cl, HV_K_FACE_GRADIENT, 2, gs, ls);
+        hv__cl_run(cl, OPS, HV_K_FACE_GRADIENT, 2, gs, ls);
     }
 }
 
@@ -172,9 +202,9 @@ void hv__cl_face_divergence(hv_cl *cl, int dim, const int n[3], double h, cl_mem
     dims4(dim, n, N);
     size_t g[2], l[2];
     hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], g, l);
-    hv__cl_args(cl, HV_K_FACE_DIVERGENCE, "Iammmmm", N, 1.0 / h, solid, F[0], F[1],
+    hv__cl_args(cl, OPS, HV_K_FACE_DIVERGENCE, "Iammmmm", N, 1.0 / h, solid, F[0], F[1],
                 dim == 3 ? F[2] : NULL, out);
-    hv__cl_run(cl, HV_K_FACE_DIVERGENCE, 2, g, l);
+    hv__cl_run(cl, OPS, HV_K_FACE_DIVERGENCE, 2, g, l);
 }
 
 void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_mem const v[3],
@@ -185,9 +215,9 @@ void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_
     for (int a = 0; a < dim; a++) {
         size_t g[2], l[2];
         face_range(a, N, g, l);
-        hv__cl_args(cl, HV_K_FACE_NORMALIZE, "Iimmmmmf", N, a, solid, v[0], v[1],
+        hv__cl_args(cl, OPS, HV_K_FACE_NORMALIZE, "Iimmmmmf", N, a, solid, v[0], v[1],
                     dim == 3 ? v[2] : NULL, out[a], eps);
-        hv__cl_run(cl, HV_K_FACE_NORMALIZE, 2, g, l);
+        hv__cl_run(cl, OPS, HV_K_FACE_NORMALIZE, 2, g, l);
     }
 }
 
@@ -195,14 +225,49 @@ void hv__cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double ep
 {
     size_t g[1], l[1];
     hv__cl_range1(n, g, l);
-    hv__cl_args(cl, HV_K_PW_RATIO, "mmmfl", a, b, out, eps, n);
-    hv__cl_run(cl, HV_K_PW_RATIO, 1, g, l);
+    hv__cl_args(cl, OPS, HV_K_PW_RATIO, "mmmfl", a, b, out, eps, n);
+    hv__cl_run(cl, OPS, HV_K_PW_RATIO, 1, g, l);
 }
 
 void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y)
 {
     size_t g[1], l[1];
     hv__cl_range1(n, g, l);
-    hv__cl_args(cl, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
-    hv__cl_run(cl, HV_K_PW_AXPY, 1, g, l);
+    hv__cl_args(cl, OPS, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
+    hv__cl_run(cl, OPS, HV_K_PW_AXPY, 1, g, l);
+}
+
+/* ---------- reductions ---------- */
+
+void hv__cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot)
+{
+    size_t l = hv__cl_group_limit(cl, OPS, HV_K_RED_FINISH, 256);
+    hv__cl_args(cl, OPS, HV_K_RED_FINISH, "mlmi", part, nparts, S, slot);
+    hv__cl_run(cl, OPS, HV_K_RED_FINISH, 1, &l, &l);
+}
+
+void hv__cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot)
+{
+    size_t g[1], l[1];
+    size_t groups = hv__cl_range_red(n, g, l);
+    if (groups > cl->part_cap) {
+        hv__cl_free(&cl->part);
+        cl->part_cap = 0;
+        if (hv__cl_alloc(cl, groups * cl->acc, NULL, &cl->part) != HV_OK) {
+            hv__cl_fail(cl, CL_MEM_OBJECT_ALLOCATION_FAILURE, "partial sums of a reduction");
+            return;
+        }
+        cl->part_cap = groups;
+    }
+    hv__cl_args(cl, OPS, HV_K_RED_DOT_F, "mmlm", a, b, n, cl->part);
+    hv__cl_run(cl, OPS, HV_K_RED_DOT_F, 1, g, l);
+    hv__cl_finish_sum(cl, cl->part, groups, S, slot);
+}
+
+void hv__cl_dot_parts_d(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem part)
+{
+    size_t g[1], l[1];
+    hv__cl_range_red(n, g, l);
+    hv__cl_args(cl, OPS, HV_K_RED_DOT_D, "mmlm", a, b, n, part);
+    hv__cl_run(cl, OPS, HV_K_RED_DOT_D, 1, g, l);
 }

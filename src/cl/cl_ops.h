@@ -3,9 +3,11 @@
  * solver: per-region sums and mean projections (one constant per connected
  * fluid region, docs/METHOD.md, "Multigrid"), face gradient and divergence
  * (as src/ops/faces.c), the heat methods' face normalization, ratio and axpy.
- * The device-resident solve is src/solve/solve_cl.h's. Steps of one heat method live with it (its
- * device path in src/sdf/, src/distance/, src/extend/) and build their own kernels (cl_core.h,
- * hv_cl_module).
+ * Their kernels (kernels/reduce.cl, faces.cl, pointwise.cl) are this
+ * folder's module, hv__cl_ops_module. The device-resident solve is
+ * src/solve/cl/solve_cl.h's. Steps of one heat method live with it (its
+ * device path in src/sdf/, src/distance/, src/extend/) and build their own
+ * kernels (cl_core.h, hv_cl_module).
  * Arrays are cl_mem of float unless named _d (double, fp64 devices only).
  * Everything is enqueued on cl's queue; errors surface at hv__cl_check /
  * hv__cl_finish.
@@ -14,6 +16,19 @@
 #define HV_CL_CL_OPS_H
 
 #include "cl_core.h"
+
+/* The module of these operations' kernels. hv__cl_ops_open builds it on cl
+ * where errors can be reported (its launches open it otherwise). */
+extern const hv_cl_module hv__cl_ops_module;
+hv_status hv__cl_ops_open(hv_cl *cl);
+
+/* S[slot] (acc_t) = sum over n of a*b (b NULL: of a), float vectors. */
+void hv__cl_dot_f(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem S, int slot);
+/* part[group] = sum of a*b over the group's block of n doubles, the groups of
+ * hv__cl_range_red(n) (fp64 handles only). */
+void hv__cl_dot_parts_d(hv_cl *cl, cl_mem a, cl_mem b, size_t n, cl_mem part);
+/* S[slot] = sum of nparts acc_t partials. */
+void hv__cl_finish_sum(hv_cl *cl, cl_mem part, size_t nparts, cl_mem S, int slot);
 
 /* Cells sorted by region and cut into chunks (one work-group each), so that
  * per-region sums take two kernels whatever the number and size of regions. */

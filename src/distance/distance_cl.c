@@ -14,31 +14,23 @@
 #include "core/error.h"
 #include "heatvox/ops.h"
 #include "cl/cl_ops.h"
-#include "solve/solve_cl.h"
+#include "solve/cl/solve_cl.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-extern const char hv__kernel_mg[], hv__kernel_reduce[], hv__kernel_fine[], hv__kernel_faces[],
-    hv__kernel_pointwise[], hv__kernel_distance[]; /* kernels/, embedded by the Makefile */
+extern const char hv__kernel_distance[]; /* kernels/, embedded by the Makefile */
 
-/* distance.cl is built behind the solver's kernel sources, as one program the
- * way it always ran: built behind common.cl alone, PoCL 3.1 ran it with
- * results that changed from run to run (up to 0.2 voxel against the host
- * path, check_distance_cl). The cause is not understood. */
-static const char *const dist_sources[] = {hv__kernel_mg,
-                                           hv__kernel_reduce,
-                                           hv__kernel_fine,
-                                           hv__kernel_faces,
-                                           hv__kernel_pointwise,
-                                           hv__kernel_distance,
-                                           NULL};
+/* The program is common.cl and distance.cl alone (the solver's kernels are
+ * the solver's module, the reductions the grid operations'); dist_front_sums
+ * writes its reduction tree out for the reason its comment gives. */
+static const char *const dist_sources[] = {hv__kernel_distance, NULL};
 enum { DK_FACES, DK_LOG, DK_ASSIGN, DK_FRONT_SUMS, DK_FRONT, DK_DIV, DK_GATHER, DK_OUTPUT };
 static const char *const dist_kernels[] = {"dist_faces",      "dist_log",    "dist_assign",
                                            "dist_front_sums", "dist_front",  "dist_div",
                                            "dist_gather",     "dist_output", NULL};
-static const hv_cl_module dist_module = {"distance", dist_sources, dist_kernels, 1};
+static const hv_cl_module dist_module = {"distance", dist_sources, dist_kernels, 1, 0};
 
 typedef struct dist_cl_work {
     hv_cl *cl;
@@ -146,7 +138,7 @@ static hv_status open_device(dist_cl_work *k, int *handled)
         return HV_OK;
     }
     *handled = 1;
-    if ((st = hv__cl_module_open(k->cl, &dist_module))) {
+    if ((st = hv__cl_module_open(k->cl, &dist_module)) || (st = hv__cl_ops_open(k->cl))) {
         hv__cl_close(&k->cl);
         return st;
     }
@@ -204,8 +196,8 @@ static hv_status open_faces(dist_cl_work *k, const int32_t *region, const double
     hv__cl_zero(cl, k->cnt, 2 * sizeof(uint32_t));
     for (int a = 0; a < dim; a++) {
         face_range(N, a, g2, l2);
-        hv__cl_module_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k->region, k->X[a], k->cnt);
-        hv__cl_module_run(cl, &dist_module, DK_FACES, 2, g2, l2);
+        hv__cl_args(cl, &dist_module, DK_FACES, "Iimmm", N, a, k->region, k->X[a], k->cnt);
+        hv__cl_run(cl, &dist_module, DK_FACES, 2, g2, l2);
     }
     if ((st = read_counts(cl, k->cnt, cnt)))
         return st;
@@ -243,8 +235,7 @@ static hv_status assign_faces(dist_cl_work *k, const hv_distance_opts *o,
     hv_cl *cl = k->cl;
     size_t g2[2], l2[2];
     hv_status st;
-    hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", k->w, k->w, k->count, k->part);
-    hv__cl_run(cl, HV_K_FINE_DOT, 1, &k->gr, &k->lr);
+    hv__cl_dot_parts_d(cl, k->w, k->w, k->count, k->part);
     hv__cl_read(cl, k->part, 0, k->ngroups * sizeof(double), k->hpart);
     if ((st = hv__cl_check(cl)))
         return st;
@@ -252,14 +243,13 @@ static hv_status assign_faces(dist_cl_work *k, const hv_distance_opts *o,
     *lthr = hv__dist_trust_log(fmax(info[0].relres, o->diffuse_tol), wn, o->t_scale);
     const double lthr2 =
         hv__dist_trust_log(fmax(info[1].relres, o->diffuse_tol), wn, o->t_scale * T_RATIO);
-    hv__cl_module_args(cl, &dist_module, DK_LOG, "lmmmmaa", k->count, k->region, k->u, k->u2, k->ok,
-                       *lthr, lthr2);
-    hv__cl_module_run(cl, &dist_module, DK_LOG, 1, k->g1, k->l1);
+    hv__cl_args(cl, &dist_module, DK_LOG, "lmmmmaa", k->count, k->region, k->u, k->u2, k->ok, *lthr,
+                lthr2);
+    hv__cl_run(cl, &dist_module, DK_LOG, 1, k->g1, k->l1);
     for (int a = 0; a < k->dim; a++) {
         face_range(k->N, a, g2, l2);
-        hv__cl_module_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", k->N, a, k->u2, k->ok, k->X[a],
-                           k->cnt);
-        hv__cl_module_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
+        hv__cl_args(cl, &dist_module, DK_ASSIGN, "Iimmmm", k->N, a, k->u2, k->ok, k->X[a], k->cnt);
+        hv__cl_run(cl, &dist_module, DK_ASSIGN, 2, g2, l2);
     }
     return read_counts(cl, k->cnt, cnt);
 }
@@ -273,9 +263,9 @@ static hv_status next_front(dist_cl_work *k, double lthr, const double tau[2], i
     uint32_t cnt[2];
     hv_status st;
     *moved = 0;
-    hv__cl_module_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", k->count, k->w, k->u2, k->u,
-                       k->ok, k->part);
-    hv__cl_module_run(cl, &dist_module, DK_FRONT_SUMS, 1, &k->gr, &k->lr);
+    hv__cl_args(cl, &dist_module, DK_FRONT_SUMS, "lmmmmm", k->count, k->w, k->u2, k->u, k->ok,
+                k->part);
+    hv__cl_run(cl, &dist_module, DK_FRONT_SUMS, 1, &k->gr, &k->lr);
     hv__cl_read(cl, k->part, 0, 3 * k->ngroups * sizeof(double), k->hpart);
     if ((st = hv__cl_check(cl)))
         return st;
@@ -287,9 +277,9 @@ static hv_status next_front(dist_cl_work *k, double lthr, const double tau[2], i
     const double step = hv__dist_front_step(lu0, lthr, k->dim, tau[0]);
     if (!(step >= 2))
         return HV_OK;
-    hv__cl_module_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", k->N, k->u2, k->ok, k->inside,
-                       k->w, psi0, step, tau[0], tau[1], FRONT_BAND, k->cnt);
-    hv__cl_module_run(cl, &dist_module, DK_FRONT, 2, k->gc, k->lc);
+    hv__cl_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", k->N, k->u2, k->ok, k->inside, k->w,
+                psi0, step, tau[0], tau[1], FRONT_BAND, k->cnt);
+    hv__cl_run(cl, &dist_module, DK_FRONT, 2, k->gc, k->lc);
     if ((st = read_counts(cl, k->cnt, cnt)))
         return st;
     *moved = cnt[0] != 0;
@@ -344,9 +334,9 @@ static hv_status poisson(dist_cl_work *k, const hv_grid *g, const int32_t *regio
     double t0 = hv_now();
     hv_solver_destroy(&k->sv[0]);
     hv_solver_destroy(&k->sv[1]);
-    hv__cl_module_args(cl, &dist_module, DK_DIV, "Immmmam", k->N, k->region, k->X[0], k->X[1],
-                       k->dim == 3 ? k->X[2] : NULL, 1.0 / g->h, k->u2);
-    hv__cl_module_run(cl, &dist_module, DK_DIV, 2, k->gc, k->lc);
+    hv__cl_args(cl, &dist_module, DK_DIV, "Immmmam", k->N, k->region, k->X[0], k->X[1],
+                k->dim == 3 ? k->X[2] : NULL, 1.0 / g->h, k->u2);
+    hv__cl_run(cl, &dist_module, DK_DIV, 2, k->gc, k->lc);
     if ((st = hv__cl_finish(cl)) ||
         (st = hv__dist_solver(&k->sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
                               HV_BACKEND_OPENCL, o->coarse)))
@@ -390,8 +380,8 @@ static hv_status fit_offsets(dist_cl_work *k, const hv_grid *g, const int32_t *r
             return st;
         size_t gg[1], lg[1];
         hv__cl_range1(m, gg, lg);
-        hv__cl_module_args(cl, &dist_module, DK_GATHER, "mmml", k->u, k->idx, k->gath, m);
-        hv__cl_module_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
+        hv__cl_args(cl, &dist_module, DK_GATHER, "mmml", k->u, k->idx, k->gath, m);
+        hv__cl_run(cl, &dist_module, DK_GATHER, 1, gg, lg);
         hv__cl_read(cl, k->gath, 0, m * sizeof(double), k->hval);
         if ((st = hv__cl_check(cl)))
             return st;
@@ -417,9 +407,9 @@ static hv_status write_output(dist_cl_work *k, hv_grid *g, const hv_distance_opt
     if ((st = hv__cl_alloc(cl, (nregions ? nregions : 1) * sizeof(double), k->num, &k->off)) ||
         (st = hv__cl_alloc(cl, k->count * sizeof(float), NULL, &k->out)))
         return st;
-    hv__cl_module_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", k->count, k->region, k->u, k->off,
-                       (double)o->solid_value, (double)o->unreachable, k->out);
-    hv__cl_module_run(cl, &dist_module, DK_OUTPUT, 1, k->g1, k->l1);
+    hv__cl_args(cl, &dist_module, DK_OUTPUT, "lmmmffm", k->count, k->region, k->u, k->off,
+                (double)o->solid_value, (double)o->unreachable, k->out);
+    hv__cl_run(cl, &dist_module, DK_OUTPUT, 1, k->g1, k->l1);
     hv__cl_read(cl, k->out, 0, k->count * sizeof(float), g->v);
     return hv__cl_check(cl);
 }

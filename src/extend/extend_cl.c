@@ -13,7 +13,7 @@
 #include "extend_cl.h"
 #include "core/error.h"
 #include "cl/cl_ops.h"
-#include "solve/solve_cl.h"
+#include "solve/cl/solve_cl.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -26,7 +26,7 @@ static const char *const extend_sources[] = {hv__kernel_extend, NULL};
 enum { EK_SETUP, EK_CHECK, EK_RHS, EK_SCATTER, EK_EVAL };
 static const char *const extend_kernels[] = {"ext_setup",   "ext_check", "ext_rhs",
                                              "ext_scatter", "ext_eval",  NULL};
-static const hv_cl_module extend_module = {"extend", extend_sources, extend_kernels, 0};
+static const hv_cl_module extend_module = {"extend", extend_sources, extend_kernels, 0, 0};
 
 /* Counters on the device (int32), as EXT_* in kernels/extend.cl. */
 enum {
@@ -92,7 +92,7 @@ static hv_status state_create(hv_extend_cl **out, const hv_extend_grid *g)
         return hv__error(HV_ERR_NOMEM, "extend: out of memory");
     hv_status st = hv__cl_open(&x->cl);
     hv_cl *cl = x->cl;
-    if (st || (st = hv__cl_module_open(cl, &extend_module)) ||
+    if (st || (st = hv__cl_module_open(cl, &extend_module)) || (st = hv__cl_ops_open(cl)) ||
         (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
         (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->w)) ||
         (st = hv__cl_alloc(cl, g->count, NULL, &x->pending)) ||
@@ -144,8 +144,7 @@ static hv_status norm2sq(hv_extend_cl *x, cl_mem v, size_t n, double *out)
         hv_status st = ensure(cl, &x->part, &x->cap_part, groups, sizeof(double));
         if (st)
             return st;
-        hv__cl_args(cl, HV_K_FINE_DOT, "mmlm", v, v, n, x->part);
-        hv__cl_run(cl, HV_K_FINE_DOT, 1, &g, &l);
+        hv__cl_dot_parts_d(cl, v, v, n, x->part);
         hv__cl_finish_sum(cl, x->part, groups, x->S, 0);
     }
     hv__cl_read_acc(cl, x->S, 0, 1, out);
@@ -184,9 +183,9 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
         int mode, ncomp;
         size_t plane;
         rhs_source(r, nfields, f, &mode, &plane, &ncomp);
-        hv__cl_module_args(cl, &extend_module, EK_RHS, "IIImmililm", N, B, L, x->w, x->in, mode,
-                           plane * count, ncomp, count, x->f);
-        hv__cl_module_run(cl, &extend_module, EK_RHS, 2, g2, l2);
+        hv__cl_args(cl, &extend_module, EK_RHS, "IIImmililm", N, B, L, x->w, x->in, mode,
+                    plane * count, ncomp, count, x->f);
+        hv__cl_run(cl, &extend_module, EK_RHS, 2, g2, l2);
         if (r == 0 && (st = norm2sq(x, x->f, bcount, &wn2)))
             return st;
         /* the solver has its own queue: f must be complete */
@@ -198,9 +197,9 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
         if (st)
             return st;
         relmax = fmax(relmax, info.relres);
-        hv__cl_module_args(cl, &extend_module, EK_SCATTER, "IIImml", N, B, L, x->u, x->sol,
-                           (size_t)r * count);
-        hv__cl_module_run(cl, &extend_module, EK_SCATTER, 2, g2, l2);
+        hv__cl_args(cl, &extend_module, EK_SCATTER, "IIImml", N, B, L, x->u, x->sol,
+                    (size_t)r * count);
+        hv__cl_run(cl, &extend_module, EK_SCATTER, 2, g2, l2);
         S->solves++;
     }
     S->relres = fmax(S->relres, relmax);
@@ -273,14 +272,13 @@ static hv_status run_loaded(hv_extend_cl *x, const hv_extend_grid *g, int nfield
     size_t gc[2], lc[2], g1[1], l1[1];
     hv__cl_range2((size_t)N[0], (size_t)N[1] * N[2], gc, lc);
     hv__cl_range1(count, g1, l1);
-    hv__cl_module_args(cl, &extend_module, EK_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point,
-                       x->phi, x->solid, x->w, x->pending, x->out, nout, count,
-                       (double)o->background, x->K);
-    hv__cl_module_run(cl, &extend_module, EK_SETUP, 2, gc, lc);
+    hv__cl_args(cl, &extend_module, EK_SETUP, "IAAimmmmmilfm", N, P, Q, o->closest_point, x->phi,
+                x->solid, x->w, x->pending, x->out, nout, count, (double)o->background, x->K);
+    hv__cl_run(cl, &extend_module, EK_SETUP, 2, gc, lc);
     for (int q = 0; q < nout; q++) {
-        hv__cl_module_args(cl, &extend_module, EK_CHECK, "mmllmi", x->w, x->in, (size_t)q * count,
-                           count, x->K, q);
-        hv__cl_module_run(cl, &extend_module, EK_CHECK, 1, g1, l1);
+        hv__cl_args(cl, &extend_module, EK_CHECK, "mmllmi", x->w, x->in, (size_t)q * count, count,
+                    x->K, q);
+        hv__cl_run(cl, &extend_module, EK_CHECK, 1, g1, l1);
     }
     hv__cl_read(cl, x->K, 0, sizeof K, K);
     if ((st = hv__cl_check(cl)))
@@ -327,10 +325,10 @@ static hv_status run_loaded(hv_extend_cl *x, const hv_extend_grid *g, int nfield
         for (int q = K_LEFT; q <= K_WEAK; q++)
             K[q] = 0;
         hv__cl_write(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
-        hv__cl_module_args(cl, &extend_module, EK_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending,
-                           x->sol, count, x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels,
-                           (double)o->background, x->K);
-        hv__cl_module_run(cl, &extend_module, EK_EVAL, 2, gc, lc);
+        hv__cl_args(cl, &extend_module, EK_EVAL, "IAmmmlmimaifm", N, P, x->phi, x->pending, x->sol,
+                    count, x->ncomp, nfields, x->out, thr, l + 1 == o->max_levels,
+                    (double)o->background, x->K);
+        hv__cl_run(cl, &extend_module, EK_EVAL, 2, gc, lc);
         hv__cl_read(cl, x->K, K_RBOX * sizeof(cl_int), (K_WEAK + 1 - K_RBOX) * sizeof(cl_int), Kl);
         if ((st = hv__cl_check(cl)))
             break;

@@ -9,7 +9,7 @@
  */
 #include "heatvox/sdf.h"
 #include "sdf_internal.h"
-#include "mesh/winding.h"
+#include "geom/winding.h"
 #include "core/error.h"
 
 #include <math.h>

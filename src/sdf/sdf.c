@@ -415,7 +415,7 @@ static hv_status sdf_place(const hv_mesh *M, hv_sdf_opts *o, const double lo[3],
     return HV_OK;
 }
 
-/* The surface quadrature at the heat grid's spacing (src/mesh/surface.c),
+/* The surface quadrature at the heat grid's spacing (src/geom/surface.c),
  * which the heat method splats; for the heat method a mesh with no part in
  * the block is an error (the exact distance and the winding number are
  * defined in any block). */
@@ -438,7 +438,7 @@ static hv_status sdf_surface(const hv_mesh *M, const sdf_plan *P, sdf_work *w, h
     return HV_OK;
 }
 
-/* 7a. The exact distance to the triangles (src/mesh/exact.c), and the nearest
+/* 7a. The exact distance to the triangles (src/geom/exact.c), and the nearest
  * triangle of each cell where a pseudonormal or the winding number needs it. */
 static hv_status sdf_band_distance(const hv_mesh *M, const hv_sdf_opts *o, const sdf_plan *P,
                                    sdf_work *w, hv_sdf_stats *S)

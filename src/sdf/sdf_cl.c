@@ -11,7 +11,7 @@
 #include "sdf_cl.h"
 #include "core/error.h"
 #include "cl/cl_ops.h"
-#include "solve/solve_cl.h"
+#include "solve/cl/solve_cl.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -25,7 +25,7 @@ static const char *const heat_sources[] = {hv__kernel_heat, NULL};
 enum { K_SPLAT, K_SDF_RHS, K_SAMPLE, K_SHIFT };
 static const char *const heat_kernels[] = {"heat_splat", "heat_sdf_rhs", "heat_sample",
                                            "heat_shift", NULL};
-static const hv_cl_module heat_module = {"heat", heat_sources, heat_kernels, 0};
+static const hv_cl_module heat_module = {"heat", heat_sources, heat_kernels, 0, 0};
 
 void hv__cl_splat_destroy(hv_cl_splat *S)
 {
@@ -80,6 +80,8 @@ hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3]
         return hv__error(HV_ERR_INVALID_ARG, "OpenCL splat: %zu samples on %d x %d x %d cells",
                          npts, nn[0], nn[1], nn[2]);
     hv_status st = hv__cl_module_open(cl, &heat_module);
+    if (!st)
+        st = hv__cl_ops_open(cl);
     if (st)
         return st;
     for (int a = 0; a < 3; a++)
@@ -97,7 +99,7 @@ hv_status hv__cl_splat_create(hv_cl *cl, hv_cl_splat *S, int dim, const int n[3]
         goto done;
     }
     const size_t stride[3] = {1, (size_t)nn[0], (size_t)nn[0] * nn[1]};
-    /* base cell and fractions exactly as hv__trilinear (src/mesh/surface.c) */
+    /* base cell and fractions exactly as hv__trilinear (src/geom/surface.c) */
     for (size_t p = 0; p < npts; p++) {
         size_t b = 0;
         for (int a = 0; a < 3; a++) {
@@ -155,8 +157,8 @@ hv_status hv__cl_splat_run(hv_cl *cl, hv_cl_splat *S, const double *val, size_t 
     hv__cl_write(cl, S->val, 0, S->npts * sizeof(float), S->stage);
     size_t g[2], l[2];
     hv__cl_range2((size_t)S->N[0], (size_t)S->N[1] * S->N[2], g, l);
-    hv__cl_module_args(cl, &heat_module, K_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
-    hv__cl_module_run(cl, &heat_module, K_SPLAT, 2, g, l);
+    hv__cl_args(cl, &heat_module, K_SPLAT, "Immmm", S->N, S->start, S->frac, S->val, out);
+    hv__cl_run(cl, &heat_module, K_SPLAT, 2, g, l);
     return hv__cl_check(cl);
 }
 
@@ -167,18 +169,17 @@ void hv__cl_sdf_rhs(hv_cl *cl, const int n[3], double h, cl_mem Y, int nlev, int
     const size_t count = (size_t)n[0] * n[1] * n[2];
     size_t g[2], l[2];
     hv__cl_range2((size_t)n[0], (size_t)n[1] * n[2], g, l);
-    hv__cl_module_args(cl, &heat_module, K_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau,
-                       1.0 / h, rhs, dead);
-    hv__cl_module_run(cl, &heat_module, K_SDF_RHS, 2, g, l);
+    hv__cl_args(cl, &heat_module, K_SDF_RHS, "Imliimamm", N, Y, count, nlev, ncomp, tau, 1.0 / h,
+                rhs, dead);
+    hv__cl_run(cl, &heat_module, K_SDF_RHS, 2, g, l);
 }
 
 void hv__cl_splat_sample(hv_cl *cl, hv_cl_splat *S, cl_mem v, cl_mem out)
 {
     size_t g[1], l[1];
     hv__cl_range1(S->npts, g, l);
-    hv__cl_module_args(cl, &heat_module, K_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out,
-                       S->npts);
-    hv__cl_module_run(cl, &heat_module, K_SAMPLE, 1, g, l);
+    hv__cl_args(cl, &heat_module, K_SAMPLE, "Immmml", S->N, S->base, S->frac, v, out, S->npts);
+    hv__cl_run(cl, &heat_module, K_SAMPLE, 1, g, l);
 }
 
 void hv__cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, double shift,
@@ -186,9 +187,8 @@ void hv__cl_sdf_shift(hv_cl *cl, size_t n, cl_mem phi, cl_mem num, cl_mem den, d
 {
     size_t g[1], l[1];
     hv__cl_range1(n, g, l);
-    hv__cl_module_args(cl, &heat_module, K_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift,
-                       n);
-    hv__cl_module_run(cl, &heat_module, K_SHIFT, 1, g, l);
+    hv__cl_args(cl, &heat_module, K_SHIFT, "mmmfail", phi, num, den, shift, tau, local_shift, n);
+    hv__cl_run(cl, &heat_module, K_SHIFT, 1, g, l);
 }
 
 /* ---------- the stages ---------- */

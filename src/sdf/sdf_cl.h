@@ -24,7 +24,7 @@ hv_status hv__sdf_heat_cl(const hv_quad *q, hv_grid *g, int nlev, int unsig, con
 
 /* Surface samples binned for the trilinear splat (kernels/heat.cl): sorted by
  * the base cell of their stencil, with fractional coordinates, clamped at the
- * block as hv__trilinear (src/mesh/surface.c) does. Bin once, splat as many
+ * block as hv__trilinear (src/geom/surface.c) does. Bin once, splat as many
  * value sets as needed. */
 typedef struct hv_cl_splat {
     cl_int N[4];  /* nx, ny, nz (1 in 2D), dim */

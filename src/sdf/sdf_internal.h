@@ -5,9 +5,9 @@
 #define HV_HEAT_SDF_INTERNAL_H
 
 #include "heatvox/sdf.h"
-#include "mesh/exact.h"
-#include "mesh/pseudonormal.h"
-#include "mesh/surface.h"
+#include "geom/exact.h"
+#include "geom/pseudonormal.h"
+#include "geom/surface.h"
 
 /* HV_ERR_NUMERIC for a vertex of m with a non-finite coordinate x: named by
  * the file's line (or its 1-based place among the file's vertices) when m

@@ -52,7 +52,7 @@ extern const hv_backend_ops hv__backend_petsc_ops; /* petsc.c: fails without HV_
 
 /* The OpenCL device that HV_BACKEND_AUTO may take (hv_backend_resolve): -1
  * none (no platform or device: logs one HV_LOG_WARN), 0 a CPU device, 1 a
- * GPU. Probes once per process, creating no context (opencl.c). */
+ * GPU. Probes once per process, creating no context (cl/cl_backend.c). */
 int hv__opencl_auto_device(void);
 
 /* Records relres into info->history (capped) and bumps nhistory. */

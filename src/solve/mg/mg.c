@@ -14,7 +14,7 @@
  * heat step at 1e-6.
  */
 #include "mg_internal.h"
-#include "iterate.h"
+#include "solve/iterate.h"
 #include "core/error.h"
 
 #include <math.h>

@@ -14,15 +14,14 @@
  * (cl_agg.c), asked for or, with HV_COARSE_AUTO, after a slow solve (mg.c).
  * The outer iterations are iterate.c's, as on the CPU; this file provides
  * their steps. It also tells HV_BACKEND_AUTO whether there is a device to
- * take (hv__opencl_auto_device).
+ * take (hv__opencl_auto_device). The entries that take the front end's solver
+ * and device fields are cl_device.c's.
  */
-#include "backend.h"
+#include "cl_backend.h"
 #include "cl_mg.h"
 #include "cl/cl_ops.h"
-#include "solve_cl.h"
 #include "core/error.h"
-#include "heatvox/opencl.h"
-#include "iterate.h"
+#include "solve/iterate.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -158,9 +157,9 @@ static void fv_residual(ocl_state *o)
     hv_clmg_level *L0 = &o->mg.lv[0];
     if (o->dev64) {
         const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
-        hv__cl_args(cl, HV_K_FINE_RESIDUAL, "IAmmmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
-                    L0->w[2], o->v[VX], o->v[VF], o->v[VR], L0->f);
-        hv__cl_run(cl, HV_K_FINE_RESIDUAL, 2, L0->g, L0->l);
+        hv__cl_args(cl, HV_CLSOLVE, HV_K_FINE_RESIDUAL, "IAmmmmmmmm", L0->N, C, L0->a, L0->w[0],
+                    L0->w[1], L0->w[2], o->v[VX], o->v[VF], o->v[VR], L0->f);
+        hv__cl_run(cl, HV_CLSOLVE, HV_K_FINE_RESIDUAL, 2, L0->g, L0->l);
         fv_dot(o, VR, VR, S_RR);
         return;
     }
@@ -203,8 +202,8 @@ static void fv_correct(ocl_state *o, int fmg)
             hv__clmg_vcycle(&o->mg, 0, 0, 0);
         size_t g[1], l[1];
         hv__cl_range1(n, g, l);
-        hv__cl_args(cl, HV_K_FINE_ADD, "mml", o->v[VX], L0->u[L0->cur], n);
-        hv__cl_run(cl, HV_K_FINE_ADD, 1, g, l);
+        hv__cl_args(cl, HV_CLSOLVE, HV_K_FINE_ADD, "mml", o->v[VX], L0->u[L0->cur], n);
+        hv__cl_run(cl, HV_CLSOLVE, HV_K_FINE_ADD, 1, g, l);
         if (o->s->p.alpha == 0)
             hv__cl_project_d(cl, &o->reg, o->v[VX]);
         return;
@@ -227,8 +226,8 @@ static void fv_precondition(ocl_state *o)
         hv__clmg_vcycle(&o->mg, 0, 0, 1);
         size_t g[1], l[1];
         hv__cl_range1(n, g, l);
-        hv__cl_args(cl, HV_K_FINE_F2D, "mml", L0->u[L0->cur], o->v[VZ], n);
-        hv__cl_run(cl, HV_K_FINE_F2D, 1, g, l);
+        hv__cl_args(cl, HV_CLSOLVE, HV_K_FINE_F2D, "mml", L0->u[L0->cur], o->v[VZ], n);
+        hv__cl_run(cl, HV_CLSOLVE, HV_K_FINE_F2D, 1, g, l);
         if (o->s->p.alpha == 0)
             hv__cl_project_d(cl, &o->reg, o->v[VZ]);
         return;
@@ -259,8 +258,7 @@ static void fv_dot(ocl_state *o, int a, int b, int slot)
         return;
     }
     size_t g, l, groups = hv__cl_range_red(n, &g, &l);
-    hv__cl_args(o->cl, HV_K_FINE_DOT, "mmlm", o->v[a], o->v[b], n, o->part);
-    hv__cl_run(o->cl, HV_K_FINE_DOT, 1, &g, &l);
+    hv__cl_dot_parts_d(o->cl, o->v[a], o->v[b], n, o->part);
     hv__cl_finish_sum(o->cl, o->part, groups, o->S, slot);
 }
 
@@ -270,9 +268,9 @@ static void fv_apply_dot(ocl_state *o)
     hv_clmg_level *L0 = &o->mg.lv[0];
     if (o->dev64) {
         const double C[4] = {L0->c[0], L0->c[1], L0->c[2], o->mg.alpha};
-        hv__cl_args(o->cl, HV_K_FINE_APPLY, "IAmmmmmm", L0->N, C, L0->a, L0->w[0], L0->w[1],
-                    L0->w[2], o->v[VP], o->v[VQ]);
-        hv__cl_run(o->cl, HV_K_FINE_APPLY, 2, L0->g, L0->l);
+        hv__cl_args(o->cl, HV_CLSOLVE, HV_K_FINE_APPLY, "IAmmmmmm", L0->N, C, L0->a, L0->w[0],
+                    L0->w[1], L0->w[2], o->v[VP], o->v[VQ]);
+        hv__cl_run(o->cl, HV_CLSOLVE, HV_K_FINE_APPLY, 2, L0->g, L0->l);
         fv_dot(o, VP, VQ, S_PQ);
         return;
     }
@@ -287,9 +285,9 @@ static void fv_pcg_update(ocl_state *o, int irz)
     const size_t n = o->s->count;
     if (o->dev64) {
         size_t g, l, groups = hv__cl_range_red(n, &g, &l);
-        hv__cl_args(o->cl, HV_K_FINE_PCG_UPDATE, "mmmmmiimlm", o->v[VX], o->v[VR], o->v[VP],
-                    o->v[VQ], o->S, irz, (int)S_PQ, o->mg.lv[0].f, n, o->part);
-        hv__cl_run(o->cl, HV_K_FINE_PCG_UPDATE, 1, &g, &l);
+        hv__cl_args(o->cl, HV_CLSOLVE, HV_K_FINE_PCG_UPDATE, "mmmmmiimlm", o->v[VX], o->v[VR],
+                    o->v[VP], o->v[VQ], o->S, irz, (int)S_PQ, o->mg.lv[0].f, n, o->part);
+        hv__cl_run(o->cl, HV_CLSOLVE, HV_K_FINE_PCG_UPDATE, 1, &g, &l);
         hv__cl_finish_sum(o->cl, o->part, groups, o->S, S_RR);
         return;
     }
@@ -313,8 +311,9 @@ static void fv_xpay(ocl_state *o, int inew, int iold)
     if (o->dev64) {
         size_t g[1], l[1];
         hv__cl_range1(n, g, l);
-        hv__cl_args(o->cl, HV_K_FINE_XPAY, "mmmiil", o->v[VP], o->v[VZ], o->S, inew, iold, n);
-        hv__cl_run(o->cl, HV_K_FINE_XPAY, 1, g, l);
+        hv__cl_args(o->cl, HV_CLSOLVE, HV_K_FINE_XPAY, "mmmiil", o->v[VP], o->v[VZ], o->S, inew,
+                    iold, n);
+        hv__cl_run(o->cl, HV_CLSOLVE, HV_K_FINE_XPAY, 1, g, l);
         return;
     }
     double be = o->hs[iold] != 0 ? o->hs[inew] / o->hs[iold] : 0.0, *p = o->h[VP];
@@ -528,53 +527,14 @@ int hv__opencl_auto_device(void)
     return auto_device;
 }
 
-/* ---------- device-resident solve (cl_ops.h) ---------- */
+/* ---------- solves of device fields ---------- */
 
-static void cl_convert(hv_cl *cl, hv_cl_kernel k, cl_mem src, cl_mem dst, size_t n)
+static void cl_convert(hv_cl *cl, int k, cl_mem src, cl_mem dst, size_t n)
 {
     size_t g[1], l[1];
     hv__cl_range1(n, g, l);
-    hv__cl_args(cl, k, "mml", src, dst, n);
-    hv__cl_run(cl, k, 1, g, l);
-}
-
-/* Devices without fp64: through the host front end. */
-static hv_status solve_cl_via_host(hv_solver *sv, ocl_state *o, cl_mem f, cl_mem u,
-                                   hv_solve_info *info)
-{
-    const size_t n = o->s->count;
-    float *hf = hv_malloc(n * sizeof *hf), *hu = hv_malloc(n * sizeof *hu);
-    hv_status st;
-    if (!hf || !hu) {
-        st = hv__error(HV_ERR_NOMEM, "OpenCL backend: out of memory for %zu-cell vectors", n);
-        goto out;
-    }
-    hv__cl_read(o->cl, f, 0, n * sizeof *hf, hf);
-    if (o->s->o.nonzero_guess)
-        hv__cl_read(o->cl, u, 0, n * sizeof *hu, hu);
-    if ((st = hv__cl_check(o->cl)) || (st = hv_solver_solve(sv, hf, hu, info)))
-        goto out;
-    hv__cl_write(o->cl, u, 0, n * sizeof *hu, hu);
-    st = hv__cl_finish(o->cl);
-out:
-    hv_free(hf);
-    hv_free(hu);
-    return st;
-}
-
-/* The checks shared by hv__cl_solver_solve(_d): *o is the solver's state. */
-static hv_status device_entry(const char *who, hv_solver *sv, cl_mem f, cl_mem u,
-                              hv_solve_info *info, ocl_state **o)
-{
-    memset(info, 0, sizeof *info);
-    info->backend = HV_BACKEND_OPENCL;
-    if (!sv || !f || !u)
-        return hv__error(HV_ERR_INVALID_ARG, "%s: NULL argument", who);
-    if (hv__solver_ops(sv) != &hv__backend_opencl_ops)
-        return hv__error(HV_ERR_UNSUPPORTED, "%s: the solver runs on the %s backend, not opencl",
-                         who, hv_backend_name(hv_solver_backend(sv)));
-    *o = hv__solver_state(sv);
-    return HV_OK;
+    hv__cl_args(cl, HV_CLSOLVE, k, "mml", src, dst, n);
+    hv__cl_run(cl, HV_CLSOLVE, k, 1, g, l);
 }
 
 /* The solve of hv__cl_solver_solve(_d) once v[VF] holds f (zero on solid
@@ -617,8 +577,8 @@ static void fine_mask(ocl_state *o, cl_mem v)
         return;
     size_t g[1], l[1];
     hv__cl_range1(o->s->count, g, l);
-    hv__cl_args(o->cl, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
-    hv__cl_run(o->cl, HV_K_FINE_MASK, 1, g, l);
+    hv__cl_args(o->cl, HV_CLSOLVE, HV_K_FINE_MASK, "mml", v, L0->a, o->s->count);
+    hv__cl_run(o->cl, HV_CLSOLVE, HV_K_FINE_MASK, 1, g, l);
 }
 
 /* The float fields f and u on the device solved there (device_takes_floats). */
@@ -638,24 +598,6 @@ static hv_status solve_floats(ocl_state *o, cl_mem f, cl_mem u, hv_solve_info *i
     }
     hv_status st2 = hv__cl_finish(cl);
     return st ? st : st2;
-}
-
-hv_status hv__cl_solver_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
-{
-    hv_solve_info local;
-    if (!info)
-        info = &local;
-    ocl_state *o = NULL;
-    hv_status st = device_entry("hv__cl_solver_solve", sv, f, u, info, &o);
-    if (st)
-        return st;
-    if (!device_takes_floats(o))
-        return solve_cl_via_host(sv, o, f, u, info);
-    double t0 = hv_now();
-    st = solve_floats(o, f, u, info);
-    info->seconds = hv_now() - t0;
-    info->backend = HV_BACKEND_OPENCL;
-    return st;
 }
 
 /* The host's float interface: f to the device and u back as floats, once
@@ -680,15 +622,26 @@ static hv_status ocl_solve_f(void *state, const float *f, float *u, hv_solve_inf
     return hv__cl_check(cl);
 }
 
-hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
+/* ---------- the device-resident solves' steps (cl_backend.h) ---------- */
+
+int hv__clsolve_takes_floats(const void *state) { return device_takes_floats(state); }
+
+hv_cl *hv__clsolve_cl(const void *state) { return ((const ocl_state *)state)->cl; }
+
+const hv_setup *hv__clsolve_setup(const void *state) { return ((const ocl_state *)state)->s; }
+
+hv_status hv__clsolve_floats(void *state, cl_mem f, cl_mem u, hv_solve_info *info)
 {
-    hv_solve_info local;
-    if (!info)
-        info = &local;
-    ocl_state *o = NULL;
-    hv_status st = device_entry("hv__cl_solver_solve_d", sv, f, u, info, &o);
-    if (st)
-        return st;
+    double t0 = hv_now();
+    hv_status st = solve_floats(state, f, u, info);
+    info->seconds = hv_now() - t0;
+    info->backend = HV_BACKEND_OPENCL;
+    return st;
+}
+
+hv_status hv__clsolve_doubles(void *state, cl_mem f, cl_mem u, hv_solve_info *info)
+{
+    ocl_state *o = state;
     if (!o->dev64)
         return hv__error(HV_ERR_UNSUPPORTED,
                          "hv__cl_solver_solve_d: the OpenCL device has no fp64");
@@ -699,7 +652,7 @@ hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info
     fine_mask(o, o->v[VF]);
     if (o->s->o.nonzero_guess)
         hv__cl_copy(cl, u, o->v[VX], bytes);
-    st = device_solve(o, info);
+    hv_status st = device_solve(o, info);
     if (!st) {
         fine_mask(o, o->v[VX]);
         hv__cl_copy(cl, o->v[VX], u, bytes);
@@ -708,57 +661,4 @@ hv_status hv__cl_solver_solve_d(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info
     info->seconds = hv_now() - t0;
     info->backend = HV_BACKEND_OPENCL;
     return st ? st : st2;
-}
-
-/* ---------- the public device entry (heatvox/opencl.h) ---------- */
-
-hv_status hv_opencl_solver_create(hv_solver **out, const hv_problem *p, const hv_solver_opts *opts,
-                                  cl_context ctx, cl_device_id dev, cl_command_queue queue)
-{
-    if (!out)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solver_create: out is NULL");
-    *out = NULL;
-    if (!ctx || !dev || !queue)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_opencl_solver_create: the context, device and queue are required");
-    hv_solver_opts o;
-    if (opts)
-        o = *opts;
-    else
-        hv_solver_opts_default(&o);
-    o.backend = HV_BACKEND_OPENCL;
-    hv__cl_adopt(ctx, dev, queue);
-    hv_status st = hv_solver_create(out, p, &o);
-    hv__cl_adopt(NULL, NULL, NULL);
-    return st;
-}
-
-hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_info *info)
-{
-    hv_solve_info local;
-    ocl_state *o = NULL;
-    hv_status st = device_entry("hv_opencl_solve", sv, f, u, info ? info : &local, &o);
-    if (st || (st = hv__cl_check_floats(o->cl, f, o->s->count, "hv_opencl_solve", "f")) ||
-        (st = hv__cl_check_floats(o->cl, u, o->s->count, "hv_opencl_solve", "u")))
-        return st;
-    return hv__cl_solver_solve(sv, f, u, info);
-}
-
-hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_device_id *dev,
-                                 cl_command_queue *queue)
-{
-    if (!sv)
-        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_solver_queue: sv is NULL");
-    if (hv__solver_ops(sv) != &hv__backend_opencl_ops)
-        return hv__error(HV_ERR_UNSUPPORTED,
-                         "hv_opencl_solver_queue: the solver runs on the %s backend, not opencl",
-                         hv_backend_name(hv_solver_backend(sv)));
-    const ocl_state *o = hv__solver_state(sv);
-    if (ctx)
-        *ctx = o->cl->ctx;
-    if (dev)
-        *dev = o->cl->dev;
-    if (queue)
-        *queue = o->cl->q;
-    return HV_OK;
 }

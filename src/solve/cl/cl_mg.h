@@ -10,8 +10,46 @@
 #define HV_SOLVE_CL_MG_H
 
 #include "cl/cl_core.h"
-#include "mg_agg.h"
-#include "mg_level.h"
+#include "solve/mg/mg_agg.h"
+#include "solve/mg/mg_level.h"
+
+/* The solver's kernels (kernels/mg.cl, agg.cl, fine.cl) as one module
+ * (cl_module.c), launched by these indices; the fine level's double kernels
+ * exist only on fp64 handles. hv__clmg_create opens it. */
+extern const hv_cl_module hv__clsolve_module;
+#define HV_CLSOLVE (&hv__clsolve_module)
+enum {
+    HV_K_MG_APPLY,
+    HV_K_MG_RESIDUAL,
+    HV_K_MG_RBGS,
+    HV_K_MG_CHEB,
+    HV_K_MG_JACOBI,
+    HV_K_MG_JACOBI0,
+    HV_K_MG_RESTRICT_RESIDUAL,
+    HV_K_MG_RESTRICT,
+    HV_K_MG_RESTRICT_TRANSPOSE,
+    HV_K_MG_PROLONG,
+    HV_K_MG_PROLONG_W,
+    HV_K_MG_PROLONG_X2,
+    HV_K_MG_BOTTOM_CG,
+    HV_K_AGG_SPMV,
+    HV_K_AGG_APPLY,
+    HV_K_AGG_RESIDUAL,
+    HV_K_AGG_CHEB,
+    HV_K_AGG_PROLONG,
+    HV_K_AGG_SCALE,
+    HV_K_AGG_RESTRICT0,
+    HV_K_AGG_INJECT0,
+    HV_K_AGG_PROLONG0,
+    HV_K_FINE_RESIDUAL, /* fp64 only from here */
+    HV_K_FINE_APPLY,
+    HV_K_FINE_ADD,
+    HV_K_FINE_F2D,
+    HV_K_FINE_PCG_UPDATE,
+    HV_K_FINE_XPAY,
+    HV_K_FINE_D2F,
+    HV_K_FINE_MASK
+};
 
 typedef struct hv_clmg_level {
     int n[3];
@@ -123,7 +161,7 @@ void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
 hv_status hv__clagg_create(hv_clmg *m, const mg_level *F, int dim, double alpha);
 void hv__clagg_destroy(hv_clmg *m);
 /* lv[0].u[cur] += the aggregation hierarchy's correction of residual lv[0]'s
- * r0 (one symmetric V-cycle on the levels below, as mg_agg.c). */
+ * r0 (one symmetric V-cycle on the levels below, as agg_cycle.c). */
 void hv__clagg_correct(hv_clmg *m);
 void hv__clmg_fmg(hv_clmg *m);
 

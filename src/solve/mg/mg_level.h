@@ -14,7 +14,7 @@
 #ifndef HV_SOLVE_MG_LEVEL_H
 #define HV_SOLVE_MG_LEVEL_H
 
-#include "backend.h"
+#include "solve/backend.h"
 
 #include <stddef.h>
 #include <stdint.h>

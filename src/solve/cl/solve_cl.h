@@ -1,7 +1,7 @@
 /*
  * The solver's interface for the heat methods' device paths (src/sdf/,
  * src/distance/, src/extend/): solves whose right-hand side and solution stay
- * in device buffers of the solver's context (src/solve/opencl.c).
+ * in device buffers of the solver's context (cl_device.c).
  */
 #ifndef HV_SOLVE_SOLVE_CL_H
 #define HV_SOLVE_SOLVE_CL_H
@@ -10,7 +10,7 @@
 #include "heatvox/solve.h"
 
 /* Solves A u = f with a solver of the opencl backend, f and u float device
- * buffers in cl's context (src/solve/opencl.c): the device keeps the fields,
+ * buffers in cl's context (cl_device.c): the device keeps the fields,
  * the host reads only residual norms. The queue that wrote f must be finished;
  * on return u is complete. Other backends: HV_ERR_UNSUPPORTED. Semantics of
  * hv_solver_solve (Poisson right-hand sides projected, u zero on solid cells,

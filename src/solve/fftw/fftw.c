@@ -10,7 +10,7 @@
  * solve: only fftw_execute is thread-safe, so planning, plan destruction and
  * wisdom go through one process-wide mutex.
  */
-#include "backend.h"
+#include "solve/backend.h"
 #include "core/error.h"
 #include "heatvox/ops.h"
 

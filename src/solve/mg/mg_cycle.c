@@ -59,7 +59,7 @@ static void bottom_solve(const mg_state *m, mg_level *L)
 }
 
 /* The V-cycle of the aggregation hierarchy: the fine level smooths as the
- * geometric cycle does, the coarse levels correct its residual (mg_agg.c). */
+ * geometric cycle does, the coarse levels correct its residual (agg_cycle.c). */
 static void vcycle_agg(const mg_state *m, int guess, int sym)
 {
     mg_level *L = (mg_level *)&m->lv[0];

@@ -7,7 +7,8 @@
  *   mg_transfer.c  restriction, prolongation and the PCG's weighted P^T
  *   mg_fused.c     the fused one-pass sweeps of plain 3D levels
  *   mg_cycle.c     smoothing, the V-cycle and full multigrid
- *   mg_agg.c       the coarse levels by smoothed aggregation (mg_agg.h)
+ *   agg_*.c        the coarse levels by smoothed aggregation (mg_agg.h,
+ *                  agg_internal.h)
  *   mg.c           the backend's entry points and its steps of the outer
  *                  iterations (iterate.h)
  */

@@ -1,6 +1,6 @@
 /*
  * The multigrid hierarchy on the host, shared by the CPU (mg.c) and OpenCL
- * (opencl.c) backends so that both coarsen the same way: level sizes by
+ * (cl/cl_backend.c) backends so that both coarsen the same way: level sizes by
  * semi-coarsening, coefficients by averaging (docs/METHOD.md, "Multigrid"),
  * Chebyshev bounds by power iteration and the bottom level's connected regions.
  */

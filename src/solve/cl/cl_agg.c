@@ -1,6 +1,6 @@
 /*
  * The coarse levels by smoothed aggregation on an OpenCL device (cl_mg.h):
- * built on the host as for the CPU backend (mg_agg.c), uploaded once, and
+ * built on the host as for the CPU backend (src/solve/mg/agg_*.c), uploaded once, and
  * cycled with kernels/agg.cl on the same in-order queue as the fine level.
  * The bottom level (at most a few hundred unknowns) is solved on the host by
  * its Cholesky factor: one read and one write per cycle.
@@ -12,7 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define AGG_DEGREE 2 /* Chebyshev degree on the coarse levels, as mg_agg.c */
+#define AGG_DEGREE 2 /* Chebyshev degree on the coarse levels, as agg_cycle.c */
 
 /* A CSR matrix on the device, row starts as uint. */
 static hv_status upload_csr(hv_cl *cl, const mg_csr *M, cl_mem *rp, cl_mem *ci, cl_mem *v)
@@ -178,20 +178,21 @@ static void residual(hv_cl *cl, hv_clagg_level *L)
 {
     size_t g[1], lw[1];
     range(L->n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_RESIDUAL, "immmmimmmmm", L->n, L->rp, L->ci, L->v, L->plain, L->tn,
-                L->toff, L->tval, L->u, L->f, L->r);
-    hv__cl_run(cl, HV_K_AGG_RESIDUAL, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_RESIDUAL, "immmmimmmmm", L->n, L->rp, L->ci, L->v,
+                L->plain, L->tn, L->toff, L->tval, L->u, L->f, L->r);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_RESIDUAL, 1, g, lw);
 }
 
 static void cheb(hv_cl *cl, hv_clagg_level *L, cl_mem r, double cd, double cr, int zero)
 {
     size_t g[1], lw[1];
     range(L->n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_CHEB, "immmmffi", L->n, L->dinv, r, L->d, L->u, cd, cr, zero);
-    hv__cl_run(cl, HV_K_AGG_CHEB, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_CHEB, "immmmffi", L->n, L->dinv, r, L->d, L->u, cd, cr,
+                zero);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_CHEB, 1, g, lw);
 }
 
-/* Chebyshev of degree AGG_DEGREE on [lmax/8, lmax], as mg_agg.c's
+/* Chebyshev of degree AGG_DEGREE on [lmax/8, lmax], as agg_cycle.c's
  * level_smooth; from u = 0 when `zero` (its first step needs no residual). */
 static void smooth(hv_cl *cl, hv_clagg_level *L, int zero)
 {
@@ -219,8 +220,8 @@ static void spmv(hv_cl *cl, int n, cl_mem rp, cl_mem ci, cl_mem v, cl_mem x, cl_
 {
     size_t g[1], lw[1];
     range(n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_SPMV, "immmmm", n, rp, ci, v, x, y);
-    hv__cl_run(cl, HV_K_AGG_SPMV, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_SPMV, "immmmm", n, rp, ci, v, x, y);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_SPMV, 1, g, lw);
 }
 
 static void bottom(hv_cl *cl, hv_clagg *G)
@@ -239,9 +240,9 @@ static void apply(hv_cl *cl, hv_clagg_level *L, cl_mem x, cl_mem y)
 {
     size_t g[1], lw[1];
     range(L->n, g, lw);
-    hv__cl_args(cl, HV_K_AGG_APPLY, "immmmimmmm", L->n, L->rp, L->ci, L->v, L->plain, L->tn,
-                L->toff, L->tval, x, y);
-    hv__cl_run(cl, HV_K_AGG_APPLY, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_APPLY, "immmmimmmm", L->n, L->rp, L->ci, L->v, L->plain,
+                L->tn, L->toff, L->tval, x, y);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_APPLY, 1, g, lw);
 }
 
 /* C->f = P^T L->r: from P and P^T where the level keeps them, else as the
@@ -255,11 +256,12 @@ static void restrict_to(hv_cl *cl, hv_clagg_level *L, hv_clagg_level *C)
     size_t g[1], lw[1], gc[1], lc[1];
     range(L->n, g, lw);
     range(C->n, gc, lc);
-    hv__cl_args(cl, HV_K_AGG_SCALE, "immm", L->n, L->dinv, L->r, L->t);
-    hv__cl_run(cl, HV_K_AGG_SCALE, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_SCALE, "immm", L->n, L->dinv, L->r, L->t);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_SCALE, 1, g, lw);
     apply(cl, L, L->t, L->s);
-    hv__cl_args(cl, HV_K_AGG_RESTRICT0, "immmmfm", C->n, L->mrp, L->mem, L->r, L->s, L->wp, C->f);
-    hv__cl_run(cl, HV_K_AGG_RESTRICT0, 1, gc, lc);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_RESTRICT0, "immmmfm", C->n, L->mrp, L->mem, L->r, L->s,
+                L->wp, C->f);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_RESTRICT0, 1, gc, lc);
 }
 
 /* L->u += P C->u, as restrict_to. */
@@ -268,15 +270,17 @@ static void prolong(hv_cl *cl, hv_clagg_level *L, hv_clagg_level *C)
     size_t g[1], lw[1];
     range(L->n, g, lw);
     if (!L->agg) {
-        hv__cl_args(cl, HV_K_AGG_PROLONG, "immmmm", L->n, L->prp, L->pci, L->pv, C->u, L->u);
-        hv__cl_run(cl, HV_K_AGG_PROLONG, 1, g, lw);
+        hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_PROLONG, "immmmm", L->n, L->prp, L->pci, L->pv, C->u,
+                    L->u);
+        hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_PROLONG, 1, g, lw);
         return;
     }
-    hv__cl_args(cl, HV_K_AGG_INJECT0, "immm", L->n, L->agg, C->u, L->t);
-    hv__cl_run(cl, HV_K_AGG_INJECT0, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_INJECT0, "immm", L->n, L->agg, C->u, L->t);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_INJECT0, 1, g, lw);
     apply(cl, L, L->t, L->s);
-    hv__cl_args(cl, HV_K_AGG_PROLONG0, "immmfm", L->n, L->t, L->s, L->dinv, L->wp, L->u);
-    hv__cl_run(cl, HV_K_AGG_PROLONG0, 1, g, lw);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_PROLONG0, "immmfm", L->n, L->t, L->s, L->dinv, L->wp,
+                L->u);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_PROLONG0, 1, g, lw);
 }
 
 /* One symmetric V-cycle from zero on level l >= 1 for lv[l].f into lv[l].u. */
@@ -304,18 +308,18 @@ void hv__clagg_correct(hv_clmg *m)
     range(G->n0, g0, l0);
     range(G->n1, g1, l1);
     /* f_1 = P0^T (r - wp A D^-1 r) */
-    hv__cl_args(cl, HV_K_AGG_SCALE, "immm", G->n0, G->dinv0, G->r0, G->t0);
-    hv__cl_run(cl, HV_K_AGG_SCALE, 1, g0, l0);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_SCALE, "immm", G->n0, G->dinv0, G->r0, G->t0);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_SCALE, 1, g0, l0);
     hv__clmg_apply(m, 0, G->t0, G->s0);
-    hv__cl_args(cl, HV_K_AGG_RESTRICT0, "immmmfm", G->n1, G->mrp0, G->mem0, G->r0, G->s0, G->wp0,
-                G->lv[1].f);
-    hv__cl_run(cl, HV_K_AGG_RESTRICT0, 1, g1, l1);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_RESTRICT0, "immmmfm", G->n1, G->mrp0, G->mem0, G->r0,
+                G->s0, G->wp0, G->lv[1].f);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_RESTRICT0, 1, g1, l1);
     cycle(cl, G, 1);
     /* u_0 += t - wp D^-1 A t, t = P0 u_1 */
-    hv__cl_args(cl, HV_K_AGG_INJECT0, "immm", G->n0, G->agg0, G->lv[1].u, G->t0);
-    hv__cl_run(cl, HV_K_AGG_INJECT0, 1, g0, l0);
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_INJECT0, "immm", G->n0, G->agg0, G->lv[1].u, G->t0);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_INJECT0, 1, g0, l0);
     hv__clmg_apply(m, 0, G->t0, G->s0);
-    hv__cl_args(cl, HV_K_AGG_PROLONG0, "immmfm", G->n0, G->t0, G->s0, G->dinv0, G->wp0,
+    hv__cl_args(cl, HV_CLSOLVE, HV_K_AGG_PROLONG0, "immmfm", G->n0, G->t0, G->s0, G->dinv0, G->wp0,
                 F->u[F->cur]);
-    hv__cl_run(cl, HV_K_AGG_PROLONG0, 1, g0, l0);
+    hv__cl_run(cl, HV_CLSOLVE, HV_K_AGG_PROLONG0, 1, g0, l0);
 }

@@ -1,0 +1,96 @@
+/*
+ * Private to the aggregation levels (agg_*.c, mg_agg.h): the operator of a
+ * level as the files see it and what each file gives the others.
+ *   agg_op.c         a level's rows, its product and its spectral bound
+ *   agg_aggregate.c  the aggregates of a level
+ *   agg_galerkin.c   the Galerkin coarse operators
+ *   agg_bottom.c     the bottom level's factor and solve
+ *   agg_cycle.c      the cycle on the coarse levels
+ *   agg_pack.c       the CPU cycle's packing of built levels
+ *   agg_build.c      building the levels and freeing them
+ */
+#ifndef HV_SOLVE_MG_AGG_INTERNAL_H
+#define HV_SOLVE_MG_AGG_INTERNAL_H
+
+#include "core/error.h"
+#include "mg_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#define AGG_OMEGA (4.0 / 3.0) /* prolongation smoothing: omega / lmax(D^-1 A) */
+#define AGG_BOTTOM 600        /* a level this small is solved by Cholesky */
+#define AGG_STALL 1200        /* more than this and not coarsening: give up */
+#define AGG_STRONG 1e-6       /* |a_ij| below this times sqrt(a_ii a_jj) joins nothing */
+#define AGG_DEGREE 2          /* Chebyshev degree on the coarse levels */
+#define AGG_PAR_MIN 16384     /* levels below this many unknowns run on one thread */
+
+/* The operator of level l: the fine level's stencil (F) or a sparse matrix. */
+typedef struct agg_op {
+    const mg_level *F;
+    int dim;
+    double alpha;
+    const mg_csr *A;
+    const float *dinv;
+    int32_t n;
+    const uint8_t *faces; /* fine level of a mask: bit 2b+hi for each open face */
+    const mg_alevel *lv;  /* the level (templates of plain rows) */
+} agg_op;
+
+static inline agg_op level_op(const mg_agg *g, int l)
+{
+    agg_op o = {NULL, g->dim, g->alpha, NULL, NULL, g->lv[l].n, NULL, &g->lv[l]};
+    if (l == 0) {
+        o.F = g->fine;
+        o.dinv = g->fine->dinv;
+        o.faces = g->faces;
+    } else {
+        o.A = &g->lv[l].A;
+        o.dinv = g->lv[l].dinv;
+    }
+    return o;
+}
+
+/* Entries a row of a coarse level can have: a template's at most (5^3). */
+#define ROW_MAX 125
+
+/* ---- agg_op.c ---- */
+/* Row c of coarse level L: pointers into its matrix, or for a plain row the
+ * template's entries in bc/bv (ROW_MAX each). The hierarchy's set-up only:
+ * hv__mg_agg_pack changes the matrices. */
+int hv__agg_level_row(const mg_alevel *L, int32_t c, int32_t *bc, float *bv, const int32_t **col,
+                      const float **val);
+/* Row c: its entries (the diagonal first on the fine level), in bc/bv
+ * (ROW_MAX entries) for the fine level and plain rows, else pointers into
+ * the matrix. */
+int hv__agg_op_row(const agg_op *o, int32_t c, int32_t *bc, float *bv, const int32_t **col,
+                   const float **val);
+/* y = A x on a level. */
+void hv__agg_op_apply(const agg_op *o, const float *x, float *y);
+/* Largest eigenvalue of D^-1 A by power iteration (times 1.1, as the
+ * geometric levels' bound); x and y are work of o->n. */
+double hv__agg_op_lmax(const agg_op *o, float *x, float *y);
+/* y = M x (rows of M). */
+void hv__agg_csr_apply(const mg_csr *M, const float *x, float *y);
+
+/* ---- agg_aggregate.c ---- */
+/* Aggregates of level l: L->agg, members (mrp, mem) and level l+1's size,
+ * coordinates and extent. */
+hv_status hv__agg_aggregate(mg_agg *g, int l);
+
+/* ---- agg_galerkin.c ---- */
+/* Level l+1's operator P^T A P from a coarse level l by sparse products. */
+hv_status hv__agg_galerkin_csr(mg_agg *g, int l, double wp);
+/* Level 1's operator from the fine level (aggregates built). */
+hv_status hv__agg_galerkin0(mg_agg *g, double wp);
+void hv__agg_csr_free(mg_csr *m);
+
+/* ---- agg_bottom.c ---- */
+/* The bottom level's dense Cholesky factor (and its regions). */
+hv_status hv__agg_bottom_factor(mg_agg *g);
+
+#endif
