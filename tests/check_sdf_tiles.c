@@ -242,6 +242,96 @@ START_TEST(tiles_should_refuse_what_needs_the_dense_grid)
 }
 END_TEST
 
+/* The one rule (hv_sdf_tiles_refusal) is what the library does: the tiles
+ * refuse exactly the options it names, and accept the rest; as a level set
+ * (the command's and batch's .vdb) it also names an unsigned distance. */
+START_TEST(the_tile_rule_should_be_what_the_library_does)
+{
+    const double c[3] = {0, 0, 0};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, 1.0, 2));
+    for (int v = 0; v < 9; v++) {
+        hv_sdf_opts o;
+        hv_sdf_opts_default(&o);
+        o.res = 24;
+        int refused = 1, levelset_refused = 1;
+        switch (v) {
+        case 0: refused = levelset_refused = 0; break;
+        case 1: o.magnitude = HV_SDF_HEAT; break;
+        case 2: o.sign = HV_SDF_SIGN_HEAT; break;
+        case 3: o.repair = HV_SDF_REPAIR_ORIENT; break;
+        case 4: o.close = 0.1; break;
+        case 5: o.open = 0.1; break;
+        case 6: o.unsigned_distance = 1, refused = 0; break;
+        case 7: o.unsigned_distance = 1, o.sign = HV_SDF_SIGN_HEAT, refused = 0; break;
+        case 8:
+            o.sign = HV_SDF_SIGN_WINDING, o.offset = 0.05, refused = levelset_refused = 0;
+            break;
+        }
+        const char *why = hv_sdf_tiles_refusal(&o, 0), *why_ls = hv_sdf_tiles_refusal(&o, 1);
+        ck_assert_msg((why != NULL) == refused, "case %d: %s", v, why ? why : "accepted");
+        ck_assert_msg((why_ls != NULL) == levelset_refused, "case %d (level set): %s", v,
+                      why_ls ? why_ls : "accepted");
+        hv_tiles *T = NULL;
+        hv_status st = hv_sdf_compute_tiles(m, &o, 3, &T, NULL);
+        ck_assert_msg(st == (refused ? HV_ERR_INVALID_ARG : HV_OK), "case %d: status %d: %s", v,
+                      (int)st, hv_last_error());
+        if (refused)
+            ck_assert_msg(strstr(hv_last_error(), why), "case %d: %s", v, hv_last_error());
+        hv_tiles_destroy(&T);
+    }
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+/* The whole of a text file (malloc'd), or NULL. */
+static char *read_text(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    char *s = malloc(1 << 16);
+    size_t n = s ? fread(s, 1, (1 << 16) - 1, f) : 0;
+    fclose(f);
+    if (s)
+        s[n] = 0;
+    return s;
+}
+
+/* The command and batch ask the same rule: a signed band goes to tiles, an
+ * unsigned one (a dense grid of class unknown) does not. */
+START_TEST(command_and_batch_should_share_the_tile_rule)
+{
+    char dir[] = "/tmp/hv_tiles_rule_XXXXXX", cmd[4096], err[8192];
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    const double c[3] = {0, 0, 0};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, c, 1.0, 3));
+    char mesh[256];
+    snprintf(mesh, sizeof mesh, "%s/s.obj", dir);
+    TL_ASSERT_OK(hv_mesh_write_obj(m, mesh));
+    hv_mesh_destroy(&m);
+    const char *flags[2] = {"", "--unsigned"};
+    for (int u = 0; u < 2; u++) {
+        snprintf(cmd, sizeof cmd, "cd %s && %s sdf s.obj --res 32 -o s%d.vdb -v %s", dir,
+                 tl_heatvox_bin(), u, flags[u]);
+        ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
+        ck_assert_msg(!strstr(err, "tiles of 8^3") == u, "%s: %s", cmd, err);
+        snprintf(cmd, sizeof cmd,
+                 "cd %s && %s batch s.obj -o out%d --res 32 --report r%d.json -q %s", dir,
+                 tl_heatvox_bin(), u, u, flags[u]);
+        ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
+        char rep[512], *text = NULL;
+        snprintf(rep, sizeof rep, "%s/r%d.json", dir, u);
+        text = read_text(rep);
+        ck_assert_ptr_nonnull(text);
+        ck_assert_msg(!strstr(text, "\"tiles\":") == u, "batch %s: %s", flags[u], text);
+        free(text);
+    }
+    tl_rm_rf(dir);
+}
+END_TEST
+
 /* The .vdb from tiles: OpenVDB's Python reader finds exactly the tiles'
  * active voxels and values, -background at the centre and +background far
  * out; heatvox's reader gives the dense writer's values on every voxel of
@@ -417,6 +507,8 @@ int main(void)
     tcase_add_test(tc, shared_meshes_should_equal_the_dense_band);
     tcase_add_test(tc, block_far_too_large_for_the_dense_grid_should_run_in_tiles);
     tcase_add_test(tc, tiles_should_refuse_what_needs_the_dense_grid);
+    tcase_add_test(tc, the_tile_rule_should_be_what_the_library_does);
+    tcase_add_test(tc, command_and_batch_should_share_the_tile_rule);
     tcase_add_test(tc, vdb_from_tiles_should_read_back_and_equal_the_dense_file);
     tcase_add_test(tc, command_should_use_tiles_for_a_narrow_band);
     suite_add_tcase(s, tc);

@@ -460,14 +460,12 @@ static int write_sidecar(const char *input, const char *output, const char *cano
     return 0;
 }
 
-/* A narrow-band .vdb alone is computed in tiles (heatvox sdf does the same). */
+/* A narrow-band .vdb alone is computed in tiles where the options allow
+ * (the rule of heatvox sdf and the library, hv_sdf_tiles_refusal). */
 static int wants_tiles(const batch_opts *o)
 {
-    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
     return o->format == BATCH_VDB && !o->dense && !o->preview &&
-           o->mesh_format == BATCH_MESH_NONE && !o->sdf.unsigned_distance &&
-           o->sdf.magnitude == HV_SDF_EXACT && o->sdf.sign != HV_SDF_SIGN_HEAT &&
-           (o->sdf.repair & orient) == orient;
+           o->mesh_format == BATCH_MESH_NONE && !hv_sdf_tiles_refusal(&o->sdf, 1);
 }
 
 /* The volume: w already holds the band streamed into it (wants_tiles), else

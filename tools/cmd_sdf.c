@@ -474,11 +474,9 @@ int cmd_sdf(int argc, char **argv)
     const double band = A.band, adaptivity = A.adaptivity;
     const int dense = A.dense, have_h = A.have_h, no_tiles = A.no_tiles;
     hv_sdf_opts o = A.o;
-    /* A narrow band alone, with the winding-number sign: tiles. */
-    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
-    const int tiles = out && !dense && !npy && !mesh_out && !no_tiles && !o.unsigned_distance &&
-                      o.magnitude == HV_SDF_EXACT && o.sign != HV_SDF_SIGN_HEAT &&
-                      (o.repair & orient) == orient && !(o.close > 0) && !(o.open > 0);
+    /* A narrow-band level set alone, where the options allow: tiles. */
+    const int tiles =
+        out && !dense && !npy && !mesh_out && !no_tiles && !hv_sdf_tiles_refusal(&o, 1);
     const char *outs[] = {out, npy, preview, mesh_out};
     if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;

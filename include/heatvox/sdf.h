@@ -233,6 +233,14 @@ HV_API hv_status hv_sdf_compute(const hv_mesh *m, const hv_sdf_opts *opts, hv_gr
 HV_API hv_status hv_sdf_compute_tiles(const hv_mesh *m, const hv_sdf_opts *opts, double band,
                                       hv_tiles **out, hv_sdf_stats *stats);
 
+/* Whether a run with options o can compute its narrow band in tiles
+ * (hv_sdf_compute_tiles, hv_sdf_stream_tiles) instead of on the dense
+ * block: NULL when it can, else a sentence saying which option keeps it on
+ * the dense grid. The rule of the library, the command and batch alike. With
+ * levelset set, the run writes a level set from the tiles (a narrow-band
+ * .vdb), which an unsigned distance is not: it needs a signed one. */
+HV_API const char *hv_sdf_tiles_refusal(const hv_sdf_opts *o, int levelset);
+
 /* hv_sdf_compute_tiles without ever holding the whole band: the same tiles,
  * in the same order, handed to sink in batches as they are finished (see
  * hv_tiles_sink; the batches' arrays are reused), so that a consumer such as

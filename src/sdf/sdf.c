@@ -644,27 +644,36 @@ static hv_status morph_end(void *user, int ok)
     return ms->to->end(ms->to->user, ok);
 }
 
+const char *hv_sdf_tiles_refusal(const hv_sdf_opts *o, int levelset)
+{
+    const unsigned orient = HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD;
+    const int sign = o && !o->unsigned_distance;
+    if (!o)
+        return "no options";
+    if (o->magnitude != HV_SDF_EXACT)
+        return "a narrow band of tiles has the exact distance only (the heat method's own values "
+               "need the dense grid)";
+    if (sign && o->sign == HV_SDF_SIGN_HEAT)
+        return "a narrow band of tiles takes its sign from the winding number (the heat method's "
+               "sign needs the dense grid)";
+    if (sign && (o->repair & orient) != orient)
+        return "a narrow band of tiles takes its sign from the winding number, which needs the "
+               "repair's orientation steps";
+    if (o->close > 0 || o->open > 0)
+        return "closing and opening need the dense grid (they redistance between their two moves)";
+    if (!sign && levelset)
+        return "an unsigned distance is no level set: it is written as a dense grid";
+    return NULL;
+}
+
 /* hv_sdf_stream_tiles's checks of its options. */
 static hv_status tiles_check(const hv_sdf_opts *o, double band)
 {
     if (!(band > 0) || band > 64)
         return hv__error(HV_ERR_INVALID_ARG,
                          "sdf: band half width must be in (0, 64] voxels, got %g", band);
-    if (o->magnitude != HV_SDF_EXACT)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles has the exact distance only (the heat "
-                         "method's own values need the dense grid)");
-    const int unsig = o->unsigned_distance != 0;
-    if (!unsig && o->sign == HV_SDF_SIGN_HEAT)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles takes its sign from the winding number "
-                         "(the heat method's sign needs the dense grid)");
-    if (!unsig && (o->repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
-                      (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: a narrow band of tiles takes its sign from the winding number, "
-                         "which needs the repair's orientation steps");
-    return hv__sdf_morph_tiles_check(o);
+    const char *why = hv_sdf_tiles_refusal(o, 0);
+    return why ? hv__error(HV_ERR_INVALID_ARG, "sdf: %s", why) : HV_OK;
 }
 
 /* hv_sdf_stream_tiles once its options are checked: the repair, the

@@ -36,7 +36,6 @@ hv_status hv__sdf_morph_check(const hv_sdf_opts *o);
 double hv__sdf_morph_growth(const hv_sdf_opts *o);
 double hv__sdf_morph_reach(const hv_sdf_opts *o);
 hv_status hv__sdf_morph_grid(hv_grid *g, const hv_sdf_opts *o);
-hv_status hv__sdf_morph_tiles_check(const hv_sdf_opts *o);
 void hv__sdf_morph_tiles(hv_tiles *T, const hv_sdf_opts *o, double band);
 
 /* Trilinear interpolation of v (on g's cells) at world point x (sdf_heat.c). */

@@ -125,15 +125,6 @@ hv_status hv__sdf_morph_grid(hv_grid *g, const hv_sdf_opts *o)
     return HV_OK;
 }
 
-hv_status hv__sdf_morph_tiles_check(const hv_sdf_opts *o)
-{
-    if (o->close > 0 || o->open > 0)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "sdf: closing and opening need the dense grid (they redistance "
-                         "between their two moves)");
-    return HV_OK;
-}
-
 void hv__sdf_morph_tiles(hv_tiles *T, const hv_sdf_opts *o, double band)
 {
     const size_t n = T->count * (size_t)(HV_TILE * HV_TILE * HV_TILE);
