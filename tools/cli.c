@@ -262,22 +262,17 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
 {
     cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO, HV_SDF_SIGN_AUTO};
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &A.n,
          .min = 8,
          .max = INT_MAX,
          .needs = "an integer >= 8"},
-        {.names = "--repeat",
-         .kind = CLI_INT,
-         .dst = &A.repeat,
-         .min = 1,
-         .max = INT_MAX,
-         .needs = "an integer >= 1"},
-        {.names = "--threads", .kind = CLI_THREADS, .dst = &A.threads},
-        {.names = "--backend", .kind = CLI_BACKEND, .dst = &A.backend, .val = CLI_BACKENDS_LOCAL},
-        {.names = "--sign", .kind = CLI_SIGN, .dst = &A.sign},
+        CLI_ROW_REPEAT(&A.repeat),
+        CLI_ROW_THREADS(&A.threads),
+        CLI_ROW_BACKEND(&A.backend, CLI_BACKENDS_LOCAL),
+        CLI_ROW_SIGN(&A.sign),
         {.names = NULL},
     };
     bench_mesh_usage = usage;

@@ -4,6 +4,9 @@
 #define HV_TOOLS_CLI_H
 
 #include "heatvox/heatvox.h"
+
+#include <limits.h>
+#include <math.h>
 #include <stdio.h>
 
 /* Exit codes (documented in README.md). */
@@ -110,6 +113,68 @@ typedef struct cli_opt {
     int (*fn)(const char *cmd, const char *opt, char **v, int nv, void *dst);
     const char *choices; /* CLI_CHOICE: the values, split by '|' */
 } cli_opt;
+
+/* The rows several commands share, declared once so that an option reads
+ * and fails the same wherever it is taken. to is where its value goes. */
+#define CLI_ROW_QUIET                                                                              \
+    {                                                                                              \
+        .names = "-q|-v", .kind = CLI_IGNORE                                                       \
+    }
+#define CLI_ROW_OUTPUT(to)                                                                         \
+    {                                                                                              \
+        .names = "-o|--output", .kind = CLI_STR, .dst = (to)                                       \
+    }
+#define CLI_ROW_THREADS(to)                                                                        \
+    {                                                                                              \
+        .names = "--threads", .kind = CLI_THREADS, .dst = (to)                                     \
+    }
+#define CLI_ROW_BACKEND(to, allowed)                                                               \
+    {                                                                                              \
+        .names = "--backend", .kind = CLI_BACKEND, .dst = (to), .val = (allowed)                   \
+    }
+/* --res with at least lo cells (given: set when the option is given, or NULL). */
+#define CLI_ROW_RES(to, lo, given_)                                                                \
+    {                                                                                              \
+        .names = "--res", .kind = CLI_INT, .dst = (to), .min = (lo), .max = INT_MAX,               \
+        .needs = (lo) == 1 ? "a positive integer" : "an integer >= " #lo, .given = (given_)        \
+    }
+#define CLI_ROW_VOXEL_SIZE(to, given_)                                                             \
+    {                                                                                              \
+        .names = "--voxel-size", .kind = CLI_DOUBLE, .dst = (to), .max = INFINITY,                 \
+        .flags = CLI_ABOVE, .needs = "a positive number", .given = (given_)                        \
+    }
+#define CLI_ROW_PAD(to)                                                                            \
+    {                                                                                              \
+        .names = "--pad", .kind = CLI_INT, .dst = (to), .max = INT_MAX, .needs = "an integer >= 0" \
+    }
+#define CLI_ROW_T_SCALE(to)                                                                        \
+    {                                                                                              \
+        .names = "--t-scale", .kind = CLI_DOUBLE, .dst = (to), .max = INFINITY,                    \
+        .flags = CLI_ABOVE, .needs = "a positive number"                                           \
+    }
+/* A band's half width in voxels (name: "--band", "--out-band"). */
+#define CLI_ROW_BAND(name, to)                                                                     \
+    {                                                                                              \
+        .names = (name), .kind = CLI_DOUBLE, .dst = (to), .max = INFINITY, .flags = CLI_ABOVE,     \
+        .needs = "a positive number of voxels"                                                     \
+    }
+#define CLI_ROW_DENSE(to)                                                                          \
+    {                                                                                              \
+        .names = "--dense", .kind = CLI_FLAG, .dst = (to), .val = 1                                \
+    }
+#define CLI_ROW_NO_REPAIR(to)                                                                      \
+    {                                                                                              \
+        .names = "--no-repair", .kind = CLI_FLAG, .dst = (to), .val = 0                            \
+    }
+#define CLI_ROW_SIGN(to)                                                                           \
+    {                                                                                              \
+        .names = "--sign", .kind = CLI_SIGN, .dst = (to)                                           \
+    }
+#define CLI_ROW_REPEAT(to)                                                                         \
+    {                                                                                              \
+        .names = "--repeat", .kind = CLI_INT, .dst = (to), .min = 1, .max = INT_MAX,               \
+        .needs = "an integer >= 1"                                                                 \
+    }
 
 /* Reads argv[1..argc) against the options (a row with names NULL ends
  * them); words that are no option go to *positional (one at most: a second

@@ -124,7 +124,7 @@ static int forward(const char *cmd, const char *opt, char **v, int nv, void *dst
 static int parse_args(int argc, char **argv, batch_args *A)
 {
     cli_opt t[6 + BATCH_JOB_OPTS + 1] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "-o", .kind = CLI_STR, .dst = &A->outdir},
         {.names = "--report", .kind = CLI_STR, .dst = &A->report},
         {.names = "-j",

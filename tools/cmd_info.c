@@ -191,7 +191,7 @@ int cmd_info(int argc, char **argv)
 {
     int json = 0, nfiles = 0, failed = 0;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--json", .kind = CLI_FLAG, .dst = &json, .val = 1},
         {.names = NULL},
     };

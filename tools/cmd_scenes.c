@@ -347,7 +347,7 @@ int cmd_make_scenes(int argc, char **argv)
 {
     const char *dir = NULL;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = NULL},
     };
     int rc = cli_parse("make-scenes", argc, argv, opts, "directory", &dir, help);

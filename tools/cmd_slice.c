@@ -91,8 +91,8 @@ int cmd_slice(int argc, char **argv)
     int axis = 2, index = -1;
     double range = 0;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
-        {.names = "-o|--output", .kind = CLI_STR, .dst = &out},
+        CLI_ROW_QUIET,
+        CLI_ROW_OUTPUT(&out),
         {.names = "--grid", .kind = CLI_STR, .dst = &grid},
         {.names = "--axis", .kind = CLI_FN, .dst = &axis, .fn = take_axis},
         {.names = "--index",

@@ -89,7 +89,7 @@ int cmd_bench_band(int argc, char **argv)
     int n = 0, repeat = 1, dense = 0;
     double band = 3;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &n,
@@ -102,13 +102,8 @@ int cmd_bench_band(int argc, char **argv)
          .min = 1,
          .max = 16,
          .needs = "1..16 voxels"},
-        {.names = "--repeat",
-         .kind = CLI_INT,
-         .dst = &repeat,
-         .min = 1,
-         .max = INT_MAX,
-         .needs = "a positive integer"},
-        {.names = "--dense", .kind = CLI_FLAG, .dst = &dense, .val = 1},
+        CLI_ROW_REPEAT(&repeat),
+        CLI_ROW_DENSE(&dense),
         {.names = NULL},
     };
     int rc = cli_parse("bench band", argc, argv, opts, "mesh", &path, help);

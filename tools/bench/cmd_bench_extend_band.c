@@ -346,7 +346,7 @@ int cmd_bench_extend_band(int argc, char **argv)
     int n = 0, vec = 1;
     double band = 3;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &n,
@@ -588,7 +588,7 @@ int cmd_bench_extend_loop(int argc, char **argv)
     const char *cmd = "bench extend-loop";
     int n = 0, steps = 20;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &n,

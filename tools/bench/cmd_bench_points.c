@@ -111,7 +111,7 @@ static int parse(int argc, char **argv, args *A)
     memset(A, 0, sizeof *A);
     A->count = 100000;
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &A->n,

@@ -131,7 +131,7 @@ int cmd_bench_sdf2d(int argc, char **argv)
     const char *dir = getenv("TMPDIR");
     dir = dir && *dir ? dir : "/tmp";
     const cli_opt opts[] = {
-        {.names = "-q|-v", .kind = CLI_IGNORE},
+        CLI_ROW_QUIET,
         {.names = "--keep", .kind = CLI_FLAG, .dst = &keep, .val = 1},
         {.names = "--n",
          .kind = CLI_INT,
@@ -139,18 +139,8 @@ int cmd_bench_sdf2d(int argc, char **argv)
          .min = 1,
          .max = INT_MAX,
          .needs = "an integer >= 1"},
-        {.names = "--res",
-         .kind = CLI_INT,
-         .dst = &res,
-         .min = 32,
-         .max = INT_MAX,
-         .needs = "an integer >= 32"},
-        {.names = "--repeat",
-         .kind = CLI_INT,
-         .dst = &repeat,
-         .min = 1,
-         .max = INT_MAX,
-         .needs = "an integer >= 1"},
+        CLI_ROW_RES(&res, 32, NULL),
+        CLI_ROW_REPEAT(&repeat),
         {.names = "--dir", .kind = CLI_STR, .dst = &dir},
         {.names = NULL},
     };
