@@ -249,37 +249,9 @@ typedef struct hv_extend_tiles_field {
 HV_API hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
                                  hv_extend_tiles_field *f, hv_extend_stats *stats);
 
-/* ---- fields on the device (opencl.h) ----
- * An extender on the caller's OpenCL context, device and in-order queue
- * (retained until hv_extender_destroy): phi and the fields are float buffers
- * of the extender's cells on that context, so that a simulation extends its
- * velocity every step without the grids leaving the device (the weights, the
- * solves, the closest-point evaluation and the later levels all run there;
- * a few counters per level cross to the host). opts->backend is ignored. */
-typedef struct hv_opencl_field {
-    int ncomp;     /* 1 (scalar) to 3 (vector) */
-    cl_mem in[3];  /* float buffers of the extender's cells */
-    cl_mem out[3]; /* may be in[] (in place) */
-} hv_opencl_field;
-
-HV_API hv_status hv_opencl_extender_create(hv_extender **out, int dim, const int n[3], double h,
-                                           const uint8_t *solid, const hv_extend_opts *opts,
-                                           cl_context ctx, cl_device_id dev,
-                                           cl_command_queue queue);
-
-/* hv_extend_many with phi and the fields on the device: an extender of
- * hv_opencl_extender_create, or of hv_extender_create with the opencl
- * backend (buffers on the context hv_opencl_extender_queue names). The
- * commands have finished when it returns. */
-HV_API hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields,
-                                  const hv_opencl_field *fields, hv_extend_stats *stats);
-
-/* The context, device and queue an extender's device work goes to (made on
- * first use for one of hv_extender_create with the opencl backend; any of
- * the three may be NULL). HV_ERR_UNSUPPORTED for an extender of another
- * backend. */
-HV_API hv_status hv_opencl_extender_queue(hv_extender *e, cl_context *ctx, cl_device_id *dev,
-                                          cl_command_queue *queue);
+/* An extender whose level set and fields are device buffers on the caller's
+ * OpenCL context (hv_opencl_extender_create, hv_opencl_extend) is
+ * declared in opencl.h, with the other entries that take OpenCL objects. */
 
 #ifdef __cplusplus
 }

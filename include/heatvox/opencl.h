@@ -25,12 +25,16 @@
 extern "C" {
 #endif
 
-/* The solver's problem, options and results (solve.h), by pointer: the
- * device layer sits below the solver. */
+/* The solver's problem, options and results (solve.h) and the extender's
+ * (heat.h), by pointer: the device layer sits below them. Every public entry
+ * that takes OpenCL objects is declared here. */
 typedef struct hv_problem hv_problem;
 typedef struct hv_solver_opts hv_solver_opts;
 typedef struct hv_solve_info hv_solve_info;
 typedef struct hv_solver hv_solver;
+typedef struct hv_extender hv_extender;
+typedef struct hv_extend_opts hv_extend_opts;
+typedef struct hv_extend_stats hv_extend_stats;
 
 typedef struct hv_opencl_device {
     int platform; /* P in HEATVOX_OPENCL_DEVICE="P:D" */
@@ -89,6 +93,38 @@ HV_API hv_status hv_opencl_solve(hv_solver *sv, cl_mem f, cl_mem u, hv_solve_inf
  * of another backend. */
 HV_API hv_status hv_opencl_solver_queue(hv_solver *sv, cl_context *ctx, cl_device_id *dev,
                                         cl_command_queue *queue);
+
+/* ---- the extension with fields on the device ----
+ * An extender (heat.h) on the caller's OpenCL context, device and in-order queue
+ * (retained until hv_extender_destroy): phi and the fields are float buffers
+ * of the extender's cells on that context, so that a simulation extends its
+ * velocity every step without the grids leaving the device (the weights, the
+ * solves, the closest-point evaluation and the later levels all run there;
+ * a few counters per level cross to the host). opts->backend is ignored. */
+typedef struct hv_opencl_field {
+    int ncomp;     /* 1 (scalar) to 3 (vector) */
+    cl_mem in[3];  /* float buffers of the extender's cells */
+    cl_mem out[3]; /* may be in[] (in place) */
+} hv_opencl_field;
+
+HV_API hv_status hv_opencl_extender_create(hv_extender **out, int dim, const int n[3], double h,
+                                           const uint8_t *solid, const hv_extend_opts *opts,
+                                           cl_context ctx, cl_device_id dev,
+                                           cl_command_queue queue);
+
+/* hv_extend_many with phi and the fields on the device: an extender of
+ * hv_opencl_extender_create, or of hv_extender_create with the opencl
+ * backend (buffers on the context hv_opencl_extender_queue names). The
+ * commands have finished when it returns. */
+HV_API hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields,
+                                  const hv_opencl_field *fields, hv_extend_stats *stats);
+
+/* The context, device and queue an extender's device work goes to (made on
+ * first use for one of hv_extender_create with the opencl backend; any of
+ * the three may be NULL). HV_ERR_UNSUPPORTED for an extender of another
+ * backend. */
+HV_API hv_status hv_opencl_extender_queue(hv_extender *e, cl_context *ctx, cl_device_id *dev,
+                                          cl_command_queue *queue);
 
 /* ---- kernel times ----
  * With HEATVOX_OPENCL_PROFILE=1 in the environment, the queues heatvox makes
