@@ -1,0 +1,30 @@
+# The Debian 12 packages heatvox needs, checked with a stamp per list and
+# installed when missing (as root; otherwise the command to run is printed).
+
+# Debian 12 packages the build and tests need; installed once when missing.
+DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboost-dev libopenvdb-tools \
+            python3-openvdb libtbb-dev libimath-dev libopenexr-dev libpng-dev \
+            ocl-icd-opencl-dev opencl-headers pocl-opencl-icd zlib1g-dev python3-numpy clang-format \
+            clang-14 libassimp-dev assimp-testmodels
+# Those of CGAL's reference program alone (make bench), checked with a stamp
+# of their own by the same rule.
+CGAL_PKGS  := libcgal-dev libeigen3-dev
+CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
+
+
+deps: $(STAMP) ## install the Debian packages the build needs (as root)
+$(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
+$(STAMP) $(CGAL_STAMP): mk/deps.mk
+	@missing=""; for p in $(DEB_PKGS); do \
+	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "heatvox: installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing || exit 1; \
+	  else \
+	    echo "heatvox: missing Debian packages. Run as root:"; \
+	    echo "  apt-get install -y$$missing"; exit 1; \
+	  fi; \
+	fi
+	@mkdir -p $(BUILD) && touch $@
