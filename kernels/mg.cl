@@ -166,7 +166,7 @@ static float hv_prolong_axis_weight(int coarsen, int nc, int i, int I)
 }
 
 /* fc = P^T (pn .* r) / co.w, the restriction of the symmetric cycle (PCG), as
- * mg.c's hv__mg_restrict_transpose: each coarse cell gathers the fine cells whose
+ * mg_transfer.c's hv__mg_restrict_transpose: each coarse cell gathers the fine cells whose
  * interpolation stencil reaches it (2I-1 .. 2I+2 along coarsened axes), in the
  * CPU's order. ac is the coarse cell weights (NULL when the coarse level is
  * plain; empty coarse cells get 0), pn the fine renormalization (NULL = 1). */

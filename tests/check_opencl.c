@@ -155,7 +155,7 @@ static void download(cl_mem m, float *v, size_t n)
     ck_assert_msg(hv__cl_check(CL) == HV_OK, "%s", hv_last_error());
 }
 
-/* ---------- CPU references (mg.c semantics) ---------- */
+/* ---------- CPU references (mg_backend.c semantics) ---------- */
 
 static void ref_residual(const mg_hierarchy *H, const mg_level *L, const float *u, const float *f,
                          float *r)

@@ -1,6 +1,6 @@
 /*
  * Private: the outer iterations of the multigrid backends, written once for
- * the CPU (mg/mg.c) and the OpenCL device (cl/cl_backend.c): the stationary defect
+ * the CPU (mg/mg_backend.c) and the OpenCL device (cl/cl_backend.c): the stationary defect
  * correction and preconditioned CG, with their stopping rules (converged,
  * max iterations, stagnated) and the residual history (docs/METHOD.md,
  * "Multigrid"). The driver sequences the steps and decides; a backend does

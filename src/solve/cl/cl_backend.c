@@ -1,5 +1,5 @@
 /*
- * The OpenCL solver backend: the multigrid of mg.c on an OpenCL device.
+ * The OpenCL solver backend: the multigrid of mg_backend.c on an OpenCL device.
  *
  * The hierarchy is built on the host exactly as for the CPU backend
  * (mg_setup.c) and uploaded once. Each solve runs on one in-order queue: float
@@ -11,7 +11,7 @@
  * norm. On devices without fp64 the double part (residuals, CG vectors) runs
  * on the host and each cycle moves the fine residual and correction across.
  * With solid cells the coarse levels may be the aggregation hierarchy
- * (cl_agg.c), asked for or, with HV_COARSE_AUTO, after a slow solve (mg.c).
+ * (cl_agg.c), asked for or, with HV_COARSE_AUTO, after a slow solve (mg_backend.c).
  * The outer iterations are iterate.c's, as on the CPU; this file provides
  * their steps. It also tells HV_BACKEND_AUTO whether there is a device to
  * take (hv__opencl_auto_device). The entries that take the front end's solver
@@ -39,7 +39,7 @@ typedef struct ocl_state {
     hv_solver_stats stats; /* modelled while the whole hierarchy is at hand */
     int dev64;             /* double defect correction on the device */
     int use_pcg;
-    int agg_tried, agg_pending; /* AUTO coarse levels: as mg.c */
+    int agg_tried, agg_pending; /* AUTO coarse levels: as mg_backend.c */
     /* device path */
     cl_mem v[NVEC];    /* double fine vectors */
     cl_mem S;          /* double scalars */
@@ -361,7 +361,7 @@ static hv_status it_residual(void *ctx, double *norm)
     return HV_OK;
 }
 
-/* One cycle per correction (the FMG start, as mg.c), then the residual. */
+/* One cycle per correction (the FMG start, as mg_backend.c), then the residual. */
 static hv_status it_correct(void *ctx, int it, double rel, hv_solve_info *info, double *norm)
 {
     ocl_state *o = ((ocl_iter *)ctx)->o;

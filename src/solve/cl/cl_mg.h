@@ -122,7 +122,7 @@ typedef struct hv_clmg {
 
 /* Uploads H's coefficients and allocates the level vectors; with sym also
  * what the symmetric cycle of PCG needs (a residual vector per level and the
- * prolongation renormalization, computed on the host as mg.c does). On failure
+ * prolongation renormalization, computed on the host as mg_backend.c does). On failure
  * m holds nothing to free. */
 hv_status hv__clmg_create(hv_clmg *m, hv_cl *cl, const mg_hierarchy *H, hv_smoother smoother,
                           int pre, int post, int sym);
@@ -152,7 +152,7 @@ void hv__clmg_bottom(hv_clmg *m);
 /* One V-cycle on level l (u from zero unless guess; sym, for use as a CG
  * preconditioner, restricts with P^T when created with sym and reverses the
  * post-smoothing order), and full multigrid
- * for lv[0].f, as mg.c. The result is lv[0].u[lv[0].cur]. */
+ * for lv[0].f, as mg_backend.c. The result is lv[0].u[lv[0].cur]. */
 void hv__clmg_vcycle(hv_clmg *m, int l, int guess, int sym);
 /* Builds the aggregation hierarchy under host fine level F (as the CPU
  * backend's, mg_agg.h) and uploads it; the symmetric cycle then uses it in

@@ -2,6 +2,7 @@
  * Private to the CPU multigrid backend: its state, the constants its passes
  * share, the plain-row helpers that inline into row loops in several files,
  * and what each file provides to the others (docs/METHOD.md, "Multigrid"):
+ *   mg_cpu.c       which kernels this CPU runs (mg_cpu.h)
  *   mg_rows.c      smoother and residual rows (AVX-512, AVX2, baseline) and
  *                  the level-wide sweeps made of them
  *   mg_transfer.c  restriction, prolongation and the PCG's weighted P^T
@@ -9,24 +10,17 @@
  *   mg_cycle.c     smoothing, the V-cycle and full multigrid
  *   agg_*.c        the coarse levels by smoothed aggregation (mg_agg.h,
  *                  agg_internal.h)
- *   mg.c           the backend's entry points and its steps of the outer
+ *   mg_backend.c   the backend's entry points and its steps of the outer
  *                  iterations (iterate.h)
  */
 #ifndef HV_SOLVE_MG_INTERNAL_H
 #define HV_SOLVE_MG_INTERNAL_H
 
 #include "mg_agg.h"
+#include "mg_cpu.h"
 #include "mg_level.h"
 
 #include <stddef.h>
-
-/* MG_KERNEL (mg_level.h): row kernels built for AVX2 and the baseline. */
-#if MG_MULTIVERSION
-#define MG_AVX512 1
-#include <immintrin.h>
-#else
-#define MG_AVX512 0
-#endif
 
 #if MG_AVX512
 /* A float row of nx cells walked in 16-lane chunks, each chunk's x neighbours
@@ -88,7 +82,7 @@ typedef struct mg_state {
     hv_smoother smoother;
     int pre, post;
     int use_pcg;     /* solid cells: PCG (and its vectors) */
-    int stat_masked; /* heat step with solid cells: defect correction first (mg.c) */
+    int stat_masked; /* heat step with solid cells: defect correction first (mg_backend.c) */
     double *rd;      /* fine double work: the residual */
     double *zsum;    /* PCG, Poisson: per-thread sums for z's projection */
     size_t zsum_per; /* doubles per thread in zsum (whole cache lines) */
@@ -104,32 +98,6 @@ typedef struct mg_state {
     int agg_tried;         /* aggregation was built or tried */
     int agg_pending;       /* AUTO: build it before the next solve */
 } mg_state;
-
-#if MG_AVX512
-/* 1: the AVX-512 rows run, 0: they do not, -1: not asked yet (mg_rows.c). */
-extern int hv__mg_avx512_state;
-int hv__mg_avx512_probe(void);
-
-/* The AVX-512 kernels where the CPU has them, unless HV_NO512 is set to
- * anything but empty or 0 (the tests run the other path that way). Asked once
- * per row, so inline. */
-static inline int mg_avx512(void)
-{
-    return hv__mg_avx512_state >= 0 ? hv__mg_avx512_state : hv__mg_avx512_probe();
-}
-
-/* 1: the hand-written AVX2 + FMA kernels (the aggregation levels' products,
- * the binary rows of the fused pass) run where AVX-512's do not: the CPU has
- * both, unless HV_NOAVX2 is set to anything but empty or 0 (the tests run the
- * baseline C that way); 0: they do not; -1: not asked yet. */
-extern int hv__mg_avx2_state;
-int hv__mg_avx2_probe(void);
-
-static inline int mg_avx2(void)
-{
-    return hv__mg_avx2_state >= 0 ? hv__mg_avx2_state : hv__mg_avx2_probe();
-}
-#endif
 
 /* v = 0 (n floats), on several threads on large levels. */
 static inline void mg_zero_f(float *v, size_t n)

@@ -80,7 +80,7 @@ void hv__mg_level_free_coeffs(mg_level *L);
  * for hv_solver_get_stats (the mg and opencl backends share the hierarchy). */
 void hv__mg_model_stats(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,
                         int post, int pcg, hv_solver_stats *st);
-/* The same for the CPU backend (mg.c), whose fused passes (mg_fused.c) move
+/* The same for the CPU backend (mg_backend.c), whose fused passes (mg_fused.c) move
  * fewer bytes on plain 3D levels and whose plain fine correction is a single
  * pass. */
 void hv__mg_model_stats_cpu(const mg_level *lv, int nlev, int dim, hv_smoother smoother, int pre,

@@ -11,27 +11,6 @@
 #include <string.h>
 
 #if MG_AVX512
-int hv__mg_avx512_state = -1;
-
-int hv__mg_avx512_probe(void)
-{
-    const char *e = getenv("HV_NO512");
-    hv__mg_avx512_state = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0")) ? 1 : 0;
-    return hv__mg_avx512_state;
-}
-
-int hv__mg_avx2_state = -1;
-
-int hv__mg_avx2_probe(void)
-{
-    const char *e = getenv("HV_NOAVX2");
-    hv__mg_avx2_state = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
-                                !(e && *e && strcmp(e, "0"))
-                            ? 1
-                            : 0;
-    return hv__mg_avx2_state;
-}
-
 /* One colour (cells of parity i0) of a plain row of nx cells, walls included,
  * in 16-lane chunks aligned to the row start: the row's own values come from
  * one load per chunk, their x-neighbours by lane shifts (valignd) of the chunks

@@ -1,5 +1,5 @@
 /*
- * The multigrid hierarchy on the host, shared by the CPU (mg.c) and OpenCL
+ * The multigrid hierarchy on the host, shared by the CPU (mg_backend.c) and OpenCL
  * (cl/cl_backend.c) backends so that both coarsen the same way: level sizes by
  * semi-coarsening, coefficients by averaging (docs/METHOD.md, "Multigrid"),
  * Chebyshev bounds by power iteration and the bottom level's connected regions.
@@ -606,9 +606,9 @@ static void model(const mg_level *lv, int nlev, int dim, hv_smoother smoother, i
     }
     double n0 = (double)lv[0].count;
     st->bytes_per_cycle = fused && !pcg ? bytes : 0;
-    if (fused && !pcg) /* x + e and f - A x in one pass; with solid cells two (mg.c) */
+    if (fused && !pcg) /* x + e and f - A x in one pass; with solid cells two (mg_backend.c) */
         bytes += n0 * (lv[0].plain ? 8 + 4 + 8 + 8 + 4 : (8 + 4 + 4 + 8) + (8 + 8 + 4 + 4));
-    else if (fused) /* CPU PCG (mg.c): q = A p with p.q; x, r, f; r.z; p (float) */
+    else if (fused) /* CPU PCG (mg_backend.c): q = A p with p.q; x, r, f; r.z; p (float) */
         bytes += n0 * ((4 + 4 + 8) + (8 + 8 + 4 + 8 + 8 + 8 + 4) + (8 + 4) + (4 + 4 + 4));
     else
         bytes += n0 * (8 + 8 + 4 + 8 + 4 + 8);
