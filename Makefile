@@ -146,7 +146,7 @@ format: | $(STAMP) ## lay out every C and C++ source by .clang-format
 format-check: | $(STAMP) ## fail where a source differs from that layout
 	@clang-format --dry-run --Werror $(FORMAT_SRC) && echo "format-check: $(words $(FORMAT_SRC)) files as .clang-format lays them out"
 
-clean: ## remove every build folder
+clean: ## remove build/, build-san/, build-mpi/ and out/
 	rm -rf build build-san build-mpi out
 
 

@@ -1410,6 +1410,54 @@ START_TEST(kernel_build_failure_should_report_the_build_log)
 }
 END_TEST
 
+/* A module's kernels on a handle (cl_core.h): opened once, the same kernel
+ * objects after; its fp64-only kernels exist exactly on fp64 handles, and a
+ * launch of one that does not exist is recorded, naming it, not dropped. A
+ * module whose sources do not build reports the build log. */
+START_TEST(modules_should_open_once_and_refuse_missing_kernels)
+{
+    TL_ASSERT_OK(hv__cl_module_open(CL, HV_CLSOLVE));
+    TL_ASSERT_OK(hv__cl_module_open(CL, HV_CLSOLVE));
+    int opened = 0;
+    for (int i = 0; i < CL->nmod; i++)
+        opened += CL->mod[i].m == HV_CLSOLVE;
+    ck_assert_int_eq(opened, 1);
+    cl_mem v = NULL, a = NULL;
+    TL_ASSERT_OK(hv__cl_alloc(CL, 64 * sizeof(double), NULL, &v));
+    TL_ASSERT_OK(hv__cl_alloc(CL, 64 * sizeof(float), NULL, &a));
+    size_t g[1], l[1];
+    hv__cl_range1(64, g, l);
+    hv__cl_args(CL, HV_CLSOLVE, HV_K_FINE_MASK, "mml", v, a, (size_t)64);
+    hv__cl_run(CL, HV_CLSOLVE, HV_K_FINE_MASK, 1, g, l);
+    hv_status st = hv__cl_finish(CL);
+    if (CL->fp64) {
+        ck_assert_int_eq(st, HV_OK);
+    } else {
+        ck_assert_int_eq(st, HV_ERR_BACKEND);
+        ck_assert_msg(strstr(hv_last_error(), "fine_mask"), "message: %s", hv_last_error());
+    }
+    hv__cl_free(&v);
+    hv__cl_free(&a);
+    static const char *const bad_sources[] = {
+        "__kernel void k(__global float *x) { x[0] = nope; }\n", NULL};
+    static const char *const bad_kernels[] = {"k", NULL};
+    static const hv_cl_module bad = {"broken", bad_sources, bad_kernels, 0, 0};
+    fflush(stderr);
+    int saved = dup(2), null = open("/dev/null", O_WRONLY);
+    if (null >= 0)
+        dup2(null, 2);
+    st = hv__cl_module_open(CL, &bad);
+    if (saved >= 0)
+        dup2(saved, 2);
+    if (null >= 0)
+        close(null);
+    if (saved >= 0)
+        close(saved);
+    ck_assert_int_eq(st, HV_ERR_BACKEND);
+    ck_assert_msg(strstr(hv_last_error(), "nope"), "message: %s", hv_last_error());
+}
+END_TEST
+
 /* AUTO: the CPU unless a GPU (or HEATVOX_AUTO_OPENCL=1 any device) is there;
  * once resolved to opencl, the solver and the pipelines run on the device. */
 START_TEST(auto_should_take_a_gpu_or_the_device_it_is_allowed)
@@ -1580,6 +1628,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, invalid_device_choice_should_fail_with_a_clear_message, have_cl, why);
     TL_ADD_IF(tc, device_list_should_describe_and_mark_the_selected_device, have_cl, why);
     TL_ADD_IF(tc, kernel_build_failure_should_report_the_build_log, have_cl, why);
+    TL_ADD_IF(tc, modules_should_open_once_and_refuse_missing_kernels, have_cl, why);
     TL_ADD_IF(tc, no_platform_should_make_the_backend_unsupported, have_cl, why);
     TL_ADD_IF(tc, auto_should_take_a_gpu_or_the_device_it_is_allowed, have_cl, why);
     suite_add_tcase(su, tc);

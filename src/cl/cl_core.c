@@ -599,7 +599,8 @@ hv_status hv__cl_module_open(hv_cl *cl, const hv_cl_module *m)
         k[i] = clCreateKernel(prog, m->kernels[i], &e);
         if (e != CL_SUCCESS) {
             for (int j = 0; j < i; j++)
-                clReleaseKernel(k[j]);
+                if (k[j])
+                    clReleaseKernel(k[j]);
             free(k);
             return hv__error(HV_ERR_BACKEND, "OpenCL: kernel '%s' of the %s kernels is missing: %s",
                              m->kernels[i], m->name, hv__cl_strerror(e));
@@ -612,17 +613,22 @@ hv_status hv__cl_module_open(hv_cl *cl, const hv_cl_module *m)
 }
 
 /* Kernel k of module m on cl, opening the module on first use; NULL (the
- * failure recorded in cl) when it cannot be had. */
+ * failure recorded in cl) when it cannot be had: the module does not build,
+ * or the kernel exists only with fp64 and cl has none. */
 static cl_kernel module_kernel(hv_cl *cl, const hv_cl_module *m, int k)
 {
     cl_kernel *ks = module_kernels(cl, m);
     if (!ks && cl->err == CL_SUCCESS && hv__cl_module_open(cl, m) == HV_OK)
         ks = module_kernels(cl, m);
+    char where[96];
     if (!ks) {
-        char where[96];
         snprintf(where, sizeof where, "building the %s kernels", m->name);
         hv__cl_fail(cl, CL_BUILD_PROGRAM_FAILURE, where);
         return NULL;
+    }
+    if (!ks[k]) {
+        snprintf(where, sizeof where, "kernel %s (fp64 only)", m->kernels[k]);
+        hv__cl_fail(cl, CL_INVALID_KERNEL, where);
     }
     return ks[k];
 }
