@@ -456,25 +456,6 @@ typedef struct local_solves {
     int restarts; /* of the Poisson solve */
 } local_solves;
 
-hv_coarse hv__dist_poisson_coarse(const hv_distance_opts *o, const uint8_t *solid)
-{
-    return o->coarse == HV_COARSE_AUTO && solid ? HV_COARSE_AGGREGATION : o->coarse;
-}
-
-hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
-                          double alpha, double beta, double tol, hv_backend backend,
-                          hv_coarse coarse)
-{
-    hv_problem p = {dim, {n[0], n[1], n[2]}, h, solid, alpha, beta};
-    hv_solver_opts o;
-    hv_solver_opts_default(&o);
-    o.backend = backend;
-    o.coarse = coarse;
-    o.tol = tol;
-    o.max_iter = 200;
-    return hv_solver_create(s, &p, &o);
-}
-
 /* Poisson, with restarts (defect correction) on the residual, a guard: CG
  * with a preconditioner that is not symmetric stalls near 3e-2 in long
  * corridors; with the symmetric cycle (P^T restriction, reversed

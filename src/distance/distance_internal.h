@@ -54,7 +54,7 @@ double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
 hv_status hv__dist_check_opts(const hv_distance_opts *o, const hv_distance_sources *src);
 /* A solver of (alpha - beta Lap) on the grid (dim, n, h, solid) for the
  * heat method's stages: tolerance tol, at most 200 iterations, on backend
- * with the given coarse levels. */
+ * with the given coarse levels (distance_solvers.c, as the next). */
 hv_status hv__dist_solver(hv_solver **s, int dim, const int n[3], double h, const uint8_t *solid,
                           double alpha, double beta, double tol, hv_backend backend,
                           hv_coarse coarse);
