@@ -10,11 +10,16 @@ DEB_PKGS := build-essential pkg-config check libfftw3-dev libopenvdb-dev libboos
 # of their own by the same rule.
 CGAL_PKGS  := libcgal-dev libeigen3-dev
 CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
+# scikit-fmm, the fast marching reference of the distance rows
+# (tools/bench/bench_distance.py, make bench only), the same way.
+FMM_PKGS   := python3-scikit-fmm
+FMM_STAMP   = $(BUILD)/.deps-fmm-ok
 
 
 deps: $(STAMP) ## install the Debian packages the build needs (as root)
 $(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
-$(STAMP) $(CGAL_STAMP): mk/deps.mk
+$(FMM_STAMP): DEB_PKGS = $(FMM_PKGS)
+$(STAMP) $(CGAL_STAMP) $(FMM_STAMP): mk/deps.mk
 	@missing=""; for p in $(DEB_PKGS); do \
 	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
 	done; \

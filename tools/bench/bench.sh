@@ -159,4 +159,11 @@ if [ -x "$mpi_hv" ]; then
 else
   echo "bench: no $mpi_hv (make mpi), petsc rows skipped" >&2
 fi
+# Geodesic distance around obstacles (the building, a 3D maze) against
+# scikit-fmm's fast marching on the same grid, solid cells and source.
+if /usr/bin/python3 -c 'import skfmm, pyopenvdb' 2>/dev/null; then
+  /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 128 256
+else
+  echo "bench: /usr/bin/python3 cannot import skfmm or pyopenvdb, distance rows skipped" >&2
+fi
 if [ -x /usr/bin/python3 ]; then /usr/bin/python3 "$(dirname "$0")/bench_python.py" "$hv"; else echo "bench: no /usr/bin/python3, python rows skipped" >&2; fi
