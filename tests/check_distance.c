@@ -129,14 +129,30 @@ static int in_rect(const scene *sc, const double x[2])
 }
 
 typedef struct {
-    double mean, max; /* |phi - exact| in voxels over fluid cells */
-    double src;       /* distance interpolated at the source point, voxels */
+    double mean, max, p99; /* |phi - exact| in voxels over fluid cells */
+    double src;            /* distance interpolated at the source point, voxels */
     hv_distance_stats st;
 } dist_err;
 
 /* Distance on the unit square (dim 2) or cube (dim 3, extruded scene, source at
  * z = 0.4) with n cells per axis. */
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* run_scene, keeping the grid in *keep (NULL: destroyed). */
+static dist_err run_scene_grid(const scene *sc, int dim, int n, const hv_distance_opts *o,
+                               hv_grid **keep);
+
 static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opts *o)
+{
+    return run_scene_grid(sc, dim, n, o, NULL);
+}
+
+static dist_err run_scene_grid(const scene *sc, int dim, int n, const hv_distance_opts *o,
+                               hv_grid **keep)
 {
     int ns[3] = {n, n, dim == 3 ? n : 1};
     hv_grid *g = NULL;
@@ -158,6 +174,8 @@ static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opt
     vgraph vg;
     build_graph(sc, &vg);
     size_t m = 0;
+    double *errs = malloc((size_t)n * n * ns[2] * sizeof *errs);
+    ck_assert_ptr_nonnull(errs);
     for (int k = 0; k < ns[2]; k++)
         for (int j = 0; j < n; j++)
             for (int i = 0; i < n; i++) {
@@ -172,11 +190,15 @@ static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opt
                 if (dim == 3)
                     ex = sqrt(ex * ex + (x[2] - pt[2]) * (x[2] - pt[2]));
                 double err = fabs(g->v[c] - ex) * n;
+                errs[m] = err;
                 e.mean += err;
                 e.max = fmax(e.max, err);
                 m++;
             }
     e.mean /= (double)m;
+    qsort(errs, m, sizeof *errs, cmp_double);
+    e.p99 = errs[(size_t)(0.99 * (double)(m - 1))];
+    free(errs);
     /* Bilinear value at the source point (2D scenes put it inside fluid cells). */
     double p = sc->s[0] * n - 0.5, q = sc->s[1] * n - 0.5;
     int i0 = (int)floor(p), j0 = (int)floor(q);
@@ -189,7 +211,10 @@ static dist_err run_scene(const scene *sc, int dim, int n, const hv_distance_opt
         v += wgt * g->v[(i0 + a) + (size_t)n * ((j0 + b) + (size_t)n * (k0 + z))];
     }
     e.src = v * n;
-    hv_grid_destroy(&g);
+    if (keep)
+        *keep = g;
+    else
+        hv_grid_destroy(&g);
     return e;
 }
 
@@ -625,6 +650,114 @@ START_TEST(heatvox_distance_should_go_around_a_vdb_mask)
 }
 END_TEST
 
+/* The stages on tiles near the front (the default) against the stages on the
+ * whole grid: the same distances to a fraction of a voxel (the band's tighter
+ * tolerance lets each stage reach further, so the fronts sit elsewhere), as
+ * accurate, on far fewer cells. */
+START_TEST(stages_on_tiles_should_match_the_whole_grid_on_fewer_cells)
+{
+    const int n = tl_sanitized() ? 128 : 256;
+    hv_distance_opts o[2];
+    dist_err e[2];
+    hv_grid *g[2];
+    for (int q = 0; q < 2; q++) {
+        hv_distance_opts_default(&o[q]);
+        o[q].backend = HV_BACKEND_MG;
+        o[q].whole_stages = q;
+        e[q] = run_scene_grid(&wall_gap, 2, n, &o[q], &g[q]);
+        report(q ? "wall-gap, whole stages" : "wall-gap, stages on tiles", 2, n, &e[q]);
+    }
+    double sum = 0, worst = 0;
+    size_t m = 0;
+    for (size_t c = 0; c < (size_t)n * n; c++)
+        if (!g[0]->solid[c]) {
+            double d = fabs(g[0]->v[c] - g[1]->v[c]) * n;
+            sum += d;
+            worst = fmax(worst, d);
+            m++;
+        }
+    printf("  tiles vs whole: mean %.3f max %.3f voxels apart; cells solved %zu vs %zu\n",
+           sum / (double)m, worst, e[0].st.cells_solved, e[1].st.cells_solved);
+    ck_assert_msg(sum / (double)m < 0.15 && worst < 1.5, "apart: mean %.3f, max %.3f voxels",
+                  sum / (double)m, worst);
+    ck_assert_msg(e[0].mean <= e[1].mean + 0.1, "mean error %.3f on tiles, %.3f whole", e[0].mean,
+                  e[1].mean);
+    ck_assert_msg(2 * e[0].st.cells_solved < e[1].st.cells_solved, "cells solved %zu vs %zu",
+                  e[0].st.cells_solved, e[1].st.cells_solved);
+    ck_assert_int_eq(e[1].st.cells_solved, (size_t)e[1].st.stages * n * n);
+    ck_assert_int_eq(e[0].st.dead_faces, 0);
+    for (int q = 0; q < 2; q++)
+        hv_grid_destroy(&g[q]);
+}
+END_TEST
+
+/* Against the exact geodesic distance around vertical prisms (the 2D
+ * visibility-graph distance combined with the height difference): mean error
+ * at most half a voxel, 99th percentile at most 2 voxels. */
+START_TEST(prisms_should_be_within_half_a_voxel_on_average)
+{
+    const scene *sc[2] = {&wall_gap, &l_room};
+    const char *name[2] = {"wall-gap prisms", "L-room prisms"};
+    for (int q = 0; q < 2; q++) {
+        dist_err e = run_scene(sc[q], 3, 48, NULL);
+        report(name[q], 3, 48, &e);
+        printf("  %s: p99 %.3f voxels\n", name[q], e.p99);
+        ck_assert_msg(e.mean <= 0.5 && e.p99 <= 2.0, "%s: mean %.3f, p99 %.3f voxels", name[q],
+                      e.mean, e.p99);
+    }
+}
+END_TEST
+
+/* One hv_distance for many queries: the set-up is paid at create and
+ * reported by the first query only; a query gives what hv_distance_compute
+ * gives, bit for bit, whatever came before; a grid of another shape is an
+ * error that says so. */
+START_TEST(an_object_should_answer_many_queries_without_set_up)
+{
+    const int n = 32, ns[3] = {n, n, n};
+    hv_grid *g = NULL, *ref = NULL, *other = NULL;
+    TL_ASSERT_OK(hv_grid_create(&g, 3, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(g));
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                double x[3];
+                hv_grid_cell_center(g, i, j, k, x);
+                g->solid[i + (size_t)n * (j + (size_t)n * k)] = (uint8_t)in_rect(&wall_gap, x);
+            }
+    TL_ASSERT_OK(hv_grid_create(&ref, 3, ns, 1.0 / n, NULL));
+    TL_ASSERT_OK(hv_grid_add_mask(ref));
+    memcpy(ref->solid, g->solid, (size_t)n * n * n);
+    double pa[3] = {0.2, 0.2, 0.4}, pb[3] = {0.8, 0.8, 0.6};
+    hv_distance_sources a = {NULL, 0, pa, 1, NULL}, b = {NULL, 0, pb, 1, NULL};
+    hv_distance *D = NULL;
+    hv_distance_stats s[3];
+    TL_ASSERT_OK(hv_distance_create(&D, g, NULL));
+    TL_ASSERT_OK(hv_distance_query(D, &a, g, &s[0]));
+    float *first = malloc((size_t)n * n * n * sizeof *first);
+    ck_assert_ptr_nonnull(first);
+    memcpy(first, g->v, (size_t)n * n * n * sizeof *first);
+    TL_ASSERT_OK(hv_distance_query(D, &b, g, &s[1]));
+    TL_ASSERT_OK(hv_distance_query(D, &a, g, &s[2]));
+    TL_ASSERT_OK(hv_distance_compute(ref, &a, NULL, NULL));
+    ck_assert_msg(s[0].t_setup > 0 && s[1].t_setup == 0 && s[2].t_setup == 0, "set-up %g, %g, %g s",
+                  s[0].t_setup, s[1].t_setup, s[2].t_setup);
+    ck_assert_int_eq(memcmp(first, g->v, (size_t)n * n * n * sizeof *first), 0);
+    ck_assert_int_eq(memcmp(ref->v, g->v, (size_t)n * n * n * sizeof *first), 0);
+    const int small[3] = {n, n, n / 2};
+    TL_ASSERT_OK(hv_grid_create(&other, 3, small, 1.0 / n, NULL));
+    ck_assert_int_eq(hv_distance_query(D, &a, other, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_msg(strstr(hv_last_error(), "the object's"), "message: %s", hv_last_error());
+    hv_distance_destroy(&D);
+    ck_assert_ptr_null(D);
+    hv_distance_destroy(&D);
+    free(first);
+    hv_grid_destroy(&g);
+    hv_grid_destroy(&ref);
+    hv_grid_destroy(&other);
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("distance");
@@ -642,6 +775,9 @@ int main(void)
     tcase_add_test(tc, mesh_source_should_give_unsigned_distance_to_its_surface);
     tcase_add_test(tc, bad_sources_should_fail_clearly);
     tcase_add_test(tc, heatvox_distance_should_go_around_a_vdb_mask);
+    tcase_add_test(tc, stages_on_tiles_should_match_the_whole_grid_on_fewer_cells);
+    tcase_add_test(tc, prisms_should_be_within_half_a_voxel_on_average);
+    tcase_add_test(tc, an_object_should_answer_many_queries_without_set_up);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -80,6 +80,10 @@ typedef struct hv_distance_opts {
     hv_coarse coarse;   /* the solves' coarse levels with obstacles (hv_solver_opts.coarse);
                            default AUTO: aggregation for the Poisson solve, AUTO for the
                            heat steps */
+    int whole_stages;   /* 0 (default): each stage solves its heat steps on the tiles its
+                           front reaches (8^3 cells, docs/METHOD.md "Stages on tiles"), by
+                           Chebyshev sweeps on the host; 1: on the whole grid with the
+                           backend's solver, as the opencl and petsc paths always do */
 } hv_distance_opts;
 
 typedef struct hv_distance_stats {
@@ -98,6 +102,10 @@ typedef struct hv_distance_stats {
     double poisson_relres;     /* final relative residual */
     hv_backend backend;        /* backend of the solves */
     double t_splat, t_diffuse, t_normalize, t_poisson, t_total; /* seconds */
+    size_t cells_solved;   /* cells the heat steps solved on, summed over stages */
+    size_t stage_cells[8]; /* cells stage l solved on (first 8) */
+    double t_setup;        /* seconds making the solvers an hv_distance keeps (0 when a
+                              query reuses them) */
 } hv_distance_stats;
 
 HV_API void hv_distance_opts_default(hv_distance_opts *o);
@@ -114,6 +122,23 @@ HV_API void hv_distance_opts_default(hv_distance_opts *o);
  * path reports none). */
 HV_API hv_status hv_distance_compute(hv_grid *dist, const hv_distance_sources *src,
                                      const hv_distance_opts *opts, hv_distance_stats *stats);
+
+/* Distance queries on one set of obstacles: the object keeps what does not
+ * depend on the sources (the obstacle mask, the Poisson solver and its coarse
+ * levels; with whole_stages the heat steps' solvers too), so that every query
+ * after the first pays no set-up. */
+typedef struct hv_distance hv_distance;
+
+/* Makes the object for grids of g's shape (dim, n, h, origin) and obstacles
+ * (g->solid, copied; g->v is not read); opts may be NULL (defaults). The
+ * first query's stats report the set-up time (t_setup); later ones 0. */
+HV_API hv_status hv_distance_create(hv_distance **d, const hv_grid *g,
+                                    const hv_distance_opts *opts);
+/* Fills dist->v (a grid of the object's dim, n and h) with the distance from
+ * src, as hv_distance_compute does; stats may be NULL. */
+HV_API hv_status hv_distance_query(hv_distance *d, const hv_distance_sources *src, hv_grid *dist,
+                                   hv_distance_stats *stats);
+HV_API void hv_distance_destroy(hv_distance **d);
 
 /* Marks as solid (adding a mask if needed) every cell of g whose closed box
  * meets a triangle of m: a watertight shell that blocks heat. Cells enclosed by

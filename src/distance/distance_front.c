@@ -31,8 +31,23 @@ double hv__dist_trust_log(double relres, double wn, double t_scale)
     return log(RELIABLE * fmax(relres, 1e-14) * wn * sqrt(t_scale));
 }
 
-double hv__dist_front_step(double lu0, double lthr, int dim, double tau)
+double hv__dist_axis_kappa(int dim, double tau)
 {
     const double axis[3] = {1, 0, 0};
-    return (lu0 - lthr - FRONT_MARGIN) / hv__dist_lattice_kappa(axis, dim, tau);
+    return hv__dist_lattice_kappa(axis, dim, tau);
+}
+
+double hv__dist_front_step(double lu0, double lthr, int dim, double tau)
+{
+    return (lu0 - lthr - FRONT_MARGIN) / hv__dist_axis_kappa(dim, tau);
+}
+
+int hv__dist_next_reach(double voxels)
+{
+    /* a cell `voxels` from a front cell (chessboard) lies within
+     * ceil((voxels + DIST_TILE - 1) / DIST_TILE) tiles of the front cell's tile */
+    if (!(voxels > 0))
+        return DIST_FIRST_REACH;
+    double r = ceil((voxels + DIST_TILE - 1) / DIST_TILE);
+    return r < 2 ? 2 : r > 16 ? 16 : (int)r;
 }

@@ -1,6 +1,8 @@
 /* Private: pieces of the heat-method distance shared between its files: the
- * pipeline (distance_heat.c), the sources (distance_sources.c), the device
- * path (distance_cl.c) and the lattice and front rules (distance_front.c). */
+ * object and its entries (distance_heat.c), the stages (distance_march.c),
+ * their tiles and local solves (distance_band.c), the sources
+ * (distance_sources.c), the device path (distance_cl.c) and the lattice and
+ * front rules (distance_front.c). */
 #ifndef HV_HEAT_DISTANCE_INTERNAL_H
 #define HV_HEAT_DISTANCE_INTERNAL_H
 
@@ -48,6 +50,12 @@ double hv__dist_trust_log(double relres, double wn, double t_scale);
  * current front) falls to FRONT_MARGIN above the trust bound lthr, at the
  * axis-aligned lattice decay rate for tau = h^2 / t. Below 2: no progress. */
 double hv__dist_front_step(double lu0, double lthr, int dim, double tau);
+
+/* kappa h of the axis-aligned lattice plane wave for tau = h^2 / t. */
+double hv__dist_axis_kappa(int dim, double tau);
+/* The core's reach in tiles for a trusted distance of `voxels` from the
+ * front: every cell that far from a front cell lies on a core tile. */
+int hv__dist_next_reach(double voxels);
 
 /* The options' and the sources' checks of hv_distance_compute, and its error
  * when no source landed on a fluid cell (HV_OK when one did). */
@@ -105,6 +113,46 @@ typedef struct hv_dist_hooks {
     hv_status (*solve)(void *user, int q, const double *f, double *u, hv_solve_info *info);
 } hv_dist_hooks;
 
+/* Tiles of the stages (distance_band.c): DIST_TILE cells a side (1 along z
+ * on 2D grids). A stage solves on the core tiles, those within `reach` tiles
+ * (chessboard) of a tile holding a front weight (behind the front, where every
+ * cell is inside, only those next to one), and on a halo ring of tiles around
+ * them; only the core's cells are trusted. */
+#define DIST_TILE 8
+/* The first stage's reach, in tiles: the sources' heat is trusted about 20
+ * voxels out. */
+#define DIST_FIRST_REACH 4
+/* The band's heat steps are solved in double to this relative residual (or
+ * diffuse_tol when tighter): the trust bound, and so each stage's step, moves
+ * out by ln(diffuse_tol / DIST_BAND_TOL) / kappa voxels (6.7 at the default
+ * 1e-11 and t = 2 h^2) for a few more sweeps. */
+#ifndef DIST_BAND_TOL
+#define DIST_BAND_TOL 1e-13
+#endif
+
+typedef struct hv_dist_tiles {
+    int tn[3];           /* cells on a tile's side per axis */
+    int nt[3];           /* tiles per axis */
+    size_t count, cells; /* tiles; cells of a tile (tn[0] tn[1] tn[2]) */
+    int band;            /* 1: stages on the band (hv__dist_band_*); 0: every tile is core
+                           and the hooks solve on the whole box */
+    uint32_t *list;      /* the stage's tiles, the core (ncore) first, then the halo */
+    size_t ncore, nlist;
+    int reach; /* the core's radius in tiles */
+    /* band mode only (NULL otherwise): per tile */
+    int32_t *slot;         /* its place in list, -1 outside the band */
+    int32_t *nbr;          /* 6 per listed tile: the slots of its face neighbours (-1 none) */
+    int32_t *fluid;        /* its cells in regions with a source */
+    int32_t *open_cells;   /* of those, the ones not yet inside a front */
+    uint8_t *front;        /* it holds a weight of the current front */
+    uint8_t *dist, *dist2; /* chessboard distance to a front tile (capped), scratch */
+    /* per band cell (list order, `cells` per tile): 0 off the unknowns, else 1 +
+     * its open faces; the right-hand side; the two solves' iterates */
+    uint8_t *code;
+    double *f, *x[4];
+    size_t cap;
+} hv_dist_tiles;
+
 /* A box of cells the stages run on: the whole grid, or a rank's box with its
  * ghost layer, whose owned cells are lo..hi-1 (box indices). */
 typedef struct hv_dist_box {
@@ -119,7 +167,16 @@ typedef struct hv_dist_box {
     float *X[3];      /* face directions; NaN = not assigned yet */
     size_t nface[3];
     const hv_dist_hooks *hk;
+    hv_dist_tiles tl; /* set up by hv__dist_march */
+    int band;         /* the stages solve on tiles near the front (hooks only for Poisson) */
 } hv_dist_box;
+
+/* Labels the connected fluid regions of b that hold a source weight of w
+ * (b->region, allocated here). */
+hv_status hv__dist_label_regions(hv_dist_box *b, const double *w, size_t *nregions,
+                                 size_t *unreach);
+/* The 2-norm of v over b's owned cells (and the ranks). */
+double hv__dist_norm2(const hv_dist_box *b, const double *v);
 
 /* Sets n, count, strides and the face counts of b from dim and n; the owned
  * cells default to all. */
@@ -135,5 +192,37 @@ void hv__dist_box_init(hv_dist_box *b, int dim, const int n[3], double h, const 
 hv_status hv__dist_march(hv_dist_box *b, const hv_distance_opts *o, double *w, double *u,
                          double *u2, uint8_t *inside, uint8_t *ok, float *ref, float *out,
                          hv_distance_stats *S);
+
+/* Tile t's first cell (box indices) and its cell counts per axis. */
+static inline void hv__dist_tile_cells(const hv_dist_box *b, size_t t, int lo[3], int len[3])
+{
+    size_t r = t;
+    for (int a = 0; a < 3; a++) {
+        int ta = (int)(r % (size_t)b->tl.nt[a]);
+        r /= (size_t)b->tl.nt[a];
+        lo[a] = ta * b->tl.tn[a];
+        len[a] = b->n[a] - lo[a] < b->tl.tn[a] ? b->n[a] - lo[a] : b->tl.tn[a];
+    }
+}
+
+/* The tiles of box b (band: the stages' band mode); every tile listed as
+ * core. Fails only out of memory. hv__dist_tiles_free releases them. */
+hv_status hv__dist_tiles_init(hv_dist_box *b, int band);
+void hv__dist_tiles_free(hv_dist_tiles *T);
+/* Band mode: counts the tiles' reachable cells (b->region set) and marks the
+ * tiles holding a weight of w as the front. */
+void hv__dist_tiles_start(hv_dist_box *b, const double *w);
+/* Band mode: clears ok on the previous core tiles' cells, then chooses the
+ * stage's tiles around the front tiles and builds the band's masks. */
+hv_status hv__dist_band_select(hv_dist_box *b, uint8_t *ok);
+/* Band mode: (I - t Lap) u = w and (I - T_RATIO t Lap) u2 = w on the band
+ * (u = 0 beyond it), to the relative residual tol; writes u and u2 on the
+ * core tiles' cells. info: sweeps and the measured relative residuals. */
+hv_status hv__dist_band_solve(hv_dist_box *b, const double *w, double *u, double *u2, double tol,
+                              hv_solve_info info[2]);
+/* Chebyshev sweeps for the relative residual tol at s = t / h^2. */
+int hv__dist_band_sweeps(int dim, double s, double tol);
+/* The reachable cells of the stage's tiles (core and halo). */
+size_t hv__dist_band_cells(const hv_dist_box *b);
 
 #endif

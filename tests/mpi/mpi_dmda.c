@@ -492,6 +492,7 @@ static int distance_case(const dcase *k, hv_dmda_distance **keep, DM *kda, Vec *
     hv_distance_opts o;
     hv_distance_opts_default(&o);
     o.backend = HV_BACKEND_MG;
+    o.whole_stages = 1; /* the DMDA's stages run on the whole box */
     hv_distance_stats sr, sd;
     if (hv_distance_compute(g, &src, &o, &sr)) {
         fprintf(stderr, "mpi_dmda: %s: one process: %s\n", k->name, hv_last_error());

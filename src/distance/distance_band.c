@@ -1,0 +1,514 @@
+/* The stages' tiles and their local heat steps (distance_internal.h;
+ * docs/METHOD.md, "Heat method", "Stages on tiles").
+ *
+ * A stage's diffusion matters only where its front can reach: (I - t Lap)^-1
+ * decays like e^{-kappa r}, kappa h ~ 1/sqrt(t_scale), and its cells are
+ * trusted only out to where u falls to the solve's error bound. So a stage
+ * solves on the tiles (DIST_TILE cells a side) within `reach` tiles of a
+ * tile that holds a front weight (the core; behind the front only those next
+ * to a front tile), and one ring of tiles more (the halo: its cells are
+ * solved, never trusted, so that the Neumann reflection at the band's edge,
+ * about e^{-2 kappa 8h} of what reaches it, stays out of the trusted cells).
+ * Every cell then takes part in a few stages, not in all of them.
+ *
+ * The band's cells are stored compactly, tile after tile (DIST_TILE^dim
+ * cells each, list order), and both heat steps are solved there by
+ * Jacobi-preconditioned Chebyshev iteration: D^-1 A has its spectrum in
+ * [1/(1+2ds), 2 - 1/(1+2ds)] (s = t/h^2, d = dim; Gershgorin, and A >= I), so
+ * a fixed count of sweeps reaches the tolerance. No inner products, no
+ * hierarchy to build per stage, one streaming pass per sweep; the residual
+ * is measured once at the end. */
+#include "distance_internal.h"
+#include "core/error.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
+
+#define CAP 250 /* tile distances are capped here */
+
+static const double zero_row[DIST_TILE];
+
+hv_status hv__dist_tiles_init(hv_dist_box *b, int band)
+{
+    hv_dist_tiles *T = &b->tl;
+    memset(T, 0, sizeof *T);
+    T->cells = 1;
+    T->count = 1;
+    for (int a = 0; a < 3; a++) {
+        T->tn[a] = a < b->dim ? DIST_TILE : 1;
+        T->nt[a] = (b->n[a] + T->tn[a] - 1) / T->tn[a];
+        T->cells *= (size_t)T->tn[a];
+        T->count *= (size_t)T->nt[a];
+    }
+    T->band = band;
+    T->reach = DIST_FIRST_REACH;
+    T->list = malloc(T->count * sizeof *T->list);
+    if (!T->list)
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory for %zu tiles", T->count);
+    T->nlist = T->ncore = T->count;
+    for (size_t t = 0; t < T->count; t++)
+        T->list[t] = (uint32_t)t;
+    if (!band)
+        return HV_OK;
+    T->slot = malloc(T->count * sizeof *T->slot);
+    T->nbr = malloc(6 * T->count * sizeof *T->nbr);
+    T->fluid = calloc(T->count, sizeof *T->fluid);
+    T->open_cells = calloc(T->count, sizeof *T->open_cells);
+    T->front = calloc(T->count, 1);
+    T->dist = malloc(T->count);
+    T->dist2 = malloc(T->count);
+    if (!T->slot || !T->nbr || !T->fluid || !T->open_cells || !T->front || !T->dist || !T->dist2)
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory for %zu tiles", T->count);
+    T->nlist = T->ncore = 0;
+    return HV_OK;
+}
+
+void hv__dist_tiles_free(hv_dist_tiles *T)
+{
+    free(T->list);
+    free(T->slot);
+    free(T->nbr);
+    free(T->fluid);
+    free(T->open_cells);
+    free(T->front);
+    free(T->dist);
+    free(T->dist2);
+    hv_free(T->code);
+    hv_free(T->f);
+    for (int q = 0; q < 4; q++)
+        hv_free(T->x[q]);
+    memset(T, 0, sizeof *T);
+}
+
+/* Counts each tile's reachable fluid cells and marks the tiles that hold a
+ * source weight: the first stage's front. */
+void hv__dist_tiles_start(hv_dist_box *b, const double *w)
+{
+    hv_dist_tiles *T = &b->tl;
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t t = 0; t < T->count; t++) {
+        int lo[3], len[3], nf = 0, fr = 0;
+        hv__dist_tile_cells(b, t, lo, len);
+        for (int k = lo[2]; k < lo[2] + len[2]; k++)
+            for (int j = lo[1]; j < lo[1] + len[1]; j++) {
+                size_t c = lo[0] + b->cs[1] * j + b->cs[2] * k;
+                for (int i = 0; i < len[0]; i++, c++) {
+                    nf += b->region[c] >= 0;
+                    fr |= w[c] > 0;
+                }
+            }
+        T->fluid[t] = nf;
+        T->open_cells[t] = nf;
+        T->front[t] = (uint8_t)fr;
+    }
+}
+
+/* One axis of the capped chessboard distance to the front tiles: dst(t) =
+ * min over offsets o along axis a of max(|o|, src(t + o e_a)). */
+static void dist_axis(const hv_dist_tiles *T, const uint8_t *src, uint8_t *dst, int a, int cap)
+{
+    size_t stride = 1;
+    for (int b = 0; b < a; b++)
+        stride *= (size_t)T->nt[b];
+    const int na = T->nt[a];
+#pragma omp parallel for schedule(static)
+    for (size_t t = 0; t < T->count; t++) {
+        int ta = (int)((t / stride) % (size_t)na), best = src[t];
+        for (int o = 1; o < best && o <= cap; o++) {
+            if (ta - o >= 0) {
+                int v = src[t - o * stride] > o ? src[t - o * stride] : o;
+                best = v < best ? v : best;
+            }
+            if (ta + o < na) {
+                int v = src[t + o * stride] > o ? src[t + o * stride] : o;
+                best = v < best ? v : best;
+            }
+        }
+        dst[t] = (uint8_t)best;
+    }
+}
+
+/* The band cell codes of listed tile q: 0 off the unknowns (solid cells, cells
+ * of regions without a source, cells past the grid), else 1 + the number of
+ * open faces to other cells of the band. A closed face's neighbour holds 0
+ * (a cell that is no unknown, or zero_row beyond the band), so the sweeps add
+ * every neighbour and take the diagonal from the code. */
+static void tile_codes(const hv_dist_box *b, size_t q)
+{
+    const hv_dist_tiles *T = &b->tl;
+    int lo[3], len[3];
+    hv__dist_tile_cells(b, T->list[q], lo, len);
+    uint8_t *m = T->code + q * T->cells;
+    memset(m, 0, T->cells);
+    const int32_t *nb = T->nbr + 6 * q;
+    for (int lz = 0; lz < len[2]; lz++)
+        for (int ly = 0; ly < len[1]; ly++)
+            for (int lx = 0; lx < len[0]; lx++) {
+                const int l[3] = {lx, ly, lz};
+                size_t c = (lo[0] + lx) + b->cs[1] * (lo[1] + ly) + b->cs[2] * (lo[2] + lz);
+                if (b->region[c] < 0)
+                    continue;
+                int v = 1;
+                for (int a = 0; a < b->dim; a++) {
+                    int g = lo[a] + l[a];
+                    v += g > 0 && (l[a] > 0 || nb[2 * a] >= 0) && b->region[c - b->cs[a]] >= 0;
+                    v += g + 1 < b->n[a] && (l[a] + 1 < len[a] || nb[2 * a + 1] >= 0) &&
+                         b->region[c + b->cs[a]] >= 0;
+                }
+                m[lx + T->tn[0] * (ly + T->tn[1] * lz)] = (uint8_t)v;
+            }
+}
+
+/* The slots of listed tile q's six face neighbours (-1: none in the band). */
+static void tile_neighbours(hv_dist_tiles *T, size_t q)
+{
+    size_t t = T->list[q], r = t, stride = 1;
+    for (int a = 0; a < 3; a++) {
+        int ta = (int)(r % (size_t)T->nt[a]);
+        r /= (size_t)T->nt[a];
+        T->nbr[6 * q + 2 * a] = ta > 0 ? T->slot[t - stride] : -1;
+        T->nbr[6 * q + 2 * a + 1] = ta + 1 < T->nt[a] ? T->slot[t + stride] : -1;
+        stride *= (size_t)T->nt[a];
+    }
+}
+
+/* Tile t has a core tile among its 26 neighbours (and itself). */
+static int near_core(const hv_dist_tiles *T, size_t t)
+{
+    int ti[3];
+    size_t r = t;
+    for (int a = 0; a < 3; a++) {
+        ti[a] = (int)(r % (size_t)T->nt[a]);
+        r /= (size_t)T->nt[a];
+    }
+    for (int dz = -1; dz <= 1; dz++)
+        for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+                int x = ti[0] + dx, y = ti[1] + dy, z = ti[2] + dz;
+                if (x < 0 || y < 0 || z < 0 || x >= T->nt[0] || y >= T->nt[1] || z >= T->nt[2])
+                    continue;
+                size_t o = x + (size_t)T->nt[0] * (y + (size_t)T->nt[1] * z);
+                if (T->slot[o] == -2)
+                    return 1;
+            }
+    return 0;
+}
+
+/* Lists the core tiles (slot -2 while listing), then the halo. */
+static void list_tiles(hv_dist_tiles *T)
+{
+    T->ncore = T->nlist = 0;
+    for (size_t t = 0; t < T->count; t++) {
+        int d = T->dist[t];
+        T->slot[t] = -1;
+        if (T->fluid[t] && d <= T->reach && (T->open_cells[t] > 0 || d <= 1)) {
+            T->slot[t] = -2;
+            T->list[T->ncore++] = (uint32_t)t;
+        }
+    }
+    T->nlist = T->ncore;
+    for (size_t t = 0; t < T->count; t++)
+        if (T->slot[t] == -1 && T->fluid[t] && T->dist[t] <= T->reach + 1 && near_core(T, t))
+            T->list[T->nlist++] = (uint32_t)t;
+    for (size_t q = 0; q < T->nlist; q++)
+        T->slot[T->list[q]] = (int32_t)q;
+}
+
+/* Room for the band's compact arrays. */
+static hv_status band_room(hv_dist_tiles *T)
+{
+    size_t need = T->nlist * T->cells;
+    if (need <= T->cap)
+        return HV_OK;
+    size_t cap = need + need / 4;
+    hv_free(T->code);
+    hv_free(T->f);
+    for (int q = 0; q < 4; q++)
+        hv_free(T->x[q]);
+    T->code = hv_malloc(cap);
+    T->f = hv_malloc(cap * sizeof *T->f);
+    int bad = !T->code || !T->f;
+    for (int q = 0; q < 4; q++)
+        bad |= !(T->x[q] = hv_malloc(cap * sizeof *T->x[q]));
+    T->cap = bad ? 0 : cap;
+    if (bad)
+        return hv__error(HV_ERR_NOMEM, "distance: out of memory for a band of %zu cells", need);
+    return HV_OK;
+}
+
+hv_status hv__dist_band_select(hv_dist_box *b, uint8_t *ok)
+{
+    hv_dist_tiles *T = &b->tl;
+    /* the previous stage's trusted cells are forgotten */
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t q = 0; q < T->ncore; q++) {
+        int lo[3], len[3];
+        hv__dist_tile_cells(b, T->list[q], lo, len);
+        for (int k = lo[2]; k < lo[2] + len[2]; k++)
+            for (int j = lo[1]; j < lo[1] + len[1]; j++)
+                memset(ok + lo[0] + b->cs[1] * j + b->cs[2] * k, 0, (size_t)len[0]);
+    }
+    const int cap = T->reach + 2 < CAP ? T->reach + 2 : CAP;
+    for (size_t t = 0; t < T->count; t++)
+        T->dist[t] = T->front[t] ? 0 : (uint8_t)cap;
+    dist_axis(T, T->dist, T->dist2, 0, cap);
+    dist_axis(T, T->dist2, T->dist, 1, cap);
+    dist_axis(T, T->dist, T->dist2, 2, cap);
+    memcpy(T->dist, T->dist2, T->count);
+    list_tiles(T);
+    hv_status st = band_room(T);
+    if (st)
+        return st;
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t q = 0; q < T->nlist; q++) {
+        tile_neighbours(T, q);
+        tile_codes(b, q);
+    }
+    return HV_OK;
+}
+
+/* Row pointers of listed tile q, row (ly, lz), into the band array x: the row
+ * itself and its four transverse neighbour rows (zero_row where none). */
+typedef struct band_rows {
+    const double *ym, *yp, *zm, *zp;
+    double xm, xp; /* the x-neighbours of the row's ends */
+} band_rows;
+
+static const double *nb_row(const hv_dist_tiles *T, const double *x, int32_t s, int ly, int lz)
+{
+    return s >= 0 ? x + (size_t)s * T->cells + (size_t)T->tn[0] * (ly + (size_t)T->tn[1] * lz)
+                  : zero_row;
+}
+
+static inline void rows_of(const hv_dist_tiles *T, const double *x, size_t q, int ly, int lz,
+                           band_rows *R)
+{
+    const int32_t *nb = T->nbr + 6 * q;
+    const double *r = x + q * T->cells + (size_t)T->tn[0] * (ly + (size_t)T->tn[1] * lz);
+    const int ty = T->tn[1], tz = T->tn[2], tx = T->tn[0];
+    R->ym = ly > 0 ? r - tx : nb_row(T, x, nb[2], ty - 1, lz);
+    R->yp = ly + 1 < ty ? r + tx : nb_row(T, x, nb[3], 0, lz);
+    R->zm = lz > 0 ? r - (size_t)tx * ty : nb_row(T, x, nb[4], ly, tz - 1);
+    R->zp = lz + 1 < tz ? r + (size_t)tx * ty : nb_row(T, x, nb[5], ly, 0);
+    R->xm = nb[0] >= 0 ? nb_row(T, x, nb[0], ly, lz)[tx - 1] : 0;
+    R->xp = nb[1] >= 0 ? nb_row(T, x, nb[1], ly, lz)[0] : 0;
+}
+
+/* The row's cells and their x-neighbours, as three rows of DIST_TILE. */
+static inline void row_x(const double *r, const band_rows *R, double xl[DIST_TILE],
+                         double xr[DIST_TILE])
+{
+    xl[0] = R->xm;
+    xr[DIST_TILE - 1] = R->xp;
+    for (int l = 1; l < DIST_TILE; l++) {
+        xl[l] = r[l - 1];
+        xr[l - 1] = r[l];
+    }
+}
+
+/* One Chebyshev sweep on listed tile q: prev <- omega (cur + D^-1 (f - A cur)
+ * - prev) + prev, on the unknowns (0 elsewhere). */
+static void sweep_tile(const hv_dist_tiles *T, size_t q, const double *cur, double *prev, double s,
+                       double omega)
+{
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            band_rows R;
+            rows_of(T, cur, q, ly, lz, &R);
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            const double *r = cur + o, *f = T->f + o;
+            const uint8_t *code = T->code + o;
+            double *p = prev + o, xl[DIST_TILE], xr[DIST_TILE];
+            row_x(r, &R, xl, xr);
+            for (int l = 0; l < DIST_TILE; l++) {
+                double c = code[l], d = 1 + s * (c > 1 ? c - 1 : 0);
+                double nb = xl[l] + xr[l] + R.ym[l] + R.yp[l] + R.zm[l] + R.zp[l];
+                double v = omega * ((f[l] - (d * r[l] - s * nb)) / d + r[l] - p[l]) + p[l];
+                p[l] = c > 0 ? v : 0;
+            }
+        }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define SWEEP_AVX512 1
+/* sweep_tile with a row of DIST_TILE doubles in one AVX-512 register: the
+ * x-neighbours by lane shifts (valignq) with the neighbour tiles' end cells. */
+__attribute__((target("avx512f,avx2"))) static void sweep_tile_avx512(const hv_dist_tiles *T,
+                                                                      size_t q, const double *cur,
+                                                                      double *prev, double s,
+                                                                      double omega)
+{
+    const __m512d vs = _mm512_set1_pd(s), vo = _mm512_set1_pd(omega), one = _mm512_set1_pd(1),
+                  zero = _mm512_setzero_pd();
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            band_rows R;
+            rows_of(T, cur, q, ly, lz, &R);
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            const __m512i x = _mm512_castpd_si512(_mm512_loadu_pd(cur + o));
+            const __m512d xl = _mm512_castsi512_pd(
+                _mm512_alignr_epi64(x, _mm512_castpd_si512(_mm512_set1_pd(R.xm)), 7));
+            const __m512d xr = _mm512_castsi512_pd(
+                _mm512_alignr_epi64(_mm512_castpd_si512(_mm512_set1_pd(R.xp)), x, 1));
+            const __m512d c = _mm512_cvtepi32_pd(
+                _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)(T->code + o))));
+            const __m512d d = _mm512_fmadd_pd(vs, _mm512_max_pd(_mm512_sub_pd(c, one), zero), one);
+            __m512d nb = _mm512_add_pd(_mm512_add_pd(xl, xr),
+                                       _mm512_add_pd(_mm512_loadu_pd(R.ym), _mm512_loadu_pd(R.yp)));
+            nb = _mm512_add_pd(nb, _mm512_add_pd(_mm512_loadu_pd(R.zm), _mm512_loadu_pd(R.zp)));
+            const __m512d xc = _mm512_castsi512_pd(x), p = _mm512_loadu_pd(prev + o);
+            const __m512d au = _mm512_fmsub_pd(d, xc, _mm512_mul_pd(vs, nb));
+            const __m512d corr = _mm512_div_pd(_mm512_sub_pd(_mm512_loadu_pd(T->f + o), au), d);
+            const __m512d v = _mm512_fmadd_pd(vo, _mm512_sub_pd(_mm512_add_pd(corr, xc), p), p);
+            const __mmask8 known = _mm512_cmp_pd_mask(c, zero, _CMP_GT_OQ);
+            _mm512_storeu_pd(prev + o, _mm512_maskz_mov_pd(known, v));
+        }
+}
+#else
+#define SWEEP_AVX512 0
+#endif
+
+static void band_sweep(const hv_dist_tiles *T, const double *cur, double *prev, double s,
+                       double omega)
+{
+#if SWEEP_AVX512
+    static int avx512 = -1;
+    if (avx512 < 0) { /* HV_NO512 turns it off, as for the multigrid's kernels */
+        const char *e = getenv("HV_NO512");
+        avx512 = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0"));
+    }
+    if (avx512) {
+#pragma omp parallel for schedule(static)
+        for (size_t q = 0; q < T->nlist; q++)
+            sweep_tile_avx512(T, q, cur, prev, s, omega);
+        return;
+    }
+#endif
+#pragma omp parallel for schedule(static)
+    for (size_t q = 0; q < T->nlist; q++)
+        sweep_tile(T, q, cur, prev, s, omega);
+}
+
+/* ||f - A x||^2 and ||f||^2 over the band. */
+static void band_residual(const hv_dist_tiles *T, const double *x, double s, double out[2])
+{
+    double rr = 0, ff = 0;
+#pragma omp parallel for schedule(static) reduction(+ : rr, ff)
+    for (size_t q = 0; q < T->nlist; q++)
+        for (int lz = 0; lz < T->tn[2]; lz++)
+            for (int ly = 0; ly < T->tn[1]; ly++) {
+                band_rows R;
+                rows_of(T, x, q, ly, lz, &R);
+                size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+                double xl[DIST_TILE], xr[DIST_TILE];
+                row_x(x + o, &R, xl, xr);
+                for (int l = 0; l < DIST_TILE; l++) {
+                    const uint8_t c = T->code[o + l];
+                    if (!c)
+                        continue;
+                    double nb = xl[l] + xr[l] + R.ym[l] + R.yp[l] + R.zm[l] + R.zp[l];
+                    double r = T->f[o + l] - ((1 + s * (c - 1)) * x[o + l] - s * nb);
+                    rr += r * r;
+                    ff += T->f[o + l] * T->f[o + l];
+                }
+            }
+    out[0] = rr;
+    out[1] = ff;
+}
+
+int hv__dist_band_sweeps(int dim, double s, double tol)
+{
+    /* the A-norm bound 2 c^k / (1 + c^2k), c = (sqrt(K) - 1) / (sqrt(K) + 1), K = 1 + 4 d s,
+     * under tol / sqrt(K) (a bound on the relative residual) */
+    const double K = 1 + 4 * dim * s, c = (sqrt(K) - 1) / (sqrt(K) + 1);
+    int k = 1;
+    while (2 * pow(c, k) / (1 + pow(c, 2 * k)) > tol / sqrt(K) && k < 2000)
+        k++;
+    return k;
+}
+
+/* x (the result: T->x[2q] or T->x[2q+1]) = (I - s Lap)^-1 f on the band. */
+static const double *band_chebyshev(hv_dist_tiles *T, int dim, double s, int q, int sweeps)
+{
+    const double rho = 1 - 1 / (1 + 2 * dim * s), r2 = rho * rho;
+    double *cur = T->x[2 * q], *prev = T->x[2 * q + 1];
+    const size_t n = T->nlist * T->cells;
+    memset(prev, 0, n * sizeof *prev);
+    memset(cur, 0, n * sizeof *cur);
+    double omega = 1;
+    for (int k = 0; k < sweeps; k++) {
+        band_sweep(T, cur, prev, s, omega);
+        double *t = cur;
+        cur = prev;
+        prev = t;
+        omega = k == 0 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega / 4);
+    }
+    return cur;
+}
+
+/* The band's values of x onto the core tiles' cells of the whole-box array u. */
+static void band_scatter(const hv_dist_box *b, const double *x, double *u)
+{
+    const hv_dist_tiles *T = &b->tl;
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t q = 0; q < T->ncore; q++) {
+        int lo[3], len[3];
+        hv__dist_tile_cells(b, T->list[q], lo, len);
+        for (int lz = 0; lz < len[2]; lz++)
+            for (int ly = 0; ly < len[1]; ly++)
+                memcpy(u + lo[0] + b->cs[1] * (lo[1] + ly) + b->cs[2] * (lo[2] + lz),
+                       x + q * T->cells + (size_t)T->tn[0] * (ly + (size_t)T->tn[1] * lz),
+                       (size_t)len[0] * sizeof *u);
+    }
+}
+
+/* The source weights w onto the band array f. */
+static void band_gather(const hv_dist_box *b, const double *w)
+{
+    const hv_dist_tiles *T = &b->tl;
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t q = 0; q < T->nlist; q++) {
+        int lo[3], len[3];
+        hv__dist_tile_cells(b, T->list[q], lo, len);
+        double *f = T->f + q * T->cells;
+        memset(f, 0, T->cells * sizeof *f);
+        for (int lz = 0; lz < len[2]; lz++)
+            for (int ly = 0; ly < len[1]; ly++)
+                memcpy(f + (size_t)T->tn[0] * (ly + (size_t)T->tn[1] * lz),
+                       w + lo[0] + b->cs[1] * (lo[1] + ly) + b->cs[2] * (lo[2] + lz),
+                       (size_t)len[0] * sizeof *f);
+    }
+}
+
+hv_status hv__dist_band_solve(hv_dist_box *b, const double *w, double *u, double *u2, double tol,
+                              hv_solve_info info[2])
+{
+    hv_dist_tiles *T = &b->tl;
+    band_gather(b, w);
+    for (int q = 0; q < 2; q++) {
+        const double s = q ? 1 / b->tau[1] : 1 / b->tau[0];
+        const int sweeps = hv__dist_band_sweeps(b->dim, s, tol);
+        const double *x = band_chebyshev(T, b->dim, s, q, sweeps);
+        double r[2];
+        band_residual(T, x, s, r);
+        band_scatter(b, x, q ? u2 : u);
+        memset(&info[q], 0, sizeof info[q]);
+        info[q].iterations = sweeps;
+        info[q].relres = r[1] > 0 ? sqrt(r[0] / r[1]) : 0;
+        info[q].backend = HV_BACKEND_MG;
+    }
+    return HV_OK;
+}
+
+size_t hv__dist_band_cells(const hv_dist_box *b)
+{
+    const hv_dist_tiles *T = &b->tl;
+    size_t n = 0;
+    for (size_t q = 0; q < T->nlist; q++)
+        n += (size_t)T->fluid[T->list[q]];
+    return n;
+}
