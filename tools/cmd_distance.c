@@ -22,11 +22,15 @@ static int usage(FILE *out)
             "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
             "auto|mg|fftw|opencl|petsc]\n"
             "                        [--coarse auto|geometric|aggregation] [--unreachable V]\n"
-            "                        [--threads T] [-q] [-v]\n"
+            "                        [--stages tiles|whole] [--threads T] [-q] [-v]\n"
             "\n"
             "Geodesic distance from the sources through free space, around obstacles, by the\n"
             "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
             "when there are obstacles, a bool grid 'obstacles'.\n"
+            "\n"
+            "--sources may be given several times: the set-up (the obstacles' solvers) is\n"
+            "made once and each source set's distance is a grid of its own in OUT.vdb,\n"
+            "'distance', 'distance_2', ... (one JSON line each).\n"
             "\n"
             "Sources FILE: a mesh (.obj .ply .stl .off, or .gltf .glb .fbx .3mf .dae .x read\n"
             "through assimp: its surface is the source), or text,\n"
@@ -47,6 +51,9 @@ static int usage(FILE *out)
             "--coarse: the solves' coarse levels with obstacles (solve.h): aggregation keeps\n"
             "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
             "(default) takes it for the Poisson solve and geometric levels for the heat steps.\n"
+            "--stages tiles (default): each stage's heat steps are solved on the 8^3 tiles its\n"
+            "front reaches; whole: on the whole grid by the backend (opencl and petsc do).\n"
+            "-v: the cells each stage solved on.\n"
             "\n"
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
             "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
@@ -221,37 +228,45 @@ static int read_sources(const char *path, int dim, source_list *s)
 }
 
 /* World bounds of the point and mesh sources and the obstacle mesh; returns 0 if none. */
-static int source_bounds(const source_list *s, const hv_mesh *obst, double lo[3], double hi[3])
+/* Adds mesh m's bounds to lo..hi; whether it had any. */
+static int mesh_bounds_add(const hv_mesh *m, double lo[3], double hi[3])
+{
+    double ml[3], mh[3];
+    if (!m || hv_mesh_bounds(m, ml, mh) != HV_OK)
+        return 0;
+    for (int a = 0; a < 3; a++) {
+        lo[a] = fmin(lo[a], ml[a]);
+        hi[a] = fmax(hi[a], mh[a]);
+    }
+    return 1;
+}
+
+/* The bounds of the ns source sets s and the obstacle mesh (may be NULL). */
+static int source_bounds(const source_list *s, int ns, const hv_mesh *obst, double lo[3],
+                         double hi[3])
 {
     int any = 0;
     for (int a = 0; a < 3; a++) {
         lo[a] = INFINITY;
         hi[a] = -INFINITY;
     }
-    for (size_t i = 0; i < s->npts; i++)
-        for (int a = 0; a < 3; a++) {
-            lo[a] = fmin(lo[a], s->pts[3 * i + a]);
-            hi[a] = fmax(hi[a], s->pts[3 * i + a]);
-            any = 1;
-        }
-    const hv_mesh *ms[2] = {s->mesh, obst};
-    for (int q = 0; q < 2; q++) {
-        double ml[3], mh[3];
-        if (ms[q] && hv_mesh_bounds(ms[q], ml, mh) == HV_OK) {
+    for (int q = 0; q < ns; q++) {
+        for (size_t i = 0; i < s[q].npts; i++)
             for (int a = 0; a < 3; a++) {
-                lo[a] = fmin(lo[a], ml[a]);
-                hi[a] = fmax(hi[a], mh[a]);
+                lo[a] = fmin(lo[a], s[q].pts[3 * i + a]);
+                hi[a] = fmax(hi[a], s[q].pts[3 * i + a]);
+                any = 1;
             }
-            any = 1;
-        }
+        any |= mesh_bounds_add(s[q].mesh, lo, hi);
     }
-    return any;
+    return mesh_bounds_add(obst, lo, hi) | any;
 }
 
 /* Grid from a VDB mask: the named grid's transform; the box is --bbox or its
  * default block grown to hold the sources plus pad cells. */
-static int grid_from_mask(const char *path, const char *name, const source_list *s, int use_bbox,
-                          const double bbox[6], int pad, hv_grid **g, double index0[3])
+static int grid_from_mask(const char *path, const char *name, const source_list *s, int ns,
+                          int use_bbox, const double bbox[6], int pad, hv_grid **g,
+                          double index0[3])
 {
     hv_vdb_grid_info info[64];
     size_t count = 0;
@@ -308,7 +323,7 @@ static int grid_from_mask(const char *path, const char *name, const source_list 
             sscanf(buf, "[%d, %d, %d]", &hi[0], &hi[1], &hi[2]);
         hv_clear_error();
         double sl[3], sh[3];
-        if (source_bounds(s, NULL, sl, sh))
+        if (source_bounds(s, ns, NULL, sl, sh))
             for (int a = 0; a < 3; a++) {
                 lo[a] = (int)fmin(lo[a], floor((sl[a] - gi->index0_world[a]) / h) - pad);
                 hi[a] = (int)fmax(hi[a], ceil((sh[a] - gi->index0_world[a]) / h) + pad);
@@ -337,14 +352,33 @@ static int parse_unreachable(const char *v, float *out)
 }
 
 /* The command line of heatvox distance. */
+#define MAX_SETS 64
+
 typedef struct dist_args {
-    const char *sources, *mask, *mask_grid, *obst_mesh, *out, *npy;
+    const char *sources; /* the first source set */
+    const char *sets[MAX_SETS];
+    int nsets;
+    const char *mask, *mask_grid, *obst_mesh, *out, *npy;
     const char *h5; /* -o OUT.h5 (then out is NULL) */
     int res, dim, pad, use_bbox, threads, none;
     double vsize, bbox[6];
     hv_distance_opts o;
     int coarse; /* hv_coarse */
+    int whole;  /* --stages whole */
 } dist_args;
+
+/* --sources FILE, once per source set. */
+static int take_sources(const char *cmd, const char *opt, char **v, int nv, void *dst)
+{
+    dist_args *A = dst;
+    if (nv < 1)
+        return -cli_usage_error(cmd, "%s needs 1 value", opt);
+    if (A->nsets == MAX_SETS)
+        return -cli_usage_error(cmd, "at most %d source sets (--sources)", MAX_SETS);
+    A->sets[A->nsets++] = v[0];
+    A->sources = A->sets[0];
+    return 1;
+}
 
 /* --bbox: 6 numbers, or 4 with --dim 2 (which may come later: take what
  * parses). */
@@ -399,7 +433,7 @@ static int parse_args(int argc, char **argv, dist_args *A)
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
         {.names = "--bbox", .kind = CLI_FN, .dst = A, .fn = take_bbox},
-        {.names = "--sources", .kind = CLI_STR, .dst = &A->sources},
+        {.names = "--sources", .kind = CLI_FN, .dst = A, .fn = take_sources},
         {.names = "--obstacles", .kind = CLI_FN, .dst = A, .fn = take_obstacles},
         {.names = "--obstacle-grid", .kind = CLI_STR, .dst = &A->mask_grid},
         {.names = "--obstacle-mesh", .kind = CLI_STR, .dst = &A->obst_mesh},
@@ -417,6 +451,11 @@ static int parse_args(int argc, char **argv, dist_args *A)
          .choices = "auto|geometric|aggregation",
          .needs = "auto, geometric or aggregation"},
         {.names = "--unreachable", .kind = CLI_FN, .dst = &A->o, .fn = take_unreachable},
+        {.names = "--stages",
+         .kind = CLI_CHOICE,
+         .dst = &A->whole,
+         .choices = "tiles|whole",
+         .needs = "tiles or whole"},
         CLI_ROW_THREADS(&A->threads),
         {.names = NULL},
     };
@@ -428,6 +467,7 @@ static int parse_args(int argc, char **argv, dist_args *A)
         return cli_usage_error(CMD, "unexpected argument '%s' (the sources come with --sources)",
                                stray);
     A->o.coarse = (hv_coarse)A->coarse;
+    A->o.whole_stages = A->whole;
     return -1;
 }
 
@@ -465,9 +505,14 @@ static int check_args(dist_args *A)
                                dim);
     if (A->res && A->vsize)
         return cli_usage_error(CMD, "give --res or --voxel-size, not both");
+    if (A->nsets > 1 && (A->npy || A->h5 || A->o.backend == HV_BACKEND_PETSC))
+        return cli_usage_error(CMD, "several --sources write one grid each into -o OUT.vdb; "
+                                    "--npy, OUT.h5 and --backend petsc take one");
     const char *outs[] = {A->out ? A->out : A->h5, A->npy};
-    const char *ins[] = {A->sources, A->mask, A->obst_mesh};
-    if (cli_check_outputs(CMD, outs, 2, ins, 3))
+    const char *ins[MAX_SETS + 2] = {A->mask, A->obst_mesh};
+    for (int q = 0; q < A->nsets; q++)
+        ins[2 + q] = A->sets[q];
+    if (cli_check_outputs(CMD, outs, 2, ins, 2 + A->nsets))
         return HV_EXIT_FAIL;
     return -1;
 }
@@ -475,8 +520,8 @@ static int check_args(dist_args *A)
 /* The grid without a VDB mask: --bbox, or the sources' and the obstacle
  * mesh's bounds plus --pad cells, with --res cells along the longest axis or
  * --voxel-size; the obstacle mesh's cells marked solid. */
-static int grid_from_bounds(const dist_args *A, const source_list *src, const hv_mesh *om,
-                            hv_grid **g)
+static int grid_from_box(const dist_args *A, const source_list *src, int nvox, const hv_mesh *om,
+                         hv_grid **g)
 {
     const int dim = A->dim;
     double lo[3], hi[3];
@@ -485,10 +530,10 @@ static int grid_from_bounds(const dist_args *A, const source_list *src, const hv
             lo[a] = A->bbox[a];
             hi[a] = A->bbox[3 + a];
         }
-    } else if (src->nvox) {
+    } else if (nvox) {
         return cli_usage_error(
             CMD, "voxel sources need --bbox or --obstacles MASK.vdb to define the grid");
-    } else if (!source_bounds(src, om, lo, hi)) {
+    } else if (!source_bounds(src, A->nsets, om, lo, hi)) {
         return cli_usage_error(CMD, "cannot size the grid: give --bbox");
     }
     double ext = 0;
@@ -521,46 +566,108 @@ static int grid_from_bounds(const dist_args *A, const source_list *src, const hv
     return 0;
 }
 
-/* The .npy and the .vdb (the distance, the obstacles, how they were made),
- * staged in co; a VDB mask's transform and index space kept (index0). */
-static int write_files(const dist_args *A, const hv_grid *g, const hv_distance_stats *sd,
-                       const double *index0, cli_outputs *co)
+static int grid_from_bounds(const dist_args *A, const source_list *src, const hv_mesh *om,
+                            hv_grid **g)
 {
-    const char *npy = A->npy, *out = A->out;
-    const char *t_npy = npy ? cli_stage(CMD, co, npy) : NULL;
-    const char *t_out = out && (!npy || t_npy) ? cli_stage(CMD, co, out) : NULL;
-    if ((npy && !t_npy) || (out && !t_out))
-        return HV_EXIT_FAIL;
-    hv_status st;
-    if (npy && (st = hv_write_npy(t_npy, g)))
-        return cli_fail(CMD, npy, st);
-    if (!out)
-        return 0;
-    hv_vdb_writer *w = NULL;
-    char buf[256];
-    st = hv_vdb_writer_create(&w);
-    if (!st && index0)
-        st = hv_vdb_writer_set_index_origin(w, index0);
-    if (!st)
-        st = hv_vdb_writer_add_float(w, g, "distance");
-    if (!st && g->solid)
-        st = hv_vdb_writer_add_mask(w, g, "obstacles");
-    snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s", A->o.t_scale,
-             sd->stages, A->sources);
-    if (!st)
-        st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_method", buf);
-    snprintf(buf, sizeof buf, "%zu", sd->unreachable_cells);
-    if (!st)
-        st = hv_vdb_writer_set_grid_meta(w, "distance", "heatvox_unreachable_cells", buf);
-    if (!st)
-        st = hv_vdb_writer_write(w, t_out);
-    hv_vdb_writer_destroy(&w);
-    return st ? cli_fail(CMD, out, st) : 0;
+    int nvox = 0;
+    for (int q = 0; q < A->nsets; q++)
+        nvox |= src[q].nvox > 0;
+    return grid_from_box(A, src, nvox, om, g);
 }
 
-static void report(const hv_grid *g, const hv_distance_stats *sd, double t_start)
+/* s as a JSON string on stdout. */
+static void json_string(const char *s)
 {
-    printf("{\"command\":\"distance\",\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
+    putchar('"');
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            printf("\\%c", c);
+        else if (c < 0x20)
+            printf("\\u%04x", c);
+        else
+            putchar(c);
+    }
+    putchar('"');
+}
+
+/* The name of source set q's grid: distance, distance_2, distance_3, ... */
+static void set_name(int q, char *buf, size_t len)
+{
+    if (q == 0)
+        snprintf(buf, len, "distance");
+    else
+        snprintf(buf, len, "distance_%d", q + 1);
+}
+
+/* Adds source set q's distance (g->v) to the VDB writer, with how it was made. */
+static hv_status add_set(hv_vdb_writer *w, const dist_args *A, const hv_grid *g,
+                         const hv_distance_stats *sd, int q)
+{
+    char name[32], buf[4200];
+    set_name(q, name, sizeof name);
+    hv_status st = hv_vdb_writer_add_float(w, g, name);
+    snprintf(buf, sizeof buf, "heat method, t = %g h^2, %d stages, sources from %s", A->o.t_scale,
+             sd->stages, A->sets[q]);
+    if (!st)
+        st = hv_vdb_writer_set_grid_meta(w, name, "heatvox_method", buf);
+    snprintf(buf, sizeof buf, "%zu", sd->unreachable_cells);
+    if (!st)
+        st = hv_vdb_writer_set_grid_meta(w, name, "heatvox_unreachable_cells", buf);
+    return st;
+}
+
+/* The outputs being written: their staged names, and the VDB's writer. */
+typedef struct dist_outs {
+    cli_outputs co;
+    const char *npy, *vdb; /* staged names (NULL: not asked for) */
+    hv_vdb_writer *w;
+} dist_outs;
+
+/* Stages the .npy (one source set) and opens the .vdb's writer (the sets'
+ * grids are added as they are computed); a VDB mask's transform and index
+ * space kept (index0). */
+static int open_files(const dist_args *A, const double *index0, dist_outs *F)
+{
+    F->npy = A->npy ? cli_stage(CMD, &F->co, A->npy) : NULL;
+    F->vdb = A->out && (!A->npy || F->npy) ? cli_stage(CMD, &F->co, A->out) : NULL;
+    if ((A->npy && !F->npy) || (A->out && !F->vdb))
+        return HV_EXIT_FAIL;
+    if (!A->out)
+        return 0;
+    hv_status st = hv_vdb_writer_create(&F->w);
+    if (!st && index0)
+        st = hv_vdb_writer_set_index_origin(F->w, index0);
+    return st ? cli_fail(CMD, A->out, st) : 0;
+}
+
+/* Writes the .npy of the one source set and the VDB with the obstacles. */
+static int finish_files(const dist_args *A, const hv_grid *g, dist_outs *F)
+{
+    hv_status st;
+    if (F->npy && (st = hv_write_npy(F->npy, g)))
+        return cli_fail(CMD, A->npy, st);
+    if (!F->w)
+        return 0;
+    st = g->solid ? hv_vdb_writer_add_mask(F->w, g, "obstacles") : HV_OK;
+    if (!st)
+        st = hv_vdb_writer_write(F->w, F->vdb);
+    return st ? cli_fail(CMD, A->out, st) : 0;
+}
+
+static void report(const dist_args *A, const hv_grid *g, const hv_distance_stats *sd, int q,
+                   double t_start)
+{
+    if (A->nsets > 1) {
+        char name[32];
+        set_name(q, name, sizeof name);
+        printf("{\"command\":\"distance\",\"grid_name\":\"%s\",\"sources\":", name);
+        json_string(A->sets[q]);
+        printf(",");
+    } else {
+        printf("{\"command\":\"distance\",");
+    }
+    printf("\"grid\":[%d,%d,%d],\"h\":%g,\"stages\":%d,"
            "\"source_cells\":%zu,\"regions\":%zu,\"unreachable_cells\":%zu,\"dead_faces\":%zu,"
            "\"backend\":\"%s\",\"diffuse_iterations\":%d,\"diffuse_seconds\":%.3f,"
            "\"poisson_iterations\":%d,\"poisson_seconds\":%.3f,\"seconds\":%.3f",
@@ -568,6 +675,11 @@ static void report(const hv_grid *g, const hv_distance_stats *sd, double t_start
            sd->unreachable_cells, sd->dead_faces, hv_backend_name(sd->backend),
            sd->diffuse_iterations, sd->t_diffuse, sd->poisson_iterations, sd->t_poisson,
            hv_now() - t_start);
+    const double cells = (double)g->n[0] * g->n[1] * g->n[2];
+    printf(",\"cells_solved\":%zu,\"cells_solved_grids\":%.2f,\"splat_seconds\":%.3f,"
+           "\"normalize_seconds\":%.3f,\"setup_seconds\":%.3f,\"query_seconds\":%.3f",
+           sd->cells_solved, (double)sd->cells_solved / cells, sd->t_splat, sd->t_normalize,
+           sd->t_setup, sd->t_total - sd->t_setup);
     cli_json_device(sd->backend);
     printf("}\n");
 }
@@ -585,12 +697,14 @@ static int other_rank(const dist_args *A)
     return 0;
 }
 
-/* The sources, the obstacle mesh and the grid (from the VDB mask, or from
+/* The source sets, the obstacle mesh and the grid (from the VDB mask, or from
  * bounds); with a mask, *have_index0 = 1 and index0 its index origin. */
 static int read_inputs(const dist_args *A, source_list *src, hv_mesh **om, hv_grid **g,
                        double index0[3], int *have_index0)
 {
-    int rc = read_sources(A->sources, A->dim, src);
+    int rc = 0;
+    for (int q = 0; !rc && q < A->nsets; q++)
+        rc = read_sources(A->sets[q], A->dim, &src[q]);
     if (rc)
         return rc;
     if (A->obst_mesh) {
@@ -601,11 +715,75 @@ static int read_inputs(const dist_args *A, source_list *src, hv_mesh **om, hv_gr
     }
     if (!A->mask)
         return grid_from_bounds(A, src, *om, g);
-    if ((rc = grid_from_mask(A->mask, A->mask_grid, src, A->use_bbox == 6, A->bbox, A->pad, g,
-                             index0)))
+    if ((rc = grid_from_mask(A->mask, A->mask_grid, src, A->nsets, A->use_bbox == 6, A->bbox,
+                             A->pad, g, index0)))
         return rc;
     *have_index0 = 1;
     return 0;
+}
+
+/* The notes on stderr after source set q's distance. */
+static void set_notes(const dist_args *A, int q, const hv_distance_stats *sd)
+{
+    const char *pre = A->nsets > 1 ? A->sets[q] : NULL;
+    if (sd->sources_in_solid)
+        fprintf(stderr,
+                "heatvox distance: %s%swarning: %zu sources lie in obstacles and were skipped\n",
+                pre ? pre : "", pre ? ": " : "", sd->sources_in_solid);
+    if (sd->unreachable_cells && cli_verbose >= 0)
+        fprintf(stderr, "heatvox distance: %s%s%zu cells no source can reach (value %g)\n",
+                pre ? pre : "", pre ? ": " : "", sd->unreachable_cells, (double)A->o.unreachable);
+    if (cli_verbose > 0)
+        for (int l = 0; l < sd->stages && l < 8; l++)
+            fprintf(stderr, "heatvox distance: stage %d: %zu cells solved, %zu faces assigned\n",
+                    l + 1, sd->stage_cells[l], sd->faces_per_stage[l]);
+}
+
+/* Each source set's distance on one hv_distance (the set-up once), added to
+ * the VDB as it comes; the last set's values stay in g. */
+static int compute_sets(const dist_args *A, const source_list *src, hv_grid *g, dist_outs *F,
+                        hv_distance_stats *sd)
+{
+    hv_distance *D = NULL;
+    hv_status st = hv_distance_create(&D, g, &A->o);
+    if (st)
+        return cli_fail(CMD, A->sources, st);
+    int rc = 0;
+    for (int q = 0; !rc && q < A->nsets; q++) {
+        const hv_distance_sources ds = {src[q].vox, src[q].nvox, src[q].pts, src[q].npts,
+                                        src[q].mesh};
+        if ((st = hv_distance_query(D, &ds, g, &sd[q])))
+            rc = cli_fail(CMD, A->sets[q], st);
+        else if (F->w && (st = add_set(F->w, A, g, &sd[q], q)))
+            rc = cli_fail(CMD, A->out, st);
+        else
+            set_notes(A, q, &sd[q]);
+    }
+    hv_distance_destroy(&D);
+    return rc;
+}
+
+/* -o OUT.h5 (one source set): the distance as HDF5, by rank 0's process alone
+ * or, under mpirun with --backend petsc, with the other ranks. */
+static int write_h5(const dist_args *A, const hv_grid *g)
+{
+    hv_status st;
+    if (A->h5 && (st = hv_petsc_write_h5(A->h5, 1, (const hv_grid *const[]){g},
+                                         (const char *const[]){"distance"})))
+        return cli_fail(CMD, A->h5, st);
+    return 0;
+}
+
+/* --backend petsc under mpirun, rank 0: the one source set over the ranks. */
+static int compute_spread(const dist_args *A, const source_list *src, hv_grid *g,
+                          hv_distance_stats *sd)
+{
+    const hv_distance_sources ds = {src->vox, src->nvox, src->pts, src->npts, src->mesh};
+    hv_status st = hv_petsc_distance_block(g, &ds, &A->o, sd);
+    if (st)
+        return cli_fail(CMD, A->sources, st);
+    set_notes(A, 0, sd);
+    return write_h5(A, g);
 }
 
 /* Reads, computes and writes. --backend petsc under mpirun: rank 0 reads the
@@ -619,51 +797,41 @@ static int run(const dist_args *A)
         return other_rank(A);
     double t_start = hv_now(), index0[3] = {0, 0, 0};
     int have_index0 = 0;
-    source_list src = {0};
-    cli_outputs co = {0};
+    source_list src[MAX_SETS] = {{0}};
+    dist_outs F = {0};
     hv_mesh *om = NULL;
     hv_grid *g = NULL;
-    hv_distance_stats sd;
-    hv_status st;
+    hv_distance_stats sd[MAX_SETS];
     int released = !spread;
-    int rc = read_inputs(A, &src, &om, &g, index0, &have_index0);
+    int rc = read_inputs(A, src, &om, &g, index0, &have_index0);
     if (rc)
         goto done;
     cli_info("heatvox distance: grid %d x %d x %d, h = %g\n", g->n[0], g->n[1], g->n[2], g->h);
-    hv_distance_sources ds = {src.vox, src.nvox, src.pts, src.npts, src.mesh};
     released = 1;
-    st = spread ? hv_petsc_distance_block(g, &ds, &A->o, &sd)
-                : hv_distance_compute(g, &ds, &A->o, &sd);
-    if (st) {
-        rc = cli_fail(CMD, A->sources, st);
+    if (spread) {
+        hv_status st = HV_OK;
+        if ((rc = compute_spread(A, src, g, sd)) || hv_mpi_rank() > 0 ||
+            (rc = open_files(A, have_index0 ? index0 : NULL, &F)))
+            goto done;
+        if (F.w && (st = add_set(F.w, A, g, sd, 0))) {
+            rc = cli_fail(CMD, A->out, st);
+            goto done;
+        }
+    } else if ((rc = open_files(A, have_index0 ? index0 : NULL, &F)) ||
+               (rc = compute_sets(A, src, g, &F, sd)) || (rc = write_h5(A, g))) {
         goto done;
     }
-    if (sd.sources_in_solid)
-        fprintf(stderr,
-                "heatvox distance: warning: %zu sources lie in obstacles and were skipped\n",
-                sd.sources_in_solid);
-    if (sd.unreachable_cells && cli_verbose >= 0)
-        fprintf(stderr, "heatvox distance: %zu cells no source can reach (value %g)\n",
-                sd.unreachable_cells, (double)A->o.unreachable);
-    /* Under mpirun the ranks write HDF5 together (rank 0's result), and rank
-     * 0 the other files. */
-    if (A->h5 && (st = hv_petsc_write_h5(A->h5, 1, (const hv_grid *const[]){g},
-                                         (const char *const[]){"distance"}))) {
-        rc = cli_fail(CMD, A->h5, st);
+    if ((rc = finish_files(A, g, &F)) || (rc = cli_commit(CMD, &F.co)))
         goto done;
-    }
-    if (hv_mpi_rank() > 0)
-        goto done;
-    if ((rc = write_files(A, g, &sd, have_index0 ? index0 : NULL, &co)) ||
-        (rc = cli_commit(CMD, &co)))
-        goto done;
-    if (cli_verbose >= 0)
-        report(g, &sd, t_start);
+    for (int q = 0; cli_verbose >= 0 && q < A->nsets; q++)
+        report(A, g, &sd[q], q, t_start);
 done:
     if (!released) /* the other ranks wait in hv_petsc_distance_block: release them */
         hv_petsc_distance_block(NULL, NULL, NULL, NULL);
-    cli_discard(&co);
-    free_sources(&src);
+    hv_vdb_writer_destroy(&F.w);
+    cli_discard(&F.co);
+    for (int q = 0; q < A->nsets; q++)
+        free_sources(&src[q]);
     hv_mesh_destroy(&om);
     hv_grid_destroy(&g);
     return rc;

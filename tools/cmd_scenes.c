@@ -31,6 +31,7 @@ static void help(void)
            "                                      rotation about z (grids \"sdf\", \"v\")\n"
            "  DIR/distance/sources.txt            one source point (heatvox distance)\n"
            "  DIR/distance/sources_2d.txt         the same point for --dim 2\n"
+           "  DIR/distance/sources_east.txt       a second source set: a point in the east room\n"
            "  DIR/distance/walls.vdb              bool grid \"walls\", 64 x 48 x 16: two walls,\n"
            "                                      each with a gap at the opposite end\n"
            "  DIR/distance/building.obj           a one-room-deep building of boxes: floor,\n"
@@ -270,6 +271,12 @@ static int distance_inputs(const char *dir)
         return 1;
     if (cli_verbose >= 0)
         printf("%-40s the same point for --dim 2\n", path);
+    snprintf(path, sizeof path, "%s/distance/sources_east.txt", dir);
+    if (write_text(path, "# a second source set for heatvox distance: a point in the east room.\n"
+                         "3.5 1.5 0.5\n"))
+        return 1;
+    if (cli_verbose >= 0)
+        printf("%-40s a point in the east room (3.5, 1.5, 0.5)\n", path);
 
     /* walls.vdb: voxels of 1/16 over [0,4] x [0,3] x [0,1]; a wall across
      * x = 1.25..1.375 open for y > 2.25, another across x = 2.625..2.75 open

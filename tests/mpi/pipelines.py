@@ -48,7 +48,7 @@ def read_dense(path, name, n):
 
 def distance_case(tmp, label, args, exact=None):
     ref = os.path.join(tmp, label + "-mg.vdb")
-    js = json.loads(run(["distance", *args, "-o", ref, "--backend", "mg"]))
+    js = json.loads(run(["distance", *args, "-o", ref, "--backend", "mg", "--stages", "whole"]))
     n, h = js["grid"], js["h"]
     a = read_dense(ref, "distance", n)
     fin = np.isfinite(a)
