@@ -40,14 +40,14 @@ from ._grid import Grid
 from ._mesh import mesh_report, read_mesh
 from ._points import points_surface, read_points
 from ._sdf import sdf, sdf_vdb
-from ._heat import Extender, distance, extend, mask_from_mesh
+from ._heat import Distance, Extender, distance, extend, mask_from_mesh
 from ._solve import SolveInfo, Solver
 
 __version__ = _fn.hv_version().decode()
 
 # Public names show as heatvox.X in help() and tracebacks.
 for _obj in (Error, Status, Grid, sdf, read_mesh, mesh_report, read_points, points_surface,
-             distance, extend, mask_from_mesh, Extender, Solver, SolveInfo):
+             distance, Distance, extend, mask_from_mesh, Extender, Solver, SolveInfo):
     _obj.__module__ = __name__
 del _obj
 
@@ -73,6 +73,7 @@ __all__ = [
     "Solver",
     "Status",
     "distance",
+    "Distance",
     "extend",
     "get_threads",
     "library_path",

@@ -72,6 +72,124 @@ def _source_arrays(sources, shape, dim):
     return None, pts
 
 
+def _distance_opts(t_scale, backend, unreachable, solid_value, max_stages, diffuse_tol,
+                   poisson_tol, coarse, stages):
+    o = hv_distance_opts()
+    fn.hv_distance_opts_default(ctypes.byref(o))
+    o.t_scale = _arrays.positive(t_scale, "t_scale")
+    o.max_stages = _arrays.integer(max_stages, "max_stages", 1)
+    o.diffuse_tol = _arrays.positive(diffuse_tol, "diffuse_tol")
+    o.poisson_tol = _arrays.positive(poisson_tol, "poisson_tol")
+    o.backend = backend_code(backend)
+    o.coarse = coarse_code(coarse)
+    if stages not in ("tiles", "whole"):
+        raise ValueError("stages: expected 'tiles' or 'whole', got %r" % (stages,))
+    o.whole_stages = stages == "whole"
+    o.unreachable = _arrays.real(unreachable, "unreachable")
+    o.solid_value = o.unreachable if solid_value is None else _arrays.real(solid_value, "solid_value")
+    return o
+
+
+def _grid_shape_of(solid, sources, shape):
+    if solid is not None:
+        grid_shape = np.shape(solid)
+    elif sources is not None and np.asarray(sources).dtype == np.bool_:
+        grid_shape = np.shape(sources)
+    elif shape is not None:
+        grid_shape = tuple(shape)
+    else:
+        raise ValueError("distance needs the grid's shape: from solid, a boolean sources array, or shape=")
+    if shape is not None and tuple(shape) != tuple(grid_shape):
+        raise ValueError("shape=%r differs from the arrays' shape %r" % (tuple(shape), tuple(grid_shape)))
+    return tuple(grid_shape)
+
+
+class Distance:
+    """Geodesic distance queries on one set of obstacles (hv_distance): the
+    obstacle mask, the Poisson solver and its coarse levels are made once, at
+    construction, so that every :meth:`query` with new sources pays no set-up.
+
+    ``Distance(solid=None, voxel_size=1.0, shape=None, origin=None, **options)``
+    takes the grid and the options of :func:`distance` (``t_scale``,
+    ``backend``, ``unreachable``, ``solid_value``, ``max_stages``,
+    ``diffuse_tol``, ``poisson_tol``, ``coarse``, ``stages``). ``query(sources,
+    mesh=None, progress=None)`` returns a :class:`Grid` as :func:`distance`
+    does; its ``stats["t_setup"]`` is the set-up's time on the first query and
+    0 after. ``close()`` (or ``with``) releases the solvers.
+    """
+
+    def __init__(self, solid=None, voxel_size=1.0, *, shape=None, origin=None, t_scale=2.0,
+                 backend="auto", unreachable=math.inf, solid_value=None, max_stages=1000,
+                 diffuse_tol=1e-11, poisson_tol=1e-9, coarse="auto", stages="tiles"):
+        if solid is None and shape is None:
+            raise ValueError("Distance needs the grid's shape: from solid, or shape=")
+        self.shape = _grid_shape_of(solid, None, shape)
+        self.dim, _ = _arrays.grid_shape(self.shape, "the grid's shape")
+        self._voxel_size, self._origin = voxel_size, origin
+        self._mask = _arrays.mask_array(solid, self.shape) if solid is not None else None
+        self._o = _distance_opts(t_scale, backend, unreachable, solid_value, max_stages,
+                                 diffuse_tol, poisson_tol, coarse, stages)
+        g = self._grid()
+        self._c = ctypes.c_void_p()
+        fn.hv_distance_create(ctypes.byref(self._c), g._c, ctypes.byref(self._o))
+
+    def _grid(self):
+        g = Grid._adopt(new_grid(self.shape, self._voxel_size, self._origin), name="distance")
+        if self._mask is not None:
+            g._set_solid(self._mask)
+        return g
+
+    def query(self, sources, mesh=None, progress=None):
+        """The distance from ``sources`` (and ``mesh``), as :func:`distance`."""
+        if not self._c:
+            raise ValueError("query on a closed Distance")
+        voxels, points = _source_arrays(sources, self.shape, self.dim)
+        if voxels is None and points is None and mesh is None:
+            raise ValueError("no sources: give sources and/or mesh")
+        if mesh is not None and self.dim != 3:
+            raise ValueError("a mesh source needs a 3D grid")
+        g = self._grid()
+        src = hv_distance_sources()
+        if voxels is not None:
+            src.voxels = ctypes.cast(_arrays.address(voxels), ctypes.POINTER(ctypes.c_int))
+            src.nvoxels = voxels.shape[0]
+        if points is not None:
+            src.points = ctypes.cast(_arrays.address(points), ctypes.POINTER(ctypes.c_double))
+            src.npoints = points.shape[0]
+        st = hv_distance_stats()
+
+        def run():
+            with progress_scope(progress):
+                fn.hv_distance_query(self._c, ctypes.byref(src), g._c, ctypes.byref(st))
+
+        if mesh is not None:
+            with c_mesh(*mesh) as m:
+                src.mesh = m
+                run()
+        else:
+            run()
+        g.stats = struct_dict(st)
+        g.stats["backend"] = backend_name(st.backend)
+        return g
+
+    def close(self):
+        if self._c:
+            fn.hv_distance_destroy(ctypes.byref(self._c))
+            self._c = ctypes.c_void_p()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
 def distance(
     sources,
     solid=None,
@@ -89,10 +207,12 @@ def distance(
     poisson_tol=1e-9,
     progress=None,
     coarse="auto",
+    stages="tiles",
 ):
     """Geodesic distance from sources through free space, around obstacles,
     by the heat method: what ``heatvox distance`` computes, on arrays a
-    simulation already has.
+    simulation already has. For many queries on the same obstacles, use
+    :class:`Distance`, which pays the set-up once.
 
     The grid: ``solid``'s shape, else a boolean ``sources``' shape, else
     ``shape``; (nz, ny, nx) for 3D, (ny, nx) for 2D. ``voxel_size`` and
@@ -105,8 +225,7 @@ def distance(
       - a float array (n, 3) (2D: (n, 2)) of world points, splatted
         trilinearly onto the fluid cells around them;
       - None, with ``mesh``.
-    solid: None or a bool array of the grid's shape, True = obstacle cell
-      (used in place: a C-contiguous bool array is not copied).
+    solid: None or a bool array of the grid's shape, True = obstacle cell.
     mesh: (vertices, faces) whose surface is a source (3D).
     Options (heat.h, hv_distance_opts): ``t_scale`` (t = t_scale h^2,
     default 2), ``backend``, ``unreachable`` (value of fluid cells no source
@@ -114,66 +233,19 @@ def distance(
     ``unreachable``, as the command's ``--unreachable`` sets both),
     ``max_stages``, ``diffuse_tol``, ``poisson_tol``, ``progress``, ``coarse``
     (the solves' coarse levels with obstacles: "auto", "geometric" or
-    "aggregation", as :class:`Solver`).
+    "aggregation", as :class:`Solver`), ``stages`` ("tiles", the default: each
+    stage solves on the tiles near its front; "whole": on the whole grid).
 
     Returns a :class:`Grid` named "distance" (world units, >= 0; with the
     solid mask when given) with ``stats`` (a dict of hv_distance_stats:
-    stages, regions, unreachable_cells, iterations, seconds, ...).
+    stages, regions, unreachable_cells, iterations, cells_solved, seconds, ...).
     """
-    if solid is not None:
-        grid_shape = np.shape(solid)
-    elif sources is not None and np.asarray(sources).dtype == np.bool_:
-        grid_shape = np.shape(sources)
-    elif shape is not None:
-        grid_shape = tuple(shape)
-    else:
-        raise ValueError("distance needs the grid's shape: from solid, a boolean sources array, or shape=")
-    dim, _ = _arrays.grid_shape(grid_shape, "the grid's shape")
-    if shape is not None and tuple(shape) != tuple(grid_shape):
-        raise ValueError("shape=%r differs from the arrays' shape %r" % (tuple(shape), tuple(grid_shape)))
-    voxels, points = _source_arrays(sources, grid_shape, dim)
-    if voxels is None and points is None and mesh is None:
-        raise ValueError("no sources: give sources and/or mesh")
-    if mesh is not None and dim != 3:
-        raise ValueError("a mesh source needs a 3D grid")
-    mask = _arrays.mask_array(solid, grid_shape) if solid is not None else None
-
-    o = hv_distance_opts()
-    fn.hv_distance_opts_default(ctypes.byref(o))
-    o.t_scale = _arrays.positive(t_scale, "t_scale")
-    o.max_stages = _arrays.integer(max_stages, "max_stages", 1)
-    o.diffuse_tol = _arrays.positive(diffuse_tol, "diffuse_tol")
-    o.poisson_tol = _arrays.positive(poisson_tol, "poisson_tol")
-    o.backend = backend_code(backend)
-    o.coarse = coarse_code(coarse)
-    o.unreachable = _arrays.real(unreachable, "unreachable")
-    o.solid_value = o.unreachable if solid_value is None else _arrays.real(solid_value, "solid_value")
-
-    g = Grid._adopt(new_grid(grid_shape, voxel_size, origin), name="distance")
-    if mask is not None:
-        g._set_solid(mask)
-    src = hv_distance_sources()
-    if voxels is not None:
-        src.voxels = ctypes.cast(_arrays.address(voxels), ctypes.POINTER(ctypes.c_int))
-        src.nvoxels = voxels.shape[0]
-    if points is not None:
-        src.points = ctypes.cast(_arrays.address(points), ctypes.POINTER(ctypes.c_double))
-        src.npoints = points.shape[0]
-    st = hv_distance_stats()
-
-    def run():
-        with progress_scope(progress):
-            fn.hv_distance_compute(g._c, ctypes.byref(src), ctypes.byref(o), ctypes.byref(st))
-
-    if mesh is not None:
-        with c_mesh(*mesh) as m:
-            src.mesh = m
-            run()
-    else:
-        run()
-    g.stats = struct_dict(st)
-    g.stats["backend"] = backend_name(st.backend)
-    return g
+    grid_shape = _grid_shape_of(solid, sources, shape)
+    with Distance(solid, voxel_size, shape=grid_shape, origin=origin, t_scale=t_scale,
+                  backend=backend, unreachable=unreachable, solid_value=solid_value,
+                  max_stages=max_stages, diffuse_tol=diffuse_tol, poisson_tol=poisson_tol,
+                  coarse=coarse, stages=stages) as d:
+        return d.query(sources, mesh=mesh, progress=progress)
 
 
 def mask_from_mesh(vertices, faces, shape, voxel_size, origin=None):

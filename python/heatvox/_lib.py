@@ -421,6 +421,7 @@ class hv_distance_opts(Structure):
         ("unreachable", c_float),
         ("solid_value", c_float),
         ("coarse", c_int),
+        ("whole_stages", c_int),
     ]
 
 
@@ -445,6 +446,9 @@ class hv_distance_stats(Structure):
         ("t_normalize", c_double),
         ("t_poisson", c_double),
         ("t_total", c_double),
+        ("cells_solved", c_size_t),
+        ("stage_cells", c_size_t * 8),
+        ("t_setup", c_double),
     ]
 
 
@@ -586,6 +590,12 @@ _PROTOTYPES = {
         _status,
         [_grid_p, _P(hv_distance_sources), _P(hv_distance_opts), _P(hv_distance_stats)],
     ),
+    "hv_distance_create": (_status, [_P(c_void_p), _grid_p, _P(hv_distance_opts)]),
+    "hv_distance_query": (
+        _status,
+        [c_void_p, _P(hv_distance_sources), _grid_p, _P(hv_distance_stats)],
+    ),
+    "hv_distance_destroy": (None, [_P(c_void_p)]),
     "hv_mask_from_mesh": (_status, [_grid_p, _mesh_p, _P(c_size_t)]),
     "hv_extend_opts_default": (None, [_P(hv_extend_opts)]),
     "hv_extender_create": (

@@ -75,6 +75,51 @@ class SameAsCommand(unittest.TestCase):
         self.assertEqual(a.values[2, 4, 3], 0.0)
 
 
+class ManyQueries(unittest.TestCase):
+    """heatvox.Distance: one set-up for many source sets; the command's
+    several --sources, one grid each in the VDB, read back by pyopenvdb."""
+
+    def setUp(self):
+        self.building = hvtest.scene("distance/building.obj")
+        self.shape, self.h, self.origin = (16, 32, 40), 0.125, (-0.5, -0.5, -0.5)
+        self.bbox = ["-0.5", "-0.5", "-0.5", "4.5", "3.5", "1.5"]
+        self.solid = heatvox.mask_from_mesh(*heatvox.read_mesh(self.building), self.shape, self.h,
+                                            self.origin)
+
+    def test_queries_should_equal_single_calls_and_pay_set_up_once(self):
+        pts = [np.array([[0.5, 1.5, 0.5]]), np.array([[3.5, 0.5, 0.5]])]
+        with heatvox.Distance(self.solid, self.h, origin=self.origin) as d:
+            got = [d.query(p) for p in pts]
+            again = d.query(pts[0])
+        for p, g in zip(pts, got):
+            one = heatvox.distance(p, self.solid, self.h, origin=self.origin)
+            hvtest.assert_bits_equal(self, g.values, one.values, "query")
+        hvtest.assert_bits_equal(self, again.values, got[0].values, "the same query again")
+        self.assertGreater(got[0].stats["t_setup"], 0)
+        self.assertEqual(got[1].stats["t_setup"], 0)
+        self.assertGreater(got[0].stats["cells_solved"], 0)
+        with self.assertRaises(ValueError):
+            d.query(pts[0])
+
+    def test_several_source_sets_should_write_one_grid_each(self):
+        vdb = hvtest.need_pyopenvdb()
+        a = hvtest.scene("distance/sources.txt")
+        b = sources_file(["3.5 0.5 0.5"])
+        opts = ["--obstacle-mesh", self.building, "--bbox", *self.bbox, "--res", "40"]
+        out = os.path.join(hvtest.tmpdir(), "two.vdb")
+        hvtest.run("distance", "--sources", a, "--sources", b, "-o", out, "-q", *opts)
+        names = sorted(g.name for g in vdb.readAllGridMetadata(out))
+        self.assertEqual(names, ["distance", "distance_2", "obstacles"])
+        for name, src in (("distance", a), ("distance_2", b)):
+            ref = command_npy("--sources", src, *opts)
+            grid = vdb.read(out, name)
+            got = np.zeros(ref.shape[::-1], np.float32)
+            grid.copyToArray(got, ijk=(0, 0, 0))
+            hvtest.assert_bits_equal(self, got.transpose(2, 1, 0), ref, name)
+        hvtest.run("distance", "--sources", a, "--sources", b, "-o", out, "--npy",
+                   os.path.join(hvtest.tmpdir(), "x.npy"), *opts, expect=2)
+
+
 class Arguments(unittest.TestCase):
     def test_progress_should_be_called_and_cancel(self):
         seen = []
