@@ -2,6 +2,7 @@
 """make bench: geodesic distance around obstacles against scikit-fmm, one JSON object per line.
 
 usage: tools/bench/bench_distance.py [--heatvox PATH] [--n N ...] [--scene building|maze ...]
+                                     [--stages tiles|whole ...]
 
 `heatvox distance` (the heat method) against scikit-fmm's fast marching
 (`skfmm.distance`, second order) on the same grid, the same solid cells and
@@ -41,7 +42,10 @@ reach_disagree counts the free cells where the two differ. Without skfmm or
 pyopenvdb the rows are skipped with a note on stderr.
 
 Other keys: grid (cells along x, y, z), h, backend and stages (from heatvox's
-summary), reported_seconds (the seconds the summary gives), ratio (seconds /
+summary), stage_solves (--stages: tiles, the default, or whole), heatvox's
+cells_solved_grids and its seconds per kind of work (set-up, splat,
+diffusion, normalization, Poisson), per_cell_growth and
+reference_per_cell_growth (time per cell against the previous --n's row), reported_seconds (the seconds the summary gives), ratio (seconds /
 reference_seconds), solid_cells, cells_compared, unreached_heatvox and
 unreached_reference (free cells without a distance: a sealed room, and the
 insides of solid boxes once they are thicker than two cells).
@@ -264,11 +268,12 @@ def compare(hv, ref, solid, h, np):
     }
 
 
-def bench(hv, scene, n, d, np, vdb):
+def bench(hv, scene, n, stages, d, np, vdb):
     """One row: heatvox and skfmm on one scene at n cells along the longest axis."""
     args = write_building(hv, d, n) if scene == "building" else write_maze(d, n, np, vdb)
     out_vdb, out_npy = os.path.join(d, "out.vdb"), os.path.join(d, "out.npy")
-    wall, rss, out = wait_timed([hv, "distance"] + args + ["-o", out_vdb, "--npy", out_npy], d)
+    cmd = [hv, "distance"] + args + ["-o", out_vdb, "--npy", out_npy, "--stages", stages]
+    wall, rss, out = wait_timed(cmd, d)
     summary = json.loads(out.strip().splitlines()[-1])
     dist, solid, origin, h = read_output(out_vdb, out_npy, np, vdb)
     phi = ball_phi(dist.shape, origin, h, source_points(args[1]), np)
@@ -276,12 +281,28 @@ def bench(hv, scene, n, d, np, vdb):
     cells = dist.size
     row = {"bench": "distance", "scene": scene, "n": max(dist.shape), "grid": list(dist.shape), "h": h,
            "backend": summary.get("backend"), "seconds": wall, "peak_rss_mb": rss,
-           "stages": summary.get("stages"), "reported_seconds": summary.get("seconds"),
+           "stages": summary.get("stages"), "stage_solves": stages,
+           "reported_seconds": summary.get("seconds"),
            "solid_cells": int(solid.sum()), "reference": "scikit-fmm",
            "reference_seconds": rs["seconds"], "reference_peak_rss_mb": rs["peak_rss_mb"],
            "reference_call_rss_mb": rs["call_rss_mb"], "ratio": wall / rs["seconds"],
            "per_cell_us": wall / cells * 1e6, "reference_per_cell_us": rs["seconds"] / cells * 1e6}
+    for k in SUMMARY_KEYS:
+        row[k] = summary.get(k)
     row.update(compare(dist, ref, solid, h, np))
+    return row
+
+
+# From heatvox's JSON summary: where its time went and how many cells its stages solved.
+SUMMARY_KEYS = ("cells_solved_grids", "setup_seconds", "splat_seconds", "diffuse_seconds",
+                "normalize_seconds", "poisson_seconds")
+
+
+def add_growth(row, prev):
+    """Time per cell against the previous grid size's row (same scene and stages)."""
+    if prev:
+        row["per_cell_growth"] = row["per_cell_us"] / prev["per_cell_us"]
+        row["reference_per_cell_growth"] = row["reference_per_cell_us"] / prev["reference_per_cell_us"]
     return row
 
 
@@ -302,6 +323,7 @@ def main():
     ap.add_argument("--heatvox", default="build/heatvox")
     ap.add_argument("--n", type=int, nargs="+", default=[128, 256])
     ap.add_argument("--scene", choices=["building", "maze"], action="append")
+    ap.add_argument("--stages", choices=["tiles", "whole"], nargs="+", default=["tiles"])
     a = ap.parse_args()
     mods = imports()
     if mods is None:
@@ -310,9 +332,12 @@ def main():
     if not os.access(hv, os.X_OK):
         sys.exit("bench_distance: no heatvox at %s" % hv)
     for scene in a.scene or ["building", "maze"]:
-        for n in a.n:
-            with tempfile.TemporaryDirectory(prefix="hv_bench_dist_") as d:
-                print(json.dumps(bench(hv, scene, n, d, *mods)), flush=True)
+        for stages in a.stages:
+            prev = None
+            for n in a.n:
+                with tempfile.TemporaryDirectory(prefix="hv_bench_dist_") as d:
+                    prev = add_growth(bench(hv, scene, n, stages, d, *mods), prev)
+                print(json.dumps(prev), flush=True)
 
 
 if __name__ == "__main__":
