@@ -57,11 +57,11 @@ hv_status hv__dist_tiles_init(hv_dist_box *b, int band)
     T->slot = malloc(T->count * sizeof *T->slot);
     T->nbr = malloc(6 * T->count * sizeof *T->nbr);
     T->fluid = calloc(T->count, sizeof *T->fluid);
-    T->open_cells = calloc(T->count, sizeof *T->open_cells);
+    T->open_faces = calloc(T->count, sizeof *T->open_faces);
     T->front = calloc(T->count, 1);
     T->dist = malloc(T->count);
     T->dist2 = malloc(T->count);
-    if (!T->slot || !T->nbr || !T->fluid || !T->open_cells || !T->front || !T->dist || !T->dist2)
+    if (!T->slot || !T->nbr || !T->fluid || !T->open_faces || !T->front || !T->dist || !T->dist2)
         return hv__error(HV_ERR_NOMEM, "distance: out of memory for %zu tiles", T->count);
     T->nlist = T->ncore = 0;
     return HV_OK;
@@ -73,7 +73,7 @@ void hv__dist_tiles_free(hv_dist_tiles *T)
     free(T->slot);
     free(T->nbr);
     free(T->fluid);
-    free(T->open_cells);
+    free(T->open_faces);
     free(T->front);
     free(T->dist);
     free(T->dist2);
@@ -84,8 +84,22 @@ void hv__dist_tiles_free(hv_dist_tiles *T)
     memset(T, 0, sizeof *T);
 }
 
-/* Counts each tile's reachable fluid cells and marks the tiles that hold a
- * source weight: the first stage's front. */
+/* The faces below cell (i, j, k) (one per axis) that are open and have no
+ * direction yet. */
+static int open_faces_of(const hv_dist_box *b, int i, int j, int k)
+{
+    const int ijk[3] = {i, j, k};
+    int m = 0;
+    for (int a = 0; a < b->dim; a++) {
+        size_t m0 = (size_t)b->n[0] + (a == 0), m1 = (size_t)b->n[1] + (a == 1);
+        m += ijk[a] > 0 && isnan(b->X[a][i + m0 * (j + m1 * k)]);
+    }
+    return m;
+}
+
+/* Counts each tile's reachable fluid cells and open faces without a
+ * direction (b->X initialized), and marks the tiles that hold a source
+ * weight: the first stage's front. */
 void hv__dist_tiles_start(hv_dist_box *b, const double *w)
 {
     hv_dist_tiles *T = &b->tl;
@@ -93,16 +107,17 @@ void hv__dist_tiles_start(hv_dist_box *b, const double *w)
     for (size_t t = 0; t < T->count; t++) {
         int lo[3], len[3], nf = 0, fr = 0;
         hv__dist_tile_cells(b, t, lo, len);
+        int open = 0;
         for (int k = lo[2]; k < lo[2] + len[2]; k++)
-            for (int j = lo[1]; j < lo[1] + len[1]; j++) {
-                size_t c = lo[0] + b->cs[1] * j + b->cs[2] * k;
-                for (int i = 0; i < len[0]; i++, c++) {
+            for (int j = lo[1]; j < lo[1] + len[1]; j++)
+                for (int i = lo[0]; i < lo[0] + len[0]; i++) {
+                    size_t c = i + b->cs[1] * j + b->cs[2] * k;
                     nf += b->region[c] >= 0;
                     fr |= w[c] > 0;
+                    open += open_faces_of(b, i, j, k);
                 }
-            }
         T->fluid[t] = nf;
-        T->open_cells[t] = nf;
+        T->open_faces[t] = open;
         T->front[t] = (uint8_t)fr;
     }
 }
@@ -205,7 +220,7 @@ static void list_tiles(hv_dist_tiles *T)
     for (size_t t = 0; t < T->count; t++) {
         int d = T->dist[t];
         T->slot[t] = -1;
-        if (T->fluid[t] && d <= T->reach && (T->open_cells[t] > 0 || d <= 1)) {
+        if (T->fluid[t] && d <= T->reach && (T->open_faces[t] > 0 || d <= 1)) {
             T->slot[t] = -2;
             T->list[T->ncore++] = (uint32_t)t;
         }

@@ -183,7 +183,7 @@ static size_t assign_faces(dist_ctx *d, const double *u, const uint8_t *ok)
     size_t done = 0;
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : done)
     for (size_t q = 0; q < T->ncore; q++) {
-        int lo[3], len[3];
+        int lo[3], len[3], here = 0;
         hv__dist_tile_cells(d, T->list[q], lo, len);
         for (int k = lo[2]; k < lo[2] + len[2]; k++)
             for (int j = lo[1]; j < lo[1] + len[1]; j++)
@@ -197,8 +197,11 @@ static size_t assign_faces(dist_ctx *d, const double *u, const uint8_t *ok)
                             isnan(d->X[a][face_index(d, a, i, j, k)])) {
                             assign_face(d, u, ok, a, i, j, k);
                             done += owned(d, i, j, k);
+                            here++;
                         }
                 }
+        if (T->band)
+            T->open_faces[T->list[q]] -= here;
     }
     return done;
 }
@@ -337,7 +340,7 @@ static size_t front_tile(dist_ctx *d, size_t q, const double *psi, const uint8_t
                          const front_rule *F, uint8_t *inside, double *w)
 {
     hv_dist_tiles *T = &d->tl;
-    int lo[3], len[3], joined = 0, any = 0;
+    int lo[3], len[3], any = 0;
     hv__dist_tile_cells(d, T->list[q], lo, len);
     size_t nf = 0;
     for (int k = lo[2]; k < lo[2] + len[2]; k++)
@@ -349,10 +352,8 @@ static size_t front_tile(dist_ctx *d, size_t q, const double *psi, const uint8_t
                     const int ijk[3] = {i, j, k};
                     int in;
                     v = front_weight(d, psi, ok, c, ijk, F, &in);
-                    if (in) {
+                    if (in)
                         inside[c] = 1;
-                        joined++;
-                    }
                     if (v > 0) {
                         nf += owned(d, i, j, k);
                         any = 1;
@@ -360,10 +361,8 @@ static size_t front_tile(dist_ctx *d, size_t q, const double *psi, const uint8_t
                 }
                 w[c] = v;
             }
-    if (T->band) {
+    if (T->band)
         T->front[T->list[q]] = (uint8_t)any;
-        T->open_cells[T->list[q]] -= joined;
-    }
     return nf;
 }
 
@@ -400,9 +399,10 @@ static size_t next_front(dist_ctx *d, const double *psi, const double *lu, const
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : nf)
     for (size_t q = 0; q < T->ncore; q++)
         nf += front_tile(d, q, psi, ok, &F, inside, w);
-    if (T->band) /* the next core reaches this stage's trusted distance, as seen from the front */
-        T->reach =
-            hv__dist_next_reach(full + FRONT_MARGIN / hv__dist_axis_kappa(d->dim, d->tau[0]));
+    if (T->band) { /* the next core: this stage's trusted distance, or the step and a margin */
+        const double trust = full + FRONT_MARGIN / hv__dist_axis_kappa(d->dim, d->tau[0]);
+        T->reach = hv__dist_next_reach(fmin(trust, full + FRONT_BAND + DIST_CORE_MARGIN));
+    }
     double fs = (double)nf;
     sum_over(d, &fs, 1);
     return (size_t)fs;
