@@ -300,4 +300,127 @@ __kernel void dist_output(ulong n, __global const int *region, __global const do
     }
 }
 
+/* ---- Stages on tiles (src/distance/distance_band.c) ---------------------
+ * The band's cells are stored tile after tile in list order: T = (tx, ty, tz,
+ * cells of a tile), NT = (tiles along x, y, z, tiles); nbr holds six slots per
+ * listed tile (-x +x -y +y -z +z, -1: no band tile there); code is 0 off the
+ * unknowns, else 1 + the open faces (a closed face's neighbour holds 0). */
+
+/* Per tile: whether a cell holds a front weight, and its open faces without
+ * a direction (a face counts in the tile of its upper cell). */
+__kernel void dist_tile_flags(int4 N, int4 T, int4 NT, __global const double *w,
+                              __global const float *X0, __global const float *X1,
+                              __global const float *X2, __global uchar *front, __global int *open)
+{
+    const size_t t = get_global_id(0);
+    if (t >= (size_t)NT.w)
+        return;
+    const int i0 = (int)(t % NT.x) * T.x, j0 = (int)((t / NT.x) % NT.y) * T.y;
+    const int k0 = (int)(t / ((size_t)NT.x * NT.y)) * T.z;
+    int fr = 0, nopen = 0;
+    for (int k = k0; k < k0 + T.z && k < N.z; k++)
+        for (int j = j0; j < j0 + T.y && j < N.y; j++)
+            for (int i = i0; i < i0 + T.x && i < N.x; i++) {
+                const size_t c = (size_t)i + (size_t)N.x * ((size_t)j + (size_t)N.y * k);
+                fr |= w[c] > 0;
+                if (i > 0)
+                    nopen += isnan(X0[(size_t)i + (size_t)(N.x + 1) * ((size_t)j + (size_t)N.y * k)]);
+                if (j > 0)
+                    nopen += isnan(X1[(size_t)i + (size_t)N.x * ((size_t)j + (size_t)(N.y + 1) * k)]);
+                if (N.w == 3 && k > 0)
+                    nopen += isnan(X2[c]);
+            }
+    front[t] = (uchar)fr;
+    open[t] = nopen;
+}
+
+/* Band cell id's cell of the grid, or -1 past the grid's end. */
+static long band_cell(int4 N, int4 T, int4 NT, __global const uint *list, size_t id)
+{
+    const size_t t = list[id / (size_t)T.w];
+    const int l = (int)(id % (size_t)T.w);
+    const int i = (int)(t % NT.x) * T.x + l % T.x;
+    const int j = (int)((t / NT.x) % NT.y) * T.y + (l / T.x) % T.y;
+    const int k = (int)(t / ((size_t)NT.x * NT.y)) * T.z + l / (T.x * T.y);
+    if (i >= N.x || j >= N.y || k >= N.z)
+        return -1;
+    return (long)i + (long)N.x * ((long)j + (long)N.y * k);
+}
+
+/* f = the weights w on the band's n cells. */
+__kernel void dist_band_gather(int4 N, int4 T, int4 NT, ulong n, __global const uint *list,
+                               __global const double *w, __global double *f)
+{
+    const size_t id = get_global_id(0);
+    if (id >= n)
+        return;
+    const long c = band_cell(N, T, NT, list, id);
+    f[id] = c >= 0 ? w[c] : 0.0;
+}
+
+/* u = x on the core tiles' n cells. */
+__kernel void dist_band_scatter(int4 N, int4 T, int4 NT, ulong n, __global const uint *list,
+                                __global const double *x, __global double *u)
+{
+    const size_t id = get_global_id(0);
+    if (id >= n)
+        return;
+    const long c = band_cell(N, T, NT, list, id);
+    if (c >= 0)
+        u[c] = x[id];
+}
+
+/* The sum of band cell id's six neighbours (0 where there is none), in the
+ * host's order (-x +x -y +y -z +z). */
+static double band_nb(int4 T, __global const int *nbr, __global const double *x, size_t id)
+{
+    const size_t q = id / (size_t)T.w;
+    const int l = (int)(id % (size_t)T.w);
+    const int lx = l % T.x, ly = (l / T.x) % T.y, lz = l / (T.x * T.y);
+    const int sy = T.x, sz = T.x * T.y;
+    __global const int *nb = nbr + 6 * q;
+    double s = lx > 0 ? x[id - 1] : (nb[0] >= 0 ? x[(size_t)nb[0] * T.w + l + (T.x - 1)] : 0.0);
+    s += lx + 1 < T.x ? x[id + 1] : (nb[1] >= 0 ? x[(size_t)nb[1] * T.w + l - (T.x - 1)] : 0.0);
+    s += ly > 0 ? x[id - sy] : (nb[2] >= 0 ? x[(size_t)nb[2] * T.w + l + sy * (T.y - 1)] : 0.0);
+    s += ly + 1 < T.y ? x[id + sy]
+                      : (nb[3] >= 0 ? x[(size_t)nb[3] * T.w + l - sy * (T.y - 1)] : 0.0);
+    if (T.z > 1) {
+        s += lz > 0 ? x[id - sz] : (nb[4] >= 0 ? x[(size_t)nb[4] * T.w + l + sz * (T.z - 1)] : 0.0);
+        s += lz + 1 < T.z ? x[id + sz]
+                          : (nb[5] >= 0 ? x[(size_t)nb[5] * T.w + l - sz * (T.z - 1)] : 0.0);
+    }
+    return s;
+}
+
+/* One Chebyshev sweep of (I - s Lap) on the band: prev <- omega (cur + D^-1
+ * (f - A cur) - prev) + prev on the unknowns, 0 elsewhere. */
+__kernel void dist_band_sweep(int4 T, ulong n, __global const int *nbr, __global const uchar *code,
+                              __global const double *f, __global const double *cur,
+                              __global double *prev, double s, double omega)
+{
+    const size_t id = get_global_id(0);
+    if (id >= n)
+        return;
+    const int c = code[id];
+    if (!c) {
+        prev[id] = 0.0;
+        return;
+    }
+    const double x = cur[id], d = 1.0 + s * (c - 1), p = prev[id];
+    const double v = omega * ((f[id] - (d * x - s * band_nb(T, nbr, cur, id))) / d + x - p) + p;
+    prev[id] = v;
+}
+
+/* r = f - A x on the unknowns, 0 elsewhere. */
+__kernel void dist_band_residual(int4 T, ulong n, __global const int *nbr,
+                                 __global const uchar *code, __global const double *f,
+                                 __global const double *x, __global double *r, double s)
+{
+    const size_t id = get_global_id(0);
+    if (id >= n)
+        return;
+    const int c = code[id];
+    r[id] = c ? f[id] - ((1.0 + s * (c - 1)) * x[id] - s * band_nb(T, nbr, x, id)) : 0.0;
+}
+
 #endif

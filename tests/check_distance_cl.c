@@ -20,6 +20,9 @@
 /* A grid of n cells with a wall (a gap in it), a block, and a sealed box
  * (solid shell) without a source; points and one voxel as sources. */
 static int no_mask;
+/* The stages on the whole grid (the comparisons of the device and host paths
+ * with the same solvers), or on tiles. */
+static int whole_stages = 1;
 
 static hv_grid *scene(int dim, const int n[3])
 {
@@ -63,7 +66,7 @@ static result run(int dim, const int n[3], hv_backend b)
     hv_distance_opts o;
     hv_distance_opts_default(&o);
     o.backend = b;
-    o.whole_stages = 1; /* the device path's stages run on the whole grid */
+    o.whole_stages = whole_stages;
     result r;
     TL_ASSERT_OK(hv_distance_compute(g, &src, &o, &r.st));
     size_t count = hv_grid_count(g);
@@ -163,6 +166,49 @@ START_TEST(opencl_distance_should_match_on_a_grid_without_mask)
 }
 END_TEST
 
+/* The stages on tiles on the device (the tiles chosen on the host from the
+ * device's per-tile flags, the band's Chebyshev sweeps on the device) against
+ * the host's stages on tiles: the same stages, faces and cells per stage, the
+ * same field to the solves' tolerance; and what the stages moved between host
+ * and device, a small part of one double field per stage. */
+START_TEST(opencl_stages_on_tiles_should_match_the_host_tiles)
+{
+    const int sizes[2][3] = {{37, 33, 29}, {201, 23, 1}};
+    whole_stages = 0;
+    for (int q = 0; q < 2; q++) {
+        const int *n = sizes[q], dim = n[2] > 1 ? 3 : 2;
+        result m = run(dim, n, HV_BACKEND_MG), c = run(dim, n, HV_BACKEND_OPENCL);
+        const size_t count = (size_t)n[0] * n[1] * n[2];
+        double dmax = 0;
+        for (size_t i = 0; i < count; i++) {
+            ck_assert_msg(isinf(m.v[i]) == isinf(c.v[i]), "cell %zu: %g, %g", i, m.v[i], c.v[i]);
+            if (!isinf(m.v[i]))
+                dmax = fmax(dmax, fabs((double)m.v[i] - c.v[i]) * n[0]);
+        }
+        const double field = (double)count * sizeof(double) * c.st.stages;
+        printf("  tiles %dD %dx%dx%d: max |device - host| %.2e voxel; stages %d/%d, cells solved "
+               "%zu/%zu; %.0f bytes between host and device, %.3f of a double field per stage\n",
+               dim, n[0], n[1], n[2], dmax, m.st.stages, c.st.stages, m.st.cells_solved,
+               c.st.cells_solved, c.st.host_bytes, c.st.host_bytes / field);
+        ck_assert_int_eq(c.st.backend, HV_BACKEND_OPENCL);
+        ck_assert_int_eq(m.st.stages, c.st.stages);
+        ck_assert_uint_eq(m.st.cells_solved, c.st.cells_solved);
+        for (int l = 0; l < 8; l++) {
+            ck_assert_uint_eq(m.st.faces_per_stage[l], c.st.faces_per_stage[l]);
+            ck_assert_uint_eq(m.st.stage_cells[l], c.st.stage_cells[l]);
+        }
+        ck_assert(c.st.cells_solved < (size_t)c.st.stages * count);
+        ck_assert_msg(dmax <= 1e-3, "device and host tiles differ by %g voxel", dmax);
+        ck_assert_msg(c.st.host_bytes > 0 && c.st.host_bytes < 0.25 * field,
+                      "%.0f bytes moved, %.0f in the stages' double fields", c.st.host_bytes,
+                      field);
+        free(m.v);
+        free(c.v);
+    }
+    whole_stages = 1;
+}
+END_TEST
+
 START_TEST(opencl_distance_without_fp64_should_fall_back_to_the_host)
 {
     setenv("HEATVOX_OPENCL_FP64", "0", 1);
@@ -198,6 +244,7 @@ int main(int argc, char **argv)
     snprintf(why, sizeof why, "no usable OpenCL device (%s)", hv_last_error());
     TL_ADD_IF(tc, opencl_distance_should_match_mg_in_2d_with_obstacles, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_should_match_mg_in_3d_with_obstacles, have_cl, why);
+    TL_ADD_IF(tc, opencl_stages_on_tiles_should_match_the_host_tiles, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_should_match_mg_over_many_stages, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_should_match_on_a_grid_without_mask, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_without_fp64_should_fall_back_to_the_host, have_cl, why);

@@ -52,7 +52,8 @@ static int usage(FILE *out)
             "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
             "(default) takes it for the Poisson solve and geometric levels for the heat steps.\n"
             "--stages tiles (default): each stage's heat steps are solved on the 8^3 tiles its\n"
-            "front reaches; whole: on the whole grid by the backend (opencl and petsc do).\n"
+            "front reaches (with opencl on the device); whole: on the whole grid by the\n"
+            "backend's solver (petsc always).\n"
             "-v: the cells each stage solved on.\n"
             "\n"
             "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
@@ -680,6 +681,8 @@ static void report(const dist_args *A, const hv_grid *g, const hv_distance_stats
            "\"normalize_seconds\":%.3f,\"setup_seconds\":%.3f,\"query_seconds\":%.3f",
            sd->cells_solved, (double)sd->cells_solved / cells, sd->t_splat, sd->t_normalize,
            sd->t_setup, sd->t_total - sd->t_setup);
+    if (sd->backend == HV_BACKEND_OPENCL)
+        printf(",\"host_bytes\":%.0f", sd->host_bytes);
     cli_json_device(sd->backend);
     printf("}\n");
 }

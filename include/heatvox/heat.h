@@ -82,8 +82,9 @@ typedef struct hv_distance_opts {
                            heat steps */
     int whole_stages;   /* 0 (default): each stage solves its heat steps on the tiles its
                            front reaches (8^3 cells, docs/METHOD.md "Stages on tiles"), by
-                           Chebyshev sweeps on the host; 1: on the whole grid with the
-                           backend's solver, as the opencl and petsc paths always do */
+                           Chebyshev sweeps on the host or, with opencl, on the device;
+                           1: on the whole grid with the backend's solver, as the petsc
+                           path always does */
 } hv_distance_opts;
 
 typedef struct hv_distance_stats {
@@ -106,6 +107,8 @@ typedef struct hv_distance_stats {
     size_t stage_cells[8]; /* cells stage l solved on (first 8) */
     double t_setup;        /* seconds making the solvers an hv_distance keeps (0 when a
                               query reuses them) */
+    double host_bytes;     /* the opencl path: bytes its stages moved between host and
+                              device (the tiles' flags, lists and codes, residual sums) */
 } hv_distance_stats;
 
 HV_API void hv_distance_opts_default(hv_distance_opts *o);

@@ -449,6 +449,7 @@ class hv_distance_stats(Structure):
         ("cells_solved", c_size_t),
         ("stage_cells", c_size_t * 8),
         ("t_setup", c_double),
+        ("host_bytes", c_double),
     ]
 
 

@@ -97,29 +97,53 @@ static int open_faces_of(const hv_dist_box *b, int i, int j, int k)
     return m;
 }
 
-/* Counts each tile's reachable fluid cells and open faces without a
- * direction (b->X initialized), and marks the tiles that hold a source
- * weight: the first stage's front. */
-void hv__dist_tiles_start(hv_dist_box *b, const double *w)
+void hv__dist_tiles_fluid(hv_dist_box *b)
 {
     hv_dist_tiles *T = &b->tl;
 #pragma omp parallel for schedule(dynamic, 16)
     for (size_t t = 0; t < T->count; t++) {
-        int lo[3], len[3], nf = 0, fr = 0;
+        int lo[3], len[3], nf = 0;
         hv__dist_tile_cells(b, t, lo, len);
-        int open = 0;
+        for (int k = lo[2]; k < lo[2] + len[2]; k++)
+            for (int j = lo[1]; j < lo[1] + len[1]; j++)
+                for (int i = lo[0]; i < lo[0] + len[0]; i++)
+                    nf += b->region[i + b->cs[1] * j + b->cs[2] * k] >= 0;
+        T->fluid[t] = nf;
+    }
+}
+
+void hv__dist_tiles_start(hv_dist_box *b, const double *w)
+{
+    hv_dist_tiles *T = &b->tl;
+    hv__dist_tiles_fluid(b);
+#pragma omp parallel for schedule(dynamic, 16)
+    for (size_t t = 0; t < T->count; t++) {
+        int lo[3], len[3], fr = 0, open = 0;
+        hv__dist_tile_cells(b, t, lo, len);
         for (int k = lo[2]; k < lo[2] + len[2]; k++)
             for (int j = lo[1]; j < lo[1] + len[1]; j++)
                 for (int i = lo[0]; i < lo[0] + len[0]; i++) {
-                    size_t c = i + b->cs[1] * j + b->cs[2] * k;
-                    nf += b->region[c] >= 0;
-                    fr |= w[c] > 0;
+                    fr |= w[i + b->cs[1] * j + b->cs[2] * k] > 0;
                     open += open_faces_of(b, i, j, k);
                 }
-        T->fluid[t] = nf;
         T->open_faces[t] = open;
         T->front[t] = (uint8_t)fr;
     }
+}
+
+double hv__dist_core_step(const hv_dist_tiles *T)
+{
+    /* every cell within DIST_TILE reach - (DIST_TILE - 1) voxels of a front
+     * cell is on a core tile */
+    if (!T->band)
+        return INFINITY;
+    return DIST_TILE * T->reach - (DIST_TILE - 1) - FRONT_BAND - 1;
+}
+
+void hv__dist_core_next(hv_dist_tiles *T, double full, int dim, double tau)
+{
+    const double trust = full + FRONT_MARGIN / hv__dist_axis_kappa(dim, tau);
+    T->reach = hv__dist_next_reach(fmin(trust, full + FRONT_BAND + DIST_CORE_MARGIN));
 }
 
 /* One axis of the capped chessboard distance to the front tiles: dst(t) =
@@ -259,8 +283,9 @@ hv_status hv__dist_band_select(hv_dist_box *b, uint8_t *ok)
 {
     hv_dist_tiles *T = &b->tl;
     /* the previous stage's trusted cells are forgotten */
+    const size_t nclear = ok ? T->ncore : 0;
 #pragma omp parallel for schedule(dynamic, 16)
-    for (size_t q = 0; q < T->ncore; q++) {
+    for (size_t q = 0; q < nclear; q++) {
         int lo[3], len[3];
         hv__dist_tile_cells(b, T->list[q], lo, len);
         for (int k = lo[2]; k < lo[2] + len[2]; k++)

@@ -6,7 +6,11 @@
  * the host path (distance_internal.h); the host reads back per stage the
  * solves' residual norms, two face counts, the front's weighted sums (one
  * double triple per work-group) and the front cell count, then phi at the
- * cells near the sources (for the offsets) and the distance once. Its
+ * cells near the sources (for the offsets) and the distance once. With the
+ * stages on tiles (the default) the host also reads two flags per tile (a
+ * front weight, open faces left) and chooses the tiles as distance_band.c
+ * does, and writes the band's tile list, neighbour slots and cell codes; the
+ * band's Chebyshev sweeps run on the device (stats->host_bytes counts it). Its
  * kernels (kernels/distance.cl, fp64 only) are registered and built here
  * (hv_cl_module, src/cl/cl_core.h).
  */
@@ -26,14 +30,42 @@ extern const char hv__kernel_distance[]; /* kernels/, embedded by the Makefile *
  * the solver's module, the reductions the grid operations'); dist_front_sums
  * writes its reduction tree out for the reason its comment gives. */
 static const char *const dist_sources[] = {hv__kernel_distance, NULL};
-enum { DK_FACES, DK_LOG, DK_ASSIGN, DK_FRONT_SUMS, DK_FRONT, DK_DIV, DK_GATHER, DK_OUTPUT };
-static const char *const dist_kernels[] = {"dist_faces",      "dist_log",    "dist_assign",
-                                           "dist_front_sums", "dist_front",  "dist_div",
-                                           "dist_gather",     "dist_output", NULL};
+enum {
+    DK_FACES,
+    DK_LOG,
+    DK_ASSIGN,
+    DK_FRONT_SUMS,
+    DK_FRONT,
+    DK_DIV,
+    DK_GATHER,
+    DK_OUTPUT,
+    DK_TILE_FLAGS,
+    DK_BAND_GATHER,
+    DK_BAND_SCATTER,
+    DK_BAND_SWEEP,
+    DK_BAND_RESIDUAL
+};
+static const char *const dist_kernels[] = {"dist_faces",         "dist_log",
+                                           "dist_assign",        "dist_front_sums",
+                                           "dist_front",         "dist_div",
+                                           "dist_gather",        "dist_output",
+                                           "dist_tile_flags",    "dist_band_gather",
+                                           "dist_band_scatter",  "dist_band_sweep",
+                                           "dist_band_residual", NULL};
 static const hv_cl_module dist_module = {"distance", dist_sources, dist_kernels, 1, 0};
+
+/* The stages on tiles (distance_band.c): the tiles chosen on the host, from
+ * per-tile flags the device computes; the band's cells on the device. */
+typedef struct dist_cl_band {
+    int on;
+    hv_dist_box b; /* the host's tiles (its region borrowed) */
+    cl_mem front, open, list, nbr, code, f, x[2];
+    size_t cap; /* band cells the device buffers hold */
+} dist_cl_band;
 
 typedef struct dist_cl_work {
     hv_cl *cl;
+    dist_cl_band bd;
     cl_mem region, X[3], w, u, u2, ok, inside, cnt, part, idx, gath, off, out;
     hv_solver *sv[2];
     double *hpart;
@@ -45,8 +77,18 @@ typedef struct dist_cl_work {
     size_t count, ngroups, g1[1], l1[1], gc[2], lc[2], gr, lr;
 } dist_cl_work;
 
+static void band_free(dist_cl_band *bd)
+{
+    cl_mem *m[] = {&bd->front, &bd->open, &bd->list, &bd->nbr,
+                   &bd->code,  &bd->f,    &bd->x[0], &bd->x[1]};
+    for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
+        hv__cl_free(m[i]);
+    hv__dist_tiles_free(&bd->b.tl);
+}
+
 static void work_free(dist_cl_work *k)
 {
+    band_free(&k->bd);
     hv_solver_destroy(&k->sv[0]);
     hv_solver_destroy(&k->sv[1]);
     cl_mem *m[] = {&k->region, &k->X[0], &k->X[1], &k->X[2], &k->w,    &k->u,   &k->u2, &k->ok,
@@ -205,6 +247,179 @@ static hv_status open_faces(dist_cl_work *k, const int32_t *region, const double
     return HV_OK;
 }
 
+/* The host's tiles of the grid, and the per-tile flags' buffers. */
+static hv_status band_open(dist_cl_work *k, const hv_grid *g, const int32_t *region)
+{
+    dist_cl_band *bd = &k->bd;
+    hv__dist_box_init(&bd->b, g->dim, g->n, g->h, g->solid);
+    bd->b.region = (int32_t *)region; /* read only */
+    hv_status st = hv__dist_tiles_init(&bd->b, 1);
+    if (st)
+        return st;
+    hv__dist_tiles_fluid(&bd->b);
+    const size_t nt = bd->b.tl.count;
+    if ((st = hv__cl_alloc(k->cl, nt, NULL, &bd->front)) ||
+        (st = hv__cl_alloc(k->cl, nt * sizeof(int32_t), NULL, &bd->open)))
+        return st;
+    return HV_OK;
+}
+
+/* The tiles' shape as the band kernels take it: T, NT. */
+static void band_shape(const hv_dist_tiles *T, cl_int t4[4], cl_int nt4[4])
+{
+    for (int a = 0; a < 3; a++) {
+        t4[a] = T->tn[a];
+        nt4[a] = T->nt[a];
+    }
+    t4[3] = (cl_int)T->cells;
+    nt4[3] = (cl_int)T->count;
+}
+
+/* The device's per-tile flags (front weights, open faces without a
+ * direction) into the host's tiles. */
+static hv_status band_flags(dist_cl_work *k, hv_distance_stats *S)
+{
+    dist_cl_band *bd = &k->bd;
+    hv_dist_tiles *T = &bd->b.tl;
+    cl_int t4[4], nt4[4];
+    band_shape(T, t4, nt4);
+    size_t g1[1], l1[1];
+    hv__cl_range1(T->count, g1, l1);
+    hv__cl_args(k->cl, &dist_module, DK_TILE_FLAGS, "IIImmmmmm", k->N, t4, nt4, k->w, k->X[0],
+                k->X[1], k->dim == 3 ? k->X[2] : NULL, bd->front, bd->open);
+    hv__cl_run(k->cl, &dist_module, DK_TILE_FLAGS, 1, g1, l1);
+    hv__cl_read(k->cl, bd->front, 0, T->count, T->front);
+    hv__cl_read(k->cl, bd->open, 0, T->count * sizeof(int32_t), T->open_faces);
+    S->host_bytes += (double)T->count * (1 + sizeof(int32_t));
+    return hv__cl_check(k->cl);
+}
+
+/* Device buffers for the band's cells. */
+static hv_status band_room(dist_cl_work *k)
+{
+    dist_cl_band *bd = &k->bd;
+    const hv_dist_tiles *T = &bd->b.tl;
+    const size_t n = T->nlist * T->cells;
+    if (n <= bd->cap && bd->list)
+        return HV_OK;
+    const size_t cap = n + n / 4, tiles = cap / T->cells + 1;
+    cl_mem *m[] = {&bd->list, &bd->nbr, &bd->code, &bd->f, &bd->x[0], &bd->x[1]};
+    for (size_t i = 0; i < sizeof m / sizeof m[0]; i++)
+        hv__cl_free(m[i]);
+    hv_status st;
+    if ((st = hv__cl_alloc(k->cl, tiles * sizeof(uint32_t), NULL, &bd->list)) ||
+        (st = hv__cl_alloc(k->cl, 6 * tiles * sizeof(int32_t), NULL, &bd->nbr)) ||
+        (st = hv__cl_alloc(k->cl, cap, NULL, &bd->code)) ||
+        (st = hv__cl_alloc(k->cl, cap * sizeof(double), NULL, &bd->f)) ||
+        (st = hv__cl_alloc(k->cl, cap * sizeof(double), NULL, &bd->x[0])) ||
+        (st = hv__cl_alloc(k->cl, cap * sizeof(double), NULL, &bd->x[1])))
+        return st;
+    bd->cap = cap;
+    return HV_OK;
+}
+
+/* The stage's tiles, chosen on the host, and their lists and codes uploaded;
+ * f = the weights on the band. */
+static hv_status band_stage(dist_cl_work *k, hv_distance_stats *S)
+{
+    dist_cl_band *bd = &k->bd;
+    hv_dist_tiles *T = &bd->b.tl;
+    hv_status st;
+    if ((st = hv__dist_band_select(&bd->b, NULL)) || (st = band_room(k)))
+        return st;
+    const size_t n = T->nlist * T->cells;
+    hv__cl_write(k->cl, bd->list, 0, T->nlist * sizeof(uint32_t), T->list);
+    hv__cl_write(k->cl, bd->nbr, 0, 6 * T->nlist * sizeof(int32_t), T->nbr);
+    hv__cl_write(k->cl, bd->code, 0, n, T->code);
+    S->host_bytes += (double)T->nlist * (sizeof(uint32_t) + 6 * sizeof(int32_t)) + (double)n;
+    cl_int t4[4], nt4[4];
+    band_shape(T, t4, nt4);
+    size_t g1[1], l1[1];
+    hv__cl_range1(n, g1, l1);
+    hv__cl_args(k->cl, &dist_module, DK_BAND_GATHER, "IIIlmmm", k->N, t4, nt4, n, bd->list, k->w,
+                bd->f);
+    hv__cl_run(k->cl, &dist_module, DK_BAND_GATHER, 1, g1, l1);
+    return hv__cl_check(k->cl);
+}
+
+/* sum of the partials of a . b over the band's n cells (read back). */
+static double band_dot(dist_cl_work *k, cl_mem a, cl_mem b, size_t n, hv_distance_stats *S)
+{
+    size_t g[1], l[1];
+    const size_t ng = hv__cl_range_red(n, g, l);
+    hv__cl_dot_parts_d(k->cl, a, b, n, k->part);
+    hv__cl_read(k->cl, k->part, 0, ng * sizeof(double), k->hpart);
+    S->host_bytes += (double)ng * sizeof(double);
+    return sum_parts(k->hpart, ng, 1, 0);
+}
+
+/* (I - s Lap) x = f on the band by the host's Chebyshev sweeps; x into dst
+ * (zeroed first) on the core tiles' cells; the measured residual in info. */
+static hv_status band_chebyshev(dist_cl_work *k, double s, double tol, cl_mem dst,
+                                hv_solve_info *info, hv_distance_stats *S)
+{
+    dist_cl_band *bd = &k->bd;
+    const hv_dist_tiles *T = &bd->b.tl;
+    const size_t n = T->nlist * T->cells, ncore = T->ncore * T->cells;
+    const int sweeps = hv__dist_band_sweeps(k->dim, s, tol);
+    const double rho = 1 - 1 / (1 + 2 * k->dim * s), r2 = rho * rho;
+    cl_int t4[4], nt4[4];
+    band_shape(T, t4, nt4);
+    size_t g1[1], l1[1];
+    hv__cl_range1(n, g1, l1);
+    cl_mem cur = bd->x[0], prev = bd->x[1];
+    hv__cl_zero(k->cl, cur, n * sizeof(double));
+    hv__cl_zero(k->cl, prev, n * sizeof(double));
+    double omega = 1;
+    for (int it = 0; it < sweeps; it++) {
+        hv__cl_args(k->cl, &dist_module, DK_BAND_SWEEP, "Ilmmmmmaa", t4, n, bd->nbr, bd->code,
+                    bd->f, cur, prev, s, omega);
+        hv__cl_run(k->cl, &dist_module, DK_BAND_SWEEP, 1, g1, l1);
+        cl_mem t = cur;
+        cur = prev;
+        prev = t;
+        omega = it == 0 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega / 4);
+    }
+    hv__cl_args(k->cl, &dist_module, DK_BAND_RESIDUAL, "Ilmmmmma", t4, n, bd->nbr, bd->code, bd->f,
+                cur, prev, s);
+    hv__cl_run(k->cl, &dist_module, DK_BAND_RESIDUAL, 1, g1, l1);
+    const double rr = band_dot(k, prev, prev, n, S), ff = band_dot(k, bd->f, bd->f, n, S);
+    hv__cl_zero(k->cl, dst, k->count * sizeof(double));
+    hv__cl_range1(ncore, g1, l1);
+    hv__cl_args(k->cl, &dist_module, DK_BAND_SCATTER, "IIIlmmm", k->N, t4, nt4, ncore, bd->list,
+                cur, dst);
+    hv__cl_run(k->cl, &dist_module, DK_BAND_SCATTER, 1, g1, l1);
+    memset(info, 0, sizeof *info);
+    info->iterations = sweeps;
+    info->relres = ff > 0 ? sqrt(rr / ff) : 0;
+    info->backend = HV_BACKEND_OPENCL;
+    return hv__cl_check(k->cl);
+}
+
+/* The heat steps' tolerance: the band's, as on the host (distance_march.c). */
+static double stage_tol(const dist_cl_work *k, const hv_distance_opts *o)
+{
+    return k->bd.on ? fmin(o->diffuse_tol, DIST_BAND_TOL) : o->diffuse_tol;
+}
+
+/* A stage's two diffusions on the band. */
+static hv_status diffuse_band(dist_cl_work *k, const hv_distance_opts *o, int l,
+                              hv_solve_info info[2], hv_distance_stats *S)
+{
+    hv_status st = band_stage(k, S);
+    for (int q = 0; !st && q < 2; q++) {
+        const double s = o->t_scale * (q ? T_RATIO : 1);
+        st = band_chebyshev(k, s, stage_tol(k, o), q ? k->u2 : k->u, &info[q], S);
+        S->diffuse_iterations += info[q].iterations;
+        S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
+    }
+    const size_t cells = hv__dist_band_cells(&k->bd.b);
+    S->cells_solved += cells;
+    if (l < 8)
+        S->stage_cells[l] = cells;
+    return st;
+}
+
 /* A stage's two diffusions of the front's weights w: for t into u, for
  * T_RATIO t into u2. */
 static hv_status diffuse(dist_cl_work *k, const hv_grid *g, const hv_distance_opts *o,
@@ -224,6 +439,9 @@ static hv_status diffuse(dist_cl_work *k, const hv_grid *g, const hv_distance_op
         S->diffuse_iterations += info[q].iterations;
         S->diffuse_relres = fmax(S->diffuse_relres, info[q].relres);
     }
+    S->cells_solved += k->count;
+    if (S->stages < 8)
+        S->stage_cells[S->stages] = k->count;
     return HV_OK;
 }
 
@@ -240,9 +458,9 @@ static hv_status assign_faces(dist_cl_work *k, const hv_distance_opts *o,
     if ((st = hv__cl_check(cl)))
         return st;
     const double wn = sqrt(sum_parts(k->hpart, k->ngroups, 1, 0));
-    *lthr = hv__dist_trust_log(fmax(info[0].relres, o->diffuse_tol), wn, o->t_scale);
+    *lthr = hv__dist_trust_log(fmax(info[0].relres, stage_tol(k, o)), wn, o->t_scale);
     const double lthr2 =
-        hv__dist_trust_log(fmax(info[1].relres, o->diffuse_tol), wn, o->t_scale * T_RATIO);
+        hv__dist_trust_log(fmax(info[1].relres, stage_tol(k, o)), wn, o->t_scale * T_RATIO);
     hv__cl_args(cl, &dist_module, DK_LOG, "lmmmmaa", k->count, k->region, k->u, k->u2, k->ok, *lthr,
                 lthr2);
     hv__cl_run(cl, &dist_module, DK_LOG, 1, k->g1, k->l1);
@@ -274,9 +492,12 @@ static hv_status next_front(dist_cl_work *k, double lthr, const double tau[2], i
         return HV_OK;
     const double psi0 = sum_parts(k->hpart, k->ngroups, 3, 0) / sw;
     const double lu0 = sum_parts(k->hpart, k->ngroups, 3, 1) / sw;
-    const double step = hv__dist_front_step(lu0, lthr, k->dim, tau[0]);
+    const double full = hv__dist_front_step(lu0, lthr, k->dim, tau[0]);
+    const double step = fmin(full, k->bd.on ? hv__dist_core_step(&k->bd.b.tl) : INFINITY);
     if (!(step >= 2))
         return HV_OK;
+    if (k->bd.on)
+        hv__dist_core_next(&k->bd.b.tl, full, k->dim, tau[0]);
     hv__cl_args(cl, &dist_module, DK_FRONT, "Immmmaaaaam", k->N, k->u2, k->ok, k->inside, k->w,
                 psi0, step, tau[0], tau[1], FRONT_BAND, k->cnt);
     hv__cl_run(cl, &dist_module, DK_FRONT, 2, k->gc, k->lc);
@@ -296,7 +517,7 @@ static hv_status run_stages(dist_cl_work *k, const hv_grid *g, const hv_distance
     for (int l = 0; l<o->max_stages && * left> 0; l++) {
         double t0 = hv_now();
         hv_solve_info info[2];
-        if ((st = diffuse(k, g, o, info, S)))
+        if ((st = k->bd.on ? diffuse_band(k, o, l, info, S) : diffuse(k, g, o, info, S)))
             return st;
         S->backend = info[0].backend;
         S->t_diffuse += hv_now() - t0;
@@ -319,6 +540,8 @@ static hv_status run_stages(dist_cl_work *k, const hv_grid *g, const hv_distance
                 return st;
             if (!moved)
                 break;
+            if (k->bd.on && (st = band_flags(k, S)))
+                return st;
         }
         S->t_normalize += hv_now() - t0;
     }
@@ -430,7 +653,9 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
     work_shape(&k, g);
     double t0 = hv_now();
     size_t left = 0;
-    if ((st = open_faces(&k, region, w0, &left)))
+    k.bd.on = !o->whole_stages;
+    if ((st = open_faces(&k, region, w0, &left)) ||
+        (k.bd.on && ((st = band_open(&k, g, region)) || (st = band_flags(&k, S)))))
         goto done;
     S->t_splat += hv_now() - t0;
     if ((st = run_stages(&k, g, o, &left, S)))

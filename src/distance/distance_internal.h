@@ -216,11 +216,19 @@ static inline void hv__dist_tile_cells(const hv_dist_box *b, size_t t, int lo[3]
  * core. Fails only out of memory. hv__dist_tiles_free releases them. */
 hv_status hv__dist_tiles_init(hv_dist_box *b, int band);
 void hv__dist_tiles_free(hv_dist_tiles *T);
-/* Band mode: counts the tiles' reachable cells (b->region set) and marks the
- * tiles holding a weight of w as the front. */
+/* Band mode: counts the tiles' reachable cells (b->region set). */
+void hv__dist_tiles_fluid(hv_dist_box *b);
+/* Band mode: hv__dist_tiles_fluid, the tiles' open faces without a direction
+ * (b->X set up) and the tiles holding a weight of w as the front. */
 void hv__dist_tiles_start(hv_dist_box *b, const double *w);
-/* Band mode: clears ok on the previous core tiles' cells, then chooses the
- * stage's tiles around the front tiles and builds the band's masks. */
+/* The largest step that keeps the next front (and its band) on the core
+ * tiles; INFINITY without a band. */
+double hv__dist_core_step(const hv_dist_tiles *T);
+/* The next stage's reach, from this stage's full step (voxels) at tau. */
+void hv__dist_core_next(hv_dist_tiles *T, double full, int dim, double tau);
+/* Band mode: clears ok (when not NULL) on the previous core tiles' cells,
+ * then chooses the stage's tiles around the front tiles and builds the band's
+ * codes. */
 hv_status hv__dist_band_select(hv_dist_box *b, uint8_t *ok);
 /* Band mode: (I - t Lap) u = w and (I - T_RATIO t Lap) u2 = w on the band
  * (u = 0 beyond it), to the relative residual tol; writes u and u2 on the

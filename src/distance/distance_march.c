@@ -366,16 +366,6 @@ static size_t front_tile(dist_ctx *d, size_t q, const double *psi, const uint8_t
     return nf;
 }
 
-/* The largest step that keeps the new front (and its band) on the core tiles:
- * every cell within DIST_TILE reach - (DIST_TILE - 1) voxels of a front cell
- * is in one. */
-static double core_step(const dist_ctx *d)
-{
-    if (!d->tl.band)
-        return INFINITY;
-    return DIST_TILE * d->tl.reach - (DIST_TILE - 1) - FRONT_BAND - 1;
-}
-
 static size_t next_front(dist_ctx *d, const double *psi, const double *lu, const uint8_t *ok,
                          double lthr, uint8_t *inside, double *w)
 {
@@ -386,7 +376,7 @@ static size_t next_front(dist_ctx *d, const double *psi, const double *lu, const
         return 0;
     const double psi0 = s[0] / s[2], lu0 = s[1] / s[2];
     const double full = hv__dist_front_step(lu0, lthr, d->dim, d->tau[0]);
-    const double step = fmin(full, core_step(d));
+    const double step = fmin(full, hv__dist_core_step(&d->tl));
     if (!(step >= 2))
         return 0;
     front_rule F = {psi0, step, 0, 0};
@@ -399,10 +389,8 @@ static size_t next_front(dist_ctx *d, const double *psi, const double *lu, const
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : nf)
     for (size_t q = 0; q < T->ncore; q++)
         nf += front_tile(d, q, psi, ok, &F, inside, w);
-    if (T->band) { /* the next core: this stage's trusted distance, or the step and a margin */
-        const double trust = full + FRONT_MARGIN / hv__dist_axis_kappa(d->dim, d->tau[0]);
-        T->reach = hv__dist_next_reach(fmin(trust, full + FRONT_BAND + DIST_CORE_MARGIN));
-    }
+    if (T->band)
+        hv__dist_core_next(T, full, d->dim, d->tau[0]);
     double fs = (double)nf;
     sum_over(d, &fs, 1);
     return (size_t)fs;
