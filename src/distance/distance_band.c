@@ -471,10 +471,21 @@ int hv__dist_band_sweeps(int dim, double s, double tol)
     return k;
 }
 
+double hv__dist_band_rho2(int dim, double s)
+{
+    const double rho = 1 - 1 / (1 + 2 * dim * s);
+    return rho * rho;
+}
+
+double hv__dist_band_omega(double omega, double rho2, int k)
+{
+    return k == 0 ? 1 / (1 - rho2 / 2) : 1 / (1 - rho2 * omega / 4);
+}
+
 /* x (the result: T->x[2q] or T->x[2q+1]) = (I - s Lap)^-1 f on the band. */
 static const double *band_chebyshev(hv_dist_tiles *T, int dim, double s, int q, int sweeps)
 {
-    const double rho = 1 - 1 / (1 + 2 * dim * s), r2 = rho * rho;
+    const double r2 = hv__dist_band_rho2(dim, s);
     double *cur = T->x[2 * q], *prev = T->x[2 * q + 1];
     const size_t n = T->nlist * T->cells;
     memset(prev, 0, n * sizeof *prev);
@@ -485,7 +496,7 @@ static const double *band_chebyshev(hv_dist_tiles *T, int dim, double s, int q, 
         double *t = cur;
         cur = prev;
         prev = t;
-        omega = k == 0 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega / 4);
+        omega = hv__dist_band_omega(omega, r2, k);
     }
     return cur;
 }

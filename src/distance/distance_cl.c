@@ -362,7 +362,7 @@ static hv_status band_chebyshev(dist_cl_work *k, double s, double tol, cl_mem ds
     const hv_dist_tiles *T = &bd->b.tl;
     const size_t n = T->nlist * T->cells, ncore = T->ncore * T->cells;
     const int sweeps = hv__dist_band_sweeps(k->dim, s, tol);
-    const double rho = 1 - 1 / (1 + 2 * k->dim * s), r2 = rho * rho;
+    const double r2 = hv__dist_band_rho2(k->dim, s);
     cl_int t4[4], nt4[4];
     band_shape(T, t4, nt4);
     size_t g1[1], l1[1];
@@ -378,7 +378,7 @@ static hv_status band_chebyshev(dist_cl_work *k, double s, double tol, cl_mem ds
         cl_mem t = cur;
         cur = prev;
         prev = t;
-        omega = it == 0 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega / 4);
+        omega = hv__dist_band_omega(omega, r2, it);
     }
     hv__cl_args(k->cl, &dist_module, DK_BAND_RESIDUAL, "Ilmmmmma", t4, n, bd->nbr, bd->code, bd->f,
                 cur, prev, s);

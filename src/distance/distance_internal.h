@@ -235,8 +235,13 @@ hv_status hv__dist_band_select(hv_dist_box *b, uint8_t *ok);
  * core tiles' cells. info: sweeps and the measured relative residuals. */
 hv_status hv__dist_band_solve(hv_dist_box *b, const double *w, double *u, double *u2, double tol,
                               hv_solve_info info[2]);
-/* Chebyshev sweeps for the relative residual tol at s = t / h^2. */
+/* Chebyshev sweeps for the relative residual tol at s = t / h^2; the square
+ * of the Jacobi-scaled spectral radius bound at s, and the weight of sweep
+ * k + 1 from that of sweep k (the first is 1), for the host's and the
+ * device's sweeps alike. */
 int hv__dist_band_sweeps(int dim, double s, double tol);
+double hv__dist_band_rho2(int dim, double s);
+double hv__dist_band_omega(double omega, double rho2, int k);
 /* The reachable cells of the stage's tiles (core and halo). */
 size_t hv__dist_band_cells(const hv_dist_box *b);
 

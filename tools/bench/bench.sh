@@ -162,7 +162,13 @@ fi
 # Geodesic distance around obstacles (the building, a 3D maze) against
 # scikit-fmm's fast marching on the same grid, solid cells and source.
 if /usr/bin/python3 -c 'import skfmm, pyopenvdb' 2>/dev/null; then
-  /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 128 256
+  /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 128 256 512 --scene building
+  /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 128 256 --scene building --stages whole
+  /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 64 128 --scene maze
+  # The stages on the device (fields there, the tiles chosen on the host).
+  case " $backends " in *" opencl "*)
+    /usr/bin/python3 "$(dirname "$0")/bench_distance.py" --heatvox "$hv" --n 128 256 --scene building --backend opencl;;
+  esac
 else
   echo "bench: /usr/bin/python3 cannot import skfmm or pyopenvdb, distance rows skipped" >&2
 fi

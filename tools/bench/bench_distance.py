@@ -2,7 +2,7 @@
 """make bench: geodesic distance around obstacles against scikit-fmm, one JSON object per line.
 
 usage: tools/bench/bench_distance.py [--heatvox PATH] [--n N ...] [--scene building|maze ...]
-                                     [--stages tiles|whole ...]
+                                     [--stages tiles|whole ...] [--backend B]
 
 `heatvox distance` (the heat method) against scikit-fmm's fast marching
 (`skfmm.distance`, second order) on the same grid, the same solid cells and
@@ -45,7 +45,9 @@ Other keys: grid (cells along x, y, z), h, backend and stages (from heatvox's
 summary), stage_solves (--stages: tiles, the default, or whole), heatvox's
 cells_solved_grids and its seconds per kind of work (set-up, splat,
 diffusion, normalization, Poisson), per_cell_growth and
-reference_per_cell_growth (time per cell against the previous --n's row), reported_seconds (the seconds the summary gives), ratio (seconds /
+reference_per_cell_growth (time per cell against the previous --n's row),
+device and host_bytes (--backend opencl: the device's name, and the bytes the
+stages moved between host and device), reported_seconds (the seconds the summary gives), ratio (seconds /
 reference_seconds), solid_cells, cells_compared, unreached_heatvox and
 unreached_reference (free cells without a distance: a sealed room, and the
 insides of solid boxes once they are thicker than two cells).
@@ -268,11 +270,13 @@ def compare(hv, ref, solid, h, np):
     }
 
 
-def bench(hv, scene, n, stages, d, np, vdb):
+def bench(hv, scene, n, stages, backend, d, np, vdb):
     """One row: heatvox and skfmm on one scene at n cells along the longest axis."""
     args = write_building(hv, d, n) if scene == "building" else write_maze(d, n, np, vdb)
     out_vdb, out_npy = os.path.join(d, "out.vdb"), os.path.join(d, "out.npy")
     cmd = [hv, "distance"] + args + ["-o", out_vdb, "--npy", out_npy, "--stages", stages]
+    if backend:
+        cmd += ["--backend", backend]
     wall, rss, out = wait_timed(cmd, d)
     summary = json.loads(out.strip().splitlines()[-1])
     dist, solid, origin, h = read_output(out_vdb, out_npy, np, vdb)
@@ -289,6 +293,9 @@ def bench(hv, scene, n, stages, d, np, vdb):
            "per_cell_us": wall / cells * 1e6, "reference_per_cell_us": rs["seconds"] / cells * 1e6}
     for k in SUMMARY_KEYS:
         row[k] = summary.get(k)
+    for k in ("device", "host_bytes"):  # the opencl backend's
+        if k in summary:
+            row[k] = summary[k]
     row.update(compare(dist, ref, solid, h, np))
     return row
 
@@ -324,6 +331,7 @@ def main():
     ap.add_argument("--n", type=int, nargs="+", default=[128, 256])
     ap.add_argument("--scene", choices=["building", "maze"], action="append")
     ap.add_argument("--stages", choices=["tiles", "whole"], nargs="+", default=["tiles"])
+    ap.add_argument("--backend", default=None, help="heatvox's --backend (default: its own choice)")
     a = ap.parse_args()
     mods = imports()
     if mods is None:
@@ -336,7 +344,7 @@ def main():
             prev = None
             for n in a.n:
                 with tempfile.TemporaryDirectory(prefix="hv_bench_dist_") as d:
-                    prev = add_growth(bench(hv, scene, n, stages, d, *mods), prev)
+                    prev = add_growth(bench(hv, scene, n, stages, a.backend, d, *mods), prev)
                 print(json.dumps(prev), flush=True)
 
 
