@@ -138,7 +138,8 @@ typedef struct hv_distance hv_distance;
 HV_API hv_status hv_distance_create(hv_distance **d, const hv_grid *g,
                                     const hv_distance_opts *opts);
 /* Fills dist->v (a grid of the object's dim, n and h) with the distance from
- * src, as hv_distance_compute does; stats may be NULL. */
+ * src, as hv_distance_compute does (bit for bit); stats may be NULL. One
+ * query at a time on an object (its solvers are shared). */
 HV_API hv_status hv_distance_query(hv_distance *d, const hv_distance_sources *src, hv_grid *dist,
                                    hv_distance_stats *stats);
 HV_API void hv_distance_destroy(hv_distance **d);
