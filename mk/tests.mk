@@ -34,14 +34,15 @@ $(BUILD)/tests/check_points_sample: $(BUILD)/obj/tests/check_points_sample.o \
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
 # offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
 # include map of src/README.md), the OpenCL ones again as on a device without
-# fp64 (NAME.fp32), the multigrid ones again without AVX-512 (NAME.no512) and without AVX2 (NAME.noavx2). make -j runs them
+# fp64 (NAME.fp32), the multigrid ones and the distance's (its band's sweeps)
+# again without AVX-512 (NAME.no512) and without AVX2 (NAME.noavx2). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
               check_kernels check_includes \
               $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device check_extend_cl check_distance_cl,$(notdir $(TESTS)))) \
-              $(patsubst %,%.no512,$(filter check_mg check_mg_agg,$(notdir $(TESTS)))) \
+              $(patsubst %,%.no512,$(filter check_mg check_mg_agg check_distance,$(notdir $(TESTS)))) \
               $(patsubst %,%.noavx2,$(filter check_mg_agg,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a

@@ -408,20 +408,75 @@ __attribute__((target("avx512f,avx2"))) static void sweep_tile_avx512(const hv_d
             _mm512_storeu_pd(prev + o, _mm512_maskz_mov_pd(known, v));
         }
 }
+
+/* One row's update of sweep_tile_avx512 for one right-hand side. */
+__attribute__((target("avx512f,avx2"))) static inline void row_avx512(const double *cur,
+                                                                      double *prev, const double *f,
+                                                                      const band_rows *R, size_t o,
+                                                                      __m512d c, __m512d vs,
+                                                                      __m512d vo)
+{
+    const __m512d one = _mm512_set1_pd(1), zero = _mm512_setzero_pd();
+    const __m512i x = _mm512_castpd_si512(_mm512_loadu_pd(cur + o));
+    const __m512d xl =
+        _mm512_castsi512_pd(_mm512_alignr_epi64(x, _mm512_castpd_si512(_mm512_set1_pd(R->xm)), 7));
+    const __m512d xr =
+        _mm512_castsi512_pd(_mm512_alignr_epi64(_mm512_castpd_si512(_mm512_set1_pd(R->xp)), x, 1));
+    const __m512d d = _mm512_fmadd_pd(vs, _mm512_max_pd(_mm512_sub_pd(c, one), zero), one);
+    __m512d nb = _mm512_add_pd(_mm512_add_pd(xl, xr),
+                               _mm512_add_pd(_mm512_loadu_pd(R->ym), _mm512_loadu_pd(R->yp)));
+    nb = _mm512_add_pd(nb, _mm512_add_pd(_mm512_loadu_pd(R->zm), _mm512_loadu_pd(R->zp)));
+    const __m512d xc = _mm512_castsi512_pd(x), p = _mm512_loadu_pd(prev + o);
+    const __m512d au = _mm512_fmsub_pd(d, xc, _mm512_mul_pd(vs, nb));
+    const __m512d corr = _mm512_div_pd(_mm512_sub_pd(_mm512_loadu_pd(f + o), au), d);
+    const __m512d v = _mm512_fmadd_pd(vo, _mm512_sub_pd(_mm512_add_pd(corr, xc), p), p);
+    const __mmask8 known = _mm512_cmp_pd_mask(c, zero, _CMP_GT_OQ);
+    _mm512_storeu_pd(prev + o, _mm512_maskz_mov_pd(known, v));
+}
+
+/* Both right-hand sides' sweeps on listed tile q in one pass (the codes, the
+ * weights and the row pointers read once): the same values as two sweeps. */
+__attribute__((target("avx512f,avx2"))) static void sweep2_tile_avx512(
+    const hv_dist_tiles *T, size_t q, double *const cur[2], double *const prev[2],
+    const double s[2], const double omega[2])
+{
+    const __m512d vs0 = _mm512_set1_pd(s[0]), vo0 = _mm512_set1_pd(omega[0]);
+    const __m512d vs1 = _mm512_set1_pd(s[1]), vo1 = _mm512_set1_pd(omega[1]);
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            const __m512d c = _mm512_cvtepi32_pd(
+                _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)(T->code + o))));
+            band_rows R;
+            rows_of(T, cur[0], q, ly, lz, &R);
+            row_avx512(cur[0], prev[0], T->f, &R, o, c, vs0, vo0);
+            rows_of(T, cur[1], q, ly, lz, &R);
+            row_avx512(cur[1], prev[1], T->f, &R, o, c, vs1, vo1);
+        }
+}
 #else
 #define SWEEP_AVX512 0
+#endif
+
+#if SWEEP_AVX512
+/* The AVX-512 rows run: the CPU has them and HV_NO512 does not turn them
+ * off, as for the multigrid's kernels (asked from the calling thread). */
+static int band_avx512(void)
+{
+    static int avx512 = -1;
+    if (avx512 < 0) {
+        const char *e = getenv("HV_NO512");
+        avx512 = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0"));
+    }
+    return avx512;
+}
 #endif
 
 static void band_sweep(const hv_dist_tiles *T, const double *cur, double *prev, double s,
                        double omega)
 {
 #if SWEEP_AVX512
-    static int avx512 = -1;
-    if (avx512 < 0) { /* HV_NO512 turns it off, as for the multigrid's kernels */
-        const char *e = getenv("HV_NO512");
-        avx512 = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0"));
-    }
-    if (avx512) {
+    if (band_avx512()) {
 #pragma omp parallel for schedule(static)
         for (size_t q = 0; q < T->nlist; q++)
             sweep_tile_avx512(T, q, cur, prev, s, omega);
@@ -431,6 +486,22 @@ static void band_sweep(const hv_dist_tiles *T, const double *cur, double *prev, 
 #pragma omp parallel for schedule(static)
     for (size_t q = 0; q < T->nlist; q++)
         sweep_tile(T, q, cur, prev, s, omega);
+}
+
+/* Both right-hand sides' sweeps: fused where the CPU has AVX-512. */
+static void band_sweep2(const hv_dist_tiles *T, double *const cur[2], double *const prev[2],
+                        const double s[2], const double omega[2])
+{
+#if SWEEP_AVX512
+    if (band_avx512()) {
+#pragma omp parallel for schedule(static)
+        for (size_t q = 0; q < T->nlist; q++)
+            sweep2_tile_avx512(T, q, cur, prev, s, omega);
+        return;
+    }
+#endif
+    for (int r = 0; r < 2; r++)
+        band_sweep(T, cur[r], prev[r], s[r], omega[r]);
 }
 
 /* ||f - A x||^2 and ||f||^2 over the band. */
@@ -483,23 +554,38 @@ double hv__dist_band_omega(double omega, double rho2, int k)
     return k == 0 ? 1 / (1 - rho2 / 2) : 1 / (1 - rho2 * omega / 4);
 }
 
-/* x (the result: T->x[2q] or T->x[2q+1]) = (I - s Lap)^-1 f on the band. */
-static const double *band_chebyshev(hv_dist_tiles *T, int dim, double s, int q, int sweeps)
+/* x[r] = (I - s[r] Lap)^-1 f on the band for both right-hand sides (the
+ * results: out[r], one of T->x[2r], T->x[2r + 1]), sweeps[r] sweeps each; the
+ * sweeps both need run in one pass. */
+static void band_chebyshev(hv_dist_tiles *T, int dim, const double s[2], const int sweeps[2],
+                           const double *out[2])
 {
-    const double r2 = hv__dist_band_rho2(dim, s);
-    double *cur = T->x[2 * q], *prev = T->x[2 * q + 1];
     const size_t n = T->nlist * T->cells;
-    memset(prev, 0, n * sizeof *prev);
-    memset(cur, 0, n * sizeof *cur);
-    double omega = 1;
-    for (int k = 0; k < sweeps; k++) {
-        band_sweep(T, cur, prev, s, omega);
-        double *t = cur;
-        cur = prev;
-        prev = t;
-        omega = hv__dist_band_omega(omega, r2, k);
+    double *cur[2], *prev[2], omega[2] = {1, 1}, r2[2];
+    for (int r = 0; r < 2; r++) {
+        cur[r] = T->x[2 * r];
+        prev[r] = T->x[2 * r + 1];
+        memset(cur[r], 0, n * sizeof *cur[r]);
+        memset(prev[r], 0, n * sizeof *prev[r]);
+        r2[r] = hv__dist_band_rho2(dim, s[r]);
     }
-    return cur;
+    const int both = sweeps[0] < sweeps[1] ? sweeps[0] : sweeps[1];
+    for (int k = 0; k < sweeps[0] || k < sweeps[1]; k++) {
+        if (k < both)
+            band_sweep2(T, cur, prev, s, omega);
+        for (int r = 0; r < 2; r++) {
+            if (k >= sweeps[r])
+                continue;
+            if (k >= both)
+                band_sweep(T, cur[r], prev[r], s[r], omega[r]);
+            double *t = cur[r];
+            cur[r] = prev[r];
+            prev[r] = t;
+            omega[r] = hv__dist_band_omega(omega[r], r2[r], k);
+        }
+    }
+    out[0] = cur[0];
+    out[1] = cur[1];
 }
 
 /* The band's values of x onto the core tiles' cells of the whole-box array u. */
@@ -541,15 +627,17 @@ hv_status hv__dist_band_solve(hv_dist_box *b, const double *w, double *u, double
 {
     hv_dist_tiles *T = &b->tl;
     band_gather(b, w);
+    const double s[2] = {1 / b->tau[0], 1 / b->tau[1]};
+    const int sweeps[2] = {hv__dist_band_sweeps(b->dim, s[0], tol),
+                           hv__dist_band_sweeps(b->dim, s[1], tol)};
+    const double *x[2];
+    band_chebyshev(T, b->dim, s, sweeps, x);
     for (int q = 0; q < 2; q++) {
-        const double s = q ? 1 / b->tau[1] : 1 / b->tau[0];
-        const int sweeps = hv__dist_band_sweeps(b->dim, s, tol);
-        const double *x = band_chebyshev(T, b->dim, s, q, sweeps);
         double r[2];
-        band_residual(T, x, s, r);
-        band_scatter(b, x, q ? u2 : u);
+        band_residual(T, x[q], s[q], r);
+        band_scatter(b, x[q], q ? u2 : u);
         memset(&info[q], 0, sizeof info[q]);
-        info[q].iterations = sweeps;
+        info[q].iterations = sweeps[q];
         info[q].relres = r[1] > 0 ? sqrt(r[0] / r[1]) : 0;
         info[q].backend = HV_BACKEND_MG;
     }
