@@ -236,10 +236,13 @@ START_TEST(aggregation_should_solve_2d_odd_sizes_and_heat_steps)
 }
 END_TEST
 
-/* AUTO keeps the geometric levels for its first solve and, after one of more
- * than 16 iterations, changes to aggregation for the next; a grid too small
- * to aggregate keeps the geometric levels even when aggregation is asked. */
-START_TEST(auto_should_change_to_aggregation_after_a_slow_solve)
+/* AUTO starts on the geometric levels and, when its first iterations stall
+ * at the walls, builds the aggregation within that first solve and goes on
+ * with it (the later solves take it from the start); a solve whose geometric
+ * levels do well keeps them, with the same iterates as GEOMETRIC. A grid too
+ * small to aggregate keeps the geometric levels even when aggregation is
+ * asked. */
+START_TEST(auto_should_change_to_aggregation_within_a_slow_solve)
 {
     const int n[3] = {48, 48, 48};
     size_t N = (size_t)n[0] * n[1] * n[2];
@@ -258,13 +261,53 @@ START_TEST(auto_should_change_to_aggregation_after_a_slow_solve)
     TL_ASSERT_OK(hv_solver_get_stats(s, &s0));
     TL_ASSERT_OK(hv_solver_solve(s, f, u1, &i1));
     TL_ASSERT_OK(hv_solver_get_stats(s, &s1));
-    ck_assert_int_eq(s0.aggregation_levels, 0);
-    ck_assert_msg(i0.iterations > 16, "first solve: %d iterations", i0.iterations);
-    ck_assert_int_gt(s1.aggregation_levels, 1);
+    run g;
+    solve(&p, HV_COARSE_GEOMETRIC, 1e-6, f, &g);
+    ck_assert_msg(g.info.iterations > 16, "geometric: %d iterations", g.info.iterations);
+    ck_assert_int_gt(s0.aggregation_levels, 1);
+    ck_assert_msg(i0.iterations <= 12 && i0.iterations < g.info.iterations - 8,
+                  "first solve: %d iterations, geometric %d", i0.iterations, g.info.iterations);
+    ck_assert_int_eq(i0.nhistory, i0.iterations + 1);
+    ck_assert(i0.relres <= 1e-6 && i0.reason == HV_STOP_CONVERGED);
+    ck_assert_int_eq(s1.aggregation_levels, s0.aggregation_levels);
     ck_assert_msg(i1.iterations <= 8, "second solve: %d iterations", i1.iterations);
     ck_assert(i1.relres <= 1e-6);
     ck_assert_msg(rel_diff(u1, u0, N) < 1e-4, "solutions differ by %g", rel_diff(u1, u0, N));
+    ck_assert_msg(rel_diff(g.u, u0, N) < 1e-4, "solutions differ by %g", rel_diff(g.u, u0, N));
     hv_solver_destroy(&s);
+    free(g.u);
+    free(mask);
+
+    /* A heat step at 4 h^2 around the same walls converges on the geometric
+     * levels: AUTO keeps them, iterate for iterate. */
+    mask = baffles(3, n);
+    hv_problem heat = {3, {n[0], n[1], n[2]}, 1.0 / n[0], mask, 1.0, 4.0 / (n[0] * n[0])};
+    run ah, gh;
+    solve(&heat, HV_COARSE_AUTO, 1e-6, f, &ah);
+    solve(&heat, HV_COARSE_GEOMETRIC, 1e-6, f, &gh);
+    ck_assert_int_eq(ah.stats.aggregation_levels, 0);
+    ck_assert_int_eq(ah.info.iterations, gh.info.iterations);
+    ck_assert(memcmp(ah.u, gh.u, N * sizeof *ah.u) == 0);
+    free(ah.u);
+    free(gh.u);
+    /* So does Poisson around a solid ball, through the probe of its PCG. */
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                double x = i + 0.5 - n[0] / 2.0, y = j + 0.5 - n[1] / 2.0, z = k + 0.5 - n[2] / 2.0;
+                mask[i + n[0] * ((size_t)j + n[1] * k)] =
+                    x * x + y * y + z * z < n[0] * n[0] / 16.0;
+            }
+    hv_problem ball = {3, {n[0], n[1], n[2]}, 1.0 / n[0], mask, 0.0, 1.0};
+    solve(&ball, HV_COARSE_AUTO, 1e-6, f, &ah);
+    solve(&ball, HV_COARSE_GEOMETRIC, 1e-6, f, &gh);
+    ck_assert_int_eq(ah.stats.aggregation_levels, 0);
+    ck_assert_msg(gh.info.iterations > MG_AGG_PROBE, "ball: %d iterations", gh.info.iterations);
+    ck_assert_int_eq(ah.info.iterations, gh.info.iterations);
+    ck_assert_int_eq(ah.info.cycles, gh.info.cycles);
+    ck_assert(memcmp(ah.u, gh.u, N * sizeof *ah.u) == 0);
+    free(ah.u);
+    free(gh.u);
     free(mask);
     free(f);
 
@@ -452,7 +495,7 @@ int main(void)
     tcase_add_test(tc, aggregation_iterations_should_not_grow_with_n);
     tcase_add_test(tc, regions_cut_apart_should_each_stay_mean_free);
     tcase_add_test(tc, aggregation_should_solve_2d_odd_sizes_and_heat_steps);
-    tcase_add_test(tc, auto_should_change_to_aggregation_after_a_slow_solve);
+    tcase_add_test(tc, auto_should_change_to_aggregation_within_a_slow_solve);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

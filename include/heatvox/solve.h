@@ -45,8 +45,8 @@ typedef enum hv_smoother {
 
 typedef enum hv_coarse {
     HV_COARSE_AUTO = 0,   /* geometric; mg and opencl with solid cells change to aggregation
-                              after a solve of more than 16 iterations, for the solves that
-                              follow */
+                              within a solve whose first 4 iterations show it would take more
+                              than 16, for that solve and the ones that follow */
     HV_COARSE_GEOMETRIC,  /* halved grids with averaged coefficients (every backend) */
     HV_COARSE_AGGREGATION /* mg and opencl with solid cells: smoothed aggregation, Galerkin
                               coarse operators that keep every wall (docs/METHOD.md) */

@@ -58,8 +58,13 @@ hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_sol
     return HV_OK;
 }
 
-hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
-                          hv_solve_info *info)
+/* The PCG loop of hv__iterate_pcg. With decide, after `probe` iterations
+ * decide may change the preconditioner (*changed): the loop then ends there
+ * (x as it got, its true residual in info->relres) for the caller to start
+ * again; else it goes on as if never asked. */
+static hv_status pcg_loop(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
+                          hv_solve_info *info, int probe, hv_iter_decide decide, void *user,
+                          int *changed)
 {
     double norm, pq;
     hv_status st = ops->residual(ctx, &norm);
@@ -99,6 +104,12 @@ hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opt
             info->reason = HV_STOP_STAGNATED;
             break;
         }
+        if (decide && it + 1 == probe && it + 1 < o->max_iter) {
+            if ((st = decide(user, info, changed)))
+                return st;
+            if (*changed)
+                break;
+        }
         if ((st = ops->pcg_next(ctx, info)))
             return st;
     }
@@ -110,5 +121,38 @@ hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opt
     info->relres = rel;
     if (info->reason != HV_STOP_STAGNATED)
         info->reason = rel <= o->tol * 1.0001 ? HV_STOP_CONVERGED : HV_STOP_MAX_ITER;
+    return HV_OK;
+}
+
+hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
+                          hv_solve_info *info)
+{
+    return pcg_loop(ops, ctx, o, fn, info, 0, NULL, NULL, NULL);
+}
+
+void hv__info_append(hv_solve_info *info, const hv_solve_info *rest)
+{
+    info->reason = rest->reason;
+    info->relres = rest->relres;
+    info->iterations += rest->iterations;
+    info->cycles += rest->cycles;
+    for (int i = 1; i < rest->nhistory; i++)
+        hv_info_push(info, rest->history[i]);
+}
+
+hv_status hv__iterate_pcg_probed(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
+                                 double fn, int probe, hv_iter_decide decide, void *user,
+                                 hv_solve_info *info)
+{
+    int changed = 0;
+    hv_status st = pcg_loop(ops, ctx, o, fn, info, probe, decide, user, &changed);
+    if (st || !changed || info->reason == HV_STOP_CONVERGED)
+        return st;
+    hv_solver_opts ro = *o;
+    ro.max_iter -= info->iterations;
+    hv_solve_info rest = {0};
+    if ((st = pcg_loop(ops, ctx, &ro, fn, &rest, 0, NULL, NULL, NULL)))
+        return st;
+    hv__info_append(info, &rest);
     return HV_OK;
 }

@@ -56,4 +56,21 @@ hv_status hv__iterate_stationary(const hv_iter_ops *ops, void *ctx, const hv_sol
 hv_status hv__iterate_pcg(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o, double fn,
                           hv_solve_info *info);
 
+/* info += rest, a solve that went on from where info's ended (rest's
+ * history[0] is info's last residual and is left out). */
+void hv__info_append(hv_solve_info *info, const hv_solve_info *rest);
+
+/* Asked after a probe's iterations (info so far): *changed = 1 when it
+ * changed what the backend's cycles run. */
+typedef hv_status (*hv_iter_decide)(void *user, const hv_solve_info *info, int *changed);
+
+/* hv__iterate_pcg that asks decide(user, ...) after `probe` iterations
+ * (neither converged nor stagnated): when it changed the preconditioner, PCG
+ * starts again from where it got, for the iterations left of o->max_iter;
+ * else it goes on unchanged (the same iterates as hv__iterate_pcg). A decide
+ * that fails fails the solve. */
+hv_status hv__iterate_pcg_probed(const hv_iter_ops *ops, void *ctx, const hv_solver_opts *o,
+                                 double fn, int probe, hv_iter_decide decide, void *user,
+                                 hv_solve_info *info);
+
 #endif

@@ -437,6 +437,18 @@ static hv_status use_aggregation(ocl_state *o)
     return st == HV_ERR_NOMEM ? HV_OK : st;
 }
 
+/* HV_COARSE_AUTO after the probe of a solve's first iterations, as in
+ * mg_backend.c: aggregation levels when the geometric ones stall. */
+static hv_status ocl_decide(void *user, const hv_solve_info *probe, int *changed)
+{
+    ocl_state *o = user;
+    if (!mg_agg_probe_stalls(probe, o->s->o.tol))
+        return HV_OK;
+    hv_status st = use_aggregation(o);
+    *changed = o->mg.agg != NULL;
+    return st;
+}
+
 static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
 {
     ocl_iter c = {o, S_RZ0};
@@ -444,10 +456,12 @@ static hv_status solve_iterate(ocl_state *o, hv_solve_info *info, double fn)
     hv_status st;
     if (o->agg_pending && (st = use_aggregation(o)))
         return st;
-    st = o->use_pcg ? hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info)
-                    : hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, 0, info, NULL);
-    if (!st && o->use_pcg && opts->coarse == HV_COARSE_AUTO && !o->agg_tried &&
-        mg_agg_slow(info->iterations, info->relres))
+    if (!o->use_pcg)
+        return hv__iterate_stationary(&ocl_iter_ops, &c, opts, fn, 0, info, NULL);
+    if (opts->coarse != HV_COARSE_AUTO || o->agg_tried)
+        return hv__iterate_pcg(&ocl_iter_ops, &c, opts, fn, info);
+    st = hv__iterate_pcg_probed(&ocl_iter_ops, &c, opts, fn, MG_AGG_PROBE, ocl_decide, o, info);
+    if (!st && !o->agg_tried && mg_agg_slow(info->iterations, info->relres))
         o->agg_pending = 1;
     return st;
 }

@@ -39,6 +39,30 @@ static inline int mg_agg_slow(int iterations, double relres)
     return iterations > MG_AGG_SWITCH && relres > 0 && pow(relres, 1.0 / iterations) > MG_AGG_SLOW;
 }
 
+/* HV_COARSE_AUTO within a solve: after MG_AGG_PROBE iterations, the mean
+ * reduction from the first iteration's residual r1 to the last one's r (the
+ * first falls faster than the rest: what the geometric levels resolve) worse
+ * than MG_AGG_SLOW, at which reaching tol would take more than MG_AGG_SWITCH
+ * iterations in all. */
+#define MG_AGG_PROBE 4
+
+static inline int mg_agg_stalls(int steps, double r1, double r, double tol)
+{
+    if (!(r > tol) || !(r1 > 0) || steps < 1)
+        return 0;
+    double rate = pow(r / r1, 1.0 / steps);
+    if (!(rate > MG_AGG_SLOW))
+        return 0;
+    return rate >= 1 || steps + 1 + log(tol / r) / log(rate) > MG_AGG_SWITCH;
+}
+
+/* mg_agg_stalls over a probe's residual history. */
+static inline int mg_agg_probe_stalls(const hv_solve_info *probe, double tol)
+{
+    return probe->nhistory > 2 &&
+           mg_agg_stalls(probe->iterations - 1, probe->history[1], probe->relres, tol);
+}
+
 /* Sparse rows. Once the hierarchy is built (hv__mg_agg_pack), a matrix whose
  * every row spans fewer than 65536 columns holds them as 16-bit offsets co
  * from the row's first column cb[r] instead of ci (then NULL). */

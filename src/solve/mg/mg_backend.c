@@ -680,6 +680,32 @@ static hv_status mg_solve_pcg(mg_state *m, const double *f, double *u, hv_solve_
     return hv__iterate_pcg(&mg_iter_ops, &c, &m->s->o, fn, info);
 }
 
+/* HV_COARSE_AUTO after the probe of a solve's first iterations: aggregation
+ * levels when the geometric ones stall (mg_agg_stalls). */
+static hv_status mg_decide(void *user, const hv_solve_info *probe, int *changed)
+{
+    mg_state *m = user;
+    if (!mg_agg_probe_stalls(probe, m->s->o.tol))
+        return HV_OK;
+    hv_status st = use_aggregation(m, 1);
+    *changed = m->agg != NULL;
+    return st;
+}
+
+/* HV_COARSE_AUTO before any aggregation: a slow solve pays the set-up once,
+ * after MG_AGG_PROBE iterations, instead of finishing on the levels that lose
+ * the walls; a stall that shows only later asks for it before the next solve. */
+static hv_status mg_solve_probed(mg_state *m, const double *f, double *u, hv_solve_info *info,
+                                 double fn)
+{
+    mg_iter c = {.m = m, .f = f, .fn = fn, .x = u, .have_x = 1};
+    hv_status st =
+        hv__iterate_pcg_probed(&mg_iter_ops, &c, &m->s->o, fn, MG_AGG_PROBE, mg_decide, m, info);
+    if (!st && !m->agg_tried && mg_agg_slow(info->iterations, info->relres))
+        m->agg_pending = 1;
+    return st;
+}
+
 /* A heat step with solid cells: defect correction, which needs no CG vectors
  * and with the identity term converges as fast as on a plain box (t = 4h^2:
  * about 0.05 per cycle); PCG from where it got when a cycle is slower than
@@ -709,12 +735,7 @@ static hv_status mg_solve_masked_heat(mg_state *m, const double *f, double *u, h
     if (s->o.coarse == HV_COARSE_AUTO && !m->agg_tried &&
         mg_agg_slow(info->cycles + p.iterations, p.relres))
         m->agg_pending = 1;
-    info->reason = p.reason;
-    info->relres = p.relres;
-    info->iterations += p.iterations;
-    info->cycles += p.cycles;
-    for (int i = 1; i < p.nhistory; i++) /* p.history[0] is the hand-over's residual */
-        hv_info_push(info, p.history[i]);
+    hv__info_append(info, &p);
     return HV_OK;
 }
 
@@ -751,10 +772,9 @@ static hv_status mg_solve(void *state, const double *f, double *u, hv_solve_info
     if (m->agg_pending && (st0 = use_aggregation(m, 1)))
         return st0;
     m->agg_pending = 0;
-    hv_status st = mg_solve_pcg(m, f, u, info, fn);
-    if (st == HV_OK && s->o.coarse == HV_COARSE_AUTO && !m->agg_tried &&
-        mg_agg_slow(info->iterations, info->relres))
-        m->agg_pending = 1;
+    hv_status st = s->o.coarse == HV_COARSE_AUTO && !m->agg_tried && m->nlev > 1
+                       ? mg_solve_probed(m, f, u, info, fn)
+                       : mg_solve_pcg(m, f, u, info, fn);
     if (st == HV_OK && s->p.solid)
         zero_solid(s, u);
     return st;
