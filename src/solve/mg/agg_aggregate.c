@@ -41,20 +41,34 @@ static int block_parts(const agg_op *o, const int32_t *u, int m, int *lab)
             const int32_t *col;
             const float *val;
             int k = hv__agg_op_row(o, u[q], bc, bv, &col, &val);
-            for (int e = 0; e < k; e++) {
-                if (col[e] == u[q] || !strong(val[e], o->dinv[u[q]], o->dinv[col[e]]))
-                    continue;
+            for (int e = 0; e < k; e++)
                 for (int p = 0; p < m; p++)
-                    if (u[p] == col[e] && lab[p] < 0) {
+                    if (u[p] == col[e] && lab[p] < 0 && p != q &&
+                        strong(val[e], o->dinv[u[q]], o->dinv[col[e]])) {
                         lab[p] = parts;
                         if (top < 64)
                             stack[top++] = p;
                     }
-            }
         }
         parts++;
     }
     return parts;
+}
+
+/* Whether the 8 unknowns of a 3D block of the fine level (u in ascending
+ * order: x fastest) are one part, every face between them open and strong
+ * (binary levels only, where op_row reads the faces): block_parts' answer
+ * without its search, for the blocks of open space. */
+static int block_whole(const agg_op *o, const int32_t *u)
+{
+    for (int q = 0; q < 8; q++)
+        for (int b = 0; b < 3; b++) {
+            int hi = !(q >> b & 1), p = q ^ (1 << b);
+            if (!(o->faces[u[q]] & (1u << (2 * b + hi))) ||
+                !strong((float)-o->F->c[b], o->dinv[u[q]], o->dinv[u[p]]))
+                return 0;
+        }
+    return 1;
 }
 
 hv_status hv__agg_aggregate(mg_agg *g, int l)
@@ -121,7 +135,10 @@ hv_status hv__agg_aggregate(mg_agg *g, int l)
             memcpy(C->xyz + 3 * b, bxyz, sizeof bxyz);
         for (int q0 = 0; q0 < m; q0 += 64) {
             int mm = m - q0 < 64 ? m - q0 : 64;
-            int parts = block_parts(&o, u + q0, mm, lab);
+            int whole = mm == 8 && o.faces && g->dim == 3 && block_whole(&o, u + q0);
+            if (whole)
+                memset(lab, 0, 8 * sizeof lab[0]);
+            int parts = whole ? 1 : block_parts(&o, u + q0, mm, lab);
             for (int p = 0; p < parts; p++) {
                 size_t id = b;
                 if (!grid || p > 0 || q0 > 0) {

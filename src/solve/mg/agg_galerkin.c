@@ -266,6 +266,34 @@ static hv_status csr_transpose(const mg_csr *M, int32_t ncols, mg_csr *T)
     return HV_OK;
 }
 
+/* Each row of P without its entries below AGG_TRUNCATE times its largest,
+ * the rest scaled to the row's old sum: P still maps the constant to the
+ * constant (the Neumann null space the coarse levels must keep), P^T A P is
+ * still a Galerkin product (symmetric, semi-definite), and the products below
+ * it stay sparse (smoothing widens every level's stencil). */
+static void p_truncate(mg_csr *P)
+{
+    size_t at = 0, start = 0;
+    for (int32_t r = 0; r < P->n; r++) {
+        size_t end = P->rp[r + 1], first = at;
+        double big = 0, sum = 0, kept = 0;
+        for (size_t q = start; q < end; q++) {
+            big = fmax(big, fabs(P->v[q]));
+            sum += P->v[q];
+        }
+        for (size_t q = start; q < end; q++)
+            if (fabs(P->v[q]) >= AGG_TRUNCATE * big) {
+                P->ci[at] = P->ci[q];
+                P->v[at++] = P->v[q];
+                kept += P->v[q];
+            }
+        for (size_t q = first; q < at && kept != 0; q++)
+            P->v[q] = (float)(P->v[q] * (sum / kept));
+        start = end;
+        P->rp[r + 1] = at;
+    }
+}
+
 /* Level l+1's operator P^T A P from a coarse level l by sparse products (row
  * by row of P^T, (P^T A) then P: nothing of the size of A P is held). */
 hv_status hv__agg_galerkin_csr(mg_agg *g, int l, double wp)
@@ -275,8 +303,10 @@ hv_status hv__agg_galerkin_csr(mg_agg *g, int l, double wp)
     p_ctx pc = {L, L->agg, L->dinv, wp};
     hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0, 0);
     rap_ctx rap = {&R, &P, L};
-    if (!st)
+    if (!st) {
+        p_truncate(&P);
         st = csr_transpose(&P, C->n, &R);
+    }
     if (!st)
         st = build_csr(&C->A, C->n, C->n, rap_row, &rap, 0, L->n, 1e-9);
     if (st) {

@@ -25,6 +25,7 @@
 #define AGG_OMEGA (4.0 / 3.0) /* prolongation smoothing: omega / lmax(D^-1 A) */
 #define AGG_BOTTOM 600        /* a level this small is solved by Cholesky */
 #define AGG_STALL 1200        /* more than this and not coarsening: give up */
+#define AGG_TRUNCATE 0.05     /* coarse levels' P: entries below this times the row's largest go */
 #define AGG_STRONG 1e-6       /* |a_ij| below this times sqrt(a_ii a_jj) joins nothing */
 #define AGG_DEGREE 2          /* Chebyshev degree on the coarse levels */
 #define AGG_PAR_MIN 16384     /* levels below this many unknowns run on one thread */
