@@ -29,8 +29,9 @@ $(BUILD)/tests/check_points_sample: $(BUILD)/obj/tests/check_points_sample.o \
 # `timeout` stands in for Check's. The OpenCL suites (solver, device fields,
 # extension, distance) run a second time as on a device without fp64 (float
 # kernels, double correction on the host): the runs named SUITE.fp32; the multigrid suites a second time without their
-# AVX-512 kernels (HV_NO512=1, the path of other CPUs): SUITE.no512; the aggregation suite a third time
-# without the hand-written AVX2 ones either (HV_NOAVX2=1, the baseline C): SUITE.noavx2.
+# AVX-512 kernels (HV_NO512=1, the path of other CPUs): SUITE.no512; the aggregation and distance
+# suites a third time without the hand-written AVX2 ones either (HV_NOAVX2=1, the baseline C):
+# SUITE.noavx2.
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
 # offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
 # include map of src/README.md), the OpenCL ones again as on a device without
@@ -43,7 +44,7 @@ CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SL
               check_kernels check_includes \
               $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device check_extend_cl check_distance_cl,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg check_mg_agg check_distance,$(notdir $(TESTS)))) \
-              $(patsubst %,%.noavx2,$(filter check_mg_agg,$(notdir $(TESTS))))
+              $(patsubst %,%.noavx2,$(filter check_mg_agg check_distance,$(notdir $(TESTS))))
 RES := $(BUILD)/tests/results
 # tests/check_readme builds the README's C example and tests/check_api a
 # program linked shared and static against an installed copy: make check

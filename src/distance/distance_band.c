@@ -374,42 +374,11 @@ static void sweep_tile(const hv_dist_tiles *T, size_t q, const double *cur, doub
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
-#define SWEEP_AVX512 1
-/* sweep_tile with a row of DIST_TILE doubles in one AVX-512 register: the
- * x-neighbours by lane shifts (valignq) with the neighbour tiles' end cells. */
-__attribute__((target("avx512f,avx2"))) static void sweep_tile_avx512(const hv_dist_tiles *T,
-                                                                      size_t q, const double *cur,
-                                                                      double *prev, double s,
-                                                                      double omega)
-{
-    const __m512d vs = _mm512_set1_pd(s), vo = _mm512_set1_pd(omega), one = _mm512_set1_pd(1),
-                  zero = _mm512_setzero_pd();
-    for (int lz = 0; lz < T->tn[2]; lz++)
-        for (int ly = 0; ly < T->tn[1]; ly++) {
-            band_rows R;
-            rows_of(T, cur, q, ly, lz, &R);
-            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
-            const __m512i x = _mm512_castpd_si512(_mm512_loadu_pd(cur + o));
-            const __m512d xl = _mm512_castsi512_pd(
-                _mm512_alignr_epi64(x, _mm512_castpd_si512(_mm512_set1_pd(R.xm)), 7));
-            const __m512d xr = _mm512_castsi512_pd(
-                _mm512_alignr_epi64(_mm512_castpd_si512(_mm512_set1_pd(R.xp)), x, 1));
-            const __m512d c = _mm512_cvtepi32_pd(
-                _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)(T->code + o))));
-            const __m512d d = _mm512_fmadd_pd(vs, _mm512_max_pd(_mm512_sub_pd(c, one), zero), one);
-            __m512d nb = _mm512_add_pd(_mm512_add_pd(xl, xr),
-                                       _mm512_add_pd(_mm512_loadu_pd(R.ym), _mm512_loadu_pd(R.yp)));
-            nb = _mm512_add_pd(nb, _mm512_add_pd(_mm512_loadu_pd(R.zm), _mm512_loadu_pd(R.zp)));
-            const __m512d xc = _mm512_castsi512_pd(x), p = _mm512_loadu_pd(prev + o);
-            const __m512d au = _mm512_fmsub_pd(d, xc, _mm512_mul_pd(vs, nb));
-            const __m512d corr = _mm512_div_pd(_mm512_sub_pd(_mm512_loadu_pd(T->f + o), au), d);
-            const __m512d v = _mm512_fmadd_pd(vo, _mm512_sub_pd(_mm512_add_pd(corr, xc), p), p);
-            const __mmask8 known = _mm512_cmp_pd_mask(c, zero, _CMP_GT_OQ);
-            _mm512_storeu_pd(prev + o, _mm512_maskz_mov_pd(known, v));
-        }
-}
-
-/* One row's update of sweep_tile_avx512 for one right-hand side. */
+#define SWEEP_SIMD 1
+/* The rows of sweep_tile in vector registers: with AVX-512 a row of
+ * DIST_TILE doubles in one register, the x-neighbours by lane shifts
+ * (valignq) with the neighbour tiles' end cells; with AVX2 and FMA in two,
+ * the same operations in the same order (the same values). */
 __attribute__((target("avx512f,avx2"))) static inline void row_avx512(const double *cur,
                                                                       double *prev, const double *f,
                                                                       const band_rows *R, size_t o,
@@ -434,6 +403,87 @@ __attribute__((target("avx512f,avx2"))) static inline void row_avx512(const doub
     _mm512_storeu_pd(prev + o, _mm512_maskz_mov_pd(known, v));
 }
 
+__attribute__((target("avx512f,avx2"))) static inline __m512d codes_avx512(const uint8_t *code)
+{
+    return _mm512_cvtepi32_pd(_mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)code)));
+}
+
+/* Half a row (lanes h .. h + 3) of row_avx512's update with AVX2: xl and xr
+ * the cells' x-neighbours. */
+__attribute__((target("avx2,fma"))) static inline __m256d half_avx2(
+    const double *xc_, const double *p_, const double *f_, const band_rows *R, int h, __m256d xl,
+    __m256d xr, __m256d c, __m256d vs, __m256d vo)
+{
+    const __m256d one = _mm256_set1_pd(1), zero = _mm256_setzero_pd();
+    const __m256d d = _mm256_fmadd_pd(vs, _mm256_max_pd(_mm256_sub_pd(c, one), zero), one);
+    __m256d nb = _mm256_add_pd(_mm256_add_pd(xl, xr), _mm256_add_pd(_mm256_loadu_pd(R->ym + h),
+                                                                    _mm256_loadu_pd(R->yp + h)));
+    nb = _mm256_add_pd(nb, _mm256_add_pd(_mm256_loadu_pd(R->zm + h), _mm256_loadu_pd(R->zp + h)));
+    const __m256d xc = _mm256_loadu_pd(xc_ + h), p = _mm256_loadu_pd(p_ + h);
+    const __m256d au = _mm256_fmsub_pd(d, xc, _mm256_mul_pd(vs, nb));
+    const __m256d corr = _mm256_div_pd(_mm256_sub_pd(_mm256_loadu_pd(f_ + h), au), d);
+    const __m256d v = _mm256_fmadd_pd(vo, _mm256_sub_pd(_mm256_add_pd(corr, xc), p), p);
+    return _mm256_and_pd(v, _mm256_cmp_pd(c, zero, _CMP_GT_OQ));
+}
+
+__attribute__((target("avx2,fma"))) static inline void row_avx2(const double *cur, double *prev,
+                                                                const double *f, const band_rows *R,
+                                                                size_t o, const __m256d c[2],
+                                                                __m256d vs, __m256d vo)
+{
+    const double *r = cur + o;
+    const __m256d lo = _mm256_loadu_pd(r), hi = _mm256_loadu_pd(r + 4);
+    /* xl = (xm, r0, r1, r2 | r3 .. r6), xr = (r1 .. r4 | r5, r6, r7, xp) */
+    const __m256d xl0 = _mm256_blend_pd(_mm256_permute4x64_pd(lo, 0x90), _mm256_set1_pd(R->xm), 1);
+    const __m256d xr1 = _mm256_blend_pd(_mm256_permute4x64_pd(hi, 0xF9), _mm256_set1_pd(R->xp), 8);
+    const __m256d v0 =
+        half_avx2(r, prev + o, f + o, R, 0, xl0, _mm256_loadu_pd(r + 1), c[0], vs, vo);
+    const __m256d v1 =
+        half_avx2(r, prev + o, f + o, R, 4, _mm256_loadu_pd(r + 3), xr1, c[1], vs, vo);
+    _mm256_storeu_pd(prev + o, v0);
+    _mm256_storeu_pd(prev + o + 4, v1);
+}
+
+__attribute__((target("avx2,fma"))) static inline void codes_avx2(const uint8_t *code, __m256d c[2])
+{
+    const __m128i b = _mm_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)code));
+    c[0] = _mm256_cvtepi32_pd(b);
+    c[1] = _mm256_cvtepi32_pd(
+        _mm_cvtepu8_epi32(_mm_srli_si128(_mm_loadl_epi64((const __m128i *)code), 4)));
+}
+
+/* sweep_tile, one register row at a time. */
+__attribute__((target("avx512f,avx2"))) static void sweep_tile_avx512(const hv_dist_tiles *T,
+                                                                      size_t q, const double *cur,
+                                                                      double *prev, double s,
+                                                                      double omega)
+{
+    const __m512d vs = _mm512_set1_pd(s), vo = _mm512_set1_pd(omega);
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            band_rows R;
+            rows_of(T, cur, q, ly, lz, &R);
+            row_avx512(cur, prev, T->f, &R, o, codes_avx512(T->code + o), vs, vo);
+        }
+}
+
+__attribute__((target("avx2,fma"))) static void sweep_tile_avx2(const hv_dist_tiles *T, size_t q,
+                                                                const double *cur, double *prev,
+                                                                double s, double omega)
+{
+    const __m256d vs = _mm256_set1_pd(s), vo = _mm256_set1_pd(omega);
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            band_rows R;
+            __m256d c[2];
+            rows_of(T, cur, q, ly, lz, &R);
+            codes_avx2(T->code + o, c);
+            row_avx2(cur, prev, T->f, &R, o, c, vs, vo);
+        }
+}
+
 /* Both right-hand sides' sweeps on listed tile q in one pass (the codes, the
  * weights and the row pointers read once): the same values as two sweeps. */
 __attribute__((target("avx512f,avx2"))) static void sweep2_tile_avx512(
@@ -445,8 +495,7 @@ __attribute__((target("avx512f,avx2"))) static void sweep2_tile_avx512(
     for (int lz = 0; lz < T->tn[2]; lz++)
         for (int ly = 0; ly < T->tn[1]; ly++) {
             size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
-            const __m512d c = _mm512_cvtepi32_pd(
-                _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)(T->code + o))));
+            const __m512d c = codes_avx512(T->code + o);
             band_rows R;
             rows_of(T, cur[0], q, ly, lz, &R);
             row_avx512(cur[0], prev[0], T->f, &R, o, c, vs0, vo0);
@@ -454,49 +503,86 @@ __attribute__((target("avx512f,avx2"))) static void sweep2_tile_avx512(
             row_avx512(cur[1], prev[1], T->f, &R, o, c, vs1, vo1);
         }
 }
+
+__attribute__((target("avx2,fma"))) static void sweep2_tile_avx2(const hv_dist_tiles *T, size_t q,
+                                                                 double *const cur[2],
+                                                                 double *const prev[2],
+                                                                 const double s[2],
+                                                                 const double omega[2])
+{
+    const __m256d vs0 = _mm256_set1_pd(s[0]), vo0 = _mm256_set1_pd(omega[0]);
+    const __m256d vs1 = _mm256_set1_pd(s[1]), vo1 = _mm256_set1_pd(omega[1]);
+    for (int lz = 0; lz < T->tn[2]; lz++)
+        for (int ly = 0; ly < T->tn[1]; ly++) {
+            size_t o = q * T->cells + (size_t)DIST_TILE * (ly + (size_t)T->tn[1] * lz);
+            __m256d c[2];
+            codes_avx2(T->code + o, c);
+            band_rows R;
+            rows_of(T, cur[0], q, ly, lz, &R);
+            row_avx2(cur[0], prev[0], T->f, &R, o, c, vs0, vo0);
+            rows_of(T, cur[1], q, ly, lz, &R);
+            row_avx2(cur[1], prev[1], T->f, &R, o, c, vs1, vo1);
+        }
+}
 #else
-#define SWEEP_AVX512 0
+#define SWEEP_SIMD 0
 #endif
 
-#if SWEEP_AVX512
-/* The AVX-512 rows run: the CPU has them and HV_NO512 does not turn them
- * off, as for the multigrid's kernels (asked from the calling thread). */
-static int band_avx512(void)
+/* Which rows run: 2 AVX-512, 1 AVX2 with FMA, 0 the baseline C, as the CPU
+ * has them and HV_NO512 and HV_NOAVX2 allow, as for the multigrid's kernels
+ * (asked from the calling thread). */
+static int band_simd(void)
 {
-    static int avx512 = -1;
-    if (avx512 < 0) {
-        const char *e = getenv("HV_NO512");
-        avx512 = __builtin_cpu_supports("avx512f") && !(e && *e && strcmp(e, "0"));
+#if SWEEP_SIMD
+    static int simd = -1;
+    if (simd < 0) {
+        const char *e5 = getenv("HV_NO512"), *e2 = getenv("HV_NOAVX2");
+        const int no512 = e5 && *e5 && strcmp(e5, "0"), noavx2 = e2 && *e2 && strcmp(e2, "0");
+        simd = __builtin_cpu_supports("avx512f") && !no512                                  ? 2
+               : __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && !noavx2 ? 1
+                                                                                            : 0;
     }
-    return avx512;
-}
+    return simd;
+#else
+    return 0;
 #endif
+}
 
 static void band_sweep(const hv_dist_tiles *T, const double *cur, double *prev, double s,
                        double omega)
 {
-#if SWEEP_AVX512
-    if (band_avx512()) {
+    const int simd = band_simd();
 #pragma omp parallel for schedule(static)
-        for (size_t q = 0; q < T->nlist; q++)
+    for (size_t q = 0; q < T->nlist; q++) {
+#if SWEEP_SIMD
+        if (simd == 2) {
             sweep_tile_avx512(T, q, cur, prev, s, omega);
-        return;
-    }
+            continue;
+        }
+        if (simd == 1) {
+            sweep_tile_avx2(T, q, cur, prev, s, omega);
+            continue;
+        }
 #endif
-#pragma omp parallel for schedule(static)
-    for (size_t q = 0; q < T->nlist; q++)
         sweep_tile(T, q, cur, prev, s, omega);
+    }
+    (void)simd;
 }
 
-/* Both right-hand sides' sweeps: fused where the CPU has AVX-512. */
+/* Both right-hand sides' sweeps: fused where the CPU has the vector rows. */
 static void band_sweep2(const hv_dist_tiles *T, double *const cur[2], double *const prev[2],
                         const double s[2], const double omega[2])
 {
-#if SWEEP_AVX512
-    if (band_avx512()) {
+#if SWEEP_SIMD
+    const int simd = band_simd();
+    if (simd) {
 #pragma omp parallel for schedule(static)
-        for (size_t q = 0; q < T->nlist; q++)
-            sweep2_tile_avx512(T, q, cur, prev, s, omega);
+        for (size_t q = 0; q < T->nlist; q++) {
+            if (simd == 2)
+                sweep2_tile_avx512(T, q, cur, prev, s, omega);
+            else
+                sweep2_tile_avx2(T, q, cur, prev, s, omega);
+        }
         return;
     }
 #endif
