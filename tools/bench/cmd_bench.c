@@ -138,12 +138,20 @@ static uint8_t *make_obstacle(const char *kind, int dim, int n)
     return solid;
 }
 
+/* The first solve of a solver (the warm-up of time_solve): its time and
+ * iterations, what a single solve costs after the set-up. */
+typedef struct first_solve {
+    double seconds;
+    int iterations;
+} first_solve;
+
 /* Times `repeat` solves after one warm-up; returns the best time and its info,
  * and in *cycle_gbs the best V-cycle bandwidth of any timed solve (cycle_bytes /
  * cycle_seconds; 0 where the backend does not time its cycles). With `ref`, a
- * copy trial runs before each solve. */
+ * copy trial runs before each solve; with `first`, the first solve's figures. */
 static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, copy_ref *ref,
-                            double *best, hv_solve_info *info, double *cycle_gbs)
+                            double *best, hv_solve_info *info, double *cycle_gbs,
+                            first_solve *first)
 {
     *best = 1e30;
     *cycle_gbs = 0;
@@ -157,6 +165,8 @@ static hv_status time_solve(hv_solver *s, const float *f, float *u, int repeat, 
         double t = hv_now() - t0;
         if (st)
             return st;
+        if (r == 0 && first)
+            *first = (first_solve){t, run.iterations};
         if (r == 0 && repeat > 0)
             continue;    /* warm-up */
         if (t < *best) { /* the info of the fastest run */
@@ -237,9 +247,11 @@ static int usage_solve(FILE *out)
             "with one square gap of a quarter of that at a fixed random place. The reference\n"
             "is then FFTW on the same box without the obstacle (\"ref\": \"fftw-plain-box\").\n"
             "--coarse: the coarse levels of mg and opencl with solid cells: aggregation\n"
-            "(Galerkin operators that keep the walls; auto changes to it after a solve that\n"
-            "stalls, as the warm-up of most --poisson rows does) or geometric (halved grids,\n"
-            "averaged coefficients); the JSON's history has the residual after each iteration.\n"
+            "(Galerkin operators that keep the walls; auto changes to it within a solve whose\n"
+            "first iterations stall, as the warm-up of most --poisson rows does) or geometric\n"
+            "(halved grids, averaged coefficients). first_seconds and first_iterations: the\n"
+            "solver's first solve (the warm-up, where auto decides); one_solve_seconds =\n"
+            "setup_seconds + first_seconds, what one solve costs from nothing.\n"
             "--backend opencl adds the device's own figures, from a context and profiling\n"
             "queue of the benchmark's: device, device_setup_seconds, device_seconds (best\n"
             "solve with f and u already on the device, hv_opencl_solve), device_event_seconds\n"
@@ -380,6 +392,7 @@ typedef struct solve_row {
     double setup, seconds, cycle_gbs, solve_gbs, traffic, peak_mb;
     double copy_gbs, copy1_gbs, copy_mb;
     hv_solve_info info;
+    first_solve first;
     int levels;
 } solve_row;
 
@@ -405,7 +418,7 @@ static int time_row(const solve_args *A, const solve_problem *P, const hv_solver
     }
     R->setup = hv_now() - t0;
     st = time_solve(s, P->f, P->u, A->repeat, copy ? &ref : NULL, &R->seconds, &R->info,
-                    &best_cycle_gbs);
+                    &best_cycle_gbs, &R->first);
     R->copy_gbs = ref.gbs;
     R->copy1_gbs = ref.gbs1;
     R->copy_mb = 2.0 * ref.n * sizeof(float) / 1048576;
@@ -451,7 +464,7 @@ static int time_mg_ref(const solve_args *A, const solve_problem *P, hv_solver_op
     const int reset = hv_peak_rss_reset() == HV_OK;
     hv_status st = hv_solver_create(&s, &P->p, &o);
     if (!st)
-        st = time_solve(s, P->f, P->u, A->repeat, NULL, &M->seconds, &M->info, &unused_gbs);
+        st = time_solve(s, P->f, P->u, A->repeat, NULL, &M->seconds, &M->info, &unused_gbs, NULL);
     hv_solver_destroy(&s);
     if (st)
         return cli_fail("bench solve", "the mg reference", st);
@@ -495,7 +508,7 @@ static void print_reference(const solve_args *A, const solve_problem *P, hv_solv
     double ref_seconds = 0, unused;
     hv_solve_info rinfo;
     if (hv_solver_create(&s, &plain, &o) == HV_OK &&
-        time_solve(s, P->f, P->u, A->repeat, NULL, &ref_seconds, &rinfo, &unused) == HV_OK)
+        time_solve(s, P->f, P->u, A->repeat, NULL, &ref_seconds, &rinfo, &unused, NULL) == HV_OK)
         printf(",\"ref\":\"%s\",\"ref_seconds\":%.5f,\"ref_relres\":%.3e,\"ratio\":%.3f",
                P->solid ? "fftw-plain-box" : "fftw", ref_seconds, rinfo.relres,
                R->seconds / ref_seconds);
@@ -513,13 +526,15 @@ static void print_row(const solve_args *A, const solve_problem *P, hv_solver_opt
         "\"reduction\":%.4f,\"reason\":\"%s\","
         "\"levels\":%d,"
         "\"copy_gbs\":%.2f,\"cycle_gbs\":%.2f,\"cycles_timed\":%d,\"solve_gbs\":%.2f,"
-        "\"obstacle\":\"%s\",\"coarse\":\"%s\"",
+        "\"obstacle\":\"%s\",\"coarse\":\"%s\",\"first_seconds\":%.5f,\"first_iterations\":%d,"
+        "\"one_solve_seconds\":%.5f",
         A->n, hv_mpi_size(), A->dim, A->poisson ? "poisson" : "heat", A->poisson ? 0.0 : A->tscale,
         hv_backend_name(A->backend), smoother_name(A), A->threads, A->tol, R->setup, R->seconds,
         R->peak_mb, info->iterations, info->cycles, info->relres,
         info->iterations > 0 && info->relres > 0 ? pow(info->relres, 1.0 / info->iterations) : 0.0,
         hv_stop_reason_str(info->reason), R->levels, R->copy_gbs, R->cycle_gbs, info->cycles_timed,
-        R->solve_gbs, OBSTACLES[A->obstacle], COARSE[A->coarse]);
+        R->solve_gbs, OBSTACLES[A->obstacle], COARSE[A->coarse], R->first.seconds,
+        R->first.iterations, R->setup + R->first.seconds);
     print_reference(A, P, *o, R, M);
     if (A->backend != HV_BACKEND_PETSC)
         printf(",\"copy1_gbs\":%.2f,\"copy_ref_mb\":%.1f", R->copy1_gbs, R->copy_mb);
