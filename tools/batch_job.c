@@ -231,7 +231,14 @@ int batch_opts_forward(cli_opt *t, int (*fn)(const char *, const char *, char **
     job_options(&o, t);
     for (int i = 0; i < JOB_OPTS; i++) {
         const int k = cli_opt_arity(&t[i]);
-        t[i] = (cli_opt){.names = t[i].names, .kind = CLI_FN, .dst = dst, .val = k, .fn = fn};
+        t[i] = (cli_opt){.names = t[i].names,
+                         .kind = CLI_FN,
+                         .dst = dst,
+                         .val = k,
+                         .fn = fn,
+                         .needs = t[i].needs,
+                         .choices = cli_opt_choices(&t[i]),
+                         .files = t[i].files};
     }
     return JOB_OPTS;
 }

@@ -263,6 +263,7 @@ int cli_bench_mesh_args_parse(const char *cmd, int argc, char **argv, int (*usag
     cli_bench_mesh_args A = {NULL, 0, 1, 0, HV_BACKEND_AUTO, HV_SDF_SIGN_AUTO};
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_MESH},
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &A.n,
@@ -324,7 +325,7 @@ const cli_opt *cli_find_opt(const cli_opt *opts, const char *a)
 {
     const size_t n = strlen(a);
     for (const cli_opt *o = opts; o->names; o++)
-        for (const char *p = o->names; *p;) {
+        for (const char *p = o->kind == CLI_WORDS ? "" : o->names; *p;) {
             const char *e = strchr(p, '|');
             size_t len = e ? (size_t)(e - p) : strlen(p);
             if (len == n && !strncmp(p, a, n))
@@ -406,6 +407,8 @@ static int parse_from(const char *cmd, int first, int argc, char **argv, const c
                       void (*help)(void))
 {
     *nwords = 0;
+    if (first == 1 && argc > 1 && !strcmp(argv[1], CLI_DESCRIBE))
+        return cli_describe(cmd, opts, noun, max);
     for (int i = first; i < argc; i++) {
         const char *a = argv[i];
         if (help && (!strcmp(a, "--help") || !strcmp(a, "-h"))) {

@@ -95,8 +95,10 @@ typedef enum cli_kind {
     CLI_LIST,    /* appended to (const char **)dst, at most val, counted in *given;
                     the same value twice is an error */
     CLI_IGNORE,  /* taken by the driver (-q, -v) */
-    CLI_FN       /* fn(cmd, option, values, how many follow, dst): the values it took
+    CLI_FN,      /* fn(cmd, option, values, how many follow, dst): the values it took
                     (>= 0), or minus the exit code; val: how many it takes, where fixed */
+    CLI_WORDS    /* no option: describes the words that are no option (names: how the
+                    synopsis calls them, "MESH"; files), for cli_describe alone */
 } cli_kind;
 
 #define CLI_ABOVE 1 /* cli_opt.flags: a number must exceed min */
@@ -111,8 +113,19 @@ typedef struct cli_opt {
     int *given;        /* set to 1 when the option is given (may be NULL); CLI_LIST: the count */
     int flags;
     int (*fn)(const char *cmd, const char *opt, char **v, int nv, void *dst);
-    const char *choices; /* CLI_CHOICE: the values, split by '|' */
+    const char *choices; /* CLI_CHOICE: the values, split by '|'; other kinds: the
+                            words the value may be, for the man page and completion */
+    const char *files;   /* the value names a file: the extensions it takes as
+                            cli_check_ext does (".vdb .h5"), CLI_FILES_ANY or
+                            CLI_FILES_DIR (either may lead an extension list) */
 } cli_opt;
+
+#define CLI_FILES_ANY "*"
+#define CLI_FILES_DIR "/"
+/* What the mesh readers take (hv_mesh_read, and the point clouds of
+ * cli_read_shape). */
+#define CLI_FILES_TRIMESH ".obj .ply .stl .off .gltf .glb .fbx .3mf .dae .x"
+#define CLI_FILES_MESH CLI_FILES_TRIMESH " .xyz .pts .xyzn"
 
 /* The rows several commands share, declared once so that an option reads
  * and fails the same wherever it is taken. to is where its value goes. */
@@ -120,9 +133,10 @@ typedef struct cli_opt {
     {                                                                                              \
         .names = "-q|-v", .kind = CLI_IGNORE                                                       \
     }
-#define CLI_ROW_OUTPUT(to)                                                                         \
+/* exts: the extensions the output takes (cli_opt.files). */
+#define CLI_ROW_OUTPUT(to, exts)                                                                   \
     {                                                                                              \
-        .names = "-o|--output", .kind = CLI_STR, .dst = (to)                                       \
+        .names = "-o|--output", .kind = CLI_STR, .dst = (to), .files = (exts)                      \
     }
 #define CLI_ROW_THREADS(to)                                                                        \
     {                                                                                              \
@@ -185,6 +199,20 @@ int cli_parse(const char *cmd, int argc, char **argv, const cli_opt *opts, const
 /* The same with up to max words that are no option, in words[0..*nwords). */
 int cli_parse_words(const char *cmd, int argc, char **argv, const cli_opt *opts, const char *noun,
                     const char **words, int max, int *nwords, void (*help)(void));
+/* `heatvox CMD --describe-options` (the first word after the command): the
+ * parsers print the command's rows instead of reading them (cli_describe),
+ * which tools/man_completion.py turns into man pages and bash completion. */
+#define CLI_DESCRIBE "--describe-options"
+/* Prints the rows of opts on stdout as lines of tab-separated fields, for a
+ * program to read:
+ *   command  CMD
+ *   words    NOUN  MAX  FILES                       (the words that are no option)
+ *   option   NAMES  KIND  ARITY  CHOICES  FILES  NEEDS
+ * NAMES and CHOICES split by '|', FILES by ' ', empty fields as "-". Returns 0. */
+int cli_describe(const char *cmd, const cli_opt *opts, const char *noun, int max);
+/* The words an option's value may be, split by '|' (CLI_CHOICE, CLI_SIGN,
+ * CLI_BACKEND, or the row's choices); NULL for any. */
+const char *cli_opt_choices(const cli_opt *o);
 /* Options only, argv[0..argc) (a manifest line's): nothing printed; 0, or
  * -1 with the message in err. */
 int cli_parse_quiet(int argc, char **argv, const cli_opt *opts, char *err, size_t size);

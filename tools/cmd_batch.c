@@ -123,10 +123,13 @@ static int forward(const char *cmd, const char *opt, char **v, int nv, void *dst
  * on, else the exit code. */
 static int parse_args(int argc, char **argv, batch_args *A)
 {
-    cli_opt t[6 + BATCH_JOB_OPTS + 1] = {
+    cli_opt t[7 + BATCH_JOB_OPTS + 1] = {
         CLI_ROW_QUIET,
-        {.names = "-o", .kind = CLI_STR, .dst = &A->outdir},
-        {.names = "--report", .kind = CLI_STR, .dst = &A->report},
+        {.names = "INPUT",
+         .kind = CLI_WORDS,
+         .files = CLI_FILES_DIR " " CLI_FILES_MESH " .txt .list"},
+        {.names = "-o", .kind = CLI_STR, .dst = &A->outdir, .files = CLI_FILES_DIR},
+        {.names = "--report", .kind = CLI_STR, .dst = &A->report, .files = CLI_FILES_ANY},
         {.names = "-j",
          .kind = CLI_INT,
          .dst = &A->nworkers,
@@ -136,7 +139,7 @@ static int parse_args(int argc, char **argv, batch_args *A)
         {.names = "--dry-run", .kind = CLI_FLAG, .dst = &A->dry, .val = 1},
         {.names = "--force", .kind = CLI_FLAG, .dst = &A->force, .val = 1},
     };
-    t[6 + batch_opts_forward(t + 6, forward, A)] = (cli_opt){.names = NULL};
+    t[7 + batch_opts_forward(t + 7, forward, A)] = (cli_opt){.names = NULL};
     int rc = cli_parse_words("batch", argc, argv, t, "input", A->inputs, argc, &A->ninputs, help);
     if (rc >= 0)
         return rc;

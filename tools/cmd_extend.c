@@ -522,6 +522,7 @@ static int parse_args(int argc, char **argv, extend_job *j)
     hv_extend_opts *o = &j->o;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "IN.vdb", .kind = CLI_WORDS, .files = ".vdb"},
         CLI_ROW_DENSE(&j->dense),
         {.names = "--plain", .kind = CLI_FLAG, .dst = &o->closest_point, .val = 0},
         {.names = "--levelset", .kind = CLI_STR, .dst = &j->ls},
@@ -530,7 +531,7 @@ static int parse_args(int argc, char **argv, extend_job *j)
          .dst = j->fields,
          .val = MAX_FIELDS,
          .given = &j->nfields},
-        CLI_ROW_OUTPUT(&j->out),
+        CLI_ROW_OUTPUT(&j->out, ".vdb .h5"),
         CLI_ROW_BAND("--band", &o->band),
         CLI_ROW_T_SCALE(&o->t_scale),
         CLI_ROW_BAND("--out-band", &o->out_band),

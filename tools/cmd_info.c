@@ -192,6 +192,7 @@ int cmd_info(int argc, char **argv)
     int json = 0, nfiles = 0, failed = 0;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_MESH},
         {.names = "--json", .kind = CLI_FLAG, .dst = &json, .val = 1},
         {.names = NULL},
     };

@@ -355,6 +355,7 @@ int cmd_make_scenes(int argc, char **argv)
     const char *dir = NULL;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "DIRECTORY", .kind = CLI_WORDS, .files = CLI_FILES_DIR},
         {.names = NULL},
     };
     int rc = cli_parse("make-scenes", argc, argv, opts, "directory", &dir, help);

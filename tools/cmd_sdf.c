@@ -256,10 +256,11 @@ static int parse_args(int argc, char **argv, sdf_args *A)
     hv_sdf_opts_default(o);
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
-        CLI_ROW_OUTPUT(&A->out),
-        {.names = "--npy", .kind = CLI_STR, .dst = &A->npy},
-        {.names = "--preview", .kind = CLI_STR, .dst = &A->preview},
-        {.names = "--mesh-out", .kind = CLI_STR, .dst = &A->mesh_out},
+        {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_MESH},
+        CLI_ROW_OUTPUT(&A->out, ".vdb"),
+        {.names = "--npy", .kind = CLI_STR, .dst = &A->npy, .files = ".npy"},
+        {.names = "--preview", .kind = CLI_STR, .dst = &A->preview, .files = ".png"},
+        {.names = "--mesh-out", .kind = CLI_STR, .dst = &A->mesh_out, .files = ".obj .ply .stl"},
         {.names = "--adaptivity",
          .kind = CLI_DOUBLE,
          .dst = &A->adaptivity,

@@ -51,8 +51,9 @@ int cmd_sdf2d(int argc, char **argv)
     hv_sdf_sign sign = (hv_sdf_sign)o.sign;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
-        {.names = "-o", .kind = CLI_STR, .dst = &out},
-        {.names = "--png", .kind = CLI_STR, .dst = &png},
+        {.names = "CURVES", .kind = CLI_WORDS, .files = ".svg .txt"},
+        {.names = "-o", .kind = CLI_STR, .dst = &out, .files = ".exr"},
+        {.names = "--png", .kind = CLI_STR, .dst = &png, .files = ".png"},
         {.names = "--channel", .kind = CLI_STR, .dst = &channel},
         CLI_ROW_RES(&o.res, 2, NULL),
         CLI_ROW_PAD(&o.pad),

@@ -92,9 +92,15 @@ int cmd_slice(int argc, char **argv)
     double range = 0;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
-        CLI_ROW_OUTPUT(&out),
+        {.names = "VOLUME", .kind = CLI_WORDS, .files = ".vdb .exr"},
+        CLI_ROW_OUTPUT(&out, ".exr .png"),
         {.names = "--grid", .kind = CLI_STR, .dst = &grid},
-        {.names = "--axis", .kind = CLI_FN, .dst = &axis, .fn = take_axis},
+        {.names = "--axis",
+         .kind = CLI_FN,
+         .dst = &axis,
+         .val = 1,
+         .fn = take_axis,
+         .choices = "x|y|z"},
         {.names = "--index",
          .kind = CLI_INT,
          .dst = &index,

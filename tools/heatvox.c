@@ -40,6 +40,14 @@ static void usage(FILE *out)
     fprintf(out, "\nexit codes: 0 success, 1 failure (bad input, I/O, solver), 2 usage error\n");
 }
 
+/* heatvox --describe-options: the commands, for tools/man_completion.py. */
+static int describe_commands(void)
+{
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        printf("subcommand\t%s\t%s\n", commands[i].name, commands[i].summary);
+    return HV_EXIT_OK;
+}
+
 static void log_to_stderr(hv_log_level level, const char *msg, void *user)
 {
     (void)user;
@@ -106,6 +114,8 @@ int main(int argc, char **argv)
         usage(stdout);
         return HV_EXIT_OK;
     }
+    if (!strcmp(argv[1], CLI_DESCRIBE))
+        return describe_commands();
     if (!strcmp(argv[1], "--version")) {
         printf("heatvox %s\n", hv_version());
         return HV_EXIT_OK;

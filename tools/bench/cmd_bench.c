@@ -319,7 +319,7 @@ static int parse_solve(int argc, char **argv, solve_args *A)
          .dst = &A->pc,
          .choices = "auto|boomeramg|pfmg|gamg",
          .needs = "auto, boomeramg, pfmg or gamg"},
-        {.names = "--wisdom", .kind = CLI_STR, .dst = &A->wisdom},
+        {.names = "--wisdom", .kind = CLI_STR, .dst = &A->wisdom, .files = CLI_FILES_ANY},
         {.names = "--obstacle",
          .kind = CLI_CHOICE,
          .dst = &A->obstacle,
@@ -580,26 +580,38 @@ static int bench_solve(int argc, char **argv)
     return rc;
 }
 
+static const struct benchmark {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *summary;
+} benchmarks[] = {
+    {"solve", bench_solve, "one solver's solves on a box, against a memory copy and FFTW"},
+    {"sdf", cmd_bench_sdf, "heatvox sdf on a mesh, stage by stage, against OpenVDB"},
+    {"band", cmd_bench_band, "a narrow band in tiles against OpenVDB's meshToLevelSet"},
+    {"mesh", cmd_bench_mesh, "the zero level set of a mesh's distance as a triangle mesh"},
+    {"points", cmd_bench_points, "surfaces of oriented point clouds against CGAL's Poisson"},
+    {"sdf2d", cmd_bench_sdf2d, "heatvox sdf2d on generated SVG curves"},
+    {"extend", bench_extend, "the extension off a level set against OpenVDB's sdfToExt"},
+    {"extend-band", cmd_bench_extend_band, "heatvox extend on a band against OpenVDB's sdfToExt"},
+    {"extend-loop", cmd_bench_extend_loop, "one extender over the steps of a moving sphere"},
+};
+
+/* heatvox bench --describe-options: the benchmarks, one line each. */
+static int describe_benchmarks(void)
+{
+    printf("command\tbench\n");
+    for (size_t i = 0; i < sizeof benchmarks / sizeof benchmarks[0]; i++)
+        printf("subcommand\tbench %s\t%s\n", benchmarks[i].name, benchmarks[i].summary);
+    return HV_EXIT_OK;
+}
+
 static int bench_run(int argc, char **argv)
 {
-    if (!strcmp(argv[1], "solve"))
-        return bench_solve(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "sdf"))
-        return cmd_bench_sdf(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "mesh"))
-        return cmd_bench_mesh(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "sdf2d"))
-        return cmd_bench_sdf2d(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "band"))
-        return cmd_bench_band(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "points"))
-        return cmd_bench_points(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "extend"))
-        return bench_extend(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "extend-band"))
-        return cmd_bench_extend_band(argc - 1, argv + 1);
-    if (!strcmp(argv[1], "extend-loop"))
-        return cmd_bench_extend_loop(argc - 1, argv + 1);
+    if (!strcmp(argv[1], CLI_DESCRIBE))
+        return describe_benchmarks();
+    for (size_t i = 0; i < sizeof benchmarks / sizeof benchmarks[0]; i++)
+        if (!strcmp(argv[1], benchmarks[i].name))
+            return benchmarks[i].run(argc - 1, argv + 1);
     return cli_usage_error("bench", "unknown benchmark '%s'", argv[1]);
 }
 

@@ -90,6 +90,7 @@ int cmd_bench_band(int argc, char **argv)
     double band = 3;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_TRIMESH},
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &n,

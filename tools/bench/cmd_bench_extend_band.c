@@ -347,6 +347,7 @@ int cmd_bench_extend_band(int argc, char **argv)
     double band = 3;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
+        {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_TRIMESH},
         {.names = "--n",
          .kind = CLI_INT,
          .dst = &n,
@@ -364,7 +365,7 @@ int cmd_bench_extend_band(int argc, char **argv)
          .dst = &vec,
          .choices = "scalar|vector",
          .needs = "vector or scalar"},
-        {.names = "--keep", .kind = CLI_STR, .dst = &keep},
+        {.names = "--keep", .kind = CLI_STR, .dst = &keep, .files = CLI_FILES_DIR},
         {.names = NULL},
     };
     int prc = cli_parse(CMD, argc, argv, opts, "mesh", &mesh, help);

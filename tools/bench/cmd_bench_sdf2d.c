@@ -141,7 +141,7 @@ int cmd_bench_sdf2d(int argc, char **argv)
          .needs = "an integer >= 1"},
         CLI_ROW_RES(&res, 32, NULL),
         CLI_ROW_REPEAT(&repeat),
-        {.names = "--dir", .kind = CLI_STR, .dst = &dir},
+        {.names = "--dir", .kind = CLI_STR, .dst = &dir, .files = CLI_FILES_DIR},
         {.names = NULL},
     };
     const char *stray = NULL;
