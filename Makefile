@@ -7,6 +7,7 @@
 #   mk/tests.mk     make check and make check-long
 #   mk/bench.mk     make bench (and its CGAL reference) and make demo
 #   mk/install.mk   make install
+#   mk/doc.mk       make man and make completion (and their install)
 #   mk/mpi.mk       the MPI build and its distributed tests
 #   mk/sanitize.mk  make sanitize (ASan, UBSan) and make tsan
 #   mk/fuzz.mk      make fuzz (libFuzzer)
@@ -133,7 +134,7 @@ LIB_SOV := $(BUILD)/libheatvox.so.$(VERSION)
 BIN     := $(BUILD)/heatvox
 
 
-include mk/deps.mk mk/library.mk mk/tests.mk mk/bench.mk mk/install.mk mk/mpi.mk mk/sanitize.mk mk/fuzz.mk
+include mk/deps.mk mk/library.mk mk/tests.mk mk/bench.mk mk/install.mk mk/doc.mk mk/mpi.mk mk/sanitize.mk mk/fuzz.mk
 
 # make format lays out every C and C++ source by .clang-format; make
 # format-check (run by CI) fails, listing the places, when one differs.
