@@ -88,7 +88,7 @@ def split_help(text):
         usage.append(re.sub(r"^usage: ", "", lines[i]))
         i += 1
     while i < len(lines):
-        if re.match(r"^(exit|Exit codes):", lines[i]):
+        if re.match(r"^(exit|[Ee]xit codes):", lines[i]):
             while i < len(lines) and lines[i].strip():
                 exits.append(lines[i])
                 i += 1
