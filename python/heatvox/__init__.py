@@ -27,8 +27,9 @@ library's ``message``, which names files); bad Python arguments raise
 TypeError or ValueError before any C call. Long calls take
 ``progress=callable(fraction, stage)``; a true return value cancels them.
 
-The library is found through $HEATVOX_LIBRARY, else the path ``make install``
-recorded, else the in-tree build (build/libheatvox.so), else
+The library is found through $HEATVOX_LIBRARY, else the copy that ``pip
+install`` put in the package (heatvox/libheatvox.so.0), else the path
+``make install`` recorded, else the in-tree build (build/libheatvox.so), else
 libheatvox.so.0 through the dynamic loader; ``heatvox.library_path`` says
 which was loaded. Unless GOMP_SPINCOUNT or OMP_WAIT_POLICY is set, importing
 heatvox sets GOMP_SPINCOUNT=1000 (as the command does: libgomp's spinning

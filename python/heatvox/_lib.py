@@ -39,14 +39,14 @@ def _candidates():
     env = os.environ.get("HEATVOX_LIBRARY")
     if env:
         return [env]
-    found = []
+    here = os.path.dirname(os.path.abspath(__file__))
+    found = [os.path.join(here, SONAME)]  # bundled by the wheel (setup.py)
     try:
         from . import _install  # written by `make install`
 
         found.append(os.path.join(_install.LIBDIR, _install.SONAME))
     except ImportError:
         pass
-    here = os.path.dirname(os.path.abspath(__file__))
     found.append(os.path.normpath(os.path.join(here, "..", "..", "build", "libheatvox.so")))
     found.append(SONAME)  # the dynamic loader's search (ldconfig, LD_LIBRARY_PATH)
     return found
@@ -66,10 +66,11 @@ def _loaded_path(name):
 
 
 def load():
-    """Loads libheatvox: $HEATVOX_LIBRARY alone when set, else the library
-    `make install` recorded, else the in-tree build (../../build/libheatvox.so
-    from this package), else libheatvox.so.0 through the dynamic loader.
-    Returns (CDLL, path)."""
+    """Loads libheatvox: $HEATVOX_LIBRARY alone when set, else the copy a
+    wheel bundles beside this file (heatvox/libheatvox.so.0, from pip
+    install), else the library `make install` recorded, else the in-tree build
+    (../../build/libheatvox.so from this package), else libheatvox.so.0
+    through the dynamic loader. Returns (CDLL, path)."""
     # libgomp's threads spin at every barrier; on a busy machine that makes
     # solves many times slower (README, "Backends and environment"). The
     # command lowers the spin count for itself; do the same before libgomp is
