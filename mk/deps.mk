@@ -14,12 +14,17 @@ CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
 # (tools/bench/bench_distance.py, make bench only), the same way.
 FMM_PKGS   := python3-scikit-fmm
 FMM_STAMP   = $(BUILD)/.deps-fmm-ok
+# What `pip install .` and `pip wheel .` need of Debian's Python (the wheel
+# test of make check, tests/check_pip.py), the same way.
+PIP_PKGS   := python3-pip python3-setuptools python3-wheel python3-venv
+PIP_STAMP   = $(BUILD)/.deps-pip-ok
 
 
 deps: $(STAMP) ## install the Debian packages the build needs (as root)
 $(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
 $(FMM_STAMP): DEB_PKGS = $(FMM_PKGS)
-$(STAMP) $(CGAL_STAMP) $(FMM_STAMP): mk/deps.mk
+$(PIP_STAMP): DEB_PKGS = $(PIP_PKGS)
+$(STAMP) $(CGAL_STAMP) $(FMM_STAMP) $(PIP_STAMP): mk/deps.mk
 	@missing=""; for p in $(DEB_PKGS); do \
 	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
 	done; \

@@ -34,14 +34,16 @@ $(BUILD)/tests/check_points_sample: $(BUILD)/obj/tests/check_points_sample.o \
 # SUITE.noavx2.
 # Runs: each suite, tests/check_kernels.sh (every OpenCL program compiled
 # offline as strict OpenCL C 1.2 and 3.0), tests/check_includes.py (the
-# include map of src/README.md), the OpenCL ones again as on a device without
+# include map of src/README.md), tests/check_pip.py (the wheel of `pip wheel
+# .` installed into a fresh virtual environment and uninstalled; its
+# packages, PIP_PKGS, from mk/deps.mk), the OpenCL ones again as on a device without
 # fp64 (NAME.fp32), the multigrid ones and the distance's (its band's sweeps)
 # again without AVX-512 (NAME.no512) and without AVX2 (NAME.noavx2). make -j runs them
 # side by side, the longest first; tests/check_summary.sh prints each log in
 # this order, then the totals.
 CHECK_SLOW := check_batch check_faults check_mesh_out check_readme check_extend_cl check_sdf_tiles
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
-              check_kernels check_includes \
+              check_kernels check_includes check_pip \
               $(patsubst %,%.fp32,$(filter check_opencl check_opencl_device check_extend_cl check_distance_cl,$(notdir $(TESTS)))) \
               $(patsubst %,%.no512,$(filter check_mg check_mg_agg check_distance,$(notdir $(TESTS)))) \
               $(patsubst %,%.noavx2,$(filter check_mg_agg check_distance,$(notdir $(TESTS))))
@@ -57,7 +59,7 @@ $(STAGE)/.installed: $(LIB_A) $(LIB_SO) $(BIN) $(wildcard include/heatvox/*.h) $
 	@touch $@
 
 .PHONY: check
-check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed ## build and run every test suite
+check: all $(TESTS) $(TEST_HELPERS) $(STAGE)/.installed | $(PIP_STAMP) ## build and run every test suite
 	@rm -rf $(RES) && mkdir -p $(RES)
 	@{ ls -d /tmp/hv_* 2>/dev/null; grep -o ' /tmp/hv_[^ ]*' /proc/mounts; } | sort > $(RES)/tmp.before
 	+@$(MAKE) --no-print-directory -k $(CHECK_RUNS:%=$(RES)/%.rc) || true
@@ -80,6 +82,7 @@ $(RES)/%.rc:
 	noavx2=$${HV_NOAVX2-}; \
 	[ $$run != check_kernels ] || t="sh tests/check_kernels.sh $(BUILD)/kernels $(FZ_CC)"; \
 	[ $$run != check_includes ] || t="python3 tests/check_includes.py"; \
+	[ $$run != check_pip ] || t="$(PYTHON) tests/check_pip.py $(BUILD)"; \
 	case $$run in *.fp32) fp64=0;; *.no512) no512=1;; *.noavx2) no512=1; noavx2=1;; esac; \
 	t0=$$(date +%s%N); \
 	HV_NO512=$$no512 HV_NOAVX2=$$noavx2 HEATVOX_OPENCL_FP64=$$fp64 GOMP_SPINCOUNT=$${GOMP_SPINCOUNT:-1000} \
