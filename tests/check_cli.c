@@ -1,7 +1,8 @@
 /* The command as a new user meets it: a resolution too large for the machine
  * is a usage error naming the option, a broken vertex is named by its line,
  * messages name a file once, outputs are checked by their extension, progress
- * appears on a terminal alone and advances through the long stages. */
+ * appears on a terminal alone and advances through the long stages, --units
+ * m scales to metres. */
 #include "heatvox/heatvox.h"
 #include "testlib.h"
 
@@ -279,6 +280,66 @@ START_TEST(long_stages_should_advance)
 }
 END_TEST
 
+/* dir/name's text into buf ("" when it cannot be read). */
+static void read_text(const char *name, char *buf, size_t size)
+{
+    char p[600];
+    snprintf(p, sizeof p, "%s/%s", dir, name);
+    FILE *f = fopen(p, "r");
+    size_t n = f ? fread(buf, 1, size - 1, f) : 0;
+    buf[n] = 0;
+    if (f)
+        fclose(f);
+}
+
+/* The h= of the summary line in dir/name (0 when there is none). */
+static double summary_h(const char *name)
+{
+    char p[600], line[4096];
+    snprintf(p, sizeof p, "%s/%s", dir, name);
+    FILE *f = fopen(p, "r");
+    double h = 0;
+    if (f && fgets(line, sizeof line, f) && strstr(line, " h="))
+        h = atof(strstr(line, " h=") + 3);
+    if (f)
+        fclose(f);
+    return h;
+}
+
+/* --units m takes a file's stated unit (the spider of assimp's test models,
+ * an FBX in centimetres) to metres: the same cells, h a hundredth; a file
+ * that states none keeps its coordinates and says so; --units cm is a usage
+ * error. */
+START_TEST(units_m_should_scale_to_metres_where_the_file_states_a_unit)
+{
+    const char *fbx = "/usr/share/assimp/models/FBX/spider.fbx";
+    if (access(fbx, R_OK))
+        TL_SKIP("units: no %s (Debian's assimp-testmodels)", fbx);
+    char err[4096];
+    /* stdout to a file: the redirections come before tl_run_cmd's, which then
+     * apply to `exit` alone */
+    ck_assert_int_eq(hv(err, sizeof err, "sdf %s -o a.vdb --res 24 > a.txt; exit $?", fbx), 0);
+    int rc =
+        hv(err, sizeof err, "sdf %s -o b.vdb --res 24 --units m -v > b.txt 2> b.err; exit $?", fbx);
+    read_text("b.err", err, sizeof err);
+    ck_assert_msg(rc == 0, "exit %d (%s)", rc, err);
+    ck_assert_msg(strstr(err, "length unit 0.01 m, from the file") &&
+                      strstr(err, "coordinates times 0.01, in metres (--units m)"),
+                  "%s", err);
+    double ha = summary_h("a.txt"), hb = summary_h("b.txt");
+    ck_assert_msg(ha > 0 && fabs(hb / ha - 0.01) < 1e-9, "h %g and %g", ha, hb);
+
+    rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o t.vdb --res 16 --units m");
+    ck_assert_msg(rc == 0 && strstr(err, "torus_holes.obj states no length unit: --units m keeps "
+                                         "its coordinates"),
+                  "exit %d (%s)", rc, err);
+    rc = hv(err, sizeof err, "sdf sc/meshes/torus_holes.obj -o u.vdb --res 16 --units cm");
+    ck_assert_msg(rc == 2 && strstr(err, "--units needs file or m, got 'cm'"), "exit %d (%s)", rc,
+                  err);
+    ck_assert(!exists("u.vdb"));
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("cli");
@@ -292,6 +353,7 @@ int main(void)
     tcase_add_test(tc, outputs_should_be_checked_by_their_extension);
     tcase_add_test(tc, progress_should_not_reach_a_log_even_with_v);
     tcase_add_test(tc, long_stages_should_advance);
+    tcase_add_test(tc, units_m_should_scale_to_metres_where_the_file_states_a_unit);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

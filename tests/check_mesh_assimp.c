@@ -1026,7 +1026,8 @@ START_TEST(the_command_should_take_these_formats_wherever_it_takes_a_mesh)
     ck_assert_msg(rc == 0, "info: exit %d: %s", rc, out);
     const char *x = strstr(out, "tet_x.x");
     ck_assert_msg(x && strstr(out, "length unit         0.01 m, from the file") < x &&
-                      !strstr(x, "length unit"),
+                      strstr(x, "length unit         none in the file") &&
+                      !strstr(strstr(x, "length unit") + 1, "length unit"),
                   "info: the FBX's unit, none for the X file: %s", out);
 
     rc = hv_capture(bin, out, sizeof out, "batch in -o out --dry-run");

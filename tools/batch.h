@@ -23,6 +23,7 @@ typedef struct batch_opts {
     int dense;         /* VDB: every voxel active */
     int mesh_format;   /* BATCH_MESH_*: also write the zero level set as a mesh */
     double adaptivity; /* of that mesh (hv_grid_to_mesh), 0..1 */
+    int units;         /* --units: CLI_UNITS_FILE or CLI_UNITS_M */
 } batch_opts;
 
 void batch_opts_default(batch_opts *o);
@@ -32,7 +33,7 @@ int batch_opt_arity(const char *name);
 /* The job options as BATCH_JOB_OPTS rows t[0..) of kind CLI_FN, each with fn
  * and dst and its arity in val (the batch command passes them on to its
  * workers); returns BATCH_JOB_OPTS. */
-#define BATCH_JOB_OPTS 21
+#define BATCH_JOB_OPTS 22
 int batch_opts_forward(cli_opt *t, int (*fn)(const char *, const char *, char **, int, void *),
                        void *dst);
 #define BATCH_STR_(x) #x

@@ -172,6 +172,7 @@ static void job_options(batch_opts *o, cli_opt t[JOB_OPTS + 1])
          .max = INT_MAX,
          .needs = "an integer >= -1"},
         CLI_ROW_NO_REPAIR(&s->repair),
+        CLI_ROW_UNITS(&o->units),
         CLI_ROW_BACKEND(&s->backend, CLI_BACKENDS_LOCAL),
         {.names = "--diffuse-tol",
          .kind = CLI_DOUBLE,
@@ -580,6 +581,8 @@ static int job_run(job *J)
         error_text(st, J->input, J->err, sizeof J->err);
         return -1;
     }
+    if (!J->points.points)
+        cli_mesh_units(NULL, J->input, J->m, J->o.units);
     t = hv_now();
     J->have_rep = hv_mesh_report_compute(J->m, &J->rep) == HV_OK;
     J->t_report = hv_now() - t;

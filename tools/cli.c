@@ -30,6 +30,26 @@ void cli_mesh_note(const char *cmd, const char *path, const hv_mesh *m)
     fputc('\n', stderr);
 }
 
+double cli_mesh_units(const char *cmd, const char *path, hv_mesh *m, int units)
+{
+    if (units != CLI_UNITS_M)
+        return 1;
+    if (!m || !(m->unit_meters > 0)) {
+        if (cmd && cli_verbose >= 0)
+            fprintf(stderr,
+                    "heatvox %s: %s states no length unit: --units m keeps its coordinates\n", cmd,
+                    path);
+        return 1;
+    }
+    const double f = m->unit_meters;
+    for (size_t i = 0; i < 3 * m->nverts && f != 1; i++)
+        m->verts[i] *= f;
+    m->unit_meters = 1;
+    if (cmd)
+        cli_info("heatvox %s: %s: coordinates times %g, in metres (--units m)\n", cmd, path, f);
+    return f;
+}
+
 int cli_fail(const char *cmd, const char *what, hv_status st)
 {
     const char *detail = hv_last_error();

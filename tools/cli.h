@@ -17,6 +17,12 @@ extern int cli_verbose; /* -1 quiet (-q), 0 default, 1 verbose (-v) */
 /* With -v: what the reader made of a mesh file (format, triangles, points and
  * lines left out, the unit the file declares) on stderr. */
 void cli_mesh_note(const char *cmd, const char *path, const hv_mesh *m);
+/* --units m on a mesh read from path (m may be NULL: a point cloud, which
+ * states no unit): its coordinates times the metres per unit the file
+ * states (m->unit_meters becomes 1), said under -v; a file that states none
+ * keeps its coordinates, said on stderr unless -q. cmd NULL: nothing said
+ * (a batch worker). Returns the factor applied (1 when none). */
+double cli_mesh_units(const char *cmd, const char *path, hv_mesh *m, int units);
 /* Prints "heatvox <cmd>: <what>: <status>: <hv_last_error()>" on stderr and
  * returns HV_EXIT_FAIL. */
 int cli_fail(const char *cmd, const char *what, hv_status st);
@@ -183,6 +189,15 @@ typedef struct cli_opt {
 #define CLI_ROW_SIGN(to)                                                                           \
     {                                                                                              \
         .names = "--sign", .kind = CLI_SIGN, .dst = (to)                                           \
+    }
+/* --units: file (CLI_UNITS_FILE, the default) keeps a mesh's coordinates as
+ * the file has them; m (CLI_UNITS_M) scales them to metres where the file
+ * states its unit (cli_mesh_units). */
+enum { CLI_UNITS_FILE = 0, CLI_UNITS_M };
+#define CLI_ROW_UNITS(to)                                                                          \
+    {                                                                                              \
+        .names = "--units", .kind = CLI_CHOICE, .dst = (to), .choices = "file|m",                  \
+        .needs = "file or m"                                                                       \
     }
 #define CLI_ROW_REPEAT(to)                                                                         \
     {                                                                                              \

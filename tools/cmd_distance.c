@@ -14,59 +14,63 @@ static const char *CMD = "distance";
 
 static int usage(FILE *out)
 {
-    fprintf(out,
-            "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
-            "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb|OUT.h5\n"
-            "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 "
-            "x1 y1 z1]\n"
-            "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
-            "auto|mg|fftw|opencl|petsc]\n"
-            "                        [--coarse auto|geometric|aggregation] [--unreachable V]\n"
-            "                        [--stages tiles|whole] [--threads T] [-q] [-v]\n"
-            "\n"
-            "Geodesic distance from the sources through free space, around obstacles, by the\n"
-            "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
-            "when there are obstacles, a bool grid 'obstacles'.\n"
-            "\n"
-            "--sources may be given several times: the set-up (the obstacles' solvers) is\n"
-            "made once and each source set's distance is a grid of its own in OUT.vdb,\n"
-            "'distance', 'distance_2', ... (one JSON line each).\n"
-            "\n"
-            "Sources FILE: a mesh (.obj .ply .stl .off, or .gltf .glb .fbx .3mf .dae .x read\n"
-            "through assimp: its surface is the source), or text,\n"
-            "one source per line, '#' starts a comment:\n"
-            "  x y z           a world point (2D grids: x y)\n"
-            "  point x y z     the same\n"
-            "  voxel i j k     a voxel of the output grid (2D: voxel i j)\n"
-            "  mesh PATH       a mesh surface (PATH relative to the file's directory)\n"
-            "\n"
-            "Grid: with --obstacles MASK.vdb, the mask's voxels (its transform), over the mask's\n"
-            "block grown to hold the sources (or --bbox); solid where a bool/mask grid is\n"
-            "active, a level set is negative, another float grid is non-zero. Otherwise\n"
-            "--bbox (default: the sources and obstacle mesh bounds plus --pad cells, default\n"
-            "4) with --res cells along the longest axis (default 128) or --voxel-size.\n"
-            "--obstacle-mesh marks the cells its triangles touch (a watertight shell).\n"
-            "--dim 2: a 2D grid (bbox x0 y0 x1 y1), written as a one-voxel slab.\n"
-            "\n"
-            "--coarse: the solves' coarse levels with obstacles (solve.h): aggregation keeps\n"
-            "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
-            "(default) takes it for the Poisson solve and geometric levels for the heat steps.\n"
-            "--stages tiles (default): each stage's heat steps are solved on the 8^3 tiles its\n"
-            "front reaches (with opencl on the device); whole: on the whole grid by the\n"
-            "backend's solver (petsc always).\n"
-            "-v: the cells each stage solved on.\n"
-            "\n"
-            "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
-            "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
-            "\n"
-            "Builds with PETSc (make mpi): -o OUT.h5 writes the distance as HDF5 (dataset\n"
-            "/distance, with the attributes spacing and origin) and an XDMF sidecar\n"
-            "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, rank 0 reads\n"
-            "the inputs, each rank computes the distance on its own box of the grid (the\n"
-            "solves distributed over the ranks), the ranks write the HDF5 file together,\n"
-            "and rank 0 gathers the result and writes the VDB and .npy\n"
-            "files and prints.\n"
-            "Exit codes: 0 success, 1 failure, 2 usage error.\n");
+    fprintf(
+        out,
+        "usage: heatvox distance --sources FILE [--obstacles MASK.vdb [--obstacle-grid NAME]\n"
+        "                        | --obstacle-mesh MESH | --obstacles none] -o OUT.vdb|OUT.h5\n"
+        "                        [--npy OUT.npy] [--res N | --voxel-size H] [--bbox x0 y0 z0 "
+        "x1 y1 z1]\n"
+        "                        [--dim 2|3] [--pad P] [--t-scale K] [--backend "
+        "auto|mg|fftw|opencl|petsc]\n"
+        "                        [--coarse auto|geometric|aggregation] [--unreachable V]\n"
+        "                        [--stages tiles|whole] [--units file|m] [--threads T] [-q] [-v]\n"
+        "\n"
+        "Geodesic distance from the sources through free space, around obstacles, by the\n"
+        "heat method (heat.h). Writes a float grid named 'distance' (world units) and,\n"
+        "when there are obstacles, a bool grid 'obstacles'.\n"
+        "\n"
+        "--sources may be given several times: the set-up (the obstacles' solvers) is\n"
+        "made once and each source set's distance is a grid of its own in OUT.vdb,\n"
+        "'distance', 'distance_2', ... (one JSON line each).\n"
+        "\n"
+        "Sources FILE: a mesh (.obj .ply .stl .off, or .gltf .glb .fbx .3mf .dae .x read\n"
+        "through assimp: its surface is the source), or text,\n"
+        "one source per line, '#' starts a comment:\n"
+        "  x y z           a world point (2D grids: x y)\n"
+        "  point x y z     the same\n"
+        "  voxel i j k     a voxel of the output grid (2D: voxel i j)\n"
+        "  mesh PATH       a mesh surface (PATH relative to the file's directory)\n"
+        "\n"
+        "Grid: with --obstacles MASK.vdb, the mask's voxels (its transform), over the mask's\n"
+        "block grown to hold the sources (or --bbox); solid where a bool/mask grid is\n"
+        "active, a level set is negative, another float grid is non-zero. Otherwise\n"
+        "--bbox (default: the sources and obstacle mesh bounds plus --pad cells, default\n"
+        "4) with --res cells along the longest axis (default 128) or --voxel-size.\n"
+        "--obstacle-mesh marks the cells its triangles touch (a watertight shell).\n"
+        "--dim 2: a 2D grid (bbox x0 y0 x1 y1), written as a one-voxel slab.\n"
+        "--units m: meshes (obstacle and source) scaled to metres where the file states\n"
+        "its unit; the sources' coordinates, --bbox and --voxel-size are then metres too\n"
+        "(default file: every coordinate as written).\n"
+        "\n"
+        "--coarse: the solves' coarse levels with obstacles (solve.h): aggregation keeps\n"
+        "walls one cell thin on every level (fewer iterations, a longer set-up); auto\n"
+        "(default) takes it for the Poisson solve and geometric levels for the heat steps.\n"
+        "--stages tiles (default): each stage's heat steps are solved on the 8^3 tiles its\n"
+        "front reaches (with opencl on the device); whole: on the whole grid by the\n"
+        "backend's solver (petsc always).\n"
+        "-v: the cells each stage solved on.\n"
+        "\n"
+        "Cells no source can reach (sealed rooms, shell insides) and solid cells get\n"
+        "--unreachable (default inf). Prints a JSON summary on stdout (not with -q).\n"
+        "\n"
+        "Builds with PETSc (make mpi): -o OUT.h5 writes the distance as HDF5 (dataset\n"
+        "/distance, with the attributes spacing and origin) and an XDMF sidecar\n"
+        "OUT.xmf for ParaView. Under mpirun -n P with --backend petsc, rank 0 reads\n"
+        "the inputs, each rank computes the distance on its own box of the grid (the\n"
+        "solves distributed over the ranks), the ranks write the HDF5 file together,\n"
+        "and rank 0 gathers the result and writes the VDB and .npy\n"
+        "files and prints.\n"
+        "Exit codes: 0 success, 1 failure, 2 usage error.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -366,6 +370,7 @@ typedef struct dist_args {
     hv_distance_opts o;
     int coarse; /* hv_coarse */
     int whole;  /* --stages whole */
+    int units;  /* --units: CLI_UNITS_FILE or CLI_UNITS_M */
 } dist_args;
 
 /* --sources FILE, once per source set. */
@@ -459,6 +464,7 @@ static int parse_args(int argc, char **argv, dist_args *A)
         {.names = "--dim", .kind = CLI_INT, .dst = &A->dim, .min = 2, .max = 3, .needs = "2 or 3"},
         CLI_ROW_PAD(&A->pad),
         CLI_ROW_T_SCALE(&A->o.t_scale),
+        CLI_ROW_UNITS(&A->units),
         CLI_ROW_BACKEND(&A->o.backend, CLI_BACKENDS_ALL),
         {.names = "--coarse",
          .kind = CLI_CHOICE,
@@ -729,11 +735,15 @@ static int read_inputs(const dist_args *A, source_list *src, hv_mesh **om, hv_gr
         rc = read_sources(A->sets[q], A->dim, &src[q]);
     if (rc)
         return rc;
+    for (int q = 0; q < A->nsets; q++)
+        if (src[q].mesh)
+            cli_mesh_units(CMD, A->sets[q], src[q].mesh, A->units);
     if (A->obst_mesh) {
         hv_status st = hv_mesh_read(A->obst_mesh, om);
         if (st)
             return cli_fail(CMD, A->obst_mesh, st);
         cli_mesh_note(CMD, A->obst_mesh, *om);
+        cli_mesh_units(CMD, A->obst_mesh, *om, A->units);
     }
     if (!A->mask)
         return grid_from_bounds(A, src, *om, g);

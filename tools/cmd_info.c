@@ -94,10 +94,13 @@ static void print_text(const char *file, const hv_mesh *m, const hv_mesh_report 
     if (m->skipped_primitives)
         printf("  points and lines    %zu left out\n", m->skipped_primitives);
     if (m->unit_meters > 0)
-        printf("  length unit         %g m, from the file\n", m->unit_meters);
+        printf("  length unit         %g m, from the file%s\n", m->unit_meters,
+               m->unit_meters != 1 ? " (--units m scales the coordinates to metres)" : "");
+    else
+        printf("  length unit         none in the file (--units m keeps the coordinates)\n");
     if (has_bounds)
-        printf("  bounds              [%g %g %g] .. [%g %g %g]\n", lo[0], lo[1], lo[2], hi[0],
-               hi[1], hi[2]);
+        printf("  bounds              [%g %g %g] .. [%g %g %g] (the file's axes and units)\n",
+               lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
     else
         printf("  bounds              none (no finite vertex)\n");
     printf("  edges               %zu\n", r->edges);

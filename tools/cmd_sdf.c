@@ -39,6 +39,10 @@ static void help(void)
            "  --bbox X0 Y0 Z0 X1 Y1 Z1\n"
            "                     outer boundary of the voxel block (with --res N: h = longest\n"
            "                     side / N); --pad is ignored\n"
+           "  --units file|m     file (default): the file's coordinates, never rescaled; m:\n"
+           "                     scaled to metres where the file states its unit (FBX's\n"
+           "                     UnitScaleFactor), and then --voxel-size, --bbox, --offset\n"
+           "                     and the output are metres\n"
            "output:\n"
            "  -o, --output FILE  the .vdb file\n"
            "  --band W           narrow band half width in voxels (default 3)\n"
@@ -208,7 +212,7 @@ static const char *morph_text(const hv_sdf_opts *o)
 typedef struct sdf_args {
     const char *mesh_path, *out, *npy, *name, *preview, *mesh_out;
     double band, adaptivity;
-    int have_adaptivity, dense, have_res, have_h, have_bbox, threads, no_tiles;
+    int have_adaptivity, dense, have_res, have_h, have_bbox, threads, no_tiles, units;
     hv_sdf_opts o;
 } sdf_args;
 
@@ -291,6 +295,7 @@ static int parse_args(int argc, char **argv, sdf_args *A)
          .needs = "an integer in 1..4"},
         CLI_ROW_SIGN(&o->sign),
         CLI_ROW_NO_REPAIR(&o->repair),
+        CLI_ROW_UNITS(&A->units),
         {.names = "--domed-caps",
          .kind = CLI_OR,
          .dst = &o->repair,
@@ -474,6 +479,7 @@ int cmd_sdf(int argc, char **argv)
     cli_points_note("sdf", mesh_path, &pr);
     if (!pr.points)
         cli_mesh_note("sdf", mesh_path, m);
+    cli_mesh_units("sdf", mesh_path, pr.points ? NULL : m, A.units);
     double t_read = hv_now() - t0;
     sdf_result r = {0};
     hv_sdf_stats S;
