@@ -295,15 +295,10 @@ static void read_text(const char *name, char *buf, size_t size)
 /* The h= of the summary line in dir/name (0 when there is none). */
 static double summary_h(const char *name)
 {
-    char p[600], line[4096];
-    snprintf(p, sizeof p, "%s/%s", dir, name);
-    FILE *f = fopen(p, "r");
-    double h = 0;
-    if (f && fgets(line, sizeof line, f) && strstr(line, " h="))
-        h = atof(strstr(line, " h=") + 3);
-    if (f)
-        fclose(f);
-    return h;
+    char line[4096];
+    read_text(name, line, sizeof line);
+    const char *h = strstr(line, " h=");
+    return h ? atof(h + 3) : 0;
 }
 
 /* --units m takes a file's stated unit (the spider of assimp's test models,
