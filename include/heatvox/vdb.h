@@ -92,6 +92,14 @@ typedef struct hv_vdb_sink_stats {
 HV_API hv_status hv_vdb_writer_levelset_sink(hv_vdb_writer *w, const char *name, double band_voxels,
                                              hv_vdb_sink_stats *stats, hv_tiles_sink *out);
 
+/* Adds the inside of a signed distance field (negative inside) as a float grid
+ * of class fog volume, the form renderers and Blender's volumes shade:
+ * clamp(1/2 - phi / h, 0, 1), so 1 inside, 0 outside and a ramp one voxel
+ * wide across the zero level; the voxels above 0 are active (the inside's
+ * constant leaves become active tiles), the rest inactive, background 0. The
+ * grid is copied. */
+HV_API hv_status hv_vdb_writer_add_fog(hv_vdb_writer *w, const hv_grid *g, const char *name);
+
 /* Adds a scalar float grid of class unknown, every voxel active, background 0. */
 HV_API hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char *name);
 

@@ -177,7 +177,8 @@ class Grid:
         Raises heatvox.Error naming the file when it cannot be written."""
         fn.hv_write_npy(fspath(path), self._c)
 
-    def write_vdb(self, path, name=None, band=None, dense=False, *, levelset=None, mask_name="obstacles", metadata=None):
+    def write_vdb(self, path, name=None, band=None, dense=False, *, levelset=None, mask_name="obstacles", metadata=None,
+                  fog=None):
         """Writes the grid to an OpenVDB file (Blosc compressed), as the command does.
 
         A signed distance (``levelset`` True, the default for ``sdf`` results
@@ -194,6 +195,10 @@ class Grid:
         ``mask_name`` (default "obstacles"; None leaves it out).
         ``metadata``: a dict of file metadata strings. The file carries
         "heatvox_version" and the writer's "creator".
+        ``fog``: for a level set, the name of a second grid (e.g. "density",
+        which Blender's volumes and renderers shade by default) holding its
+        inside as a fog volume: 1 inside, 0 outside, a ramp one voxel wide
+        across the surface; the inside active.
         Raises heatvox.Error naming the file when it cannot be written.
         """
         name = self.name if name is None else str(name)
@@ -201,6 +206,8 @@ class Grid:
         band = self.band if band is None else _arrays.positive(band, "band")
         if not name:
             raise ValueError("name must not be empty")
+        if fog is not None and (not levelset or not str(fog) or str(fog) == name):
+            raise ValueError("fog names a second grid of a level set, not %r, got %r" % (name, fog))
         w = ctypes.c_void_p()
         fn.hv_vdb_writer_create(ctypes.byref(w))
         try:
@@ -208,6 +215,8 @@ class Grid:
                 fn.hv_vdb_writer_add_levelset(w, self._c, name.encode(), band, 1 if dense else 0)
             else:
                 fn.hv_vdb_writer_add_float(w, self._c, name.encode())
+            if fog is not None:
+                fn.hv_vdb_writer_add_fog(w, self._c, str(fog).encode())
             if mask_name is not None and self._g.solid:
                 fn.hv_vdb_writer_add_mask(w, self._c, str(mask_name).encode())
             fn.hv_vdb_writer_set_meta(w, b"heatvox_version", fn.hv_version())

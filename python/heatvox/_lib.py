@@ -614,6 +614,7 @@ _PROTOTYPES = {
     "hv_vdb_writer_destroy": (None, [_P(_writer_p)]),
     "hv_vdb_writer_add_levelset": (_status, [_writer_p, _grid_p, c_char_p, c_double, c_int]),
     "hv_vdb_writer_add_float": (_status, [_writer_p, _grid_p, c_char_p]),
+    "hv_vdb_writer_add_fog": (_status, [_writer_p, _grid_p, c_char_p]),
     "hv_vdb_writer_add_levelset_tiles": (_status, [_writer_p, _P(hv_tiles), c_char_p, c_double]),
     "hv_vdb_writer_levelset_sink": (
         _status,

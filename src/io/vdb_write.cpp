@@ -755,6 +755,32 @@ hv_status hv_vdb_writer_add_float(hv_vdb_writer *w, const hv_grid *g, const char
     });
 }
 
+hv_status hv_vdb_writer_add_fog(hv_vdb_writer *w, const hv_grid *g, const char *name)
+{
+    return guarded("hv_vdb_writer_add_fog", [&] {
+        check_new_name(w, name);
+        check_grid(g, "fog volume");
+        hv_status st = hv_check_finite(g->v, hv_grid_count(g), name);
+        if (st)
+            return st;
+        Placement pl = placement(w, g, name);
+        auto grid = openvdb::FloatGrid::create(0.0f);
+        const double inv_h = 1.0 / g->h;
+        fill_block(
+            *grid, g->n, pl.off,
+            [&](int i, int j, int k, bool *active) {
+                const float d = (float)std::clamp(0.5 - g->v[lin(g, i, j, k)] * inv_h, 0.0, 1.0);
+                *active = d > 0;
+                return d;
+            },
+            [](int, int, int) { return 0.0f; }, true);
+        grid->setTransform(pl.xf);
+        grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+        finish_grid(w, grid, g, name, pl);
+        return HV_OK;
+    });
+}
+
 hv_status hv_vdb_writer_add_vec3(hv_vdb_writer *w, const hv_grid *gx, const hv_grid *gy,
                                  const hv_grid *gz, const char *name)
 {

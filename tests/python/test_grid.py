@@ -89,6 +89,27 @@ class Output(unittest.TestCase):
         _, meta = vdb.readAll(p)
         self.assertEqual(meta["heatvox_version"], heatvox.__version__)
 
+    def test_write_vdb_fog_should_read_back_as_the_inside(self):
+        vdb = hvtest.need_pyopenvdb()
+        p = os.path.join(self.dir, "fog.vdb")
+        self.grid.write_vdb(p, fog="density")
+        self.assertEqual(sorted(g.name for g in vdb.readAllGridMetadata(p)), ["density", "sdf"])
+        g, dense = read_vdb_dense(p, "density", self.grid.shape)
+        h = self.grid.voxel_size
+        self.assertEqual(g.gridClass, vdb.GridClass.FOG_VOLUME)
+        self.assertEqual(g.background, 0.0)
+        self.assertTrue(np.allclose(g.transform.voxelSize(), [h] * 3))
+        want = np.clip(0.5 - self.grid.values.astype(np.float64) / h, 0, 1).astype(np.float32)
+        self.assertTrue(np.allclose(dense, want, atol=1e-6))
+        self.assertEqual(g.activeVoxelCount(), int((want > 0).sum()))
+        self.assertGreater((want == 1).sum(), 1000)  # the sphere's inside, not a shell
+        # the same placement as the level set
+        s = vdb.read(p, "sdf")
+        self.assertEqual(list(s.metadata["heatvox_block_min"]), list(g.metadata["heatvox_block_min"]))
+        with self.assertRaises(ValueError):
+            self.grid.write_vdb(os.path.join(self.dir, "bad.vdb"), fog="sdf")
+        self.assertFalse(os.path.exists(os.path.join(self.dir, "bad.vdb")))
+
     def test_write_vdb_should_match_the_command(self):
         hvtest.need_pyopenvdb()
         ref = os.path.join(self.dir, "cmd.vdb")
