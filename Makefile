@@ -134,7 +134,7 @@ LIB_SOV := $(BUILD)/libheatvox.so.$(VERSION)
 BIN     := $(BUILD)/heatvox
 
 
-include mk/deps.mk mk/library.mk mk/tests.mk mk/bench.mk mk/install.mk mk/doc.mk mk/mpi.mk mk/sanitize.mk mk/fuzz.mk
+include mk/deps.mk mk/library.mk mk/tests.mk mk/bench.mk mk/install.mk mk/doc.mk mk/blender.mk mk/mpi.mk mk/sanitize.mk mk/fuzz.mk
 
 # make format lays out every C and C++ source by .clang-format; make
 # format-check (run by CI) fails, listing the places, when one differs.

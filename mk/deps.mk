@@ -18,13 +18,17 @@ FMM_STAMP   = $(BUILD)/.deps-fmm-ok
 # test of make check, tests/check_pip.py), the same way.
 PIP_PKGS   := python3-pip python3-setuptools python3-wheel python3-venv
 PIP_STAMP   = $(BUILD)/.deps-pip-ok
+# Blender 3.4, which the add-on's tests run in (make check-blender), the same way.
+BLENDER_PKGS := blender
+BLENDER_STAMP = $(BUILD)/.deps-blender-ok
 
 
 deps: $(STAMP) ## install the Debian packages the build needs (as root)
 $(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
 $(FMM_STAMP): DEB_PKGS = $(FMM_PKGS)
 $(PIP_STAMP): DEB_PKGS = $(PIP_PKGS)
-$(STAMP) $(CGAL_STAMP) $(FMM_STAMP) $(PIP_STAMP): mk/deps.mk
+$(BLENDER_STAMP): DEB_PKGS = $(BLENDER_PKGS)
+$(STAMP) $(CGAL_STAMP) $(FMM_STAMP) $(PIP_STAMP) $(BLENDER_STAMP): mk/deps.mk
 	@missing=""; for p in $(DEB_PKGS); do \
 	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
 	done; \
