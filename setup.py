@@ -5,7 +5,8 @@ pip runs this through pyproject.toml (`pip install --no-build-isolation
 the shared library, which reuses the build directory when it is up to date
 (build/, or make's BUILD in $HEATVOX_BUILD), and puts a stripped copy of
 the library in the package as heatvox/libheatvox.so.0, which heatvox/_lib.py
-loads before the make-install and development-tree copies. setuptools' own files (build/lib,
+loads before the make-install and development-tree copies. The man pages and
+the bash completion go in as data files (doc_files). setuptools' own files (build/lib,
 bdist, egg-info) go under BUILD/python, beside make's.
 
 The wheel holds no Python extension (the package loads the library through
@@ -15,6 +16,7 @@ FFTW, OpenCL loader, and PETSc where the build found it): it is tagged
 py3-none-<platform>, never pure.
 """
 
+import glob
 import os
 import re
 import shutil
@@ -39,16 +41,36 @@ def version():
     return m.group(1)
 
 
-def make_library():
-    """Runs make for BUILD/libheatvox.so; returns the file it links to."""
-    target = BUILD_ARG.rstrip("/") + "/libheatvox.so"
+def make(*targets):
+    """Runs make for targets under BUILD (paths relative to it)."""
     cmd = [os.environ.get("MAKE") or "make", "-C", ROOT]
     if os.environ.get("HEATVOX_BUILD"):
         cmd.append("BUILD=" + BUILD_ARG)
-    cmd.append(target)
+    cmd += [BUILD_ARG.rstrip("/") + "/" + t for t in targets]
     print("heatvox: " + " ".join(cmd), flush=True)
     subprocess.run(cmd, check=True)
-    return os.path.realpath(os.path.join(ROOT, target))
+
+
+def make_library():
+    """Runs make for BUILD/libheatvox.so; returns the file it links to."""
+    make("libheatvox.so")
+    return os.path.realpath(os.path.join(ROOT, BUILD, "libheatvox.so"))
+
+
+def doc_files():
+    """The wheel's data files, where a prefix keeps them: the man pages in
+    share/man/man1 (a venv's man finds them from its bin/ on PATH) and the
+    bash completion in share/bash-completion/completions. make writes both
+    (with the command they are generated from) when they are not up to date."""
+    make("man/.generated", "completion/heatvox")
+    pages = sorted(glob.glob(os.path.join(BUILD, "man", "*.1")))
+    if not pages:
+        raise RuntimeError("make wrote no man pages under %s/man" % BUILD)
+    rel = lambda p: os.path.relpath(p, ROOT)  # setuptools wants them relative
+    return [
+        ("share/man/man1", [rel(p) for p in pages]),
+        ("share/bash-completion/completions", [rel(os.path.join(BUILD, "completion", "heatvox"))]),
+    ]
 
 
 class build_py_with_library(build_py):
@@ -102,6 +124,7 @@ setup(
     version=version(),
     package_dir={"": "python"},
     packages=["heatvox"],
+    data_files=doc_files(),
     distclass=BinaryDistribution,
     cmdclass={"build_py": build_py_with_library, "bdist_wheel": bdist_wheel_platform},
     options={"build": {"build_base": SETUP_BUILD}, "egg_info": {"egg_base": SETUP_BUILD}},

@@ -3,7 +3,8 @@ builds a platform wheel with libheatvox inside; a fresh virtual environment
 (--system-site-packages, for Debian's NumPy) installs it with --no-index;
 from another directory, without PYTHONPATH or HEATVOX_LIBRARY, the package
 loads its bundled library and computes the signed distance of a cube, which
-matches the analytic one; `pip uninstall` leaves nothing of heatvox in the
+matches the analytic one, with the man pages and the bash completion under
+the environment's prefix; `pip uninstall` leaves nothing of heatvox in the
 environment. Then the same for `pip install --no-build-isolation --no-index .`
 from the source tree.
 
@@ -198,7 +199,12 @@ class Run:
         for need in ("heatvox/__init__.py", "heatvox/_lib.py", "heatvox/" + SONAME):
             if need not in names:
                 raise Failed("%s has no %s" % (name, need))
-        stray = sorted(n for n in names if not n.startswith(("heatvox/", info)))
+        data = "heatvox-%s.data/data/" % self.version
+        for need in ("share/man/man1/heatvox.1", "share/man/man1/heatvox-sdf.1",
+                     "share/bash-completion/completions/heatvox"):
+            if data + need not in names:
+                raise Failed("%s has no %s" % (name, data + need))
+        stray = sorted(n for n in names if not n.startswith(("heatvox/", info, data)))
         if stray:
             raise Failed("%s holds files outside the package: %s" % (name, ", ".join(stray)))
         if "Root-Is-Purelib: false" not in wheel_meta:
@@ -223,6 +229,23 @@ class Run:
         run([vpy, "-m", "pip", "install", "--no-index", self.wheel], self.elsewhere, clean_env(), 300,
             "pip install of the wheel")
         self.check_distance(self.probe())
+        self.check_docs()
+
+    def check_docs(self):
+        """The man pages and the completion under the environment's prefix,
+        where man finds the pages from its bin/ on PATH."""
+        for rel in ("share/man/man1/heatvox.1", "share/man/man1/heatvox-sdf.1",
+                    "share/bash-completion/completions/heatvox"):
+            if not os.path.isfile(os.path.join(self.venv, rel)):
+                raise Failed("pip install put no %s in the environment" % rel)
+        man = shutil.which("man")
+        if man:
+            path = os.path.join(self.venv, "bin") + os.pathsep + os.environ.get("PATH", "")
+            got = run([man, "-w", "heatvox-sdf"], self.elsewhere, clean_env(PATH=path, MANPATH=""), 60, "man -w")
+            want = os.path.join(os.path.realpath(self.venv), "share", "man", "man1", "heatvox-sdf.1")
+            if os.path.realpath(got.strip()) != want:
+                raise Failed("man -w heatvox-sdf gives %s, not %s" % (got.strip(), want))
+            print("    man heatvox-sdf: %s" % got.strip())
 
     def check_distance(self, r):
         h = r["voxel_size"]
@@ -247,6 +270,7 @@ class Run:
         run([vpy, "-m", "pip", "install", "--no-build-isolation", "--no-index", ROOT], ROOT, self.env, 600,
             "pip install .")
         self.check_distance(self.probe())
+        self.check_docs()
 
     def pip_uninstall_after_a_source_install_should_leave_nothing_of_heatvox(self):
         self.need_venv()
