@@ -130,7 +130,8 @@ def fog_material():
 def new_volume(context, name, path):
     """A Volume object reading the .vdb at path, with fog_material."""
     vol = bpy.data.volumes.new(name)
-    vol.filepath = path
+    # Relative to a saved .blend ("//NAME.vdb"), so that the two move together.
+    vol.filepath = bpy.path.relpath(path) if bpy.data.filepath else path
     vol.materials.append(fog_material())
     ob = bpy.data.objects.new(name, vol)
     link(context, ob)

@@ -200,6 +200,25 @@ def sdf_volume():
                                                           lo.round(3), hi.round(3)))
 
 
+def beside_the_blend():
+    """A saved scene's volume lands beside its .blend, referred to relatively."""
+    reset()
+    bpy.ops.mesh.primitive_ico_sphere_add(radius=0.5)
+    ob = bpy.context.active_object
+    d = os.path.join(OUT, "saved")
+    os.makedirs(d)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(d, "scene.blend"))
+    select(ob)
+    r = bpy.ops.heatvox.sdf_volume(resolution=32)
+    expect(r == {"FINISHED"}, "sdf_volume returned %s" % r)
+    vol = bpy.context.active_object.data
+    expect(vol.filepath == "//Icosphere_sdf.vdb", "filepath %r" % vol.filepath)
+    expect(os.path.isfile(os.path.join(d, "Icosphere_sdf.vdb")), "no vdb beside the .blend")
+    vol.grids.load()
+    expect(sorted(g.name for g in vol.grids) == ["density", "sdf"], "grids of the saved scene's volume")
+    bpy.ops.wm.read_homefile(use_empty=True)
+
+
 def remesh():
     reset()
     ob, intact = broken_sphere()
@@ -461,7 +480,7 @@ def readme_example():
     expect(edges_closed_oriented(f) == (True, True), "README remesh not closed and oriented")
 
 
-CHECKS = [install, sdf_volume, remesh, points_surface, bad_input, renders, readme_example]
+CHECKS = [install, sdf_volume, beside_the_blend, remesh, points_surface, bad_input, renders, readme_example]
 
 
 def main():
