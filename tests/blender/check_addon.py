@@ -164,8 +164,18 @@ def sdf_volume():
     v, f = tri_arrays(ob)
     directory = os.path.join(OUT, "vdb")
     n0 = len(bpy.data.objects)
-    r = bpy.ops.heatvox.sdf_volume(resolution=96, band=3.0, directory=directory)
+    # The library's progress reaches the add-on's progress bar.
+    import heatvox_blender.operators as ops
+
+    seen, call = [], ops._Progress.__call__
+    ops._Progress.__call__ = lambda self, f, stage: seen.append((f, stage)) or call(self, f, stage)
+    try:
+        r = bpy.ops.heatvox.sdf_volume(resolution=96, band=3.0, directory=directory)
+    finally:
+        ops._Progress.__call__ = call
     expect(r == {"FINISHED"}, "sdf_volume returned %s" % r)
+    expect(len(seen) >= 3 and all(0 <= f <= 1 for f, _ in seen), "progress calls %s" % seen)
+    print("    progress: %d calls, stages %s" % (len(seen), sorted(set(st for _, st in seen))))
     expect(len(bpy.data.objects) == n0 + 1, "objects %d -> %d" % (n0, len(bpy.data.objects)))
     vo = bpy.context.active_object
     expect(vo.type == "VOLUME" and vo.name == "broken_sdf", "new object %s %s" % (vo.name, vo.type))
@@ -269,6 +279,21 @@ def points_surface():
     expect(ob.name == "cloud" and len(ob.data.vertices) == len(pts) and len(ob.data.polygons) == 0,
            "imported %s: %d vertices" % (ob.name, len(ob.data.vertices)))
     expect("N" in ob.data.attributes, "no normal attribute N")
+    # A binary PLY of the same points: the normals kept, point for point.
+    ply = os.path.join(OUT, "cloud_ply.ply")
+    with open(ply, "wb") as fh:
+        fh.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\n" % len(pts)).encode())
+        for c in ("x", "y", "z", "nx", "ny", "nz"):
+            fh.write(("property float %s\n" % c).encode())
+        fh.write(b"end_header\n")
+        fh.write(np.hstack([pts, nrm]).astype("<f4").tobytes())
+    r = bpy.ops.heatvox.import_points(filepath=ply)
+    expect(r == {"FINISHED"}, "import_points of a PLY returned %s" % r)
+    got = np.empty(3 * len(pts), dtype=np.float32)
+    bpy.context.active_object.data.attributes["N"].data.foreach_get("vector", got)
+    expect(np.allclose(got.reshape(-1, 3), nrm, atol=1e-6), "the PLY's normals did not arrive")
+    bpy.data.objects.remove(bpy.context.active_object)
+    select(ob)
     ob.location = (0.0, 0.0, 1.0)  # the surface must follow the object
     bpy.context.view_layer.update()
     r = bpy.ops.heatvox.points_surface(resolution=96)
