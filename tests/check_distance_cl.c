@@ -231,6 +231,62 @@ START_TEST(opencl_stages_on_tiles_should_match_the_host_tiles)
 }
 END_TEST
 
+static int count_progress(double fraction, const char *stage, void *user)
+{
+    int *seen = user;
+    seen[strcmp(stage, "poisson") == 0]++;
+    return fraction < 0 || fraction > 1;
+}
+
+/* One hv_distance for many queries on the device: its Poisson solver (the
+ * set-up) made at create and kept, the first query reporting the set-up and
+ * the others none; a query gives what hv_distance_compute gives, bit for bit,
+ * whatever came before; the stages report progress as on the host. */
+START_TEST(an_opencl_object_should_answer_many_queries_without_set_up)
+{
+    hv_cl *cl = NULL;
+    TL_ASSERT_OK(hv__cl_open(&cl));
+    const int fp64 = cl->fp64;
+    hv__cl_close(&cl);
+    const int n[3] = {37, 33, 29};
+    const size_t count = (size_t)n[0] * n[1] * n[2];
+    hv_grid *g = scene(3, n), *ref = scene(3, n);
+    hv_distance_opts o;
+    hv_distance_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    double pa[3] = {0.2, 0.2, 0.3}, pb[3] = {0.8, 0.7, 0.5};
+    hv_distance_sources a = {NULL, 0, pa, 1, NULL}, b = {NULL, 0, pb, 1, NULL};
+    hv_distance *D = NULL;
+    hv_distance_stats s[3];
+    int seen[2] = {0, 0};
+    TL_ASSERT_OK(hv_distance_create(&D, g, &o));
+    hv_set_progress(count_progress, seen);
+    TL_ASSERT_OK(hv_distance_query(D, &a, g, &s[0]));
+    hv_set_progress(NULL, NULL);
+    float *first = malloc(count * sizeof *first);
+    ck_assert_ptr_nonnull(first);
+    memcpy(first, g->v, count * sizeof *first);
+    TL_ASSERT_OK(hv_distance_query(D, &b, g, &s[1]));
+    TL_ASSERT_OK(hv_distance_query(D, &a, g, &s[2]));
+    TL_ASSERT_OK(hv_distance_compute(ref, &a, &o, NULL));
+    printf("  device object: set-up %.3f, %.3f, %.3f s; Poisson %.3f, %.3f, %.3f s; stages %d, "
+           "progress %d diffuse, %d poisson (fp64 %d)\n",
+           s[0].t_setup, s[1].t_setup, s[2].t_setup, s[0].t_poisson, s[1].t_poisson, s[2].t_poisson,
+           s[0].stages, seen[0], seen[1], fp64);
+    ck_assert_msg(s[0].t_setup > 0 && s[1].t_setup == 0 && s[2].t_setup == 0, "set-up %g, %g, %g s",
+                  s[0].t_setup, s[1].t_setup, s[2].t_setup);
+    ck_assert_int_eq(s[0].backend, HV_BACKEND_OPENCL);
+    ck_assert_int_eq(memcmp(first, g->v, count * sizeof *first), 0);
+    ck_assert_int_eq(memcmp(ref->v, g->v, count * sizeof *first), 0);
+    ck_assert_int_eq(seen[0], s[0].stages);
+    ck_assert_int_eq(seen[1], 1);
+    hv_distance_destroy(&D);
+    free(first);
+    hv_grid_destroy(&g);
+    hv_grid_destroy(&ref);
+}
+END_TEST
+
 START_TEST(opencl_distance_without_fp64_should_fall_back_to_the_host)
 {
     setenv("HEATVOX_OPENCL_FP64", "0", 1);
@@ -269,6 +325,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, opencl_stages_on_tiles_should_match_the_host_tiles, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_should_match_mg_over_many_stages, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_should_match_on_a_grid_without_mask, have_cl, why);
+    TL_ADD_IF(tc, an_opencl_object_should_answer_many_queries_without_set_up, have_cl, why);
     TL_ADD_IF(tc, opencl_distance_without_fp64_should_fall_back_to_the_host, have_cl, why);
     suite_add_tcase(su, tc);
     return tl_run(su);

@@ -121,8 +121,8 @@ HV_API void hv_distance_opts_default(hv_distance_opts *o);
  * Fails with HV_ERR_INVALID_ARG when no source lands on a fluid cell, a voxel
  * index is out of range or a mesh source is given for a 2D grid. Reports
  * progress through hv_set_progress before each stage ("diffuse") and the
- * Poisson solve ("poisson"); a cancel returns HV_ERR_CANCELLED (the opencl
- * path reports none). */
+ * Poisson solve ("poisson"), on every backend; a cancel returns
+ * HV_ERR_CANCELLED. */
 HV_API hv_status hv_distance_compute(hv_grid *dist, const hv_distance_sources *src,
                                      const hv_distance_opts *opts, hv_distance_stats *stats);
 

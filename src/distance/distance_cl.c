@@ -67,7 +67,8 @@ typedef struct dist_cl_work {
     hv_cl *cl;
     dist_cl_band bd;
     cl_mem region, X[3], w, u, u2, ok, inside, cnt, part, idx, gath, off, out;
-    hv_solver *sv[2];
+    hv_solver *sv[2];   /* the whole stages' heat steps, made here */
+    hv_solver *poisson; /* the hv_distance's, kept across queries */
     double *hpart;
     uint32_t *hidx;
     double *hval, *num;
@@ -151,7 +152,7 @@ static hv_status poisson_restarts(dist_cl_work *k, const hv_grid *g, const int32
         if (*rel <= o->poisson_tol)
             break;
         hv_solve_info pinfo;
-        if ((st = hv_solver_solve_d(k->sv[0], r, Au, &pinfo)))
+        if ((st = hv_solver_solve_d(k->poisson, r, Au, &pinfo)))
             goto out;
         for (size_t c = 0; c < n; c++)
             u[c] += Au[c];
@@ -507,48 +508,47 @@ static hv_status next_front(dist_cl_work *k, double lthr, const double tau[2], i
     return HV_OK;
 }
 
-/* Stages, as distance_heat.c; *left: the faces still open. */
-static hv_status run_stages(dist_cl_work *k, const hv_grid *g, const hv_distance_opts *o,
-                            size_t *left, hv_distance_stats *S)
+/* The device's stages for hv__dist_stages: the work, the query's grid and
+ * options. */
+typedef struct cl_stages {
+    dist_cl_work *k;
+    const hv_grid *g;
+    const hv_distance_opts *o;
+    double tau[2];
+} cl_stages;
+
+static hv_status cl_diffuse(void *self, int l, hv_solve_info info[2], hv_distance_stats *S)
 {
-    const double tau[2] = {1.0 / o->t_scale, 1.0 / (o->t_scale * T_RATIO)};
-    int idle = 0;
-    hv_status st;
-    for (int l = 0; l<o->max_stages && * left> 0; l++) {
-        double t0 = hv_now();
-        hv_solve_info info[2];
-        if ((st = k->bd.on ? diffuse_band(k, o, l, info, S) : diffuse(k, g, o, info, S)))
-            return st;
+    cl_stages *C = self;
+    hv_status st =
+        C->k->bd.on ? diffuse_band(C->k, C->o, l, info, S) : diffuse(C->k, C->g, C->o, info, S);
+    if (!st)
         S->backend = info[0].backend;
-        S->t_diffuse += hv_now() - t0;
-        t0 = hv_now();
-        double lthr;
-        uint32_t cnt[2];
-        if ((st = assign_faces(k, o, info, &lthr, cnt)))
-            return st;
-        *left = cnt[0];
-        const size_t got = cnt[1];
-        if (l < 8)
-            S->faces_per_stage[l] = got;
-        S->stages = l + 1;
-        idle = got ? 0 : idle + 1;
-        if (idle == 2) /* two stages without a new face: the rest is out of reach */
-            break;
-        if (*left) {
-            int moved;
-            if ((st = next_front(k, lthr, tau, &moved)))
-                return st;
-            if (!moved)
-                break;
-            if (k->bd.on && (st = band_flags(k, S)))
-                return st;
-        }
-        S->t_normalize += hv_now() - t0;
-    }
-    return HV_OK;
+    return st;
 }
 
-/* Poisson: -Lap phi = -div X (unassigned faces count 0), rhs in u2, phi in u. */
+static hv_status cl_assign(void *self, const hv_solve_info info[2], double *lthr, size_t *got,
+                           size_t *left)
+{
+    cl_stages *C = self;
+    uint32_t cnt[2] = {0, 0};
+    hv_status st = assign_faces(C->k, C->o, info, lthr, cnt);
+    *left = cnt[0];
+    *got = cnt[1];
+    return st;
+}
+
+static hv_status cl_advance(void *self, double lthr, int *moved, hv_distance_stats *S)
+{
+    cl_stages *C = self;
+    hv_status st = next_front(C->k, lthr, C->tau, moved);
+    if (!st && *moved && C->k->bd.on)
+        st = band_flags(C->k, S);
+    return st;
+}
+
+/* Poisson: -Lap phi = -div X (unassigned faces count 0), rhs in u2, phi in u,
+ * by the object's solver. */
 static hv_status poisson(dist_cl_work *k, const hv_grid *g, const int32_t *region,
                          const hv_distance_opts *o, hv_distance_stats *S)
 {
@@ -557,21 +557,20 @@ static hv_status poisson(dist_cl_work *k, const hv_grid *g, const int32_t *regio
     double t0 = hv_now();
     hv_solver_destroy(&k->sv[0]);
     hv_solver_destroy(&k->sv[1]);
+    if ((st = hv__progress(0.7, "poisson")))
+        return st;
     hv__cl_args(cl, &dist_module, DK_DIV, "Immmmam", k->N, k->region, k->X[0], k->X[1],
                 k->dim == 3 ? k->X[2] : NULL, 1.0 / g->h, k->u2);
     hv__cl_run(cl, &dist_module, DK_DIV, 2, k->gc, k->lc);
-    if ((st = hv__cl_finish(cl)) ||
-        (st = hv__dist_solver(&k->sv[0], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
-                              HV_BACKEND_OPENCL, o->coarse)))
+    if ((st = hv__cl_finish(cl)))
         return st;
     hv_solve_info pinfo;
-    if ((st = hv__cl_solver_solve_d(k->sv[0], k->u2, k->u, &pinfo)))
+    if ((st = hv__cl_solver_solve_d(k->poisson, k->u2, k->u, &pinfo)))
         return st;
     S->poisson_iterations = pinfo.iterations;
     double rel = pinfo.relres;
     if (rel > o->poisson_tol && (st = poisson_restarts(k, g, region, o, &rel, S)))
         return st;
-    hv_solver_destroy(&k->sv[0]);
     S->poisson_relres = rel;
     S->t_poisson = hv_now() - t0;
     return HV_OK;
@@ -637,12 +636,13 @@ static hv_status write_output(dist_cl_work *k, hv_grid *g, const hv_distance_opt
     return hv__cl_check(cl);
 }
 
-hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int32_t *region,
-                               size_t nregions, const double *w0, const float *ref,
-                               hv_distance_stats *S, int *handled)
+hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, hv_solver *psolver,
+                               const int32_t *region, size_t nregions, const double *w0,
+                               const float *ref, hv_distance_stats *S, int *handled)
 {
     dist_cl_work k;
     memset(&k, 0, sizeof k);
+    k.poisson = psolver;
     *handled = 0;
     const char *env = getenv("HEATVOX_DISTANCE_CL");
     if (env && !strcmp(env, "0")) /* tests: the host path with the same backend */
@@ -658,7 +658,9 @@ hv_status hv__distance_heat_cl(hv_grid *g, const hv_distance_opts *o, const int3
         (k.bd.on && ((st = band_open(&k, g, region)) || (st = band_flags(&k, S)))))
         goto done;
     S->t_splat += hv_now() - t0;
-    if ((st = run_stages(&k, g, o, &left, S)))
+    cl_stages C = {&k, g, o, {1.0 / o->t_scale, 1.0 / (o->t_scale * T_RATIO)}};
+    const hv_dist_stage_ops ops = {&C, cl_diffuse, cl_assign, cl_advance};
+    if ((st = hv__dist_stages(&ops, o, left, 1, &left, S)))
         goto done;
     S->dead_faces = left;
     if ((st = poisson(&k, g, region, o, S)) || (st = fit_offsets(&k, g, region, ref, nregions)))

@@ -94,16 +94,23 @@ static hv_status local_solve(void *user, int q, const double *f, double *u, hv_s
     return q == 2 ? local_poisson(L, f, u, info) : hv_solver_solve_d(L->D->sv[q], f, u, info);
 }
 
-/* The solvers the object keeps: Poisson, and with whole stages the heat steps. */
-static hv_status make_solvers(hv_distance *D)
+/* The solvers the object keeps: Poisson (on a device too, where the device
+ * path solves with it), and for the host's whole stages the heat steps. */
+static hv_status make_poisson(hv_distance *D)
+{
+    const hv_grid *g = &D->shape;
+    const hv_distance_opts *o = &D->o;
+    return hv__dist_solver(&D->sv[2], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
+                           o->backend, hv__dist_poisson_coarse(o, g->solid));
+}
+
+static hv_status make_heat_steps(hv_distance *D)
 {
     const hv_grid *g = &D->shape;
     const hv_distance_opts *o = &D->o;
     const double t = o->t_scale * g->h * g->h;
-    hv_status st =
-        hv__dist_solver(&D->sv[2], g->dim, g->n, g->h, g->solid, 0.0, 1.0, o->poisson_tol,
-                        o->backend, hv__dist_poisson_coarse(o, g->solid));
-    for (int q = 0; !st && !D->band && q < 2; q++)
+    hv_status st = HV_OK;
+    for (int q = 0; !st && q < 2; q++)
         st = hv__dist_solver(&D->sv[q], g->dim, g->n, g->h, g->solid, 1.0, t * (q ? T_RATIO : 1),
                              o->diffuse_tol, o->backend, o->coarse);
     return st;
@@ -154,10 +161,13 @@ hv_status hv_distance_create(hv_distance **out, const hv_grid *g, const hv_dista
         st = hv__error(HV_ERR_NOMEM, "distance: out of memory for the obstacle mask");
     else if (g->solid)
         memcpy(D->shape.solid, g->solid, D->count);
-    /* the device path makes its own solvers; with no fluid cell every query
-     * fails on its sources (no source lands on a fluid cell) */
-    if (!st && o.backend != HV_BACKEND_OPENCL && any_fluid(&D->shape, D->count))
-        st = make_solvers(D);
+    /* the device path makes its whole stages' heat steps itself; with no fluid
+     * cell every query fails on its sources (no source lands on a fluid cell) */
+    if (!st && any_fluid(&D->shape, D->count)) {
+        st = make_poisson(D);
+        if (!st && !D->band && o.backend != HV_BACKEND_OPENCL)
+            st = make_heat_steps(D);
+    }
     if (st) {
         hv_distance_destroy(&D);
         return st;
@@ -276,11 +286,18 @@ hv_status hv_distance_query(hv_distance *D, const hv_distance_sources *src, hv_g
         int handled = 0;
         hv_grid dev = D->shape;
         dev.v = g->v;
-        st = hv__distance_heat_cl(&dev, &D->o, d.region, S->regions, A.w, A.ref, S, &handled);
+        st = hv__distance_heat_cl(&dev, &D->o, D->sv[2], d.region, S->regions, A.w, A.ref, S,
+                                  &handled);
         if (st || handled)
             goto done;
-        if (!D->sv[2] && (st = make_solvers(D))) /* no fp64 device: the host's solvers */
-            goto done;
+        /* no fp64 device: the host's whole stages, with the device's solvers,
+         * made by the first query */
+        if (!D->sv[0]) {
+            const double t1 = hv_now();
+            if ((st = make_heat_steps(D)))
+                goto done;
+            S->t_setup += hv_now() - t1;
+        }
     }
     st = hv__dist_march(&d, &D->o, A.w, A.u, A.u2, A.inside, A.ok, A.ref, g->v, S);
     S->poisson_restarts = L.restarts;

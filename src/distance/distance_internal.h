@@ -200,6 +200,31 @@ hv_status hv__dist_march(hv_dist_box *b, const hv_distance_opts *o, double *w, d
                          double *u2, uint8_t *inside, uint8_t *ok, float *ref, float *out,
                          hv_distance_stats *S);
 
+/* Where the stages run: the host's box (distance_march.c) or a device
+ * (distance_cl.c). hv__dist_stages is the one loop over either; each method
+ * works on the current front and the fields its backend keeps. */
+typedef struct hv_dist_stage_ops {
+    void *self;
+    /* Stage l's two heat steps from the front's weights: sets info (the
+     * solves' iterations and residuals) and S's diffusion counts and backend. */
+    hv_status (*diffuse)(void *self, int l, hv_solve_info info[2], hv_distance_stats *S);
+    /* The trust bounds from info and the front's norm, the cells trusted and
+     * the open faces they assign: *lthr the bound on ln u(t), *got the faces
+     * assigned, *left the open faces still without a direction. */
+    hv_status (*assign)(void *self, const hv_solve_info info[2], double *lthr, size_t *got,
+                        size_t *left);
+    /* The next front, a margin inside the trusted zone (lthr); *moved is 0
+     * where none can be placed. */
+    hv_status (*advance)(void *self, double lthr, int *moved, hv_distance_stats *S);
+} hv_dist_stage_ops;
+
+/* The stages (docs/METHOD.md, "Heat method", step 4) until every one of the
+ * open faces has a direction, two stages pass without a new one or the front
+ * stops; progress (whole grids): reports "diffuse" before each stage. Sets
+ * S's stage counts and times; *left: the faces left open. */
+hv_status hv__dist_stages(const hv_dist_stage_ops *ops, const hv_distance_opts *o, size_t open,
+                          int progress, size_t *left, hv_distance_stats *S);
+
 /* Tile t's first cell (box indices) and its cell counts per axis. */
 static inline void hv__dist_tile_cells(const hv_dist_box *b, size_t t, int lo[3], int len[3])
 {

@@ -492,56 +492,99 @@ static void stage_trust(dist_ctx *d, double *u, double *u2, uint8_t *ok, double 
     }
 }
 
-/* The stages (docs/METHOD.md, "Heat method", step 4): diffuse from the current
- * front; trust the faces where u is above the solve's error bound; the next
- * front is a wavefront of the distance a margin inside the trusted zone,
- * beyond the current one, so that by Huygens' principle its own distance
- * field continues the source's. Returns the open faces left unassigned. */
-static hv_status stages(dist_ctx *d, const hv_distance_opts *o, double *w, double *u, double *u2,
-                        uint8_t *inside, uint8_t *ok, size_t *left_out, hv_distance_stats *S)
+hv_status hv__dist_stages(const hv_dist_stage_ops *ops, const hv_distance_opts *o, size_t open,
+                          int progress, size_t *left_out, hv_distance_stats *S)
 {
-    double t0 = hv_now();
-    double counts[2] = {(double)init_faces(d), 0};
-    sum_over(d, counts, 1);
-    size_t open = (size_t)counts[0], left = open;
-    S->t_splat += hv_now() - t0;
-    d->tau[0] = 1.0 / o->t_scale;
-    d->tau[1] = 1.0 / (o->t_scale * T_RATIO);
-    if (d->tl.band)
-        hv__dist_tiles_start(d, w);
+    size_t left = open;
     hv_status st = HV_OK;
     int idle = 0;
     for (int l = 0; l < o->max_stages && left > 0; l++) {
         /* the share of open faces with a direction: how far the stages have got */
-        if (d->whole &&
+        if (progress &&
             (st = hv__progress(0.05 + 0.6 * (double)(open - left) / (double)open, "diffuse")))
-            return st;
-        t0 = hv_now();
+            break;
+        double t0 = hv_now();
         hv_solve_info info[2];
-        if ((st = stage_solve(d, o, l, w, u, u2, ok, info, S)))
-            return st;
+        if ((st = ops->diffuse(ops->self, l, info, S)))
+            break;
         S->t_diffuse += hv_now() - t0;
         t0 = hv_now();
-        double wn = core_norm2(d, w);
-        double lthr = hv__dist_trust_log(fmax(info[0].relres, stage_tol(d, o)), wn, o->t_scale);
-        double lthr2 =
-            hv__dist_trust_log(fmax(info[1].relres, stage_tol(d, o)), wn, o->t_scale * T_RATIO);
-        stage_trust(d, u, u2, ok, lthr, lthr2);
-        double got = (double)assign_faces(d, u2, ok);
-        sum_over(d, &got, 1);
-        left -= (size_t)got;
+        double lthr;
+        size_t got;
+        if ((st = ops->assign(ops->self, info, &lthr, &got, &left)))
+            break;
         if (l < 8)
-            S->faces_per_stage[l] = (size_t)got;
+            S->faces_per_stage[l] = got;
         S->stages = l + 1;
         idle = got > 0 ? 0 : idle + 1;
         if (idle == 2) /* two stages without a new face: the rest is out of reach */
             break;
-        if (left && !next_front(d, u2, u, ok, lthr, inside, w))
+        int moved = 1;
+        if (left && (st = ops->advance(ops->self, lthr, &moved, S)))
+            break;
+        if (!moved)
             break;
         S->t_normalize += hv_now() - t0;
     }
     *left_out = left;
     return st;
+}
+
+/* The host's stages: the box's fields and the open faces left. */
+typedef struct host_stages {
+    dist_ctx *d;
+    const hv_distance_opts *o;
+    double *w, *u, *u2;
+    uint8_t *inside, *ok;
+    size_t left;
+} host_stages;
+
+static hv_status host_diffuse(void *self, int l, hv_solve_info info[2], hv_distance_stats *S)
+{
+    host_stages *H = self;
+    return stage_solve(H->d, H->o, l, H->w, H->u, H->u2, H->ok, info, S);
+}
+
+static hv_status host_assign(void *self, const hv_solve_info info[2], double *lthr, size_t *got,
+                             size_t *left)
+{
+    host_stages *H = self;
+    dist_ctx *d = H->d;
+    const double tol = stage_tol(d, H->o), wn = core_norm2(d, H->w);
+    *lthr = hv__dist_trust_log(fmax(info[0].relres, tol), wn, H->o->t_scale);
+    const double lthr2 = hv__dist_trust_log(fmax(info[1].relres, tol), wn, H->o->t_scale * T_RATIO);
+    stage_trust(d, H->u, H->u2, H->ok, *lthr, lthr2);
+    double n = (double)assign_faces(d, H->u2, H->ok);
+    sum_over(d, &n, 1);
+    *got = (size_t)n;
+    H->left -= *got;
+    *left = H->left;
+    return HV_OK;
+}
+
+static hv_status host_advance(void *self, double lthr, int *moved, hv_distance_stats *S)
+{
+    host_stages *H = self;
+    *moved = next_front(H->d, H->u2, H->u, H->ok, lthr, H->inside, H->w) != 0;
+    return HV_OK;
+}
+
+/* The stages on the host's box: the open faces set up, then the loop.
+ * Returns the open faces left unassigned. */
+static hv_status stages(dist_ctx *d, const hv_distance_opts *o, double *w, double *u, double *u2,
+                        uint8_t *inside, uint8_t *ok, size_t *left_out, hv_distance_stats *S)
+{
+    double t0 = hv_now();
+    double counts[1] = {(double)init_faces(d)};
+    sum_over(d, counts, 1);
+    S->t_splat += hv_now() - t0;
+    d->tau[0] = 1.0 / o->t_scale;
+    d->tau[1] = 1.0 / (o->t_scale * T_RATIO);
+    if (d->tl.band)
+        hv__dist_tiles_start(d, w);
+    host_stages H = {d, o, w, u, u2, inside, ok, (size_t)counts[0]};
+    const hv_dist_stage_ops ops = {&H, host_diffuse, host_assign, host_advance};
+    return hv__dist_stages(&ops, o, H.left, d->whole, left_out, S);
 }
 
 static hv_status march(hv_dist_box *d, const hv_distance_opts *o, double *w, double *u, double *u2,
