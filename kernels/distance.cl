@@ -52,7 +52,7 @@ __kernel void dist_faces(int4 N, int axis, __global const int *region, __global 
     dist_count(open, cnt, red);
 }
 
-/* u = ln u(t), u2 = psi = ln u(t) - ln u(4t) on trusted cells (-inf elsewhere),
+/* u = ln u(t), u2 = psi = ln u(t) - ln u(T_RATIO t) on trusted cells (-inf elsewhere),
  * ok = in a region with a source and both logs above their trust bounds. */
 __kernel void dist_log(ulong n, __global const int *region, __global double *u,
                        __global double *u2, __global uchar *ok, double lthr, double lthr2)

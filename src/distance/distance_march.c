@@ -146,7 +146,7 @@ static int transverse(const dist_ctx *d, const double *u, const uint8_t *ok, siz
 }
 
 /* Assigns X on every unassigned open face whose cells are trusted (ok), from
- * psi = ln u(t) - ln u(4t): X = -grad psi / |grad psi|, the face's own
+ * psi = ln u(t) - ln u(T_RATIO t): X = -grad psi / |grad psi|, the face's own
  * difference normalized with the mean of the open, trusted transverse face
  * differences around it. Differences of logarithms, not of u: u falls like
  * e^{-r/sqrt t}, and for an exponential a face difference (span h) and a mean
@@ -234,8 +234,8 @@ static void sum_over(const dist_ctx *d, double *v, int n)
         d->hk->sum(d->hk->user, v, n);
 }
 
-/* Builds the next front. psi = ln u(t) - ln u(4t) on trusted cells (ok) falls
- * by kappa(t) - kappa(4t) per voxel travelled away from the current front, with
+/* Builds the next front. psi = ln u(t) - ln u(T_RATIO t) on trusted cells (ok) falls
+ * by kappa(t) - kappa(T_RATIO t) per voxel travelled away from the current front, with
  * the amplitude cancelled; on the lattice kappa depends on the direction nu of
  * travel, so the distance travelled is e = (psi0 - psi) / (kappa1(nu) -
  * kappa2(nu)), psi0 its value on the current front (weights w). Using e rather
@@ -273,12 +273,12 @@ static void front_sums(const dist_ctx *d, const double *psi, const double *lu, c
 }
 
 /* Where the next front goes: psi on the current front, the step, and bounds
- * on kappa(t) - kappa(4t) over every direction of travel. */
+ * on kappa(t) - kappa(T_RATIO t) over every direction of travel. */
 typedef struct front_rule {
     double psi0, step, dk_lo, dk_hi;
 } front_rule;
 
-/* kappa(t) - kappa(4t) along the axis and the diagonals (the lattice's
+/* kappa(t) - kappa(T_RATIO t) along the axis and the diagonals (the lattice's
  * extremes), widened by 2%: a cell whose distance travelled lies off the
  * front's band for every value between them needs no Newton solve. */
 static void front_bounds(const dist_ctx *d, front_rule *F)
@@ -470,7 +470,7 @@ static hv_status stage_solve(dist_ctx *d, const hv_distance_opts *o, int l, cons
 }
 
 /* ok: the core tiles' cells where both heat steps are above their trust
- * bounds; u becomes ln u(t), u2 psi = ln u(t) - ln u(4t) on trusted cells. */
+ * bounds; u becomes ln u(t), u2 psi = ln u(t) - ln u(T_RATIO t) on trusted cells. */
 static void stage_trust(dist_ctx *d, double *u, double *u2, uint8_t *ok, double lthr, double lthr2)
 {
     const hv_dist_tiles *T = &d->tl;
