@@ -1,6 +1,7 @@
 #!/bin/sh
 # Prints the logs of make check's runs in order, the skipped tests, the
-# slowest runs and the closing line "check: N passed, M failed, K skipped";
+# slowest runs, the variant runs left out ($CHECK_LEFT_OUT) and the closing
+# line "check: N passed, M failed, K skipped";
 # exits 1 when a run failed, or when its log holds a skip line other than the
 # test library's "SKIP: " and "NOT RUN: " at the start of a line. Usage: check_summary.sh RESULTS_DIR RUN...
 res=$1
@@ -59,5 +60,9 @@ if [ -f "$res/tmp.before" ]; then
     fi
 fi
 [ -z "$bad" ] || echo "failing suites:$bad"
+# Variant runs that make check did not list here (CHECK_LEFT_OUT, from
+# mk/tests.mk: "RUNS (why);" each), counted neither passed nor skipped.
+left=${CHECK_LEFT_OUT:-}
+[ -z "$left" ] || echo "variants left out: ${left%;}"
 echo "check: $pass passed, $fail failed, $skip skipped"
 [ -z "$bad" ]
