@@ -60,6 +60,16 @@ ifneq ($(words $(filter avx2 fma,$(CPU_FLAGS))),2)
 CHECK_LEFT_OUT += $(if $(RUNS_NOAVX2),$(RUNS_NOAVX2) (no avx2 with fma on this CPU: the plain runs take that path);)
 RUNS_NOAVX2 :=
 endif
+# make sanitize (SAN=1) leaves out .fp32: each of those suites has a test of
+# its own on a float device (HEATVOX_OPENCL_FP64=0: the host's double
+# correction, the solve through the host, the distance's host fallback) that
+# the plain run takes, and the rest moves other values through the same
+# buffers; make check runs them. .no512 and .noavx2 stay where they run:
+# their AVX2 and baseline C rows are other memory access paths.
+ifeq ($(SAN),1)
+CHECK_LEFT_OUT += $(if $(RUNS_FP32),$(RUNS_FP32) (make sanitize: the plain runs take their float paths; make check runs them);)
+RUNS_FP32 :=
+endif
 CHECK_RUNS := $(filter $(CHECK_SLOW),$(notdir $(TESTS))) $(filter-out $(CHECK_SLOW),$(notdir $(TESTS))) \
               check_kernels check_includes check_pip $(RUNS_FP32) $(RUNS_NO512) $(RUNS_NOAVX2)
 RES := $(BUILD)/tests/results
