@@ -595,11 +595,14 @@ START_TEST(batch_exr_volumes_should_decode_to_the_npy_of_the_same_grid)
     closedir(d);
     if (nm == 0)
         TL_SKIP("no meshes in %s", data);
-    /* Two resolutions in make check, the two smaller ones under the
-     * sanitizers; all four in make check-long. */
+    /* Two resolutions in make check, all four in make check-long. Under the
+     * sanitizers the smallest alone: every mesh still goes through the batch,
+     * the EXR writer and its guard once, and the guard's raw-chunk branch is
+     * check_image's (a chunk made to deflate to its raw size). */
     const int all_res[] = {32, 64, 96, 128}, quick_res[] = {32, 96};
-    const int full = tl_long();
-    const int *res = full || tl_sanitized() ? all_res : quick_res, nres = full ? 4 : 2;
+    const int full = tl_long(), san = tl_sanitized();
+    const int *res = full || san ? all_res : quick_res;
+    const int nres = full ? 4 : san ? 1 : 2;
     int volumes = 0;
     for (int r = 0; r < nres; r++) {
         char args[16384];
