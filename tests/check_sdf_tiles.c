@@ -143,10 +143,17 @@ START_TEST(shared_meshes_should_equal_the_dense_band)
                            "polygon-bear.obj",
                            "rocker.obj",
                            "spot.obj"};
+    /* Under the sanitizers three small ones: holed, non-manifold and with
+     * duplicate faces; closed; open with line records. The tiles take one
+     * path whatever the mesh, and the tests above take it on closed,
+     * defective and open meshes there too. */
+    const int sanitized[] = {0, 1, 1, 0, 1, 0, 0, 0, 0, 0, 0};
     hv_sdf_opts o;
     hv_sdf_opts_default(&o);
     o.res = 64;
     for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
+        if (tl_sanitized() && !sanitized[k])
+            continue;
         hv_mesh *m = tu_load_shared(names[k]);
         if (!m)
             return;
