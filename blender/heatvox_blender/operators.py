@@ -110,6 +110,25 @@ class _Placement:
         return {"res": self.resolution}
 
 
+class _Shape:
+    """The surface moved, its gaps closed or its thin parts opened (scene units)."""
+
+    offset: FloatProperty(name="Offset", default=0.0, subtype="DISTANCE",
+                          description="Move the surface out (in when negative)")
+    close: FloatProperty(name="Close", min=0.0, default=0.0, subtype="DISTANCE",
+                         description="Fill gaps and cracks narrower than twice this")
+    open: FloatProperty(name="Open", min=0.0, default=0.0, subtype="DISTANCE",
+                        description="Remove parts thinner than twice this")
+
+    def shape(self):
+        """sdf()'s options for them; the exact values only near the surface
+        unless the morphology needs them all."""
+        more = {"offset": self.offset, "close": self.close, "open": self.open}
+        if self.close == 0 and self.open == 0:
+            more["band_only"] = 3.0
+        return more
+
+
 def _run(op, context, body):
     """body(hv) -> result, with every failure reported and cancelling."""
     t0 = time.time()
@@ -133,7 +152,7 @@ class _ObjectOp:
         return context.mode == "OBJECT"
 
 
-class HEATVOX_OT_sdf_volume(_ObjectOp, _Placement, bpy.types.Operator):
+class HEATVOX_OT_sdf_volume(_ObjectOp, _Placement, _Shape, bpy.types.Operator):
     """Signed distance volume of the selected meshes (holes, flipped faces and
     duplicated sheets welcome): a Volume object with the level set "sdf"
     (negative inside) and its inside as the fog grid "density"
@@ -144,14 +163,8 @@ class HEATVOX_OT_sdf_volume(_ObjectOp, _Placement, bpy.types.Operator):
 
     band: FloatProperty(name="Band", min=1.0, max=64.0, default=3.0,
                         description="Half width of the narrow band, in voxels")
-    offset: FloatProperty(name="Offset", default=0.0, subtype="DISTANCE",
-                          description="Move the surface out (in when negative)")
     shell: FloatProperty(name="Shell", min=0.0, default=0.0, subtype="DISTANCE",
                          description="> 0: only a wall of this thickness inside the surface")
-    close: FloatProperty(name="Close", min=0.0, default=0.0, subtype="DISTANCE",
-                         description="Fill gaps and cracks narrower than twice this")
-    open: FloatProperty(name="Open", min=0.0, default=0.0, subtype="DISTANCE",
-                        description="Remove parts thinner than twice this")
     directory: StringProperty(name="Directory", subtype="DIR_PATH", default="",
                               description="Where the .vdb goes; empty: beside the .blend, or a temporary directory")
 
@@ -163,9 +176,9 @@ class HEATVOX_OT_sdf_volume(_ObjectOp, _Placement, bpy.types.Operator):
         v, f = geometry.triangles(context, objects)
         name = _unique(objects[0].name + "_sdf")
         path = os.path.join(_directory(self.directory), name + ".vdb")
-        more = {"offset": self.offset, "shell": self.shell, "close": self.close, "open": self.open}
-        if self.close == 0 and self.open == 0:
-            more["band_only"] = self.band  # exact values in the band; morphology needs them all
+        more = dict(self.shape(), shell=self.shell)
+        if "band_only" in more:
+            more["band_only"] = self.band  # exact values across the band written
         with _Progress(context, "signed distance") as progress:
             g = hv.sdf(v, f, band=self.band, progress=progress, **more, **self.placement())
             g.write_vdb(path, fog="density")
@@ -174,7 +187,7 @@ class HEATVOX_OT_sdf_volume(_ObjectOp, _Placement, bpy.types.Operator):
         return "%s: %d x %d x %d voxels of %.4g" % (path, n[0], n[1], n[2], h)
 
 
-class HEATVOX_OT_remesh(_ObjectOp, _Placement, bpy.types.Operator):
+class HEATVOX_OT_remesh(_ObjectOp, _Placement, _Shape, bpy.types.Operator):
     """Watertight remesh of the selected meshes: one closed, consistently
     oriented mesh around their inside, for printing and booleans"""
 
@@ -183,12 +196,6 @@ class HEATVOX_OT_remesh(_ObjectOp, _Placement, bpy.types.Operator):
 
     adaptivity: FloatProperty(name="Adaptivity", min=0.0, max=1.0, default=0.0,
                               description="0: a vertex per crossed voxel; more merges flat parts")
-    offset: FloatProperty(name="Offset", default=0.0, subtype="DISTANCE",
-                          description="Move the surface out (in when negative)")
-    close: FloatProperty(name="Close", min=0.0, default=0.0, subtype="DISTANCE",
-                         description="Fill gaps and cracks narrower than twice this")
-    open: FloatProperty(name="Open", min=0.0, default=0.0, subtype="DISTANCE",
-                        description="Remove parts thinner than twice this")
     replace: BoolProperty(name="Replace", default=False,
                           description="Replace the active object's mesh (and its modifiers, "
                           "which the result holds) instead of adding an object")
@@ -201,11 +208,8 @@ class HEATVOX_OT_remesh(_ObjectOp, _Placement, bpy.types.Operator):
         if self.replace and len(objects) != 1:
             raise geometry.InputError("Replace takes one object; %d are selected" % len(objects))
         v, f = geometry.triangles(context, objects)
-        more = {"close": self.close, "open": self.open, "offset": self.offset}
-        if self.close == 0 and self.open == 0:
-            more["band_only"] = 3.0  # the zero set needs exact values near it only
         with _Progress(context, "remesh") as progress:
-            g = hv.sdf(v, f, progress=progress, **more, **self.placement())
+            g = hv.sdf(v, f, progress=progress, **self.shape(), **self.placement())
             verts, faces = g.to_mesh(self.adaptivity)
         if self.replace:
             ob = objects[0]
