@@ -13,7 +13,7 @@ $(BLENDER_ZIP): $(BLENDER_SRC) $(PY_SRC) $(LIB_SO) tools/blender_zip.py
 
 # The add-on is installed into a scripts directory of the run's own
 # (BLENDER_USER_SCRIPTS), never the user's; the scenes are generated for it.
-check-blender: $(BLENDER_ZIP) $(BIN) | $(BLENDER_STAMP) ## the add-on's tests inside Blender
+check-blender: $(BLENDER_ZIP) $(BIN) $(STAGE)/.installed | $(BLENDER_STAMP) ## the add-on's tests inside Blender
 	@rm -rf $(BUILD)/blender && mkdir -p $(BUILD)/blender
 	@$(BIN) make-scenes $(BUILD)/blender/scenes > /dev/null
 	@s0=$$(date +%s); \

@@ -505,7 +505,44 @@ def readme_example():
     expect(edges_closed_oriented(f) == (True, True), "README remesh not closed and oriented")
 
 
-CHECKS = [install, sdf_volume, beside_the_blend, remesh, points_surface, bad_input, renders, readme_example]
+def installed_package():
+    """The add-on alone (blender/heatvox_blender, no package inside) finds the
+    heatvox that make install put on Blender's path (the staged install of
+    make check; /usr/local/lib/python3.X/dist-packages with PREFIX=/usr/local,
+    which Debian's Blender searches), in a Blender of its own."""
+    import shutil
+    import subprocess
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    stage = os.path.join(os.path.dirname(os.path.abspath(ZIP)), "stage", "lib")
+    site = [os.path.join(stage, p, "dist-packages") for p in os.listdir(stage) if p.startswith("python3")]
+    expect(len(site) == 1, "no staged Python package under %s" % stage)
+    d = tempfile.mkdtemp(prefix="hv_installed_", dir=OUT)
+    addons = os.path.join(d, "scripts", "addons")
+    shutil.copytree(os.path.join(root, "blender", "heatvox_blender"), os.path.join(addons, "heatvox_blender"))
+    code = """
+import sys
+sys.path.insert(0, %r)
+import bpy, addon_utils
+bpy.ops.preferences.addon_enable(module="heatvox_blender")
+bpy.ops.mesh.primitive_ico_sphere_add(radius=0.5)
+assert bpy.ops.heatvox.remesh(resolution=32) == {"FINISHED"}
+import heatvox_blender.library as lib
+print("LOADED", lib.describe())
+""" % site[0]
+    with open(os.path.join(d, "probe.py"), "w") as fh:
+        fh.write(code)
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=os.path.join(d, "scripts"))
+    p = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1",
+                        "-P", os.path.join(d, "probe.py")], cwd=d, env=env, capture_output=True, text=True,
+                       timeout=300)
+    expect(p.returncode == 0, "exit %d:\n%s%s" % (p.returncode, p.stdout[-2000:], p.stderr[-2000:]))
+    line = [x for x in p.stdout.splitlines() if x.startswith("LOADED")]
+    expect(line and os.path.join(stage, "libheatvox.so") in line[0], "loaded %s" % line)
+    print("    " + line[0])
+
+
+CHECKS = [install, sdf_volume, beside_the_blend, remesh, points_surface, bad_input, renders, readme_example, installed_package]
 
 
 def main():
