@@ -113,17 +113,16 @@ def link(context, ob):
 
 
 def fog_material():
-    """A volume material shading the grid "density" (the inside)."""
+    """A volume material shading the grid "density" (the inside): a
+    Principled Volume, whose density attribute is "density" by default."""
     mat = bpy.data.materials.new("heatvox inside")
     mat.use_nodes = True
-    vol = mat.node_tree.nodes.get("Principled Volume")
-    if vol is None:  # a material's default nodes are a Principled BSDF
-        nodes = mat.node_tree.nodes
-        nodes.clear()
-        out = nodes.new("ShaderNodeOutputMaterial")
-        vol = nodes.new("ShaderNodeVolumePrincipled")
-        mat.node_tree.links.new(vol.outputs["Volume"], out.inputs["Volume"])
+    nodes = mat.node_tree.nodes
+    nodes.clear()  # the default nodes are a surface's Principled BSDF
+    out = nodes.new("ShaderNodeOutputMaterial")
+    vol = nodes.new("ShaderNodeVolumePrincipled")
     vol.inputs["Color"].default_value = (0.8, 0.55, 0.3, 1.0)
+    mat.node_tree.links.new(vol.outputs["Volume"], out.inputs["Volume"])
     return mat
 
 

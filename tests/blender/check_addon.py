@@ -365,28 +365,26 @@ def slab_material(name):
     vol.inputs["Color"].default_value = (0.9, 0.6, 0.3, 1)
     vol.inputs["Emission Color"].default_value = (0.9, 0.6, 0.3, 1)
     vol.inputs["Emission Strength"].default_value = 0.6
+    def math(op, a, b):
+        """A Math node op(a, b) of sockets or numbers."""
+        m = nodes.new("ShaderNodeMath")
+        m.operation = op
+        for i, x in enumerate((a, b)):
+            if isinstance(x, float):
+                m.inputs[i].default_value = x
+            else:
+                links.new(x, m.inputs[i])
+        return m.outputs[0]
+
     coords = nodes.new("ShaderNodeTexCoord")
     xyz = nodes.new("ShaderNodeSeparateXYZ")
     links.new(coords.outputs["Object"], xyz.inputs["Vector"])
-    absz = nodes.new("ShaderNodeMath")
-    absz.operation = "ABSOLUTE"
-    links.new(xyz.outputs["Z"], absz.inputs[0])
-    slab = nodes.new("ShaderNodeMath")
-    slab.operation = "LESS_THAN"
-    slab.inputs[1].default_value = 0.08
-    links.new(absz.outputs[0], slab.inputs[0])
-    both = nodes.new("ShaderNodeMath")
-    both.operation = "MULTIPLY"
-    links.new(slab.outputs[0], both.inputs[0])
     attr = nodes.new("ShaderNodeAttribute")
     attr.attribute_name = "density"
-    links.new(attr.outputs["Fac"], both.inputs[1])
-    dens = nodes.new("ShaderNodeMath")
-    dens.operation = "MULTIPLY"
-    dens.inputs[1].default_value = 60.0
-    links.new(both.outputs[0], dens.inputs[0])
-    links.new(dens.outputs[0], vol.inputs["Density"])
-    links.new(dens.outputs[0], vol.inputs["Emission Strength"])
+    slab = math("LESS_THAN", math("ABSOLUTE", xyz.outputs["Z"], 0.0), 0.08)
+    dens = math("MULTIPLY", math("MULTIPLY", slab, attr.outputs["Fac"]), 60.0)
+    links.new(dens, vol.inputs["Density"])
+    links.new(dens, vol.inputs["Emission Strength"])
     links.new(vol.outputs["Volume"], out.inputs["Volume"])
     return mat
 
