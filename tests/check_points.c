@@ -63,11 +63,38 @@ START_TEST(text_reader)
 }
 END_TEST
 
+/* Clouds without normals: x y z per line, the normals NULL. */
+START_TEST(text_unoriented)
+{
+    const char *t = "# x y z\n0 0 0\n1 2 3 # a comment\n\n4 5 6\n";
+    hv_points *P = NULL;
+    TL_ASSERT_OK(hv_points_read(write_file("u.xyz", t, strlen(t)), &P));
+    ck_assert_uint_eq(P->count, 3);
+    ck_assert_ptr_null(P->normals);
+    ck_assert_double_eq(P->xyz[8], 6);
+    hv_points_destroy(&P);
+    const double x[6] = {0, 0, 0, 1, 1, 1};
+    TL_ASSERT_OK(hv_points_from_arrays(&P, x, NULL, 2));
+    ck_assert_ptr_null(P->normals);
+    hv_points_destroy(&P);
+    const char *nan = "0 0 0\n1 nan 3\n";
+    expect_error(write_file("n.xyz", nan, strlen(nan)), HV_ERR_NUMERIC,
+                 (const char *[]){"n.xyz", "line 2", "coordinate y", NULL});
+}
+END_TEST
+
 START_TEST(text_errors)
 {
     const char *t1 = "0 0 0 1 0 0\n1 2 3\n";
-    expect_error(write_file("u.xyz", t1, strlen(t1)), HV_ERR_INVALID_ARG,
-                 (const char *[]){"u.xyz", "line 2", "unoriented", NULL});
+    expect_error(write_file("u.xyz", t1, strlen(t1)), HV_ERR_PARSE,
+                 (const char *[]){"u.xyz", "line 2",
+                                  "x y z without a normal, where the points "
+                                  "before have normals",
+                                  NULL});
+    const char *t0 = "# bare\n0 0 0\n1 0 0 1 0 0\n";
+    expect_error(
+        write_file("v.xyz", t0, strlen(t0)), HV_ERR_PARSE,
+        (const char *[]){"v.xyz", "line 3", "a normal, where the points before have none", NULL});
     const char *t2 = "0 0 0 1 0 0\n\n0 0 x 1 0 0\n";
     expect_error(write_file("b.xyz", t2, strlen(t2)), HV_ERR_PARSE,
                  (const char *[]){"b.xyz", "line 3", "column 3 is not a number (x)", NULL});
@@ -127,10 +154,14 @@ START_TEST(ply_reader)
     n = snprintf(text, sizeof text, ply_head, "ascii",
                  "element face 1\nproperty list uchar int vertex_indices\n");
     ck_assert_int_eq(hv_points_file(write_file("m.ply", text, (size_t)n)), 0);
-    const char *bare = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
-                       "property float y\nproperty float z\nend_header\n0 0 0\n";
-    expect_error(write_file("u.ply", bare, strlen(bare)), HV_ERR_INVALID_ARG,
-                 (const char *[]){"u.ply", "line 3", "unoriented", NULL});
+    const char *bare = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                       "property float y\nproperty float nx\nproperty float z\nend_header\n"
+                       "0 0 5 0\n1 2 7 3\n";
+    TL_ASSERT_OK(hv_points_read(write_file("u.ply", bare, strlen(bare)), &P));
+    ck_assert_uint_eq(P->count, 2);
+    ck_assert_ptr_null(P->normals); /* nx alone is no normal */
+    ck_assert_double_eq(P->xyz[5], 3);
+    hv_points_destroy(&P);
 }
 END_TEST
 
@@ -411,6 +442,154 @@ START_TEST(bunny_defects)
 }
 END_TEST
 
+/* The points of P without their normals (an unoriented cloud). */
+static hv_points *bare(const hv_points *P)
+{
+    hv_points *Q = NULL;
+    TL_ASSERT_OK(hv_points_from_arrays(&Q, P->xyz, NULL, P->count));
+    return Q;
+}
+
+/* The fraction of P's points whose recovered normal (the surface's
+ * orientation from the points alone, HV_ORIENT_RECOVER) is on the side of
+ * their true normal, from the report. */
+static double agreement(const hv_points *P, const hv_points_report *R)
+{
+    ck_assert_int_eq(R->recovered, 1);
+    return 1 - (double)R->orient_disagree / (double)P->count;
+}
+
+/* The sphere's clouds of sphere_defects without their normals: the inside-IoU
+ * within 0.01 of the true normals' and at least 99% of the points on their
+ * true side. The cloud read as unoriented (normals NULL, HV_ORIENT_AUTO)
+ * gives the same surface as HV_ORIENT_RECOVER on the cloud with normals. */
+START_TEST(sphere_recovered)
+{
+    static const defects cases[] = {
+        {0, 0, 0, 0}, {0.25, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 0.3}};
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 6));
+    hv_grid *truth = sphere_truth(64, 1.3, 1.0);
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        if (tl_sanitized() && c != 2)
+            continue;
+        hv_points *P = sample(m, 40000, &cases[c], truth->h, 7 + c), *Q = bare(P);
+        hv_points_report R, G, U;
+        double j, jg, ju, mean, max;
+        score(P, truth, &jg, &mean, &max, &G);
+        hv_sdf_opts o = opts_on(0, truth);
+        o.orient = HV_ORIENT_RECOVER;
+        hv_mesh *S = NULL;
+        hv_grid *g = NULL;
+        TL_ASSERT_OK(hv_points_surface(P, &o, &S, &R));
+        TL_ASSERT_OK(hv_sdf_compute(S, &o, &g, NULL));
+        j = iou(g, truth);
+        hv_mesh_destroy(&S);
+        hv_grid_destroy(&g);
+        score(Q, truth, &ju, &mean, &max, &U);
+        printf("points: sphere case %zu recovered: IoU %.5f (true normals %.5f, read bare "
+               "%.5f), %.3f%% on their true side, %zu components, %d rounds, %.2f s\n",
+               c, j, jg, ju, 100 * agreement(P, &R), R.orient_components, R.orient_rounds,
+               R.t_orient);
+        ck_assert_msg(j >= jg - 0.01, "case %zu: IoU %g, %g with the true normals", c, j, jg);
+        ck_assert_msg(agreement(P, &R) >= 0.99, "case %zu: %g on their side", c, agreement(P, &R));
+        ck_assert_int_eq(U.recovered, 1);
+        ck_assert_uint_eq(U.orient_disagree, 0); /* nothing to disagree with */
+        ck_assert_double_eq_tol(ju, j, 1e-12);
+        ck_assert_int_eq(G.recovered, 0);
+        hv_points_destroy(&P);
+        hv_points_destroy(&Q);
+    }
+    hv_grid_destroy(&truth);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+/* Two spheres in one scan, without normals: each is oriented outward (both
+ * centres inside), whatever the propagation's start. */
+START_TEST(two_objects)
+{
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_make_sphere(&m, (const double[3]){0, 0, 0}, 1.0, 5));
+    const defects clean = {0, 0, 0, 0};
+    hv_points *A = sample(m, 20000, &clean, 0.05, 3), *B = sample(m, 10000, &clean, 0.05, 4);
+    const size_t n = A->count + B->count;
+    double *xyz = malloc(3 * n * sizeof *xyz);
+    memcpy(xyz, A->xyz, 3 * A->count * sizeof *xyz);
+    for (size_t i = 0; i < 3 * B->count; i++) /* radius 0.6 at (3, 0, 0) */
+        xyz[3 * A->count + i] = 0.6 * B->xyz[i] + (i % 3 == 0 ? 3 : 0);
+    hv_points *P = NULL;
+    TL_ASSERT_OK(hv_points_from_arrays(&P, xyz, NULL, n));
+    hv_sdf_opts o = opts_on(96, NULL);
+    hv_mesh *S = NULL;
+    hv_points_report R;
+    TL_ASSERT_OK(hv_points_surface(P, &o, &S, &R));
+    hv_grid *g = NULL;
+    o.sign = HV_SDF_SIGN_WINDING;
+    TL_ASSERT_OK(hv_sdf_compute(S, &o, &g, NULL));
+    printf("points: two spheres recovered: %zu components (%zu turned), %d rounds turned %zu\n",
+           R.orient_components, R.orient_components_flipped, R.orient_rounds, R.orient_turned);
+    ck_assert_uint_ge(R.orient_components, 2);
+    ck_assert_double_lt(sample_grid(g, (const double[3]){0, 0, 0}), -0.9);
+    ck_assert_double_lt(sample_grid(g, (const double[3]){3, 0, 0}), -0.5);
+    ck_assert_double_gt(sample_grid(g, (const double[3]){1.8, 0, 0}), 0.3);
+    hv_grid_destroy(&g);
+    hv_mesh_destroy(&S);
+    hv_points_destroy(&P);
+    hv_points_destroy(&A);
+    hv_points_destroy(&B);
+    free(xyz);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
+/* The bunny's clouds of bunny_defects without their normals (shared
+ * meshes): the inside-IoU within 0.01 of the true normals', at least 99%
+ * of the points on their true side. */
+START_TEST(bunny_recovered)
+{
+    const char *data = tl_test_data();
+    char path[512];
+    if (!data)
+        TL_SKIP("bunny_recovered: no test meshes (HEATVOX_TEST_DATA)");
+    snprintf(path, sizeof path, "%s/stanford-bunny.obj", data);
+    if (access(path, R_OK))
+        TL_SKIP("bunny_recovered: %s is absent", path);
+    hv_mesh *m = NULL;
+    TL_ASSERT_OK(hv_mesh_read(path, &m));
+    hv_sdf_opts o = opts_on(128, NULL);
+    o.sign = HV_SDF_SIGN_WINDING;
+    hv_grid *truth = NULL;
+    TL_ASSERT_OK(hv_sdf_compute(m, &o, &truth, NULL));
+    static const defects cases[] = {{0, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0, 0, 0.15}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        if (tl_sanitized() && c != 0)
+            continue;
+        hv_points *P = sample(m, 200000, &cases[c], truth->h, 11 + c);
+        hv_points_report G, R;
+        double jg, j, mean, max;
+        score(P, truth, &jg, &mean, &max, &G);
+        hv_sdf_opts r = opts_on(0, truth);
+        r.orient = HV_ORIENT_RECOVER;
+        hv_mesh *S = NULL;
+        hv_grid *g = NULL;
+        TL_ASSERT_OK(hv_points_surface(P, &r, &S, &R));
+        TL_ASSERT_OK(hv_sdf_compute(S, &r, &g, NULL));
+        j = iou(g, truth);
+        printf("points: bunny case %zu recovered: IoU %.5f (true normals %.5f), %.3f%% on their "
+               "true side; %.2f s (orientation %.2f s), %.2f s with the true normals\n",
+               c, j, jg, 100 * agreement(P, &R), R.t_total, R.t_orient, G.t_total);
+        ck_assert_msg(j >= jg - 0.01, "case %zu: IoU %g, %g with the true normals", c, j, jg);
+        ck_assert_msg(agreement(P, &R) >= 0.99, "case %zu: %g on their side", c, agreement(P, &R));
+        hv_mesh_destroy(&S);
+        hv_grid_destroy(&g);
+        hv_points_destroy(&P);
+    }
+    hv_grid_destroy(&truth);
+    hv_mesh_destroy(&m);
+}
+END_TEST
+
 START_TEST(refusals)
 {
     hv_mesh *S = NULL;
@@ -425,6 +604,36 @@ START_TEST(refusals)
     hv_points_destroy(&P);
     ck_assert_int_eq(hv_points_from_arrays(&P, x, (const double[3]){0, 0, 0}, 1), HV_ERR_NUMERIC);
     ck_assert_ptr_nonnull(strstr(hv_last_error(), "point 1"));
+    /* Without normals: too few points to orient, normals asked for that are
+     * not there, points on a plane (no inside). */
+    const double three[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    TL_ASSERT_OK(hv_points_from_arrays(&P, three, NULL, 3));
+    ck_assert_int_eq(hv_points_surface(P, NULL, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "at least 4"));
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.orient = HV_ORIENT_GIVEN;
+    ck_assert_int_eq(hv_points_surface(P, &o, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "no normals"));
+    hv_points_destroy(&P);
+    enum { NPLANE = 2500 };
+    double *plane = malloc(3 * NPLANE * sizeof *plane);
+    for (int i = 0; i < NPLANE; i++) {
+        plane[3 * i] = i % 50 * 0.02;
+        plane[3 * i + 1] = i / 50 * 0.02;
+        plane[3 * i + 2] = 0.5;
+    }
+    TL_ASSERT_OK(hv_points_from_arrays(&P, plane, NULL, NPLANE));
+    hv_sdf_opts_default(&o);
+    o.res = 32;
+    ck_assert_int_eq(hv_points_surface(P, &o, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_null(S);
+    ck_assert_msg(strstr(hv_last_error(), "no inside"), "%s", hv_last_error());
+    hv_points_destroy(&P);
+    free(plane);
+    o.orient = (hv_points_orient)7;
+    ck_assert_int_eq(hv_points_surface(P, &o, &S, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "orientation source"));
 }
 END_TEST
 
@@ -441,8 +650,19 @@ static void write_xyz(const char *path, const hv_points *P)
     ck_assert_int_eq(fclose(f), 0);
 }
 
+/* Writes P's points alone (x y z) at path. */
+static void write_xyz_bare(const char *path, const hv_points *P)
+{
+    FILE *f = fopen(path, "w");
+    ck_assert_ptr_nonnull(f);
+    for (size_t i = 0; i < P->count; i++)
+        fprintf(f, "%.17g %.17g %.17g\n", P->xyz[3 * i], P->xyz[3 * i + 1], P->xyz[3 * i + 2]);
+    ck_assert_int_eq(fclose(f), 0);
+}
+
 /* heatvox sdf on a cloud: a level set of the sphere read back from the
- * .vdb; an unoriented cloud fails naming the file and line, writing
+ * .vdb, with the normals and without; a cloud too small to orient, and
+ * normals asked for that the file lacks, fail naming the file and write
  * nothing. */
 START_TEST(command)
 {
@@ -470,9 +690,24 @@ START_TEST(command)
     ck_assert_msg(worst < 0.05, "|phi| on the sphere up to %g voxels", worst);
     ck_assert_double_lt(sample_grid(g, (const double[3]){0, 0, 0}), 0);
     hv_grid_destroy(&g);
+    /* The same points without normals: recovered, the same sphere. */
+    snprintf(path, sizeof path, "%s/b.xyz", dir);
+    write_xyz_bare(path, P);
+    ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o b.vdb --res 48 -v"), 0);
+    ck_assert_msg(strstr(err, "b.xyz: orientation recovered"), "stderr: %s", err);
+    snprintf(path, sizeof path, "%s/b.vdb", dir);
+    TL_ASSERT_OK(hv_vdb_read_float(path, "sdf", NULL, &g, &cls));
+    ck_assert_double_lt(fabs(sample_grid(g, (const double[3]){0, 1, 0})) / g->h, 0.1);
+    ck_assert_double_lt(sample_grid(g, (const double[3]){0, 0, 0}), 0);
+    hv_grid_destroy(&g);
+    ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o g.vdb --orient given"), 1);
+    ck_assert_msg(strstr(err, "b.xyz") && strstr(err, "no normals"), "stderr: %s", err);
+    ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o g.vdb --orient maybe"), 2);
+    snprintf(path, sizeof path, "%s/g.vdb", dir);
+    ck_assert_int_ne(access(path, F_OK), 0);
     write_file("u.xyz", "0 0 0\n1 0 0\n", 12);
     ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf u.xyz -o u.vdb"), 1);
-    ck_assert_msg(strstr(err, "u.xyz: line 1: x y z without a normal"), "stderr: %s", err);
+    ck_assert_msg(strstr(err, "u.xyz") && strstr(err, "at least 4"), "stderr: %s", err);
     snprintf(path, sizeof path, "%s/u.vdb", dir);
     ck_assert_int_ne(access(path, F_OK), 0);
     hv_points_destroy(&P);
@@ -486,6 +721,7 @@ int main(void)
     TCase *tc = tcase_create("readers");
     tcase_add_checked_fixture(tc, setup, teardown);
     tcase_add_test(tc, text_reader);
+    tcase_add_test(tc, text_unoriented);
     tcase_add_test(tc, text_errors);
     tcase_add_test(tc, ply_reader);
     tcase_add_test(tc, command);
@@ -494,6 +730,9 @@ int main(void)
     tcase_set_timeout(tc, 300);
     tcase_add_test(tc, sphere_defects);
     tcase_add_test(tc, bunny_defects);
+    tcase_add_test(tc, sphere_recovered);
+    tcase_add_test(tc, two_objects);
+    tcase_add_test(tc, bunny_recovered);
     tcase_add_test(tc, refusals);
     suite_add_tcase(s, tc);
     return tl_run(s);

@@ -33,7 +33,7 @@ int batch_opt_arity(const char *name);
 /* The job options as BATCH_JOB_OPTS rows t[0..) of kind CLI_FN, each with fn
  * and dst and its arity in val (the batch command passes them on to its
  * workers); returns BATCH_JOB_OPTS. */
-#define BATCH_JOB_OPTS 22
+#define BATCH_JOB_OPTS 23
 int batch_opts_forward(cli_opt *t, int (*fn)(const char *, const char *, char **, int, void *),
                        void *dst);
 #define BATCH_STR_(x) #x

@@ -172,6 +172,11 @@ static void job_options(batch_opts *o, cli_opt t[JOB_OPTS + 1])
          .max = INT_MAX,
          .needs = "an integer >= -1"},
         CLI_ROW_NO_REPAIR(&s->repair),
+        {.names = "--orient",
+         .kind = CLI_CHOICE,
+         .dst = &s->orient,
+         .choices = "auto|given|recover",
+         .needs = "auto, given or recover"},
         CLI_ROW_UNITS(&o->units),
         CLI_ROW_BACKEND(&s->backend, CLI_BACKENDS_LOCAL),
         {.names = "--diffuse-tol",
@@ -277,6 +282,8 @@ void batch_opts_canonical(const batch_opts *o, char *buf, size_t size)
     if (n > 0 && (size_t)n < size && o->format == BATCH_VDB)
         n += snprintf(buf + n, size - (size_t)n, " band=%.17g dense=%d", o->band, o->dense);
     /* Only with a mesh, so that the hashes of outputs without one stay as they were. */
+    if (n > 0 && (size_t)n < size && s->orient != HV_ORIENT_AUTO) /* hashes as before without it */
+        n += snprintf(buf + n, size - (size_t)n, " orient=%d", (int)s->orient);
     if (n > 0 && (size_t)n < size && o->mesh_format != BATCH_MESH_NONE)
         snprintf(buf + n, size - (size_t)n, " mesh=%s adaptivity=%.17g", mesh_exts[o->mesh_format],
                  o->adaptivity);
@@ -658,9 +665,11 @@ static void report_points(batch_buf *b, const job *J)
         return;
     bb_printf(b,
               ",\"points\":{\"count\":%zu,\"spacing\":%.9g,\"normals_turned\":%zu"
-              ",\"normal_agreement\":%.6f,\"vertices_unsupported\":%zu}",
+              ",\"normal_agreement\":%.6f,\"vertices_unsupported\":%zu,\"orientation\":\"%s\""
+              ",\"orient_rounds\":%d,\"orient_seconds\":%.3f}",
               p->points, p->spacing_median, p->normals_against, p->normal_agreement,
-              p->vertices_unsupported);
+              p->vertices_unsupported, p->recovered ? "recovered" : "given", p->orient_rounds,
+              p->t_orient);
 }
 
 /* The job's JSON line on stdout (batch --report's format). */

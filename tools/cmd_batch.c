@@ -55,6 +55,8 @@ static void help(void)
            "                     heat method's sign (default)\n"
            "  --t-scale S        diffusion time (S h)^2 (default 1)\n"
            "  --far-levels N     extra diffusion levels (-1 automatic)\n"
+           "  --orient O         a point cloud's normals: auto (recovered when the file\n"
+           "                     has none), given, or recover\n"
            "  --no-repair        no mesh repair before the heat method\n"
            "  --backend B        auto, mg, fftw, opencl\n"
            "  --diffuse-tol T, --poisson-tol T   solver tolerances\n"

@@ -16,8 +16,8 @@ static void help(void)
            "and prints its defect report: boundary, non-manifold and inconsistently\n"
            "oriented edges, duplicate and degenerate faces, non-finite vertices,\n"
            "edge-connected components; and the unit the file declares, if any. An\n"
-           "oriented point cloud (.xyz .pts .xyzn, or a PLY of points with normals) gets\n"
-           "its point count and bounds.\n"
+           "point cloud (.xyz .pts .xyzn, or a PLY of points) gets its point count, bounds\n"
+           "and whether it has normals.\n"
            "\n"
            "  --json   one JSON object per mesh, one per line, on stdout; a mesh that fails\n"
            "           gives {\"file\": ..., \"error\": ...}\n"
@@ -154,7 +154,7 @@ static void report_failure(const char *file, hv_status st, int json)
     }
 }
 
-/* An oriented point cloud: its points and bounds; 1 when it fails to read. */
+/* A point cloud: its points, bounds and normals; 1 when it fails to read. */
 static int info_points(const char *file, int json)
 {
     hv_points *P = NULL;
@@ -175,16 +175,20 @@ static int info_points(const char *file, int json)
         json_string(file);
         printf(",\"format\":");
         json_string(P->format);
-        printf(",\"points\":%zu,\"oriented\":true,\"bounds\":[[%.17g,%.17g,%.17g],"
+        printf(",\"points\":%zu,\"oriented\":%s,\"bounds\":[[%.17g,%.17g,%.17g],"
                "[%.17g,%.17g,%.17g]],\"read_seconds\":%.6f}\n",
-               P->count, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], seconds);
+               P->count, P->normals ? "true" : "false", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2],
+               seconds);
     } else if (cli_verbose >= 0) {
         printf("%s\n", file);
         printf("  format              %s (read in %.3f s)\n", P->format, seconds);
-        printf("  points              %zu, each with a normal\n", P->count);
+        printf("  points              %zu, %s\n", P->count,
+               P->normals ? "each with a normal" : "without normals");
         printf("  bounds              [%g %g %g] .. [%g %g %g]\n", lo[0], lo[1], lo[2], hi[0],
                hi[1], hi[2]);
-        printf("  verdict             an oriented point cloud (heatvox sdf takes it)\n");
+        printf("  verdict             %s\n",
+               P->normals ? "an oriented point cloud (heatvox sdf takes it)"
+                          : "an unoriented point cloud (heatvox sdf recovers its normals)");
     }
     hv_points_destroy(&P);
     return 0;

@@ -24,12 +24,13 @@ static void help(void)
            "duplicated sheets, soups and self-intersections, and writes it as an OpenVDB\n"
            "level set (negative inside), a dense .npy array, and/or its zero level set as a\n"
            "closed, manifold, outward-oriented triangle mesh (at least one of the three).\n"
-           "MESH may also be an oriented point cloud (a scan): a text file .xyz, .pts or\n"
-           ".xyzn with x y z nx ny nz per line, or a PLY file of vertices with nx ny nz and\n"
-           "no faces. Its surface comes from the signed heat method with the points'\n"
-           "normals (normals flipped on part of the cloud are outvoted) moved onto the\n"
-           "points, and everything below applies to it as to a mesh (-v tells the points,\n"
-           "their spacing and how many normals were turned).\n"
+           "MESH may also be a point cloud (a scan): a text file .xyz, .pts or .xyzn with\n"
+           "x y z nx ny nz or x y z per line, or a PLY file of vertices (with nx ny nz or\n"
+           "without) and no faces. Its surface comes from the signed heat method with the\n"
+           "points' normals (normals flipped on part of the cloud are outvoted) moved onto\n"
+           "the points; a cloud without normals has them recovered first (--orient).\n"
+           "Everything below applies to it as to a mesh (-v tells the points, their\n"
+           "spacing, the orientation and how many normals were turned).\n"
            "Prints one summary line on stdout.\n"
            "\n"
            "grid (cell-centred; sample (i,j,k) at corner + (i+1/2, j+1/2, k+1/2) h):\n"
@@ -77,6 +78,9 @@ static void help(void)
            "                     of the repaired mesh when it stays open or the block cuts it,\n"
            "                     so that the answer does not depend on the block; the heat\n"
            "                     method otherwise), heat, or winding\n"
+           "  --orient O         a point cloud's normals: auto (default: recovered when the\n"
+           "                     file has none, else the file's), given, or recover (from\n"
+           "                     the points alone, ignoring the file's normals)\n"
            "  --no-repair        skip mesh repair (weld, dedup, orientation, hole filling)\n"
            "  --domed-caps       close holes with caps that bulge like the wall around them\n"
            "                     (default: planar caps)\n"
@@ -294,6 +298,11 @@ static int parse_args(int argc, char **argv, sdf_args *A)
          .max = 4,
          .needs = "an integer in 1..4"},
         CLI_ROW_SIGN(&o->sign),
+        {.names = "--orient",
+         .kind = CLI_CHOICE,
+         .dst = &o->orient,
+         .choices = "auto|given|recover",
+         .needs = "auto, given or recover"},
         CLI_ROW_NO_REPAIR(&o->repair),
         CLI_ROW_UNITS(&A->units),
         {.names = "--domed-caps",

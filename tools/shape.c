@@ -1,5 +1,5 @@
-/* The shape an sdf takes from a file: a mesh, or the closed surface of an
- * oriented point cloud. */
+/* The shape an sdf takes from a file: a mesh, or the closed surface of a
+ * point cloud. */
 #include "cli.h"
 
 #include <stdio.h>
@@ -23,7 +23,13 @@ void cli_points_note(const char *cmd, const char *path, const hv_points_report *
 {
     if (!pr->points)
         return;
-    cli_info("heatvox %s: %s: %zu oriented points, spacing %.4g (%.4g to %.4g); %zu normals "
+    if (pr->recovered)
+        cli_info("heatvox %s: %s: orientation recovered from the points: %zu components of the "
+                 "neighbour graph (%zu turned outward), %d heat rounds turned %zu points, %.2f s; "
+                 "%zu points against the file's normals\n",
+                 cmd, path, pr->orient_components, pr->orient_components_flipped, pr->orient_rounds,
+                 pr->orient_turned, pr->t_orient, pr->orient_disagree);
+    cli_info("heatvox %s: %s: %zu points, spacing %.4g (%.4g to %.4g); %zu normals "
              "(%.1f%% of the area) pointed into the surface and were turned; heat grid "
              "%dx%dx%d h=%.6g; surface of %zu vertices, %zu with no point within reach, moved "
              "%.3f voxels on average (at most %.3f), noise %.3g, kernel %.3g; s: spacing %.2f "

@@ -96,12 +96,13 @@ HV_API hv_status hv_mesh_clone(const hv_mesh *m, hv_mesh **out);
 /* Frees *m and sets it to NULL; accepts NULL and *m == NULL. */
 HV_API void hv_mesh_destroy(hv_mesh **m);
 
-/* Oriented point clouds (a scan, a depth fusion, a normal estimator's
- * output): positions with unit outward normals. */
+/* Point clouds (a scan, a depth fusion, a normal estimator's output):
+ * positions, with unit outward normals or without (an unoriented cloud,
+ * whose orientation hv_points_surface recovers). */
 typedef struct hv_points {
     size_t count;
     double *xyz;        /* 3 * count coordinates, owned */
-    double *normals;    /* 3 * count unit normals, owned */
+    double *normals;    /* 3 * count unit normals, owned; NULL when the cloud has none */
     const char *format; /* static name ("PLY points", "text points"); NULL when not read */
 } hv_points;
 
@@ -109,15 +110,16 @@ typedef struct hv_points {
  * .pts, .xyzn) or a PLY file whose header has vertices and no faces. */
 HV_API int hv_points_file(const char *path);
 
-/* Reads an oriented point cloud: text, x y z nx ny nz per line (# starts a
- * comment, further columns are ignored), or a PLY vertex element with x y z
- * nx ny nz. Points without normals are an error (an unoriented cloud), as
- * are NaN/Inf values and normals of zero length (named by line, or by the
- * point's place in a binary PLY). Normals are scaled to unit length. The
- * caller owns *out (hv_points_destroy). */
+/* Reads a point cloud: text, x y z nx ny nz or x y z per line (# starts a
+ * comment; further columns are ignored; every line has a normal or none),
+ * or a PLY vertex element with x y z, and nx ny nz where it has them
+ * (normals NULL when not). NaN/Inf values and normals of zero length are
+ * errors (named by line, or by the point's place in a binary PLY). Normals
+ * are scaled to unit length. The caller owns *out (hv_points_destroy). */
 HV_API hv_status hv_points_read(const char *path, hv_points **out);
 
-/* A point cloud from arrays (copied, normals scaled to unit length). */
+/* A point cloud from arrays (copied, normals scaled to unit length; normals
+ * NULL: an unoriented cloud). */
 HV_API hv_status hv_points_from_arrays(hv_points **out, const double *xyz, const double *normals,
                                        size_t count);
 

@@ -77,6 +77,14 @@ typedef enum hv_sdf_magnitude {
     HV_SDF_HEAT       /* the heat method's phi itself */
 } hv_sdf_magnitude;
 
+/* A point cloud's normals: those given, recovered from the points alone
+ * (hv_points_surface, step 0), or (AUTO) recovered when the cloud has none. */
+typedef enum hv_points_orient {
+    HV_ORIENT_AUTO = 0,
+    HV_ORIENT_GIVEN,
+    HV_ORIENT_RECOVER
+} hv_points_orient;
+
 typedef struct hv_sdf_opts {
     /* Grid placement. Exactly one of res / voxel_size is used (voxel_size when > 0). */
     int res;           /* cells along the longest axis of the padded box; default 128 */
@@ -138,6 +146,9 @@ typedef struct hv_sdf_opts {
     double offset; /* the surface moved out by offset (in when negative): phi - offset */
     double shell;  /* > 0: only a wall of this thickness inside the surface:
                       max(phi, -phi - shell) */
+
+    /* Point clouds (hv_points_surface): where the normals come from. */
+    hv_points_orient orient; /* default HV_ORIENT_AUTO */
 } hv_sdf_opts;
 
 typedef struct hv_sdf_repair_report {
@@ -295,6 +306,14 @@ typedef struct hv_points_report {
     int coarsen;       /* it is this many times coarser than the block */
     hv_sdf_stats heat; /* its stages (t_splat .. t_shift, iterations, backend) */
     double t_spacing, t_heat, t_mesh, t_project, t_total; /* seconds */
+    /* Step 0, the orientation recovered (recovered 0: the given normals). */
+    int recovered;
+    size_t orient_components; /* neighbour-graph components oriented outward each */
+    size_t orient_components_flipped;
+    int orient_rounds;      /* heat rounds that turned points to phi's outside */
+    size_t orient_turned;   /* points the rounds turned, in all */
+    size_t orient_disagree; /* recovered normals against the given ones (where given) */
+    double t_orient;        /* seconds: directions, propagation and the rounds' heat */
 } hv_points_report;
 
 /* The closed surface of oriented points P (above); opts as for

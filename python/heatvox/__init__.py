@@ -5,8 +5,8 @@ A thin layer over libheatvox (ctypes and NumPy only) that computes what the
 
 - ``read_mesh(path) -> (vertices, faces)`` and ``mesh_report(...)``;
 - ``read_points(path) -> (points, normals)`` and ``points_surface(points,
-  normals, res=...) -> (vertices, faces, report)``: oriented point clouds
-  and the closed surface through them;
+  normals, res=...) -> (vertices, faces, report)``: point clouds, with
+  normals or without, and the closed surface through them;
 - ``sdf(vertices, faces, res=128, ...) -> Grid``: the signed distance of a
   (broken) triangle mesh, bit for bit the command's ``--npy`` output;
 - ``distance(sources, solid, voxel_size, ...) -> Grid``: geodesic distance

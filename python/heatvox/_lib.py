@@ -298,6 +298,7 @@ class hv_sdf_opts(Structure):
         ("open", c_double),
         ("offset", c_double),
         ("shell", c_double),
+        ("orient", c_int),
     ]
 
 
@@ -399,6 +400,13 @@ class hv_points_report(Structure):
         ("t_mesh", c_double),
         ("t_project", c_double),
         ("t_total", c_double),
+        ("recovered", c_int),
+        ("orient_components", c_size_t),
+        ("orient_components_flipped", c_size_t),
+        ("orient_rounds", c_int),
+        ("orient_turned", c_size_t),
+        ("orient_disagree", c_size_t),
+        ("t_orient", c_double),
     ]
 
 

@@ -28,8 +28,8 @@ from ._points import is_points_file, read_points, surface_of_points
 
 
 def _shape(path, o):
-    """(vertices, faces) of a mesh file, or of the surface through an oriented
-    point cloud's file (placed with o)."""
+    """(vertices, faces) of a mesh file, or of the surface through a point
+    cloud's file (placed with o; its normals recovered as o.orient says)."""
     if is_points_file(path):
         v, f, _ = surface_of_points(*read_points(path), o)
         return v, f
@@ -82,6 +82,15 @@ def _opts(res, pad, voxel_size, bbox, band, unsigned, backend, heat, t_scale, he
     return o, band
 
 
+_ORIENTS = {"auto": 0, "given": 1, "recover": 2}
+
+
+def _orient_code(x):
+    if x not in _ORIENTS:
+        raise ValueError("orient must be one of 'auto', 'given', 'recover', got %r" % (x,))
+    return _ORIENTS[x]
+
+
 # hv_sdf_opts fields that sdf() takes through **more, with their checks.
 _MORE = {
     "round_to": lambda x: _arrays.integer(x, "round_to", 1),
@@ -92,6 +101,8 @@ _MORE = {
     "band_only": lambda x: _arrays.real(x, "band_only", 0.0),
     "diffuse_tol": lambda x: _arrays.real(x, "diffuse_tol", 0.0),
     "poisson_tol": lambda x: _arrays.real(x, "poisson_tol", 0.0),
+    # a point cloud's normals: "auto" (recovered when it has none), "given", "recover"
+    "orient": lambda x: _orient_code(x),
     # morphology in world units (sdf.h): close and open run on the dense grid
     "close": lambda x: _arrays.real(x, "close", 0.0),
     "open": lambda x: _arrays.real(x, "open", 0.0),

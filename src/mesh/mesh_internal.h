@@ -65,18 +65,21 @@ hv_status hv__mesh_read_file(const char *path, char **out, size_t *len);
 
 /* Point clouds (points.c, ply.c). A reader adds each point through
  * hv__points_add, which checks it (finite, a normal of non-zero length) and
- * names the place `where` ("line 12", "point 7") in its message. */
+ * names the place `where` ("line 12", "point 7") in its message. A cloud
+ * has normals on every point or on none: the first point decides. */
 typedef struct points_builder {
     const char *path;
     double *xyz, *nrm;
     size_t n, cap;
     int negative; /* some normal component was negative */
     int nonunit;  /* some normal was not of unit length */
+    int values;   /* 6: x y z nx ny nz per point, 3: x y z (unoriented), 0: no point yet */
 } points_builder;
 hv_status hv__points_reserve(points_builder *b, size_t n);
-hv_status hv__points_add(points_builder *b, const double p[6], const char *where);
+/* Adds x y z (values 3) or x y z nx ny nz (values 6) from p. */
+hv_status hv__points_add(points_builder *b, const double *p, int values, const char *where);
 /* PLY: whether the header has a vertex element and no faces (ply.c), and
- * the vertex element's x y z nx ny nz into b. */
+ * the vertex element's x y z (nx ny nz where it has them) into b. */
 int hv__ply_is_points(const char *buf, size_t len);
 hv_status hv__points_read_ply(const char *path, const char *buf, size_t len, points_builder *b);
 

@@ -668,8 +668,8 @@ int hv__ply_is_points(const char *buf, size_t len)
     return !st && vertices && !faces;
 }
 
-/* The places of x y z nx ny nz among e's properties; a missing normal is
- * an unoriented cloud. */
+/* The places of x y z nx ny nz among e's properties; without all three of
+ * nx ny nz the cloud is unoriented (ix[3..5] -1). */
 static hv_status point_props(const ply_reader *r, const ply_elem *e, int ix[6])
 {
     static const char *const names[6] = {"x", "y", "z", "nx", "ny", "nz"};
@@ -688,11 +688,7 @@ static hv_status point_props(const ply_reader *r, const ply_elem *e, int ix[6])
             return hv__error(HV_ERR_PARSE, "%s: line %zu: vertex element has no property %s",
                              r->path, e->line, names[a]);
     if (ix[3] < 0 || ix[4] < 0 || ix[5] < 0)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "%s: line %zu: points without normals (no nx, ny, nz): an unoriented "
-                         "point cloud; the signed distance needs a normal per point (estimate "
-                         "and orient them first, or give a mesh)",
-                         r->path, e->line);
+        ix[3] = ix[4] = ix[5] = -1;
     return HV_OK;
 }
 
@@ -700,6 +696,7 @@ static hv_status read_point_records(ply_reader *r, const ply_elem *e, points_bui
 {
     int ix[6];
     hv_status st = point_props(r, e, ix);
+    const int values = ix[3] < 0 ? 3 : 6;
     if (!st)
         st = hv__points_reserve(b, (size_t)e->count);
     for (uint64_t n = 0; n < e->count && !st; n++) {
@@ -711,14 +708,14 @@ static hv_status read_point_records(ply_reader *r, const ply_elem *e, points_bui
             snprintf(at, sizeof at, "point %llu", (unsigned long long)n + 1);
         for (size_t k = 0; k < e->nprops && !st; k++) {
             int a = 0;
-            while (a < 6 && ix[a] != (int)k)
+            while (a < values && ix[a] != (int)k)
                 a++;
             int64_t i;
-            st = a < 6 ? read_value(r, e->props[k].type, &p[a], &i, "a point coordinate")
-                       : skip_prop(r, &e->props[k]);
+            st = a < values ? read_value(r, e->props[k].type, &p[a], &i, "a point coordinate")
+                            : skip_prop(r, &e->props[k]);
         }
         if (!st)
-            st = hv__points_add(b, p, at);
+            st = hv__points_add(b, p, values, at);
     }
     return st;
 }

@@ -1,6 +1,6 @@
-/* Oriented point clouds: text files (.xyz, .pts: x y z nx ny nz per line, #
- * comments, more columns ignored) and PLY files whose vertices carry nx ny
- * nz and that have no faces. Normals are scaled to unit length. */
+/* Point clouds: text files (.xyz, .pts: x y z per line, or x y z nx ny nz,
+ * # comments, more columns ignored) and PLY files without faces, whose
+ * vertices carry nx ny nz or not. Normals are scaled to unit length. */
 #include "mesh_internal.h"
 
 #include <math.h>
@@ -21,29 +21,54 @@ hv_status hv__points_reserve(points_builder *b, size_t n)
     double *x = realloc(b->xyz, 3 * cap * sizeof *x);
     if (x)
         b->xyz = x;
-    double *m = x ? realloc(b->nrm, 3 * cap * sizeof *m) : NULL;
-    if (!m)
+    double *m = x && b->values != 3 ? realloc(b->nrm, 3 * cap * sizeof *m) : NULL;
+    if (!x || (b->values != 3 && !m))
         return hv__error(HV_ERR_NOMEM, "%s: out of memory for %zu points", b->path, cap);
-    b->nrm = m;
+    if (m)
+        b->nrm = m;
     b->cap = cap;
     return HV_OK;
 }
 
-hv_status hv__points_add(points_builder *b, const double p[6], const char *where)
+/* The first point fixes whether the cloud has normals; a later point must
+ * agree. */
+static hv_status points_values(points_builder *b, int values, const char *where)
 {
-    for (int a = 0; a < 6; a++)
+    if (b->values == values)
+        return HV_OK;
+    if (b->values)
+        return hv__error(HV_ERR_PARSE,
+                         values == 3 ? "%s: %s: x y z without a normal, where the points before "
+                                       "have normals (x y z nx ny nz)"
+                                     : "%s: %s: a normal, where the points before have none "
+                                       "(x y z)",
+                         b->path, where);
+    b->values = values;
+    if (values == 3) { /* the first point: no normals kept */
+        free(b->nrm);
+        b->nrm = NULL;
+    }
+    return HV_OK;
+}
+
+hv_status hv__points_add(points_builder *b, const double *p, int values, const char *where)
+{
+    hv_status st = points_values(b, values, where);
+    if (st)
+        return st;
+    for (int a = 0; a < values; a++)
         if (!isfinite(p[a]) || fabs(p[a]) > MESH_MAX_COORD)
             return hv__error(HV_ERR_NUMERIC, "%s: %s: %s %c is %g", b->path, where,
                              a < 3 ? "coordinate" : "normal component", "xyzxyz"[a], p[a]);
-    double len = sqrt(p[3] * p[3] + p[4] * p[4] + p[5] * p[5]);
+    double len = values == 6 ? sqrt(p[3] * p[3] + p[4] * p[4] + p[5] * p[5]) : 1;
     if (!(len > 1e-30))
         return hv__error(HV_ERR_NUMERIC, "%s: %s: the normal (%g %g %g) has no direction", b->path,
                          where, p[3], p[4], p[5]);
-    hv_status st = hv__points_reserve(b, 1);
-    if (st)
+    if ((st = hv__points_reserve(b, 1)))
         return st;
-    for (int a = 0; a < 3; a++) {
+    for (int a = 0; a < 3; a++)
         b->xyz[3 * b->n + a] = p[a];
+    for (int a = 0; a < 3 && values == 6; a++) {
         b->nrm[3 * b->n + a] = p[3 + a] / len;
         b->negative |= p[3 + a] < 0;
     }
@@ -93,17 +118,12 @@ static hv_status read_text(const char *path, const char *buf, size_t len, points
         if (n < 0)
             st = hv__error(HV_ERR_PARSE, "%s: line %zu: column %d is not a number (%s)", path, line,
                            bad, hv__mesh_token_preview(word, eol));
-        else if (n == 3)
-            st = hv__error(HV_ERR_INVALID_ARG,
-                           "%s: line %zu: x y z without a normal: an unoriented point cloud; the "
-                           "signed distance needs x y z nx ny nz per line (estimate and orient "
-                           "normals first, or give a mesh)",
-                           path, line);
-        else if (n > 0 && n < 6)
-            st = hv__error(HV_ERR_PARSE, "%s: line %zu: %d numbers; a point is x y z nx ny nz",
-                           path, line, n);
-        else if (n >= 6)
-            st = hv__points_add(b, v, at);
+        else if ((n > 0 && n < 3) || n == 4 || n == 5)
+            st = hv__error(HV_ERR_PARSE,
+                           "%s: line %zu: %d numbers; a point is x y z, or x y z nx ny nz", path,
+                           line, n);
+        else if (n >= 3)
+            st = hv__points_add(b, v, n == 3 ? 3 : 6, at);
         p = eol + 1;
     }
     return st;
@@ -146,7 +166,7 @@ static hv_status check_normals(const points_builder *b)
 {
     if (b->n == 0)
         return hv__error(HV_ERR_PARSE, "%s: no points", b->path);
-    if (!b->negative && b->nonunit && b->n >= 8)
+    if (b->values == 6 && !b->negative && b->nonunit && b->n >= 8)
         return hv__error(HV_ERR_INVALID_ARG,
                          "%s: no normal has a negative component in %zu points: columns 4-6 look "
                          "like colours, not normals (a point is x y z nx ny nz)",
@@ -180,7 +200,7 @@ hv_status hv_points_read(const char *path, hv_points **out)
     hv_status st = hv__mesh_read_file(path, &buf, &len);
     if (st)
         return st;
-    points_builder b = {path, NULL, NULL, 0, 0, 0, 0};
+    points_builder b = {path, NULL, NULL, 0, 0, 0, 0, 0};
     const int ply = len >= 4 && !strncmp(buf, "ply", 3) && (buf[3] == '\n' || buf[3] == '\r');
     st = ply ? hv__points_read_ply(path, buf, len, &b) : read_text(path, buf, len, &b);
     free(buf);
@@ -199,19 +219,20 @@ hv_status hv_points_from_arrays(hv_points **out, const double *xyz, const double
     if (!out)
         return hv__error(HV_ERR_INVALID_ARG, "hv_points_from_arrays: out is NULL");
     *out = NULL;
-    if (!xyz || !normals || count == 0)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "hv_points_from_arrays: %zu points, positions %s, normals %s", count,
-                         xyz ? "given" : "NULL", normals ? "given" : "NULL");
-    points_builder b = {"points", NULL, NULL, 0, 0, 0, 0};
+    if (!xyz || count == 0)
+        return hv__error(HV_ERR_INVALID_ARG, "hv_points_from_arrays: %zu points, positions %s",
+                         count, xyz ? "given" : "NULL");
+    const int values = normals ? 6 : 3;
+    points_builder b = {"points", NULL, NULL, 0, 0, 0, 0, values};
     hv_status st = hv__points_reserve(&b, count);
     for (size_t i = 0; i < count && !st; i++) {
         double p[6];
         char at[48];
         memcpy(p, xyz + 3 * i, 3 * sizeof *p);
-        memcpy(p + 3, normals + 3 * i, 3 * sizeof *p);
+        if (normals)
+            memcpy(p + 3, normals + 3 * i, 3 * sizeof *p);
         snprintf(at, sizeof at, "point %zu", i + 1);
-        st = hv__points_add(&b, p, at);
+        st = hv__points_add(&b, p, values, at);
     }
     if (!st)
         st = points_finish(&b, NULL, out);

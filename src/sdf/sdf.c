@@ -138,6 +138,9 @@ hv_status hv__sdf_check_opts(const hv_sdf_opts *o)
     if (o->sign != HV_SDF_SIGN_AUTO && o->sign != HV_SDF_SIGN_HEAT &&
         o->sign != HV_SDF_SIGN_WINDING)
         return hv__error(HV_ERR_INVALID_ARG, "sdf: unknown sign source %d", (int)o->sign);
+    if (o->orient != HV_ORIENT_AUTO && o->orient != HV_ORIENT_GIVEN &&
+        o->orient != HV_ORIENT_RECOVER)
+        return hv__error(HV_ERR_INVALID_ARG, "sdf: unknown orientation source %d", (int)o->orient);
     if (o->sign == HV_SDF_SIGN_WINDING && o->magnitude == HV_SDF_EXACT && !o->unsigned_distance &&
         (o->repair & (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD)) !=
             (HV_SDF_REPAIR_ORIENT | HV_SDF_REPAIR_OUTWARD))

@@ -38,6 +38,53 @@ double hv__sdf_morph_reach(const hv_sdf_opts *o);
 hv_status hv__sdf_morph_grid(hv_grid *g, const hv_sdf_opts *o);
 void hv__sdf_morph_tiles(hv_tiles *T, const hv_sdf_opts *o, double band);
 
+/* Point clouds (points_bins.c). */
+/* Points binned into cubic cells of side c, sorted by cell; a table with
+ * open addressing maps a cell's key to its run of points. */
+typedef struct pt_bins {
+    double lo[3], c;
+    uint32_t *order;       /* point indices, cell by cell */
+    float *sx;             /* their coordinates in that order (x y z, float) */
+    uint64_t *keys;        /* table: cell keys, UINT64_MAX where empty */
+    uint32_t *start, *len; /* table: each cell's run in order */
+    size_t mask;
+} pt_bins;
+
+/* The points of the cells at Chebyshev distance r from cell q, one by one:
+ * hv__ring_first, then hv__ring_next until it returns 0. */
+typedef struct ring_iter {
+    long q[3], r, d[3];
+    uint32_t s, len, m;
+} ring_iter;
+
+/* Bins the n points xyz into cells of side c from lo: a counting sort
+ * through the table, so each cell's points stay in input order; the number
+ * of cells with points into *cells. */
+hv_status hv__bins_build(pt_bins *B, const double *xyz, size_t n, const double lo[3], double c,
+                         size_t *cells);
+void hv__bins_free(pt_bins *B);
+/* The key of cell (i, j, k) (UINT64_MAX outside the keyed range), the cell
+ * of x, the run of points in cell key (*len points from order + *start). */
+uint64_t hv__cell_key(long i, long j, long k);
+void hv__cell_of(const pt_bins *B, const double *x, long c[3]);
+int hv__bins_find(const pt_bins *B, uint64_t key, uint32_t *start, uint32_t *len);
+/* The cell of table slot t. */
+void hv__slot_cell(const pt_bins *B, size_t t, long q[3]);
+void hv__ring_first(ring_iter *it, const long q[3], long r);
+int hv__ring_next(const pt_bins *B, ring_iter *it, uint32_t *j);
+
+/* The orientation of a cloud without normals (sdf_orient.c): each point's
+ * direction (sign unknown) into dir, the axis of least spread of the points
+ * of B within rho; then the directions turned along a minimum spanning tree
+ * of the graph of each point's nearest in the 27 cells of `near` around it,
+ * each component outward (area: the points' areas; counts into R). */
+/* 1 when the points lie on a plane or a line (or are one point): no spread
+ * across the least-spread axis of the whole cloud. */
+int hv__points_flat(const hv_points *P);
+hv_status hv__points_axes(const pt_bins *B, const hv_points *P, double rho, double *dir);
+hv_status hv__points_propagate(const pt_bins *near, const hv_points *P, const double *area,
+                               double *dir, hv_points_report *R);
+
 /* Trilinear interpolation of v (on g's cells) at world point x (sdf_heat.c). */
 double hv__sdf_interp(const hv_grid *g, const float *v, const double x[3]);
 

@@ -13,226 +13,15 @@
 
 #define PTS_K 6                            /* neighbours of the spacing estimate */
 #define PTS_RINGS 4                        /* cell rings searched around a point */
-#define PTS_KEY_BITS 21                    /* per axis in a cell key */
 #define PTS_FACING 0.5                     /* cosine above which a point faces a vertex's way */
 #define PTS_HEAT_CELLS ((double)(1 << 22)) /* the heat grid's default bound */
 #define PTS_NOISE_STRIDE 8                 /* every 8th cell of vertices measures the noise */
-#define PTS_NOISE_FLOOR 0.1 /* a clean fit's residual, of sigma0 (bunny: 0.03-0.05) */
-#define PTS_WIDEN 1.5       /* the kernel's width on noisy points, at most, of sigma0 */
-#define PTS_HEAT_ERR 0.05   /* the heat method's surface error, heat voxels */
-
-/* Points binned into cubic cells of side c, sorted by cell; a table with
- * open addressing maps a cell's key to its run of points. */
-typedef struct pt_bins {
-    double lo[3], c;
-    uint32_t *order;       /* point indices, cell by cell */
-    float *sx;             /* their coordinates in that order (x y z, float) */
-    uint64_t *keys;        /* table: cell keys, UINT64_MAX where empty */
-    uint32_t *start, *len; /* table: each cell's run in order */
-    size_t mask;
-} pt_bins;
-
-static uint64_t hash_key(uint64_t k)
-{
-    k += 0x9e3779b97f4a7c15ull;
-    k = (k ^ (k >> 30)) * 0xbf58476d1ce4e5b9ull;
-    k = (k ^ (k >> 27)) * 0x94d049bb133111ebull;
-    return k ^ (k >> 31);
-}
-
-/* The key of cell (i, j, k); UINT64_MAX outside the keyed range. */
-static uint64_t cell_key(long i, long j, long k)
-{
-    const long lim = 1L << PTS_KEY_BITS;
-    if (i < 0 || j < 0 || k < 0 || i >= lim || j >= lim || k >= lim)
-        return UINT64_MAX;
-    return (uint64_t)i | (uint64_t)j << PTS_KEY_BITS | (uint64_t)k << (2 * PTS_KEY_BITS);
-}
-
-static void cell_of(const pt_bins *B, const double *x, long c[3])
-{
-    for (int a = 0; a < 3; a++)
-        c[a] = (long)floor((x[a] - B->lo[a]) / B->c);
-}
-
-static void bins_free(pt_bins *B)
-{
-    free(B->order);
-    free(B->sx);
-    free(B->keys);
-    free(B->start);
-    free(B->len);
-}
-
-/* The table slot of key: where it is, or the empty one where it goes. */
-static size_t bins_slot(const pt_bins *B, uint64_t key)
-{
-    size_t s = hash_key(key) & B->mask;
-    while (B->keys[s] != UINT64_MAX && B->keys[s] != key)
-        s = (s + 1) & B->mask;
-    return s;
-}
-
-/* Makes the table of B cap slots (a power of two) and moves its cells
- * over; -1 when out of memory. */
-static int bins_resize(pt_bins *B, size_t cap)
-{
-    pt_bins N = *B;
-    N.mask = cap - 1;
-    N.keys = malloc(cap * sizeof *N.keys);
-    N.len = calloc(cap, sizeof *N.len);
-    if (!N.keys || !N.len) {
-        free(N.keys);
-        free(N.len);
-        return -1;
-    }
-    memset(N.keys, 0xff, cap * sizeof *N.keys);
-    for (size_t t = 0; B->keys && t <= B->mask; t++)
-        if (B->keys[t] != UINT64_MAX) {
-            size_t u = bins_slot(&N, B->keys[t]);
-            N.keys[u] = B->keys[t];
-            N.len[u] = B->len[t];
-        }
-    free(B->keys);
-    free(B->len);
-    *B = N;
-    return 0;
-}
-
-/* Counts the points of each cell (keys[i]: point i's cell) into the
- * table, growing it to stay at most half full; the number of cells. */
-static size_t bins_count(pt_bins *B, const uint64_t *keys, size_t n)
-{
-    size_t cells = 0;
-    if (bins_resize(B, 1024))
-        return SIZE_MAX;
-    for (size_t i = 0; i < n; i++) {
-        size_t t = bins_slot(B, keys[i]);
-        if (B->keys[t] == UINT64_MAX) {
-            B->keys[t] = keys[i];
-            if (2 * ++cells > B->mask && bins_resize(B, 2 * (B->mask + 1)))
-                return SIZE_MAX;
-            t = bins_slot(B, keys[i]);
-        }
-        B->len[t]++;
-    }
-    return cells;
-}
-
-/* The run of points in cell key: *len points from order + *start. */
-static int bins_find(const pt_bins *B, uint64_t key, uint32_t *start, uint32_t *len)
-{
-    if (key == UINT64_MAX)
-        return 0;
-    for (size_t s = hash_key(key) & B->mask;; s = (s + 1) & B->mask) {
-        if (B->keys[s] == UINT64_MAX)
-            return 0;
-        if (B->keys[s] == key) {
-            *start = B->start[s];
-            *len = B->len[s];
-            return 1;
-        }
-    }
-}
-
-/* Bins the n points xyz into cells of side c from lo: a counting sort
- * through the table, so each cell's points stay in input order. */
-static hv_status bins_build(pt_bins *B, const double *xyz, size_t n, const double lo[3], double c,
-                            size_t *cells)
-{
-    memset(B, 0, sizeof *B);
-    memcpy(B->lo, lo, sizeof B->lo);
-    B->c = c;
-    uint64_t *keys = malloc(n * sizeof *keys);
-    B->order = malloc(n * sizeof *B->order);
-    if (!keys || !B->order) {
-        free(keys);
-        return hv__error(HV_ERR_NOMEM, "points: out of memory binning %zu points", n);
-    }
-#pragma omp parallel for schedule(static)
-    for (size_t i = 0; i < n; i++) {
-        long q[3];
-        cell_of(B, xyz + 3 * i, q);
-        for (int a = 0; a < 3; a++) /* a point past the keyed range joins its edge cell */
-            q[a] = q[a] < 0 ? 0 : q[a] >= (1L << PTS_KEY_BITS) ? (1L << PTS_KEY_BITS) - 1 : q[a];
-        keys[i] = cell_key(q[0], q[1], q[2]);
-    }
-    *cells = bins_count(B, keys, n);
-    B->start = *cells != SIZE_MAX ? malloc((B->mask + 1) * sizeof *B->start) : NULL;
-    if (!B->start) {
-        free(keys);
-        return hv__error(HV_ERR_NOMEM, "points: out of memory for the cells of %zu points", n);
-    }
-    uint32_t at = 0;
-    for (size_t t = 0; t <= B->mask; t++) {
-        B->start[t] = at;
-        at += B->len[t];
-    }
-    for (size_t i = 0; i < n; i++) /* start[t] walks to the end of its run */
-        B->order[B->start[bins_slot(B, keys[i])]++] = (uint32_t)i;
-    for (size_t t = 0; t <= B->mask; t++)
-        B->start[t] -= B->len[t];
-    free(keys);
-    if (!(B->sx = malloc(3 * n * sizeof *B->sx)))
-        return hv__error(HV_ERR_NOMEM, "points: out of memory binning %zu points", n);
-#pragma omp parallel for schedule(static)
-    for (size_t i = 0; i < n; i++)
-        for (int a = 0; a < 3; a++)
-            B->sx[3 * i + a] = (float)(xyz[3 * (size_t)B->order[i] + a] - lo[a]);
-    return HV_OK;
-}
-
-/* The points of the cells at Chebyshev distance r from cell q, one by one:
- * ring_first, then ring_next until it returns 0. */
-typedef struct ring_iter {
-    long q[3], r, d[3];
-    uint32_t s, len, m;
-} ring_iter;
-
-/* Steps d through the cube [-r, r]^3, x fastest; 0 past its end. */
-static int cube_step(long d[3], long r)
-{
-    for (int a = 0; a < 3; a++) {
-        if (d[a] < r) {
-            d[a]++;
-            return 1;
-        }
-        d[a] = -r;
-    }
-    return 0;
-}
-
-/* Loads the next cell of the ring that has points; 0 when none is left. */
-static int ring_cell(const pt_bins *B, ring_iter *it)
-{
-    do {
-        if (!cube_step(it->d, it->r))
-            return 0;
-        if (labs(it->d[0]) != it->r && labs(it->d[1]) != it->r && labs(it->d[2]) != it->r)
-            continue;
-        it->m = 0;
-    } while (!bins_find(B, cell_key(it->q[0] + it->d[0], it->q[1] + it->d[1], it->q[2] + it->d[2]),
-                        &it->s, &it->len));
-    return 1;
-}
-
-static void ring_first(ring_iter *it, const long q[3], long r)
-{
-    memcpy(it->q, q, sizeof it->q);
-    it->r = r;
-    it->d[0] = -r - 1; /* cube_step's first step lands on (-r, -r, -r) */
-    it->d[1] = it->d[2] = -r;
-    it->len = it->m = 0;
-}
-
-static int ring_next(const pt_bins *B, ring_iter *it, uint32_t *j)
-{
-    while (it->m >= it->len)
-        if (!ring_cell(B, it))
-            return 0;
-    *j = B->order[it->s + it->m++];
-    return 1;
-}
+#define PTS_NOISE_FLOOR 0.1  /* a clean fit's residual, of sigma0 (bunny: 0.03-0.05) */
+#define PTS_WIDEN 1.5        /* the kernel's width on noisy points, at most, of sigma0 */
+#define PTS_HEAT_ERR 0.05    /* the heat method's surface error, heat voxels */
+#define PTS_MIN_RECOVER 4    /* points a recovered orientation needs, at least */
+#define PTS_ROUNDS 4         /* heat rounds of a recovered orientation, at most */
+#define PTS_ROUND_QUIET 1000 /* ... while more than one point in this many turns */
 
 static double dist2(const double *a, const double *b)
 {
@@ -259,14 +48,14 @@ static double point_area(const pt_bins *B, const hv_points *P, size_t i)
 {
     const double *x = P->xyz + 3 * i;
     long q[3];
-    cell_of(B, x, q);
+    hv__cell_of(B, x, q);
     double best[PTS_K];
     int m = 0;
     for (long r = 0; r <= PTS_RINGS; r++) {
         ring_iter it;
         uint32_t j;
-        ring_first(&it, q, r);
-        while (ring_next(B, &it, &j))
+        hv__ring_first(&it, q, r);
+        while (hv__ring_next(B, &it, &j))
             if (j != i)
                 keep_smallest(best, &m, dist2(x, P->xyz + 3 * (size_t)j));
         if (m == PTS_K && best[PTS_K - 1] <= (double)(r * r) * B->c * B->c)
@@ -309,15 +98,6 @@ static double select_kth(double *v, size_t n, size_t k)
     return v[k];
 }
 
-/* The cell of table slot t. */
-static void slot_cell(const pt_bins *B, size_t t, long q[3])
-{
-    const uint64_t key = B->keys[t], mask = (1u << PTS_KEY_BITS) - 1;
-    q[0] = (long)(key & mask);
-    q[1] = (long)(key >> PTS_KEY_BITS & mask);
-    q[2] = (long)(key >> (2 * PTS_KEY_BITS));
-}
-
 /* The points of the cells within `rings` rings around cell q into *buf
  * (grown as needed); their number, SIZE_MAX when out of memory. */
 static size_t gather_block(const pt_bins *B, const long q[3], long rings, uint32_t **buf,
@@ -327,8 +107,8 @@ static size_t gather_block(const pt_bins *B, const long q[3], long rings, uint32
     for (long r = 0; r <= rings; r++) {
         ring_iter it;
         uint32_t j;
-        ring_first(&it, q, r);
-        while (ring_next(B, &it, &j)) {
+        hv__ring_first(&it, q, r);
+        while (hv__ring_next(B, &it, &j)) {
             if (m == *cap) {
                 size_t c = *cap ? 2 * *cap : 256;
                 uint32_t *nb = realloc(*buf, c * sizeof *nb);
@@ -388,15 +168,15 @@ static void knn_run(const pt_bins *B, uint32_t s0, uint32_t n0, uint32_t r0, uin
 static int cell_areas(const pt_bins *B, const hv_points *P, size_t t, knn_buf *K, double *area)
 {
     long q[3];
-    slot_cell(B, t, q);
+    hv__slot_cell(B, t, q);
     const uint32_t s0 = B->start[t], n0 = B->len[t];
     if (knn_reserve(K, n0))
         return -1;
     memset(K->found, 0, n0 * sizeof *K->found);
     for (long d = 0; d < 27; d++) {
         uint32_t r0, len;
-        if (bins_find(B, cell_key(q[0] + d % 3 - 1, q[1] + d / 3 % 3 - 1, q[2] + d / 9 - 1), &r0,
-                      &len))
+        if (hv__bins_find(B, hv__cell_key(q[0] + d % 3 - 1, q[1] + d / 3 % 3 - 1, q[2] + d / 9 - 1),
+                          &r0, &len))
             knn_run(B, s0, n0, r0, len, K);
     }
     for (uint32_t u = 0; u < n0; u++) {
@@ -619,7 +399,7 @@ static hv_status project_fits(const pt_bins *B, const pt_bins *V, const hv_point
             if (V->keys[t] == UINT64_MAX || failed)
                 continue;
             long q[3];
-            slot_cell(V, t, q);
+            hv__slot_cell(V, t, q);
             const size_t m = gather_block(B, q, rings, &buf, &cap);
             failed |= m == SIZE_MAX;
             for (uint32_t k = 0; k < V->len[t] && !failed; k++) {
@@ -678,7 +458,7 @@ static hv_status points_project(const pt_bins *B, const hv_points *P, const doub
     pt_bins V;
     size_t cells, lonely = 0;
     memset(&V, 0, sizeof V);
-    hv_status st = F && un ? bins_build(&V, M->verts, nv, B->lo, B->c, &cells)
+    hv_status st = F && un ? hv__bins_build(&V, M->verts, nv, B->lo, B->c, &cells)
                            : hv__error(HV_ERR_NOMEM, "points: out of memory for %zu vertices", nv);
     double s2 = 0;
     if (!st)
@@ -688,7 +468,7 @@ static hv_status points_project(const pt_bins *B, const hv_points *P, const doub
     const double sigma = sigma0 * fmin(PTS_WIDEN, 1 + sqrt(noise2) / (0.4 * sigma0));
     if (!st)
         st = project_fits(B, &V, P, area, nrm, gh, M, sigma, 1, F, un);
-    bins_free(&V);
+    hv__bins_free(&V);
     double sum = 0, mx = 0;
 #pragma omp parallel for schedule(static) if (!st) reduction(+ : lonely, sum) reduction(max : mx)
     for (size_t i = 0; i < (st ? 0 : nv); i++) {
@@ -718,14 +498,14 @@ static hv_status points_project(const pt_bins *B, const hv_points *P, const doub
  * hv_points_from_arrays make sure of them; a caller's own struct may not). */
 static hv_status points_check(const hv_points *P)
 {
-    if (!P || P->count == 0 || !P->xyz || !P->normals)
+    if (!P || P->count == 0 || !P->xyz)
         return hv__error(HV_ERR_INVALID_ARG, "points: the cloud is empty (%zu points)",
                          P ? P->count : 0);
     if (P->count > UINT32_MAX)
         return hv__error(HV_ERR_INVALID_ARG, "points: %zu points, more than %u", P->count,
                          UINT32_MAX);
     for (size_t i = 0; i < 3 * P->count; i++)
-        if (!isfinite(P->xyz[i]) || !isfinite(P->normals[i]))
+        if (!isfinite(P->xyz[i]) || (P->normals && !isfinite(P->normals[i])))
             return hv__error(HV_ERR_NUMERIC, "points: point %zu has a NaN or Inf value", i / 3 + 1);
     return HV_OK;
 }
@@ -734,16 +514,18 @@ typedef struct pts_work {
     pt_bins B;    /* cells of the heat grid's size */
     pt_bins near; /* cells of about 1.5 spacings, for the nearest neighbours */
     double *area, *nrm;
+    double *dir; /* the recovered normals (step 0), NULL with the given ones */
     hv_grid *gh;
     hv_mesh *M;
 } pts_work;
 
 static void pts_work_free(pts_work *w)
 {
-    bins_free(&w->B);
-    bins_free(&w->near);
+    hv__bins_free(&w->B);
+    hv__bins_free(&w->near);
     free(w->area);
     free(w->nrm);
+    free(w->dir);
     hv_grid_destroy(&w->gh);
     hv_mesh_destroy(&w->M);
 }
@@ -817,14 +599,65 @@ out:
     return st;
 }
 
+/* 0. The normals of a cloud without them (or whose normals are not to be
+ * trusted): directions from the neighbourhoods of about two voxels of the
+ * block, turned consistently and outward (sdf_orient.c). */
+static hv_status points_recover(const hv_points *P, pts_work *w, hv_points_report *R)
+{
+    const double rho = fmax(2 * w->gh->h / R->coarsen, 3 * R->spacing_median);
+    hv_status st = hv__points_axes(&w->B, P, rho, w->dir);
+    return st ? st : hv__points_propagate(&w->near, P, w->area, w->dir, R);
+}
+
+/* 2. The heat method, and the normals turned to face out of phi's inside.
+ * With recovered normals, rounds: the turned normals go through the heat
+ * method again while more than one point in PTS_ROUND_QUIET turns (the
+ * rounds' time counts as the orientation's). */
+static hv_status points_heat_orient(hv_points *Q, const hv_sdf_opts *o, pts_work *w,
+                                    hv_points_report *R)
+{
+    for (;;) {
+        double tt = hv_now();
+        hv_status st = points_heat(Q, w->area, o, w->gh, R);
+        if (st)
+            return st;
+        points_orient(Q, w->area, w->gh, w->nrm, R);
+        R->t_heat = hv_now() - tt;
+        if (!w->dir || R->orient_rounds >= PTS_ROUNDS ||
+            R->normals_against * PTS_ROUND_QUIET <= Q->count)
+            return HV_OK;
+        R->orient_rounds++;
+        R->orient_turned += R->normals_against;
+        R->t_orient += R->t_heat;
+        memcpy(w->dir, w->nrm, 3 * Q->count * sizeof *w->dir);
+    }
+}
+
 static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *w,
                             hv_points_report *R)
 {
+    const int recover =
+        o->orient == HV_ORIENT_RECOVER || (o->orient == HV_ORIENT_AUTO && !P->normals);
+    if (!recover && !P->normals)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "points: the cloud has no normals, and the orientation is to be the "
+                         "given one (recover it, or give x y z nx ny nz)");
+    if (recover && P->count < PTS_MIN_RECOVER)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "points: %zu points without normals; recovering their orientation "
+                         "needs at least %d",
+                         P->count, PTS_MIN_RECOVER);
+    if (recover && hv__points_flat(P))
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "points: the %zu points lie on a plane or a line: no orientation to "
+                         "recover (no inside)",
+                         P->count);
+    R->recovered = recover;
     hv_status st;
     double tt = hv_now();
     size_t cells, near_cells;
     if ((st = points_grid(P, o, &w->gh, R)) ||
-        (st = bins_build(&w->B, P->xyz, P->count, w->gh->origin, w->gh->h, &cells)))
+        (st = hv__bins_build(&w->B, P->xyz, P->count, w->gh->origin, w->gh->h, &cells)))
         return st;
     /* A surface through `cells` cells of side c holds about cells c^2 of
      * area: the spacing s0 it gives sizes the cells of the neighbour
@@ -832,22 +665,33 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
      * the bunny: with cells of 1.5 s0, 10% of the points had to search
      * farther and that took half the time; with 2 s0, 0.1%). */
     const double s0 = w->gh->h * sqrt((double)cells / (double)P->count);
-    if ((st = bins_build(&w->near, P->xyz, P->count, w->gh->origin, fmin(w->gh->h, 2 * s0),
-                         &near_cells)))
+    if ((st = hv__bins_build(&w->near, P->xyz, P->count, w->gh->origin, fmin(w->gh->h, 2 * s0),
+                             &near_cells)))
         return st;
     w->area = malloc(P->count * sizeof *w->area);
     w->nrm = malloc(3 * P->count * sizeof *w->nrm);
-    if (!w->area || !w->nrm)
+    if (recover)
+        w->dir = malloc(3 * P->count * sizeof *w->dir);
+    if (!w->area || !w->nrm || (recover && !w->dir))
         return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu points", P->count);
     if ((st = points_spacing(&w->near, P, w->area, R)))
         return st;
     R->t_spacing = hv_now() - tt;
-    tt = hv_now();
-    if ((st = points_heat(P, w->area, o, w->gh, R)))
+    hv_points Q = *P;
+    if (w->dir) {
+        tt = hv_now();
+        if ((st = points_recover(P, w, R)))
+            return st;
+        Q.normals = w->dir;
+        R->t_orient = hv_now() - tt;
+    }
+    if ((st = points_heat_orient(&Q, o, w, R)))
         return st;
-    R->t_heat = hv_now() - tt;
+    for (size_t i = 0; w->dir && P->normals && i < P->count; i++) {
+        const double *a = P->normals + 3 * i, *b = w->nrm + 3 * i;
+        R->orient_disagree += a[0] * b[0] + a[1] * b[1] + a[2] * b[2] < 0;
+    }
     tt = hv_now();
-    points_orient(P, w->area, w->gh, w->nrm, R);
     /* On a heat grid that is the block's own, the surface's vertices are
      * a voxel apart: halved, they follow the points between (bunny from
      * 20 000 points at 64^3: mean distance 0.041 -> 0.034 voxel, the
@@ -857,7 +701,7 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
         return st;
     R->t_mesh = hv_now() - tt;
     tt = hv_now();
-    if ((st = points_project(&w->B, P, w->area, w->nrm, w->gh, w->M, R)))
+    if ((st = points_project(&w->B, &Q, w->area, w->nrm, w->gh, w->M, R)))
         return st;
     R->t_project = hv_now() - tt;
     return HV_OK;

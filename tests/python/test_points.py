@@ -32,14 +32,38 @@ class Points(unittest.TestCase):
         np.testing.assert_array_equal(q, p)
         np.testing.assert_allclose(m, n, atol=1e-15)
 
-    def test_unoriented_cloud_should_raise_naming_file_and_line(self):
+    def test_unoriented_cloud_should_read_without_normals(self):
         path = os.path.join(hvtest.tmpdir(), "bare.xyz")
         with open(path, "w") as f:
-            f.write("# no normals\n0 0 0\n")
+            f.write("# no normals\n0 0 0\n1 2 3\n")
+        q, m = heatvox.read_points(path)
+        self.assertIsNone(m)
+        np.testing.assert_array_equal(q, [[0, 0, 0], [1, 2, 3]])
+
+    def test_mixed_cloud_should_raise_naming_file_and_line(self):
+        path = os.path.join(hvtest.tmpdir(), "mixed.xyz")
+        with open(path, "w") as f:
+            f.write("# no normals\n0 0 0\n1 2 3 0 0 1\n")
         with self.assertRaises(heatvox.Error) as cm:
             heatvox.read_points(path)
-        self.assertIn(path + ": line 2", str(cm.exception))
-        self.assertIn("unoriented", str(cm.exception))
+        self.assertIn(path + ": line 3", str(cm.exception))
+        self.assertIn("where the points before have none", str(cm.exception))
+
+    def test_points_surface_without_normals_should_be_the_sphere(self):
+        p, _ = sphere_cloud()
+        v, f, rep = heatvox.points_surface(p, None, res=48)
+        self.assertEqual(rep["recovered"], 1)
+        r = np.linalg.norm(v, axis=1)
+        self.assertLess(np.abs(r - 0.8).max(), 0.5 * rep["h"])
+        # outward: the signed volume of the closed surface is the ball's
+        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        vol = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6
+        self.assertAlmostEqual(vol, 4 / 3 * np.pi * 0.8 ** 3, delta=0.03)
+        with self.assertRaises(heatvox.Error) as cm:
+            heatvox.points_surface(p, None, res=48, orient="given")
+        self.assertIn("no normals", str(cm.exception))
+        with self.assertRaises(ValueError):
+            heatvox.points_surface(p, None, res=48, orient="sideways")
 
     def test_points_surface_should_be_the_sphere(self):
         p, n = sphere_cloud()

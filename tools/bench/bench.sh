@@ -76,8 +76,9 @@ if [ -f "$bunny" ]; then
   # --mesh-out) against CGAL's Poisson reconstruction of the same points
   # ($dir/bench_ref_cgal, built by make bench; its rows are skipped without
   # it), clean and with scan defects, scored against the bunny. About two
-  # minutes on 2 cores, CGAL's for the most part.
-  "$hv" bench points "$bunny" --n 128 --count 50000
+  # minutes on 2 cores, CGAL's for the most part; --unoriented adds each set
+  # without its normals (heatvox-recover rows, about a minute more).
+  "$hv" bench points "$bunny" --n 128 --count 50000 --unoriented
   "$hv" bench points "$bunny" --n 64 --count 20000 --scenario clean --scenario noise-0.5
   # A million points to a 512^3 narrow band (heatvox sdf PTS.xyz -o X.vdb),
   # against the bunny's own band in the same run.

@@ -41,7 +41,7 @@ static const scenario SCENARIOS[NSCEN] = {
 
 typedef struct args {
     const char *mesh, *keep, *cgal, *heatvox;
-    int n, count, nonly, band;
+    int n, count, nonly, band, unoriented;
     const char *only[NSCEN];
 } args;
 
@@ -62,7 +62,9 @@ typedef struct bench {
     int have_cgal;
     int asked[NSCEN];
     run hv[NSCEN], cg[NSCEN];
-    run mesh_band; /* --band: heatvox sdf MESH -o X.vdb --res N */
+    run rec[NSCEN];        /* --unoriented: heatvox sdf PTS.xyz --orient recover */
+    double rec_iou[NSCEN]; /* and the iou of the given normals' surface beside it */
+    run mesh_band;         /* --band: heatvox sdf MESH -o X.vdb --res N */
 } bench;
 
 static int usage(FILE *out)
@@ -90,6 +92,11 @@ static int usage(FILE *out)
                  "  --cgal BIN       the reference program (default: bench_ref_cgal beside\n"
                  "                   this heatvox); without it the cgal rows are skipped\n"
                  "  --heatvox BIN    the heatvox that reconstructs (default: this one)\n"
+                 "  --unoriented     also reconstruct each set without its normals (heatvox sdf\n"
+                 "                   PTS.xyz --orient recover ...: backend \"heatvox-recover\",\n"
+                 "                   ref \"heatvox\" with the true normals, iou_gap = its iou\n"
+                 "                   minus theirs, orient_agree: the fraction of the points\n"
+                 "                   whose recovered normal is on their true normal's side)\n"
                  "  --band           time the narrow band alone instead: heatvox sdf PTS.xyz\n"
                  "                   -o X.vdb --res N (tiles), against the same command on\n"
                  "                   MESH itself in the same run (ref \"mesh-band\"); no cgal\n"
@@ -134,6 +141,7 @@ static int parse(int argc, char **argv, args *A)
          .min = 1,
          .files = CLI_FILES_ANY},
         {.names = "--band", .kind = CLI_FLAG, .dst = &A->band, .val = 1},
+        {.names = "--unoriented", .kind = CLI_FLAG, .dst = &A->unoriented, .val = 1},
         {.names = NULL},
     };
     int rc = cli_parse(CMD, argc, argv, opts, "mesh", &A->mesh, help);
@@ -295,21 +303,34 @@ static void run_program(const char *exe, char **argv, const char *out, run *R)
         fprintf(stderr, "heatvox %s: %s %s ... failed (exit %d)\n", CMD, exe, argv[1], R->code);
 }
 
-static void run_heatvox(bench *B, int s)
+/* heatvox sdf on scenario s's points, with their normals or (recover) from
+ * the points alone. */
+static void run_heatvox(bench *B, int s, int recover)
 {
     char xyz[4096 + 64], npy[4096 + 64], ply[4096 + 64], out[4096 + 64], ns[16];
+    const char *who = recover ? "-recover" : "-heatvox";
+    char tail[32];
     file_of(B, s, ".xyz", xyz, sizeof xyz);
-    file_of(B, s, "-heatvox.npy", npy, sizeof npy);
-    file_of(B, s, "-heatvox.ply", ply, sizeof ply);
-    file_of(B, s, "-heatvox.out", out, sizeof out);
+    snprintf(tail, sizeof tail, "%s.npy", who);
+    file_of(B, s, tail, npy, sizeof npy);
+    snprintf(tail, sizeof tail, "%s.ply", who);
+    file_of(B, s, tail, ply, sizeof ply);
+    snprintf(tail, sizeof tail, "%s.out", who);
+    file_of(B, s, tail, out, sizeof out);
     snprintf(ns, sizeof ns, "%d", B->A.n);
-    char *argv[] = {"heatvox", "sdf", xyz, "--res", ns, "--npy", npy, "--mesh-out", ply, NULL};
+    char *argv[] = {"heatvox", "sdf",        xyz, "--res", ns,   "--npy",
+                    npy,       "--mesh-out", ply, NULL,    NULL, NULL};
+    if (recover) {
+        argv[9] = "--orient";
+        argv[10] = "recover";
+    }
     if (B->A.band) { /* the narrow band alone, in tiles */
-        file_of(B, s, "-heatvox.vdb", npy, sizeof npy);
+        snprintf(tail, sizeof tail, "%s.vdb", who);
+        file_of(B, s, tail, npy, sizeof npy);
         argv[5] = "-o";
         argv[7] = NULL;
     }
-    run_program(B->heatvox, argv, out, &B->hv[s]);
+    run_program(B->heatvox, argv, out, recover ? &B->rec[s] : &B->hv[s]);
 }
 
 /* compute_seconds from the reference's JSON line; -1 when absent. */
@@ -349,16 +370,18 @@ static void print_head(const bench *B, int s, const char *backend)
            B->A.mesh, B->A.n, backend, SCENARIOS[s].name, B->A.count);
 }
 
-/* The scores of the surface a run wrote; the row's end. */
-static void print_scores(const points_truth *T, const char *ply)
+/* The scores of the surface a run wrote; the row's end. Its iou, -1 when
+ * it has none. */
+static double print_scores(const points_truth *T, const char *ply, const char *more)
 {
     hv_mesh *r = NULL;
     hv_status st = hv_mesh_read(ply, &r);
     if (st) {
         printf(",\"error\":\"reading the surface: %s\"}\n", hv_status_str(st));
         fprintf(stderr, "heatvox %s: %s\n", CMD, hv_last_error());
-        return;
+        return -1;
     }
+    double iou = -1;
     points_score sc;
     char err[512];
     if (points_score_mesh(T, r, &sc, err, sizeof err)) {
@@ -366,13 +389,15 @@ static void print_scores(const points_truth *T, const char *ply)
         fprintf(stderr, "heatvox %s: %s: %s\n", CMD, ply, err);
     } else {
         printf(",\"triangles\":%zu,\"iou\":%.5f,\"mean_dist_vox\":%.4f,\"max_dist_vox\":%.4f,"
-               "\"dist_samples\":%zu}\n",
-               r->ntris, sc.iou, sc.mean_dist_vox, sc.max_dist_vox, sc.samples);
+               "\"dist_samples\":%zu%s}\n",
+               r->ntris, sc.iou, sc.mean_dist_vox, sc.max_dist_vox, sc.samples, more);
+        iou = sc.iou;
     }
     hv_mesh_destroy(&r);
+    return iou;
 }
 
-static void print_run(const bench *B, int s, const points_truth *T, int cgal)
+static void print_run(bench *B, int s, const points_truth *T, int cgal)
 {
     const run *R = cgal ? &B->cg[s] : &B->hv[s];
     print_head(B, s, cgal ? "cgal-poisson" : "heatvox");
@@ -391,7 +416,65 @@ static void print_run(const bench *B, int s, const points_truth *T, int cgal)
                R->seconds / B->cg[s].seconds);
     char ply[4096 + 64];
     file_of(B, s, cgal ? "-cgal.ply" : "-heatvox.ply", ply, sizeof ply);
-    print_scores(T, ply);
+    const double iou = print_scores(T, ply, "");
+    if (!cgal)
+        B->rec_iou[s] = iou;
+    fflush(stdout);
+}
+
+/* The fraction of scenario s's points whose recovered normal lies on their
+ * true normal's side: the library's own recovery (hv_points_surface with
+ * HV_ORIENT_RECOVER) in this process, after the timed runs. -1 on failure. */
+static double orient_agreement(const bench *B, int s)
+{
+    char xyz[4096 + 64];
+    file_of(B, s, ".xyz", xyz, sizeof xyz);
+    hv_points *P = NULL;
+    hv_mesh *M = NULL;
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = B->A.n;
+    o.orient = HV_ORIENT_RECOVER;
+    hv_points_report R;
+    hv_status st = hv_points_read(xyz, &P);
+    if (!st)
+        st = hv_points_surface(P, &o, &M, &R);
+    const double agree = st ? -1 : 1 - (double)R.orient_disagree / (double)P->count;
+    if (st)
+        fprintf(stderr, "heatvox %s: %s\n", CMD, hv_last_error());
+    hv_mesh_destroy(&M);
+    hv_points_destroy(&P);
+    return agree;
+}
+
+/* --unoriented: the row of the points' recovered orientation. */
+static void print_recovered(bench *B, int s, const points_truth *T)
+{
+    const run *R = &B->rec[s];
+    print_head(B, s, "heatvox-recover");
+    if (R->code) {
+        printf(",\"error\":\"heatvox sdf --orient recover %s\"}\n",
+               R->code < 0 ? "was killed by a signal" : "failed");
+        fflush(stdout);
+        return;
+    }
+    printf(",\"threads\":%d,\"seconds\":%.4f,\"peak_rss_mb\":%.1f", hv_get_threads(), R->seconds,
+           R->rss_mb);
+    if (!B->hv[s].code)
+        printf(",\"ref\":\"heatvox\",\"ref_seconds\":%.4f,\"ratio\":%.3f", B->hv[s].seconds,
+               R->seconds / B->hv[s].seconds);
+    char ply[4096 + 64], more[160] = "";
+    const double agree = orient_agreement(B, s);
+    file_of(B, s, "-recover.ply", ply, sizeof ply);
+    int k = snprintf(more, sizeof more, ",\"orient_agree\":%.5f", agree);
+    if (B->rec_iou[s] >= 0)
+        snprintf(more + k, sizeof more - (size_t)k, ",\"ref_iou\":%.5f", B->rec_iou[s]);
+    const double iou = print_scores(T, ply, more);
+    if (iou >= 0 && B->rec_iou[s] >= 0)
+        fprintf(stderr,
+                "heatvox %s: %s: recovered orientation: iou %.4f (%+.4f against the true "
+                "normals), %.3f%% of the points on their true side\n",
+                CMD, SCENARIOS[s].name, iou, iou - B->rec_iou[s], 100 * agree);
     fflush(stdout);
 }
 
@@ -405,7 +488,9 @@ static int run_all(bench *B)
             continue;
         if (write_points(B, s))
             return HV_EXIT_FAIL;
-        run_heatvox(B, s);
+        run_heatvox(B, s, 0);
+        if (B->A.unoriented)
+            run_heatvox(B, s, 1);
         if (B->have_cgal)
             run_cgal(B, s);
     }
@@ -419,6 +504,8 @@ static int run_all(bench *B)
         if (!B->asked[s])
             continue;
         print_run(B, s, &T, 0);
+        if (B->A.unoriented)
+            print_recovered(B, s, &T);
         if (B->have_cgal)
             print_run(B, s, &T, 1);
     }
@@ -446,7 +533,7 @@ static int band_rows(bench *B)
             continue;
         if (write_points(B, s))
             return HV_EXIT_FAIL;
-        run_heatvox(B, s);
+        run_heatvox(B, s, 0);
         const run *R = &B->hv[s], *M = &B->mesh_band;
         print_head(B, s, "heatvox-band");
         if (R->code)
