@@ -27,6 +27,7 @@ static void help(void)
            "  DIR/points/torus_scan.xyz           a torus scanned as oriented points: uneven\n"
            "                                      density, noise, 10%% of the normals turned\n"
            "                                      around, a patch missing\n"
+           "  DIR/points/torus_scan_bare.xyz      the same points without their normals\n"
            "  DIR/levelset/sphere_velocity.vdb    sphere level set (radius 1, 64^3) and a\n"
            "                                      rotation about z (grids \"sdf\", \"v\")\n"
            "  DIR/distance/sources.txt            one source point (heatvox distance)\n"
@@ -163,12 +164,18 @@ static int scan_point(uint64_t *s, double R, double r, double out[6])
 static int points(const char *dir)
 {
     enum { COUNT = 12000 };
-    char path[1024], *text = malloc((size_t)COUNT * 96 + 128);
-    if (!text)
+    char path[1024], *text = malloc((size_t)COUNT * 96 + 128),
+                     *bare = malloc((size_t)COUNT * 48 + 128);
+    if (!text || !bare) {
+        free(text), free(bare);
         return cli_fail("make-scenes", "torus_scan", HV_ERR_NOMEM);
+    }
     size_t len = (size_t)snprintf(text, 128,
                                   "# heatvox make-scenes: a torus (R 1, r 0.35) as "
                                   "oriented points\n# x y z nx ny nz\n");
+    size_t blen = (size_t)snprintf(bare, 128,
+                                   "# heatvox make-scenes: the torus scan's points without "
+                                   "their normals\n# x y z\n");
     uint64_t s = 29;
     for (int k = 0; k < COUNT;) {
         double q[6];
@@ -176,13 +183,17 @@ static int points(const char *dir)
             continue;
         len += (size_t)snprintf(text + len, 96, "%.6f %.6f %.6f %.5f %.5f %.5f\n", q[0], q[1], q[2],
                                 q[3], q[4], q[5]);
+        blen += (size_t)snprintf(bare + blen, 48, "%.6f %.6f %.6f\n", q[0], q[1], q[2]);
         k++;
     }
     snprintf(path, sizeof path, "%s/points/torus_scan.xyz", dir);
     int rc = write_text(path, text);
-    free(text);
     if (!rc && cli_verbose >= 0)
         printf("%-40s %d oriented points\n", path, COUNT);
+    snprintf(path, sizeof path, "%s/points/torus_scan_bare.xyz", dir);
+    if (!rc && !(rc = write_text(path, bare)) && cli_verbose >= 0)
+        printf("%-40s %d points without normals\n", path, COUNT);
+    free(text), free(bare);
     return rc;
 }
 
