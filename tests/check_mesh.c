@@ -732,6 +732,42 @@ START_TEST(nonfinite_coordinates_should_be_loaded_and_counted)
 }
 END_TEST
 
+static int bare_normal_notes;
+static void count_bare_normals(hv_log_level level, const char *msg, void *user)
+{
+    (void)user;
+    bare_normal_notes += level == HV_LOG_INFO && strstr(msg, "'facet normal' without numbers") &&
+                         strstr(msg, "line 2");
+}
+
+/* 'facet normal' without its numbers (a public STL test file has them):
+ * read, since STL normals are never used, and said once at info level. */
+START_TEST(stl_facet_normals_without_numbers_should_read_with_a_note)
+{
+    make_tmpdir();
+    const char *path = tmp_write_str("bare.stl", "solid t\nfacet normal\nouter loop\nvertex 0 0 0\n"
+                                                 "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n"
+                                                 "facet normal\nouter loop\nvertex 0 0 0\n"
+                                                 "vertex 0 1 0\nvertex 0 0 1\nendloop\nendfacet\n"
+                                                 "endsolid t\n");
+    bare_normal_notes = 0;
+    hv_set_log(count_bare_normals, NULL);
+    hv_mesh *m = NULL;
+    hv_status st = hv_mesh_read(path, &m);
+    hv_set_log(NULL, NULL);
+    TL_ASSERT_OK(st);
+    ck_assert_uint_eq(m->ntris, 2);
+    ck_assert_uint_eq(m->nverts, 4);
+    ck_assert_int_eq(bare_normal_notes, 1);
+    hv_mesh_destroy(&m);
+    assert_fails(tmp_write_str("half.stl", "solid t\nfacet normal 0 1\nouter loop\nvertex 0 0 0\n"
+                                           "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n"
+                                           "endsolid t\n"),
+                 "malformed normal coordinate 'outer'");
+    remove_tmpdir();
+}
+END_TEST
+
 START_TEST(tristrips_should_alternate_winding_and_restart_at_minus_one)
 {
     make_tmpdir();
@@ -1229,6 +1265,7 @@ static Suite *mesh_suite(void)
     tcase_add_test(tc, malformed_files_should_fail_with_the_line_or_byte);
     tcase_add_test(tc, nonfinite_coordinates_should_be_loaded_and_counted);
     tcase_add_test(tc, tristrips_should_alternate_winding_and_restart_at_minus_one);
+    tcase_add_test(tc, stl_facet_normals_without_numbers_should_read_with_a_note);
     tcase_add_test(tc, ply_integers_beyond_int64_should_fail_naming_the_file_and_line);
     tcase_add_test(tc, coordinates_beyond_1e100_should_fail_naming_the_file_and_the_bound);
     tcase_add_test(tc, non_regular_inputs_should_be_refused_naming_the_file);

@@ -96,6 +96,25 @@ static hv_status read_numbers(stl_cursor *c, const char *path, double *x, int k,
     return HV_OK;
 }
 
+/* A facet's normal: three numbers, or none (some writers leave them out;
+ * STL normals are never used, so that is said once, under -v). */
+static hv_status facet_normal(stl_cursor *c, const char *path, int *bare)
+{
+    stl_cursor peek = *c;
+    size_t n;
+    const char *w = next_word(&peek, &n);
+    if (is_word(w, n, "outer")) {
+        if (!(*bare)++)
+            hv__log(HV_LOG_INFO,
+                    "%s: line %zu: 'facet normal' without numbers (STL normals are "
+                    "not used)",
+                    path, c->line);
+        return HV_OK;
+    }
+    double x[3];
+    return read_numbers(c, path, x, 3, "normal");
+}
+
 static hv_status read_ascii(const char *path, const char *buf, size_t len, hv_mesh **out)
 {
     stl_cursor c = {buf, buf + len, 1};
@@ -103,7 +122,7 @@ static hv_status read_ascii(const char *path, const char *buf, size_t len, hv_me
     hv__mb_init(&b, path);
     u32vec loop = {0};
     hv_status st = HV_OK;
-    int in_solid = 0, solids = 0;
+    int in_solid = 0, solids = 0, bare_normals = 0;
     size_t n;
     const char *w;
     while (!st && (w = next_word(&c, &n))) {
@@ -126,9 +145,8 @@ static hv_status read_ascii(const char *path, const char *buf, size_t len, hv_me
         } else if (is_word(w, n, "facet") && in_solid) {
             double x[3];
             size_t at = c.line;
-            if ((st = expect(&c, path, "normal")) ||
-                (st = read_numbers(&c, path, x, 3, "normal")) || (st = expect(&c, path, "outer")) ||
-                (st = expect(&c, path, "loop")))
+            if ((st = expect(&c, path, "normal")) || (st = facet_normal(&c, path, &bare_normals)) ||
+                (st = expect(&c, path, "outer")) || (st = expect(&c, path, "loop")))
                 break;
             loop.n = 0;
             while (!st) {

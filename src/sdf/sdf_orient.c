@@ -13,7 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define OR_K 10            /* neighbours of a point in the graph */
+#define OR_K 8             /* neighbours of a point in the graph */
 #define OR_OFFSET 1.0      /* weight of a neighbour's offset along the directions */
 #define OR_JACOBI_SWEEPS 8 /* of the 3 x 3 eigenproblem (converged after 4-5) */
 #define OR_FLAT 1e-6       /* least spread, of the cloud's size, of a cloud that has a volume */
@@ -144,7 +144,8 @@ int hv__points_flat(const hv_points *P)
 }
 
 /* The graph: each point's OR_K nearest within the 27 cells around its own,
- * both ways, as lists (adj from off[i] to off[i + 1]). */
+ * both ways, as lists (adj from off[u] to off[u + 1]), points by their
+ * place u in the bins' order, so that neighbours lie near in memory. */
 typedef struct or_graph {
     uint32_t *off, *adj;
 } or_graph;
@@ -164,7 +165,8 @@ static void keep_nearest(uint32_t *nb, double *d2s, int *m, uint32_t j, double d
 }
 
 /* The OR_K nearest of the point at place u of the sorted order among the
- * runs of the cells around its own, as point indices into nb; how many. */
+ * runs of the cells around its own, as places in that order into nb; how
+ * many. */
 static int point_neighbours(const pt_bins *B, uint32_t u, const uint32_t *run, int nrun,
                             uint32_t *nb)
 {
@@ -176,7 +178,7 @@ static int point_neighbours(const pt_bins *B, uint32_t u, const uint32_t *run, i
             const float *y = B->sx + 3 * (size_t)k;
             const double d0 = y[0] - x[0], d1 = y[1] - x[1], d2 = y[2] - x[2];
             if (k != u)
-                keep_nearest(nb, d2s, &m, B->order[k], d0 * d0 + d1 * d1 + d2 * d2);
+                keep_nearest(nb, d2s, &m, k, d0 * d0 + d1 * d1 + d2 * d2);
         }
     return m;
 }
@@ -200,10 +202,8 @@ static hv_status graph_build(const pt_bins *B, const hv_points *P, or_graph *G)
         uint32_t run[2 * 27];
         hv__slot_cell(B, t, q);
         const int nrun = block_runs(B, q, 1, run, 27);
-        for (uint32_t u = B->start[t]; u < B->start[t] + B->len[t]; u++) {
-            const uint32_t i = B->order[u];
-            cnt[i] = (uint8_t)point_neighbours(B, u, run, nrun, knn + OR_K * (size_t)i);
-        }
+        for (uint32_t u = B->start[t]; u < B->start[t] + B->len[t]; u++)
+            cnt[u] = (uint8_t)point_neighbours(B, u, run, nrun, knn + OR_K * (size_t)u);
     }
     for (size_t i = 0; i < n; i++)
         for (int k = 0; k < cnt[i]; k++) {
@@ -229,14 +229,14 @@ static hv_status graph_build(const pt_bins *B, const hv_points *P, or_graph *G)
     return HV_OK;
 }
 
-/* How far apart the directions of i and j are as a step of the
+/* How far apart the directions of places i and j are as a step of the
  * propagation: their angle, and how far each lies off the other's plane
  * (the two faces of a thin wall are parallel but lie off each other's). */
-static float edge_cost(const hv_points *P, const double *dir, uint32_t i, uint32_t j)
+static float edge_cost(const pt_bins *B, const double *dir, uint32_t i, uint32_t j)
 {
     const double *a = dir + 3 * (size_t)i, *b = dir + 3 * (size_t)j;
-    const double *x = P->xyz + 3 * (size_t)i, *y = P->xyz + 3 * (size_t)j;
-    double u[3] = {y[0] - x[0], y[1] - x[1], y[2] - x[2]};
+    const float *x = B->sx + 3 * (size_t)i, *y = B->sx + 3 * (size_t)j;
+    const double u[3] = {y[0] - x[0], y[1] - x[1], y[2] - x[2]};
     const double len = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
     const double ab = fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
     if (!(len > 0))
@@ -296,10 +296,11 @@ static or_entry heap_pop(or_heap *H)
     return top;
 }
 
-/* Prim's tree from seed over its component: each point turned to agree
- * with its parent's direction, its component's number into comp. */
-static hv_status propagate(const hv_points *P, const or_graph *G, double *dir, uint32_t seed,
-                           uint32_t c, uint32_t *comp, or_heap *H)
+/* Prim's tree from seed over its component (places in the bins' order):
+ * each point turned to agree with its parent's direction, its component's
+ * number into comp; key: the cheapest edge to each point seen so far. */
+static hv_status propagate(const pt_bins *B, const or_graph *G, double *dir, uint32_t seed,
+                           uint32_t c, uint32_t *comp, float *key, or_heap *H)
 {
     H->n = 0;
     if (heap_push(H, (or_entry){0, seed, seed}))
@@ -314,8 +315,13 @@ static hv_status propagate(const hv_points *P, const or_graph *G, double *dir, u
             b[0] = -b[0], b[1] = -b[1], b[2] = -b[2];
         for (uint32_t k = G->off[x.to]; k < G->off[x.to + 1]; k++) {
             const uint32_t j = G->adj[k];
-            if (comp[j] == UINT32_MAX &&
-                heap_push(H, (or_entry){edge_cost(P, dir, x.to, j), j, x.to}))
+            if (comp[j] != UINT32_MAX)
+                continue;
+            const float e = edge_cost(B, dir, x.to, j);
+            if (e >= key[j])
+                continue;
+            key[j] = e;
+            if (heap_push(H, (or_entry){e, j, x.to}))
                 return hv__error(HV_ERR_NOMEM, "points: out of memory orienting the cloud");
         }
     }
@@ -352,23 +358,48 @@ static hv_status turn_outward(const hv_points *P, const double *area, const uint
     return HV_OK;
 }
 
+/* The trees over every component, in the bins' order: dir's directions
+ * permuted into that order, turned, and back; each point's component into
+ * comp (by point). */
+static hv_status propagate_all(const pt_bins *B, const hv_points *P, double *dir, uint32_t *comp,
+                               size_t *ncomp)
+{
+    const size_t n = P->count;
+    or_graph G = {NULL, NULL};
+    or_heap H = {NULL, 0, 0};
+    double *D = malloc(3 * n * sizeof *D);
+    uint32_t *cu = malloc(n * sizeof *cu);
+    float *key = malloc(n * sizeof *key);
+    hv_status st = D && cu && key
+                       ? graph_build(B, P, &G)
+                       : hv__error(HV_ERR_NOMEM, "points: out of memory orienting the cloud");
+    for (size_t u = 0; u < n && !st; u++) {
+        memcpy(D + 3 * u, dir + 3 * (size_t)B->order[u], 3 * sizeof *D);
+        cu[u] = UINT32_MAX;
+        key[u] = INFINITY;
+    }
+    *ncomp = 0;
+    for (size_t u = 0; u < n && !st; u++)
+        if (cu[u] == UINT32_MAX)
+            st = propagate(B, &G, D, (uint32_t)u, (uint32_t)(*ncomp)++, cu, key, &H);
+    for (size_t u = 0; u < n && !st; u++) {
+        memcpy(dir + 3 * (size_t)B->order[u], D + 3 * u, 3 * sizeof *D);
+        comp[B->order[u]] = cu[u];
+    }
+    free(G.off), free(G.adj), free(H.e), free(D), free(cu), free(key);
+    return st;
+}
+
 hv_status hv__points_propagate(const pt_bins *B, const hv_points *P, const double *area,
                                double *dir, hv_points_report *R)
 {
-    or_graph G = {NULL, NULL};
-    or_heap H = {NULL, 0, 0};
     uint32_t *comp = malloc(P->count * sizeof *comp);
-    hv_status st = comp ? graph_build(B, P, &G)
-                        : hv__error(HV_ERR_NOMEM, "points: out of memory orienting the cloud");
     size_t ncomp = 0;
-    if (!st)
-        memset(comp, 0xff, P->count * sizeof *comp);
-    for (size_t i = 0; i < P->count && !st; i++)
-        if (comp[i] == UINT32_MAX)
-            st = propagate(P, &G, dir, (uint32_t)i, (uint32_t)ncomp++, comp, &H);
+    hv_status st = comp ? propagate_all(B, P, dir, comp, &ncomp)
+                        : hv__error(HV_ERR_NOMEM, "points: out of memory orienting the cloud");
     R->orient_components = ncomp;
     if (!st)
         st = turn_outward(P, area, comp, ncomp, dir, R);
-    free(G.off), free(G.adj), free(H.e), free(comp);
+    free(comp);
     return st;
 }

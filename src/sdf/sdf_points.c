@@ -605,7 +605,15 @@ out:
 static hv_status points_recover(const hv_points *P, pts_work *w, hv_points_report *R)
 {
     const double rho = fmax(2 * w->gh->h / R->coarsen, 3 * R->spacing_median);
-    hv_status st = hv__points_axes(&w->B, P, rho, w->dir);
+    /* Cells of side rho: the 27 around a point's own hold its
+     * neighbourhood, with fewer points to pass over than the cells of a
+     * coarsened heat grid (three block voxels wide at 512^3) would hold. */
+    pt_bins A;
+    size_t cells;
+    hv_status st = hv__bins_build(&A, P->xyz, P->count, w->gh->origin, rho, &cells);
+    if (!st)
+        st = hv__points_axes(&A, P, rho, w->dir);
+    hv__bins_free(&A);
     return st ? st : hv__points_propagate(&w->near, P, w->area, w->dir, R);
 }
 
