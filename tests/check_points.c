@@ -399,24 +399,39 @@ START_TEST(sphere_defects)
 }
 END_TEST
 
+/* The shared meshes' intact bunny into path; NULL, or why it is absent. */
+static const char *bunny_path(char *path, size_t size)
+{
+    const char *data = tl_test_data();
+    if (!data)
+        return "no test meshes (HEATVOX_TEST_DATA)";
+    snprintf(path, size, "%s/stanford-bunny.obj", data);
+    return access(path, R_OK) ? "stanford-bunny.obj is absent" : NULL;
+}
+
+/* The bunny at path into *m, and its signed distance at 128^3 (the
+ * winding number's sign): the truth its clouds are scored against. */
+static hv_grid *bunny_truth(const char *path, hv_mesh **m)
+{
+    TL_ASSERT_OK(hv_mesh_read(path, m));
+    hv_sdf_opts o = opts_on(128, NULL);
+    o.sign = HV_SDF_SIGN_WINDING;
+    hv_grid *truth = NULL;
+    TL_ASSERT_OK(hv_sdf_compute(*m, &o, &truth, NULL));
+    return truth;
+}
+
 /* Points sampled from the intact bunny (shared meshes) at 128^3: inside-IoU
  * against its solid and the surface's distance to it, bounded per case
  * (measured 0.018, 0.019, 0.047, 0.074, 0.018, 0.058 voxel). */
 START_TEST(bunny_defects)
 {
-    const char *data = tl_test_data();
     char path[512];
-    if (!data)
-        TL_SKIP("bunny_defects: no test meshes (HEATVOX_TEST_DATA)");
-    snprintf(path, sizeof path, "%s/stanford-bunny.obj", data);
-    if (access(path, R_OK))
-        TL_SKIP("bunny_defects: %s is absent", path);
+    const char *why = bunny_path(path, sizeof path);
+    if (why)
+        TL_SKIP("bunny_defects: %s", why);
     hv_mesh *m = NULL;
-    TL_ASSERT_OK(hv_mesh_read(path, &m));
-    hv_sdf_opts o = opts_on(128, NULL);
-    o.sign = HV_SDF_SIGN_WINDING;
-    hv_grid *truth = NULL;
-    TL_ASSERT_OK(hv_sdf_compute(m, &o, &truth, NULL));
+    hv_grid *truth = bunny_truth(path, &m);
     static const defects cases[] = {{0, 0, 0, 0},   {0, 0, 1, 0},   {0.25, 0, 0, 0},
                                     {0.5, 0, 0, 0}, {0, 0.1, 0, 0}, {0, 0, 0, 0.15}};
     static const double mean_max[] = {0.025, 0.025, 0.065, 0.1, 0.025, 0.08};
@@ -459,6 +474,23 @@ static double agreement(const hv_points *P, const hv_points_report *R)
     return 1 - (double)R->orient_disagree / (double)P->count;
 }
 
+/* The inside-IoU against truth of P's surface with its orientation
+ * recovered from the points alone (HV_ORIENT_RECOVER, P's normals only
+ * counted against), its report into R. */
+static double score_recovered(const hv_points *P, const hv_grid *truth, hv_points_report *R)
+{
+    hv_sdf_opts o = opts_on(0, truth);
+    o.orient = HV_ORIENT_RECOVER;
+    hv_mesh *S = NULL;
+    hv_grid *g = NULL;
+    TL_ASSERT_OK(hv_points_surface(P, &o, &S, R));
+    TL_ASSERT_OK(hv_sdf_compute(S, &o, &g, NULL));
+    const double j = iou(g, truth);
+    hv_mesh_destroy(&S);
+    hv_grid_destroy(&g);
+    return j;
+}
+
 /* The sphere's clouds of sphere_defects without their normals: the inside-IoU
  * within 0.01 of the true normals' and at least 99% of the points on their
  * true side. The cloud read as unoriented (normals NULL, HV_ORIENT_AUTO)
@@ -477,15 +509,7 @@ START_TEST(sphere_recovered)
         hv_points_report R, G, U;
         double j, jg, ju, mean, max;
         score(P, truth, &jg, &mean, &max, &G);
-        hv_sdf_opts o = opts_on(0, truth);
-        o.orient = HV_ORIENT_RECOVER;
-        hv_mesh *S = NULL;
-        hv_grid *g = NULL;
-        TL_ASSERT_OK(hv_points_surface(P, &o, &S, &R));
-        TL_ASSERT_OK(hv_sdf_compute(S, &o, &g, NULL));
-        j = iou(g, truth);
-        hv_mesh_destroy(&S);
-        hv_grid_destroy(&g);
+        j = score_recovered(P, truth, &R);
         score(Q, truth, &ju, &mean, &max, &U);
         printf("points: sphere case %zu recovered: IoU %.5f (true normals %.5f, read bare "
                "%.5f), %.3f%% on their true side, %zu components, %d rounds, %.2f s\n",
@@ -548,19 +572,12 @@ END_TEST
  * of the points on their true side. */
 START_TEST(bunny_recovered)
 {
-    const char *data = tl_test_data();
     char path[512];
-    if (!data)
-        TL_SKIP("bunny_recovered: no test meshes (HEATVOX_TEST_DATA)");
-    snprintf(path, sizeof path, "%s/stanford-bunny.obj", data);
-    if (access(path, R_OK))
-        TL_SKIP("bunny_recovered: %s is absent", path);
+    const char *why = bunny_path(path, sizeof path);
+    if (why)
+        TL_SKIP("bunny_recovered: %s", why);
     hv_mesh *m = NULL;
-    TL_ASSERT_OK(hv_mesh_read(path, &m));
-    hv_sdf_opts o = opts_on(128, NULL);
-    o.sign = HV_SDF_SIGN_WINDING;
-    hv_grid *truth = NULL;
-    TL_ASSERT_OK(hv_sdf_compute(m, &o, &truth, NULL));
+    hv_grid *truth = bunny_truth(path, &m);
     static const defects cases[] = {{0, 0, 0, 0}, {0.5, 0, 0, 0}, {0, 0, 0, 0.15}};
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         if (tl_sanitized() && c != 0)
@@ -569,20 +586,12 @@ START_TEST(bunny_recovered)
         hv_points_report G, R;
         double jg, j, mean, max;
         score(P, truth, &jg, &mean, &max, &G);
-        hv_sdf_opts r = opts_on(0, truth);
-        r.orient = HV_ORIENT_RECOVER;
-        hv_mesh *S = NULL;
-        hv_grid *g = NULL;
-        TL_ASSERT_OK(hv_points_surface(P, &r, &S, &R));
-        TL_ASSERT_OK(hv_sdf_compute(S, &r, &g, NULL));
-        j = iou(g, truth);
+        j = score_recovered(P, truth, &R);
         printf("points: bunny case %zu recovered: IoU %.5f (true normals %.5f), %.3f%% on their "
                "true side; %.2f s (orientation %.2f s), %.2f s with the true normals\n",
                c, j, jg, 100 * agreement(P, &R), R.t_total, R.t_orient, G.t_total);
         ck_assert_msg(j >= jg - 0.01, "case %zu: IoU %g, %g with the true normals", c, j, jg);
         ck_assert_msg(agreement(P, &R) >= 0.99, "case %zu: %g on their side", c, agreement(P, &R));
-        hv_mesh_destroy(&S);
-        hv_grid_destroy(&g);
         hv_points_destroy(&P);
     }
     hv_grid_destroy(&truth);

@@ -74,14 +74,14 @@ void hv__ring_first(ring_iter *it, const long q[3], long r);
 int hv__ring_next(const pt_bins *B, ring_iter *it, uint32_t *j);
 
 /* The orientation of a cloud without normals (sdf_orient.c): each point's
- * direction (sign unknown) into dir, the axis of least spread of the points
- * of B within rho; then the directions turned along a minimum spanning tree
+ * direction (sign unknown) into dir (by point), the axis of least spread of
+ * the points of B within rho; then the directions turned along a minimum spanning tree
  * of the graph of each point's nearest in the 27 cells of `near` around it,
  * each component outward (area: the points' areas; counts into R). */
 /* 1 when the points lie on a plane or a line (or are one point): no spread
  * across the least-spread axis of the whole cloud. */
 int hv__points_flat(const hv_points *P);
-hv_status hv__points_axes(const pt_bins *B, const hv_points *P, double rho, double *dir);
+hv_status hv__points_axes(const pt_bins *B, double rho, double *dir);
 hv_status hv__points_propagate(const pt_bins *near, const hv_points *P, const double *area,
                                double *dir, hv_points_report *R);
 

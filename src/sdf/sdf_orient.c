@@ -98,12 +98,11 @@ static void point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nr
     smallest_axis(cov, v);
 }
 
-hv_status hv__points_axes(const pt_bins *B, const hv_points *P, double rho, double *dir)
+hv_status hv__points_axes(const pt_bins *B, double rho, double *dir)
 {
     const long rings = (long)fmin(OR_MAX_RINGS, ceil(rho / B->c));
     const int max = (int)((2 * rings + 1) * (2 * rings + 1) * (2 * rings + 1));
     int failed = 0;
-    (void)P;
 #pragma omp parallel reduction(| : failed)
     {
         uint32_t *run = malloc(2 * (size_t)max * sizeof *run);

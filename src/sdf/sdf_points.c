@@ -612,7 +612,7 @@ static hv_status points_recover(const hv_points *P, pts_work *w, hv_points_repor
     size_t cells;
     hv_status st = hv__bins_build(&A, P->xyz, P->count, w->gh->origin, rho, &cells);
     if (!st)
-        st = hv__points_axes(&A, P, rho, w->dir);
+        st = hv__points_axes(&A, rho, w->dir);
     hv__bins_free(&A);
     return st ? st : hv__points_propagate(&w->near, P, w->area, w->dir, R);
 }
