@@ -263,6 +263,11 @@ class HEATVOX_OT_import_points(bpy.types.Operator, ImportHelper):
 
     def _import(self, hv, context):
         pts, nrm = hv.read_points(self.filepath)
+        if nrm is None:  # the add-on's surface needs the points' normals
+            raise geometry.InputError(
+                "%s has no normals: heatvox sdf recovers them (heatvox sdf %s --mesh-out OUT.ply), "
+                "the add-on needs x y z nx ny nz" % (self.filepath, os.path.basename(self.filepath))
+            )
         name = _unique(os.path.splitext(os.path.basename(self.filepath))[0])
         ob = bpy.data.objects.new(name, geometry.new_points(name, pts, nrm))
         geometry.link(context, ob)

@@ -336,6 +336,11 @@ def bad_input():
     with open(bad, "w") as fh:
         fh.write("0 0 0 0 0 1\n1 0 0 0 0 1\n1 1 nan 0 0 1\n")
     cases.append(("a cloud file with NaN", cube, lambda: bpy.ops.heatvox.import_points(filepath=bad), bad))
+    bare = os.path.join(OUT, "bare.xyz")
+    with open(bare, "w") as fh:
+        fh.write("0 0 0\n1 0 0\n1 1 0\n0 1 1\n")
+    cases.append(("a cloud file without normals", cube, lambda: bpy.ops.heatvox.import_points(filepath=bare),
+                  "bare.xyz has no normals"))
     n0 = len(bpy.data.objects)
     for what, ob, call, want in cases:
         select(ob)
