@@ -646,6 +646,51 @@ START_TEST(refusals)
 }
 END_TEST
 
+/* A cloud larger than the memory it may take (100M points on 24 GB; here
+ * 6M points, binary PLY, under an address-space cap of 1.5 GB) is refused
+ * before the work, with what it would need, naming the file; nothing is
+ * written. The command runs under ulimit -v, whose cap ends with it. */
+START_TEST(too_large)
+{
+    if (tl_sanitized())
+        TL_SKIP("too_large: the sanitizers' shadow memory is outside any address-space cap");
+    const char *bin = tl_heatvox_bin();
+    ck_assert_msg(bin != NULL, "no heatvox command to run");
+    enum { N = 6000000 };
+    char path[128], err[2048], cmd[1024];
+    snprintf(path, sizeof path, "%s/big.ply", dir);
+    FILE *f = fopen(path, "wb");
+    ck_assert_ptr_nonnull(f);
+    fprintf(f,
+            "ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\n"
+            "property float y\nproperty float z\nend_header\n",
+            (int)N);
+    float *x = malloc(3 * (size_t)N * sizeof *x);
+    ck_assert_ptr_nonnull(x);
+    for (size_t i = 0; i < N; i++) { /* a sphere's spiral */
+        const double z = 1 - (2 * i + 1.0) / N, r = sqrt(1 - z * z), t = 2.39996 * i;
+        x[3 * i] = (float)(r * cos(t));
+        x[3 * i + 1] = (float)(r * sin(t));
+        x[3 * i + 2] = (float)z;
+    }
+    ck_assert_uint_eq(fwrite(x, sizeof *x, 3 * (size_t)N, f), 3 * (size_t)N);
+    free(x);
+    ck_assert_int_eq(fclose(f), 0);
+    snprintf(
+        cmd, sizeof cmd,
+        "cd '%s' && ulimit -v 1572864 && MALLOC_ARENA_MAX=2 OMP_NUM_THREADS=2 '%s' sdf big.ply "
+        "-o big.vdb --res 128",
+        dir, bin);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "big.ply") &&
+                      strstr(err, "6000000 points without normals need about") &&
+                      strstr(err, "ulimit -v"),
+                  "stderr: %s", err);
+    snprintf(path, sizeof path, "%s/big.vdb", dir);
+    ck_assert_int_ne(access(path, F_OK), 0);
+}
+END_TEST
+
 /* Writes P as a text cloud at path. */
 static void write_xyz(const char *path, const hv_points *P)
 {
@@ -709,6 +754,26 @@ START_TEST(command)
     ck_assert_double_lt(fabs(sample_grid(g, (const double[3]){0, 1, 0})) / g->h, 0.1);
     ck_assert_double_lt(sample_grid(g, (const double[3]){0, 0, 0}), 0);
     hv_grid_destroy(&g);
+    /* A band and the cloud's own surface beside it: the band in tiles. */
+    ck_assert_int_eq(
+        tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o m.vdb --mesh-out m.ply --res 48 -v"), 0);
+    ck_assert_msg(strstr(err, "the band went into the .vdb's tree as it was computed"),
+                  "stderr: %s", err);
+    snprintf(path, sizeof path, "%s/m.vdb", dir);
+    TL_ASSERT_OK(hv_vdb_read_float(path, "sdf", NULL, &g, &cls));
+    ck_assert_int_eq(cls, HV_VDB_LEVEL_SET);
+    ck_assert_double_lt(fabs(sample_grid(g, (const double[3]){1, 0, 0})) / g->h, 0.1);
+    const double hm = g->h;
+    hv_grid_destroy(&g);
+    snprintf(path, sizeof path, "%s/m.ply", dir);
+    hv_mesh *own = NULL;
+    TL_ASSERT_OK(hv_mesh_read(path, &own));
+    ck_assert_uint_gt(own->ntris, 1000);
+    for (size_t v = 0; v < own->nverts; v += 97) {
+        const double *p = own->verts + 3 * v;
+        ck_assert_double_lt(fabs(sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) - 1), 0.1 * hm);
+    }
+    hv_mesh_destroy(&own);
     ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o g.vdb --orient given"), 1);
     ck_assert_msg(strstr(err, "b.xyz") && strstr(err, "no normals"), "stderr: %s", err);
     ck_assert_int_eq(tl_hv(dir, bin, err, sizeof err, "sdf b.xyz -o g.vdb --orient maybe"), 2);
@@ -734,6 +799,7 @@ int main(void)
     tcase_add_test(tc, text_errors);
     tcase_add_test(tc, ply_reader);
     tcase_add_test(tc, command);
+    tcase_add_test(tc, too_large);
     suite_add_tcase(s, tc);
     tc = tcase_create("surfaces");
     tcase_set_timeout(tc, 300);

@@ -48,8 +48,9 @@ static void help(void)
            "  -o, --output FILE  the .vdb file\n"
            "  --band W           narrow band half width in voxels (default 3)\n"
            "  --dense            store every voxel of the block as active\n"
-           "  A narrow band (-o without --dense, --npy, --mesh-out) is computed in 8^3\n"
-           "  tiles near the surface, never as the whole block: memory and time follow the\n"
+           "  A narrow band (-o without --dense, --npy, --mesh-out; a point cloud's own\n"
+           "  surface as --mesh-out aside) is computed in 8^3 tiles near the surface,\n"
+           "  never as the whole block: memory and time follow the\n"
            "  surface (--preview then computes its three slices alone). Its sign is the\n"
            "  winding number's (--sign heat, --heat, --unsigned and --no-repair take the\n"
            "  dense path).\n"
@@ -463,9 +464,6 @@ int cmd_sdf(int argc, char **argv)
     const double band = A.band, adaptivity = A.adaptivity;
     const int dense = A.dense, have_h = A.have_h, no_tiles = A.no_tiles;
     hv_sdf_opts o = A.o;
-    /* A narrow-band level set alone, where the options allow: tiles. */
-    const int tiles =
-        out && !dense && !npy && !mesh_out && !no_tiles && !hv_sdf_tiles_refusal(&o, 1);
     const char *outs[] = {out, npy, preview, mesh_out};
     if (cli_check_outputs("sdf", outs, 4, &mesh_path, 1))
         return HV_EXIT_FAIL;
@@ -490,6 +488,15 @@ int cmd_sdf(int argc, char **argv)
         cli_mesh_note("sdf", mesh_path, m);
     cli_mesh_units("sdf", mesh_path, pr.points ? NULL : m, A.units);
     double t_read = hv_now() - t0;
+    /* A cloud's surface is the output's zero set: --mesh-out writes it as it
+     * is (the grid's zero set taken again would stray from it by the
+     * extraction's error), unless the shape was moved or merged. */
+    const int own_surface = pr.points && mesh_out && adaptivity == 0 &&
+                            !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
+    /* A narrow-band level set alone (and a cloud's own surface beside it),
+     * where the options allow: tiles. */
+    const int tiles = out && !dense && !npy && (!mesh_out || own_surface) && !no_tiles &&
+                      !hv_sdf_tiles_refusal(&o, 1);
     sdf_result r = {0};
     hv_sdf_stats S;
     st = compute(&A, m, &o, tiles, &r, &S);
@@ -505,12 +512,7 @@ int cmd_sdf(int argc, char **argv)
         return cli_fail("sdf", mesh_path, st);
     }
     size_t tris = m->ntris;
-    /* The preview of a run in tiles computes its slices from the mesh. A
-     * cloud's surface is the output's zero set: --mesh-out writes it as it
-     * is (the grid's zero set taken again would stray from it by the
-     * extraction's error), unless the shape was moved or merged. */
-    const int own_surface = pr.points && mesh_out && adaptivity == 0 &&
-                            !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
+    /* The preview of a run in tiles computes its slices from the mesh. */
     if (!(tiles && preview) && !own_surface)
         hv_mesh_destroy(&m);
 

@@ -13,11 +13,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define OR_K 8             /* neighbours of a point in the graph */
-#define OR_OFFSET 1.0      /* weight of a neighbour's offset along the directions */
-#define OR_JACOBI_SWEEPS 8 /* of the 3 x 3 eigenproblem (converged after 4-5) */
-#define OR_FLAT 1e-6       /* least spread, of the cloud's size, of a cloud that has a volume */
-#define OR_MAX_RINGS 3     /* cells searched around a point's own for its direction */
+#define OR_K 8               /* neighbours of a point in the graph */
+#define OR_OFFSET 1.0        /* weight of a neighbour's offset along the directions */
+#define OR_JACOBI_SWEEPS 8   /* of the 3 x 3 eigenproblem (converged after 4-5) */
+#define OR_FLAT 1e-6         /* least spread, of the cloud's size, of a cloud that has a volume */
+#define OR_MAX_RINGS 3       /* cells searched around a point's own for its direction */
+#define OR_AXIS_SAMPLES 1024 /* points of the cells around, at most, a direction weighs */
 
 /* The eigenvector of the symmetric 3 x 3 matrix m (xx yy zz xy xz yz) of its
  * smallest eigenvalue, by Jacobi rotations. */
@@ -69,16 +70,17 @@ static int block_runs(const pt_bins *B, const long q[3], long rings, uint32_t *r
 }
 
 /* The direction of the point at place u of the sorted order: the axis of
- * least spread of the points within rho (runs: the cells around its own),
- * weighted (1 - d^2/rho^2)^2 about their weighted mean. */
-static void point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nrun, double rho,
-                       double *v)
+ * least spread of the points within rho (runs: the cells around its own;
+ * every stride-th of each), weighted (1 - d^2/rho^2)^2 about their
+ * weighted mean. */
+static void point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nrun, uint32_t stride,
+                       double rho, double *v)
 {
     const float *x = B->sx + 3 * (size_t)u;
     const double r2 = rho * rho;
     double w0 = 0, m1[3] = {0, 0, 0}, m2[6] = {0, 0, 0, 0, 0, 0};
     for (int r = 0; r < nrun; r++)
-        for (uint32_t k = run[2 * r]; k < run[2 * r] + run[2 * r + 1]; k++) {
+        for (uint32_t k = run[2 * r]; k < run[2 * r] + run[2 * r + 1]; k += stride) {
             const float *y = B->sx + 3 * (size_t)k;
             const double d[3] = {y[0] - x[0], y[1] - x[1], y[2] - x[2]};
             const double d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
@@ -114,8 +116,15 @@ hv_status hv__points_axes(const pt_bins *B, double rho, double *dir)
             long q[3];
             hv__slot_cell(B, t, q);
             const int nrun = block_runs(B, q, rings, run, max);
+            /* A cloud far denser than the voxels (1M points at 64^3: some
+             * 4000 around each) is sampled: every stride-th point of each
+             * cell, about OR_AXIS_SAMPLES in all, give the same axis. */
+            size_t around = 0;
+            for (int r = 0; r < nrun; r++)
+                around += run[2 * r + 1];
+            const uint32_t stride = (uint32_t)(1 + around / OR_AXIS_SAMPLES);
             for (uint32_t u = B->start[t]; u < B->start[t] + B->len[t]; u++)
-                point_axis(B, u, run, nrun, rho, dir + 3 * (size_t)B->order[u]);
+                point_axis(B, u, run, nrun, stride, rho, dir + 3 * (size_t)B->order[u]);
         }
         free(run);
     }
