@@ -8,10 +8,11 @@ heat method gives such a mesh a solid inside. The operators (bpy.ops.heatvox):
 - ``sdf_volume``: the selected meshes -> a Volume object holding the ``sdf``
   grid (negative inside), written as a .vdb beside the .blend;
 - ``remesh``: the selected meshes -> one closed, consistently oriented mesh;
-- ``points_surface``: a vertex-only object with a normal per point -> a
-  closed mesh through the points;
+- ``points_surface``: a vertex-only object, with a normal per point or
+  without (recovered from the points) -> a closed mesh through the points;
 - ``import_points``: a point cloud file (.ply, .xyz, .pts, .xyzn) -> a
-  vertex-only object keeping the file's normals (point attribute "N").
+  vertex-only object keeping the file's normals where it has them (point
+  attribute "N").
 
 Everything runs in world coordinates, so results line up with their inputs.
 The work is done by the heatvox Python package (heatvox/ in this add-on when

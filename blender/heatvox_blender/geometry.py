@@ -51,7 +51,8 @@ def triangles(context, objects):
 def points(context, ob):
     """(points, normals) of a vertex-only object in world coordinates: the
     normals from its point attribute NORMAL_ATTR (which import_points
-    writes; Blender 3.4 reserves the name "normal")."""
+    writes; Blender 3.4 reserves the name "normal"), None without one (a
+    cloud whose orientation heatvox recovers)."""
     if ob is None:
         raise InputError("select a point cloud: a mesh object of vertices")
     if ob.type != "MESH":
@@ -60,20 +61,28 @@ def points(context, ob):
     n = len(me.vertices)
     if n == 0:
         raise InputError("%s has no vertices" % ob.name)
-    attr = me.attributes.get(NORMAL_ATTR)
-    if attr is None or attr.domain != "POINT" or attr.data_type != "FLOAT_VECTOR":
+    if len(me.polygons):
         raise InputError(
-            "%s has no normals: heatvox needs a normal per point (a vector point attribute %s); "
-            "File > Import > Point cloud (heatvox) keeps a PLY's or .xyz's normals" % (ob.name, NORMAL_ATTR)
+            "%s has %d faces: a point cloud is a mesh of vertices alone (SDF Volume and Remesh "
+            "take meshes)" % (ob.name, len(me.polygons))
         )
     co = np.empty(3 * n, dtype=np.float32)
     me.vertices.foreach_get("co", co)
+    pts = _world(co.reshape(n, 3).astype(np.float64), ob.matrix_world)
+    attr = me.attributes.get(NORMAL_ATTR)
+    if attr is None:
+        return pts, None
+    if attr.domain != "POINT" or attr.data_type != "FLOAT_VECTOR":
+        raise InputError(
+            "%s: its attribute %s is not a vector per point, so it cannot be the points' normals "
+            "(remove it and heatvox recovers them)" % (ob.name, NORMAL_ATTR)
+        )
     nr = np.empty(3 * n, dtype=np.float32)
     attr.data.foreach_get("vector", nr)
     m = np.array(ob.matrix_world, dtype=np.float64)
     # Normals go with the inverse transpose; heatvox makes them unit length.
     nrm = nr.reshape(n, 3).astype(np.float64) @ np.linalg.inv(m[:3, :3])
-    return _world(co.reshape(n, 3).astype(np.float64), ob.matrix_world), nrm
+    return pts, nrm
 
 
 def new_mesh(name, vertices, faces):
@@ -93,12 +102,14 @@ def new_mesh(name, vertices, faces):
 
 
 def new_points(name, pts, normals):
-    """A vertex-only mesh with the normals as point attribute NORMAL_ATTR."""
+    """A vertex-only mesh with the normals (None: a cloud without them) as
+    point attribute NORMAL_ATTR."""
     me = bpy.data.meshes.new(name)
     me.vertices.add(len(pts))
     me.vertices.foreach_set("co", np.asarray(pts, dtype=np.float32).ravel())
-    attr = me.attributes.new(NORMAL_ATTR, "FLOAT_VECTOR", "POINT")
-    attr.data.foreach_set("vector", np.asarray(normals, dtype=np.float32).ravel())
+    if normals is not None:
+        attr = me.attributes.new(NORMAL_ATTR, "FLOAT_VECTOR", "POINT")
+        attr.data.foreach_set("vector", np.asarray(normals, dtype=np.float32).ravel())
     me.update()
     return me
 

@@ -228,11 +228,22 @@ class HEATVOX_OT_remesh(_ObjectOp, _Placement, _Shape, bpy.types.Operator):
 
 
 class HEATVOX_OT_points_surface(_ObjectOp, _Placement, bpy.types.Operator):
-    """Closed surface through the active point cloud (a mesh of vertices with a
-    normal per point): flipped normals on part of it are outvoted"""
+    """Closed surface through the active point cloud (a mesh of vertices, with a
+    normal per point or without): flipped normals on part of it are outvoted,
+    missing ones recovered from the points"""
 
     bl_idname = "heatvox.points_surface"
     bl_label = "Points to Surface"
+
+    orient: EnumProperty(
+        name="Normals",
+        items=(
+            ("auto", "Auto", "The cloud's normals (point attribute N), recovered where it has none"),
+            ("given", "Given", "The cloud's normals; a cloud without them is an error"),
+            ("recover", "Recover", "Recovered from the points alone, the cloud's own ignored"),
+        ),
+        default="auto",
+    )
 
     def execute(self, context):
         return _run(self, context, lambda hv: self._surface(hv, context))
@@ -240,17 +251,24 @@ class HEATVOX_OT_points_surface(_ObjectOp, _Placement, bpy.types.Operator):
     def _surface(self, hv, context):
         ob = context.active_object
         pts, nrm = geometry.points(context, ob)
-        verts, faces, rep = hv.points_surface(pts, nrm, **self.placement())
+        if nrm is None and self.orient == "given":
+            raise geometry.InputError(
+                "%s has no normals (no vector point attribute %s): set Normals to Auto or Recover"
+                % (ob.name, geometry.NORMAL_ATTR))
+        verts, faces, rep = hv.points_surface(pts, nrm, orient=self.orient, **self.placement())
         name = _unique(ob.name + "_surface")
         out = bpy.data.objects.new(name, geometry.new_mesh(name, verts, faces))
         geometry.link(context, out)
+        if rep["recovered"]:
+            return "%s: %d points, %d triangles, normals recovered (%d components, %.2f s)" % (
+                name, len(pts), len(faces), rep["orient_components"], rep["t_orient"])
         return "%s: %d points, %d triangles, %d normals against the rest" % (
             name, len(pts), len(faces), rep["normals_against"])
 
 
 class HEATVOX_OT_import_points(bpy.types.Operator, ImportHelper):
-    """A point cloud file (PLY vertices with nx ny nz, or x y z nx ny nz text)
-    as a mesh of vertices that keeps the normals (point attribute "N")"""
+    """A point cloud file (PLY vertices, x y z or x y z nx ny nz text) as a mesh
+    of vertices that keeps the normals where it has them (point attribute "N")"""
 
     bl_idname = "heatvox.import_points"
     bl_label = "Import Point Cloud"
@@ -263,12 +281,9 @@ class HEATVOX_OT_import_points(bpy.types.Operator, ImportHelper):
 
     def _import(self, hv, context):
         pts, nrm = hv.read_points(self.filepath)
-        if nrm is None:  # the add-on's surface needs the points' normals
-            raise geometry.InputError(
-                "%s has no normals: heatvox sdf recovers them (heatvox sdf %s --mesh-out OUT.ply), "
-                "the add-on needs x y z nx ny nz" % (self.filepath, os.path.basename(self.filepath))
-            )
         name = _unique(os.path.splitext(os.path.basename(self.filepath))[0])
         ob = bpy.data.objects.new(name, geometry.new_points(name, pts, nrm))
         geometry.link(context, ob)
+        if nrm is None:
+            return "%s: %d points without normals (Points to Surface recovers them)" % (name, len(pts))
         return "%s: %d points with normals" % (name, len(pts))

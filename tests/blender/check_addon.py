@@ -307,6 +307,22 @@ def points_surface():
     c = v.mean(axis=0)
     expect(np.allclose(c, [0.5, 0.2, 0.9], atol=0.01), "surface centre %s" % c)
     print("    %d points -> %d triangles, volume %+.2f%% of the sphere's" % (len(pts), len(f), 100 * (vol / want - 1)))
+    # The same points without their normals: imported bare, recovered.
+    bare = os.path.join(OUT, "cloud_bare.xyz")
+    np.savetxt(bare, pts, fmt="%.7f")
+    r = bpy.ops.heatvox.import_points(filepath=bare)
+    expect(r == {"FINISHED"}, "import_points of a bare cloud returned %s" % r)
+    ob = bpy.context.active_object
+    expect(len(ob.data.vertices) == len(pts) and "N" not in ob.data.attributes,
+           "bare import: %d vertices, attributes %s" % (len(ob.data.vertices), list(ob.data.attributes.keys())))
+    r = bpy.ops.heatvox.points_surface(resolution=96)
+    expect(r == {"FINISHED"}, "points_surface of a bare cloud returned %s" % r)
+    v, f = tri_arrays(bpy.context.active_object)
+    expect(edges_closed_oriented(f) == (True, True), "recovered surface not closed and oriented")
+    vol = volume_of(v, f)
+    expect(abs(vol / want - 1) <= 0.01, "recovered surface volume %.5f, sphere %.5f" % (vol, want))
+    expect(np.allclose(v.mean(axis=0), [0.5, 0.2, -0.1], atol=0.01), "recovered centre %s" % v.mean(axis=0))
+    print("    the same points without normals -> %d triangles, volume %+.2f%%" % (len(f), 100 * (vol / want - 1)))
 
 
 def bad_input():
@@ -325,7 +341,7 @@ def bad_input():
     ]
     bpy.ops.mesh.primitive_cube_add()
     cube = bpy.context.active_object
-    cases.append(("a mesh without normals", cube, lambda: bpy.ops.heatvox.points_surface(), "Cube has no normals"))
+    cases.append(("a mesh, points", cube, lambda: bpy.ops.heatvox.points_surface(), "Cube has 6 faces"))
     # A directory nobody may write into, root included: one in /proc.
     ro = tempfile.mkdtemp(prefix="hv_ro_", dir=OUT)
     os.chmod(ro, 0o555)
@@ -339,8 +355,11 @@ def bad_input():
     bare = os.path.join(OUT, "bare.xyz")
     with open(bare, "w") as fh:
         fh.write("0 0 0\n1 0 0\n1 1 0\n0 1 1\n")
-    cases.append(("a cloud file without normals", cube, lambda: bpy.ops.heatvox.import_points(filepath=bare),
-                  "bare.xyz has no normals"))
+    expect(bpy.ops.heatvox.import_points(filepath=bare) == {"FINISHED"}, "a bare cloud was not imported")
+    cloud = bpy.context.active_object
+    expect("N" not in cloud.data.attributes, "a bare cloud came with normals")
+    cases.append(("normals asked of a cloud without them", cloud,
+                  lambda: bpy.ops.heatvox.points_surface(orient="given"), "bare has no normals"))
     n0 = len(bpy.data.objects)
     for what, ob, call, want in cases:
         select(ob)
