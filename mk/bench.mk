@@ -15,7 +15,7 @@ $(REF_CGAL): tools/bench/bench_ref_cgal.cpp $(FLAGS) | $(CGAL_STAMP)
 	  -I/usr/include/eigen3 $< -o $@ -lgmp -lmpfr
 
 .PHONY: bench demo
-bench: all $(REF_CGAL) | $(FMM_STAMP) ## the benchmarks, one JSON object a line
+bench: all $(REF_CGAL) | $(FMM_STAMP) $(OPEN3D_STAMP) ## the benchmarks, one JSON object a line
 	@sh tools/bench/bench.sh $(BIN)
 
 demo: all ## the main job on the bundled scenes

@@ -14,6 +14,10 @@ CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
 # (tools/bench/bench_distance.py, make bench only), the same way.
 FMM_PKGS   := python3-scikit-fmm
 FMM_STAMP   = $(BUILD)/.deps-fmm-ok
+# Open3D, the second reference of the points rows without normals
+# (tools/bench/bench_ref_open3d.py, make bench only), the same way.
+OPEN3D_PKGS := python3-open3d
+OPEN3D_STAMP = $(BUILD)/.deps-open3d-ok
 # What `pip install .` and `pip wheel .` need of Debian's Python (the wheel
 # test of make check, tests/check_pip.py), the same way.
 PIP_PKGS   := python3-pip python3-setuptools python3-wheel python3-venv
@@ -26,9 +30,10 @@ BLENDER_STAMP = $(BUILD)/.deps-blender-ok
 deps: $(STAMP) ## install the Debian packages the build needs (as root)
 $(CGAL_STAMP): DEB_PKGS = $(CGAL_PKGS)
 $(FMM_STAMP): DEB_PKGS = $(FMM_PKGS)
+$(OPEN3D_STAMP): DEB_PKGS = $(OPEN3D_PKGS)
 $(PIP_STAMP): DEB_PKGS = $(PIP_PKGS)
 $(BLENDER_STAMP): DEB_PKGS = $(BLENDER_PKGS)
-$(STAMP) $(CGAL_STAMP) $(FMM_STAMP) $(PIP_STAMP) $(BLENDER_STAMP): mk/deps.mk
+$(STAMP) $(CGAL_STAMP) $(FMM_STAMP) $(OPEN3D_STAMP) $(PIP_STAMP) $(BLENDER_STAMP): mk/deps.mk
 	@missing=""; for p in $(DEB_PKGS); do \
 	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed' || missing="$$missing $$p"; \
 	done; \

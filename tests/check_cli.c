@@ -115,8 +115,8 @@ START_TEST(option_errors_should_read_alike_in_every_command)
          "bench band: more than one mesh given ('a.obj' and 'b.obj')"},
         {"bench points x.obj --n 8", "bench points: --n needs an integer in 16..4096, got '8'"},
         {"bench points x.obj --n 64 --scenario dusty",
-         "bench points: --scenario 'dusty': one of clean, uneven, noise-0.25, noise-0.5, "
-         "flipped-10, hole"},
+         "bench points: --scenario 'dusty': one of clean, uneven, density-4, noise-0.25, "
+         "noise-0.5, flipped-10, hole, all"},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         char err[4096];

@@ -75,14 +75,25 @@ if [ -f "$bunny" ]; then
   # Surfaces from oriented points drawn on the bunny (heatvox sdf PTS.xyz
   # --mesh-out) against CGAL's Poisson reconstruction of the same points
   # ($dir/bench_ref_cgal, built by make bench; its rows are skipped without
-  # it), clean and with scan defects, scored against the bunny. About two
-  # minutes on 2 cores, CGAL's for the most part; --unoriented adds each set
-  # without its normals (heatvox-recover rows, about a minute more).
-  "$hv" bench points "$bunny" --n 128 --count 50000 --unoriented
+  # it), clean and with scan defects, scored against the bunny.
+  # --unoriented adds each set without its normals: heatvox's recovered
+  # orientation against CGAL's (jet normals, mst_orient_normals) and
+  # Open3D's (estimate_normals, orient_normals_consistent_tangent_plane)
+  # from the same points, each with its Poisson reconstruction; about 16
+  # minutes on 2 cores, the references' for the most part.
+  o3d="$(dirname "$0")/bench_ref_open3d.py"
+  "$hv" bench points "$bunny" --n 128 --count 200000 --unoriented --open3d "$o3d"
+  spot="$meshes/spot.obj"
+  if [ -f "$spot" ]; then
+    "$hv" bench points "$spot" --n 128 --count 200000 --unoriented --open3d "$o3d" \
+      --scenario clean --scenario density-4 --scenario noise-0.5 --scenario all
+  fi
   "$hv" bench points "$bunny" --n 64 --count 20000 --scenario clean --scenario noise-0.5
-  # A million points to a 512^3 narrow band (heatvox sdf PTS.xyz -o X.vdb),
-  # against the bunny's own band in the same run.
-  "$hv" bench points "$bunny" --n 512 --count 1000000 --scenario clean --scenario noise-0.5 --band
+  # A million points to a 512^3 narrow band and its mesh (heatvox sdf
+  # PTS.xyz -o X.vdb --mesh-out S.ply), with their normals and recovered,
+  # against the bunny's own band and mesh in the same run.
+  "$hv" bench points "$bunny" --n 512 --count 1000000 --scenario clean --scenario noise-0.5 \
+    --band --unoriented
 else
   echo "bench: $bunny not found, sdf, mesh and points rows skipped" >&2
 fi

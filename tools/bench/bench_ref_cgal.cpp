@@ -4,12 +4,17 @@
 // level meshed by CGAL's surface mesher), the reference that `heatvox bench
 // points` measures heatvox's reconstruction from oriented points against.
 //
-//   bench_ref_cgal IN.xyz OUT.ply --h H
+//   bench_ref_cgal IN.xyz OUT.ply --h H [--unoriented]
 //
-// IN.xyz: one point a line, "x y z nx ny nz" ('#' starts a comment). OUT.ply:
+// IN.xyz: one point a line, "x y z nx ny nz" ('#' starts a comment; with
+// --unoriented "x y z" will do, and normals given are ignored: they are
+// estimated by jet fitting and oriented along a minimum spanning tree, CGAL's
+// jet_estimate_normals and mst_orient_normals, as its Poisson example does,
+// and the points the tree leaves unoriented are dropped). OUT.ply:
 // the mesh, binary little-endian PLY (double coordinates), written under a
 // temporary name and renamed when complete. One JSON line on stdout: points,
-// triangles, h, poisson_seconds (the implicit function), mesh_seconds (the
+// triangles, h, with --unoriented normals_seconds, orient_seconds and
+// oriented (the points kept), poisson_seconds (the implicit function), mesh_seconds (the
 // surface mesher), compute_seconds (both), seconds (the whole run, reading and
 // writing included), peak_rss_mb. Exit codes: 0 success, 1 failure, 2 usage.
 //
@@ -21,7 +26,9 @@
 #include <CGAL/Poisson_reconstruction_function.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_default_triangulation_3.h>
+#include <CGAL/jet_estimate_normals.h>
 #include <CGAL/make_surface_mesh.h>
+#include <CGAL/mst_orient_normals.h>
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -54,6 +61,9 @@ typedef CGAL::Implicit_surface_3<Kernel, Poisson> Surface_3;
 typedef CGAL::Surface_mesh<Point> Mesh;
 
 const char *PROG = "bench_ref_cgal";
+// The neighbours of --unoriented's jet fit and spanning tree: CGAL's Poisson
+// reconstruction example's 18.
+const int NEIGHBOURS = 18;
 
 // A failure to report: the message names the file and the problem.
 struct Fail {
@@ -76,16 +86,20 @@ int usage(const char *why)
     if (why)
         std::fprintf(stderr, "%s: %s\n", PROG, why);
     std::fprintf(f,
-                 "usage: %s IN.xyz OUT.ply --h H\n"
+                 "usage: %s IN.xyz OUT.ply --h H [--unoriented]\n"
                  "CGAL's Poisson surface reconstruction of the oriented points of IN.xyz\n"
                  "(x y z nx ny nz a line), meshed at the resolution of a grid of voxel size H,\n"
-                 "written to OUT.ply; one JSON line of times and sizes on stdout.\n",
-                 PROG);
+                 "written to OUT.ply; one JSON line of times and sizes on stdout.\n"
+                 "--unoriented: the normals estimated (jet_estimate_normals) and oriented\n"
+                 "(mst_orient_normals), %d neighbours each, from the points alone (x y z a\n"
+                 "line will do; normals given are ignored).\n",
+                 PROG, NEIGHBOURS);
     return why ? 2 : 0;
 }
 
-// One line of IN.xyz: false for a blank or comment line, else its six numbers.
-bool parse_line(const std::string &line, const std::string &where, double v[6])
+// One line of IN.xyz: 0 for a blank or comment line, else how many numbers
+// (6, or 3 when bare is allowed).
+int parse_line(const std::string &line, const std::string &where, bool bare, double v[6])
 {
     const size_t hash = line.find('#');
     std::istringstream in(line.substr(0, hash));
@@ -100,12 +114,14 @@ bool parse_line(const std::string &line, const std::string &where, double v[6])
             fail(where + ": '" + word + "' is not a finite number");
         got++;
     }
-    if (got != 0 && got != 6)
-        fail(where + ": " + std::to_string(got) + " numbers, 6 expected (x y z nx ny nz)");
-    return got == 6;
+    if (got != 0 && got != 6 && !(bare && got == 3))
+        fail(where + ": " + std::to_string(got) + " numbers, " + (bare ? "3 or " : "") +
+             "6 expected (x y z nx ny nz)");
+    return got;
 }
 
-std::vector<Point_with_normal> read_xyz(const char *path)
+// The points of IN.xyz; without their normals (zero vectors) when bare.
+std::vector<Point_with_normal> read_xyz(const char *path, bool bare)
 {
     std::ifstream in(path);
     if (!in)
@@ -114,11 +130,17 @@ std::vector<Point_with_normal> read_xyz(const char *path)
     std::string line;
     for (size_t no = 1; std::getline(in, line); no++) {
         double v[6];
-        if (!parse_line(line, std::string(path) + ":" + std::to_string(no), v))
+        const std::string where = std::string(path) + ":" + std::to_string(no);
+        const int got = parse_line(line, where, bare, v);
+        if (!got)
             continue;
+        if (bare) {
+            pts.emplace_back(Point(v[0], v[1], v[2]), Vector(0, 0, 0));
+            continue;
+        }
         const Vector n(v[3], v[4], v[5]);
         if (n.squared_length() == 0)
-            fail(std::string(path) + ":" + std::to_string(no) + ": zero normal");
+            fail(where + ": zero normal");
         pts.emplace_back(Point(v[0], v[1], v[2]), n / std::sqrt(n.squared_length()));
     }
     if (in.bad())
@@ -130,8 +152,27 @@ std::vector<Point_with_normal> read_xyz(const char *path)
 }
 
 struct Times {
-    double poisson = 0, mesh = 0;
+    double normals = 0, orient = 0, poisson = 0, mesh = 0;
 };
+
+// --unoriented: the normals by jet fitting, their signs along the minimum
+// spanning tree; the points it leaves unoriented dropped (as CGAL's example
+// does). Fails when none is oriented.
+void estimate_normals(std::vector<Point_with_normal> &pts, Times &t)
+{
+    const auto params =
+        CGAL::parameters::point_map(CGAL::First_of_pair_property_map<Point_with_normal>())
+            .normal_map(CGAL::Second_of_pair_property_map<Point_with_normal>());
+    double t0 = now();
+    CGAL::jet_estimate_normals<CGAL::Sequential_tag>(pts, NEIGHBOURS, params);
+    t.normals = now() - t0;
+    t0 = now();
+    const auto unoriented = CGAL::mst_orient_normals(pts, NEIGHBOURS, params);
+    pts.erase(unoriented, pts.end());
+    t.orient = now() - t0;
+    if (pts.empty())
+        fail("mst_orient_normals oriented no point");
+}
 
 // The surface mesher's criteria for the resolution of a grid of voxel size h.
 // A grid's zero level mesh (one vertex per crossed voxel) has edges of about
@@ -253,22 +294,30 @@ double peak_rss_mb()
     return getrusage(RUSAGE_SELF, &ru) == 0 ? ru.ru_maxrss / 1024.0 : 0;
 }
 
-int run(const char *in, const char *out, double h)
+int run(const char *in, const char *out, double h, bool unoriented)
 {
     const double t0 = now();
     // The surface mesher starts from random points, by default seeded from the
     // clock: a fixed seed makes the runs repeatable.
     CGAL::get_default_random() = CGAL::Random(1);
     Staged staged(out);
-    const std::vector<Point_with_normal> pts = read_xyz(in);
+    std::vector<Point_with_normal> pts = read_xyz(in, unoriented);
+    const size_t count = pts.size();
     Times t;
+    if (unoriented)
+        estimate_normals(pts, t);
     const Mesh mesh = reconstruct(pts, h, t);
     write_ply(staged, mesh);
-    std::printf("{\"ref\":\"cgal-poisson\",\"points\":%zu,\"triangles\":%zu,\"h\":%.9g,"
-                "\"poisson_seconds\":%.4f,\"mesh_seconds\":%.4f,\"compute_seconds\":%.4f,"
+    std::printf("{\"ref\":\"%s\",\"points\":%zu,\"triangles\":%zu,\"h\":%.9g,",
+                unoriented ? "cgal-unoriented" : "cgal-poisson", count,
+                (size_t)mesh.number_of_faces(), h);
+    if (unoriented)
+        std::printf("\"normals_seconds\":%.4f,\"orient_seconds\":%.4f,\"oriented\":%zu,", t.normals,
+                    t.orient, pts.size());
+    std::printf("\"poisson_seconds\":%.4f,\"mesh_seconds\":%.4f,\"compute_seconds\":%.4f,"
                 "\"seconds\":%.4f,\"peak_rss_mb\":%.1f}\n",
-                pts.size(), (size_t)mesh.number_of_faces(), h, t.poisson, t.mesh,
-                t.poisson + t.mesh, now() - t0, peak_rss_mb());
+                t.poisson, t.mesh, t.normals + t.orient + t.poisson + t.mesh, now() - t0,
+                peak_rss_mb());
     return 0;
 }
 
@@ -278,8 +327,11 @@ int main(int argc, char **argv)
 {
     const char *in = nullptr, *out = nullptr;
     double h = 0;
+    bool unoriented = false;
     for (int a = 1; a < argc; a++) {
-        if (!std::strcmp(argv[a], "--h")) {
+        if (!std::strcmp(argv[a], "--unoriented")) {
+            unoriented = true;
+        } else if (!std::strcmp(argv[a], "--h")) {
             if (++a == argc)
                 return usage("--h needs a voxel size");
             char *end = nullptr;
@@ -303,7 +355,7 @@ int main(int argc, char **argv)
     if (!in || !out || h == 0)
         return usage(!in ? "no input" : !out ? "no output" : "--h H is required");
     try {
-        return run(in, out, h);
+        return run(in, out, h, unoriented);
     } catch (const Fail &e) {
         std::fprintf(stderr, "%s: %s\n", PROG, e.msg.c_str());
     } catch (const std::bad_alloc &) {
