@@ -15,8 +15,10 @@ CGAL_STAMP  = $(BUILD)/.deps-cgal-ok
 FMM_PKGS   := python3-scikit-fmm
 FMM_STAMP   = $(BUILD)/.deps-fmm-ok
 # Open3D, the second reference of the points rows without normals
-# (tools/bench/bench_ref_open3d.py, make bench only), the same way.
-OPEN3D_PKGS := python3-open3d
+# (tools/bench/bench_ref_open3d.py), and SciPy, which the orientation's
+# alternatives are measured with (tools/bench/orient_alternatives.py):
+# make bench only, the same way.
+OPEN3D_PKGS := python3-open3d python3-scipy
 OPEN3D_STAMP = $(BUILD)/.deps-open3d-ok
 # What `pip install .` and `pip wheel .` need of Debian's Python (the wheel
 # test of make check, tests/check_pip.py), the same way.

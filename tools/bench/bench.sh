@@ -82,7 +82,19 @@ if [ -f "$bunny" ]; then
   # from the same points, each with its Poisson reconstruction; about 16
   # minutes on 2 cores, the references' for the most part.
   o3d="$(dirname "$0")/bench_ref_open3d.py"
-  "$hv" bench points "$bunny" --n 128 --count 200000 --unoriented --open3d "$o3d"
+  keep="$dir/bench-points-keep"
+  "$hv" bench points "$bunny" --n 128 --count 200000 --unoriented --open3d "$o3d" --keep "$keep"
+  # The orientation's alternatives (the diffused line field, a Z2
+  # synchronisation of its cells) on three of those clouds and a thin plate,
+  # beside heatvox's own (numpy and scipy; about 3 minutes).
+  if /usr/bin/python3 -c 'import scipy' 2>/dev/null; then
+    PYTHONPATH="$(dirname "$0")/../../python" HEATVOX_LIBRARY="$dir/libheatvox.so" \
+      /usr/bin/python3 "$(dirname "$0")/orient_alternatives.py" --t 0.25 --plate \
+      "$keep/clean.xyz" "$keep/noise-0.5.xyz" "$keep/hole.xyz"
+  else
+    echo "bench: /usr/bin/python3 cannot import scipy, orientation alternatives skipped" >&2
+  fi
+  rm -rf "$keep"
   spot="$meshes/spot.obj"
   if [ -f "$spot" ]; then
     "$hv" bench points "$spot" --n 128 --count 200000 --unoriented --open3d "$o3d" \
