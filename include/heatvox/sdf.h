@@ -286,7 +286,8 @@ HV_API hv_status hv_sdf_stream_tiles(const hv_mesh *m, const hv_sdf_opts *opts, 
  *                (Gaussian weights of width sigma = max(the block's voxel,
  *                the spacing), corrected for the curvature by the points'
  *                normals, at most one heat voxel); on noisy points the
- *                kernel widens (to 1.5 sigma) and each move is weighed
+ *                kernel widens (to 1.5 sigma, while a fit weighs fewer
+ *                than about 30 points) and each move is weighed
  *                against the heat method's surface by its uncertainty;
  *                where the cloud has a gap the heat method's surface stays
  * The result is closed and oriented outward; its signed distance

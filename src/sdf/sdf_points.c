@@ -18,6 +18,7 @@
 #define PTS_NOISE_STRIDE 8                 /* every 8th cell of vertices measures the noise */
 #define PTS_NOISE_FLOOR 0.1  /* a clean fit's residual, of sigma0 (bunny: 0.03-0.05) */
 #define PTS_WIDEN 1.5        /* the kernel's width on noisy points, at most, of sigma0 */
+#define PTS_FIT_NEFF 30.0    /* points a fit weighs, beyond which noise widens no kernel */
 #define PTS_HEAT_ERR 0.05    /* the heat method's surface error, heat voxels */
 #define PTS_MIN_RECOVER 4    /* points a recovered orientation needs, at least */
 #define PTS_ROUNDS 4         /* heat rounds of a recovered orientation, at most */
@@ -433,7 +434,8 @@ static hv_status project_fits(const pt_bins *B, const pt_bins *V, const hv_point
  * heights) on every PTS_NOISE_STRIDE-th cell of vertices, into *s2. */
 static hv_status points_noise(const pt_bins *B, const pt_bins *V, const hv_points *P,
                               const double *area, const double *nrm, const hv_grid *gh,
-                              const hv_mesh *M, double sigma, vfit *F, double *un, double *s2)
+                              const hv_mesh *M, double sigma, vfit *F, double *un, double *s2,
+                              double *neff)
 {
     hv_status st = project_fits(B, V, P, area, nrm, gh, M, sigma, PTS_NOISE_STRIDE, F, un);
     double *var = st ? NULL : malloc(M->nverts * sizeof *var);
@@ -444,6 +446,11 @@ static hv_status points_noise(const pt_bins *B, const pt_bins *V, const hv_point
         if (!isnan(F[i].d))
             var[k++] = F[i].var;
     *s2 = k ? select_kth(var, k, k / 2) : 0;
+    k = 0;
+    for (size_t i = 0; !st && i < M->nverts; i++)
+        if (!isnan(F[i].d))
+            var[k++] = F[i].neff;
+    *neff = k ? select_kth(var, k, k / 2) : 0;
     free(var);
     return st;
 }
@@ -454,11 +461,13 @@ static hv_status points_noise(const pt_bins *B, const pt_bins *V, const hv_point
  * clean surface leaves, PTS_NOISE_FLOOR sigma0), and the offset of a fit
  * over n_eff points is uncertain by s / sqrt(n_eff), where the heat
  * method's surface, diffused over the points of a wider patch, is not:
- * the kernel widens with s, to PTS_WIDEN sigma0 at s = sigma0 / 5
- * (the bunny at 128^3: 0.104 -> 0.100 voxel with 0.5 voxel of noise,
- * 0.066 -> 0.062 with 0.25), and each offset is
- * weighed against the heat method's own error b (PTS_HEAT_ERR heat
- * voxels) as independent estimates are, b^2 / (b^2 + s^2 / n_eff). */
+ * the kernel widens with s, to PTS_WIDEN sigma0 at s = sigma0 / 5, but
+ * no wider than makes the median fit weigh PTS_FIT_NEFF points (n_eff
+ * grows as sigma^2): the bunny at 128^3 with 0.5 voxel of noise, 50 000
+ * points (n_eff 13 at sigma0): 0.106 -> 0.104 voxel widened; 200 000
+ * (n_eff 48): 0.068 unwidened, 0.076 widened. Each offset is weighed
+ * against the heat method's own error b (PTS_HEAT_ERR heat voxels) as
+ * independent estimates are, b^2 / (b^2 + s^2 / n_eff). */
 static hv_status points_project(const pt_bins *B, const hv_points *P, const double *area,
                                 const double *nrm, const hv_grid *gh, hv_mesh *M,
                                 hv_points_report *R)
@@ -472,12 +481,13 @@ static hv_status points_project(const pt_bins *B, const hv_points *P, const doub
     memset(&V, 0, sizeof V);
     hv_status st = F && un ? hv__bins_build(&V, M->verts, nv, B->lo, B->c, &cells)
                            : hv__error(HV_ERR_NOMEM, "points: out of memory for %zu vertices", nv);
-    double s2 = 0;
+    double s2 = 0, n0 = 0;
     if (!st)
-        st = points_noise(B, &V, P, area, nrm, gh, M, sigma0, F, un, &s2);
+        st = points_noise(B, &V, P, area, nrm, gh, M, sigma0, F, un, &s2, &n0);
     const double floor = PTS_NOISE_FLOOR * sigma0, noise2 = fmax(0, s2 - floor * floor),
                  b = PTS_HEAT_ERR * gh->h;
-    const double sigma = sigma0 * fmin(PTS_WIDEN, 1 + sqrt(noise2) / (0.4 * sigma0));
+    const double widen = fmin(PTS_WIDEN, 1 + sqrt(noise2) / (0.4 * sigma0));
+    const double sigma = sigma0 * fmax(1, fmin(widen, n0 > 0 ? sqrt(PTS_FIT_NEFF / n0) : widen));
     if (!st)
         st = project_fits(B, &V, P, area, nrm, gh, M, sigma, 1, F, un);
     hv__bins_free(&V);
