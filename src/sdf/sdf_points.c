@@ -431,26 +431,26 @@ static hv_status project_fits(const pt_bins *B, const pt_bins *V, const hv_point
 }
 
 /* The points' scatter about the fits (the median variance of their
- * heights) on every PTS_NOISE_STRIDE-th cell of vertices, into *s2. */
+ * heights) and how many points a fit weighs (the median n_eff) on every
+ * PTS_NOISE_STRIDE-th cell of vertices, into *s2 and *neff. */
 static hv_status points_noise(const pt_bins *B, const pt_bins *V, const hv_points *P,
                               const double *area, const double *nrm, const hv_grid *gh,
                               const hv_mesh *M, double sigma, vfit *F, double *un, double *s2,
                               double *neff)
 {
     hv_status st = project_fits(B, V, P, area, nrm, gh, M, sigma, PTS_NOISE_STRIDE, F, un);
-    double *var = st ? NULL : malloc(M->nverts * sizeof *var);
+    double *var = st ? NULL : malloc(2 * M->nverts * sizeof *var);
     if (!st && !var)
         st = hv__error(HV_ERR_NOMEM, "points: out of memory for %zu vertices", M->nverts);
+    double *ne = st ? NULL : var + M->nverts;
     size_t k = 0;
     for (size_t i = 0; !st && i < M->nverts; i++)
-        if (!isnan(F[i].d))
-            var[k++] = F[i].var;
+        if (!isnan(F[i].d)) {
+            var[k] = F[i].var;
+            ne[k++] = F[i].neff;
+        }
     *s2 = k ? select_kth(var, k, k / 2) : 0;
-    k = 0;
-    for (size_t i = 0; !st && i < M->nverts; i++)
-        if (!isnan(F[i].d))
-            var[k++] = F[i].neff;
-    *neff = k ? select_kth(var, k, k / 2) : 0;
+    *neff = k ? select_kth(ne, k, k / 2) : 0;
     free(var);
     return st;
 }
