@@ -311,10 +311,13 @@ typedef struct hv_points_report {
     int recovered;
     size_t orient_components; /* neighbour-graph components oriented outward each */
     size_t orient_components_flipped;
-    int orient_rounds;      /* heat rounds that turned points to phi's outside */
-    size_t orient_turned;   /* points the rounds turned, in all */
-    size_t orient_disagree; /* recovered normals against the given ones (where given) */
-    double t_orient;        /* seconds: directions, propagation and the rounds' heat */
+    int orient_rounds;          /* heat rounds that turned points to phi's outside */
+    size_t orient_turned;       /* points the rounds turned, in all */
+    size_t orient_disagree;     /* recovered normals against the given ones (where given) */
+    double t_orient;            /* seconds: directions, propagation and the rounds' heat */
+    double orient_spread;       /* median spread off the points' planes (0 clean, 1 no plane) */
+    int orient_lines;           /* 1: the directions came from the diffused line field */
+    int orient_line_iterations; /* of its six heat steps */
 } hv_points_report;
 
 /* The closed surface of oriented points P (above); opts as for

@@ -407,6 +407,9 @@ class hv_points_report(Structure):
         ("orient_turned", c_size_t),
         ("orient_disagree", c_size_t),
         ("t_orient", c_double),
+        ("orient_spread", c_double),
+        ("orient_lines", c_int),
+        ("orient_line_iterations", c_int),
     ]
 
 

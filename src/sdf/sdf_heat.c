@@ -165,8 +165,8 @@ double hv__sdf_interp(const hv_grid *g, const float *v, const double x[3])
  * z-planes and takes the corners of every point that fall in it: no atomics,
  * and every cell sums its points in the same order whatever the thread
  * count. */
-static void splat(const hv_grid *g, const hv_quad *q, int ncomp, const double *vals, int vstride,
-                  float *const *out)
+void hv__sdf_splat(const hv_grid *g, const hv_quad *q, int ncomp, const double *vals, int vstride,
+                   float *const *out)
 {
     const double inv_h3 = 1.0 / (g->h * g->h * g->h);
     const size_t plane = (size_t)g->n[0] * g->n[1];
@@ -240,8 +240,8 @@ static hv_status local_shift(heat_work *w, const hv_grid *g, const hv_sdf_opts *
 #pragma omp parallel for schedule(static)
     for (size_t p = 0; p < w->q->count; p++)
         res[p] = w->q->area[p] * hv__sdf_interp(g, phi, w->q->x + 3 * p);
-    splat(g, w->q, 1, res, 1, &f0);
-    splat(g, w->q, 1, NULL, 1, &f1);
+    hv__sdf_splat(g, w->q, 1, res, 1, &f0);
+    hv__sdf_splat(g, w->q, 1, NULL, 1, &f1);
     if (!w->heat) {
         hv_solver_opts so;
         hv_solver_opts_default(&so);
@@ -409,9 +409,9 @@ static hv_status heat_splat(heat_work *w, const hv_grid *gh, int unsig)
             return hv__error(HV_ERR_NOMEM, "sdf: out of memory for the surface field (%zu cells)",
                              hcount);
     if (unsig)
-        splat(gh, w->q, 1, NULL, 1, w->Y0);
+        hv__sdf_splat(gh, w->q, 1, NULL, 1, w->Y0);
     else
-        splat(gh, w->q, 3, w->q->w, 3, w->Y0);
+        hv__sdf_splat(gh, w->q, 3, w->q->w, 3, w->Y0);
     return HV_OK;
 }
 

@@ -75,18 +75,47 @@ int hv__ring_next(const pt_bins *B, ring_iter *it, uint32_t *j);
 
 /* The orientation of a cloud without normals (sdf_orient.c): each point's
  * direction (sign unknown) into dir (by point), the axis of least spread of
- * the points of B within rho; then the directions turned along a minimum spanning tree
+ * the points of B within rho, and that spread over the least across it into
+ * spread (0 on a clean plane, near 1 where no plane shows); then the directions turned along a minimum spanning tree
  * of the graph of each point's nearest in the 27 cells of `near` around it,
  * each component outward (area: the points' areas; counts into R). */
 /* 1 when the points lie on a plane or a line (or are one point): no spread
  * across the least-spread axis of the whole cloud. */
 int hv__points_flat(const hv_points *P);
-hv_status hv__points_axes(const pt_bins *B, double rho, double *dir);
+hv_status hv__points_axes(const pt_bins *B, double rho, double *dir, float *spread);
 hv_status hv__points_propagate(const pt_bins *near, const hv_points *P, const double *area,
                                double *dir, hv_points_report *R);
 
+/* The eigenvalues lam and eigenvectors (the columns of e) of the symmetric
+ * 3 x 3 matrix m (xx yy zz xy xz yz), by Jacobi rotations (sdf_orient.c). */
+void hv__sym3_axes(const double m[6], double lam[3], double e[3][3]);
+
+/* The diffused line field of a cloud (points_lines.c): each point's
+ * direction dir (sign unknown) splatted with its area as the tensor
+ * a d d^T, six components, and one heat step (I - t Lap) per component on
+ * g with the pipeline's solver (backend; opencl solves on the host, FFTW or
+ * multigrid). T[0..5]: the fields, xx yy zz xy xz yz. */
+typedef struct pt_lines {
+    const hv_grid *g;
+    float *T[6];
+    int iterations; /* of the six heat steps, in all */
+} pt_lines;
+hv_status hv__lines_build(pt_lines *L, const hv_points *P, const double *area, const double *dir,
+                          const hv_grid *g, double t, hv_backend backend);
+void hv__lines_free(pt_lines *L);
+/* The field's principal direction at x (world) into v, its sign along
+ * `along` when that is not NULL; returns the anisotropy (l1 - l2) / l1
+ * (0 where the field holds nothing), l1 >= l2 >= l3 the eigenvalues. At
+ * cell c of L->g: hv__lines_cell. */
+double hv__lines_at(const pt_lines *L, const double x[3], const double *along, double v[3]);
+double hv__lines_cell(const pt_lines *L, size_t c, double v[3]);
+
 /* Trilinear interpolation of v (on g's cells) at world point x (sdf_heat.c). */
 double hv__sdf_interp(const hv_grid *g, const float *v, const double x[3]);
+/* Adds ncomp values per point of q (vals[vstride * p + b], or its area when
+ * vals is NULL) / h^3 trilinearly to out[b] (sdf_heat.c). */
+void hv__sdf_splat(const hv_grid *g, const hv_quad *q, int ncomp, const double *vals, int vstride,
+                   float *const *out);
 
 /* out (on g) = trilinear interpolation of v (on gh) at g's cell centres. */
 hv_status hv__sdf_upsample(const hv_grid *gh, const float *v, const hv_grid *g, float *out);

@@ -20,12 +20,12 @@
 #define OR_MAX_RINGS 3       /* cells searched around a point's own for its direction */
 #define OR_AXIS_SAMPLES 1024 /* points of the cells around, at most, a direction weighs */
 
-/* The eigenvector of the symmetric 3 x 3 matrix m (xx yy zz xy xz yz) of its
- * smallest eigenvalue, by Jacobi rotations. */
-static void smallest_axis(const double m[6], double v[3])
+void hv__sym3_axes(const double m[6], double lam[3], double e[3][3])
 {
     double a[3][3] = {{m[0], m[3], m[4]}, {m[3], m[1], m[5]}, {m[4], m[5], m[2]}};
-    double e[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            e[i][k] = i == k;
     for (int sweep = 0; sweep < OR_JACOBI_SWEEPS; sweep++)
         for (int p = 0; p < 2; p++)
             for (int q = p + 1; q < 3; q++) {
@@ -49,10 +49,22 @@ static void smallest_axis(const double m[6], double v[3])
                     e[k][q] = s * x + c * y;
                 }
             }
-    int j = a[0][0] <= a[1][1] && a[0][0] <= a[2][2] ? 0 : a[1][1] <= a[2][2] ? 1 : 2;
+    for (int k = 0; k < 3; k++)
+        lam[k] = a[k][k];
+}
+
+/* The eigenvector of m of its smallest eigenvalue; returns that eigenvalue
+ * over the middle one (0 on a plane, 1 for no plane at all). */
+static double smallest_axis(const double m[6], double v[3])
+{
+    double lam[3], e[3][3];
+    hv__sym3_axes(m, lam, e);
+    int j = lam[0] <= lam[1] && lam[0] <= lam[2] ? 0 : lam[1] <= lam[2] ? 1 : 2;
+    const double mid = fmin(lam[(j + 1) % 3], lam[(j + 2) % 3]);
     const double len = sqrt(e[0][j] * e[0][j] + e[1][j] * e[1][j] + e[2][j] * e[2][j]);
     for (int k = 0; k < 3; k++)
         v[k] = e[k][j] / len;
+    return mid > 0 ? fmax(lam[j], 0) / mid : 1;
 }
 
 /* The runs of points of the cells within `rings` of cell q: up to max
@@ -72,9 +84,9 @@ static int block_runs(const pt_bins *B, const long q[3], long rings, uint32_t *r
 /* The direction of the point at place u of the sorted order: the axis of
  * least spread of the points within rho (runs: the cells around its own;
  * every stride-th of each), weighted (1 - d^2/rho^2)^2 about their
- * weighted mean. */
-static void point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nrun, uint32_t stride,
-                       double rho, double *v)
+ * weighted mean; returns the spread along it over the least across it. */
+static double point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nrun,
+                         uint32_t stride, double rho, double *v)
 {
     const float *x = B->sx + 3 * (size_t)u;
     const double r2 = rho * rho;
@@ -97,10 +109,10 @@ static void point_axis(const pt_bins *B, uint32_t u, const uint32_t *run, int nr
     const double cov[6] = {m2[0] / w0 - c[0] * c[0], m2[1] / w0 - c[1] * c[1],
                            m2[2] / w0 - c[2] * c[2], m2[3] / w0 - c[0] * c[1],
                            m2[4] / w0 - c[0] * c[2], m2[5] / w0 - c[1] * c[2]};
-    smallest_axis(cov, v);
+    return smallest_axis(cov, v);
 }
 
-hv_status hv__points_axes(const pt_bins *B, double rho, double *dir)
+hv_status hv__points_axes(const pt_bins *B, double rho, double *dir, float *spread)
 {
     const long rings = (long)fmin(OR_MAX_RINGS, ceil(rho / B->c));
     const int max = (int)((2 * rings + 1) * (2 * rings + 1) * (2 * rings + 1));
@@ -123,8 +135,10 @@ hv_status hv__points_axes(const pt_bins *B, double rho, double *dir)
             for (int r = 0; r < nrun; r++)
                 around += run[2 * r + 1];
             const uint32_t stride = (uint32_t)(1 + around / OR_AXIS_SAMPLES);
-            for (uint32_t u = B->start[t]; u < B->start[t] + B->len[t]; u++)
-                point_axis(B, u, run, nrun, stride, rho, dir + 3 * (size_t)B->order[u]);
+            for (uint32_t u = B->start[t]; u < B->start[t] + B->len[t]; u++) {
+                const uint32_t i = B->order[u];
+                spread[i] = (float)point_axis(B, u, run, nrun, stride, rho, dir + 3 * (size_t)i);
+            }
         }
         free(run);
     }

@@ -16,13 +16,15 @@
 #define PTS_FACING 0.5                     /* cosine above which a point faces a vertex's way */
 #define PTS_HEAT_CELLS ((double)(1 << 22)) /* the heat grid's default bound */
 #define PTS_NOISE_STRIDE 8                 /* every 8th cell of vertices measures the noise */
-#define PTS_NOISE_FLOOR 0.1  /* a clean fit's residual, of sigma0 (bunny: 0.03-0.05) */
-#define PTS_WIDEN 1.5        /* the kernel's width on noisy points, at most, of sigma0 */
-#define PTS_FIT_NEFF 30.0    /* points a fit weighs, beyond which noise widens no kernel */
-#define PTS_HEAT_ERR 0.05    /* the heat method's surface error, heat voxels */
-#define PTS_MIN_RECOVER 4    /* points a recovered orientation needs, at least */
-#define PTS_ROUNDS 4         /* heat rounds of a recovered orientation, at most */
-#define PTS_FIT_SAMPLES 2048 /* candidates a vertex's fit weighs, at most */
+#define PTS_NOISE_FLOOR 0.1   /* a clean fit's residual, of sigma0 (bunny: 0.03-0.05) */
+#define PTS_WIDEN 1.5         /* the kernel's width on noisy points, at most, of sigma0 */
+#define PTS_FIT_NEFF 30.0     /* points a fit weighs, beyond which noise widens no kernel */
+#define PTS_HEAT_ERR 0.05     /* the heat method's surface error, heat voxels */
+#define PTS_MIN_RECOVER 4     /* points a recovered orientation needs, at least */
+#define PTS_ROUNDS 4          /* heat rounds of a recovered orientation, at most */
+#define PTS_FIT_SAMPLES 2048  /* candidates a vertex's fit weighs, at most */
+#define PTS_LINES_SPREAD 0.25 /* median spread above which the line field gives directions */
+#define PTS_LINES_T 0.25      /* the line field's heat step, of h^2 */
 /* Peak memory of the surface beyond the cloud's own, measured (peak RSS of
  * heatvox sdf -o X.vdb on 1M and 2M points of the bunny at 64^3 and 256^3:
  * 130-150 bytes a point more with the normals given, 240-260 recovered),
@@ -621,10 +623,49 @@ out:
     return st;
 }
 
+/* The median of the points' spreads (sdf_orient.c): how far the cloud's
+ * neighbourhoods are from planes. */
+static hv_status median_spread(const float *spread, size_t n, double *med)
+{
+    double *v = malloc(n * sizeof *v);
+    if (!v)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu spreads", n);
+    for (size_t i = 0; i < n; i++)
+        v[i] = spread[i];
+    *med = select_kth(v, n, n / 2);
+    free(v);
+    return HV_OK;
+}
+
+/* The directions of a noisy cloud from its diffused line field instead
+ * (points_lines.c), each kept on its own axis's side. */
+static hv_status lines_directions(const hv_points *P, const hv_sdf_opts *o, pts_work *w,
+                                  hv_points_report *R)
+{
+    pt_lines L;
+    const double h = w->gh->h;
+    hv_status st = hv__lines_build(&L, P, w->area, w->dir, w->gh, PTS_LINES_T * h * h,
+                                   hv_backend_resolve(o->backend, hv_grid_count(w->gh), 0));
+    if (st)
+        return st;
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < P->count; i++) {
+        double v[3];
+        hv__lines_at(&L, P->xyz + 3 * i, w->dir + 3 * i, v);
+        memcpy(w->dir + 3 * i, v, sizeof v);
+    }
+    R->orient_lines = 1;
+    R->orient_line_iterations = L.iterations;
+    hv__lines_free(&L);
+    return HV_OK;
+}
+
 /* 0. The normals of a cloud without them (or whose normals are not to be
  * trusted): directions from the neighbourhoods of about two voxels of the
- * block, turned consistently and outward (sdf_orient.c). */
-static hv_status points_recover(const hv_points *P, pts_work *w, hv_points_report *R)
+ * block, from the diffused line field where the cloud is noisy, turned
+ * consistently and outward (sdf_orient.c). */
+static hv_status points_recover(const hv_points *P, const hv_sdf_opts *o, pts_work *w,
+                                hv_points_report *R)
 {
     const double rho = fmax(2 * w->gh->h / R->coarsen, 3 * R->spacing_median);
     /* Cells of side rho: the 27 around a point's own hold its
@@ -632,10 +673,18 @@ static hv_status points_recover(const hv_points *P, pts_work *w, hv_points_repor
      * coarsened heat grid (three block voxels wide at 512^3) would hold. */
     pt_bins A;
     size_t cells;
+    float *spread = malloc(P->count * sizeof *spread);
+    if (!spread)
+        return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu spreads", P->count);
     hv_status st = hv__bins_build(&A, P->xyz, P->count, w->gh->origin, rho, &cells);
     if (!st)
-        st = hv__points_axes(&A, rho, w->dir);
+        st = hv__points_axes(&A, rho, w->dir, spread);
     hv__bins_free(&A);
+    if (!st)
+        st = median_spread(spread, P->count, &R->orient_spread);
+    free(spread);
+    if (!st && R->orient_spread > PTS_LINES_SPREAD)
+        st = lines_directions(P, o, w, R);
     return st ? st : hv__points_propagate(&w->near, P, w->area, w->dir, R);
 }
 
@@ -728,7 +777,7 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
     hv_points Q = *P;
     if (w->dir) {
         tt = hv_now();
-        if ((st = points_recover(P, w, R)))
+        if ((st = points_recover(P, o, w, R)))
             return st;
         Q.normals = w->dir;
         R->t_orient = hv_now() - tt;

@@ -105,6 +105,9 @@ class Points(unittest.TestCase):
         p, _ = sphere_cloud()
         v, f, rep = heatvox.points_surface(p, None, res=48)
         self.assertEqual(rep["recovered"], 1)
+        # clean: the neighbourhoods' own axes, not the diffused line field
+        self.assertLess(rep["orient_spread"], 0.05)
+        self.assertEqual(rep["orient_lines"], 0)
         r = np.linalg.norm(v, axis=1)
         self.assertLess(np.abs(r - 0.8).max(), 0.5 * rep["h"])
         # outward: the signed volume of the closed surface is the ball's
