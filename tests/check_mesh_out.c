@@ -983,6 +983,47 @@ START_TEST(sdf_mesh_write_failure_after_the_vdb_should_replace_no_output)
 }
 END_TEST
 
+/* A cloud's mesh beside its batch volume is the cloud's own surface, as
+ * heatvox sdf --mesh-out writes it (the same bytes), the band in tiles;
+ * with --adaptivity the grid's zero set again. */
+START_TEST(batch_mesh_of_a_cloud_should_be_its_own_surface)
+{
+    const char *hv = tl_heatvox_bin();
+    ck_assert_msg(hv != NULL, "no heatvox binary beside the tests (set HEATVOX_BIN)");
+    make_tmpdir();
+    scenes(hv);
+    const char *cloud = tmp_path("scenes/points/torus_scan_bare.xyz");
+    char cmd[3000], out[8192];
+    snprintf(cmd, sizeof cmd,
+             "%s batch %s -o %s --res 32 --mesh-out-format ply --report %s/report.jsonl -q", hv,
+             cloud, tmp_path("b"), tmpdir);
+    int rc = run_capture(cmd, out, sizeof out);
+    ck_assert_msg(rc == 0, "%s: exit %d: %s", cmd, rc, out);
+    snprintf(cmd, sizeof cmd, "%s sdf %s -o %s --mesh-out %s --res 32 -q", hv, cloud,
+             tmp_path("s.vdb"), tmp_path("s.ply"));
+    rc = run_capture(cmd, out, sizeof out);
+    ck_assert_msg(rc == 0, "%s: exit %d: %s", cmd, rc, out);
+    snprintf(cmd, sizeof cmd, "cmp %s %s", tmp_path("b/torus_scan_bare.ply"), tmp_path("s.ply"));
+    rc = run_capture(cmd, out, sizeof out);
+    ck_assert_msg(rc == 0, "%s: %s", cmd, out);
+    snprintf(cmd, sizeof cmd, "cat %s/report.jsonl", tmpdir);
+    run_capture(cmd, out, sizeof out);
+    ck_assert_msg(strstr(out, "\"tiles\":") && strstr(out, "\"orient_lines\":false"), "report: %s",
+                  out);
+    /* with adaptivity: the grid's zero set, not the same file */
+    snprintf(cmd, sizeof cmd,
+             "%s batch %s -o %s --res 32 --mesh-out-format ply --adaptivity 0.5 -q", hv, cloud,
+             tmp_path("a"));
+    rc = run_capture(cmd, out, sizeof out);
+    ck_assert_msg(rc == 0, "%s: exit %d: %s", cmd, rc, out);
+    snprintf(cmd, sizeof cmd, "cmp -s %s %s", tmp_path("a/torus_scan_bare.ply"), tmp_path("s.ply"));
+    ck_assert_int_ne(run_capture(cmd, out, sizeof out), 0);
+    assert_info_clean(hv, tmp_path("a/torus_scan_bare.ply"));
+    assert_info_clean(hv, tmp_path("b/torus_scan_bare.ply"));
+    tl_rm_rf(tmpdir);
+}
+END_TEST
+
 START_TEST(batch_mesh_out_format_should_write_beside_the_volume_report_it_and_resume)
 {
     const char *hv = tl_heatvox_bin();
@@ -1080,6 +1121,7 @@ static Suite *mesh_out_suite(void)
     tcase_add_test(tc, sdf_mesh_out_usage_errors_should_exit_2_before_computing);
     tcase_add_test(tc, sdf_mesh_write_failure_after_the_vdb_should_replace_no_output);
     tcase_add_test(tc, batch_mesh_out_format_should_write_beside_the_volume_report_it_and_resume);
+    tcase_add_test(tc, batch_mesh_of_a_cloud_should_be_its_own_surface);
     suite_add_tcase(s, tc);
     return s;
 }

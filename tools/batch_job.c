@@ -456,14 +456,6 @@ static int write_sidecar(const char *input, const char *output, const char *cano
     return 0;
 }
 
-/* A narrow-band .vdb alone is computed in tiles where the options allow
- * (the rule of heatvox sdf and the library, hv_sdf_tiles_refusal). */
-static int wants_tiles(const batch_opts *o)
-{
-    return o->format == BATCH_VDB && !o->dense && !o->preview &&
-           o->mesh_format == BATCH_MESH_NONE && !hv_sdf_tiles_refusal(&o->sdf, 1);
-}
-
 /* The volume: w already holds the band streamed into it (wants_tiles), else
  * the dense grid g goes in. */
 static int write_volume(const char *output, const hv_grid *g, hv_vdb_writer *w, const batch_opts *o,
@@ -508,17 +500,39 @@ typedef struct job {
     hv_points_report points; /* points.points > 0 for a point cloud */
 } job;
 
-/* The zero level set as a mesh beside the volume. */
+/* A cloud's surface is the volume's zero set: the mesh beside it is that
+ * surface as it is, unless the shape was moved or merged (heatvox sdf
+ * --mesh-out's rule). */
+static int own_surface(const job *J)
+{
+    const hv_sdf_opts *o = &J->o.sdf;
+    return J->points.points && J->o.mesh_format != BATCH_MESH_NONE && J->o.adaptivity == 0 &&
+           !(o->close > 0 || o->open > 0 || o->offset != 0 || o->shell > 0);
+}
+
+/* A narrow-band .vdb alone (and a cloud's own surface beside it) is
+ * computed in tiles where the options allow (the rule of heatvox sdf and
+ * the library, hv_sdf_tiles_refusal). */
+static int wants_tiles(const job *J)
+{
+    const batch_opts *o = &J->o;
+    return o->format == BATCH_VDB && !o->dense && !o->preview &&
+           (o->mesh_format == BATCH_MESH_NONE || own_surface(J)) &&
+           !hv_sdf_tiles_refusal(&o->sdf, 1);
+}
+
+/* The zero level set as a mesh beside the volume (a cloud's: its surface). */
 static int job_mesh(job *J)
 {
     J->stage = "mesh";
     batch_mesh_path(J->output, J->o.mesh_format, J->mesh_path, sizeof J->mesh_path);
     double t = hv_now();
     hv_mesh *iso = NULL;
-    hv_status st = hv_grid_to_mesh(J->g, 0.0, J->o.adaptivity, &iso);
+    hv_status st = own_surface(J) ? HV_OK : hv_grid_to_mesh(J->g, 0.0, J->o.adaptivity, &iso);
     if (!st) {
-        J->mesh_tris = iso->ntris;
-        st = hv_mesh_write(iso, J->mesh_path);
+        const hv_mesh *m = iso ? iso : J->m;
+        J->mesh_tris = m->ntris;
+        st = hv_mesh_write(m, J->mesh_path);
     }
     hv_mesh_destroy(&iso);
     J->t_mesh = hv_now() - t;
@@ -594,7 +608,7 @@ static int job_run(job *J)
     J->have_rep = hv_mesh_report_compute(J->m, &J->rep) == HV_OK;
     J->t_report = hv_now() - t;
     J->stage = "sdf";
-    st = wants_tiles(&J->o) ? job_stream(J) : hv_sdf_compute(J->m, &J->o.sdf, &J->g, &J->stats);
+    st = wants_tiles(J) ? job_stream(J) : hv_sdf_compute(J->m, &J->o.sdf, &J->g, &J->stats);
     if (st) {
         error_text(st, J->input, J->err, sizeof J->err);
         return -1;
@@ -666,10 +680,11 @@ static void report_points(batch_buf *b, const job *J)
     bb_printf(b,
               ",\"points\":{\"count\":%zu,\"spacing\":%.9g,\"normals_turned\":%zu"
               ",\"normal_agreement\":%.6f,\"vertices_unsupported\":%zu,\"orientation\":\"%s\""
-              ",\"orient_rounds\":%d,\"orient_seconds\":%.3f}",
+              ",\"orient_rounds\":%d,\"orient_seconds\":%.3f,\"orient_spread\":%.4f"
+              ",\"orient_lines\":%s}",
               p->points, p->spacing_median, p->normals_against, p->normal_agreement,
               p->vertices_unsupported, p->recovered ? "recovered" : "given", p->orient_rounds,
-              p->t_orient);
+              p->t_orient, p->orient_spread, p->orient_lines ? "true" : "false");
 }
 
 /* The job's JSON line on stdout (batch --report's format). */
