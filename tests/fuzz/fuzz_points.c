@@ -1,4 +1,4 @@
-/* libFuzzer target: hv_points_read on oriented point clouds. The file is
+/* libFuzzer target: hv_points_read on point clouds, with normals or without. The file is
  * named .xyz; the reader takes PLY by its content ("ply" first), so one
  * target covers the text and the PLY readers. */
 #include "fuzz_common.h"

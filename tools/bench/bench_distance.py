@@ -328,9 +328,9 @@ def imports():
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--heatvox", default="build/heatvox")
-    ap.add_argument("--n", type=int, nargs="+", default=[128, 256])
+    ap.add_argument("--n", type=int, nargs="+", action="extend")
     ap.add_argument("--scene", choices=["building", "maze"], action="append")
-    ap.add_argument("--stages", choices=["tiles", "whole"], nargs="+", default=["tiles"])
+    ap.add_argument("--stages", choices=["tiles", "whole"], nargs="+", action="extend")
     ap.add_argument("--backend", default=None, help="heatvox's --backend (default: its own choice)")
     a = ap.parse_args()
     mods = imports()
@@ -340,9 +340,9 @@ def main():
     if not os.access(hv, os.X_OK):
         sys.exit("bench_distance: no heatvox at %s" % hv)
     for scene in a.scene or ["building", "maze"]:
-        for stages in a.stages:
+        for stages in a.stages or ["tiles"]:
             prev = None
-            for n in a.n:
+            for n in a.n or [128, 256]:
                 with tempfile.TemporaryDirectory(prefix="hv_bench_dist_") as d:
                     prev = add_growth(bench(hv, scene, n, stages, a.backend, d, *mods), prev)
                 print(json.dumps(prev), flush=True)
