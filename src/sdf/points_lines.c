@@ -113,9 +113,14 @@ static double principal(const double m[6], const double *along, double v[3])
 
 double hv__lines_at(const pt_lines *L, const double x[3], const double *along, double v[3])
 {
-    double m[6];
-    for (int b = 0; b < 6; b++)
-        m[b] = hv__sdf_interp(L->g, L->T[b], x);
+    size_t c0, step[3];
+    double wt[8], m[6] = {0, 0, 0, 0, 0, 0};
+    hv__trilinear(L->g, x, &c0, step, wt);
+    for (int q = 0; q < 8; q++) {
+        const size_t c = c0 + (q & 1 ? step[0] : 0) + (q & 2 ? step[1] : 0) + (q & 4 ? step[2] : 0);
+        for (int b = 0; b < 6; b++)
+            m[b] += wt[q] * L->T[b][c];
+    }
     return principal(m, along, v);
 }
 
