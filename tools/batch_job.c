@@ -500,14 +500,11 @@ typedef struct job {
     hv_points_report points; /* points.points > 0 for a point cloud */
 } job;
 
-/* A cloud's surface is the volume's zero set: the mesh beside it is that
- * surface as it is, unless the shape was moved or merged (heatvox sdf
- * --mesh-out's rule). */
+/* A cloud's mesh is its own surface (heatvox sdf --mesh-out's rule). */
 static int own_surface(const job *J)
 {
-    const hv_sdf_opts *o = &J->o.sdf;
-    return J->points.points && J->o.mesh_format != BATCH_MESH_NONE && J->o.adaptivity == 0 &&
-           !(o->close > 0 || o->open > 0 || o->offset != 0 || o->shell > 0);
+    return J->o.mesh_format != BATCH_MESH_NONE &&
+           cli_own_surface(&J->points, &J->o.sdf, J->o.adaptivity);
 }
 
 /* A narrow-band .vdb alone (and a cloud's own surface beside it) is

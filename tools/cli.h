@@ -256,5 +256,10 @@ int cli_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m, hv_points_report *pr);
 /* With -v, a line on stderr about a cloud read by cli_read_shape. */
 void cli_points_note(const char *cmd, const char *path, const hv_points_report *pr);
+/* 1 when a cloud's mesh beside its volume is the cloud's own surface (pr:
+ * its report, points > 0 for a cloud): the volume's zero set as it is,
+ * unless adaptivity, an offset, a shell, closing or opening asks for the
+ * zero set of the grid again. */
+int cli_own_surface(const hv_points_report *pr, const hv_sdf_opts *o, double adaptivity);
 
 #endif

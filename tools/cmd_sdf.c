@@ -491,8 +491,7 @@ int cmd_sdf(int argc, char **argv)
     /* A cloud's surface is the output's zero set: --mesh-out writes it as it
      * is (the grid's zero set taken again would stray from it by the
      * extraction's error), unless the shape was moved or merged. */
-    const int own_surface = pr.points && mesh_out && adaptivity == 0 &&
-                            !(o.close > 0 || o.open > 0 || o.offset != 0 || o.shell > 0);
+    const int own_surface = mesh_out && cli_own_surface(&pr, &o, adaptivity);
     /* A narrow-band level set alone (and a cloud's own surface beside it),
      * where the options allow: tiles. */
     const int tiles = out && !dense && !npy && (!mesh_out || own_surface) && !no_tiles &&

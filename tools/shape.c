@@ -19,6 +19,12 @@ hv_status cli_read_shape(const char *path, const hv_sdf_opts *o, hv_mesh **m, hv
     return st;
 }
 
+int cli_own_surface(const hv_points_report *pr, const hv_sdf_opts *o, double adaptivity)
+{
+    return pr->points && adaptivity == 0 &&
+           !(o->close > 0 || o->open > 0 || o->offset != 0 || o->shell > 0);
+}
+
 void cli_points_note(const char *cmd, const char *path, const hv_points_report *pr)
 {
     if (!pr->points)
