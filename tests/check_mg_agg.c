@@ -347,13 +347,18 @@ static mg_agg *build_levels(const int n[3], const uint8_t *mask, int heat, hv_se
 
 /* Level 1's operator against P^T A P computed from its definition with the
  * fine level's own apply (double): columns of plain rows (the template) and
- * of rows next to the walls (the hash-table path), heat and Poisson. */
+ * of rows next to the walls and the box's faces (the hash-table path, most
+ * of them copies of their class's row), heat and Poisson, on the baffles and
+ * on a maze of odd size. */
+#define WALL_ROWS 40
 START_TEST(galerkin_rows_should_be_p_transpose_a_p)
 {
-    const int n[3] = {40, 38, 36};
+    const int sizes[2][3] = {{40, 38, 36}, {37, 35, 33}};
+    for (int scene = 0; scene < 4; scene++) {
+    const int *n = sizes[scene / 2], heat = scene % 2;
     size_t N = (size_t)n[0] * n[1] * n[2];
-    uint8_t *mask = baffles(3, n);
-    for (int heat = 0; heat < 2; heat++) {
+    uint8_t *mask = scene < 2 ? baffles(3, n) : maze(n, 8);
+    {
         hv_setup s;
         mg_hierarchy H;
         mg_agg *g = build_levels(n, mask, heat, &s, &H);
@@ -361,16 +366,19 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
         int nplain = 0;
         for (int32_t J = 0; J < L1->n; J++)
             nplain += L1->tn && L1->plain[J];
-        ck_assert_msg(L1->tn > 0 && nplain > 50, "%d plain rows of %d", nplain, L1->n);
+        const int want_plain = scene < 2 ? 6 : 0; /* the maze's walls leave no plain row */
+        ck_assert_msg(!want_plain || (L1->tn > 0 && nplain > 50), "%d plain rows of %d", nplain,
+                      L1->n);
         double wp = 4.0 / 3.0 / L0->lmax;
         double *v = calloc(N, sizeof *v), *w = calloc(N, sizeof *w), *t = calloc(N, sizeof *t);
         double *col = calloc((size_t)L1->n, sizeof *col);
         int checked[2] = {0, 0};
-        for (int32_t J = 0; J < L1->n && (checked[0] < 6 || checked[1] < 6); J += 7) {
+        for (int32_t J = 0; J < L1->n && (checked[0] < WALL_ROWS || checked[1] < want_plain);
+             J += 7) {
             if (L0->mrp[J] == L0->mrp[J + 1])
                 continue; /* a block without fluid */
             int plain = L1->tn && L1->plain[J];
-            if (checked[plain] >= 6)
+            if (checked[plain] >= (plain ? want_plain : WALL_ROWS))
                 continue;
             checked[plain]++;
             /* v = P e_J = (I - wp D^-1 A) P0 e_J */
@@ -404,7 +412,7 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
                               col[I]);
             free(row);
         }
-        ck_assert_msg(checked[0] == 6 && checked[1] == 6,
+        ck_assert_msg(checked[0] == WALL_ROWS && checked[1] == want_plain,
                       "rows checked: %d next to walls, %d plain", checked[0], checked[1]);
         free(v);
         free(w);
@@ -414,6 +422,7 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
         hv__mg_hierarchy_free(&H);
     }
     free(mask);
+    }
 }
 END_TEST
 

@@ -91,7 +91,7 @@ static hv_status build_csr(mg_csr *out, int32_t nrows, int32_t ncols, row_fn fn,
     memset(out, 0, sizeof *out);
     int nthr = 1;
 #ifdef _OPENMP
-    nthr = nrows > 2048 ? omp_get_max_threads() : 1;
+    nthr = nrows > 256 ? omp_get_max_threads() : 1;
 #endif
     rows_out *outs = calloc((size_t)nthr, sizeof *outs);
     int32_t *len = malloc(((size_t)nrows + 1) * sizeof *len);
@@ -380,12 +380,30 @@ typedef struct g0_template {
     double val[125];
 } g0_template;
 
+/* Rows of level 1 that share their neighbourhood: classes of rows whose 5^3
+ * blocks of fine cells read the same (open faces, fluid, in the grid) and
+ * hold one aggregate each, so that g0_row does the same arithmetic in the
+ * same order for each of them and gives the same entries at the same block
+ * offsets, bit for bit. One row of each class of two or more is computed;
+ * the others are copied from it. */
+#define G0_WIN 125          /* blocks of a neighbourhood */
+#define G0_SPLIT UINT64_MAX /* a block code: more than one aggregate */
+#define G0_CLASS_MAX 65536  /* classes computed at most */
+
+typedef struct g0_class {
+    int n;
+    int8_t off[G0_WIN][3];
+    double val[G0_WIN];
+} g0_class;
+
 typedef struct g0_ctx {
     agg_op o;
     const mg_alevel *L, *C;
     double wp;
     const uint8_t *plain;    /* per level-1 unknown: a plain neighbourhood (or NULL) */
     const g0_template *tmpl; /* NULL until made */
+    const int32_t *cls;      /* per level-1 unknown: its class, -1 none (or NULL) */
+    const g0_class *rows;    /* the classes' rows (NULL while they are made) */
 } g0_ctx;
 
 /* Row J of A_c = P^T A (P e_J): v = P e_J on the members of J and their
@@ -455,6 +473,245 @@ static int g0_row(const void *ctx, void *scratch, int32_t J, spa *cs)
     return 0;
 }
 
+/* A level-1 row from its class: the class's entries at J's block offsets. */
+static int g0_class_row(const g0_ctx *x, int32_t J, spa *cs)
+{
+    const g0_class *K = &x->rows[x->cls[J]];
+    const int32_t *p = x->C->xyz + 3 * (size_t)J;
+    const int *e = x->C->ext;
+    for (int q = 0; q < K->n; q++) {
+        int32_t I =
+            (p[0] + K->off[q][0]) + e[0] * ((p[1] + K->off[q][1]) + e[1] * (p[2] + K->off[q][2]));
+        spa_add(cs, I, K->val[q]);
+    }
+    return 0;
+}
+
+static int g0_row_classed(const void *ctx, void *scratch, int32_t J, spa *cs)
+{
+    const g0_ctx *x = ctx;
+    if (x->cls && x->rows && x->cls[J] >= 0)
+        return g0_class_row(x, J, cs);
+    return g0_row(ctx, scratch, J, cs);
+}
+
+/* Per block of level 1: its 8 fine cells as bytes (open faces, 0x40 fluid,
+ * 0x80 outside the grid), or G0_SPLIT where the block holds a cell of
+ * another aggregate than the block's own. */
+static void block_codes(const mg_agg *g, uint64_t *code)
+{
+    const mg_level *F = g->fine;
+    const mg_alevel *L = &g->lv[0];
+    const int *e = g->lv[1].ext;
+    const size_t nb = (size_t)e[0] * e[1] * e[2];
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+    for (size_t b = 0; b < nb; b++) {
+        int bx = (int)(b % e[0]), by = (int)((b / e[0]) % e[1]),
+            bz = (int)(b / ((size_t)e[0] * e[1]));
+        uint64_t v = 0;
+        for (int q = 0; q < 8 && v != G0_SPLIT; q++) {
+            int i = 2 * bx + (q & 1), j = 2 * by + ((q >> 1) & 1), k = 2 * bz + (q >> 2);
+            uint64_t byte = 0x80;
+            if (i < F->n[0] && j < F->n[1] && k < F->n[2]) {
+                size_t c = (size_t)i + F->sy * j + F->sz * k;
+                byte = g->faces[c] | (F->a[c] != 0.0f ? 0x40u : 0u);
+                if (L->agg[c] >= 0 && (size_t)L->agg[c] != b)
+                    v = G0_SPLIT;
+            }
+            if (v != G0_SPLIT)
+                v |= byte << (8 * q);
+        }
+        code[b] = v;
+    }
+}
+
+/* Fingerprints of the 5^3 neighbourhoods of blocks: two independent 64-bit
+ * hashes of the block codes, taken along x, then y, then z (5 values each,
+ * a block outside the grid reading as the hash of blocks outside), and a
+ * flag for a neighbourhood with a split block. */
+#define G0_OUTSIDE 0x8080808080808080ull
+
+static inline uint64_t mix5(uint64_t h, uint64_t k, const uint64_t v[5])
+{
+    for (int q = 0; q < 5; q++) {
+        h = (h ^ v[q]) * k;
+        h ^= h >> 29;
+    }
+    return h;
+}
+
+static const uint64_t seed[2] = {0x9E3779B97F4A7C15ull, 0xD1B54A32D192ED03ull},
+                      mult[2] = {0xBF58476D1CE4E5B9ull, 0x94D049BB133111EBull};
+
+/* One pass along axis a: dst[b] = the hash of src over b - 2 .. b + 2. */
+static void window_pass(const int e[3], int a, const uint64_t *src, uint64_t out, int chain,
+                        uint64_t *dst)
+{
+    const size_t nb = (size_t)e[0] * e[1] * e[2];
+    const size_t stride = a == 0 ? 1 : a == 1 ? (size_t)e[0] : (size_t)e[0] * e[1];
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+    for (size_t b = 0; b < nb; b++) {
+        int x = (int)(b / stride % (size_t)e[a]);
+        uint64_t v[5];
+        for (int d = -2; d <= 2; d++)
+            v[d + 2] = x + d >= 0 && x + d < e[a] ? src[b + (ptrdiff_t)d * (ptrdiff_t)stride] : out;
+        dst[b] = mix5(seed[chain], mult[chain], v);
+    }
+}
+
+/* fp[2 b], fp[2 b + 1]: block b's fingerprint, (0, 0) where its
+ * neighbourhood holds a split block. work: 2 nb values. */
+static void window_prints(const int e[3], const uint64_t *code, uint64_t *fp, uint64_t *w0,
+                          uint64_t *w1)
+{
+    const size_t nb = (size_t)e[0] * e[1] * e[2];
+    uint64_t *wk[2] = {w0, w1};
+    for (int chain = 0; chain < 2; chain++) {
+        uint64_t out = G0_OUTSIDE, o5[5];
+        const uint64_t *src = code;
+        for (int a = 0; a < 3; a++) {
+            uint64_t *dst = wk[a % 2];
+            window_pass(e, a, src, out, chain, dst);
+            for (int q = 0; q < 5; q++)
+                o5[q] = out;
+            out = mix5(seed[chain], mult[chain], o5);
+            src = dst;
+        }
+        /* After three passes the hashes are in w0. */
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+        for (size_t b = 0; b < nb; b++)
+            fp[2 * b + chain] = w0[b];
+    }
+    /* The split flag: an OR over the neighbourhood, axis by axis. */
+    uint8_t *f0 = (uint8_t *)w0, *f1 = (uint8_t *)w1;
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+    for (size_t b = 0; b < nb; b++)
+        f0[b] = code[b] == G0_SPLIT;
+    for (int a = 0; a < 3; a++) {
+        const uint8_t *src = a % 2 ? f1 : f0;
+        uint8_t *dst = a % 2 ? f0 : f1;
+        const size_t stride = a == 0 ? 1 : a == 1 ? (size_t)e[0] : (size_t)e[0] * e[1];
+#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
+        for (size_t b = 0; b < nb; b++) {
+            int x = (int)(b / stride % (size_t)e[a]), any = 0;
+            for (int d = -2; d <= 2; d++)
+                any |= x + d >= 0 && x + d < e[a] && src[b + (ptrdiff_t)d * (ptrdiff_t)stride];
+            dst[b] = (uint8_t)any;
+        }
+    }
+    /* After three passes the flags are in f1. */
+    for (size_t b = 0; b < nb; b++)
+        if (f1[b])
+            fp[2 * b] = fp[2 * b + 1] = 0;
+}
+
+/* cls[J] for the rows of level 1 that are not plain: the class of J's
+ * neighbourhood (by its fingerprint: two 64-bit hashes), -1 for a row alone
+ * in its class. Returns the number of classes, or -1 out of memory. */
+static int32_t row_classes(const mg_agg *g, const uint8_t *plain, int32_t *cls)
+{
+    const mg_alevel *C = &g->lv[1];
+    const int *e = C->ext;
+    const size_t nb = (size_t)e[0] * e[1] * e[2];
+    uint64_t *code = malloc(nb * sizeof *code), *fp = malloc(2 * nb * sizeof *fp);
+    uint64_t *w0 = malloc(nb * sizeof *w0), *w1 = malloc(nb * sizeof *w1);
+    size_t tsize = 1;
+    while (tsize < 2 * nb)
+        tsize *= 2;
+    int32_t *slot = malloc(tsize * sizeof *slot), *count = NULL, ncls = -1;
+    if (!code || !fp || !w0 || !w1 || !slot)
+        goto done;
+    block_codes(g, code);
+    window_prints(e, code, fp, w0, w1);
+    for (size_t q = 0; q < tsize; q++)
+        slot[q] = -1;
+    /* Classes named by their first row; cls[J] the first row for now. */
+    for (size_t J = 0; J < nb; J++) {
+        const uint64_t *h = fp + 2 * J;
+        cls[J] = -1;
+        if ((plain && plain[J]) || (!h[0] && !h[1]))
+            continue;
+        size_t s = h[0] & (tsize - 1);
+        while (slot[s] >= 0 &&
+               (fp[2 * (size_t)slot[s]] != h[0] || fp[2 * (size_t)slot[s] + 1] != h[1]))
+            s = (s + 1) & (tsize - 1);
+        if (slot[s] < 0)
+            slot[s] = (int32_t)J;
+        else
+            cls[J] = slot[s];
+    }
+    /* Classes of two rows or more, numbered; the first row joins its class. */
+    if (!(count = calloc(nb, sizeof *count)))
+        goto done;
+    for (size_t J = 0; J < nb; J++)
+        if (cls[J] >= 0)
+            count[cls[J]]++;
+    ncls = 0;
+    for (size_t J = 0; J < nb; J++)
+        count[J] = count[J] > 0 && ncls < G0_CLASS_MAX ? ncls++ : -1;
+    for (size_t J = 0; J < nb; J++)
+        cls[J] = count[J] >= 0 ? count[J] : cls[J] >= 0 ? count[cls[J]] : -1;
+    for (size_t J = nb; J < (size_t)C->n; J++)
+        cls[J] = -1;
+done:
+    free(code);
+    free(fp);
+    free(w0);
+    free(w1);
+    free(slot);
+    free(count);
+    return ncls;
+}
+
+/* The rows of the classes: each class's first row by g0_row, as offsets to
+ * its block. Returns 0, or -1 where g0_row failed. */
+static int class_rows(const g0_ctx *x, int32_t ncls, g0_class *rows)
+{
+    const mg_alevel *C = x->C;
+    int32_t *first = malloc(((size_t)ncls + 1) * sizeof *first);
+    int failed = !first;
+    for (int32_t k = 0; first && k < ncls; k++)
+        first[k] = -1;
+    for (int32_t J = 0; first && J < C->n; J++)
+        if (x->cls[J] >= 0 && first[x->cls[J]] < 0)
+            first[x->cls[J]] = J;
+#pragma omp parallel if (ncls > 64 && !failed)
+    {
+        spa cs = {0};
+        g0_scratch *S = malloc(sizeof *S);
+        int bad = failed || !S || spa_init(&cs, C->n);
+        if (S)
+            memset(S, 0, sizeof *S);
+#pragma omp for schedule(dynamic, 16)
+        for (int32_t k = 0; k < ncls; k++) {
+            if (bad)
+                continue;
+            int32_t J = first[k];
+            const int32_t *p = C->xyz + 3 * (size_t)J;
+            spa_start(&cs);
+            if (g0_row(x, S, J, &cs) || cs.nidx > G0_WIN) {
+                bad = 1;
+                continue;
+            }
+            rows[k].n = (int)cs.nidx;
+            for (size_t q = 0; q < cs.nidx; q++) {
+                const int32_t *r = C->xyz + 3 * (size_t)cs.idx[q];
+                for (int a = 0; a < 3; a++)
+                    rows[k].off[q][a] = (int8_t)(r[a] - p[a]);
+                rows[k].val[q] = cs.acc[cs.idx[q]];
+            }
+        }
+        spa_free(&cs);
+        free(S);
+        if (bad) {
+#pragma omp atomic write
+            failed = 1;
+        }
+    }
+    free(first);
+    return failed ? -1 : 0;
+}
+
 /* Blocks of level 1 whose 5^3 neighbourhood of blocks is whole and all fluid
  * (3D binary fine levels): their rows are all the same, up to the columns.
  * plain[J] per level-1 unknown (NULL when there are none). */
@@ -513,7 +770,7 @@ static hv_status plain_blocks(const mg_agg *g, uint8_t **plain_out)
 hv_status hv__agg_galerkin0(mg_agg *g, double wp)
 {
     mg_alevel *C = &g->lv[1];
-    g0_ctx x = {level_op(g, 0), &g->lv[0], C, wp, NULL, NULL};
+    g0_ctx x = {level_op(g, 0), &g->lv[0], C, wp, NULL, NULL, NULL, NULL};
     uint8_t *plain;
     hv_status st = plain_blocks(g, &plain);
     if (st)
@@ -546,7 +803,18 @@ hv_status hv__agg_galerkin0(mg_agg *g, double wp)
     }
     x.plain = plain;
     x.tmpl = T;
-    st = build_csr(&C->A, C->n, C->n, g0_row, &x, sizeof(g0_scratch), 0, 1e-9);
+    /* The other rows by class where they repeat (3D binary levels). */
+    int32_t *cls = NULL, ncls = 0;
+    g0_class *rows = NULL;
+    if (g->dim == 3 && g->fine->binary && (cls = malloc(((size_t)C->n + 1) * sizeof *cls)) &&
+        (ncls = row_classes(g, plain, cls)) > 0 && (rows = malloc((size_t)ncls * sizeof *rows))) {
+        x.cls = cls;
+        if (class_rows(&x, ncls, rows) == 0)
+            x.rows = rows;
+    }
+    st = build_csr(&C->A, C->n, C->n, g0_row_classed, &x, sizeof(g0_scratch), 0, 1e-9);
+    free(cls);
+    free(rows);
     if (!st && T) {
         /* Level 1 keeps the template for its plain rows (as build_csr keeps
          * them: tiny entries off the diagonal left out). */

@@ -86,7 +86,7 @@ static void drop_geometric(mg_state *m)
 static hv_status use_aggregation(mg_state *m, int soft)
 {
     m->agg_tried = 1;
-    if (!m->use_pcg || m->nlev < 2)
+    if (!m->use_pcg || (m->nlev < 2 && !m->fine_only))
         return HV_OK;
     hv_status st = hv__mg_agg_build(&m->agg, &m->lv[0], m->dim, m->alpha);
     if (st == HV_ERR_NOMEM && soft)
@@ -101,26 +101,17 @@ static hv_status use_aggregation(mg_state *m, int soft)
     return HV_OK;
 }
 
-static hv_status mg_create(void **state, const hv_setup *s)
+/* The geometric levels (mg_setup.c), at most max_levels of them, with their
+ * work vectors, PCG's prolongation weights and restriction work, and, when
+ * they go all the way down, the bottom's CG work. */
+static hv_status geometric_levels(mg_state *m, const hv_setup *s, int max_levels)
 {
-    mg_state *m = calloc(1, sizeof *m);
-    if (!m)
-        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory");
-    m->s = s;
-    m->dim = s->p.dim;
-    m->alpha = s->p.alpha;
-    m->smoother = s->o.smoother;
-    m->pre = s->o.pre_smooth;
-    m->post = s->o.post_smooth;
-    m->use_pcg = s->p.solid != NULL;
-    m->stat_masked = m->use_pcg && m->alpha > 0 && m->smoother == HV_SMOOTH_RBGS;
-    hv_status st = HV_OK;
-
-    /* Levels and coefficients (mg_setup.c); the state takes them over. */
     mg_hierarchy H;
-    if ((st = hv__mg_hierarchy_build(&H, s, m->smoother == HV_SMOOTH_CHEBYSHEV)))
-        goto fail;
+    hv_status st = hv__mg_hierarchy_build_to(&H, s, m->smoother == HV_SMOOTH_CHEBYSHEV, max_levels);
+    if (st)
+        return st;
     m->nlev = H.nlev;
+    m->fine_only = max_levels == 1;
     memcpy(m->lv, H.lv, (size_t)H.nlev * sizeof H.lv[0]);
     for (int l = 0; l < m->nlev; l++) {
         mg_level *L = &m->lv[l];
@@ -129,11 +120,9 @@ static hv_status mg_create(void **state, const hv_setup *s)
         L->r = hv_calloc(L->count, sizeof(float));
         if (m->smoother != HV_SMOOTH_RBGS)
             L->d = hv_calloc(L->count, sizeof(float));
-        if (!L->u || !L->f || !L->r || (m->smoother != HV_SMOOTH_RBGS && !L->d)) {
-            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)", l,
-                           L->count);
-            goto fail;
-        }
+        if (!L->u || !L->f || !L->r || (m->smoother != HV_SMOOTH_RBGS && !L->d))
+            return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d (%zu cells)", l,
+                             L->count);
     }
     /* PCG restricts with P^T; renormalized prolongation needs its weight sums. */
     for (int l = 0; m->use_pcg && l + 1 < m->nlev; l++) {
@@ -141,10 +130,8 @@ static hv_status mg_create(void **state, const hv_setup *s)
         if (C->plain)
             continue;
         float *pn = m->pnorm[l] = hv_malloc(F->count * sizeof(float));
-        if (!pn) {
-            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
-            goto fail;
-        }
+        if (!pn)
+            return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for level %d weights", l);
         hv__mg_prolong_norm(F, C, pn);
     }
     if (m->use_pcg && m->nlev > 1) {
@@ -157,17 +144,21 @@ static hv_status mg_create(void **state, const hv_setup *s)
 #ifdef _OPENMP
         m->rt_threads = omp_get_max_threads();
 #endif
-        if (!(m->rt_work = hv_malloc((size_t)m->rt_threads * per * sizeof(float)))) {
-            st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the restriction's work");
-            goto fail;
-        }
+        if (!(m->rt_work = hv_malloc((size_t)m->rt_threads * per * sizeof(float))))
+            return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the restriction's work");
     }
-    /* Bottom: CG work. */
+    if (m->fine_only)
+        return HV_OK;
     mg_level *L = &m->lv[m->nlev - 1];
-    if (!(L->bwork = malloc(MG_BOTTOM_WORK * L->count * sizeof(double)))) {
-        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
-        goto fail;
-    }
+    if (!(L->bwork = malloc(MG_BOTTOM_WORK * L->count * sizeof(double))))
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for the bottom solver");
+    return HV_OK;
+}
+
+/* The outer iterations' work on the fine grid: double residuals, and PCG's
+ * direction, product and per-region sums. */
+static hv_status fine_work(mg_state *m, const hv_setup *s)
+{
     size_t n0 = s->count;
     m->rd = hv_malloc(n0 * sizeof(double));
     if (m->use_pcg) {
@@ -181,14 +172,44 @@ static hv_status mg_create(void **state, const hv_setup *s)
             m->alpha == 0 ? calloc(m->zsum_per * (size_t)m->zsum_threads, sizeof(double)) : NULL;
         m->q = hv_malloc(n0 * sizeof(double));
     }
-    if (!m->rd || (m->use_pcg && (!m->p || (m->alpha == 0 && !m->zsum) || !m->q))) {
-        st = hv__error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
+    if (!m->rd || (m->use_pcg && (!m->p || (m->alpha == 0 && !m->zsum) || !m->q)))
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory for %zu-cell work vectors", n0);
+    return HV_OK;
+}
+
+/* With aggregation asked for, the geometric levels below the fine one are
+ * built only where aggregation does not apply. */
+static hv_status mg_create(void **state, const hv_setup *s)
+{
+    mg_state *m = calloc(1, sizeof *m);
+    if (!m)
+        return hv__error(HV_ERR_NOMEM, "multigrid: out of memory");
+    m->s = s;
+    m->dim = s->p.dim;
+    m->alpha = s->p.alpha;
+    m->smoother = s->o.smoother;
+    m->pre = s->o.pre_smooth;
+    m->post = s->o.post_smooth;
+    m->use_pcg = s->p.solid != NULL;
+    m->stat_masked = m->use_pcg && m->alpha > 0 && m->smoother == HV_SMOOTH_RBGS;
+    const int agg_first =
+        s->o.coarse == HV_COARSE_AGGREGATION && m->use_pcg && s->count > MG_BOTTOM_CELLS;
+    hv_status st = geometric_levels(m, s, agg_first ? 1 : MG_MAX_LEVELS);
+    if (!st)
+        st = fine_work(m, s);
+    if (st)
         goto fail;
-    }
     hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post,
                            m->use_pcg && !m->stat_masked, &m->model);
     if (s->o.coarse == HV_COARSE_AGGREGATION && (st = use_aggregation(m, 0)))
         goto fail;
+    if (m->fine_only && !m->agg) {
+        level_free(&m->lv[0]);
+        if ((st = geometric_levels(m, s, MG_MAX_LEVELS)))
+            goto fail;
+        hv__mg_model_stats_cpu(m->lv, m->nlev, m->dim, m->smoother, m->pre, m->post,
+                               m->use_pcg && !m->stat_masked, &m->model);
+    }
     *state = m;
     return HV_OK;
 fail:

@@ -96,6 +96,7 @@ typedef struct mg_state {
     hv_solver_stats model; /* traffic model (hv__mg_model_stats_cpu) */
     mg_agg *agg;           /* coarse levels by aggregation (solid cells), or NULL */
     int agg_tried;         /* aggregation was built or tried */
+    int fine_only;         /* the geometric levels stop at the fine one (aggregation first) */
     int agg_pending;       /* AUTO: build it before the next solve */
 } mg_state;
 

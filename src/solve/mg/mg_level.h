@@ -72,6 +72,11 @@ typedef struct mg_hierarchy {
 /* Builds H for setup s; with_lmax estimates lmax (Chebyshev) on every level.
  * On failure H holds nothing to free. */
 hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax);
+/* The same with at most max_levels levels; below MG_MAX_LEVELS the last level
+ * gets no bottom regions (for a caller that puts other coarse levels under
+ * the fine one). */
+hv_status hv__mg_hierarchy_build_to(mg_hierarchy *H, const hv_setup *s, int with_lmax,
+                                    int max_levels);
 /* Frees what hv__mg_hierarchy_build allocated (coefficients and bottom regions). */
 void hv__mg_hierarchy_free(mg_hierarchy *H);
 void hv__mg_level_free_coeffs(mg_level *L);

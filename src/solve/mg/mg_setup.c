@@ -484,6 +484,12 @@ void hv__mg_hierarchy_free(mg_hierarchy *H)
 
 hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lmax)
 {
+    return hv__mg_hierarchy_build_to(H, s, with_lmax, MG_MAX_LEVELS);
+}
+
+hv_status hv__mg_hierarchy_build_to(mg_hierarchy *H, const hv_setup *s, int with_lmax,
+                                    int max_levels)
+{
     memset(H, 0, sizeof *H);
     H->dim = s->p.dim;
     H->alpha = s->p.alpha;
@@ -520,7 +526,7 @@ hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lm
             L->coarsen[b] = L->n[b] > 2 && hh[b] <= hmin * 1.01;
             any |= L->coarsen[b];
         }
-        if (!any || L->count <= MG_BOTTOM_CELLS || H->nlev == MG_MAX_LEVELS) {
+        if (!any || L->count <= MG_BOTTOM_CELLS || H->nlev >= max_levels) {
             for (int b = 0; b < 3; b++)
                 L->coarsen[b] = 0;
             break;
@@ -534,7 +540,8 @@ hv_status hv__mg_hierarchy_build(mg_hierarchy *H, const hv_setup *s, int with_lm
         }
         H->nlev++;
     }
-    if (H->alpha == 0 && (st = level_regions(H, &H->lv[H->nlev - 1])))
+    if (H->alpha == 0 && max_levels == MG_MAX_LEVELS &&
+        (st = level_regions(H, &H->lv[H->nlev - 1])))
         goto fail;
     return HV_OK;
 fail:
