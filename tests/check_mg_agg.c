@@ -355,73 +355,132 @@ START_TEST(galerkin_rows_should_be_p_transpose_a_p)
 {
     const int sizes[2][3] = {{40, 38, 36}, {37, 35, 33}};
     for (int scene = 0; scene < 4; scene++) {
-    const int *n = sizes[scene / 2], heat = scene % 2;
-    size_t N = (size_t)n[0] * n[1] * n[2];
-    uint8_t *mask = scene < 2 ? baffles(3, n) : maze(n, 8);
-    {
-        hv_setup s;
-        mg_hierarchy H;
-        mg_agg *g = build_levels(n, mask, heat, &s, &H);
-        const mg_alevel *L0 = &g->lv[0], *L1 = &g->lv[1];
-        int nplain = 0;
-        for (int32_t J = 0; J < L1->n; J++)
-            nplain += L1->tn && L1->plain[J];
-        const int want_plain = scene < 2 ? 6 : 0; /* the maze's walls leave no plain row */
-        ck_assert_msg(!want_plain || (L1->tn > 0 && nplain > 50), "%d plain rows of %d", nplain,
-                      L1->n);
-        double wp = 4.0 / 3.0 / L0->lmax;
-        double *v = calloc(N, sizeof *v), *w = calloc(N, sizeof *w), *t = calloc(N, sizeof *t);
-        double *col = calloc((size_t)L1->n, sizeof *col);
-        int checked[2] = {0, 0};
-        for (int32_t J = 0; J < L1->n && (checked[0] < WALL_ROWS || checked[1] < want_plain);
-             J += 7) {
-            if (L0->mrp[J] == L0->mrp[J + 1])
-                continue; /* a block without fluid */
-            int plain = L1->tn && L1->plain[J];
-            if (checked[plain] >= (plain ? want_plain : WALL_ROWS))
-                continue;
-            checked[plain]++;
-            /* v = P e_J = (I - wp D^-1 A) P0 e_J */
-            memset(t, 0, N * sizeof *t);
-            for (size_t q = L0->mrp[J]; q < L0->mrp[J + 1]; q++)
-                t[L0->mem[q]] = 1;
-            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, w);
-            for (size_t c = 0; c < N; c++)
-                v[c] = t[c] - wp * H.lv[0].dinv[c] * w[c];
-            /* column J of P^T A P = P0^T (I - wp A D^-1) A v */
-            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, v, w);
-            for (size_t c = 0; c < N; c++)
-                t[c] = H.lv[0].dinv[c] * w[c];
-            hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, v);
-            memset(col, 0, (size_t)L1->n * sizeof *col);
-            for (size_t c = 0; c < N; c++)
-                if (L0->agg[c] >= 0)
-                    col[L0->agg[c]] += w[c] - wp * v[c];
-            /* against row J as stored (symmetric) */
-            double *row = calloc((size_t)L1->n, sizeof *row), scale = fabs(col[J]);
-            if (plain)
-                for (int e = 0; e < L1->tn; e++)
-                    row[J + L1->toff[e]] += L1->tval[e];
-            else
-                for (size_t q = L1->A.rp[J]; q < L1->A.rp[J + 1]; q++)
-                    row[L1->A.ci[q]] += L1->A.v[q];
-            for (int32_t I = 0; I < L1->n; I++)
-                ck_assert_msg(fabs(row[I] - col[I]) <= 1e-5 * scale,
-                              "%s, %s row %d, column %d: %g stored, %g from P^T A P",
-                              heat ? "heat" : "Poisson", plain ? "plain" : "wall", J, I, row[I],
-                              col[I]);
-            free(row);
+        const int *n = sizes[scene / 2], heat = scene % 2;
+        size_t N = (size_t)n[0] * n[1] * n[2];
+        uint8_t *mask = scene < 2 ? baffles(3, n) : maze(n, 8);
+        {
+            hv_setup s;
+            mg_hierarchy H;
+            mg_agg *g = build_levels(n, mask, heat, &s, &H);
+            const mg_alevel *L0 = &g->lv[0], *L1 = &g->lv[1];
+            int nplain = 0;
+            for (int32_t J = 0; J < L1->n; J++)
+                nplain += L1->tn && L1->plain[J];
+            const int want_plain = scene < 2 ? 6 : 0; /* the maze's walls leave no plain row */
+            ck_assert_msg(!want_plain || (L1->tn > 0 && nplain > 50), "%d plain rows of %d", nplain,
+                          L1->n);
+            double wp = 4.0 / 3.0 / L0->lmax;
+            double *v = calloc(N, sizeof *v), *w = calloc(N, sizeof *w), *t = calloc(N, sizeof *t);
+            double *col = calloc((size_t)L1->n, sizeof *col);
+            int checked[2] = {0, 0};
+            for (int32_t J = 0; J < L1->n && (checked[0] < WALL_ROWS || checked[1] < want_plain);
+                 J += 7) {
+                if (L0->mrp[J] == L0->mrp[J + 1])
+                    continue; /* a block without fluid */
+                int plain = L1->tn && L1->plain[J];
+                if (checked[plain] >= (plain ? want_plain : WALL_ROWS))
+                    continue;
+                checked[plain]++;
+                /* v = P e_J = (I - wp D^-1 A) P0 e_J */
+                memset(t, 0, N * sizeof *t);
+                for (size_t q = L0->mrp[J]; q < L0->mrp[J + 1]; q++)
+                    t[L0->mem[q]] = 1;
+                hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, w);
+                for (size_t c = 0; c < N; c++)
+                    v[c] = t[c] - wp * H.lv[0].dinv[c] * w[c];
+                /* column J of P^T A P = P0^T (I - wp A D^-1) A v */
+                hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, v, w);
+                for (size_t c = 0; c < N; c++)
+                    t[c] = H.lv[0].dinv[c] * w[c];
+                hv__mg_level_apply_d(&H.lv[0], 3, s.p.alpha, t, v);
+                memset(col, 0, (size_t)L1->n * sizeof *col);
+                for (size_t c = 0; c < N; c++)
+                    if (L0->agg[c] >= 0)
+                        col[L0->agg[c]] += w[c] - wp * v[c];
+                /* against row J as stored (symmetric) */
+                double *row = calloc((size_t)L1->n, sizeof *row), scale = fabs(col[J]);
+                if (plain)
+                    for (int e = 0; e < L1->tn; e++)
+                        row[J + L1->toff[e]] += L1->tval[e];
+                else
+                    for (size_t q = L1->A.rp[J]; q < L1->A.rp[J + 1]; q++)
+                        row[L1->A.ci[q]] += L1->A.v[q];
+                for (int32_t I = 0; I < L1->n; I++)
+                    ck_assert_msg(fabs(row[I] - col[I]) <= 1e-5 * scale,
+                                  "%s, %s row %d, column %d: %g stored, %g from P^T A P",
+                                  heat ? "heat" : "Poisson", plain ? "plain" : "wall", J, I, row[I],
+                                  col[I]);
+                free(row);
+            }
+            ck_assert_msg(checked[0] == WALL_ROWS && checked[1] == want_plain,
+                          "rows checked: %d next to walls, %d plain", checked[0], checked[1]);
+            free(v);
+            free(w);
+            free(t);
+            free(col);
+            hv__mg_agg_free(g);
+            hv__mg_hierarchy_free(&H);
         }
-        ck_assert_msg(checked[0] == WALL_ROWS && checked[1] == want_plain,
-                      "rows checked: %d next to walls, %d plain", checked[0], checked[1]);
-        free(v);
-        free(w);
-        free(t);
-        free(col);
-        hv__mg_agg_free(g);
-        hv__mg_hierarchy_free(&H);
+        free(mask);
     }
-    free(mask);
+}
+END_TEST
+
+/* Whether two builds of the levels hold the same operators, bit for bit. */
+static void assert_same_levels(const mg_agg *a, const mg_agg *b, const char *what)
+{
+    ck_assert_int_eq(a->nlev, b->nlev);
+    for (int l = 1; l < a->nlev; l++) {
+        const mg_alevel *A = &a->lv[l], *B = &b->lv[l];
+        ck_assert_msg(A->n == B->n && A->tn == B->tn, "%s, level %d: %d and %d unknowns", what, l,
+                      A->n, B->n);
+        ck_assert(!memcmp(A->toff, B->toff, sizeof A->toff));
+        ck_assert(!memcmp(A->tval, B->tval, sizeof A->tval));
+        ck_assert(!memcmp(A->A.rp, B->A.rp, ((size_t)A->n + 1) * sizeof *A->A.rp));
+        size_t nnz = A->A.rp[A->n];
+        ck_assert_msg(!memcmp(A->A.ci, B->A.ci, nnz * sizeof *A->A.ci) &&
+                          !memcmp(A->A.v, B->A.v, nnz * sizeof *A->A.v),
+                      "%s, level %d: the entries differ", what, l);
+    }
+}
+
+/* Rows copied from their class (agg_classes.c) against every row computed:
+ * the same levels bit for bit, on the baffles (rows that repeat along the
+ * walls and the faces on levels 1 and 2), a maze of odd size and a ball. */
+START_TEST(row_classes_should_change_no_bit)
+{
+    const int big[3] = {64, 60, 56}, odd[3] = {37, 35, 33};
+    for (int scene = 0; scene < 3; scene++) {
+        const int *n = scene == 0 ? big : odd;
+        size_t N = (size_t)n[0] * n[1] * n[2];
+        uint8_t *mask = scene == 0 ? baffles(3, n) : scene == 1 ? maze(n, 8) : calloc(N, 1);
+        for (size_t c = 0; scene == 2 && c < N; c++) {
+            int i = (int)(c % n[0]), j = (int)(c / n[0] % n[1]),
+                k = (int)(c / ((size_t)n[0] * n[1]));
+            double x = i - n[0] / 2.0, y = j - n[1] / 2.0, z = k - n[2] / 2.0;
+            mask[c] = x * x + y * y + z * z < 100;
+        }
+        for (int heat = 0; heat < 2; heat++) {
+            hv_setup s;
+            mg_hierarchy H;
+            mg_agg *with = build_levels(n, mask, heat, &s, &H);
+            setenv("HV_AGG_NOCLASS", "1", 1);
+            mg_agg *without = NULL;
+            TL_ASSERT_OK(hv__mg_agg_build(&without, &H.lv[0], 3, s.p.alpha));
+            unsetenv("HV_AGG_NOCLASS");
+            ck_assert_ptr_nonnull(without);
+            ck_assert_msg(with->class_copies > 0 && without->class_copies == 0,
+                          "scene %d: %zu rows copied with classes, %zu without", scene,
+                          with->class_copies, without->class_copies);
+            assert_same_levels(with, without,
+                               scene == 0   ? "baffles"
+                               : scene == 1 ? "maze"
+                                            : "ball");
+            hv__mg_agg_free(with);
+            hv__mg_agg_free(without);
+            hv__mg_hierarchy_free(&H);
+        }
+        free(mask);
     }
 }
 END_TEST
@@ -499,6 +558,7 @@ int main(void)
     TCase *tc = tcase_create("core");
     tcase_set_timeout(tc, 240);
     tcase_add_test(tc, galerkin_rows_should_be_p_transpose_a_p);
+    tcase_add_test(tc, row_classes_should_change_no_bit);
     tcase_add_test(tc, packed_levels_should_give_the_same_cycle);
     tcase_add_test(tc, aggregation_should_see_thin_walls);
     tcase_add_test(tc, aggregation_iterations_should_not_grow_with_n);

@@ -205,11 +205,22 @@ static int p_row(const void *ctx, void *scratch, int32_t c, spa *s)
     return 0;
 }
 
+/* A row of a class of level 2: n entries at block offsets off (3 each). */
+typedef struct agg_crow {
+    int n;
+    int8_t *off;
+    double *val;
+} agg_crow;
+
 /* Row I of R A P: the row (R A)(I,:) in the inner accumulator, then times P.
- * No product is stored between the two. */
+ * No product is stored between the two. With classes (level 2), rows of a
+ * class are copied from its row. */
 typedef struct rap_ctx {
     const mg_csr *R, *P;
-    const mg_alevel *L;
+    const mg_alevel *L, *C;
+    const int32_t *cls;   /* per unknown of level 2: its class, -1 none (or NULL) */
+    const int32_t *bid;   /* per block of level 2: its one unknown */
+    const agg_crow *rows; /* the classes' rows (NULL while they are made) */
 } rap_ctx;
 
 static int rap_row(const void *ctx, void *scratch, int32_t I, spa *s)
@@ -235,6 +246,125 @@ static int rap_row(const void *ctx, void *scratch, int32_t I, spa *s)
             spa_add(s, m->P->ci[p], x * m->P->v[p]);
     }
     return 0;
+}
+
+static int rap_row_classed(const void *ctx, void *scratch, int32_t I, spa *s)
+{
+    const rap_ctx *m = ctx;
+    if (!m->rows || m->cls[I] < 0)
+        return rap_row(ctx, scratch, I, s);
+    const agg_crow *K = &m->rows[m->cls[I]];
+    const int32_t *p = m->C->xyz + 3 * (size_t)I;
+    const int *e = m->C->ext;
+    for (int q = 0; q < K->n; q++) {
+        const int8_t *d = K->off + 3 * q;
+        size_t B =
+            (size_t)(p[0] + d[0]) + e[0] * ((size_t)(p[1] + d[1]) + e[1] * (size_t)(p[2] + d[2]));
+        spa_add(s, m->bid[B], K->val[q]);
+    }
+    return 0;
+}
+
+/* Each class's row from its first unknown by rap_row, as block offsets.
+ * Returns 0, or -1 out of memory. */
+static int rap_class_rows(const rap_ctx *m, int32_t ncls, agg_crow *rows)
+{
+    const mg_alevel *C = m->C;
+    int32_t *first = malloc(((size_t)ncls + 1) * sizeof *first);
+    int failed = !first;
+    for (int32_t k = 0; first && k < ncls; k++)
+        first[k] = -1;
+    for (int32_t I = 0; first && I < C->n; I++)
+        if (m->cls[I] >= 0 && first[m->cls[I]] < 0)
+            first[m->cls[I]] = I;
+#pragma omp parallel if (ncls > 16 && !failed)
+    {
+        spa cs = {0}, in = {0};
+        int bad = failed || spa_init(&cs, C->n) || spa_init(&in, m->L->n);
+#pragma omp for schedule(dynamic, 4)
+        for (int32_t k = 0; k < ncls; k++) {
+            if (bad)
+                continue;
+            int32_t I = first[k];
+            const int32_t *p = C->xyz + 3 * (size_t)I;
+            spa_start(&cs);
+            rap_row(m, &in, I, &cs);
+            rows[k].n = (int)cs.nidx;
+            rows[k].off = malloc(3 * (cs.nidx ? cs.nidx : 1));
+            rows[k].val = malloc((cs.nidx ? cs.nidx : 1) * sizeof *rows[k].val);
+            if (!rows[k].off || !rows[k].val) {
+                bad = 1;
+                continue;
+            }
+            for (size_t q = 0; q < cs.nidx; q++) {
+                const int32_t *r = C->xyz + 3 * (size_t)cs.idx[q];
+                for (int a = 0; a < 3; a++)
+                    rows[k].off[3 * q + a] = (int8_t)(r[a] - p[a]);
+                rows[k].val[q] = cs.acc[cs.idx[q]];
+            }
+        }
+        spa_free(&cs);
+        spa_free(&in);
+        if (bad) {
+#pragma omp atomic write
+            failed = 1;
+        }
+    }
+    free(first);
+    return failed ? -1 : 0;
+}
+
+/* Classes of level 2's rows (3D, from level 1): m->cls, m->bid and m->rows
+ * set where they apply; *ncls_out for the caller to free them. Returns the
+ * rows that copy their class's row. */
+static size_t rap_classes(const mg_agg *g, rap_ctx *m, int32_t **cls_out, int32_t **bid_out,
+                          agg_crow **rows_out, int32_t *ncls_out)
+{
+    const mg_alevel *C = &g->lv[2];
+    const size_t nb = (size_t)C->ext[0] * C->ext[1] * C->ext[2];
+    int32_t *bid = malloc((nb ? nb : 1) * sizeof *bid),
+            *bcls = malloc((nb ? nb : 1) * sizeof *bcls);
+    int32_t *cls = malloc(((size_t)C->n + 1) * sizeof *cls), ncls = -1;
+    uint64_t *ca = malloc((nb ? nb : 1) * sizeof *ca), *cb = malloc((nb ? nb : 1) * sizeof *cb);
+    uint64_t *fp = malloc(2 * (nb ? nb : 1) * sizeof *fp);
+    agg_crow *rows = NULL;
+    if (bid && bcls && cls && ca && cb && fp && hv__agg_level1_codes(g, bid, ca, cb) == 0 &&
+        hv__agg_fingerprints(C->ext, 3, ca, cb, fp) == 0)
+        ncls = hv__agg_classes(nb, fp, NULL, bcls, AGG_CLASS_MAX);
+    if (ncls > 0 && (rows = calloc((size_t)ncls, sizeof *rows))) {
+        for (int32_t I = 0; I < C->n; I++)
+            cls[I] = -1;
+        for (size_t B = 0; B < nb; B++)
+            if (bcls[B] >= 0 && bid[B] >= 0)
+                cls[bid[B]] = bcls[B];
+        m->cls = cls;
+        m->bid = bid;
+        if (rap_class_rows(m, ncls, rows) == 0)
+            m->rows = rows;
+    }
+    size_t copies = 0;
+    for (int32_t I = 0; m->rows && I < C->n; I++)
+        copies += cls[I] >= 0;
+    free(bcls);
+    free(ca);
+    free(cb);
+    free(fp);
+    *cls_out = cls;
+    *bid_out = bid;
+    *rows_out = rows;
+    *ncls_out = rows ? ncls : 0;
+    return m->rows ? copies - (size_t)ncls : 0;
+}
+
+static void rap_classes_free(int32_t *cls, int32_t *bid, agg_crow *rows, int32_t ncls)
+{
+    for (int32_t k = 0; k < ncls; k++) {
+        free(rows[k].off);
+        free(rows[k].val);
+    }
+    free(rows);
+    free(cls);
+    free(bid);
 }
 
 /* T = M^T for M with ncols columns. */
@@ -302,13 +432,18 @@ hv_status hv__agg_galerkin_csr(mg_agg *g, int l, double wp)
     mg_csr P = {0}, R = {0};
     p_ctx pc = {L, L->agg, L->dinv, wp};
     hv_status st = build_csr(&P, L->n, C->n, p_row, &pc, 0, 0, 0);
-    rap_ctx rap = {&R, &P, L};
+    rap_ctx rap = {&R, &P, L, C, NULL, NULL, NULL};
     if (!st) {
         p_truncate(&P);
         st = csr_transpose(&P, C->n, &R);
     }
+    int32_t *cls = NULL, *bid = NULL, ncls = 0;
+    agg_crow *rows = NULL;
+    if (!st && l == 1 && g->dim == 3 && hv__agg_classes_on())
+        g->class_copies += rap_classes(g, &rap, &cls, &bid, &rows, &ncls);
     if (!st)
-        st = build_csr(&C->A, C->n, C->n, rap_row, &rap, 0, L->n, 1e-9);
+        st = build_csr(&C->A, C->n, C->n, rap_row_classed, &rap, 0, L->n, 1e-9);
+    rap_classes_free(cls, bid, rows, ncls);
     if (st) {
         hv__agg_csr_free(&P);
         hv__agg_csr_free(&R);
@@ -386,9 +521,7 @@ typedef struct g0_template {
  * same order for each of them and gives the same entries at the same block
  * offsets, bit for bit. One row of each class of two or more is computed;
  * the others are copied from it. */
-#define G0_WIN 125          /* blocks of a neighbourhood */
-#define G0_SPLIT UINT64_MAX /* a block code: more than one aggregate */
-#define G0_CLASS_MAX 65536  /* classes computed at most */
+#define G0_WIN 125 /* blocks of a neighbourhood */
 
 typedef struct g0_class {
     int n;
@@ -495,171 +628,24 @@ static int g0_row_classed(const void *ctx, void *scratch, int32_t J, spa *cs)
     return g0_row(ctx, scratch, J, cs);
 }
 
-/* Per block of level 1: its 8 fine cells as bytes (open faces, 0x40 fluid,
- * 0x80 outside the grid), or G0_SPLIT where the block holds a cell of
- * another aggregate than the block's own. */
-static void block_codes(const mg_agg *g, uint64_t *code)
-{
-    const mg_level *F = g->fine;
-    const mg_alevel *L = &g->lv[0];
-    const int *e = g->lv[1].ext;
-    const size_t nb = (size_t)e[0] * e[1] * e[2];
-#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
-    for (size_t b = 0; b < nb; b++) {
-        int bx = (int)(b % e[0]), by = (int)((b / e[0]) % e[1]),
-            bz = (int)(b / ((size_t)e[0] * e[1]));
-        uint64_t v = 0;
-        for (int q = 0; q < 8 && v != G0_SPLIT; q++) {
-            int i = 2 * bx + (q & 1), j = 2 * by + ((q >> 1) & 1), k = 2 * bz + (q >> 2);
-            uint64_t byte = 0x80;
-            if (i < F->n[0] && j < F->n[1] && k < F->n[2]) {
-                size_t c = (size_t)i + F->sy * j + F->sz * k;
-                byte = g->faces[c] | (F->a[c] != 0.0f ? 0x40u : 0u);
-                if (L->agg[c] >= 0 && (size_t)L->agg[c] != b)
-                    v = G0_SPLIT;
-            }
-            if (v != G0_SPLIT)
-                v |= byte << (8 * q);
-        }
-        code[b] = v;
-    }
-}
-
-/* Fingerprints of the 5^3 neighbourhoods of blocks: two independent 64-bit
- * hashes of the block codes, taken along x, then y, then z (5 values each,
- * a block outside the grid reading as the hash of blocks outside), and a
- * flag for a neighbourhood with a split block. */
-#define G0_OUTSIDE 0x8080808080808080ull
-
-static inline uint64_t mix5(uint64_t h, uint64_t k, const uint64_t v[5])
-{
-    for (int q = 0; q < 5; q++) {
-        h = (h ^ v[q]) * k;
-        h ^= h >> 29;
-    }
-    return h;
-}
-
-static const uint64_t seed[2] = {0x9E3779B97F4A7C15ull, 0xD1B54A32D192ED03ull},
-                      mult[2] = {0xBF58476D1CE4E5B9ull, 0x94D049BB133111EBull};
-
-/* One pass along axis a: dst[b] = the hash of src over b - 2 .. b + 2. */
-static void window_pass(const int e[3], int a, const uint64_t *src, uint64_t out, int chain,
-                        uint64_t *dst)
-{
-    const size_t nb = (size_t)e[0] * e[1] * e[2];
-    const size_t stride = a == 0 ? 1 : a == 1 ? (size_t)e[0] : (size_t)e[0] * e[1];
-#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
-    for (size_t b = 0; b < nb; b++) {
-        int x = (int)(b / stride % (size_t)e[a]);
-        uint64_t v[5];
-        for (int d = -2; d <= 2; d++)
-            v[d + 2] = x + d >= 0 && x + d < e[a] ? src[b + (ptrdiff_t)d * (ptrdiff_t)stride] : out;
-        dst[b] = mix5(seed[chain], mult[chain], v);
-    }
-}
-
-/* fp[2 b], fp[2 b + 1]: block b's fingerprint, (0, 0) where its
- * neighbourhood holds a split block. work: 2 nb values. */
-static void window_prints(const int e[3], const uint64_t *code, uint64_t *fp, uint64_t *w0,
-                          uint64_t *w1)
-{
-    const size_t nb = (size_t)e[0] * e[1] * e[2];
-    uint64_t *wk[2] = {w0, w1};
-    for (int chain = 0; chain < 2; chain++) {
-        uint64_t out = G0_OUTSIDE, o5[5];
-        const uint64_t *src = code;
-        for (int a = 0; a < 3; a++) {
-            uint64_t *dst = wk[a % 2];
-            window_pass(e, a, src, out, chain, dst);
-            for (int q = 0; q < 5; q++)
-                o5[q] = out;
-            out = mix5(seed[chain], mult[chain], o5);
-            src = dst;
-        }
-        /* After three passes the hashes are in w0. */
-#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
-        for (size_t b = 0; b < nb; b++)
-            fp[2 * b + chain] = w0[b];
-    }
-    /* The split flag: an OR over the neighbourhood, axis by axis. */
-    uint8_t *f0 = (uint8_t *)w0, *f1 = (uint8_t *)w1;
-#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
-    for (size_t b = 0; b < nb; b++)
-        f0[b] = code[b] == G0_SPLIT;
-    for (int a = 0; a < 3; a++) {
-        const uint8_t *src = a % 2 ? f1 : f0;
-        uint8_t *dst = a % 2 ? f0 : f1;
-        const size_t stride = a == 0 ? 1 : a == 1 ? (size_t)e[0] : (size_t)e[0] * e[1];
-#pragma omp parallel for schedule(static) if (nb > AGG_PAR_MIN)
-        for (size_t b = 0; b < nb; b++) {
-            int x = (int)(b / stride % (size_t)e[a]), any = 0;
-            for (int d = -2; d <= 2; d++)
-                any |= x + d >= 0 && x + d < e[a] && src[b + (ptrdiff_t)d * (ptrdiff_t)stride];
-            dst[b] = (uint8_t)any;
-        }
-    }
-    /* After three passes the flags are in f1. */
-    for (size_t b = 0; b < nb; b++)
-        if (f1[b])
-            fp[2 * b] = fp[2 * b + 1] = 0;
-}
-
 /* cls[J] for the rows of level 1 that are not plain: the class of J's
- * neighbourhood (by its fingerprint: two 64-bit hashes), -1 for a row alone
- * in its class. Returns the number of classes, or -1 out of memory. */
+ * neighbourhood of 5^3 blocks, -1 for a row alone in its class. Returns the
+ * number of classes, or -1 out of memory. */
 static int32_t row_classes(const mg_agg *g, const uint8_t *plain, int32_t *cls)
 {
     const mg_alevel *C = &g->lv[1];
-    const int *e = C->ext;
-    const size_t nb = (size_t)e[0] * e[1] * e[2];
+    const size_t nb = (size_t)C->ext[0] * C->ext[1] * C->ext[2];
     uint64_t *code = malloc(nb * sizeof *code), *fp = malloc(2 * nb * sizeof *fp);
-    uint64_t *w0 = malloc(nb * sizeof *w0), *w1 = malloc(nb * sizeof *w1);
-    size_t tsize = 1;
-    while (tsize < 2 * nb)
-        tsize *= 2;
-    int32_t *slot = malloc(tsize * sizeof *slot), *count = NULL, ncls = -1;
-    if (!code || !fp || !w0 || !w1 || !slot)
-        goto done;
-    block_codes(g, code);
-    window_prints(e, code, fp, w0, w1);
-    for (size_t q = 0; q < tsize; q++)
-        slot[q] = -1;
-    /* Classes named by their first row; cls[J] the first row for now. */
-    for (size_t J = 0; J < nb; J++) {
-        const uint64_t *h = fp + 2 * J;
-        cls[J] = -1;
-        if ((plain && plain[J]) || (!h[0] && !h[1]))
-            continue;
-        size_t s = h[0] & (tsize - 1);
-        while (slot[s] >= 0 &&
-               (fp[2 * (size_t)slot[s]] != h[0] || fp[2 * (size_t)slot[s] + 1] != h[1]))
-            s = (s + 1) & (tsize - 1);
-        if (slot[s] < 0)
-            slot[s] = (int32_t)J;
-        else
-            cls[J] = slot[s];
+    int32_t ncls = -1;
+    if (code && fp) {
+        hv__agg_fine_codes(g, code);
+        if (hv__agg_fingerprints(C->ext, 2, code, code, fp) == 0)
+            ncls = hv__agg_classes(nb, fp, plain, cls, AGG_CLASS_MAX);
     }
-    /* Classes of two rows or more, numbered; the first row joins its class. */
-    if (!(count = calloc(nb, sizeof *count)))
-        goto done;
-    for (size_t J = 0; J < nb; J++)
-        if (cls[J] >= 0)
-            count[cls[J]]++;
-    ncls = 0;
-    for (size_t J = 0; J < nb; J++)
-        count[J] = count[J] > 0 && ncls < G0_CLASS_MAX ? ncls++ : -1;
-    for (size_t J = 0; J < nb; J++)
-        cls[J] = count[J] >= 0 ? count[J] : cls[J] >= 0 ? count[cls[J]] : -1;
-    for (size_t J = nb; J < (size_t)C->n; J++)
+    for (size_t J = nb; ncls >= 0 && J < (size_t)C->n; J++)
         cls[J] = -1;
-done:
     free(code);
     free(fp);
-    free(w0);
-    free(w1);
-    free(slot);
-    free(count);
     return ncls;
 }
 
@@ -806,11 +792,16 @@ hv_status hv__agg_galerkin0(mg_agg *g, double wp)
     /* The other rows by class where they repeat (3D binary levels). */
     int32_t *cls = NULL, ncls = 0;
     g0_class *rows = NULL;
-    if (g->dim == 3 && g->fine->binary && (cls = malloc(((size_t)C->n + 1) * sizeof *cls)) &&
+    if (hv__agg_classes_on() && g->dim == 3 && g->fine->binary &&
+        (cls = malloc(((size_t)C->n + 1) * sizeof *cls)) &&
         (ncls = row_classes(g, plain, cls)) > 0 && (rows = malloc((size_t)ncls * sizeof *rows))) {
         x.cls = cls;
-        if (class_rows(&x, ncls, rows) == 0)
+        if (class_rows(&x, ncls, rows) == 0) {
             x.rows = rows;
+            for (int32_t J = 0; J < C->n; J++)
+                g->class_copies += cls[J] >= 0;
+            g->class_copies -= (size_t)ncls;
+        }
     }
     st = build_csr(&C->A, C->n, C->n, g0_row_classed, &x, sizeof(g0_scratch), 0, 1e-9);
     free(cls);

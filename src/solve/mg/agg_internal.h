@@ -59,6 +59,33 @@ static inline agg_op level_op(const mg_agg *g, int l)
 /* Entries a row of a coarse level can have: a template's at most (5^3). */
 #define ROW_MAX 125
 
+/* ---- agg_classes.c ---- */
+#define AGG_SPLIT UINT64_MAX              /* a block's code: more than one aggregate */
+#define AGG_OUTSIDE 0x8080808080808080ull /* the code of a block outside the grid */
+#define AGG_CLASS_MAX 65536               /* classes of rows computed at most */
+/* Per block of level 1 (3D binary fine levels): its 8 fine cells as bytes
+ * (open faces, 0x40 fluid, 0x80 outside the grid), or AGG_SPLIT where the
+ * block holds a cell of another aggregate than the block's own. */
+void hv__agg_fine_codes(const mg_agg *g, uint64_t *code);
+/* Per block of level 2: two codes of the rows of level 1 in it (offsets and
+ * values, diagonals), AGG_SPLIT in both where it or one of them holds more
+ * than one unknown; bid[B] the block's one unknown of level 2 (-1 split or
+ * empty). Returns 0, or -1 out of memory. */
+int hv__agg_level1_codes(const mg_agg *g, int32_t *bid, uint64_t *ca, uint64_t *cb);
+/* fp[2b], fp[2b + 1]: block b's fingerprint, hashes of the (2r+1)^3 blocks
+ * around it (codes ca for the first, cb for the second), (0, 0) where one
+ * of them is AGG_SPLIT. Returns 0, or -1 out of memory. */
+int hv__agg_fingerprints(const int e[3], int r, const uint64_t *ca, const uint64_t *cb,
+                         uint64_t *fp);
+/* cls[b]: the class of block b among those not skipped with a fingerprint,
+ * numbered from 0 where two blocks or more share it (at most max classes),
+ * else -1. Returns the number of classes, or -1 out of memory. */
+int32_t hv__agg_classes(size_t nb, const uint64_t *fp, const uint8_t *skip, int32_t *cls,
+                        int32_t max);
+/* Whether row classes are used (HV_AGG_NOCLASS=1 turns them off: the tests
+ * compare the levels both ways). */
+int hv__agg_classes_on(void);
+
 /* ---- agg_op.c ---- */
 /* Row c of coarse level L: pointers into its matrix, or for a plain row the
  * template's entries in bc/bv (ROW_MAX each). The hierarchy's set-up only:

@@ -134,8 +134,9 @@ typedef struct mg_agg {
     double *chol; /* bottom: Cholesky factor (nb x nb, lower), Poisson regularized per region */
     int32_t *region;
     int nregion;
-    double *bx;   /* nb doubles of work */
-    size_t bytes; /* memory held */
+    double *bx;          /* nb doubles of work */
+    size_t bytes;        /* memory held */
+    size_t class_copies; /* rows of levels 1 and 2 copied from their class's row */
 } mg_agg;
 
 /* Builds the aggregation hierarchy under fine level F (weighted, with dinv).
