@@ -358,6 +358,80 @@ START_TEST(wide_rows_with_solid_cells_should_converge)
 }
 END_TEST
 
+/* Region labels by a walk over single cells, the reference for the runs'
+ * union-find: the same numbering (regions in the order of their first cell). */
+static int flood_labels(const int n[3], const uint8_t *solid, int32_t *lab)
+{
+    size_t sy = (size_t)n[0], sz = sy * n[1], N = sz * n[2];
+    size_t *stack = malloc(N * sizeof *stack);
+    int nr = 0;
+    for (size_t c = 0; c < N; c++)
+        lab[c] = -1;
+    for (size_t seed = 0; seed < N; seed++) {
+        if (solid[seed] || lab[seed] >= 0)
+            continue;
+        size_t top = 0;
+        stack[top++] = seed;
+        lab[seed] = nr;
+        while (top) {
+            size_t c = stack[--top], i = c % sy, j = c / sy % n[1], k = c / sz;
+            size_t nb[6];
+            int m = 0;
+            if (i > 0)
+                nb[m++] = c - 1;
+            if (i + 1 < sy)
+                nb[m++] = c + 1;
+            if (j > 0)
+                nb[m++] = c - sy;
+            if (j + 1 < (size_t)n[1])
+                nb[m++] = c + sy;
+            if (k > 0)
+                nb[m++] = c - sz;
+            if (k + 1 < (size_t)n[2])
+                nb[m++] = c + sz;
+            for (int q = 0; q < m; q++)
+                if (!solid[nb[q]] && lab[nb[q]] < 0) {
+                    lab[nb[q]] = nr;
+                    stack[top++] = nb[q];
+                }
+        }
+        nr++;
+    }
+    free(stack);
+    return nr;
+}
+
+/* The solver's fluid regions (runs along x joined by a union-find) against a
+ * flood fill: random masks near the percolation threshold, where regions
+ * are many and wind, in 3D and 2D, and a comb whose teeth meet only at the
+ * far end (a region that the runs join late). */
+START_TEST(fluid_regions_should_match_a_flood_fill)
+{
+    const int sizes[3][3] = {{23, 19, 17}, {41, 37, 1}, {30, 8, 6}};
+    uint64_t seed = 11;
+    for (int t = 0; t < 7; t++) {
+        const int *n = sizes[t < 3 ? 0 : t < 6 ? 1 : 2];
+        size_t N = (size_t)n[0] * n[1] * n[2];
+        uint8_t *m = malloc(N);
+        int32_t *a = malloc(N * sizeof *a), *b = malloc(N * sizeof *b);
+        double p = t < 6 ? 0.55 + 0.1 * (t % 3) : 0;
+        for (size_t c = 0; c < N; c++) {
+            int i = (int)(c % n[0]), j = (int)(c / n[0] % n[1]);
+            m[c] = t < 6 ? (tl_rand(&seed) + 0.5) < p : (j < n[1] - 1 && i % 2 == 1);
+        }
+        int na = hv__label_regions(n, m, a), nb = flood_labels(n, m, b);
+        ck_assert_msg(na == nb, "mask %d: %d regions, the flood fill finds %d", t, na, nb);
+        for (size_t c = 0; c < N; c++)
+            ck_assert_msg(a[c] == b[c], "mask %d, cell %zu: region %d, the flood fill's %d", t, c,
+                          a[c], b[c]);
+        ck_assert_int_ge(na, t < 6 ? 2 : 1);
+        free(m);
+        free(a);
+        free(b);
+    }
+}
+END_TEST
+
 START_TEST(poisson_solution_should_be_mean_free_in_each_region)
 {
     shape sh = {2, {64, 48, 1}, 2};
@@ -910,6 +984,7 @@ int main(void)
     tcase_add_test(tc, multigrid_and_fftw_should_agree);
     tcase_add_test(tc, petsc_backend_should_work_or_fail_clearly);
     tcase_add_test(tc, poisson_solution_should_be_mean_free_in_each_region);
+    tcase_add_test(tc, fluid_regions_should_match_a_flood_fill);
     tcase_add_test(tc, pcg_should_converge_in_a_serpentine_corridor);
     tcase_add_test(tc, solver_should_report_max_iterations_not_fail);
     tcase_add_test(tc, solver_should_reject_bad_input);

@@ -70,6 +70,11 @@ void *hv__solver_state(hv_solver *sv);
 
 /* Subtracts the per-region mean of u (regions as in s; whole grid without mask). */
 void hv__project_mean(const hv_setup *s, double *u);
+/* region[c]: the connected fluid region of cell c (faces shared with fluid
+ * cells, n[2] = 1 in 2D), numbered from 0 in the order of the regions' first
+ * cells; -1 on solid cells. Returns the number of regions, or -1 out of
+ * memory. */
+int hv__label_regions(const int n[3], const uint8_t *solid, int32_t *region);
 
 /* ||v||_2 over fluid cells. */
 double hv__norm2(const hv_setup *s, const double *v);

@@ -86,52 +86,142 @@ void hv_solver_opts_default(hv_solver_opts *o)
 }
 
 /* 6-connected (4 in 2D) flood fill of the fluid cells. */
+/* Runs of fluid cells along x, row after row, and a union-find over them:
+ * the connected fluid regions without a walk over single cells. */
+typedef struct fluid_runs {
+    size_t *start; /* first cell of run r */
+    int32_t *len;  /* its cells */
+    size_t *row;   /* runs of row j + n[1] k: row[j + n[1] k] .. row[... + 1] */
+    int32_t *up;   /* union-find parent */
+    size_t n;
+} fluid_runs;
+
+static int32_t run_root(int32_t *up, int32_t r)
+{
+    while (up[r] != r) {
+        up[r] = up[up[r]];
+        r = up[r];
+    }
+    return r;
+}
+
+static void run_union(int32_t *up, int32_t a, int32_t b)
+{
+    a = run_root(up, a);
+    b = run_root(up, b);
+    if (a != b)
+        up[a > b ? a : b] = a < b ? a : b;
+}
+
+/* Unions the runs of rows ra and rb that share an x. */
+static void join_rows(const fluid_runs *R, size_t sy, size_t ra, size_t rb)
+{
+    size_t p = R->row[ra], q = R->row[rb];
+    while (p < R->row[ra + 1] && q < R->row[rb + 1]) {
+        size_t p0 = R->start[p] % sy, p1 = p0 + (size_t)R->len[p];
+        size_t q0 = R->start[q] % sy, q1 = q0 + (size_t)R->len[q];
+        if (p0 < q1 && q0 < p1)
+            run_union(R->up, (int32_t)p, (int32_t)q);
+        if (p1 < q1)
+            p++;
+        else
+            q++;
+    }
+}
+
+static hv_status find_runs(const int n[3], const uint8_t *solid, fluid_runs *R)
+{
+    const size_t sy = (size_t)n[0], rows = (size_t)n[1] * n[2];
+    size_t cap = rows + 16;
+    memset(R, 0, sizeof *R);
+    R->row = malloc((rows + 1) * sizeof *R->row);
+    R->start = malloc(cap * sizeof *R->start);
+    R->len = malloc(cap * sizeof *R->len);
+    if (!R->row || !R->start || !R->len)
+        return HV_ERR_NOMEM;
+    for (size_t w = 0; w < rows; w++) {
+        R->row[w] = R->n;
+        const uint8_t *m = solid + w * sy;
+        for (size_t i = 0; i < sy;) {
+            if (m[i]) {
+                i++;
+                continue;
+            }
+            size_t i0 = i;
+            while (i < sy && !m[i])
+                i++;
+            if (R->n == cap) {
+                cap *= 2;
+                size_t *st = realloc(R->start, cap * sizeof *st);
+                if (st)
+                    R->start = st;
+                int32_t *ln = st ? realloc(R->len, cap * sizeof *ln) : NULL;
+                if (ln)
+                    R->len = ln;
+                if (!st || !ln)
+                    return HV_ERR_NOMEM;
+            }
+            R->start[R->n] = w * sy + i0;
+            R->len[R->n++] = (int32_t)(i - i0);
+        }
+    }
+    R->row[rows] = R->n;
+    if (R->n >= (size_t)INT32_MAX || !(R->up = malloc((R->n ? R->n : 1) * sizeof *R->up)))
+        return HV_ERR_NOMEM;
+    return HV_OK;
+}
+
+static void runs_free(fluid_runs *R)
+{
+    free(R->start);
+    free(R->len);
+    free(R->row);
+    free(R->up);
+}
+
+int hv__label_regions(const int n[3], const uint8_t *solid, int32_t *region)
+{
+    const size_t sy = (size_t)n[0], ny = (size_t)n[1], count = sy * ny * (size_t)n[2];
+    fluid_runs R = {0};
+    if (find_runs(n, solid, &R)) {
+        runs_free(&R);
+        return -1;
+    }
+    for (size_t r = 0; r < R.n; r++)
+        R.up[r] = (int32_t)r;
+    for (size_t k = 0; k < (size_t)n[2]; k++)
+        for (size_t j = 0; j < ny; j++) {
+            size_t w = j + ny * k;
+            if (j > 0)
+                join_rows(&R, sy, w, w - 1);
+            if (k > 0)
+                join_rows(&R, sy, w, w - ny);
+        }
+    /* Parents precede their children, so in one ascending pass every run
+     * comes to point at its root, the component's first run (which holds its
+     * first cell): regions are numbered as the roots come. */
+    int nr = 0;
+    for (size_t r = 0; r < R.n; r++) {
+        int32_t p = R.up[r];
+        R.up[r] = p == (int32_t)r ? -(++nr) : R.up[p];
+    }
+    for (size_t c = 0; c < count; c++)
+        region[c] = -1;
+    for (size_t r = 0; r < R.n; r++) {
+        int32_t lab = -R.up[r] - 1;
+        for (int32_t q = 0; q < R.len[r]; q++)
+            region[R.start[r] + (size_t)q] = lab;
+    }
+    runs_free(&R);
+    return nr;
+}
+
 static hv_status label_regions(hv_solver *sv)
 {
-    const hv_setup *s = &sv->setup;
-    const int *n = s->p.n;
-    size_t sy = (size_t)n[0], sz = (size_t)n[0] * n[1];
-    sv->region = malloc(s->count * sizeof(int32_t));
-    size_t *stack = malloc(s->count * sizeof(size_t));
-    if (!sv->region || !stack) {
-        free(stack);
+    int nr = -1;
+    sv->region = malloc(sv->setup.count * sizeof(int32_t));
+    if (!sv->region || (nr = hv__label_regions(sv->setup.p.n, sv->solid, sv->region)) < 0)
         return hv__error(HV_ERR_NOMEM, "solver: out of memory labelling fluid regions");
-    }
-    for (size_t c = 0; c < s->count; c++)
-        sv->region[c] = -1;
-    int nr = 0;
-    for (size_t seed = 0; seed < s->count; seed++) {
-        if (sv->solid[seed] || sv->region[seed] >= 0)
-            continue;
-        size_t top = 0;
-        stack[top++] = seed;
-        sv->region[seed] = nr;
-        while (top) {
-            size_t c = stack[--top];
-            size_t i = c % sy, j = (c / sy) % (size_t)n[1], k = c / sz;
-            size_t nb[6];
-            int m = 0;
-            if (i > 0)
-                nb[m++] = c - 1;
-            if (i + 1 < (size_t)n[0])
-                nb[m++] = c + 1;
-            if (j > 0)
-                nb[m++] = c - sy;
-            if (j + 1 < (size_t)n[1])
-                nb[m++] = c + sy;
-            if (s->p.dim == 3 && k > 0)
-                nb[m++] = c - sz;
-            if (s->p.dim == 3 && k + 1 < (size_t)n[2])
-                nb[m++] = c + sz;
-            for (int q = 0; q < m; q++)
-                if (!sv->solid[nb[q]] && sv->region[nb[q]] < 0) {
-                    sv->region[nb[q]] = nr;
-                    stack[top++] = nb[q];
-                }
-        }
-        nr++;
-    }
-    free(stack);
     sv->setup.nregion = nr;
     sv->setup.region = sv->region;
     return HV_OK;
