@@ -1,8 +1,8 @@
 /*
  * Smoothed aggregation (agg_internal.h): rows that repeat, found before they
  * are computed. A row of level 1 depends only on the fine cells of the 5^3
- * blocks around its block, a row of level 2 only on the rows of level 1 in
- * the 7^3 blocks of level 2 around its own. Each block gets a code of what
+ * blocks around its block, a row of a deeper level l + 1 only on the rows of
+ * level l in the 7^3 blocks of level l + 1 around its own. Each block gets a code of what
  * it holds, each neighbourhood a fingerprint of its codes (two independent
  * 64-bit hashes, taken along x, then y, then z), and rows whose
  * neighbourhoods have the same fingerprint form a class: the Galerkin
@@ -54,9 +54,9 @@ void hv__agg_fine_codes(const mg_agg *g, uint64_t *code)
     }
 }
 
-/* The two codes of level-1 unknown c (a block's first part): its row as
+/* The two codes of unknown c of a coarse level (its block's only one): its row as
  * offsets to its block and values, and its diagonal's inverse. */
-static void unknown_code(const mg_alevel *L, int32_t c, uint64_t h[2])
+static void unknown_code(const mg_alevel *L, int32_t c, uint64_t h[2], int *reach)
 {
     int32_t bc[ROW_MAX];
     float bv[ROW_MAX];
@@ -70,6 +70,8 @@ static void unknown_code(const mg_alevel *L, int32_t c, uint64_t h[2])
         h[chain] = mix(seed[chain], mult[chain], ((uint64_t)(uint32_t)k << 32) | d);
     for (int q = 0; q < k; q++) {
         const int32_t *r = L->xyz + 3 * (size_t)col[q];
+        for (int a = 0; a < 3; a++)
+            *reach = abs(r[a] - p[a]) > *reach ? abs(r[a] - p[a]) : *reach;
         uint64_t off = (uint64_t)(uint8_t)(r[0] - p[0]) | (uint64_t)(uint8_t)(r[1] - p[1]) << 8 |
                        (uint64_t)(uint8_t)(r[2] - p[2]) << 16;
         uint32_t v;
@@ -79,47 +81,53 @@ static void unknown_code(const mg_alevel *L, int32_t c, uint64_t h[2])
     }
 }
 
-int hv__agg_level1_codes(const mg_agg *g, int32_t *bid, uint64_t *ca, uint64_t *cb)
+/* Per block of level l: its one unknown (-1 none, -2 more than one). */
+static int32_t *block_unknowns(const mg_alevel *L)
 {
-    const mg_alevel *L = &g->lv[1], *C = &g->lv[2];
+    const int *e = L->ext;
+    const size_t nb = (size_t)e[0] * e[1] * e[2];
+    int32_t *u = malloc((nb ? nb : 1) * sizeof *u);
+    if (!u)
+        return NULL;
+    for (size_t b = 0; b < nb; b++)
+        u[b] = -1;
+    for (int32_t c = 0; c < L->n; c++) {
+        const int32_t *p = L->xyz + 3 * (size_t)c;
+        size_t b = (size_t)p[0] + e[0] * ((size_t)p[1] + e[1] * (size_t)p[2]);
+        u[b] = u[b] == -1 ? c : -2;
+    }
+    return u;
+}
+
+int hv__agg_level_codes(const mg_agg *g, int l, int32_t *bid, uint64_t *ca, uint64_t *cb,
+                        int *reach)
+{
+    int far = 0;
+    const mg_alevel *L = &g->lv[l], *C = &g->lv[l + 1];
     const int *e1 = L->ext, *e2 = C->ext;
-    const size_t nb1 = (size_t)e1[0] * e1[1] * e1[2], nb2 = (size_t)e2[0] * e2[1] * e2[2];
-    uint8_t *split1 = calloc(nb1, 1);
-    int32_t *parts = calloc(nb2, sizeof *parts);
-    if (!split1 || !parts) {
-        free(split1);
-        free(parts);
+    const size_t nb2 = (size_t)e2[0] * e2[1] * e2[2];
+    int32_t *u1 = block_unknowns(L), *u2 = block_unknowns(C);
+    if (!u1 || !u2) {
+        free(u1);
+        free(u2);
         return -1;
     }
-    /* Level-1 blocks with more than one part; level-2 blocks' parts. */
-    for (int32_t c = (int32_t)nb1; c < L->n; c++) {
-        const int32_t *p = L->xyz + 3 * (size_t)c;
-        split1[(size_t)p[0] + e1[0] * ((size_t)p[1] + e1[1] * (size_t)p[2])] = 1;
-    }
-    for (size_t B = 0; B < nb2; B++)
-        bid[B] = -1;
-    for (int32_t I = 0; I < C->n; I++) {
-        const int32_t *p = C->xyz + 3 * (size_t)I;
-        size_t B = (size_t)p[0] + e2[0] * ((size_t)p[1] + e2[1] * (size_t)p[2]);
-        parts[B]++;
-        bid[B] = I;
-    }
-#pragma omp parallel for schedule(static) if (nb2 > AGG_PAR_MIN / 8)
+#pragma omp parallel for schedule(static) reduction(max : far) if (nb2 > AGG_PAR_MIN / 8)
     for (size_t B = 0; B < nb2; B++) {
         int x = (int)(B % e2[0]), y = (int)((B / e2[0]) % e2[1]),
             z = (int)(B / ((size_t)e2[0] * e2[1]));
         uint64_t h[2] = {seed[0], seed[1]};
-        int split = parts[B] > 1;
+        int split = u2[B] == -2;
         for (int q = 0; q < 8 && !split; q++) {
             int i = 2 * x + (q & 1), j = 2 * y + ((q >> 1) & 1), k = 2 * z + (q >> 2);
             uint64_t v[2] = {AGG_OUTSIDE, AGG_OUTSIDE};
             if (i < e1[0] && j < e1[1] && k < e1[2]) {
-                size_t c = (size_t)i + e1[0] * ((size_t)j + e1[1] * (size_t)k);
-                split |= split1[c];
-                if (L->agg[c] < 0)
-                    v[0] = v[1] = 1;
+                int32_t c = u1[(size_t)i + e1[0] * ((size_t)j + e1[1] * (size_t)k)];
+                split |= c == -2;
+                if (c < 0 || L->agg[c] < 0)
+                    v[0] = v[1] = 1; /* no unknown, or one without a row */
                 else
-                    unknown_code(L, (int32_t)c, v);
+                    unknown_code(L, c, v, &far);
             }
             for (int chain = 0; chain < 2; chain++)
                 h[chain] = mix(h[chain], mult[chain], v[chain]);
@@ -127,11 +135,11 @@ int hv__agg_level1_codes(const mg_agg *g, int32_t *bid, uint64_t *ca, uint64_t *
         /* A code of its own for split blocks: no hash stands for it. */
         ca[B] = split ? AGG_SPLIT : h[0] == AGG_SPLIT ? h[0] - 1 : h[0];
         cb[B] = split ? AGG_SPLIT : h[1];
-        if (split)
-            bid[B] = -1;
+        bid[B] = split ? -1 : u2[B];
     }
-    free(split1);
-    free(parts);
+    free(u1);
+    free(u2);
+    *reach = far;
     return 0;
 }
 

@@ -314,13 +314,13 @@ static int rap_class_rows(const rap_ctx *m, int32_t ncls, agg_crow *rows)
     return failed ? -1 : 0;
 }
 
-/* Classes of level 2's rows (3D, from level 1): m->cls, m->bid and m->rows
+/* Classes of level l + 1's rows (3D, l >= 1): m->cls, m->bid and m->rows
  * set where they apply; *ncls_out for the caller to free them. Returns the
  * rows that copy their class's row. */
-static size_t rap_classes(const mg_agg *g, rap_ctx *m, int32_t **cls_out, int32_t **bid_out,
+static size_t rap_classes(const mg_agg *g, int l, rap_ctx *m, int32_t **cls_out, int32_t **bid_out,
                           agg_crow **rows_out, int32_t *ncls_out)
 {
-    const mg_alevel *C = &g->lv[2];
+    const mg_alevel *C = &g->lv[l + 1];
     const size_t nb = (size_t)C->ext[0] * C->ext[1] * C->ext[2];
     int32_t *bid = malloc((nb ? nb : 1) * sizeof *bid),
             *bcls = malloc((nb ? nb : 1) * sizeof *bcls);
@@ -328,8 +328,14 @@ static size_t rap_classes(const mg_agg *g, rap_ctx *m, int32_t **cls_out, int32_
     uint64_t *ca = malloc((nb ? nb : 1) * sizeof *ca), *cb = malloc((nb ? nb : 1) * sizeof *cb);
     uint64_t *fp = malloc(2 * (nb ? nb : 1) * sizeof *fp);
     agg_crow *rows = NULL;
-    if (bid && bcls && cls && ca && cb && fp && hv__agg_level1_codes(g, bid, ca, cb) == 0 &&
-        hv__agg_fingerprints(C->ext, 3, ca, cb, fp) == 0)
+    /* A row of level l + 1 reads P's columns (a row's reach out of its
+     * block), A's rows (a reach more) and those rows' P (their rows, a third):
+     * that many blocks of level l, half as many of level l + 1. */
+    int reach = 0;
+    if (bid && bcls && cls && ca && cb && fp &&
+        hv__agg_level_codes(g, l, bid, ca, cb, &reach) == 0 &&
+        (3 * reach + 1) / 2 <= AGG_CLASS_RADIUS &&
+        hv__agg_fingerprints(C->ext, (3 * reach + 1) / 2, ca, cb, fp) == 0)
         ncls = hv__agg_classes(nb, fp, NULL, bcls, AGG_CLASS_MAX);
     if (ncls > 0 && (rows = calloc((size_t)ncls, sizeof *rows))) {
         for (int32_t I = 0; I < C->n; I++)
@@ -439,8 +445,10 @@ hv_status hv__agg_galerkin_csr(mg_agg *g, int l, double wp)
     }
     int32_t *cls = NULL, *bid = NULL, ncls = 0;
     agg_crow *rows = NULL;
+    /* Level 2 only: deeper rows reach 3 blocks, their neighbourhoods 11^3
+     * blocks, and those repeat too rarely to pay for the fingerprints. */
     if (!st && l == 1 && g->dim == 3 && hv__agg_classes_on())
-        g->class_copies += rap_classes(g, &rap, &cls, &bid, &rows, &ncls);
+        g->class_copies += rap_classes(g, l, &rap, &cls, &bid, &rows, &ncls);
     if (!st)
         st = build_csr(&C->A, C->n, C->n, rap_row_classed, &rap, 0, L->n, 1e-9);
     rap_classes_free(cls, bid, rows, ncls);

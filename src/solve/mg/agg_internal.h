@@ -63,15 +63,19 @@ static inline agg_op level_op(const mg_agg *g, int l)
 #define AGG_SPLIT UINT64_MAX              /* a block's code: more than one aggregate */
 #define AGG_OUTSIDE 0x8080808080808080ull /* the code of a block outside the grid */
 #define AGG_CLASS_MAX 65536               /* classes of rows computed at most */
+#define AGG_CLASS_RADIUS 6 /* neighbourhoods wider than this many blocks: no classes */
 /* Per block of level 1 (3D binary fine levels): its 8 fine cells as bytes
  * (open faces, 0x40 fluid, 0x80 outside the grid), or AGG_SPLIT where the
  * block holds a cell of another aggregate than the block's own. */
 void hv__agg_fine_codes(const mg_agg *g, uint64_t *code);
-/* Per block of level 2: two codes of the rows of level 1 in it (offsets and
- * values, diagonals), AGG_SPLIT in both where it or one of them holds more
- * than one unknown; bid[B] the block's one unknown of level 2 (-1 split or
- * empty). Returns 0, or -1 out of memory. */
-int hv__agg_level1_codes(const mg_agg *g, int32_t *bid, uint64_t *ca, uint64_t *cb);
+/* Per block of level l + 1 (l >= 1): two codes of the rows of level l in
+ * it (offsets and values, diagonals), AGG_SPLIT in both where it or one of
+ * its blocks of level l holds more than one unknown; bid[B] the block's one
+ * unknown of level l + 1 (-1 split or empty); *reach the farthest a row of
+ * level l reaches, in blocks of level l along an axis. Returns 0, or -1 out
+ * of memory. */
+int hv__agg_level_codes(const mg_agg *g, int l, int32_t *bid, uint64_t *ca, uint64_t *cb,
+                        int *reach);
 /* fp[2b], fp[2b + 1]: block b's fingerprint, hashes of the (2r+1)^3 blocks
  * around it (codes ca for the first, cb for the second), (0, 0) where one
  * of them is AGG_SPLIT. Returns 0, or -1 out of memory. */

@@ -136,7 +136,7 @@ typedef struct mg_agg {
     int nregion;
     double *bx;          /* nb doubles of work */
     size_t bytes;        /* memory held */
-    size_t class_copies; /* rows of levels 1 and 2 copied from their class's row */
+    size_t class_copies; /* coarse rows copied from their class's row */
 } mg_agg;
 
 /* Builds the aggregation hierarchy under fine level F (weighted, with dinv).
