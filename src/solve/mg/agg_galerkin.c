@@ -205,6 +205,19 @@ static int p_row(const void *ctx, void *scratch, int32_t c, spa *s)
     return 0;
 }
 
+/* The first row of each of ncls classes (cls over n rows, -1 none); NULL
+ * out of memory. */
+static int32_t *class_firsts(const int32_t *cls, int32_t n, int32_t ncls)
+{
+    int32_t *first = malloc(((size_t)ncls + 1) * sizeof *first);
+    for (int32_t k = 0; first && k < ncls; k++)
+        first[k] = -1;
+    for (int32_t r = 0; first && r < n; r++)
+        if (cls[r] >= 0 && first[cls[r]] < 0)
+            first[cls[r]] = r;
+    return first;
+}
+
 /* A row of a class of level 2: n entries at block offsets off (3 each). */
 typedef struct agg_crow {
     int n;
@@ -270,13 +283,8 @@ static int rap_row_classed(const void *ctx, void *scratch, int32_t I, spa *s)
 static int rap_class_rows(const rap_ctx *m, int32_t ncls, agg_crow *rows)
 {
     const mg_alevel *C = m->C;
-    int32_t *first = malloc(((size_t)ncls + 1) * sizeof *first);
+    int32_t *first = class_firsts(m->cls, C->n, ncls);
     int failed = !first;
-    for (int32_t k = 0; first && k < ncls; k++)
-        first[k] = -1;
-    for (int32_t I = 0; first && I < C->n; I++)
-        if (m->cls[I] >= 0 && first[m->cls[I]] < 0)
-            first[m->cls[I]] = I;
 #pragma omp parallel if (ncls > 16 && !failed)
     {
         spa cs = {0}, in = {0};
@@ -662,13 +670,8 @@ static int32_t row_classes(const mg_agg *g, const uint8_t *plain, int32_t *cls)
 static int class_rows(const g0_ctx *x, int32_t ncls, g0_class *rows)
 {
     const mg_alevel *C = x->C;
-    int32_t *first = malloc(((size_t)ncls + 1) * sizeof *first);
+    int32_t *first = class_firsts(x->cls, C->n, ncls);
     int failed = !first;
-    for (int32_t k = 0; first && k < ncls; k++)
-        first[k] = -1;
-    for (int32_t J = 0; first && J < C->n; J++)
-        if (x->cls[J] >= 0 && first[x->cls[J]] < 0)
-            first[x->cls[J]] = J;
 #pragma omp parallel if (ncls > 64 && !failed)
     {
         spa cs = {0};
