@@ -294,6 +294,8 @@ static int rap_class_rows(const rap_ctx *m, int32_t ncls, agg_crow *rows)
             if (bad)
                 continue;
             int32_t I = first[k];
+            if (I < 0)
+                continue; /* a class of blocks without an unknown: no row uses it */
             const int32_t *p = C->xyz + 3 * (size_t)I;
             spa_start(&cs);
             rap_row(m, &in, I, &cs);
@@ -684,6 +686,8 @@ static int class_rows(const g0_ctx *x, int32_t ncls, g0_class *rows)
             if (bad)
                 continue;
             int32_t J = first[k];
+            if (J < 0)
+                continue;
             const int32_t *p = C->xyz + 3 * (size_t)J;
             spa_start(&cs);
             if (g0_row(x, S, J, &cs) || cs.nidx > G0_WIN) {
