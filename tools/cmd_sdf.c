@@ -367,9 +367,10 @@ static void report(const sdf_args *A, const hv_sdf_stats *Sp, const hv_vdb_sink_
         fprintf(stderr,
                 "heatvox sdf: %zu triangles in, %zu after repair; narrow band of %g voxels in "
                 "%zu tiles of 8^3 (%zu active voxels, %zu rasterized); sign from %s: %zu cells "
-                "by pseudonormals, %zu winding-number evaluations (%.2f s)\n",
+                "by pseudonormals, %zu winding-number evaluations (%.2f s%s)\n",
                 tris, R->triangles_out, band, S.tiles, S.active_voxels, S.band_cells,
-                cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign);
+                cli_sign_name(S.sign), S.near_sign_cells, S.winding_evals, S.t_sign,
+                S.backend == HV_BACKEND_OPENCL ? ", on the device" : "");
     if (cli_verbose >= 1 && tiles)
         fprintf(stderr,
                 "heatvox sdf: the band went into the .vdb's tree as it was computed: %zu "

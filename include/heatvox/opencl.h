@@ -126,14 +126,17 @@ HV_API hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields,
 HV_API hv_status hv_opencl_extender_queue(hv_extender *e, cl_context *ctx, cl_device_id *dev,
                                           cl_command_queue *queue);
 
-/* ---- kernel times ----
+/* ---- kernel times and host traffic ----
  * With HEATVOX_OPENCL_PROFILE=1 in the environment, the queues heatvox makes
- * time every kernel and transfer with events; a caller's queue is timed
- * whenever it was made with CL_QUEUE_PROFILING_ENABLE. */
+ * time every kernel and transfer with events and count the bytes that cross
+ * between host and device; a caller's queue is timed whenever it was made
+ * with CL_QUEUE_PROFILING_ENABLE. */
 typedef struct hv_opencl_kernel_time {
     const char *name; /* the kernel, or "read", "write", "copy", "fill" */
     long launches;
     double seconds; /* device time, summed */
+    double bytes;   /* "read": bytes to the host; "write": to the device (buffers made from
+                       host memory included); 0 for the rest */
 } hv_opencl_kernel_time;
 
 /* The times summed since the last call, the largest first, into

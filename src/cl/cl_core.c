@@ -343,6 +343,7 @@ void hv__cl_close(hv_cl **pcl)
     hv__cl_profile_flush(cl);
     free(cl->ev);
     free(cl->evname);
+    free(cl->evbytes);
     hv__cl_free(&cl->part);
     for (int i = 0; i < cl->nmod; i++) {
         for (int k = 0; cl->mod[i].m->kernels[k]; k++)
@@ -494,7 +495,8 @@ static hv_status open_finish(hv_cl *cl, hv_cl **out)
     if (cl->profile) {
         cl->ev = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->ev);
         cl->evname = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->evname);
-        if (!cl->ev || !cl->evname) {
+        cl->evbytes = malloc(HV_CL_PROFILE_EVENTS * sizeof *cl->evbytes);
+        if (!cl->ev || !cl->evname || !cl->evbytes) {
             hv__cl_close(&cl);
             return hv__error(HV_ERR_NOMEM, "OpenCL: out of memory");
         }
@@ -673,8 +675,11 @@ hv_status hv__cl_alloc(hv_cl *cl, size_t bytes, const void *init, cl_mem *out)
         init = NULL;
     *out = clCreateBuffer(cl->ctx, CL_MEM_READ_WRITE | (init ? CL_MEM_COPY_HOST_PTR : 0),
                           bytes ? bytes : 1, (void *)init, &e);
-    if (e == CL_SUCCESS)
+    if (e == CL_SUCCESS) {
+        if (init)
+            hv__cl_profile_count(cl, "write", bytes);
         return HV_OK;
+    }
     *out = NULL;
     if (e == CL_INVALID_BUFFER_SIZE || e == CL_MEM_OBJECT_ALLOCATION_FAILURE ||
         e == CL_OUT_OF_RESOURCES || e == CL_OUT_OF_HOST_MEMORY)
@@ -698,7 +703,7 @@ void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *
         return;
     cl_int e = clEnqueueWriteBuffer(cl->q, m, CL_TRUE, offset, bytes, src, 0, NULL,
                                     hv__cl_profile_event(cl, "write"));
-    hv__cl_profile_done(cl, e);
+    hv__cl_profile_moved(cl, e, bytes);
     hv__cl_fail(cl, e, "clEnqueueWriteBuffer");
 }
 
@@ -708,7 +713,7 @@ void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst)
         return;
     cl_int e = clEnqueueReadBuffer(cl->q, m, CL_TRUE, offset, bytes, dst, 0, NULL,
                                    hv__cl_profile_event(cl, "read"));
-    hv__cl_profile_done(cl, e);
+    hv__cl_profile_moved(cl, e, bytes);
     hv__cl_fail(cl, e, "clEnqueueReadBuffer");
 }
 

@@ -60,6 +60,7 @@ typedef struct hv_cl {
     int nev;
     cl_event *ev;
     const char **evname;
+    size_t *evbytes; /* bytes a transfer event moved between host and device */
 } hv_cl;
 
 /* Events a profiling handle holds before it reads them. */
@@ -85,6 +86,10 @@ void hv__cl_close(hv_cl **cl);
 int hv__cl_profiling(void);
 cl_event *hv__cl_profile_event(hv_cl *cl, const char *name);
 void hv__cl_profile_done(hv_cl *cl, cl_int e);
+/* The same for a transfer of `bytes` between host and device. */
+void hv__cl_profile_moved(hv_cl *cl, cl_int e, size_t bytes);
+/* Adds bytes under name without an event (a buffer made from host memory). */
+void hv__cl_profile_count(hv_cl *cl, const char *name, size_t bytes);
 void hv__cl_profile_flush(hv_cl *cl);
 
 /* Builds a program from sources on cl's device; HV_ERR_BACKEND with the

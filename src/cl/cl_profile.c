@@ -26,7 +26,7 @@ int hv__cl_profiling(void)
     return on;
 }
 
-static void profile_add(const char *name, double seconds)
+static void profile_add(const char *name, double seconds, double bytes)
 {
     int i = 0;
     while (i < profile_count && strcmp(profile[i].name, name) != 0)
@@ -34,10 +34,11 @@ static void profile_add(const char *name, double seconds)
     if (i == profile_count) {
         if (profile_count == PROFILE_NAMES)
             return;
-        profile[profile_count++] = (hv_opencl_kernel_time){name, 0, 0.0};
+        profile[profile_count++] = (hv_opencl_kernel_time){name, 0, 0.0, 0.0};
     }
     profile[i].launches++;
     profile[i].seconds += seconds;
+    profile[i].bytes += bytes;
 }
 
 void hv__cl_profile_flush(hv_cl *cl)
@@ -53,7 +54,7 @@ void hv__cl_profile_flush(hv_cl *cl)
             clGetEventProfilingInfo(cl->ev[i], CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) ==
                 CL_SUCCESS &&
             t1 >= t0)
-            profile_add(cl->evname[i], (double)(t1 - t0) * 1e-9);
+            profile_add(cl->evname[i], (double)(t1 - t0) * 1e-9, (double)cl->evbytes[i]);
         clReleaseEvent(cl->ev[i]);
     }
     pthread_mutex_unlock(&profile_lock);
@@ -67,6 +68,7 @@ cl_event *hv__cl_profile_event(hv_cl *cl, const char *name)
     if (cl->nev == HV_CL_PROFILE_EVENTS)
         hv__cl_profile_flush(cl);
     cl->evname[cl->nev] = name;
+    cl->evbytes[cl->nev] = 0;
     return &cl->ev[cl->nev];
 }
 
@@ -74,6 +76,21 @@ void hv__cl_profile_done(hv_cl *cl, cl_int e)
 {
     if (cl->profile && e == CL_SUCCESS)
         cl->nev++;
+}
+
+void hv__cl_profile_moved(hv_cl *cl, cl_int e, size_t bytes)
+{
+    if (cl->profile && e == CL_SUCCESS)
+        cl->evbytes[cl->nev++] = bytes;
+}
+
+void hv__cl_profile_count(hv_cl *cl, const char *name, size_t bytes)
+{
+    if (!cl->profile)
+        return;
+    pthread_mutex_lock(&profile_lock);
+    profile_add(name, 0.0, (double)bytes);
+    pthread_mutex_unlock(&profile_lock);
 }
 
 static int by_seconds(const void *a, const void *b)

@@ -679,6 +679,30 @@ static hv_status tiles_check(const hv_sdf_opts *o, double band)
     return why ? hv__error(HV_ERR_INVALID_ARG, "sdf: %s", why) : HV_OK;
 }
 
+/* The band's tiles on the device where the backend says so: opencl always,
+ * auto where it would take the device for a solve on the block (a GPU, a
+ * large block; HEATVOX_AUTO_OPENCL). An auto run whose device fails before
+ * the sink was begun (no fp64, too little memory) falls back to the host. */
+static hv_status band_tiles(const hv_mesh *M, const hv_sdf_opts *o, const int n[3], double h,
+                            const double origin[3], double band, const hv_tiles_sink *via,
+                            hv_sdf_stats *S)
+{
+    const int unsig = o->unsigned_distance != 0;
+    const size_t cells = (size_t)n[0] * n[1] * n[2];
+    const int device = o->backend == HV_BACKEND_OPENCL ||
+                       (o->backend == HV_BACKEND_AUTO &&
+                        hv_backend_resolve(HV_BACKEND_AUTO, cells, 0) == HV_BACKEND_OPENCL);
+    if (device) {
+        hv_status st = hv__sdf_tiles_cl(M, n, h, origin, band, unsig, o->near_sign, via, S);
+        const morph_sink *ms = via->user;
+        if (o->backend == HV_BACKEND_OPENCL || ms->ended ||
+            (st != HV_ERR_UNSUPPORTED && st != HV_ERR_NOMEM && st != HV_ERR_BACKEND))
+            return st;
+        hv_clear_error();
+    }
+    return hv__sdf_tiles(M, n, h, origin, band, unsig, o->near_sign, via, S);
+}
+
 /* hv_sdf_stream_tiles once its options are checked: the repair, the
  * placement and the tiles through ms. */
 static hv_status stream_run(const hv_mesh *m, hv_sdf_opts *o, double band, morph_sink *ms,
@@ -703,8 +727,7 @@ static hv_status stream_run(const hv_mesh *m, hv_sdf_opts *o, double band, morph
         return st;
     const double tt = hv_now();
     const hv_tiles_sink via = {ms, morph_begin, morph_put, morph_end};
-    if ((st = hv__sdf_tiles(M, n, h, origin, band + hv__sdf_morph_reach(o) / h, unsig, o->near_sign,
-                            &via, S)))
+    if ((st = band_tiles(M, o, n, h, origin, band + hv__sdf_morph_reach(o) / h, &via, S)))
         return st;
     S->active_voxels = ms->active;
     S->t_redistance = hv_now() - tt;

@@ -156,4 +156,24 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
                         double band, int unsig, double near_sign, const hv_tiles_sink *sink,
                         hv_sdf_stats *S);
 
+/* sdf_tiles.c's helpers, which the device path (tiles_cl.c) shares: a lower
+ * bound on the band's memory checked against the limit (numbered: the
+ * block's tiles can be numbered in 32 bits); ntiles tiles on the block, no
+ * voxel active (NULL when out of memory); the tiles a batch holds
+ * (HEATVOX_TILE_BATCH, else 16384). */
+hv_status hv__sdf_band_fits(const hv_mesh *M, const int n[3], double h, int numbered);
+hv_tiles *hv__tiles_alloc(const int n[3], double h, const double origin[3], size_t ntiles);
+size_t hv__sdf_tile_batch(void);
+
+/* hv__sdf_tiles on an OpenCL device (tiles_cl.c, kernels/tiles.cl): the same
+ * tiles in the same order, the same signs, distances as the host's to a few
+ * ulps. Everything runs on the device; the tiles come back once. Before the
+ * sink is begun a failure leaves it untouched (HV_ERR_UNSUPPORTED without a
+ * device with fp64, HV_ERR_NOMEM when the device's memory does not hold the
+ * band), so that the host path can take over; S->backend is set to
+ * HV_BACKEND_OPENCL. */
+hv_status hv__sdf_tiles_cl(const hv_mesh *M, const int n[3], double h, const double origin[3],
+                           double band, int unsig, double near_sign, const hv_tiles_sink *sink,
+                           hv_sdf_stats *S);
+
 #endif

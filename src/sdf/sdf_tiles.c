@@ -107,7 +107,7 @@ static int tri_tiles(const hv_mesh *M, size_t t, const int n[3], double h, const
  * at most 64 sqrt(2) voxel^2, so the surface's area bounds the band's tiles
  * below. Blocks whose tiles cannot be numbered in 32 bits (past 2^41 cells)
  * are refused with that figure, or as such where it fits. */
-static hv_status band_fits(const hv_mesh *M, const int n[3], double h, int numbered)
+hv_status hv__sdf_band_fits(const hv_mesh *M, const int n[3], double h, int numbered)
 {
     double area = 0;
     for (size_t t = 0; t < M->ntris; t++) {
@@ -314,7 +314,7 @@ static int group_runs(const uint64_t *pairs, const size_t *tstart, size_t ntiles
 
 /* ntiles tiles on the block (n, h, origin), no voxel active; NULL when out
  * of memory. */
-static hv_tiles *tiles_alloc(const int n[3], double h, const double origin[3], size_t ntiles)
+hv_tiles *hv__tiles_alloc(const int n[3], double h, const double origin[3], size_t ntiles)
 {
     hv_tiles *T = calloc(1, sizeof *T);
     if (!T || !(T->ijk = hv_malloc(3 * ntiles * sizeof *T->ijk)) ||
@@ -342,7 +342,7 @@ static hv_status collect_begin(void *user, const hv_tiles *block, size_t max_til
                          "needs about %.3g GB, more than %s",
                          block->n[0], block->n[1], block->n[2], max_tiles, need / 1e9,
                          hv__memory_limit_text(lim, sizeof lim));
-    if (!(c->T = tiles_alloc(block->n, block->h, block->origin, max_tiles ? max_tiles : 1)))
+    if (!(c->T = hv__tiles_alloc(block->n, block->h, block->origin, max_tiles ? max_tiles : 1)))
         return tiles_nomem();
     return HV_OK;
 }
@@ -721,7 +721,7 @@ static size_t near_tiles(const band_ctx *c, size_t ntiles, uint8_t *near)
 
 /* The tiles a batch holds: HEATVOX_TILE_BATCH where set (a test's way to
  * cut a small band into many batches), else 16384 (34 MB). */
-static size_t batch_tiles(void)
+size_t hv__sdf_tile_batch(void)
 {
     const char *e = getenv("HEATVOX_TILE_BATCH");
     long b = e ? strtol(e, NULL, 10) : 0;
@@ -778,7 +778,7 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
     const int nt[3] = {(n[0] + HV_TILE - 1) / HV_TILE, (n[1] + HV_TILE - 1) / HV_TILE,
                        (n[2] + HV_TILE - 1) / HV_TILE};
     const int nb[3] = {(nt[0] + 1) / 2, (nt[1] + 1) / 2, (nt[2] + 1) / 2};
-    hv_status st = band_fits(M, n, h, 8.0 * nb[0] * nb[1] * nb[2] < 4294967295.0);
+    hv_status st = hv__sdf_band_fits(M, n, h, 8.0 * nb[0] * nb[1] * nb[2] < 4294967295.0);
     if (st)
         return st;
     /* The raster's reach: the band, and at least the 2 voxels the dense
@@ -794,12 +794,12 @@ hv_status hv__sdf_tiles(const hv_mesh *M, const int n[3], double h, const double
     if ((st = bin_triangles(M, n, h, origin, W, nt, nb, &pairs, &npairs)))
         goto out;
     const size_t ntiles = tile_runs(pairs, npairs, NULL);
-    const size_t batch = batch_tiles();
+    const size_t batch = hv__sdf_tile_batch();
     const size_t cap = (batch < ntiles ? batch : ntiles) + 7; /* whole groups of up to 8 */
     if ((st = hv__progress(0.3, "tiles")) || (st = band_memory(ntiles, npairs, cap, n)))
         goto out;
     if (!(tstart = hv_malloc((ntiles + 1) * sizeof *tstart)) || !(near = hv_malloc(ntiles)) ||
-        !(B = tiles_alloc(n, h, origin, cap)) || !(keep = hv_calloc(cap, 1)))
+        !(B = hv__tiles_alloc(n, h, origin, cap)) || !(keep = hv_calloc(cap, 1)))
         goto nomem;
     tile_runs(pairs, npairs, tstart);
     if (!unsig) {

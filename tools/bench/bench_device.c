@@ -112,7 +112,7 @@ static double take_profile(double *launches)
         if (k == ntaken) {
             if (ntaken == PROFILE_MAX)
                 continue;
-            taken[ntaken++] = (hv_opencl_kernel_time){t[i].name, 0, 0.0};
+            taken[ntaken++] = (hv_opencl_kernel_time){t[i].name, 0, 0.0, 0.0};
         }
         taken[k].launches += t[i].launches;
         taken[k].seconds += t[i].seconds;
