@@ -60,6 +60,13 @@ if [ -f "$bunny" ]; then
   for n in 1024 2048; do
     "$hv" bench band "$bunny" --n $n
   done
+  # The same band on the device (kernels/tiles.cl): its stages' device
+  # times, the bytes that cross, and the device's copy bandwidth beside.
+  case " $backends " in *" opencl "*)
+    for n in 256 512 1024 2048; do
+      "$hv" bench band "$bunny" --n $n --backend opencl
+    done ;;
+  esac
   # 4096^3: the band streamed into the .vdb and packed as it is computed
   # (about 30 s and 1.4 GB on 2 cores) against OpenVDB's 117 s and 8.5 GB.
   "$hv" bench band "$bunny" --n 4096

@@ -217,6 +217,79 @@ out:
     return st;
 }
 
+void bench_device_run_begin(void)
+{
+    setenv("HEATVOX_OPENCL_PROFILE", "1", 1);
+    hv_opencl_kernel_time t[PROFILE_MAX];
+    hv_opencl_profile_take(t, PROFILE_MAX);
+}
+
+/* The copy reference on a context of its own: at least 256 MiB, half the
+ * largest buffer at most. */
+static hv_status run_copy(bench_device_run *d, size_t bytes)
+{
+    bench_device info;
+    cl_context ctx;
+    cl_device_id dev;
+    cl_command_queue q;
+    hv_status st = open_device(&info, &ctx, &dev, &q);
+    if (st)
+        return st;
+    snprintf(d->name, sizeof d->name, "%s", info.name);
+    cl_ulong mem = 0;
+    clGetDeviceInfo(dev, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof mem, &mem, NULL);
+    size_t cb = bytes > (256u << 20) ? bytes : (256u << 20);
+    if (mem && cb > mem / 2)
+        cb = (size_t)(mem / 2);
+    d->copy_gbs = copy_gbs(ctx, q, cb);
+    clReleaseCommandQueue(q);
+    clReleaseContext(ctx);
+    return HV_OK;
+}
+
+hv_status bench_device_run_end(bench_device_run *d, const char *const *prefixes,
+                               const char *const *names, int nstages, size_t copy_bytes)
+{
+    hv_opencl_kernel_time t[PROFILE_MAX];
+    const int n = hv_opencl_profile_take(t, PROFILE_MAX);
+    memset(d, 0, sizeof *d);
+    d->nstages = nstages < 8 ? nstages : 8;
+    for (int k = 0; k < d->nstages; k++)
+        d->stage_names[k] = names[k];
+    for (int i = 0; i < n && i < PROFILE_MAX; i++) {
+        d->launches += (double)t[i].launches;
+        if (!strcmp(t[i].name, "write")) {
+            d->host_bytes_in += t[i].bytes;
+            continue;
+        }
+        if (!strcmp(t[i].name, "read")) {
+            d->host_bytes_out += t[i].bytes;
+            continue;
+        }
+        if (!strcmp(t[i].name, "copy") || !strcmp(t[i].name, "fill"))
+            continue;
+        d->kernel_seconds += t[i].seconds;
+        for (int k = 0; k < d->nstages; k++)
+            if (!strncmp(t[i].name, prefixes[k], strlen(prefixes[k]))) {
+                d->stage_seconds[k] += t[i].seconds;
+                break;
+            }
+    }
+    return run_copy(d, copy_bytes);
+}
+
+void bench_device_run_json(const bench_device_run *d, FILE *out)
+{
+    fprintf(out, ",\"device\":\"%s\",\"device_seconds\":%.6f,\"stage_device_seconds\":{", d->name,
+            d->kernel_seconds);
+    for (int k = 0; k < d->nstages; k++)
+        fprintf(out, "%s\"%s\":%.6f", k ? "," : "", d->stage_names[k], d->stage_seconds[k]);
+    fprintf(out,
+            "},\"host_bytes_in\":%.0f,\"host_bytes_out\":%.0f,\"launches\":%.0f,"
+            "\"copy_gbs\":%.2f",
+            d->host_bytes_in, d->host_bytes_out, d->launches, d->copy_gbs);
+}
+
 static int by_seconds(const void *a, const void *b)
 {
     double x = ((const hv_opencl_kernel_time *)a)->seconds;

@@ -25,6 +25,34 @@ typedef struct bench_device {
 hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const float *f,
                              int repeat, bench_device *d);
 
+/* The device's figures of one run of a device pipeline (bench band, bench
+ * extend-band, bench extend-loop): its kernels' device time by stage, the
+ * bytes that crossed (host_bytes_in: host to device, host_bytes_out: device
+ * to host, buffers made from host memory included), the commands enqueued,
+ * and the device's copy bandwidth measured in the same run. */
+typedef struct bench_device_run {
+    char name[128];
+    double kernel_seconds; /* all kernels, summed */
+    double stage_seconds[8];
+    const char *stage_names[8];
+    int nstages;
+    double host_bytes_in, host_bytes_out;
+    double launches;
+    double copy_gbs;
+} bench_device_run;
+
+/* Starts counting: HEATVOX_OPENCL_PROFILE=1 before the library's first
+ * OpenCL call (the environment is read once), and what was counted before
+ * dropped. */
+void bench_device_run_begin(void);
+/* Ends it: the kernels whose names start with prefixes[k] summed into stage
+ * k (names[k] its JSON name), the transfers, and the copy bandwidth over
+ * copy_bytes (at least 256 MiB where the device allows). */
+hv_status bench_device_run_end(bench_device_run *d, const char *const *prefixes,
+                               const char *const *names, int nstages, size_t copy_bytes);
+/* Prints d's fields as JSON members (",\"device\":...") to out. */
+void bench_device_run_json(const bench_device_run *d, FILE *out);
+
 /* With HEATVOX_OPENCL_PROFILE set, prints one JSON line per kernel and
  * transfer timed since the last call (bench "kernel", of = bench or the
  * command) to out, the largest first. */

@@ -2,6 +2,7 @@
  * `heatvox sdf MESH -o OUT.vdb` against OpenVDB's meshToLevelSet plus its
  * .vdb write on the same lattice, each in its own process, so that the times
  * and the peak RSS (from wait4) are those a user sees. */
+#include "bench_device.h"
 #include "bench_ref.h"
 #include "../cli.h"
 #include "../commands.h"
@@ -19,6 +20,7 @@
 static int usage(FILE *out)
 {
     fprintf(out, "usage: heatvox bench band MESH --n N [--band W] [--repeat R] [--dense]\n"
+                 "                         [--backend auto|mg|opencl]\n"
                  "\n"
                  "Times `heatvox sdf MESH --res N --band W -o OUT.vdb` (the narrow band in\n"
                  "tiles) and OpenVDB's meshToLevelSet with its .vdb write on the same lattice,\n"
@@ -28,7 +30,12 @@ static int usage(FILE *out)
                  "512^3 also band_sign_agreement and band_mean_abs_diff (of the distances, in\n"
                  "voxels) over the voxels in both bands; with --dense also dense_seconds and "
                  "dense_rss_mb of the same\n"
-                 "band on the dense block (--no-tiles). Files go to $TMPDIR (default /tmp).\n");
+                 "band on the dense block (--no-tiles). With --backend opencl the command\n"
+                 "runs on the device, and one more run in this process adds the device's\n"
+                 "figures: device, device_seconds, stage_device_seconds (trust, bin, scan,\n"
+                 "sign, compact), host_bytes_in (host to device), host_bytes_out (device to\n"
+                 "host), launches, and copy_gbs, the device's own copy bandwidth. Files go to\n"
+                 "$TMPDIR (default /tmp).\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -79,6 +86,51 @@ static int compare(const char *mine, const char *ref, double band, double *agree
     return 0;
 }
 
+/* The device's figures of one more run, in this process. */
+static int device_figures(const char *path, int n, double band, bench_device_run *d)
+{
+    static const char *const prefixes[] = {"tiles_trust", "tiles_count",  "tiles_fill",
+                                           "tiles_scan",  "tiles_flag",   "tiles_list",
+                                           "tiles_sign",  "tiles_compact"};
+    static const char *const names[] = {"trust", "bin", "bin",  "scan",
+                                        "bin",   "bin", "sign", "compact"};
+    hv_mesh *m = NULL;
+    hv_status st = hv_mesh_read(path, &m);
+    if (st)
+        return cli_fail("bench band", path, st);
+    hv_sdf_opts o;
+    hv_sdf_opts_default(&o);
+    o.res = n;
+    o.backend = HV_BACKEND_OPENCL;
+    hv_tiles *T = NULL;
+    hv_sdf_stats S;
+    bench_device_run_begin();
+    st = hv_sdf_compute_tiles(m, &o, band, &T, &S);
+    size_t bytes = T ? T->count * (size_t)(HV_TILE * HV_TILE * HV_TILE) * sizeof(float) : 0;
+    hv_tiles_destroy(&T);
+    hv_mesh_destroy(&m);
+    if (!st)
+        st = bench_device_run_end(d, prefixes, names, 8, bytes);
+    if (st)
+        return cli_fail("bench band", path, st);
+    /* Stages of one name summed into the first of them. */
+    bench_device_run e = *d;
+    e.nstages = 0;
+    for (int k = 0; k < d->nstages; k++) {
+        int at = 0;
+        while (at < e.nstages && strcmp(e.stage_names[at], d->stage_names[k]))
+            at++;
+        if (at == e.nstages) {
+            e.stage_names[at] = d->stage_names[k];
+            e.stage_seconds[at] = 0;
+            e.nstages++;
+        }
+        e.stage_seconds[at] += d->stage_seconds[k];
+    }
+    *d = e;
+    return HV_EXIT_OK;
+}
+
 static void help(void) { usage(stdout); }
 
 int cmd_bench_band(int argc, char **argv)
@@ -87,6 +139,7 @@ int cmd_bench_band(int argc, char **argv)
         return run_ref(argc, argv);
     const char *path = NULL;
     int n = 0, repeat = 1, dense = 0;
+    hv_backend backend = HV_BACKEND_AUTO;
     double band = 3;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
@@ -105,6 +158,7 @@ int cmd_bench_band(int argc, char **argv)
          .needs = "1..16 voxels"},
         CLI_ROW_REPEAT(&repeat),
         CLI_ROW_DENSE(&dense),
+        CLI_ROW_BACKEND(&backend, CLI_BACKENDS_LOCAL),
         {.names = NULL},
     };
     int rc = cli_parse("bench band", argc, argv, opts, "mesh", &path, help);
@@ -121,8 +175,10 @@ int cmd_bench_band(int argc, char **argv)
     snprintf(bs, sizeof bs, "%.17g", band);
 
     double sec = INFINITY, rss = 0, dsec = INFINITY, drss = 0, rsec = INFINITY, rrss = 0, t, r;
-    char *hv_argv[] = {"heatvox", "sdf", (char *)path, "--res", ns,   "--band",
-                       bs,        "-o",  mine,         "-q",    NULL, NULL};
+    char *hv_argv[] = {"heatvox", "sdf",    (char *)path, "--res",
+                       ns,        "--band", bs,           "-o",
+                       mine,      "-q",     "--backend",  (char *)hv_backend_name(backend),
+                       NULL,      NULL};
     for (int k = 0; k < repeat; k++) {
         if (bench_run_self(hv_argv, &t, &r)) {
             fprintf(stderr, "heatvox bench band: heatvox sdf %s --res %d failed\n", path, n);
@@ -132,13 +188,13 @@ int cmd_bench_band(int argc, char **argv)
             sec = t, rss = r;
     }
     for (int k = 0; dense && k < repeat; k++) {
-        hv_argv[10] = "--no-tiles";
+        hv_argv[12] = "--no-tiles";
         if (bench_run_self(hv_argv, &t, &r)) {
             fprintf(stderr, "heatvox bench band: heatvox sdf %s --res %d --no-tiles failed\n", path,
                     n);
             return HV_EXIT_FAIL;
         }
-        hv_argv[10] = NULL;
+        hv_argv[12] = NULL;
         if (t < dsec)
             dsec = t, drss = r;
     }
@@ -171,14 +227,23 @@ int cmd_bench_band(int argc, char **argv)
         remove(ref);
         return HV_EXIT_FAIL;
     }
-    printf("{\"bench\":\"sdf_band\",\"mesh\":\"%s\",\"n\":%d,\"band\":%g,\"backend\":\"tiles\","
+    bench_device_run dev;
+    if (backend == HV_BACKEND_OPENCL && device_figures(path, n, band, &dev)) {
+        remove(mine);
+        remove(ref);
+        return HV_EXIT_FAIL;
+    }
+    printf("{\"bench\":\"sdf_band\",\"mesh\":\"%s\",\"n\":%d,\"band\":%g,\"backend\":\"%s\","
            "\"threads\":%d,\"seconds\":%.4f,\"peak_rss_mb\":%.1f,\"active_voxels\":%lld,"
            "\"ref\":\"openvdb\",\"ref_seconds\":%.4f,\"ref_rss_mb\":%.1f,"
            "\"ref_active_voxels\":%lld,\"ratio\":%.3f,\"rss_ratio\":%.3f",
-           path, n, band, hv_get_threads(), sec, rss, (long long)gi.active_voxels, rsec, rrss,
-           (long long)ri.active_voxels, sec / rsec, rss / rrss);
+           path, n, band, backend == HV_BACKEND_OPENCL ? "opencl" : "tiles", hv_get_threads(), sec,
+           rss, (long long)gi.active_voxels, rsec, rrss, (long long)ri.active_voxels, sec / rsec,
+           rss / rrss);
     if (dense)
         printf(",\"dense_seconds\":%.4f,\"dense_rss_mb\":%.1f", dsec, drss);
+    if (backend == HV_BACKEND_OPENCL)
+        bench_device_run_json(&dev, stdout);
     double agree, diff;
     if (n <= 512 && !compare(mine, ref, band, &agree, &diff))
         printf(",\"band_sign_agreement\":%.5f,\"band_mean_abs_diff\":%.5f", agree, diff);
