@@ -7,9 +7,9 @@
  *                  of the other faces at its centroid near 1/2)
  *   tiles_count    per triangle: the tiles its box grown by the reach W
  *                  touches and its plane reaches, counted per tile key
- *   tiles_scan_*   exclusive prefix sums (counts to starts)
- *   tiles_fill     the triangles into their tiles' lists (a counting sort
- *                  of the (tile, triangle) pairs by tile)
+ *   tiles_fill     the triangles into their tiles' lists at the counts'
+ *                  prefix sums (src/cl/cl_ops.c): a counting sort of the
+ *                  (tile, triangle) pairs by tile
  *   tiles_list     the tile keys that hold a triangle, in key order
  *   tiles_sign     one work-group per tile: the near test, the raster (the
  *                  least packed (distance bits, triangle) per cell), the
@@ -313,48 +313,6 @@ __kernel void tiles_fill(int4 N, int4 NB, double4 O, double W, uint ntri,
     const uint t = get_global_id(0);
     if (t < ntri)
         tl_bin(N, NB, O, W, V, T, t, cur, start, pairs, 1);
-}
-
-/* ---------- prefix sums ----------
- * tiles_scan_block: work-group g's HV_WG * HV_RED_BLOCK elements of in
- * (work-item l the HV_RED_BLOCK from g * HV_WG * HV_RED_BLOCK + l *
- * HV_RED_BLOCK on) into their exclusive sums within the block in out, the
- * block's total into sums[g]; tiles_scan_add adds the scanned totals back. */
-__kernel void tiles_scan_block(uint n, __global const uint *in, __global uint *out,
-                               __global uint *sums)
-{
-    __local uint part[HV_WG];
-    const uint l = get_local_id(0), g = get_group_id(0);
-    const size_t base = (size_t)g * HV_WG * HV_RED_BLOCK + (size_t)l * HV_RED_BLOCK;
-    uint s = 0;
-    for (int q = 0; q < HV_RED_BLOCK; q++)
-        s += base + q < n ? in[base + q] : 0;
-    part[l] = s;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (l == 0) {
-        uint run = 0;
-        for (int i = 0; i < HV_WG; i++) {
-            const uint v = part[i];
-            part[i] = run;
-            run += v;
-        }
-        sums[g] = run;
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
-    uint run = part[l];
-    for (int q = 0; q < HV_RED_BLOCK; q++)
-        if (base + q < n) {
-            const uint v = in[base + q];
-            out[base + q] = run;
-            run += v;
-        }
-}
-
-__kernel void tiles_scan_add(uint n, __global uint *out, __global const uint *sums)
-{
-    const size_t i = get_global_id(0);
-    if (i < n)
-        out[i] += sums[i / (HV_WG * HV_RED_BLOCK)];
 }
 
 /* flag[k] = whether tile key k holds a triangle (start is its exclusive

@@ -500,6 +500,38 @@ START_TEST(device_solve_should_refuse_other_backends_and_zero_rhs_gives_zero)
 }
 END_TEST
 
+/* The exclusive prefix sums on the device equal the host's, across one,
+ * two and three levels of block totals. */
+START_TEST(scan_should_give_the_host_prefix_sums)
+{
+    const size_t sizes[] = {1, 5, 1023, 1024, 1025, 70000, (1u << 20) + 3, (1u << 21) + 17};
+    for (size_t z = 0; z < sizeof sizes / sizeof sizes[0]; z++) {
+        const size_t n = sizes[z];
+        uint32_t *in = malloc(n * sizeof *in), *out = malloc(n * sizeof *out);
+        uint64_t seed = 7 + n;
+        for (size_t i = 0; i < n; i++)
+            in[i] = (uint32_t)((tl_rand(&seed) + 0.5) * 7);
+        cl_mem a = NULL, b = NULL;
+        TL_ASSERT_OK(hv__cl_alloc(CL, n * sizeof *in, in, &a));
+        TL_ASSERT_OK(hv__cl_alloc(CL, n * sizeof *in, NULL, &b));
+        TL_ASSERT_OK(hv__cl_scan_u32(CL, a, b, n));
+        hv__cl_read(CL, b, 0, n * sizeof *out, out);
+        TL_ASSERT_OK(hv__cl_check(CL));
+        uint32_t run = 0;
+        size_t bad = 0;
+        for (size_t i = 0; i < n; i++) {
+            bad += out[i] != run;
+            run += in[i];
+        }
+        ck_assert_msg(bad == 0, "%zu of %zu prefix sums differ", bad, n);
+        hv__cl_free(&a);
+        hv__cl_free(&b);
+        free(in);
+        free(out);
+    }
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -529,6 +561,7 @@ int main(int argc, char **argv)
     TL_ADD_IF(tc, sdf_rhs_should_match_the_cpu_for_the_unsigned_gradient, have_cl, why);
     TL_ADD_IF(tc, device_solve_should_match_the_host_interface, have_cl, why);
     TL_ADD_IF(tc, device_solve_should_refuse_other_backends_and_zero_rhs_gives_zero, have_cl, why);
+    TL_ADD_IF(tc, scan_should_give_the_host_prefix_sums, have_cl, why);
     suite_add_tcase(su, tc);
     int rc = tl_run(su);
     if (CL)

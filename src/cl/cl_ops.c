@@ -21,14 +21,17 @@ enum {
     HV_K_FACE_NORMALIZE,
     HV_K_PW_RATIO,
     HV_K_PW_AXPY,
+    HV_K_SCAN_BLOCK_U,
+    HV_K_SCAN_ADD_U,
     HV_K_RED_CHUNK_D, /* fp64 only from here */
     HV_K_REGION_SUB_D,
     HV_K_RED_DOT_D
 };
 static const char *const ops_kernels[] = {
-    "red_dot_f",     "red_finish",      "red_chunk_f",    "red_region", "region_sub_f",
-    "face_gradient", "face_divergence", "face_normalize", "pw_ratio",   "pw_axpy",
-    "red_chunk_d",   "region_sub_d",    "red_dot_d",      NULL};
+    "red_dot_f",    "red_finish",    "red_chunk_f",     "red_region",
+    "region_sub_f", "face_gradient", "face_divergence", "face_normalize",
+    "pw_ratio",     "pw_axpy",       "scan_block_u",    "scan_add_u",
+    "red_chunk_d",  "region_sub_d",  "red_dot_d",       NULL};
 const hv_cl_module hv__cl_ops_module = {"grid operation", ops_sources, ops_kernels, 0,
                                         HV_K_RED_CHUNK_D};
 #define OPS (&hv__cl_ops_module)
@@ -235,6 +238,30 @@ void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y)
     hv__cl_range1(n, g, l);
     hv__cl_args(cl, OPS, HV_K_PW_AXPY, "fmml", alpha, x, y, n);
     hv__cl_run(cl, OPS, HV_K_PW_AXPY, 1, g, l);
+}
+
+/* ---------- prefix sums ---------- */
+
+hv_status hv__cl_scan_u32(hv_cl *cl, cl_mem in, cl_mem out, size_t n)
+{
+    const size_t ng = (n + CHUNK - 1) / CHUNK;
+    cl_mem sums = NULL, ssum = NULL;
+    hv_status st = hv__cl_alloc(cl, (ng ? ng : 1) * sizeof(cl_uint), NULL, &sums);
+    if (st)
+        return st;
+    size_t g[1] = {ng * HV_CL_WG}, l[1] = {HV_CL_WG};
+    hv__cl_args(cl, OPS, HV_K_SCAN_BLOCK_U, "lmmm", n, in, out, sums);
+    hv__cl_run(cl, OPS, HV_K_SCAN_BLOCK_U, 1, g, l);
+    if (ng > 1 && !(st = hv__cl_alloc(cl, ng * sizeof(cl_uint), NULL, &ssum)) &&
+        !(st = hv__cl_scan_u32(cl, sums, ssum, ng))) {
+        hv__cl_range1(n, g, l);
+        hv__cl_args(cl, OPS, HV_K_SCAN_ADD_U, "lmm", n, out, ssum);
+        hv__cl_run(cl, OPS, HV_K_SCAN_ADD_U, 1, g, l);
+    }
+    /* Released with commands queued: OpenCL frees them once those ran. */
+    hv__cl_free(&sums);
+    hv__cl_free(&ssum);
+    return st ? st : hv__cl_check(cl);
 }
 
 /* ---------- reductions ---------- */

@@ -70,5 +70,8 @@ void hv__cl_face_normalize(hv_cl *cl, int dim, const int n[3], cl_mem solid, cl_
 void hv__cl_ratio(hv_cl *cl, size_t n, cl_mem a, cl_mem b, cl_mem out, double eps);
 /* y += alpha x */
 void hv__cl_axpy(hv_cl *cl, size_t n, double alpha, cl_mem x, cl_mem y);
+/* out[0..n) = the exclusive prefix sums of in[0..n) (uint32; out may not be
+ * in). To have the total, scan n + 1 entries whose last is 0. */
+hv_status hv__cl_scan_u32(hv_cl *cl, cl_mem in, cl_mem out, size_t n);
 
 #endif

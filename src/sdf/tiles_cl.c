@@ -20,6 +20,7 @@
 #include "sdf_internal.h"
 #include "core/error.h"
 #include "cl/cl_core.h"
+#include "cl/cl_ops.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -28,14 +29,13 @@
 extern const char hv__kernel_tiles[]; /* kernels/tiles.cl, embedded by the Makefile */
 
 static const char *const tiles_sources[] = {hv__kernel_tiles, NULL};
-enum { K_TRUST, K_COUNT, K_FILL, K_SCAN_BLOCK, K_SCAN_ADD, K_FLAG, K_LIST, K_SIGN, K_COMPACT };
-static const char *const tiles_kernels[] = {
-    "tiles_trust", "tiles_count", "tiles_fill", "tiles_scan_block", "tiles_scan_add",
-    "tiles_flag",  "tiles_list",  "tiles_sign", "tiles_compact",    NULL};
+enum { K_TRUST, K_COUNT, K_FILL, K_FLAG, K_LIST, K_SIGN, K_COMPACT };
+static const char *const tiles_kernels[] = {"tiles_trust",   "tiles_count", "tiles_fill",
+                                            "tiles_flag",    "tiles_list",  "tiles_sign",
+                                            "tiles_compact", NULL};
 static const hv_cl_module tiles_module = {"tiles", tiles_sources, tiles_kernels, 1, 0};
 
 #define T3 (HV_TILE * HV_TILE * HV_TILE)
-#define SCAN_BLOCK ((size_t)HV_CL_WG * HV_CL_RED_BLOCK)
 
 /* The stage's sums (kernels/tiles.cl, tiles_sign). */
 enum { C_BAND, C_ACTIVE, C_EVALS, C_USED, C_NEAR, C_COUNT };
@@ -70,31 +70,6 @@ static void range_groups(size_t groups, size_t g[1], size_t l[1])
 {
     l[0] = HV_CL_WG;
     g[0] = groups * HV_CL_WG;
-}
-
-/* out[0..n) = the exclusive prefix sums of in[0..n) (uint), the blocks'
- * totals scanned the same way one level down. */
-static hv_status scan(hv_cl *cl, cl_mem in, cl_mem out, size_t n)
-{
-    const size_t ng = (n + SCAN_BLOCK - 1) / SCAN_BLOCK;
-    cl_mem sums = NULL, ssum = NULL;
-    size_t g[1], l[1];
-    hv_status st = hv__cl_alloc(cl, ng * sizeof(cl_uint), NULL, &sums);
-    if (st)
-        return st;
-    range_groups(ng, g, l);
-    hv__cl_args(cl, &tiles_module, K_SCAN_BLOCK, "immm", (int)n, in, out, sums);
-    hv__cl_run(cl, &tiles_module, K_SCAN_BLOCK, 1, g, l);
-    if (ng > 1 && !(st = hv__cl_alloc(cl, ng * sizeof(cl_uint), NULL, &ssum)) &&
-        !(st = scan(cl, sums, ssum, ng))) {
-        hv__cl_range1(n, g, l);
-        hv__cl_args(cl, &tiles_module, K_SCAN_ADD, "imm", (int)n, out, ssum);
-        hv__cl_run(cl, &tiles_module, K_SCAN_ADD, 1, g, l);
-    }
-    /* Released with commands queued: OpenCL frees them once those ran. */
-    hv__cl_free(&sums);
-    hv__cl_free(&ssum);
-    return st ? st : hv__cl_check(cl);
 }
 
 /* One uint of m at index i (a host synchronization). */
@@ -191,7 +166,7 @@ static hv_status bin(tl_run *r, size_t ntri)
     hv__cl_args(cl, &tiles_module, K_COUNT, "IIAaimmm", r->N, r->NB, r->O, r->R[0], (int)ntri, r->V,
                 r->T, r->cnt);
     hv__cl_run(cl, &tiles_module, K_COUNT, 1, g, l);
-    if ((st = scan(cl, r->cnt, r->start, nk + 1)))
+    if ((st = hv__cl_scan_u32(cl, r->cnt, r->start, nk + 1)))
         return st;
     r->npairs = read_u32(cl, r->start, nk);
     if ((st = hv__cl_check(cl)))
@@ -213,7 +188,7 @@ static hv_status bin(tl_run *r, size_t ntri)
     hv__cl_range1(nk, g, l);
     hv__cl_args(cl, &tiles_module, K_FLAG, "imm", (int)nk, r->start, r->flag);
     hv__cl_run(cl, &tiles_module, K_FLAG, 1, g, l);
-    if ((st = scan(cl, r->flag, r->pos, nk + 1)))
+    if ((st = hv__cl_scan_u32(cl, r->flag, r->pos, nk + 1)))
         return st;
     r->ntiles = read_u32(cl, r->pos, nk);
     if ((st = hv__cl_alloc(cl, (r->ntiles ? r->ntiles : 1) * sizeof(cl_uint), NULL, &r->list)))
@@ -273,7 +248,7 @@ static hv_status compact(tl_run *r)
     const size_t nt = r->ntiles;
     hv_status st;
     if ((st = hv__cl_alloc(cl, (nt + 1) * sizeof(cl_uint), NULL, &r->kpos)) ||
-        (st = scan(cl, r->keep, r->kpos, nt + 1)))
+        (st = hv__cl_scan_u32(cl, r->keep, r->kpos, nt + 1)))
         return st;
     r->kept = read_u32(cl, r->kpos, nt);
     if ((st = hv__cl_check(cl)))
@@ -372,7 +347,8 @@ static hv_status run_setup(tl_run *r, const hv_mesh *M, const int n[3], double h
                          "sdf: the narrow band on a device needs double precision, which '%s' "
                          "lacks",
                          r->cl->info.name);
-    return hv__cl_module_open(r->cl, &tiles_module);
+    hv_status so = hv__cl_module_open(r->cl, &tiles_module);
+    return so ? so : hv__cl_ops_open(r->cl);
 }
 
 static void run_stats(const tl_run *r, const cl_uint cnt[C_COUNT], double ts, hv_sdf_stats *S)

@@ -90,7 +90,7 @@ static int compare(const char *mine, const char *ref, double band, double *agree
 static int device_figures(const char *path, int n, double band, bench_device_run *d)
 {
     static const char *const prefixes[] = {"tiles_trust", "tiles_count",  "tiles_fill",
-                                           "tiles_scan",  "tiles_flag",   "tiles_list",
+                                           "scan_",       "tiles_flag",   "tiles_list",
                                            "tiles_sign",  "tiles_compact"};
     static const char *const names[] = {"trust", "bin", "bin",  "scan",
                                         "bin",   "bin", "sign", "compact"};
