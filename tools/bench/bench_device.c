@@ -88,6 +88,18 @@ static double copy_gbs(cl_context ctx, cl_command_queue q, size_t bytes)
     return best;
 }
 
+/* The copy reference: copies of at least 256 MiB (as the host's reference)
+ * or of bytes, half the largest buffer at most, in GB/s. */
+static double copy_reference(cl_context ctx, cl_device_id dev, cl_command_queue q, size_t bytes)
+{
+    cl_ulong mem = 0;
+    clGetDeviceInfo(dev, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof mem, &mem, NULL);
+    size_t cb = bytes > (256u << 20) ? bytes : (256u << 20);
+    if (mem && cb > mem / 2)
+        cb = (size_t)(mem / 2);
+    return copy_gbs(ctx, q, cb);
+}
+
 /* Kernel times taken from the library (hv_opencl_profile_take) before
  * bench_device_profile prints them: the device solves' own, and those that
  * ran before them. */
@@ -199,13 +211,7 @@ hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const
     d->setup_seconds = hv_now() - t0;
     if ((st = time_device(sv, q, fd, ud, repeat, d)))
         goto out;
-    /* The copy reference: at least 256 MiB, as the host's, where it fits. */
-    cl_ulong mem = 0;
-    clGetDeviceInfo(dev, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof mem, &mem, NULL);
-    size_t cb = bytes > (256u << 20) ? bytes : (256u << 20);
-    if (mem && cb > mem / 2)
-        cb = (size_t)(mem / 2);
-    d->copy_gbs = copy_gbs(ctx, q, cb);
+    d->copy_gbs = copy_reference(ctx, dev, q, bytes);
 out:
     hv_solver_destroy(&sv);
     if (e1 == CL_SUCCESS)
@@ -224,8 +230,7 @@ void bench_device_run_begin(void)
     hv_opencl_profile_take(t, PROFILE_MAX);
 }
 
-/* The copy reference on a context of its own: at least 256 MiB, half the
- * largest buffer at most. */
+/* The copy reference on a context of its own. */
 static hv_status run_copy(bench_device_run *d, size_t bytes)
 {
     bench_device info;
@@ -236,12 +241,7 @@ static hv_status run_copy(bench_device_run *d, size_t bytes)
     if (st)
         return st;
     snprintf(d->name, sizeof d->name, "%s", info.name);
-    cl_ulong mem = 0;
-    clGetDeviceInfo(dev, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof mem, &mem, NULL);
-    size_t cb = bytes > (256u << 20) ? bytes : (256u << 20);
-    if (mem && cb > mem / 2)
-        cb = (size_t)(mem / 2);
-    d->copy_gbs = copy_gbs(ctx, q, cb);
+    d->copy_gbs = copy_reference(ctx, dev, q, bytes);
     clReleaseCommandQueue(q);
     clReleaseContext(ctx);
     return HV_OK;
