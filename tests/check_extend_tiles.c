@@ -4,6 +4,7 @@
  * extension, bad input, and the heatvox extend command's sparse path. */
 #include "testlib.h"
 #include "heatvox/heat.h"
+#include "heatvox/opencl.h"
 #include "heatvox/vdb.h"
 
 #include <math.h>
@@ -590,6 +591,160 @@ START_TEST(command_should_extend_a_narrow_band_in_tiles)
 }
 END_TEST
 
+/* ---- on a device ------------------------------------------------------------ */
+
+/* Whether an OpenCL device with fp64 is here; skips the test otherwise. */
+static int have_device(void)
+{
+    hv_opencl_device d;
+    if (hv_opencl_probe(&d) != HV_OK) {
+        tl_skip("no OpenCL device: %s", hv_last_error());
+        return 0;
+    }
+    if (!d.fp64) {
+        tl_skip("the OpenCL device '%s' has no fp64", d.name);
+        return 0;
+    }
+    return 1;
+}
+
+/* The case's scalar and vector on tiles, extended by e (fresh tiles). */
+static void extend_on(const nb_case *c, hv_extender *e, hv_tiles *F[4], hv_extend_stats *S)
+{
+    hv_tiles *P = tiles_of(c, c->phi);
+    for (int q = 0; q < 4; q++)
+        F[q] = tiles_of(c, c->in[q]);
+    hv_extend_tiles_field tf[2] = {{1, {F[0], NULL, NULL}}, {3, {F[1], F[2], F[3]}}};
+    TL_ASSERT_OK(hv_extend_tiles(e, P, 2, tf, S));
+    hv_tiles_destroy(&P);
+}
+
+/* The device extender dev gives the host extender's values bit for bit,
+ * the same active voxels and the same counts. */
+static void expect_device_equal(const nb_case *c, hv_extender *host, hv_extender *dev,
+                                const char *what)
+{
+    hv_tiles *A[4], *B[4];
+    hv_extend_stats sa, sb;
+    extend_on(c, host, A, &sa);
+    extend_on(c, dev, B, &sb);
+    size_t diff = 0, ondiff = 0;
+    double worst = 0;
+    for (int q = 0; q < 4; q++) {
+        ck_assert_uint_eq(A[q]->count, B[q]->count);
+        for (size_t v = 0; v < A[q]->count * TCELLS; v++) {
+            const float a = A[q]->v[v], b = B[q]->v[v];
+            if (memcmp(&a, &b, sizeof a)) {
+                if (!diff++)
+                    printf("  %s: component %d, value %zu: host %.9g, device %.9g\n", what, q, v, a,
+                           b);
+                worst = fmax(worst, fabs(a - b) / fmax(fabs(a), 1e-3));
+            }
+        }
+        for (size_t w = 0; w < 8 * A[q]->count; w++)
+            ondiff += A[q]->on[w] != B[q]->on[w];
+        ck_assert_uint_eq(A[q]->active, B[q]->active);
+    }
+    printf("check_extend_tiles: %s on the device: %zu tiles, %zu active, %zu values apart "
+           "(worst %.3g), levels %d/%d, solve cells %zu/%zu, cp %zu/%zu, ratio %zu/%zu, "
+           "weak %zu/%zu\n",
+           what, A[0]->count, A[0]->active, diff, worst, sa.levels, sb.levels, sa.solve_cells,
+           sb.solve_cells, sa.cp_cells, sb.cp_cells, sa.ratio_cells, sb.ratio_cells, sa.weak_cells,
+           sb.weak_cells);
+    ck_assert_msg(diff == 0 && ondiff == 0, "%s: %zu values and %zu active words differ", what,
+                  diff, ondiff);
+    ck_assert_int_eq(sa.levels, sb.levels);
+    ck_assert_uint_eq(sa.solve_cells, sb.solve_cells);
+    ck_assert_uint_eq(sa.source_cells, sb.source_cells);
+    ck_assert_uint_eq(sa.cp_cells, sb.cp_cells);
+    ck_assert_uint_eq(sa.ratio_cells, sb.ratio_cells);
+    ck_assert_uint_eq(sa.weak_cells, sb.weak_cells);
+    ck_assert_int_eq(sa.solves, sb.solves);
+    ck_assert_msg(fabs(sa.relres - sb.relres) <= 1e-6 * sa.relres + 1e-12, "relres %g %g",
+                  sa.relres, sb.relres);
+    for (int q = 0; q < 4; q++) {
+        hv_tiles_destroy(&A[q]);
+        hv_tiles_destroy(&B[q]);
+    }
+}
+
+START_TEST(device_should_equal_the_host_on_bands)
+{
+    if (!have_device())
+        return;
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_extend_opts od = o;
+    od.backend = HV_BACKEND_OPENCL;
+    {
+        const int n[3] = {61, 57, 54};
+        const double c0[3] = {0.05, -0.03, 0.02};
+        nb_case c;
+        make_case(&c, SPHERE, n, c0);
+        for (int pass = 0; pass < 3; pass++) {
+            o.out_band = od.out_band = pass == 0 ? LS_BAND : pass == 1 ? 2 : 0;
+            hv_extender *h = NULL, *d = NULL;
+            TL_ASSERT_OK(hv_extender_create(&h, 3, c.n, c.h, NULL, &o));
+            TL_ASSERT_OK(hv_extender_create(&d, 3, c.n, c.h, NULL, &od));
+            expect_device_equal(&c, h, d,
+                                pass == 0   ? "sphere, band 3"
+                                : pass == 1 ? "sphere, band 2"
+                                            : "sphere, every voxel");
+            hv_extender_destroy(&h);
+            hv_extender_destroy(&d);
+        }
+        /* Cells read at themselves, and a short first level that leaves
+         * cells to the next. */
+        o.out_band = od.out_band = LS_BAND;
+        o.closest_point = od.closest_point = 0;
+        o.t_scale = od.t_scale = 0.02;
+        hv_extender *h = NULL, *d = NULL;
+        TL_ASSERT_OK(hv_extender_create(&h, 3, c.n, c.h, NULL, &o));
+        TL_ASSERT_OK(hv_extender_create(&d, 3, c.n, c.h, NULL, &od));
+        expect_device_equal(&c, h, d, "sphere, at the cells, two levels");
+        hv_extender_destroy(&h);
+        hv_extender_destroy(&d);
+        free_case(&c);
+    }
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    od = o;
+    od.backend = HV_BACKEND_OPENCL;
+    {
+        /* Against the block's walls: one-sided differences and clamped
+         * stencils; one extender each for three steps of a moving sphere. */
+        const int n[3] = {40, 44, 36};
+        hv_extender *h = NULL, *d = NULL;
+        TL_ASSERT_OK(hv_extender_create(&h, 3, n, 2.0 / n[0], NULL, &o));
+        TL_ASSERT_OK(hv_extender_create(&d, 3, n, 2.0 / n[0], NULL, &od));
+        for (int step = 0; step < 3; step++) {
+            const double c0[3] = {0.45 - 0.2 * step, -0.5 + 0.1 * step, 0.55};
+            nb_case c;
+            make_case(&c, SPHERE, n, c0);
+            expect_device_equal(&c, h, d, "sphere through the walls");
+            free_case(&c);
+        }
+        hv_extender_destroy(&h);
+        hv_extender_destroy(&d);
+    }
+    if (!tl_sanitized()) {
+        const int n[3] = {128, 128, 64};
+        const double c0[3] = {0.02, 0.01, -0.5 + 0.013};
+        nb_case c;
+        make_case(&c, TORUS, n, c0);
+        o.out_band = od.out_band = LS_BAND;
+        hv_extender *h = NULL, *d = NULL;
+        TL_ASSERT_OK(hv_extender_create(&h, 3, c.n, c.h, NULL, &o));
+        TL_ASSERT_OK(hv_extender_create(&d, 3, c.n, c.h, NULL, &od));
+        expect_device_equal(&c, h, d, "torus, band 3");
+        hv_extender_destroy(&h);
+        hv_extender_destroy(&d);
+        free_case(&c);
+    }
+}
+END_TEST
+
 int main(void)
 {
     Suite *s = suite_create("extend_tiles");
@@ -601,6 +756,7 @@ int main(void)
     tcase_add_test(tc, bad_input_should_fail_without_output);
     tcase_add_test(tc, an_extender_for_tiles_should_not_allocate_the_block);
     tcase_add_test(tc, command_should_extend_a_narrow_band_in_tiles);
+    tcase_add_test(tc, device_should_equal_the_host_on_bands);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

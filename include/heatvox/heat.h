@@ -268,8 +268,12 @@ typedef struct hv_extend_tiles_field {
  * (the values agree with it on the band to float rounding); the levels stop at
  * the first whose reach covers the output band. The extender keeps its maps
  * and work arrays between calls, so a level set that moves from call to call
- * costs no new set-up. It runs on the CPU whatever the extender's backend;
- * an extender with solid cells is refused (HV_ERR_INVALID_ARG). NaN/Inf in the level set or
+ * costs no new set-up. With the opencl backend (or auto on a GPU) every
+ * step runs on the device, which gives the same values bit for bit; it keeps
+ * maps of the block's tiles there, 268 bytes a tile (2048^3: 4.5 GB), needs
+ * double precision and takes at most 17 right-hand sides (auto falls back to
+ * the CPU where it cannot). An extender with solid cells is refused
+ * (HV_ERR_INVALID_ARG). NaN/Inf in the level set or
  * in a field where it is read: HV_ERR_NUMERIC, the fields unchanged (other
  * failures, out of memory or a cancel, can leave them partly extended). The
  * fields' values at the cells read are copied compactly first, so the

@@ -119,6 +119,36 @@ HV_API hv_status hv_opencl_extender_create(hv_extender **out, int dim, const int
 HV_API hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields,
                                   const hv_opencl_field *fields, hv_extend_stats *stats);
 
+/* ---- narrow bands in tiles with fields on the device ----
+ * A narrow-band level set on the device as hv_tiles (grid.h) holds it on the
+ * host, on the extender's block: count tiles; ijk int32 3 count (each tile's
+ * first cell, on the block's 8^3 lattice), v float 512 count (v[t 512 + i +
+ * 8 j + 64 k]), on 8 count 64-bit words (bit i + 8 j of word k: active). */
+typedef struct hv_opencl_tiles {
+    size_t count;
+    cl_mem ijk, v, on;
+} hv_opencl_tiles;
+
+/* One field on the level set's tiles (ncomp 1 or 3), each component's
+ * values and active words laid out as the level set's, extended in place as
+ * hv_extend_tiles_field. */
+typedef struct hv_opencl_tiles_field {
+    int ncomp;
+    cl_mem v[3];
+    cl_mem on[3];
+} hv_opencl_tiles_field;
+
+/* hv_extend_tiles (heat.h) with the level set and the fields on the device:
+ * an extender of hv_opencl_extender_create, or of hv_extender_create with
+ * the opencl backend (buffers on the context hv_opencl_extender_queue
+ * names), so that a simulation that keeps a narrow band on a GPU extends its
+ * velocity every step without a copy to the host (a few counters per level
+ * cross). The same values as hv_extend_tiles on the host. HV_ERR_UNSUPPORTED
+ * on a device without double precision, or past 17 right-hand sides (1 + per
+ * field 1, or 4 for a vector). The commands have finished when it returns. */
+HV_API hv_status hv_opencl_extend_tiles(hv_extender *e, const hv_opencl_tiles *phi, int nfields,
+                                        const hv_opencl_tiles_field *f, hv_extend_stats *stats);
+
 /* The context, device and queue an extender's device work goes to (made on
  * first use for one of hv_extender_create with the opencl backend; any of
  * the three may be NULL). HV_ERR_UNSUPPORTED for an extender of another

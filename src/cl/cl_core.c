@@ -728,6 +728,16 @@ void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes)
     hv__cl_fail(cl, e, "clEnqueueFillBuffer");
 }
 
+void hv__cl_fill(hv_cl *cl, cl_mem m, size_t bytes, const void *pattern, size_t size)
+{
+    if (!bytes)
+        return;
+    cl_int e = clEnqueueFillBuffer(cl->q, m, pattern, size, 0, bytes, 0, NULL,
+                                   hv__cl_profile_event(cl, "fill"));
+    hv__cl_profile_done(cl, e);
+    hv__cl_fail(cl, e, "clEnqueueFillBuffer");
+}
+
 void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes)
 {
     if (!bytes)

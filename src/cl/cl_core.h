@@ -142,6 +142,8 @@ void hv__cl_write(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, const void *
 /* Blocking read: a host synchronization. */
 void hv__cl_read(hv_cl *cl, cl_mem m, size_t offset, size_t bytes, void *dst);
 void hv__cl_zero(hv_cl *cl, cl_mem m, size_t bytes);
+/* bytes (a multiple of size) of m set to the pattern of size bytes (1, 2, 4 ...). */
+void hv__cl_fill(hv_cl *cl, cl_mem m, size_t bytes, const void *pattern, size_t size);
 void hv__cl_copy(hv_cl *cl, cl_mem src, cl_mem dst, size_t bytes);
 /* HV_OK when m is a buffer on cl's context of at least count floats, else
  * HV_ERR_INVALID_ARG with a message "<who>: <what> ..." saying which. */

@@ -93,13 +93,9 @@ static hv_status state_create(hv_extend_cl **out, const hv_extend_grid *g)
     hv_status st = hv__cl_open(&x->cl);
     hv_cl *cl = x->cl;
     if (st || (st = hv__cl_module_open(cl, &extend_module)) || (st = hv__cl_ops_open(cl)) ||
-        (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->phi)) ||
-        (st = hv__cl_alloc(cl, g->count * sizeof(float), NULL, &x->w)) ||
-        (st = hv__cl_alloc(cl, g->count, NULL, &x->pending)) ||
         (st = hv__cl_alloc(cl, MAX_FIELDS_PER_CALL * sizeof(cl_int), NULL, &x->ncomp)) ||
         (st = hv__cl_alloc(cl, K_COUNT * sizeof(cl_int), NULL, &x->K)) ||
-        (st = hv__cl_alloc(cl, sizeof(double), NULL, &x->S)) ||
-        (g->solid && (st = hv__cl_alloc(cl, g->count, g->solid, &x->solid)))) {
+        (st = hv__cl_alloc(cl, sizeof(double), NULL, &x->S))) {
         hv__extend_cl_destroy(&x);
         return st;
     }
@@ -232,7 +228,13 @@ static hv_status io_planes(hv_extend_cl *x, const hv_extend_grid *g, int nfields
     for (int i = 0; i < nfields; i++)
         nout += f[i].ncomp;
     const size_t fb = g->count * sizeof(float);
-    hv_status st;
+    hv_status st = HV_OK;
+    /* The grid's planes, on first use (an extender of tiles never needs them). */
+    if ((!x->phi && (st = hv__cl_alloc(x->cl, fb, NULL, &x->phi))) ||
+        (!x->w && (st = hv__cl_alloc(x->cl, fb, NULL, &x->w))) ||
+        (!x->pending && (st = hv__cl_alloc(x->cl, g->count, NULL, &x->pending))) ||
+        (g->solid && !x->solid && (st = hv__cl_alloc(x->cl, g->count, g->solid, &x->solid))))
+        return st;
     if ((st = ensure(x->cl, &x->in, &x->cap_in, (size_t)nout, fb)) ||
         (st = ensure(x->cl, &x->out, &x->cap_out, (size_t)nout, fb)))
         return st;
@@ -413,6 +415,8 @@ hv_status hv__extend_cl_run_dev(hv_extend_cl *x, const hv_extend_grid *g, cl_mem
             hv__cl_copy_at(cl, x->out, (size_t)(q0 + q) * fb, fd[i].out[q], 0, fb);
     return hv__cl_finish(cl);
 }
+
+struct hv_cl *hv__extend_cl_handle(hv_extend_cl *x) { return x->cl; }
 
 void hv__extend_cl_queue(const hv_extend_cl *x, cl_context *ctx, cl_device_id *dev,
                          cl_command_queue *queue)

@@ -44,4 +44,30 @@ void hv__extend_cl_queue(const hv_extend_cl *x, cl_context *ctx, cl_device_id *d
 hv_status hv__extend_cl_run_dev(hv_extend_cl *x, const hv_extend_grid *g, cl_mem phi, int nfields,
                                 const hv_opencl_field *f, int nrhs, hv_extend_stats *S);
 
+/* The device handle of x (its context, queue and built modules). */
+struct hv_cl *hv__extend_cl_handle(hv_extend_cl *x);
+
+/* ---- narrow bands in tiles on the device (extend_tiles_cl.c) ---- */
+
+/* Right-hand sides a tile extension takes on the device (1 + per field 1
+ * or 4): a private array of each evaluating work-item. */
+#define HV_EXTEND_TILES_CL_MAX_R 17
+
+/* Made on the extender's device state (hv__extend_cl_prepare) at first use:
+ * HV_ERR_UNSUPPORTED on a device without double precision. */
+hv_status hv__extend_tiles_cl_prepare(hv_extender *e);
+void hv__extend_tiles_cl_destroy(struct hv_extend_tiles_cl **state);
+
+/* hv_extend_tiles on the device once the arguments are checked: the level
+ * set and the fields go to the device, the outputs come back (the tiles'
+ * values and active words; `active` is the caller's to count).
+ * HV_ERR_UNSUPPORTED past HV_EXTEND_TILES_CL_MAX_R right-hand sides. */
+hv_status hv__extend_tiles_cl_run(hv_extender *e, const hv_tiles *phi, int nfields,
+                                  hv_extend_tiles_field *f, hv_extend_stats *S);
+
+/* hv_opencl_extend_tiles once the extender is checked: the buffers on the
+ * extender's context (checked here). */
+hv_status hv__extend_tiles_cl_run_dev(hv_extender *e, const hv_opencl_tiles *phi, int nfields,
+                                      const hv_opencl_tiles_field *f, hv_extend_stats *S);
+
 #endif

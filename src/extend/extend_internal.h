@@ -99,16 +99,19 @@ struct hv_extender {
      * for all fields). */
     float *sol;
     int nsol, capsol;
-    float *bf, *bu0, *bu1;       /* band solve: right-hand sides and iterates, compact */
-    size_t bcap;                 /* floats each of them holds */
-    uint8_t *bneed, *bg0, *bg1;  /* band solve: cells read, growing buffers */
-    uint8_t *pending;            /* per cell: 0 done, 1 read at the closest point, 2 at itself,
+    float *bf, *bu0, *bu1;          /* band solve: right-hand sides and iterates, compact */
+    size_t bcap;                    /* floats each of them holds */
+    uint8_t *bneed, *bg0, *bg1;     /* band solve: cells read, growing buffers */
+    uint8_t *pending;               /* per cell: 0 done, 1 read at the closest point, 2 at itself,
                                     3 at a closest point past the box (hv_extend_remote) */
-    struct hv_extend_cl *cl;     /* backend opencl: the device path's state (extend_cl.h) */
-    int resolved;                /* o.backend resolved (AUTO: OPENCL on a GPU) */
-    struct hv_extend_sparse *sp; /* hv_extend_tiles: maps and marks kept between calls
+    struct hv_extend_cl *cl;        /* backend opencl: the device path's state (extend_cl.h) */
+    int resolved;                   /* o.backend resolved (AUTO: OPENCL on a GPU) */
+    int auto_backend;               /* o.backend was AUTO (a device path may fall back) */
+    struct hv_extend_sparse *sp;    /* hv_extend_tiles: maps and marks kept between calls
                                     (extend_tiles.c) */
-    const hv_extend_dist *dist;  /* NULL, or the distributed extension's hooks */
+    struct hv_extend_tiles_cl *tcl; /* hv_extend_tiles on the device: its maps and buffers
+                                       (extend_tiles_cl.c), on cl's context */
+    const hv_extend_dist *dist;     /* NULL, or the distributed extension's hooks */
 };
 
 /* ---- right-hand sides ----------------------------------------------------- */
@@ -433,6 +436,12 @@ hv_status hv__extend_band_solve(hv_extender *e, hv_extend_band *b, int nfields,
 /* ---- narrow bands as tiles (extend_tiles.c, extend_wave.c) ------------------- */
 
 void hv__extend_sparse_destroy(struct hv_extend_sparse **sp);
+
+/* HV_OK when e takes tiles (3D, no solid cells), else HV_ERR_INVALID_ARG. */
+hv_status hv__extend_tiles_check(const hv_extender *e);
+
+/* e->o.backend resolved once (AUTO: opencl on a GPU, e->auto_backend set). */
+void hv__extend_resolve_backend(hv_extender *e);
 
 /* A set of cells as x-runs per row, on the planes k0 <= k < k1: the runs of
  * row (j, k) are x[2 q] <= x < x[2 q + 1] for first[r] <= q < first[r + 1],

@@ -24,6 +24,7 @@
  * them: no zero crossing lies between two neighbours unless both are within
  * a voxel of it, hence in a tile. */
 #include "extend_internal.h"
+#include "extend_cl.h"
 #include "core/error.h"
 
 #include <math.h>
@@ -873,6 +874,30 @@ static void unmap(tctx *x, size_t mapped)
     hv_free(x->sval);
 }
 
+/* The fields' active voxels, counted. */
+static void count_active(int nfields, hv_extend_tiles_field *f)
+{
+    for (int i = 0; i < nfields; i++)
+        for (int q = 0; q < f[i].ncomp; q++) {
+            hv_tiles *F = f[i].v[q];
+            size_t a = 0;
+            for (size_t w = 0; w < 8 * F->count; w++)
+                a += (size_t)__builtin_popcountll(F->on[w]);
+            F->active = a;
+        }
+}
+
+hv_status hv__extend_tiles_check(const hv_extender *e)
+{
+    if (e->dim != 3)
+        return hv__error(HV_ERR_INVALID_ARG, "extend: tiles are 3D; the extender is %dD", e->dim);
+    if (e->solid)
+        return hv__error(HV_ERR_INVALID_ARG,
+                         "extend: the extender has solid cells; tiles take none (use "
+                         "hv_extend_many)");
+    return HV_OK;
+}
+
 hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
                           hv_extend_tiles_field *f, hv_extend_stats *stats)
 {
@@ -882,17 +907,13 @@ hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
     memset(S, 0, sizeof *S);
     if (!e || !phi || nfields < 0 || (nfields > 0 && !f))
         return hv__error(HV_ERR_INVALID_ARG, "hv_extend_tiles: bad arguments");
-    if (e->dim != 3)
-        return hv__error(HV_ERR_INVALID_ARG, "extend: tiles are 3D; the extender is %dD", e->dim);
-    if (e->solid)
-        return hv__error(HV_ERR_INVALID_ARG,
-                         "extend: the extender has solid cells; tiles take none (use "
-                         "hv_extend_many)");
+    hv_status st = hv__extend_tiles_check(e);
+    if (st)
+        return st;
     if (nfields > MAX_FIELDS_PER_CALL)
         return hv__error(HV_ERR_INVALID_ARG, "extend: %d fields in one call, at most %d", nfields,
                          MAX_FIELDS_PER_CALL);
-    hv_status st = check_tiles(e, phi, "the level set");
-    if (st)
+    if ((st = check_tiles(e, phi, "the level set")))
         return st;
     int nrhs = 1;
     for (int i = 0; i < nfields; i++) {
@@ -920,6 +941,19 @@ hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
                                  "lattice",
                                  t);
         }
+    hv__extend_resolve_backend(e);
+    if (e->o.backend == HV_BACKEND_OPENCL) {
+        st = hv__extend_tiles_cl_run(e, phi, nfields, f, S);
+        if (!(st == HV_ERR_UNSUPPORTED && e->auto_backend)) {
+            if (!st)
+                count_active(nfields, f);
+            S->t_total = hv_now() - t_start;
+            return st;
+        }
+        hv_clear_error();
+        memset(S, 0, sizeof *S);
+        S->tiles = phi->count;
+    }
     /* The level set: finite, and its background. */
     float bg = 0;
     size_t bad = SIZE_MAX;
@@ -1003,13 +1037,7 @@ hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
         npend = k.left;
     }
     if (!st)
-        for (int i = 0; i < nfields; i++)
-            for (int q = 0; q < f[i].ncomp; q++) {
-                size_t a = 0;
-                for (size_t w = 0; w < 8 * phi->count; w++)
-                    a += (size_t)__builtin_popcountll(f[i].v[q]->on[w]);
-                f[i].v[q]->active = a;
-            }
+        count_active(nfields, f);
     S->work_bytes += cells + 8 * (x.ncand + phi->count) * sizeof(uint64_t) +
                      (x.sbase ? x.sbase[phi->count] * x.nfc * sizeof(float) : 0);
     unmap(&x, mapped);

@@ -104,6 +104,7 @@ void hv_extender_destroy(hv_extender **ep)
     hv_free(e->pending);
     hv_free(e->bg0);
     hv_free(e->bg1);
+    hv__extend_tiles_cl_destroy(&e->tcl);
     hv__extend_cl_destroy(&e->cl);
     hv__extend_sparse_destroy(&e->sp);
     free(e->solid);
@@ -185,9 +186,10 @@ static size_t left_everywhere(const hv_extender *e, const hv_extend_dist *D)
  * first dense call:
  * looking for a device loads the OpenCL platforms, which hv_extend_tiles
  * never needs. */
-static void resolve_backend(hv_extender *e)
+void hv__extend_resolve_backend(hv_extender *e)
 {
     if (!e->resolved) {
+        e->auto_backend = e->o.backend == HV_BACKEND_AUTO;
         if (hv_backend_resolve(e->o.backend, e->count, e->solid != NULL) == HV_BACKEND_OPENCL)
             e->o.backend = HV_BACKEND_OPENCL;
         e->resolved = 1;
@@ -418,7 +420,7 @@ hv_status hv_extend_many(hv_extender *e, const float *phi, int nfields, const hv
     hv_status st = count_rhs(nfields, f, &nrhs);
     if (st)
         return st;
-    resolve_backend(e);
+    hv__extend_resolve_backend(e);
     if (e->o.backend == HV_BACKEND_OPENCL) {
         if ((st = hv_check_finite(phi, e->count, "the level set")))
             return st;
@@ -545,7 +547,7 @@ static hv_status device_extender(hv_extender *e, const char *who)
 {
     if (!e)
         return hv__error(HV_ERR_INVALID_ARG, "%s: the extender is NULL", who);
-    resolve_backend(e);
+    hv__extend_resolve_backend(e);
     if (e->o.backend != HV_BACKEND_OPENCL)
         return hv__error(HV_ERR_UNSUPPORTED, "%s: the extender runs on the %s backend, not opencl",
                          who, hv_backend_name(e->o.backend));
@@ -575,6 +577,30 @@ hv_status hv_opencl_extend(hv_extender *e, cl_mem phi, int nfields, const hv_ope
     }
     const hv_extend_grid g = device_grid(e);
     st = hv__extend_cl_run_dev(e->cl, &g, phi, nfields, f, nrhs, S);
+    S->t_total = hv_now() - t_start;
+    return st;
+}
+
+hv_status hv_opencl_extend_tiles(hv_extender *e, const hv_opencl_tiles *phi, int nfields,
+                                 const hv_opencl_tiles_field *f, hv_extend_stats *stats)
+{
+    const double t_start = hv_now();
+    hv_extend_stats lst;
+    hv_extend_stats *S = stats ? stats : &lst;
+    memset(S, 0, sizeof *S);
+    hv_status st = device_extender(e, "hv_opencl_extend_tiles");
+    if (st)
+        return st;
+    if (!phi || nfields < 0 || nfields > MAX_FIELDS_PER_CALL || (nfields > 0 && !f))
+        return hv__error(HV_ERR_INVALID_ARG, "hv_opencl_extend_tiles: bad arguments");
+    if ((st = hv__extend_tiles_check(e)))
+        return st;
+    for (int i = 0; i < nfields; i++)
+        if (f[i].ncomp != 1 && f[i].ncomp != 3)
+            return hv__error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 or 3)", i,
+                             f[i].ncomp);
+    S->tiles = phi->count;
+    st = hv__extend_tiles_cl_run_dev(e, phi, nfields, f, S);
     S->t_total = hv_now() - t_start;
     return st;
 }
