@@ -332,8 +332,9 @@ START_TEST(heatvox_extend_with_backend_opencl_should_give_the_library_s_fields)
     hv_grid *v[2][3];
     for (int b = 0; b < 2; b++) {
         snprintf(out[b], sizeof out[b], "%s/out%d.vdb", dir, b);
-        snprintf(cmd, sizeof cmd, "%s extend %s --levelset surface --field v -o %s --backend %s -q",
-                 bin, in, out[b], be[b]);
+        snprintf(cmd, sizeof cmd,
+                 "%s extend %s --levelset surface --field v -o %s --backend %s --dense -q", bin, in,
+                 out[b], be[b]);
         ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
         TL_ASSERT_OK(hv_vdb_read_vec3(out[b], "v", NULL, &v[b][0], &v[b][1], &v[b][2]));
     }

@@ -478,6 +478,27 @@ START_TEST(an_extender_for_tiles_should_not_allocate_the_block)
 }
 END_TEST
 
+/* The command's input in dir/in.vdb: a sphere's narrow band (class level
+ * set, "surface") with a vector "v" and a scalar "temp" on the source band. */
+static void write_band_input(nb_case *c, const char *dir, char *in, size_t size)
+{
+    const int n[3] = {44, 40, 36};
+    const double c0[3] = {0.03, -0.02, 0.01};
+    make_case(c, SPHERE, n, c0);
+    for (size_t q = 0; q < hv_grid_count(c->phi); q++)
+        if (c->in[0]->v[q] > 1e5f)
+            for (int k = 0; k < 4; k++)
+                c->in[k]->v[q] = 0; /* no garbage in a file */
+    snprintf(in, size, "%s/in.vdb", dir);
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, c->phi, "surface", LS_BAND, 0));
+    TL_ASSERT_OK(hv_vdb_writer_add_vec3(w, c->in[1], c->in[2], c->in[3], "v"));
+    TL_ASSERT_OK(hv_vdb_writer_add_float(w, c->in[0], "temp"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, in));
+    hv_vdb_writer_destroy(&w);
+}
+
 /* heatvox extend on a level set: the tiles' path by default, its output
  * read back by OpenVDB's own reader (pyopenvdb): the active voxels are the
  * band's cells, with the values of the --dense path; NaN in the field fails
@@ -489,26 +510,13 @@ START_TEST(command_should_extend_a_narrow_band_in_tiles)
         TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
     ck_assert_msg(system("/usr/bin/python3 -c 'import pyopenvdb' >/dev/null 2>&1") == 0,
                   "pyopenvdb does not import in /usr/bin/python3 (package python3-openvdb)");
-    const int n[3] = {44, 40, 36};
-    const double c0[3] = {0.03, -0.02, 0.01};
     nb_case c;
-    make_case(&c, SPHERE, n, c0);
-    for (size_t q = 0; q < hv_grid_count(c.phi); q++)
-        if (c.in[0]->v[q] > 1e5f)
-            for (int k = 0; k < 4; k++)
-                c.in[k]->v[q] = 0; /* no garbage in a file */
     char dir[] = "/tmp/hv_ext_tiles_XXXXXX", in[256], sp[256], dn[256], cmd[4096], err[4096];
     ck_assert_ptr_nonnull(mkdtemp(dir));
-    snprintf(in, sizeof in, "%s/in.vdb", dir);
+    write_band_input(&c, dir, in, sizeof in);
     snprintf(sp, sizeof sp, "%s/sparse.vdb", dir);
     snprintf(dn, sizeof dn, "%s/dense.vdb", dir);
     hv_vdb_writer *w = NULL;
-    TL_ASSERT_OK(hv_vdb_writer_create(&w));
-    TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, c.phi, "surface", LS_BAND, 0));
-    TL_ASSERT_OK(hv_vdb_writer_add_vec3(w, c.in[1], c.in[2], c.in[3], "v"));
-    TL_ASSERT_OK(hv_vdb_writer_add_float(w, c.in[0], "temp"));
-    TL_ASSERT_OK(hv_vdb_writer_write(w, in));
-    hv_vdb_writer_destroy(&w);
     snprintf(cmd, sizeof cmd,
              "cd %s && %s extend in.vdb --levelset surface --field v --field temp --out-band 2.5 "
              "-o sparse.vdb -v",
@@ -745,8 +753,199 @@ START_TEST(device_should_equal_the_host_on_bands)
 }
 END_TEST
 
-int main(void)
+/* The bytes each way and the reads since the last call. */
+static void traffic(double *to_device, double *to_host, long *reads)
 {
+    hv_opencl_kernel_time t[256];
+    const int n = hv_opencl_profile_take(t, 256);
+    *to_device = *to_host = 0;
+    *reads = 0;
+    for (int i = 0; i < n && i < 256; i++) {
+        if (!strcmp(t[i].name, "write"))
+            *to_device += t[i].bytes;
+        if (!strcmp(t[i].name, "read")) {
+            *to_host += t[i].bytes;
+            *reads += t[i].launches;
+        }
+    }
+}
+
+/* Bytes of scalars a device call moves each way at most: the counters and
+ * the fields' layout in, per level the domain's size, the residual's 3 R
+ * sums and the level's counts out (R = 6: a scalar and a vector). */
+#define SCALARS_IN(levels) (64.0 + 8 + 16.0 * (levels))
+#define SCALARS_OUT(levels) (2 * 64.0 + (4 + 3 * 6 * 8 + 16.0) * (levels))
+
+/* On host tiles, a device run moves the level set and the fields in, the
+ * fields out, and scalars; on device buffers, scalars only. */
+START_TEST(device_runs_should_move_their_inputs_and_outputs_only)
+{
+    if (!have_device())
+        return;
+    const int n[3] = {96, 96, 96};
+    const double c0[3] = {0.02, 0.01, -0.013};
+    nb_case c;
+    make_case(&c, TORUS, n, c0);
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    o.out_band = LS_BAND;
+    hv_extender *d = NULL;
+    TL_ASSERT_OK(hv_extender_create(&d, 3, c.n, c.h, NULL, &o));
+    double in, out;
+    long reads;
+    hv_tiles *F[4];
+    hv_extend_stats S;
+    extend_on(&c, d, F, &S); /* the first call builds the program */
+    for (int q = 0; q < 4; q++)
+        hv_tiles_destroy(&F[q]);
+    traffic(&in, &out, &reads);
+    extend_on(&c, d, F, &S);
+    traffic(&in, &out, &reads);
+    const double T = (double)F[0]->count, L = S.levels;
+    const double want_in = T * (12 + 2048 + 64) + 4 * T * 2048, want_out = 4 * T * (2048 + 64);
+    printf("check_extend_tiles: torus 96^3 on the device: %.0f tiles, %d levels; %.0f bytes in "
+           "(inputs %.0f), %.0f out (outputs %.0f), %ld reads\n",
+           T, S.levels, in, want_in, out, want_out, reads);
+    ck_assert_msg(in >= want_in && in <= want_in + SCALARS_IN(L), "%.0f bytes in", in);
+    ck_assert_msg(out >= want_out && out <= want_out + SCALARS_OUT(L), "%.0f bytes out", out);
+    /* the counters twice, per level 3 reads, each component's values and words */
+    ck_assert_msg(reads <= 2 + 3 * (long)S.levels + 2 * 4, "%ld reads", reads);
+    /* The same level set and fields as device buffers on the extender's
+     * context: only scalars cross, and the values are the host tiles'. */
+    cl_context ctx;
+    cl_command_queue queue;
+    TL_ASSERT_OK(hv_opencl_extender_queue(d, &ctx, NULL, &queue));
+    hv_tiles *P = tiles_of(&c, c.phi), *G[4];
+    hv_opencl_tiles dp = {P->count, NULL, NULL, NULL};
+    cl_int e;
+    const size_t vb = P->count * TCELLS * sizeof(float), ob = 8 * P->count * sizeof(uint64_t);
+    dp.ijk = clCreateBuffer(ctx, CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR,
+                            3 * P->count * sizeof(int32_t), P->ijk, &e);
+    dp.v = clCreateBuffer(ctx, CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, vb, P->v, &e);
+    dp.on = clCreateBuffer(ctx, CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, ob, P->on, &e);
+    ck_assert_int_eq(e, CL_SUCCESS);
+    cl_mem fv[4], fo[4];
+    for (int q = 0; q < 4; q++) {
+        G[q] = tiles_of(&c, c.in[q]);
+        fv[q] = clCreateBuffer(ctx, CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, vb, G[q]->v, &e);
+        fo[q] = clCreateBuffer(ctx, CL_MEM_READ_WRITE, ob, NULL, &e);
+        ck_assert_int_eq(e, CL_SUCCESS);
+    }
+    hv_opencl_tiles_field df[2] = {{1, {fv[0], NULL, NULL}, {fo[0], NULL, NULL}},
+                                   {3, {fv[1], fv[2], fv[3]}, {fo[1], fo[2], fo[3]}}};
+    traffic(&in, &out, &reads);
+    TL_ASSERT_OK(hv_opencl_extend_tiles(d, &dp, 2, df, &S));
+    traffic(&in, &out, &reads);
+    printf("check_extend_tiles: the same on device buffers: %.0f bytes in, %.0f out, %ld reads\n",
+           in, out, reads);
+    ck_assert_msg(in <= SCALARS_IN(S.levels), "%.0f bytes in", in);
+    ck_assert_msg(out <= SCALARS_OUT(S.levels), "%.0f bytes out", out);
+    ck_assert_msg(reads <= 2 + 3 * (long)S.levels, "%ld reads", reads);
+    for (int q = 0; q < 4; q++) {
+        ck_assert_int_eq(clEnqueueReadBuffer(queue, fv[q], CL_TRUE, 0, vb, G[q]->v, 0, NULL, NULL),
+                         CL_SUCCESS);
+        ck_assert_int_eq(clEnqueueReadBuffer(queue, fo[q], CL_TRUE, 0, ob, G[q]->on, 0, NULL, NULL),
+                         CL_SUCCESS);
+        ck_assert_msg(!memcmp(G[q]->v, F[q]->v, vb) && !memcmp(G[q]->on, F[q]->on, ob),
+                      "component %d: the buffers' extension differs from the tiles'", q);
+        clReleaseMemObject(fv[q]);
+        clReleaseMemObject(fo[q]);
+        hv_tiles_destroy(&G[q]);
+        hv_tiles_destroy(&F[q]);
+    }
+    /* A buffer too small is refused, naming it. */
+    dp.count = P->count + 1;
+    ck_assert_int_eq(hv_opencl_extend_tiles(d, &dp, 2, df, NULL), HV_ERR_INVALID_ARG);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "hv_opencl_extend_tiles"));
+    clReleaseMemObject(dp.ijk);
+    clReleaseMemObject(dp.v);
+    clReleaseMemObject(dp.on);
+    hv_tiles_destroy(&P);
+    hv_extender_destroy(&d);
+    free_case(&c);
+}
+END_TEST
+
+/* The command with --backend opencl extends the band on the device and
+ * writes the host's file: OpenVDB reads the same active voxels and values;
+ * a NaN where the field is read fails the same way, writing nothing. */
+START_TEST(command_should_extend_the_band_on_the_device)
+{
+    if (!have_device())
+        return;
+    const char *bin = tl_heatvox_bin();
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
+    nb_case c;
+    char dir[] = "/tmp/hv_ext_tiles_cl_XXXXXX", in[256], cmd[4096], err[4096];
+    ck_assert_ptr_nonnull(mkdtemp(dir));
+    write_band_input(&c, dir, in, sizeof in);
+    const char *be[2] = {"mg", "opencl"};
+    for (int b = 0; b < 2; b++) {
+        snprintf(cmd, sizeof cmd,
+                 "cd %s && %s extend in.vdb --levelset surface --field v --field temp "
+                 "--out-band 2.5 -o %s.vdb --backend %s -v",
+                 dir, bin, be[b], be[b]);
+        ck_assert_msg(tl_run_cmd(cmd, dir, err, sizeof err) == 0, "%s: %s", cmd, err);
+        ck_assert_msg(!b == !strstr(err, "on the device"), "--backend %s: -v says %s", be[b], err);
+    }
+    snprintf(
+        cmd, sizeof cmd,
+        "/usr/bin/python3 -c 'import sys, pyopenvdb as vdb\n"
+        "for name in (\"v\", \"temp\", \"surface\"):\n"
+        "    a = vdb.read(sys.argv[1], name); b = vdb.read(sys.argv[2], name)\n"
+        "    acc = b.getConstAccessor(); n = 0; apart = 0\n"
+        "    for it in a.citerOnValues():\n"
+        "        n += 1; apart += acc.getValue(it.min) != it.value or not acc.isValueOn(it.min)\n"
+        "    print(name, n, b.activeVoxelCount(), apart)\n"
+        "' %s/mg.vdb %s/opencl.vdb",
+        dir, dir);
+    FILE *pp = popen(cmd, "r");
+    ck_assert_ptr_nonnull(pp);
+    char line[512];
+    int seen = 0;
+    while (fgets(line, sizeof line, pp)) {
+        char name[32];
+        size_t na, nb, apart;
+        ck_assert_int_eq(sscanf(line, "%31s %zu %zu %zu", name, &na, &nb, &apart), 4);
+        printf("  %s: %zu active voxels on the host, %zu on the device, %zu apart\n", name, na, nb,
+               apart);
+        ck_assert(na > 1000 && na == nb && apart == 0);
+        seen++;
+    }
+    ck_assert_int_eq(pclose(pp), 0);
+    ck_assert_int_eq(seen, 3);
+    for (size_t q = 0; q < hv_grid_count(c.phi); q++)
+        if (fabsf(c.phi->v[q]) < 0.3f * (float)c.h) {
+            c.in[0]->v[q] = NAN;
+            break;
+        }
+    hv_vdb_writer *w = NULL;
+    TL_ASSERT_OK(hv_vdb_writer_create(&w));
+    TL_ASSERT_OK(hv_vdb_writer_add_levelset(w, c.phi, "surface", LS_BAND, 0));
+    TL_ASSERT_OK(hv_vdb_writer_add_float(w, c.in[0], "temp"));
+    TL_ASSERT_OK(hv_vdb_writer_write(w, in));
+    hv_vdb_writer_destroy(&w);
+    snprintf(cmd, sizeof cmd,
+             "cd %s && %s extend in.vdb --levelset surface --field temp -o nan.vdb --backend "
+             "opencl",
+             dir, bin);
+    ck_assert_int_eq(tl_run_cmd(cmd, dir, err, sizeof err), 1);
+    ck_assert_msg(strstr(err, "in.vdb") && strstr(err, "NaN"), "message: %s", err);
+    snprintf(cmd, sizeof cmd, "%s/nan.vdb", dir);
+    ck_assert_int_ne(access(cmd, F_OK), 0);
+    free_case(&c);
+    tl_rm_rf(dir);
+}
+END_TEST
+
+int main(int argc, char **argv)
+{
+    (void)argc;
+    /* Every queue counts its traffic (before the first OpenCL call). */
+    setenv("HEATVOX_OPENCL_PROFILE", "1", 1);
+    tl_pocl_cache(argv[0]);
     Suite *s = suite_create("extend_tiles");
     TCase *tc = tcase_create("core");
     tcase_set_timeout(tc, 300);
@@ -757,6 +956,8 @@ int main(void)
     tcase_add_test(tc, an_extender_for_tiles_should_not_allocate_the_block);
     tcase_add_test(tc, command_should_extend_a_narrow_band_in_tiles);
     tcase_add_test(tc, device_should_equal_the_host_on_bands);
+    tcase_add_test(tc, device_runs_should_move_their_inputs_and_outputs_only);
+    tcase_add_test(tc, command_should_extend_the_band_on_the_device);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -40,8 +40,10 @@ static int usage(FILE *out)
             "A level set (class 'level set') is read and extended as a narrow band: 8^3\n"
             "tiles of its active voxels, never a dense block; the output voxels are its\n"
             "active voxels (with --out-band W, those with |phi| < W voxels), and the fields\n"
-            "come back sparse, active there. Other classes, and --dense, take the dense\n"
-            "block, where fields come back fully active. All transforms must match.\n"
+            "come back sparse, active there (--backend opencl: every step on the OpenCL\n"
+            "device, the same values; auto takes it on a GPU). Other classes, and --dense,\n"
+            "take the dense block, where fields come back fully active. All transforms\n"
+            "must match.\n"
             "OUT.vdb gets the level set (a level set again) and the extended fields, with\n"
             "their names, voxel size, world placement, index coordinates and classes. Other\n"
             "grids of IN.vdb are not copied. Prints a JSON summary on stdout (not with -q);\n"
@@ -217,12 +219,12 @@ static int extend_on_tiles(const extend_job *j, tiles_run *r)
     if (st)
         return cli_fail(CMD, j->in, st);
     const hv_extend_stats *es = &r->es;
-    cli_info("heatvox extend: %d levels; %zu source cells, %zu output cells (%zu at closest "
+    cli_info("heatvox extend: %d levels%s; %zu source cells, %zu output cells (%zu at closest "
              "points), %zu cells in the first level's solve; work %.0f MB; set-up %.3f s, "
              "extension %.2f s (solves %.2f, evaluation %.2f), peak %.0f MB\n",
-             es->levels, es->source_cells, es->cp_cells + es->ratio_cells, es->cp_cells,
-             es->solve_cells, es->work_bytes / 1e6, r->t_setup, es->t_total, es->t_solve,
-             es->t_eval, hv_peak_rss() / 1e6);
+             es->levels, es->on_device ? ", on the device" : "", es->source_cells,
+             es->cp_cells + es->ratio_cells, es->cp_cells, es->solve_cells, es->work_bytes / 1e6,
+             r->t_setup, es->t_total, es->t_solve, es->t_eval, hv_peak_rss() / 1e6);
     warn_weak(es);
     release_freed();
     return 0;
@@ -630,7 +632,8 @@ int cmd_extend(int argc, char **argv)
         return cli_fail(CMD, j.in, st);
     const int level_set = find_grid(info, j.count, j.ls)->grid_class == HV_VDB_LEVEL_SET;
     if (!j.dense && !j.h5 && level_set &&
-        (j.o.backend == HV_BACKEND_AUTO || j.o.backend == HV_BACKEND_MG))
+        (j.o.backend == HV_BACKEND_AUTO || j.o.backend == HV_BACKEND_MG ||
+         j.o.backend == HV_BACKEND_OPENCL))
         return extend_tiles(&j, ro.box_lo, ro.box_hi);
     return extend_dense(&j, &ro);
 }

@@ -945,6 +945,7 @@ hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
     if (e->o.backend == HV_BACKEND_OPENCL) {
         st = hv__extend_tiles_cl_run(e, phi, nfields, f, S);
         if (!(st == HV_ERR_UNSUPPORTED && e->auto_backend)) {
+            S->on_device = 1;
             if (!st)
                 count_active(nfields, f);
             S->t_total = hv_now() - t_start;

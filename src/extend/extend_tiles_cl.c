@@ -594,6 +594,7 @@ hv_status hv__extend_tiles_cl_run(hv_extender *e, const hv_tiles *phi, int nfiel
             hv__cl_read(cl, x->fon, (q0 + q) * 8 * phi->count * sizeof(uint64_t),
                         8 * phi->count * sizeof(uint64_t), f[i].v[q]->on);
         }
+    hv__cl_profile_flush(cl);
     return hv__cl_check(cl);
 }
 
@@ -647,5 +648,7 @@ hv_status hv__extend_tiles_cl_run_dev(hv_extender *e, const hv_opencl_tiles *phi
                            cells * sizeof(float));
             hv__cl_copy_at(cl, x->fon, (q0 + q) * ob, f[i].on[q], 0, ob);
         }
-    return hv__cl_finish(cl);
+    st = hv__cl_finish(cl);
+    hv__cl_profile_flush(cl);
+    return st;
 }

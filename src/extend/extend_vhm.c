@@ -600,6 +600,7 @@ hv_status hv_opencl_extend_tiles(hv_extender *e, const hv_opencl_tiles *phi, int
             return hv__error(HV_ERR_INVALID_ARG, "extend: field %d has %d components (1 or 3)", i,
                              f[i].ncomp);
     S->tiles = phi->count;
+    S->on_device = 1;
     st = hv__extend_tiles_cl_run_dev(e, phi, nfields, f, S);
     S->t_total = hv_now() - t_start;
     return st;
