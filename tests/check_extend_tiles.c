@@ -940,6 +940,76 @@ START_TEST(command_should_extend_the_band_on_the_device)
 }
 END_TEST
 
+/* The number after "key": in a JSON line, or -1; the text after it in *at. */
+static double json_num(const char *line, const char *key, const char **at)
+{
+    char pat[64];
+    snprintf(pat, sizeof pat, "\"%s\":", key);
+    const char *p = strstr(line, pat);
+    if (at)
+        *at = p ? p + strlen(pat) : NULL;
+    return p ? atof(p + strlen(pat)) : -1;
+}
+
+/* One line of `heatvox ARGS` into line. */
+static void bench_line(const char *args, char *line, size_t size)
+{
+    char cmd[8400];
+    snprintf(cmd, sizeof cmd, "env -u HEATVOX_OPENCL_PROFILE '%s' %s", tl_heatvox_bin(), args);
+    FILE *pp = popen(cmd, "r");
+    ck_assert_ptr_nonnull(pp);
+    ck_assert_ptr_nonnull(fgets(line, (int)size, pp));
+    ck_assert_int_eq(pclose(pp), 0);
+}
+
+/* bench extend-loop and extend-band with --backend opencl: the host's errors
+ * (the same values), and the device's figures beside them. */
+START_TEST(benches_should_report_the_device_and_its_figures)
+{
+    if (!have_device())
+        return;
+    if (!tl_heatvox_bin())
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
+    char args[4200], host[8192], dev[8192];
+    const char *data = tl_test_data();
+    for (int b = 0; b < 2; b++) {
+        if (b == 1 && !data) {
+            tl_skip("no shared meshes: bench extend-band left out");
+            break;
+        }
+        const char *be[2] = {"mg", "opencl"};
+        char *out[2] = {host, dev};
+        for (int k = 0; k < 2; k++) {
+            if (b == 0)
+                snprintf(args, sizeof args, "bench extend-loop --n 48 --steps 3 --backend %s",
+                         be[k]);
+            else
+                snprintf(args, sizeof args,
+                         "bench extend-band '%s/bunny_small.obj' --n 48 --backend %s", data, be[k]);
+            bench_line(args, out[k], sizeof host);
+        }
+        printf("  %s", dev);
+        const char *keys[] = {"err", "ref_err", "err_all", "cells"};
+        for (size_t q = 0; q < sizeof keys / sizeof keys[0]; q++) {
+            const char *a, *c;
+            json_num(host, keys[q], &a);
+            json_num(dev, keys[q], &c);
+            ck_assert_msg(a && c && strcspn(a, ",") == strcspn(c, ",") &&
+                              !strncmp(a, c, strcspn(a, ",")),
+                          "%s: host %s, device %s", keys[q], host, dev);
+        }
+        ck_assert_ptr_nonnull(strstr(dev, "\"backend\":\"opencl\""));
+        ck_assert_ptr_nonnull(strstr(dev, "\"device\":\""));
+        const char *pos[] = {
+            "device_seconds", "host_bytes_in", "host_bytes_out", "launches", "copy_gbs",
+            "sweeps",         "eval"};
+        for (size_t q = 0; q < sizeof pos / sizeof pos[0]; q++)
+            ck_assert_msg(json_num(dev, pos[q], NULL) > 0, "%s: %s", pos[q], dev);
+        ck_assert_ptr_null(strstr(host, "\"device\":"));
+    }
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -958,6 +1028,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, device_should_equal_the_host_on_bands);
     tcase_add_test(tc, device_runs_should_move_their_inputs_and_outputs_only);
     tcase_add_test(tc, command_should_extend_the_band_on_the_device);
+    tcase_add_test(tc, benches_should_report_the_device_and_its_figures);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -144,11 +144,23 @@ if [ -f "$meshes/stanford-bunny.obj" ]; then
   for n in 256 512 1024; do
     "$hv" bench extend-band "$meshes/stanford-bunny.obj" --n $n
   done
+  # The same on the device (kernels/bandext.cl): its stages' device times,
+  # the bytes that cross, and the device's copy bandwidth beside.
+  case " $backends " in *" opencl "*)
+    for n in 256 512 1024; do
+      "$hv" bench extend-band "$meshes/stanford-bunny.obj" --n $n --backend opencl
+    done ;;
+  esac
 else
   echo "bench extend-band: $meshes/stanford-bunny.obj not found, skipped" >&2
 fi
 # A simulation's loop: one extender, a moving sphere's level set as tiles.
 "$hv" bench extend-loop --n 256
+case " $backends " in *" opencl "*)
+  for n in 256 512; do
+    "$hv" bench extend-loop --n $n --backend opencl
+  done ;;
+esac
 # The petsc backend (make mpi) under mpirun on 1 and 2 ranks, against mg on
 # the same grid in the same run; skipped without build-mpi/heatvox.
 mpi_hv=$(dirname "$hv")/../build-mpi/heatvox

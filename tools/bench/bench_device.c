@@ -253,7 +253,7 @@ hv_status bench_device_run_end(bench_device_run *d, const char *const *prefixes,
     hv_opencl_kernel_time t[PROFILE_MAX];
     const int n = hv_opencl_profile_take(t, PROFILE_MAX);
     memset(d, 0, sizeof *d);
-    d->nstages = nstages < 8 ? nstages : 8;
+    d->nstages = nstages < BENCH_DEVICE_STAGES ? nstages : BENCH_DEVICE_STAGES;
     for (int k = 0; k < d->nstages; k++)
         d->stage_names[k] = names[k];
     for (int i = 0; i < n && i < PROFILE_MAX; i++) {

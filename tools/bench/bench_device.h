@@ -30,11 +30,14 @@ hv_status bench_device_solve(const hv_problem *p, const hv_solver_opts *o, const
  * bytes that crossed (host_bytes_in: host to device, host_bytes_out: device
  * to host, buffers made from host memory included), the commands enqueued,
  * and the device's copy bandwidth measured in the same run. */
+/* Stages a device run reports at most. */
+#define BENCH_DEVICE_STAGES 16
+
 typedef struct bench_device_run {
     char name[128];
     double kernel_seconds; /* all kernels, summed */
-    double stage_seconds[8];
-    const char *stage_names[8];
+    double stage_seconds[BENCH_DEVICE_STAGES];
+    const char *stage_names[BENCH_DEVICE_STAGES];
     int nstages;
     double host_bytes_in, host_bytes_out;
     double launches;

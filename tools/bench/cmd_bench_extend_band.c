@@ -8,6 +8,7 @@
  * heatvox bench extend-loop: the same extension in a simulation's loop (a
  * sphere moving across the box, its level set as tiles each step), one
  * extender for all steps against sdfToExt per step, in this process. */
+#include "bench_device.h"
 #include "bench_ref.h"
 #include "tri_buckets.h"
 #include "../cli.h"
@@ -31,7 +32,7 @@ static int usage(FILE *out)
 {
     fprintf(out,
             "usage: heatvox bench extend-band MESH --n N [--out-band W] [--field vector|scalar]\n"
-            "                                 [--keep DIR]\n"
+            "                                 [--backend auto|mg|opencl] [--keep DIR]\n"
             "\n"
             "Writes IN.vdb (not timed): the level set \"sdf\" of MESH (heatvox sdf --res N,\n"
             "band 3 voxels, in tiles) and a field \"v\" = g(closest point on the mesh), g\n"
@@ -46,6 +47,11 @@ static int usage(FILE *out)
             "cells with |phi| < W voxels (err_all, ref_err_all).\n"
             "  --out-band W   output band of heatvox extend, voxels (default 3)\n"
             "  --field F      vector (vec3s, default) or scalar (float)\n"
+            "  --backend B    heatvox extend's --backend; opencl: the band on the device, and\n"
+            "                 one more extension of IN.vdb's tiles in this process for the\n"
+            "                 device's figures (device, kernel_seconds and each stage's\n"
+            "                 device time, host_bytes_in, host_bytes_out, launches, and\n"
+            "                 copy_gbs, the device's copy bandwidth in the same run)\n"
             "  --keep DIR     write the files to DIR (made if missing) and keep them;\n"
             "                 else a temporary directory under $TMPDIR (default /tmp),\n"
             "                 removed at the end\n"
@@ -334,6 +340,73 @@ static void remove_files(const char *dir, char (*files)[4096], int nfiles, int k
     rmdir(dir);
 }
 
+/* The stages of the device's tile extension (kernels/bandext.cl), by kernel
+ * name prefix. */
+static const char *const dev_prefixes[] = {"bx_scan_phi", "bx_map",      "bx_classify", "bx_count",
+                                           "bx_grow",     "scan_",       "bx_build",    "bx_first",
+                                           "bx_sweep",    "bx_residual", "bx_eval"};
+static const char *const dev_names[] = {"check",  "check",    "classify", "domain",
+                                        "domain", "domain",   "build",    "sweeps",
+                                        "sweeps", "residual", "eval"};
+#define DEV_STAGES ((int)(sizeof dev_names / sizeof dev_names[0]))
+
+/* d's stages of one name summed into the first of them. */
+static void merge_stages(bench_device_run *d)
+{
+    bench_device_run e = *d;
+    e.nstages = 0;
+    for (int k = 0; k < d->nstages; k++) {
+        int at = 0;
+        while (at < e.nstages && strcmp(e.stage_names[at], d->stage_names[k]))
+            at++;
+        if (at == e.nstages) {
+            e.stage_names[at] = d->stage_names[k];
+            e.stage_seconds[at] = 0;
+            e.nstages++;
+        }
+        e.stage_seconds[at] += d->stage_seconds[k];
+    }
+    *d = e;
+}
+
+/* The device's figures of one more extension of IN.vdb's tiles, in this
+ * process (the tiles read first, not counted). */
+static int device_figures(const char *in, double band, bench_device_run *d)
+{
+    const char *names[2] = {"sdf", "v"};
+    int lo[3], hi[3], cls = 0, ncomp = 0;
+    hv_tiles *P = NULL, *F[3] = {NULL, NULL, NULL};
+    hv_extender *e = NULL;
+    hv_status st = hv_vdb_common_box(in, names, 2, lo, hi);
+    if (!st)
+        st = hv_vdb_read_float_tiles(in, "sdf", lo, hi, &P, &cls);
+    if (!st)
+        st = hv_vdb_read_tiles_like(in, "v", P, F, &ncomp);
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    o.out_band = band;
+    if (!st)
+        st = hv_extender_create(&e, 3, P->n, P->h, NULL, &o);
+    if (!st) {
+        hv_extend_tiles_field f = {ncomp, {F[0], F[1], F[2]}};
+        bench_device_run_begin();
+        st = hv_extend_tiles(e, P, 1, &f, NULL);
+        hv_extender_destroy(&e);
+        if (!st)
+            st = bench_device_run_end(d, dev_prefixes, dev_names, DEV_STAGES,
+                                      P->count * 512 * sizeof(float));
+    }
+    hv_extender_destroy(&e);
+    hv_tiles_destroy(&P);
+    for (int c = 0; c < 3; c++)
+        hv_tiles_destroy(&F[c]);
+    if (st)
+        return cli_fail(CMD, in, st);
+    merge_stages(d);
+    return HV_EXIT_OK;
+}
+
 static void help(void) { usage(stdout); }
 
 int cmd_bench_extend_band(int argc, char **argv)
@@ -345,6 +418,7 @@ int cmd_bench_extend_band(int argc, char **argv)
     const char *mesh = NULL, *keep = NULL;
     int n = 0, vec = 1;
     double band = 3;
+    hv_backend backend = HV_BACKEND_AUTO;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
         {.names = "MESH", .kind = CLI_WORDS, .files = CLI_FILES_TRIMESH},
@@ -366,6 +440,7 @@ int cmd_bench_extend_band(int argc, char **argv)
          .choices = "scalar|vector",
          .needs = "vector or scalar"},
         {.names = "--keep", .kind = CLI_STR, .dst = &keep, .files = CLI_FILES_DIR},
+        CLI_ROW_BACKEND(&backend, CLI_BACKENDS_LOCAL),
         {.names = NULL},
     };
     int prc = cli_parse(CMD, argc, argv, opts, "mesh", &mesh, help);
@@ -406,8 +481,14 @@ int cmd_bench_extend_band(int argc, char **argv)
     double t, r, sec, rss, rsec, rrss;
     char *in_argv[] = {"heatvox",     "bench", "extend-band", "--input", (char *)mesh, ns,
                        (char *)field, in,      NULL};
-    char *hv_argv[] = {"heatvox",    "extend", in,   "--levelset", "sdf", "--field", "v",
-                       "--out-band", ws,       "-o", mine,         "-q",  NULL};
+    char *hv_argv[] = {"heatvox",   "extend",
+                       in,          "--levelset",
+                       "sdf",       "--field",
+                       "v",         "--out-band",
+                       ws,          "-o",
+                       mine,        "-q",
+                       "--backend", (char *)hv_backend_name(backend),
+                       NULL};
     char *ref_argv[] = {"heatvox", "bench", "extend-band", "--ref", in, "sdf", "v", ref, NULL};
     int rc = HV_EXIT_FAIL;
     if (bench_run_self(in_argv, &t, &r)) {
@@ -422,6 +503,9 @@ int cmd_bench_extend_band(int argc, char **argv)
         fprintf(stderr, "heatvox %s: the OpenVDB reference failed on %s\n", CMD, in);
         goto done;
     }
+    bench_device_run dev;
+    if (backend == HV_BACKEND_OPENCL && device_figures(in, band, &dev))
+        goto done;
     ext_errors e = {NAN, NAN, NAN, NAN, 0};
     hv_status st = measure(in, mine, ref, mesh, n, ncomp, band, &e);
     if (st) {
@@ -431,14 +515,17 @@ int cmd_bench_extend_band(int argc, char **argv)
     const long long cells = active_voxels(mine, "v"), ref_cells = active_voxels(ref, "v");
     const long long band_cells = active_voxels(in, "sdf");
     printf("{\"bench\":\"extend_band\",\"n\":%d,\"mesh\":\"%s\",\"field\":\"%s\",\"out_band\":%g,"
-           "\"backend\":\"cpu\",\"threads\":%d,\"path\":\"%s\",\"seconds\":%.4f,"
+           "\"backend\":\"%s\",\"threads\":%d,\"path\":\"%s\",\"seconds\":%.4f,"
            "\"peak_rss_mb\":%.1f,\"ref\":\"openvdb-sdfToExt\",\"ref_seconds\":%.4f,"
            "\"ref_peak_rss_mb\":%.1f,\"ratio\":%.3f,\"mem_ratio\":%.3f,\"err\":%.3e,"
            "\"ref_err\":%.3e,\"err_all\":%.3e,\"ref_err_all\":%.3e,\"cells\":%lld,"
-           "\"ref_cells\":%lld,\"tiles\":%zu}\n",
-           n, mesh, field, band, hv_get_threads(), cells <= band_cells ? "sparse" : "dense", sec,
-           rss, rsec, rrss, sec / rsec, rss / rrss, e.err, e.ref_err, e.err_all, e.ref_err_all,
-           cells, ref_cells, e.tiles);
+           "\"ref_cells\":%lld,\"tiles\":%zu",
+           n, mesh, field, band, backend == HV_BACKEND_OPENCL ? "opencl" : "cpu", hv_get_threads(),
+           cells <= band_cells ? "sparse" : "dense", sec, rss, rsec, rrss, sec / rsec, rss / rrss,
+           e.err, e.ref_err, e.err_all, e.ref_err_all, cells, ref_cells, e.tiles);
+    if (backend == HV_BACKEND_OPENCL)
+        bench_device_run_json(&dev, stdout);
+    printf("}\n");
     fflush(stdout);
     rc = HV_EXIT_OK;
 done:
@@ -450,7 +537,7 @@ done:
 
 static int usage_loop(FILE *out)
 {
-    fprintf(out, "usage: heatvox bench extend-loop --n N [--steps S]\n"
+    fprintf(out, "usage: heatvox bench extend-loop --n N [--steps S] [--backend auto|mg|opencl]\n"
                  "\n"
                  "A sphere of radius 0.25 moving across the box [-1,1]^3 (N cells per axis) in\n"
                  "S steps (default 20). Each step (not timed) its level set as tiles within 3\n"
@@ -463,7 +550,10 @@ static int usage_loop(FILE *out)
                  "and mean relative errors against the exact extension: err, ref_err over the\n"
                  "cells 1 <= |phi|/h < 3 in both outputs, err_all, ref_err_all over each\n"
                  "output's cells with |phi| < 3 voxels; peak_rss_mb, the process's (both\n"
-                 "methods run in it).\n");
+                 "methods run in it). --backend opencl: every step on the device (the tiles\n"
+                 "cross each way), with the device's figures over the steps after the first\n"
+                 "(kernel_seconds, each stage's device time, host_bytes_in, host_bytes_out,\n"
+                 "launches, per step) and copy_gbs, its copy bandwidth in the same run.\n");
     return out == stdout ? HV_EXIT_OK : HV_EXIT_USAGE;
 }
 
@@ -588,6 +678,7 @@ int cmd_bench_extend_loop(int argc, char **argv)
 {
     const char *cmd = "bench extend-loop";
     int n = 0, steps = 20;
+    hv_backend backend = HV_BACKEND_AUTO;
     const cli_opt opts[] = {
         CLI_ROW_QUIET,
         {.names = "--n",
@@ -602,6 +693,7 @@ int cmd_bench_extend_loop(int argc, char **argv)
          .min = 1,
          .max = INT_MAX,
          .needs = "a positive integer"},
+        CLI_ROW_BACKEND(&backend, CLI_BACKENDS_LOCAL),
         {.names = NULL},
     };
     const char *stray = NULL;
@@ -617,6 +709,9 @@ int cmd_bench_extend_loop(int argc, char **argv)
     hv_extend_opts o;
     hv_extend_opts_default(&o);
     o.out_band = 3;
+    o.backend = backend;
+    if (backend == HV_BACKEND_OPENCL)
+        bench_device_run_begin(); /* before the first OpenCL call */
     hv_extender *e = NULL;
     double t0 = hv_now();
     hv_status st = hv_extender_create(&e, 3, ns, 2.0 / n, NULL, &o);
@@ -654,8 +749,11 @@ int cmd_bench_extend_loop(int argc, char **argv)
             st = hv_extend_tiles(e, phi, 1, &fld, &es);
             const double t = hv_now() - t0;
             sec += t;
-            if (!step)
+            if (!step) {
                 first = t;
+                if (backend == HV_BACKEND_OPENCL)
+                    bench_device_run_begin(); /* the first step's counts dropped */
+            }
             tiles += (double)phi->count;
         }
         if (!st) {
@@ -672,16 +770,35 @@ int cmd_bench_extend_loop(int argc, char **argv)
         }
     }
     hv_extender_destroy(&e);
+    bench_device_run dev;
+    if (!st && backend == HV_BACKEND_OPENCL) {
+        const size_t bytes = (size_t)(tiles / steps) * 512 * sizeof(float);
+        if ((st = bench_device_run_end(&dev, dev_prefixes, dev_names, DEV_STAGES, bytes)))
+            cli_fail(cmd, "the device's figures", st);
+        merge_stages(&dev);
+        /* per step, the first (the program's build) left out */
+        const double k = steps > 1 ? 1.0 / (steps - 1) : 1;
+        dev.kernel_seconds *= k;
+        dev.host_bytes_in *= k;
+        dev.host_bytes_out *= k;
+        dev.launches *= k;
+        for (int q = 0; q < dev.nstages; q++)
+            dev.stage_seconds[q] *= k;
+    }
     if (st)
         return HV_EXIT_FAIL;
     printf("{\"bench\":\"extend_loop\",\"n\":%d,\"steps\":%d,\"field\":\"vector\",\"out_band\":3,"
-           "\"backend\":\"cpu\",\"threads\":%d,\"setup_seconds\":%.4f,\"seconds\":%.4f,"
+           "\"backend\":\"%s\",\"threads\":%d,\"setup_seconds\":%.4f,\"seconds\":%.4f,"
            "\"first_seconds\":%.4f,\"ref\":\"openvdb-sdfToExt\",\"ref_seconds\":%.4f,"
            "\"ratio\":%.3f,\"err\":%.3e,\"ref_err\":%.3e,\"err_all\":%.3e,\"ref_err_all\":%.3e,"
-           "\"tiles\":%.0f,\"cells\":%.0f,\"peak_rss_mb\":%.1f}\n",
-           n, steps, hv_get_threads(), setup, sec / steps, first, rsec / steps, sec / rsec,
-           m[0] ? s[0] / m[0] : NAN, m[0] ? s[1] / m[0] : NAN, m[1] ? s[2] / m[1] : NAN,
-           m[2] ? s[3] / m[2] : NAN, tiles / steps, cells / steps, hv_peak_rss() / 1e6);
+           "\"tiles\":%.0f,\"cells\":%.0f,\"peak_rss_mb\":%.1f",
+           n, steps, backend == HV_BACKEND_OPENCL ? "opencl" : "cpu", hv_get_threads(), setup,
+           sec / steps, first, rsec / steps, sec / rsec, m[0] ? s[0] / m[0] : NAN,
+           m[0] ? s[1] / m[0] : NAN, m[1] ? s[2] / m[1] : NAN, m[2] ? s[3] / m[2] : NAN,
+           tiles / steps, cells / steps, hv_peak_rss() / 1e6);
+    if (backend == HV_BACKEND_OPENCL)
+        bench_device_run_json(&dev, stdout);
+    printf("}\n");
     fflush(stdout);
     return HV_EXIT_OK;
 }
