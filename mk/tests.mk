@@ -8,6 +8,14 @@ $(BUILD)/tests/exr_values: tests/exr_values.cpp | $(STAMP)
 	$(CXX) -std=c++17 -O2 $(WARN) -I/usr/include/OpenEXR -I/usr/include/Imath $< -o $@ \
 	  -lOpenEXR-3_1 -lIex-3_1 -lImath-3_1
 
+# The example programs a user builds against the library (tools/examples/),
+# run by the tests (check_extend_tiles: advect_band_cl).
+EXAMPLES := $(BUILD)/examples/advect_band_cl
+TEST_HELPERS += $(EXAMPLES)
+$(BUILD)/examples/%: tools/examples/%.c $(LIB_A) | $(STAMP)
+	@mkdir -p $(dir $@)
+	$(CC) $(TOOL_CPPFLAGS) $(CFLAGS) $< -o $@ $(C_PROG_LINK)
+
 $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(TESTLIB) $(LIB_A)
 	@mkdir -p $(dir $@)
 	$(CXX) -o $@ $^ $(CHECK_LIBS) $(LIB_LINK)

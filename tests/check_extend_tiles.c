@@ -1010,6 +1010,44 @@ START_TEST(benches_should_report_the_device_and_its_figures)
 }
 END_TEST
 
+/* tools/examples/advect_band_cl, beside the command: a sphere's band on the
+ * device advected for a few steps, its velocity extended each step with
+ * hv_opencl_extend_tiles; the program checks the sphere and the velocity,
+ * and heatvox moves only scalars between host and device. */
+START_TEST(example_should_advect_a_band_on_the_device)
+{
+    if (!have_device())
+        return;
+    const char *bin = tl_heatvox_bin();
+    if (!bin)
+        TL_SKIP("no heatvox binary (build/heatvox or $HEATVOX_BIN)");
+    char ex[4096], cmd[8400], out[8192];
+    snprintf(ex, sizeof ex, "%s", bin);
+    char *slash = strrchr(ex, '/');
+    snprintf(slash ? slash + 1 : ex, sizeof ex - (size_t)(slash ? slash + 1 - ex : 0),
+             "examples/advect_band_cl");
+    ck_assert_msg(access(ex, X_OK) == 0, "%s not built (make check builds it)", ex);
+    snprintf(cmd, sizeof cmd, "HEATVOX_OPENCL_PROFILE=1 '%s' --n 40 --steps 10 2>&1", ex);
+    FILE *pp = popen(cmd, "r");
+    ck_assert_ptr_nonnull(pp);
+    const size_t got = fread(out, 1, sizeof out - 1, pp);
+    out[got] = 0;
+    const int rc = pclose(pp);
+    printf("%s", out);
+    ck_assert_msg(rc == 0, "advect_band_cl failed: %s", out);
+    const char *m = strstr(out, "heatvox moved ");
+    double in = -1, to_host = -1;
+    ck_assert_ptr_nonnull(m);
+    ck_assert_int_eq(
+        sscanf(m, "heatvox moved %lf bytes to the device and %lf to the host", &in, &to_host), 2);
+    /* per step: the counters and, per level, the domain's size, the
+     * residual's sums and the counts (two levels at most here) */
+    ck_assert_msg(in > 0 && in <= SCALARS_IN(2) && to_host > 0 && to_host <= SCALARS_OUT(2),
+                  "%.0f bytes in, %.0f out a step", in, to_host);
+    ck_assert_ptr_nonnull(strstr(out, "voxels off"));
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -1029,6 +1067,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, device_runs_should_move_their_inputs_and_outputs_only);
     tcase_add_test(tc, command_should_extend_the_band_on_the_device);
     tcase_add_test(tc, benches_should_report_the_device_and_its_figures);
+    tcase_add_test(tc, example_should_advect_a_band_on_the_device);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

@@ -68,10 +68,38 @@ for p in $programs; do
         done
     done
 done
+# The example programs' own kernels (tools/examples/*_cl.c: the C string
+# `kernels`), strict OpenCL C 1.2 and 3.0 as a user's would be built.
+for ex in "$here"/tools/examples/*_cl.c; do
+    [ -f "$ex" ] || continue
+    name=$(basename "$ex" .c)
+    file=$out/example_$name.cl
+    python3 - "$ex" "$file" <<'PY' || { echo "check_kernels: no kernels string in $ex"; exit 1; }
+import ast, re, sys
+src = open(sys.argv[1]).read()
+m = re.search(r'static const char \*kernels =(.*?);\n', src, re.S)
+if not m:
+    sys.exit(1)
+parts = re.findall(r'"(?:[^"\\]|\\.)*"', m.group(1))
+open(sys.argv[2], "w").write("".join(ast.literal_eval(p) for p in parts))
+PY
+    for std in CL1.2 CL3.0; do
+        n=$((n + 1))
+        log=$out/example_$name.$std.log
+        if "$cc" -x cl -cl-std="$std" -Xclang -finclude-default-header -Werror -pedantic \
+            -fsyntax-only "$file" >"$log" 2>&1; then
+            echo "  example $name ($std): ok"
+        else
+            bad=$((bad + 1))
+            echo "  example $name ($std): FAILED"
+            head -n 20 "$log" | sed 's/^/    /'
+        fi
+    done
+done
 # make check reads this line as it reads Check's.
 echo "$(((n - bad) * 100 / n))%: Checks: $n, Failures: $bad, Errors: 0"
 if [ "$bad" -ne 0 ]; then
     echo "check_kernels: $bad of $n compiles failed (logs in $out)"
     exit 1
 fi
-echo "check_kernels: $n compiles of $(echo "$programs" | wc -l) programs, strict OpenCL C 1.2 and 3.0"
+echo "check_kernels: $n compiles of $(echo "$programs" | wc -l) programs and the examples', strict OpenCL C 1.2 and 3.0"
