@@ -347,7 +347,17 @@ START_TEST(one_extender_should_follow_a_moving_band)
 }
 END_TEST
 
-START_TEST(bad_input_should_fail_without_output)
+/* Whether an OpenCL device with fp64 is here (no message). */
+static int device_here(void)
+{
+    hv_opencl_device d;
+    const int ok = hv_opencl_probe(&d) == HV_OK && d.fp64;
+    hv_clear_error();
+    return ok;
+}
+
+/* The checks of bad_input_should_fail_without_output on backend b. */
+static void bad_input_on(hv_backend b)
 {
     const int n[3] = {32, 32, 32};
     const double c0[3] = {0, 0, 0};
@@ -355,7 +365,10 @@ START_TEST(bad_input_should_fail_without_output)
     make_case(&c, SPHERE, n, c0);
     hv_tiles *P = tiles_of(&c, c.phi), *F = tiles_of(&c, c.in[0]);
     hv_extender *e = NULL;
-    TL_ASSERT_OK(hv_extender_create(&e, 3, n, c.h, NULL, NULL));
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = b;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, n, c.h, NULL, &o));
     hv_extend_tiles_field f = {1, {F, NULL, NULL}};
     float *copy = malloc(F->count * TCELLS * sizeof *copy);
     ck_assert_ptr_nonnull(copy);
@@ -411,12 +424,22 @@ START_TEST(bad_input_should_fail_without_output)
     /* After the failures the extender still works. */
     hv_extend_stats st;
     TL_ASSERT_OK(hv_extend_tiles(e, P, 1, &f, &st));
+    ck_assert_int_eq(st.on_device, b == HV_BACKEND_OPENCL);
     ck_assert_uint_eq(F->active, st.cp_cells + st.ratio_cells);
     ck_assert_uint_eq(F->active, P->active);
     hv_extender_destroy(&e);
     hv_tiles_destroy(&P);
     hv_tiles_destroy(&F);
     free_case(&c);
+}
+
+START_TEST(bad_input_should_fail_without_output)
+{
+    bad_input_on(HV_BACKEND_AUTO);
+    if (device_here())
+        bad_input_on(HV_BACKEND_OPENCL);
+    else
+        printf("  bad input: no OpenCL device with fp64, the device path left out\n");
 }
 END_TEST
 
@@ -1048,6 +1071,57 @@ START_TEST(example_should_advect_a_band_on_the_device)
 }
 END_TEST
 
+/* auto takes the device where a solve would (HEATVOX_AUTO_OPENCL=1 on a CPU
+ * device) and the host where not; past the device's 17 right-hand sides
+ * auto falls back to the host, an explicit opencl says why. */
+START_TEST(auto_should_take_the_device_where_it_can)
+{
+    if (!have_device())
+        return;
+    const int n[3] = {32, 32, 32};
+    const double c0[3] = {0.01, 0.02, -0.01};
+    nb_case c;
+    make_case(&c, SPHERE, n, c0);
+    hv_tiles *P = tiles_of(&c, c.phi);
+    enum { NF = 5 };
+    hv_tiles *F[NF][3];
+    hv_extend_tiles_field f[NF];
+    for (int i = 0; i < NF; i++) {
+        f[i].ncomp = 3;
+        for (int q = 0; q < 3; q++)
+            f[i].v[q] = F[i][q] = tiles_of(&c, c.in[1 + q]);
+    }
+    const char *env[3] = {"1", "0", "1"};
+    for (int pass = 0; pass < 3; pass++) {
+        setenv("HEATVOX_AUTO_OPENCL", env[pass], 1);
+        hv_extend_opts o;
+        hv_extend_opts_default(&o);
+        hv_extender *e = NULL;
+        TL_ASSERT_OK(hv_extender_create(&e, 3, n, c.h, NULL, &o));
+        hv_extend_stats S;
+        /* passes 0, 1: one vector (R = 5); pass 2: five (R = 21) */
+        TL_ASSERT_OK(hv_extend_tiles(e, P, pass == 2 ? NF : 1, f, &S));
+        ck_assert_int_eq(S.on_device, pass == 0);
+        ck_assert_uint_eq(S.cp_cells + S.ratio_cells, P->active);
+        hv_extender_destroy(&e);
+    }
+    unsetenv("HEATVOX_AUTO_OPENCL");
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_OPENCL;
+    hv_extender *e = NULL;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, n, c.h, NULL, &o));
+    ck_assert_int_eq(hv_extend_tiles(e, P, NF, f, NULL), HV_ERR_UNSUPPORTED);
+    ck_assert_ptr_nonnull(strstr(hv_last_error(), "right-hand sides"));
+    hv_extender_destroy(&e);
+    for (int i = 0; i < NF; i++)
+        for (int q = 0; q < 3; q++)
+            hv_tiles_destroy(&F[i][q]);
+    hv_tiles_destroy(&P);
+    free_case(&c);
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -1068,6 +1142,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, command_should_extend_the_band_on_the_device);
     tcase_add_test(tc, benches_should_report_the_device_and_its_figures);
     tcase_add_test(tc, example_should_advect_a_band_on_the_device);
+    tcase_add_test(tc, auto_should_take_the_device_where_it_can);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }
