@@ -568,8 +568,9 @@ __kernel void bx_sweep(ulong n, int R, float s, float a, float cc, __global cons
 }
 
 /* The residual f - A u of right-hand side r = group id 1, as
- * hv__band_run_residual: per group of the range its squared sum, its
- * largest magnitude and the squared sum of f, into part[3 (g R + r) ..]. */
+ * hv__band_run_residual: per group of the range (a contiguous block of the
+ * cells, its work-items a cell apart) its squared sum, its largest
+ * magnitude and the squared sum of f, into part[3 (g R + r) ..]. */
 __kernel void bx_residual(ulong n, int R, double s, __global const uint *nb,
                           __global const float *dg, __global const float *f,
                           __global const float *U, __global double *part)
@@ -577,7 +578,9 @@ __kernel void bx_residual(ulong n, int R, double s, __global const uint *nb,
     __local double l2[HV_WG], lm[HV_WG], lf[HV_WG];
     const int l = get_local_id(0), r = get_group_id(1);
     double a2 = 0, am = 0, af = 0;
-    for (size_t c = get_global_id(0); c < n; c += get_global_size(0)) {
+    const size_t G = get_num_groups(0), chunk = (n + G - 1) / G, c0 = get_group_id(0) * chunk;
+    const size_t c1 = min(n, c0 + chunk);
+    for (size_t c = c0 + l; c < c1; c += HV_WG) {
         float v[6];
         for (int q = 0; q < 6; q++) {
             const uint m = nb[6 * c + q];
