@@ -12,8 +12,8 @@
  *                 cell is read (its closest point or itself), the cells a
  *                 solve must answer for marked in bit masks of the block's
  *                 tiles, the fields checked where they are read
- *   bx_count      per tile of the block: the cells of a mask
- *   bx_grow_x/y/z a mask grown by m cells along one axis (box dilation)
+ *   bx_count      per tile of a box of the block's tiles: the cells of a mask
+ *   bx_grow_x/yz  a mask grown by m cells along one axis (box dilation)
  *   bx_build      per cell of the grown mask (the domain, compact in tile
  *                 order): its six neighbours' compact cells, its diagonal,
  *                 its right-hand sides
@@ -27,7 +27,9 @@
  * 8 (j & 3) + i of word 2 k + (j >> 2), so that byte 8 k + j is its row
  * (j, k) (little-endian devices; the host checks). The level set's and the
  * fields' active words (uint64 on the host) read the same way. N = (nx, ny,
- * nz, 0), TN = tiles per axis. Double precision, contraction off: fp64
+ * nz, 0), TN = tiles per axis. The domain's kernels run over the box of
+ * tiles B0 .. B0 + BN - 1 that holds it (the marks' tiles grown by the
+ * level's reach and one more); the host zeroes the counts outside it. Double precision, contraction off: fp64
  * devices only.
  */
 #ifdef HV_FP64
@@ -51,6 +53,7 @@
 #define BX_CP 9
 #define BX_RATIO 10
 #define BX_WEAK 11
+#define BX_BOX 16    /* the marks' tiles: lowest x, y, z, then highest x, y, z */
 
 static uint bx_tile(int4 TN, int i, int j, int k)
 {
@@ -58,6 +61,15 @@ static uint bx_tile(int4 TN, int i, int j, int k)
 }
 
 static int bx_off(int i, int j, int k) { return (i & 7) + 8 * (j & 7) + 64 * (k & 7); }
+
+/* Tile q of the box B0 .. B0 + BN - 1, as its coordinates and index. */
+static uint bx_box_tile(int4 TN, int4 B0, int4 BN, uint q, int *tx, int *ty, int *tz)
+{
+    *tx = B0.x + (int)(q % (uint)BN.x);
+    *ty = B0.y + (int)(q / (uint)BN.x % (uint)BN.y);
+    *tz = B0.z + (int)(q / ((uint)BN.x * (uint)BN.y));
+    return (uint)*tx + (uint)TN.x * ((uint)*ty + (uint)TN.y * (uint)*tz);
+}
 
 /* phi at block cell (i, j, k); ref: the value of the cell that looks (its
  * sign for cells outside the tiles). */
@@ -360,7 +372,9 @@ __kernel void bx_classify(int4 N, int4 TN, __global const int *map, __global con
     const int l = get_local_id(0), jj = l & 7, kk = l >> 3;
     const int i0 = ijk[3 * t], j = ijk[3 * t + 1] + jj, k = ijk[3 * t + 2] + kk;
     const uint onrow = (pon[16 * t + 2 * kk + (jj >> 2)] >> (8 * (jj & 3))) & 0xffu;
+    __local int box[6][HV_WG];
     uint nsrc = 0, npend = 0, badf = BX_NONE;
+    int lo[3] = {1 << 30, 1 << 30, 1 << 30}, hi[3] = {-1, -1, -1};
     for (int ii = 0; ii < 8; ii++) {
         const int i = i0 + ii, o = ii + 8 * jj + 64 * kk;
         const size_t tc = t * 512 + o;
@@ -374,6 +388,11 @@ __kernel void bx_classify(int4 N, int4 TN, __global const int *map, __global con
                 if (!isfinite(src[q * stride + tc]) && (uint)tc < badf)
                     badf = (uint)tc;
             bx_mark(mark, TN, i, j, k);
+            const int p[3] = {i, j, k};
+            for (int a = 0; a < 3; a++) {
+                lo[a] = min(lo[a], p[a] >> 3);
+                hi[a] = max(hi[a], p[a] >> 3);
+            }
         }
         if (!((onrow >> ii) & 1) || (ob > 0 && !(fabs(v) < ob)))
             continue;
@@ -384,8 +403,37 @@ __kernel void bx_classify(int4 N, int4 TN, __global const int *map, __global con
             int c[3];
             bx_corner(&s, q, c);
             bx_mark(mark, TN, c[0], c[1], c[2]);
+            for (int a = 0; a < 3; a++) {
+                lo[a] = min(lo[a], c[a] >> 3);
+                hi[a] = max(hi[a], c[a] >> 3);
+            }
+        }
+        /* the cell itself, which a later level may read */
+        const int p[3] = {i, j, k};
+        for (int a = 0; a < 3; a++) {
+            lo[a] = min(lo[a], p[a] >> 3);
+            hi[a] = max(hi[a], p[a] >> 3);
         }
     }
+    /* the group's box of marked tiles, then one atomic per bound */
+    for (int a = 0; a < 3; a++) {
+        box[a][l] = lo[a];
+        box[3 + a][l] = hi[a];
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int w = HV_WG >> 1; w > 0; w >>= 1) {
+        if (l < w)
+            for (int a = 0; a < 3; a++) {
+                box[a][l] = min(box[a][l], box[a][l + w]);
+                box[3 + a][l] = max(box[3 + a][l], box[3 + a][l + w]);
+            }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (l == 0 && box[3][0] >= 0)
+        for (int a = 0; a < 3; a++) {
+            atomic_min(&K[BX_BOX + a], (uint)box[a][0]);
+            atomic_max(&K[BX_BOX + 3 + a], (uint)box[3 + a][0]);
+        }
     if (nsrc)
         atomic_add(&K[BX_NSRC], nsrc);
     if (npend)
@@ -396,11 +444,13 @@ __kernel void bx_classify(int4 N, int4 TN, __global const int *map, __global con
 
 /* ---- the domain: the marks grown by m cells along x, y and z --------------- */
 
-__kernel void bx_count(ulong ntiles, __global const uint *M, __global uint *cnt)
+__kernel void bx_count(int4 TN, int4 B0, int4 BN, __global const uint *M, __global uint *cnt)
 {
-    const size_t t = get_global_id(0);
-    if (t >= ntiles)
+    const size_t q = get_global_id(0);
+    if (q >= (size_t)BN.x * BN.y * BN.z)
         return;
+    int tx, ty, tz;
+    const uint t = bx_box_tile(TN, B0, BN, (uint)q, &tx, &ty, &tz);
     uint c = 0;
     for (int q = 0; q < 16; q++)
         c += popcount(M[16 * t + q]);
@@ -409,12 +459,13 @@ __kernel void bx_count(ulong ntiles, __global const uint *M, __global uint *cnt)
 
 /* One work-item per row (j, k) of a tile of the block; cnt: the input's
  * cells per tile (bx_count), so that empty tiles are skipped. */
-__kernel void bx_grow_x(int4 N, int4 TN, int m, __global const uchar *in,
+__kernel void bx_grow_x(int4 N, int4 TN, int4 B0, int4 BN, int m, __global const uchar *in,
                         __global const uint *cnt, __global uchar *out)
 {
-    const uint t = get_group_id(0);
+    int tx, ty, tz;
+    const uint t = bx_box_tile(TN, B0, BN, get_group_id(0), &tx, &ty, &tz);
     const int l = get_local_id(0), jj = l & 7, kk = l >> 3;
-    const int tx = (int)(t % (uint)TN.x), D = (m + 7) / 8;
+    const int D = (m + 7) / 8;
     uint o = 0;
     for (int dt = -D; dt <= D; dt++) {
         if (tx + dt < 0 || tx + dt >= TN.x || !cnt[t + dt])
@@ -436,13 +487,12 @@ __kernel void bx_grow_x(int4 N, int4 TN, int m, __global const uchar *in,
 
 /* Along y (axis 1) or z (axis 2): row (j, k) takes the union of the rows
  * within m along the axis, in the block. */
-__kernel void bx_grow_yz(int4 N, int4 TN, int m, int axis, __global const uchar *in,
-                         __global const uint *cnt, __global uchar *out)
+__kernel void bx_grow_yz(int4 N, int4 TN, int4 B0, int4 BN, int m, int axis,
+                         __global const uchar *in, __global const uint *cnt, __global uchar *out)
 {
-    const uint t = get_group_id(0);
+    int tx, ty, tz;
+    const uint t = bx_box_tile(TN, B0, BN, get_group_id(0), &tx, &ty, &tz);
     const int l = get_local_id(0), jj = l & 7, kk = l >> 3;
-    const int tx = (int)(t % (uint)TN.x), ty = (int)(t / (uint)TN.x % (uint)TN.y),
-              tz = (int)(t / ((uint)TN.x * (uint)TN.y));
     const int j = 8 * ty + jj, k = 8 * tz + kk;
     uint o = 0;
     if (j < N.y && k < N.z) {
@@ -463,23 +513,24 @@ __kernel void bx_grow_yz(int4 N, int4 TN, int m, int axis, __global const uchar 
 
 /* ---- the band solve on the domain --------------------------------------------- */
 
-/* Per domain cell c: nb[6 c ..] its neighbours' compact cells (BX_NONE
- * outside the domain) in the order the host's sweep adds them (y - 1, y + 1,
- * z - 1, z + 1, x - 1, x + 1), dg[c] the diagonal 1 + s (neighbours in the
- * block), f[R c ..] the right-hand sides (row_rhs). fnc: each field's
+/* Per domain cell c of n: nb[a n + c] its neighbours' compact cells
+ * (BX_NONE outside the domain) in the order the host's sweep adds them
+ * (y - 1, y + 1, z - 1, z + 1, x - 1, x + 1), dg[c] the diagonal 1 + s
+ * (neighbours in the block), f[r n + c] the right-hand sides (row_rhs): one
+ * plane of n per right-hand side, as the iterates. fnc: each field's
  * components. One work-group per tile of the block, a row each. */
-__kernel void bx_build(int4 N, int4 TN, double s, int R, int nfields, __global const int *fnc,
-                       double bh, ulong stride, __global const uint *dm, __global const uint *base,
-                       __global const uint *cnt, __global const int *map, __global const float *pv,
+__kernel void bx_build(int4 N, int4 TN, int4 B0, int4 BN, double s, int R, ulong n, int nfields,
+                       __global const int *fnc, double bh, ulong stride, __global const uint *dm,
+                       __global const uint *base, __global const uint *cnt,
+                       __global const int *map, __global const float *pv,
                        __global const float *src, __global uint *nb, __global float *dg,
                        __global float *f)
 {
-    const uint t = get_group_id(0);
+    int tx, ty, tz;
+    const uint t = bx_box_tile(TN, B0, BN, get_group_id(0), &tx, &ty, &tz);
     if (!cnt[t])
         return;
     const int l = get_local_id(0), jj = l & 7, kk = l >> 3;
-    const int tx = (int)(t % (uint)TN.x), ty = (int)(t / (uint)TN.x % (uint)TN.y),
-              tz = (int)(t / ((uint)TN.x * (uint)TN.y));
     const int j = 8 * ty + jj, k = 8 * tz + kk;
     const int tp = map[t];
     for (int ii = 0; ii < 8; ii++) {
@@ -497,24 +548,24 @@ __kernel void bx_build(int4 N, int4 TN, double s, int R, int nfields, __global c
                 in_block++;
                 v = bx_cell(dm, base, TN, p[a][0], p[a][1], p[a][2]);
             }
-            nb[6 * (size_t)c + a] = v;
+            nb[a * n + c] = v;
         }
         dg[c] = (float)(1 + s * in_block);
-        __global float *dst = f + (size_t)c * R;
+        __global float *dst = f + c; /* right-hand side r at dst[r n] */
         const size_t tc = (size_t)(tp - 1) * 512 + o;
         const float wf = tp ? bx_weight(pv[tc], bh) : 0.0f;
         if (!(wf > 0)) {
             for (int r = 0; r < R; r++)
-                dst[r] = 0;
+                dst[r * n] = 0;
             continue;
         }
         const double w = wf;
         int r = 0, q0 = 0;
-        dst[r++] = (float)w;
+        dst[n * r++] = (float)w;
         for (int fi = 0; fi < nfields; fi++) {
             const int nc = fnc[fi];
             if (nc == 1) {
-                dst[r++] = (float)(w * src[q0 * stride + tc]);
+                dst[n * r++] = (float)(w * src[q0 * stride + tc]);
                 q0++;
                 continue;
             }
@@ -523,9 +574,9 @@ __kernel void bx_build(int4 N, int4 TN, double s, int R, int nfields, __global c
                 const float x = src[(q0 + q) * stride + tc];
                 mg += (double)x * x;
             }
-            dst[r++] = (float)(w * sqrt(mg));
+            dst[n * r++] = (float)(w * sqrt(mg));
             for (int q = 0; q < nc; q++)
-                dst[r++] = (float)(w * src[(q0 + q) * stride + tc]);
+                dst[n * r++] = (float)(w * src[(q0 + q) * stride + tc]);
             q0 += nc;
         }
     }
@@ -540,8 +591,8 @@ __kernel void bx_first(ulong n, int R, __global const float *dg, __global const 
         return;
     const float cd = 1.0f / dg[c];
     for (int r = 0; r < R; r++) {
-        A[c * R + r] = cd * f[c * R + r];
-        B[c * R + r] = 0;
+        A[r * n + c] = cd * f[r * n + c];
+        B[r * n + c] = 0;
     }
 }
 
@@ -556,14 +607,15 @@ __kernel void bx_sweep(ulong n, int R, float s, float a, float cc, __global cons
     const float d = dg[c], cd = cc / d;
     uint m[6];
     for (int q = 0; q < 6; q++)
-        m[q] = nb[6 * c + q];
+        m[q] = nb[q * n + c];
     for (int r = 0; r < R; r++) {
+        const size_t at = r * n;
         float v[6];
         for (int q = 0; q < 6; q++)
-            v[q] = m[q] == BX_NONE ? 0.0f : C[(size_t)m[q] * R + r];
+            v[q] = m[q] == BX_NONE ? 0.0f : C[at + m[q]];
         const float sum = v[0] + v[1] + v[2] + v[3] + v[4] + v[5];
-        const float u = C[c * R + r], o = O[c * R + r];
-        O[c * R + r] = u + a * (u - o) + cd * (f[c * R + r] - (d * u - s * sum));
+        const float u = C[at + c], o = O[at + c];
+        O[at + c] = u + a * (u - o) + cd * (f[at + c] - (d * u - s * sum));
     }
 }
 
@@ -583,12 +635,12 @@ __kernel void bx_residual(ulong n, int R, double s, __global const uint *nb,
     for (size_t c = c0 + l; c < c1; c += HV_WG) {
         float v[6];
         for (int q = 0; q < 6; q++) {
-            const uint m = nb[6 * c + q];
-            v[q] = m == BX_NONE ? 0.0f : U[(size_t)m * R + r];
+            const uint m = nb[q * n + c];
+            v[q] = m == BX_NONE ? 0.0f : U[r * n + m];
         }
         const double sum = (double)v[0] + v[1] + v[2] + v[3] + v[4] + v[5];
-        const double d = dg[c], fv = f[c * R + r];
-        const double res = fv - (d * (double)U[c * R + r] - s * sum);
+        const double d = dg[c], fv = f[r * n + c];
+        const double res = fv - (d * (double)U[r * n + c] - s * sum);
         a2 += res * res;
         if (fabs(res) > am)
             am = fabs(res);
@@ -639,7 +691,7 @@ __kernel void bx_residual_sum(int groups, int R, __global const double *part,
  * corners off need read 0. */
 static void bx_sample(__global const uint *need, __global const uint *dm,
                       __global const uint *base, int4 TN, __global const float *sol, int R,
-                      const bx_stencil *s, double *out)
+                      ulong n, const bx_stencil *s, double *out)
 {
     for (int r = 0; r < R; r++)
         out[r] = 0;
@@ -649,8 +701,10 @@ static void bx_sample(__global const uint *need, __global const uint *dm,
         if (!bx_bit(need, TN, c[0], c[1], c[2]))
             continue;
         const uint x = bx_cell(dm, base, TN, c[0], c[1], c[2]);
+        if (x == BX_NONE)
+            continue; /* cannot happen: the marks are in the domain */
         for (int r = 0; r < R; r++)
-            out[r] += s->wt[q] * sol[(size_t)x * R + r];
+            out[r] += s->wt[q] * sol[r * n + x];
     }
 }
 
@@ -687,7 +741,7 @@ __kernel void bx_eval(int4 N, int4 TN, __global const int *map, __global const i
                       __global const float *pv, float bg, double h, double band, int cp_on,
                       int R, int nfields, int nfc, __global const int *fnc, ulong stride,
                       __global const uint *need, __global const uint *dm,
-                      __global const uint *base, __global const float *sol, double thr,
+                      __global const uint *base, __global const float *sol, ulong n, double thr,
                       int trusted, int last, float background, __global uchar *pend,
                       __global uint *mark, __global float *fv, __global uint *fon,
                       __global uint *K)
@@ -709,7 +763,7 @@ __kernel void bx_eval(int4 N, int4 TN, __global const int *map, __global const i
         if (pd == 1)
             at_cp = bx_point(map, pv, N, TN, bg, h, band, cp_on, i, j, k, pc, 0, &s);
         double val[BX_MAX_R];
-        bx_sample(need, dm, base, TN, sol, R, &s, val);
+        bx_sample(need, dm, base, TN, sol, R, n, &s, val);
         double W = val[0];
         if (!(W > thr) && at_cp) {
             at_cp = 0;
@@ -718,7 +772,7 @@ __kernel void bx_eval(int4 N, int4 TN, __global const int *map, __global const i
             if (trusted && !bx_bit(need, TN, i, j, k)) {
                 W = 0;
             } else {
-                bx_sample(need, dm, base, TN, sol, R, &s, val);
+                bx_sample(need, dm, base, TN, sol, R, n, &s, val);
                 W = val[0];
             }
         }

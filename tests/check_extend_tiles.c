@@ -796,8 +796,8 @@ static void traffic(double *to_device, double *to_host, long *reads)
 /* Bytes of scalars a device call moves each way at most: the counters and
  * the fields' layout in, per level the domain's size, the residual's 3 R
  * sums and the level's counts out (R = 6: a scalar and a vector). */
-#define SCALARS_IN(levels) (64.0 + 8 + 16.0 * (levels))
-#define SCALARS_OUT(levels) (2 * 64.0 + (4 + 3 * 6 * 8 + 16.0) * (levels))
+#define SCALARS_IN(levels) (96.0 + 8 + 16.0 * (levels))
+#define SCALARS_OUT(levels) (2 * 96.0 + (4 + 3 * 6 * 8 + 16.0) * (levels))
 
 /* On host tiles, a device run moves the level set and the fields in, the
  * fields out, and scalars; on device buffers, scalars only. */

@@ -16,7 +16,8 @@
  *      cells; the cells left marked for the next level
  *
  * The masks and maps cover the block's tiles (268 bytes a tile, kept between
- * calls); the solve's arrays follow the domain's cells. On the way the host
+ * calls), the domain's kernels the box of its tiles; the solve's arrays
+ * follow the domain's cells. On the way the host
  * reads the counters twice, then per level the domain's size, 3 R residual
  * sums and 4 counts; no field crosses. With the same cells, sweeps and reads
  * as the host, the values are the host's bit for bit (check_extend_tiles_cl).
@@ -68,7 +69,8 @@ enum {
     BK_CP = 9,
     BK_RATIO = 10,
     BK_WEAK = 11,
-    BK_COUNT = 16
+    BK_BOX = 16, /* the marks' tiles: lowest x, y, z, then highest */
+    BK_COUNT = 24
 };
 #define BK_NONE 0xffffffffu
 #define T3 (HV_TILE * HV_TILE * HV_TILE)
@@ -198,6 +200,7 @@ typedef struct {
     int nfields, nfc, R;
     int fnc[MAX_FIELDS_PER_CALL];
     cl_int N[4], TN[4];
+    int mlo[3], mhi[3]; /* the marked tiles' box (classify) */
     float bg;
     double bh, ob;
 } bx_run;
@@ -232,6 +235,7 @@ static hv_status check_and_map(bx_run *r)
     cl_uint K[BK_COUNT];
     memset(K, 0, sizeof K);
     K[BK_BADPHI] = K[BK_BADF] = K[BK_BADTILE] = K[BK_DUP] = BK_NONE;
+    K[BK_BOX] = K[BK_BOX + 1] = K[BK_BOX + 2] = BK_NONE;
     hv__cl_write(cl, x->K, 0, sizeof K, K);
     const size_t cells = r->count * T3;
     size_t g[1], l[1];
@@ -306,42 +310,59 @@ static hv_status classify(bx_run *r, size_t *nsrc, size_t *npend)
     }
     *nsrc = K[BK_NSRC];
     *npend = K[BK_NPEND];
+    for (int a = 0; a < 3; a++) {
+        r->mlo[a] = K[BK_BOX + a] == BK_NONE ? 0 : (int)K[BK_BOX + a];
+        r->mhi[a] = (int)K[BK_BOX + 3 + a];
+    }
     const float bgv = (float)e->o.background;
     hv__cl_fill(cl, x->fv, (size_t)r->nfc * stride * sizeof(float), &bgv, sizeof bgv);
     hv__cl_zero(cl, x->fon, (size_t)r->nfc * 16 * r->count * sizeof(cl_uint));
     return hv__cl_check(cl);
 }
 
-/* mask -> its cells per tile in x->cnt. */
-static void count_cells(bx_run *r, cl_mem mask)
+/* mask -> its cells per tile of the box B0, BN in x->cnt. */
+static void count_cells(bx_run *r, cl_mem mask, const cl_int B0[4], const cl_int BN[4])
 {
     hv_cl *cl = r->x->cl;
     size_t g[1], l[1];
-    hv__cl_range1(r->x->nt, g, l);
-    hv__cl_args(cl, &bx_module, K_COUNT, "lmm", (size_t)r->x->nt, mask, r->x->cnt);
+    hv__cl_range1((size_t)BN[0] * BN[1] * BN[2], g, l);
+    hv__cl_args(cl, &bx_module, K_COUNT, "IIImm", r->TN, B0, BN, mask, r->x->cnt);
     hv__cl_run(cl, &bx_module, K_COUNT, 1, g, l);
 }
 
 /* 3a. The domain of level l (marks grown by m) in g1, its cells per tile
- * in cnt and their prefix sums in base; *ncells its cells. */
-static hv_status make_domain(bx_run *r, int m, size_t *ncells)
+ * in cnt and their prefix sums in base; *ncells its cells. The kernels run
+ * on the box of the marked tiles grown by the reach and one tile (B0, BN),
+ * which holds the domain and its neighbours; cnt is 0 outside it. */
+static hv_status make_domain(bx_run *r, int m, size_t *ncells, cl_int B0[4], cl_int BN[4])
 {
     struct hv_extend_tiles_cl *x = r->x;
     hv_cl *cl = x->cl;
     const size_t mb = 16 * sizeof(cl_uint) * x->nt;
+    const int D = (m + HV_TILE - 1) / HV_TILE + 1;
+    for (int a = 0; a < 3; a++) {
+        B0[a] = r->mlo[a] - D < 0 ? 0 : r->mlo[a] - D;
+        const int hi = r->mhi[a] + D >= x->tn[a] ? x->tn[a] - 1 : r->mhi[a] + D;
+        BN[a] = hi - B0[a] + 1;
+    }
+    B0[3] = BN[3] = 0;
     size_t g[1], l[1];
-    groups(x->nt, g, l);
+    groups((size_t)BN[0] * BN[1] * BN[2], g, l);
     hv__cl_copy(cl, x->mark, x->need, mb);
-    count_cells(r, x->need);
-    hv__cl_args(cl, &bx_module, K_GROW_X, "IIimmm", r->N, r->TN, m, x->need, x->cnt, x->g1);
+    hv__cl_zero(cl, x->cnt, x->nt * sizeof(cl_uint));
+    count_cells(r, x->need, B0, BN);
+    hv__cl_args(cl, &bx_module, K_GROW_X, "IIIIimmm", r->N, r->TN, B0, BN, m, x->need, x->cnt,
+                x->g1);
     hv__cl_run(cl, &bx_module, K_GROW_X, 1, g, l);
-    count_cells(r, x->g1);
-    hv__cl_args(cl, &bx_module, K_GROW_YZ, "IIiimmm", r->N, r->TN, m, 1, x->g1, x->cnt, x->g2);
+    count_cells(r, x->g1, B0, BN);
+    hv__cl_args(cl, &bx_module, K_GROW_YZ, "IIIIiimmm", r->N, r->TN, B0, BN, m, 1, x->g1, x->cnt,
+                x->g2);
     hv__cl_run(cl, &bx_module, K_GROW_YZ, 1, g, l);
-    count_cells(r, x->g2);
-    hv__cl_args(cl, &bx_module, K_GROW_YZ, "IIiimmm", r->N, r->TN, m, 2, x->g2, x->cnt, x->g1);
+    count_cells(r, x->g2, B0, BN);
+    hv__cl_args(cl, &bx_module, K_GROW_YZ, "IIIIiimmm", r->N, r->TN, B0, BN, m, 2, x->g2, x->cnt,
+                x->g1);
     hv__cl_run(cl, &bx_module, K_GROW_YZ, 1, g, l);
-    count_cells(r, x->g1);
+    count_cells(r, x->g1, B0, BN);
     hv_status st = hv__cl_scan_u32(cl, x->cnt, x->base, x->nt + 1);
     if (st)
         return st;
@@ -353,8 +374,8 @@ static hv_status make_domain(bx_run *r, int m, size_t *ncells)
 
 /* 3b. The band solve of level l (diffusion time s h^2) on the domain:
  * the solutions in the final iterate (*sol), *thr the trust bound. */
-static hv_status solve(bx_run *r, double s, size_t ncells, cl_mem *sol, double *thr,
-                       hv_extend_stats *S)
+static hv_status solve(bx_run *r, double s, size_t ncells, const cl_int B0[4], const cl_int BN[4],
+                       cl_mem *sol, double *thr, hv_extend_stats *S)
 {
     struct hv_extend_tiles_cl *x = r->x;
     hv_cl *cl = x->cl;
@@ -377,10 +398,10 @@ static hv_status solve(bx_run *r, double s, size_t ncells, cl_mem *sol, double *
         x->cap_rc = ncells * R;
     }
     size_t g[1], l[1];
-    groups(x->nt, g, l);
-    hv__cl_args(cl, &bx_module, K_BUILD, "IIaiimalmmmmmmmmm", r->N, r->TN, s, R, r->nfields, x->fnc,
-                r->bh, (size_t)(r->count * T3), x->g1, x->base, x->cnt, x->map, r->pv, x->src,
-                x->nb, x->dg, x->f);
+    groups((size_t)BN[0] * BN[1] * BN[2], g, l);
+    hv__cl_args(cl, &bx_module, K_BUILD, "IIIIailimalmmmmmmmmm", r->N, r->TN, B0, BN, s, R, ncells,
+                r->nfields, x->fnc, r->bh, (size_t)(r->count * T3), x->g1, x->base, x->cnt, x->map,
+                r->pv, x->src, x->nb, x->dg, x->f);
     hv__cl_run(cl, &bx_module, K_BUILD, 1, g, l);
     hv__cl_range1(ncells, g, l);
     hv__cl_args(cl, &bx_module, K_FIRST, "limmmm", (size_t)ncells, R, x->dg, x->f, x->A, x->B);
@@ -420,7 +441,8 @@ static hv_status solve(bx_run *r, double s, size_t ncells, cl_mem *sol, double *
 }
 
 /* 4. The output cells read from the level's solutions; those left marked. */
-static hv_status evaluate(bx_run *r, cl_mem sol, int l, int last, double thr, hv_extend_counts *n)
+static hv_status evaluate(bx_run *r, cl_mem sol, size_t ncells, int l, int last, double thr,
+                          hv_extend_counts *n)
 {
     struct hv_extend_tiles_cl *x = r->x;
     hv_cl *cl = x->cl;
@@ -430,10 +452,10 @@ static hv_status evaluate(bx_run *r, cl_mem sol, int l, int last, double thr, hv
     hv__cl_zero(cl, x->mark, 16 * sizeof(cl_uint) * x->nt);
     size_t g[1], lc[1];
     groups(r->count, g, lc);
-    hv__cl_args(cl, &bx_module, K_EVAL, "IImmmfaaiiiimlmmmmaiifmmmmm", r->N, r->TN, x->map, r->ijk,
+    hv__cl_args(cl, &bx_module, K_EVAL, "IImmmfaaiiiimlmmmmlaiifmmmmm", r->N, r->TN, x->map, r->ijk,
                 r->pv, (double)r->bg, e->h, e->o.band, e->o.closest_point, r->R, r->nfields, r->nfc,
-                x->fnc, (size_t)(r->count * T3), x->need, x->g1, x->base, sol, thr, l == 0, last,
-                (double)(float)e->o.background, x->pend, x->mark, x->fv, x->fon, x->K);
+                x->fnc, (size_t)(r->count * T3), x->need, x->g1, x->base, sol, ncells, thr, l == 0,
+                last, (double)(float)e->o.background, x->pend, x->mark, x->fv, x->fon, x->K);
     if (r->count)
         hv__cl_run(cl, &bx_module, K_EVAL, 1, g, lc);
     cl_uint K[4];
@@ -451,7 +473,8 @@ static hv_status run_level(bx_run *r, int l, int last, hv_extend_stats *S, hv_ex
     const int m = (int)lround(BOX_MARGIN * sqrt(s));
     double t0 = hv_now();
     size_t ncells = 0;
-    hv_status st = make_domain(r, m, &ncells);
+    cl_int B0[4], BN[4];
+    hv_status st = make_domain(r, m, &ncells, B0, BN);
     if (st)
         return st;
     if (l == 0)
@@ -461,14 +484,14 @@ static hv_status run_level(bx_run *r, int l, int last, hv_extend_stats *S, hv_ex
                          "extend: a band of %zu cells is past the device path's limit", ncells);
     cl_mem sol = NULL;
     double thr = 0;
-    if ((st = solve(r, s, ncells, &sol, &thr, S)))
+    if ((st = solve(r, s, ncells, B0, BN, &sol, &thr, S)))
         return st;
     const size_t work = ncells * (6 * sizeof(cl_uint) + sizeof(float) + 3 * r->R * sizeof(float));
     if (work > S->work_bytes)
         S->work_bytes = work;
     S->t_solve += hv_now() - t0;
     t0 = hv_now();
-    st = evaluate(r, sol, l, last, thr, n);
+    st = evaluate(r, sol, ncells, l, last, thr, n);
     S->t_eval += hv_now() - t0;
     return st;
 }
