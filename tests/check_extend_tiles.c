@@ -2,6 +2,7 @@
  * the dense path on the band, scalar and vector fields, a band that moves
  * between calls of one extender, accuracy against the exact closest-point
  * extension, bad input, and the heatvox extend command's sparse path. */
+#include "sdf_testutil.h"
 #include "testlib.h"
 #include "heatvox/heat.h"
 #include "heatvox/opencl.h"
@@ -1122,6 +1123,89 @@ START_TEST(auto_should_take_the_device_where_it_can)
 }
 END_TEST
 
+/* A shared mesh's narrow band (hv_sdf_compute_tiles, 3 voxels) with a
+ * smooth vector and scalar known within 1.5 voxels: the device's extension
+ * is the host's bit for bit. */
+static void expect_mesh_equal(const char *name, int res)
+{
+    hv_mesh *m = tu_load_shared(name);
+    if (!m)
+        return;
+    hv_sdf_opts so;
+    hv_sdf_opts_default(&so);
+    so.res = res;
+    hv_tiles *P = NULL, *A[4], *B[4];
+    hv_sdf_stats ss;
+    TL_ASSERT_OK(hv_sdf_compute_tiles(m, &so, 3, &P, &ss));
+    hv_mesh_destroy(&m);
+    for (int q = 0; q < 4; q++) {
+        TL_ASSERT_OK(hv_tiles_create_like(&A[q], P, 0.0f));
+        TL_ASSERT_OK(hv_tiles_create_like(&B[q], P, 0.0f));
+    }
+    for (size_t t = 0; t < P->count; t++)
+        for (int o = 0; o < TCELLS; o++) {
+            double x[3], v[3];
+            for (int a = 0; a < 3; a++)
+                x[a] = P->origin[a] + (P->ijk[3 * t + a] +
+                                       (a == 0   ? o & 7
+                                        : a == 1 ? o >> 3 & 7
+                                                 : o >> 6) +
+                                       0.5) *
+                                          P->h;
+            g_vector(x, v);
+            const size_t c = t * TCELLS + o;
+            const int src = fabsf(P->v[c]) < 1.5f * (float)P->h;
+            A[0]->v[c] = B[0]->v[c] = src ? (float)g_scalar(x) : 1e6f;
+            for (int q = 0; q < 3; q++)
+                A[1 + q]->v[c] = B[1 + q]->v[c] = src ? (float)v[q] : 1e6f;
+        }
+    hv_extend_opts o;
+    hv_extend_opts_default(&o);
+    o.backend = HV_BACKEND_MG;
+    hv_extender *h = NULL, *d = NULL;
+    TL_ASSERT_OK(hv_extender_create(&h, 3, P->n, P->h, NULL, &o));
+    o.backend = HV_BACKEND_OPENCL;
+    TL_ASSERT_OK(hv_extender_create(&d, 3, P->n, P->h, NULL, &o));
+    hv_extend_tiles_field fa[2] = {{1, {A[0], NULL, NULL}}, {3, {A[1], A[2], A[3]}}};
+    hv_extend_tiles_field fb[2] = {{1, {B[0], NULL, NULL}}, {3, {B[1], B[2], B[3]}}};
+    hv_extend_stats sa, sb;
+    TL_ASSERT_OK(hv_extend_tiles(h, P, 2, fa, &sa));
+    TL_ASSERT_OK(hv_extend_tiles(d, P, 2, fb, &sb));
+    size_t diff = 0;
+    for (int q = 0; q < 4; q++) {
+        diff += memcmp(A[q]->v, B[q]->v, P->count * TCELLS * sizeof(float)) != 0;
+        diff += memcmp(A[q]->on, B[q]->on, 8 * P->count * sizeof(uint64_t)) != 0;
+    }
+    printf("check_extend_tiles: %s at %d on the device: %zu tiles, %zu output voxels, %d levels, "
+           "%zu solve cells; %zu of 8 arrays differ\n",
+           name, res, P->count, A[0]->active, sb.levels, sb.solve_cells, diff);
+    ck_assert_msg(diff == 0, "%s: the device's extension differs from the host's", name);
+    ck_assert_int_eq(sa.levels, sb.levels);
+    ck_assert_uint_eq(sa.solve_cells, sb.solve_cells);
+    ck_assert_uint_gt(A[0]->active, 1000);
+    hv_extender_destroy(&h);
+    hv_extender_destroy(&d);
+    for (int q = 0; q < 4; q++) {
+        hv_tiles_destroy(&A[q]);
+        hv_tiles_destroy(&B[q]);
+    }
+    hv_tiles_destroy(&P);
+}
+
+START_TEST(device_should_equal_the_host_on_shared_meshes)
+{
+    if (!have_device())
+        return;
+    const char *names[] = {"bunny_small.obj", "armadillo_bad.obj", "chair.obj", "knot.obj",
+                           "spot.obj"};
+    for (size_t k = 0; k < sizeof names / sizeof names[0]; k++) {
+        if (tl_sanitized() && k > 0)
+            break;
+        expect_mesh_equal(names[k], 80);
+    }
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -1138,6 +1222,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, an_extender_for_tiles_should_not_allocate_the_block);
     tcase_add_test(tc, command_should_extend_a_narrow_band_in_tiles);
     tcase_add_test(tc, device_should_equal_the_host_on_bands);
+    tcase_add_test(tc, device_should_equal_the_host_on_shared_meshes);
     tcase_add_test(tc, device_runs_should_move_their_inputs_and_outputs_only);
     tcase_add_test(tc, command_should_extend_the_band_on_the_device);
     tcase_add_test(tc, benches_should_report_the_device_and_its_figures);
