@@ -272,14 +272,15 @@ typedef struct hv_extend_tiles_field {
  * costs no new set-up. With the opencl backend (or auto on a GPU) every
  * step runs on the device, which gives the same values bit for bit; it keeps
  * maps of the block's tiles there, 268 bytes a tile (2048^3: 4.5 GB), needs
- * double precision and takes at most 17 right-hand sides (auto falls back to
- * the CPU where it cannot). An extender with solid cells is refused
- * (HV_ERR_INVALID_ARG). NaN/Inf in the level set or
- * in a field where it is read: HV_ERR_NUMERIC, the fields unchanged (other
- * failures, out of memory or a cancel, can leave them partly extended). The
- * fields' values at the cells read are copied compactly first, so the
- * extension needs no second copy of the tiles. stats: also tiles and
- * work_bytes. */
+ * double precision and takes at most 17 right-hand sides; auto keeps the CPU
+ * where those maps would be more than 8 times the band and its fields (plus
+ * 256 MB), and falls back to it where the device cannot run the call. An
+ * extender with solid cells is refused (HV_ERR_INVALID_ARG). NaN/Inf in the
+ * level set or in a field where it is read: HV_ERR_NUMERIC, the fields
+ * unchanged (other failures, out of memory or a cancel, can leave them partly
+ * extended). The fields' values at the cells read are copied compactly
+ * first, so the extension needs no second copy of the tiles. stats: also
+ * tiles, work_bytes and on_device. */
 HV_API hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
                                  hv_extend_tiles_field *f, hv_extend_stats *stats);
 

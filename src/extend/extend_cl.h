@@ -52,6 +52,8 @@ struct hv_cl *hv__extend_cl_handle(hv_extend_cl *x);
 /* Right-hand sides a tile extension takes on the device (1 + per field 1
  * or 4): a private array of each evaluating work-item. */
 #define HV_EXTEND_TILES_CL_MAX_R 17
+/* Device bytes per tile of the block: its map, four masks, two counts. */
+#define HV_EXTEND_TILES_CL_BYTES (4 + 4 * 64 + 2 * 4)
 
 /* Made on the extender's device state (hv__extend_cl_prepare) at first use:
  * HV_ERR_UNSUPPORTED on a device without double precision. */

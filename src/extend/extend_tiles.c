@@ -887,6 +887,21 @@ static void count_active(int nfields, hv_extend_tiles_field *f)
         }
 }
 
+/* Whether auto takes the device: where the device's maps of the block's
+ * tiles (HV_EXTEND_TILES_CL_BYTES a tile) are not far larger than the band
+ * and its fields (a small band on a huge block stays on the host). */
+static int device_pays(const hv_extender *e, const hv_tiles *phi, int nfields,
+                       const hv_extend_tiles_field *f)
+{
+    double nt = 1, nfc = 0;
+    for (int a = 0; a < 3; a++)
+        nt *= (double)((e->n[a] + TS - 1) / TS);
+    for (int i = 0; i < nfields; i++)
+        nfc += f[i].ncomp;
+    const double band = (double)phi->count * TCELLS * sizeof(float) * (1 + 2 * nfc);
+    return nt * HV_EXTEND_TILES_CL_BYTES <= 8 * band + 256e6;
+}
+
 hv_status hv__extend_tiles_check(const hv_extender *e)
 {
     if (e->dim != 3)
@@ -942,9 +957,11 @@ hv_status hv_extend_tiles(hv_extender *e, const hv_tiles *phi, int nfields,
                                  t);
         }
     hv__extend_resolve_backend(e);
-    if (e->o.backend == HV_BACKEND_OPENCL) {
+    if (e->o.backend == HV_BACKEND_OPENCL &&
+        (!e->auto_backend || device_pays(e, phi, nfields, f))) {
         st = hv__extend_tiles_cl_run(e, phi, nfields, f, S);
-        if (!(st == HV_ERR_UNSUPPORTED && e->auto_backend)) {
+        const int fell = st == HV_ERR_UNSUPPORTED || st == HV_ERR_NOMEM || st == HV_ERR_BACKEND;
+        if (!(fell && e->auto_backend)) {
             S->on_device = 1;
             if (!st)
                 count_active(nfields, f);
