@@ -777,23 +777,6 @@ START_TEST(device_should_equal_the_host_on_bands)
 }
 END_TEST
 
-/* The bytes each way and the reads since the last call. */
-static void traffic(double *to_device, double *to_host, long *reads)
-{
-    hv_opencl_kernel_time t[256];
-    const int n = hv_opencl_profile_take(t, 256);
-    *to_device = *to_host = 0;
-    *reads = 0;
-    for (int i = 0; i < n && i < 256; i++) {
-        if (!strcmp(t[i].name, "write"))
-            *to_device += t[i].bytes;
-        if (!strcmp(t[i].name, "read")) {
-            *to_host += t[i].bytes;
-            *reads += t[i].launches;
-        }
-    }
-}
-
 /* Bytes of scalars a device call moves each way at most: the counters and
  * the fields' layout in, per level the domain's size, the residual's 3 R
  * sums and the level's counts out (R = 6: a scalar and a vector). */
@@ -823,9 +806,9 @@ START_TEST(device_runs_should_move_their_inputs_and_outputs_only)
     extend_on(&c, d, F, &S); /* the first call builds the program */
     for (int q = 0; q < 4; q++)
         hv_tiles_destroy(&F[q]);
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     extend_on(&c, d, F, &S);
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     const double T = (double)F[0]->count, L = S.levels;
     const double want_in = T * (12 + 2048 + 64) + 4 * T * 2048, want_out = 4 * T * (2048 + 64);
     printf("check_extend_tiles: torus 96^3 on the device: %.0f tiles, %d levels; %.0f bytes in "
@@ -858,9 +841,9 @@ START_TEST(device_runs_should_move_their_inputs_and_outputs_only)
     }
     hv_opencl_tiles_field df[2] = {{1, {fv[0], NULL, NULL}, {fo[0], NULL, NULL}},
                                    {3, {fv[1], fv[2], fv[3]}, {fo[1], fo[2], fo[3]}}};
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     TL_ASSERT_OK(hv_opencl_extend_tiles(d, &dp, 2, df, &S));
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     printf("check_extend_tiles: the same on device buffers: %.0f bytes in, %.0f out, %ld reads\n",
            in, out, reads);
     ck_assert_msg(in <= SCALARS_IN(S.levels), "%.0f bytes in", in);

@@ -172,23 +172,6 @@ START_TEST(shared_meshes_should_equal_the_host_tiles)
 }
 END_TEST
 
-/* The bytes each way and the reads since the last call. */
-static void traffic(double *to_device, double *to_host, long *reads)
-{
-    hv_opencl_kernel_time t[256];
-    const int n = hv_opencl_profile_take(t, 256);
-    *to_device = *to_host = 0;
-    *reads = 0;
-    for (int i = 0; i < n && i < 256; i++) {
-        if (!strcmp(t[i].name, "write"))
-            *to_device += t[i].bytes;
-        if (!strcmp(t[i].name, "read")) {
-            *to_host += t[i].bytes;
-            *reads += t[i].launches;
-        }
-    }
-}
-
 /* What crosses in a device run: the mesh and its sign data in (vertices,
  * triangles, face and vertex normals, edge neighbours, the tree of at most
  * 2 nodes a face), the kept tiles out in batches, and eight scalars. */
@@ -196,10 +179,10 @@ static void check_traffic(const hv_mesh *m, const hv_sdf_opts *o, const char *wh
 {
     double in, out;
     long reads;
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     hv_sdf_stats S;
     hv_tiles *D = tiles_of(m, o, HV_BACKEND_OPENCL, 3, &S, what);
-    traffic(&in, &out, &reads);
+    tl_cl_traffic(&in, &out, &reads);
     const double nv = (double)m->nverts, nt = (double)m->ntris;
     const double inputs =
         24 * nv + 12 * nt + 24 * nt + 24 * nv + 12 * nt + nv + 5 * nt + 2 * nt * 80;

@@ -184,3 +184,19 @@ int tl_hv(const char *dir, const char *bin, char *err, size_t errsize, const cha
     snprintf(cmd, sizeof cmd, "cd '%s' && '%s' %s", dir, bin, args);
     return tl_run_cmd(cmd, dir, err, errsize);
 }
+
+void tl_cl_traffic(double *to_device, double *to_host, long *reads)
+{
+    hv_opencl_kernel_time t[256];
+    const int n = hv_opencl_profile_take(t, 256);
+    *to_device = *to_host = 0;
+    *reads = 0;
+    for (int i = 0; i < n && i < 256; i++) {
+        if (!strcmp(t[i].name, "write"))
+            *to_device += t[i].bytes;
+        if (!strcmp(t[i].name, "read")) {
+            *to_host += t[i].bytes;
+            *reads += t[i].launches;
+        }
+    }
+}

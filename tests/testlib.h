@@ -73,4 +73,9 @@ int tl_hv(const char *dir, const char *bin, char *err, size_t errsize, const cha
                       hv_last_error());                                                            \
     } while (0)
 
+/* The bytes heatvox's OpenCL queues moved to the device and to the host,
+ * and the reads, since the last call (HEATVOX_OPENCL_PROFILE=1 set before
+ * the first OpenCL call; hv_opencl_profile_take). */
+void tl_cl_traffic(double *to_device, double *to_host, long *reads);
+
 #endif

@@ -278,6 +278,24 @@ hv_status bench_device_run_end(bench_device_run *d, const char *const *prefixes,
     return run_copy(d, copy_bytes);
 }
 
+void bench_device_run_merge(bench_device_run *d)
+{
+    bench_device_run e = *d;
+    e.nstages = 0;
+    for (int k = 0; k < d->nstages; k++) {
+        int at = 0;
+        while (at < e.nstages && strcmp(e.stage_names[at], d->stage_names[k]))
+            at++;
+        if (at == e.nstages) {
+            e.stage_names[at] = d->stage_names[k];
+            e.stage_seconds[at] = 0;
+            e.nstages++;
+        }
+        e.stage_seconds[at] += d->stage_seconds[k];
+    }
+    *d = e;
+}
+
 void bench_device_run_json(const bench_device_run *d, FILE *out)
 {
     fprintf(out, ",\"device\":\"%s\",\"device_seconds\":%.6f,\"stage_device_seconds\":{", d->name,

@@ -53,6 +53,9 @@ void bench_device_run_begin(void);
  * copy_bytes (at least 256 MiB where the device allows). */
 hv_status bench_device_run_end(bench_device_run *d, const char *const *prefixes,
                                const char *const *names, int nstages, size_t copy_bytes);
+/* d's stages of one name summed into the first of them (prefixes of one
+ * stage given apart). */
+void bench_device_run_merge(bench_device_run *d);
 /* Prints d's fields as JSON members (",\"device\":...") to out. */
 void bench_device_run_json(const bench_device_run *d, FILE *out);
 

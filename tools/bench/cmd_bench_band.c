@@ -113,21 +113,7 @@ static int device_figures(const char *path, int n, double band, bench_device_run
         st = bench_device_run_end(d, prefixes, names, 8, bytes);
     if (st)
         return cli_fail("bench band", path, st);
-    /* Stages of one name summed into the first of them. */
-    bench_device_run e = *d;
-    e.nstages = 0;
-    for (int k = 0; k < d->nstages; k++) {
-        int at = 0;
-        while (at < e.nstages && strcmp(e.stage_names[at], d->stage_names[k]))
-            at++;
-        if (at == e.nstages) {
-            e.stage_names[at] = d->stage_names[k];
-            e.stage_seconds[at] = 0;
-            e.nstages++;
-        }
-        e.stage_seconds[at] += d->stage_seconds[k];
-    }
-    *d = e;
+    bench_device_run_merge(d);
     return HV_EXIT_OK;
 }
 

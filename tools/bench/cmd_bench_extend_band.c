@@ -350,25 +350,6 @@ static const char *const dev_names[] = {"check",  "check",    "classify", "domai
                                         "sweeps", "residual", "eval"};
 #define DEV_STAGES ((int)(sizeof dev_names / sizeof dev_names[0]))
 
-/* d's stages of one name summed into the first of them. */
-static void merge_stages(bench_device_run *d)
-{
-    bench_device_run e = *d;
-    e.nstages = 0;
-    for (int k = 0; k < d->nstages; k++) {
-        int at = 0;
-        while (at < e.nstages && strcmp(e.stage_names[at], d->stage_names[k]))
-            at++;
-        if (at == e.nstages) {
-            e.stage_names[at] = d->stage_names[k];
-            e.stage_seconds[at] = 0;
-            e.nstages++;
-        }
-        e.stage_seconds[at] += d->stage_seconds[k];
-    }
-    *d = e;
-}
-
 /* The device's figures of one more extension of IN.vdb's tiles, in this
  * process (the tiles read first, not counted). */
 static int device_figures(const char *in, double band, bench_device_run *d)
@@ -403,7 +384,7 @@ static int device_figures(const char *in, double band, bench_device_run *d)
         hv_tiles_destroy(&F[c]);
     if (st)
         return cli_fail(CMD, in, st);
-    merge_stages(d);
+    bench_device_run_merge(d);
     return HV_EXIT_OK;
 }
 
@@ -775,7 +756,7 @@ int cmd_bench_extend_loop(int argc, char **argv)
         const size_t bytes = (size_t)(tiles / steps) * 512 * sizeof(float);
         if ((st = bench_device_run_end(&dev, dev_prefixes, dev_names, DEV_STAGES, bytes)))
             cli_fail(cmd, "the device's figures", st);
-        merge_stages(&dev);
+        bench_device_run_merge(&dev);
         /* per step, the first (the program's build) left out */
         const double k = steps > 1 ? 1.0 / (steps - 1) : 1;
         dev.kernel_seconds *= k;
