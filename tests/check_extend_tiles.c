@@ -444,20 +444,19 @@ START_TEST(bad_input_should_fail_without_output)
 }
 END_TEST
 
-START_TEST(an_extender_for_tiles_should_not_allocate_the_block)
+/* The band of a sphere of radius 6 voxels around cell (c + 8.5) per axis of
+ * a block of n^3 cells: 27 tiles from cell c on, the distance clamped to 3
+ * voxels, active below it. */
+static hv_tiles *small_sphere(int nb, int c)
 {
-    /* A 4096^3 block: 256 GB as one float field. The extender and a call on
-     * a small sphere's band cost the tiles, not the block. */
-    const int n[3] = {4096, 4096, 4096};
-    const double h = 1.0 / 4096;
-    hv_extender *e = NULL;
-    TL_ASSERT_OK(hv_extender_create(&e, 3, n, h, NULL, NULL));
-    /* A sphere of radius 6 voxels around cell (2000, 2000, 2000). */
-    hv_tiles *P = calloc(1, sizeof *P), *F = NULL;
+    const int n[3] = {nb, nb, nb};
+    const double h = 1.0 / nb;
+    hv_tiles *P = calloc(1, sizeof *P);
     ck_assert_ptr_nonnull(P);
     memcpy(P->n, n, sizeof P->n);
     P->h = h;
-    const int t0 = 1992, nt = 3;
+    const int t0 = c, nt = 3;
+    const double o0 = c + 8.5;
     P->count = nt * nt * nt;
     P->ijk = hv_malloc(3 * P->count * sizeof *P->ijk);
     P->v = hv_malloc(P->count * TCELLS * sizeof *P->v);
@@ -470,9 +469,9 @@ START_TEST(an_extender_for_tiles_should_not_allocate_the_block)
                 P->ijk[3 * q + 1] = t0 + 8 * tj;
                 P->ijk[3 * q + 2] = t0 + 8 * tk;
                 for (int o = 0; o < TCELLS; o++) {
-                    const double x = t0 + 8 * ti + (o & 7) - 2000.5,
-                                 y = t0 + 8 * tj + ((o >> 3) & 7) - 2000.5,
-                                 z = t0 + 8 * tk + (o >> 6) - 2000.5;
+                    const double x = t0 + 8 * ti + (o & 7) - o0,
+                                 y = t0 + 8 * tj + ((o >> 3) & 7) - o0,
+                                 z = t0 + 8 * tk + (o >> 6) - o0;
                     double d = sqrt(x * x + y * y + z * z) - 6;
                     d = d > 3 ? 3 : d < -3 ? -3 : d;
                     P->v[q * TCELLS + o] = (float)(d * h);
@@ -482,6 +481,18 @@ START_TEST(an_extender_for_tiles_should_not_allocate_the_block)
                     }
                 }
             }
+    return P;
+}
+
+START_TEST(an_extender_for_tiles_should_not_allocate_the_block)
+{
+    /* A 4096^3 block: 256 GB as one float field. The extender and a call on
+     * a small sphere's band cost the tiles, not the block. */
+    const int n[3] = {4096, 4096, 4096};
+    const double h = 1.0 / 4096;
+    hv_extender *e = NULL;
+    TL_ASSERT_OK(hv_extender_create(&e, 3, n, h, NULL, NULL));
+    hv_tiles *P = small_sphere(n[0], 1992), *F = NULL;
     TL_ASSERT_OK(hv_tiles_create_like(&F, P, 2.5f));
     hv_extend_tiles_field f = {1, {F, NULL, NULL}};
     hv_extend_stats st;
@@ -1189,6 +1200,44 @@ START_TEST(device_should_equal_the_host_on_shared_meshes)
 }
 END_TEST
 
+/* A block past 2^31 cells (1296^3): the device's band extension keeps maps
+ * of its tiles only (1.1 GB here) and gives the host's values. */
+START_TEST(device_should_extend_a_band_on_a_block_past_2_31_cells)
+{
+    if (!have_device())
+        return;
+    if (tl_sanitized())
+        TL_SKIP("a 1.1 GB device map under the sanitizers: make check runs it");
+    const int nb = 1296, n[3] = {nb, nb, nb};
+    hv_tiles *P = small_sphere(nb, 1000), *F[2][3];
+    hv_extend_stats S[2];
+    for (int b = 0; b < 2; b++) {
+        hv_extend_opts o;
+        hv_extend_opts_default(&o);
+        o.backend = b ? HV_BACKEND_OPENCL : HV_BACKEND_MG;
+        hv_extender *e = NULL;
+        TL_ASSERT_OK(hv_extender_create(&e, 3, n, 1.0 / nb, NULL, &o));
+        for (int q = 0; q < 3; q++)
+            TL_ASSERT_OK(hv_tiles_create_like(&F[b][q], P, 1.0f + q));
+        hv_extend_tiles_field f = {3, {F[b][0], F[b][1], F[b][2]}};
+        TL_ASSERT_OK(hv_extend_tiles(e, P, 1, &f, &S[b]));
+        hv_extender_destroy(&e);
+    }
+    ck_assert_int_eq(S[1].on_device, 1);
+    for (int q = 0; q < 3; q++) {
+        ck_assert_uint_eq(F[1][q]->active, P->active);
+        ck_assert(!memcmp(F[0][q]->v, F[1][q]->v, P->count * TCELLS * sizeof(float)));
+        ck_assert(!memcmp(F[0][q]->on, F[1][q]->on, 8 * P->count * sizeof(uint64_t)));
+        hv_tiles_destroy(&F[0][q]);
+        hv_tiles_destroy(&F[1][q]);
+    }
+    printf("check_extend_tiles: 1296^3 block on the device: %zu tiles, %zu output voxels as the "
+           "host's; device memory %.0f MB\n",
+           P->count, P->active, S[1].work_bytes / 1e6);
+    hv_tiles_destroy(&P);
+}
+END_TEST
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -1211,6 +1260,7 @@ int main(int argc, char **argv)
     tcase_add_test(tc, benches_should_report_the_device_and_its_figures);
     tcase_add_test(tc, example_should_advect_a_band_on_the_device);
     tcase_add_test(tc, auto_should_take_the_device_where_it_can);
+    tcase_add_test(tc, device_should_extend_a_band_on_a_block_past_2_31_cells);
     suite_add_tcase(s, tc);
     return tl_run(s);
 }

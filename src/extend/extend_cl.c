@@ -208,9 +208,6 @@ static hv_status solve_level(hv_extend_cl *x, const hv_extend_grid *g, int l, co
 hv_status hv__extend_cl_prepare(hv_extend_cl **state, const hv_extend_grid *g, cl_context ctx,
                                 cl_device_id dev, cl_command_queue queue)
 {
-    if (g->count > (size_t)INT32_MAX)
-        return hv__error(HV_ERR_UNSUPPORTED,
-                         "extend: %zu cells exceed the OpenCL path's 2^31 limit", g->count);
     if (*state)
         return HV_OK;
     if (ctx)
@@ -229,6 +226,9 @@ static hv_status io_planes(hv_extend_cl *x, const hv_extend_grid *g, int nfields
         nout += f[i].ncomp;
     const size_t fb = g->count * sizeof(float);
     hv_status st = HV_OK;
+    if (g->count > (size_t)INT32_MAX) /* dense grids only: tiles have their own limits */
+        return hv__error(HV_ERR_UNSUPPORTED,
+                         "extend: %zu cells exceed the OpenCL path's 2^31 limit", g->count);
     /* The grid's planes, on first use (an extender of tiles never needs them). */
     if ((!x->phi && (st = hv__cl_alloc(x->cl, fb, NULL, &x->phi))) ||
         (!x->w && (st = hv__cl_alloc(x->cl, fb, NULL, &x->w))) ||
