@@ -200,11 +200,11 @@ typedef struct hv_extend_stats {
     size_t tiles;                               /* hv_extend_tiles: the level set's tiles */
     size_t work_bytes;   /* hv_extend_tiles: the call's work memory at its largest (the
                           solves' arrays, the outputs not counted; on a device, its memory) */
-    int on_device;       /* hv_extend_tiles: 1 when it ran on the OpenCL device */
     size_t remote_cells; /* hv_dmda_extend: this rank's output cells read at closest points
                             whose stencils lie on other ranks' cells past what the ghost
                             layer holds of the first level (their values fetched from
                             those ranks) */
+    int on_device;       /* hv_extend_tiles: 1 when it ran on the OpenCL device */
 } hv_extend_stats;
 
 /* One field to extend: ncomp = 1 (scalar) or 2..3 (vector, per-component

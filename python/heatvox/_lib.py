@@ -496,6 +496,7 @@ class hv_extend_stats(Structure):
         ("tiles", c_size_t),
         ("work_bytes", c_size_t),
         ("remote_cells", c_size_t),
+        ("on_device", c_int),
     ]
 
 
