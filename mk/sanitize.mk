@@ -58,7 +58,7 @@ TS_RUNENV   := OMP_TOOL_LIBRARIES=/usr/lib/llvm-14/lib/libarcher.so ARCHER_OPTIO
 tsan: ## the threaded suites under ThreadSanitizer
 	+@$(MAKE) --no-print-directory BUILD=$(TS) HV_PETSC=0 CC=$(FZ_CC) CXX=$(FZ_CXX) OPT='-O1 -g' \
 	  SANFLAGS='$(SAN_THREAD)' DEB_PKGS='$(DEB_PKGS) $(FUZZ_PKGS)' \
-	  $(TS)/heatvox $(TSAN_SUITES:%=$(TS)/tests/%)
+	  $(TS)/heatvox $(TSAN_SUITES:%=$(TS)/tests/%) $(EXAMPLES:$(BUILD)/%=$(TS)/%)
 	@rm -f $(TS)/tests/*.tsan
 	+@$(MAKE) --no-print-directory -k $(TSAN_SUITES:%=$(TS)/tests/%.tsan) || true
 	@bad=""; for t in $(TSAN_SUITES); do \
