@@ -678,10 +678,11 @@ static void report_points(batch_buf *b, const job *J)
               ",\"points\":{\"count\":%zu,\"spacing\":%.9g,\"normals_turned\":%zu"
               ",\"normal_agreement\":%.6f,\"vertices_unsupported\":%zu,\"orientation\":\"%s\""
               ",\"orient_rounds\":%d,\"orient_seconds\":%.3f,\"orient_spread\":%.4f"
-              ",\"orient_lines\":%s}",
+              ",\"orient_lines\":%s,\"orient_thin_votes\":%zu,\"orient_thin_turned\":%zu}",
               p->points, p->spacing_median, p->normals_against, p->normal_agreement,
               p->vertices_unsupported, p->recovered ? "recovered" : "given", p->orient_rounds,
-              p->t_orient, p->orient_spread, p->orient_lines ? "true" : "false");
+              p->t_orient, p->orient_spread, p->orient_lines ? "true" : "false",
+              p->orient_thin_votes, p->orient_thin_turned);
 }
 
 /* The job's JSON line on stdout (batch --report's format). */

@@ -32,12 +32,14 @@ void cli_points_note(const char *cmd, const char *path, const hv_points_report *
     if (pr->recovered)
         cli_info("heatvox %s: %s: orientation recovered from the points: spread off their planes "
                  "%.3f (median), directions from %s; %zu components of the neighbour graph (%zu "
-                 "turned outward), %d heat rounds turned %zu points, %.2f s; %zu points against "
-                 "the file's normals\n",
+                 "turned outward), %zu points of thin parts voted by rays and %zu turned, %d "
+                 "heat rounds turned %zu points, %.2f s; %zu points against the file's "
+                 "normals\n",
                  cmd, path, pr->orient_spread,
                  pr->orient_lines ? "the diffused line field" : "the neighbourhoods' axes",
-                 pr->orient_components, pr->orient_components_flipped, pr->orient_rounds,
-                 pr->orient_turned, pr->t_orient, pr->orient_disagree);
+                 pr->orient_components, pr->orient_components_flipped, pr->orient_thin_votes,
+                 pr->orient_thin_turned, pr->orient_rounds, pr->orient_turned, pr->t_orient,
+                 pr->orient_disagree);
     cli_info("heatvox %s: %s: %zu points, spacing %.4g (%.4g to %.4g); %zu normals "
              "(%.1f%% of the area) pointed into the surface and were turned; heat grid "
              "%dx%dx%d h=%.6g; surface of %zu vertices, %zu with no point within reach, moved "

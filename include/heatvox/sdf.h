@@ -318,6 +318,8 @@ typedef struct hv_points_report {
     double orient_spread;       /* median spread off the points' planes (0 clean, 1 no plane) */
     int orient_lines;           /* 1: the directions came from the diffused line field */
     int orient_line_iterations; /* of its six heat steps */
+    size_t orient_thin_votes;   /* points of thin parts that the rays' sheet counts oriented */
+    size_t orient_thin_turned;  /* points the thin parts' labelling turned */
 } hv_points_report;
 
 /* The closed surface of oriented points P (above); opts as for

@@ -410,6 +410,8 @@ class hv_points_report(Structure):
         ("orient_spread", c_double),
         ("orient_lines", c_int),
         ("orient_line_iterations", c_int),
+        ("orient_thin_votes", c_size_t),
+        ("orient_thin_turned", c_size_t),
     ]
 
 

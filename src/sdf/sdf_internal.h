@@ -83,8 +83,26 @@ int hv__ring_next(const pt_bins *B, ring_iter *it, uint32_t *j);
  * across the least-spread axis of the whole cloud. */
 int hv__points_flat(const hv_points *P);
 hv_status hv__points_axes(const pt_bins *B, double rho, double *dir, float *spread);
+/* Thin parts (orient_cut.c): the points whose spread (by point) is above
+ * a threshold vote by rays of radius rc, off their own sheet by more than
+ * `sheet`; T NULL: none. */
+typedef struct pt_thin {
+    const float *spread;
+    double rc, sheet;
+    unsigned char *held; /* by point: 1 where a vote gave the sign (NULL: not kept) */
+} pt_thin;
 hv_status hv__points_propagate(const pt_bins *near, const hv_points *P, const double *area,
-                               double *dir, hv_points_report *R);
+                               const pt_thin *T, double *dir, hv_points_report *R);
+/* The neighbour graph of the tree: place u's neighbours (places in the
+ * bins' order) from adj + off[u] to adj + off[u + 1], both ways. */
+typedef struct or_graph {
+    uint32_t *off, *adj;
+} or_graph;
+/* The votes of the thin parts' points, and the least-cost labelling of
+ * the points near them (keep or turn their directions D, by place), which
+ * turns D where it says so; counts into R. */
+hv_status hv__points_cut(const pt_bins *near, const or_graph *G, const hv_points *P,
+                         const pt_thin *T, double *D, hv_points_report *R);
 
 /* The eigenvalues lam and eigenvectors (the columns of e) of the symmetric
  * 3 x 3 matrix m (xx yy zz xy xz yz), by Jacobi rotations (sdf_orient.c). */

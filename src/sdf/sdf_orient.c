@@ -168,10 +168,6 @@ int hv__points_flat(const hv_points *P)
 /* The graph: each point's OR_K nearest within the 27 cells around its own,
  * both ways, as lists (adj from off[u] to off[u + 1]), points by their
  * place u in the bins' order, so that neighbours lie near in memory. */
-typedef struct or_graph {
-    uint32_t *off, *adj;
-} or_graph;
-
 static void keep_nearest(uint32_t *nb, double *d2s, int *m, uint32_t j, double d2)
 {
     if (*m == OR_K && d2 >= d2s[OR_K - 1])
@@ -382,9 +378,10 @@ static hv_status turn_outward(const hv_points *P, const double *area, const uint
 
 /* The trees over every component, in the bins' order: dir's directions
  * permuted into that order, turned, and back; each point's component into
- * comp (by point). */
-static hv_status propagate_all(const pt_bins *B, const hv_points *P, double *dir, uint32_t *comp,
-                               size_t *ncomp)
+ * comp (by point); each component turned outward; then (T) the thin
+ * parts' labelling, in the bins' order again. */
+static hv_status propagate_all(const pt_bins *B, const hv_points *P, const double *area,
+                               const pt_thin *T, double *dir, uint32_t *comp, hv_points_report *R)
 {
     const size_t n = P->count;
     or_graph G = {NULL, NULL};
@@ -400,28 +397,34 @@ static hv_status propagate_all(const pt_bins *B, const hv_points *P, double *dir
         cu[u] = UINT32_MAX;
         key[u] = INFINITY;
     }
-    *ncomp = 0;
+    size_t ncomp = 0;
     for (size_t u = 0; u < n && !st; u++)
         if (cu[u] == UINT32_MAX)
-            st = propagate(B, &G, D, (uint32_t)u, (uint32_t)(*ncomp)++, cu, key, &H);
+            st = propagate(B, &G, D, (uint32_t)u, (uint32_t)ncomp++, cu, key, &H);
     for (size_t u = 0; u < n && !st; u++) {
         memcpy(dir + 3 * (size_t)B->order[u], D + 3 * u, 3 * sizeof *D);
         comp[B->order[u]] = cu[u];
+    }
+    R->orient_components = ncomp;
+    if (!st)
+        st = turn_outward(P, area, comp, ncomp, dir, R);
+    if (!st && T) { /* the votes count from the outside: after the turns */
+        for (size_t u = 0; u < n; u++)
+            memcpy(D + 3 * u, dir + 3 * (size_t)B->order[u], 3 * sizeof *D);
+        if (!(st = hv__points_cut(B, &G, P, T, D, R)))
+            for (size_t u = 0; u < n; u++)
+                memcpy(dir + 3 * (size_t)B->order[u], D + 3 * u, 3 * sizeof *D);
     }
     free(G.off), free(G.adj), free(H.e), free(D), free(cu), free(key);
     return st;
 }
 
 hv_status hv__points_propagate(const pt_bins *B, const hv_points *P, const double *area,
-                               double *dir, hv_points_report *R)
+                               const pt_thin *T, double *dir, hv_points_report *R)
 {
     uint32_t *comp = malloc(P->count * sizeof *comp);
-    size_t ncomp = 0;
-    hv_status st = comp ? propagate_all(B, P, dir, comp, &ncomp)
+    hv_status st = comp ? propagate_all(B, P, area, T, dir, comp, R)
                         : hv__error(HV_ERR_NOMEM, "points: out of memory orienting the cloud");
-    R->orient_components = ncomp;
-    if (!st)
-        st = turn_outward(P, area, comp, ncomp, dir, R);
     free(comp);
     return st;
 }

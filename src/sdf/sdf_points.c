@@ -21,6 +21,8 @@
 #define PTS_FIT_NEFF 30.0     /* points a fit weighs, beyond which noise widens no kernel */
 #define PTS_HEAT_ERR 0.05     /* the heat method's surface error, heat voxels */
 #define PTS_MIN_RECOVER 4     /* points a recovered orientation needs, at least */
+#define PTS_THIN_RAY 0.4      /* a thin part's rays' radius, block voxels, at least */
+#define PTS_THIN_SHEET 0.5    /* a sheet's half thickness on them, block voxels, at least */
 #define PTS_ROUNDS 4          /* heat rounds of a recovered orientation, at most */
 #define PTS_FIT_SAMPLES 2048  /* candidates a vertex's fit weighs, at most */
 #define PTS_LINES_SPREAD 0.25 /* median spread above which the line field gives directions */
@@ -315,8 +317,8 @@ static void phi_gradient(const hv_grid *g, const double x[3], double grad[3])
 
 /* Each point's normal turned to face out of phi's inside (into nrm), and
  * how many had to be turned. */
-static void points_orient(const hv_points *P, const double *area, const hv_grid *gh, double *nrm,
-                          hv_points_report *R)
+static void points_orient(const hv_points *P, const double *area, const hv_grid *gh,
+                          const unsigned char *held, double *nrm, hv_points_report *R)
 {
     size_t against = 0;
     double a_against = 0, a_all = 0;
@@ -325,7 +327,7 @@ static void points_orient(const hv_points *P, const double *area, const hv_grid 
         double g[3];
         phi_gradient(gh, P->xyz + 3 * i, g);
         const double *m = P->normals + 3 * i;
-        const int flip = m[0] * g[0] + m[1] * g[1] + m[2] * g[2] < 0;
+        const int flip = m[0] * g[0] + m[1] * g[1] + m[2] * g[2] < 0 && !(held && held[i]);
         for (int a = 0; a < 3; a++)
             nrm[3 * i + a] = flip ? -m[a] : m[a];
         against += (size_t)flip;
@@ -538,7 +540,8 @@ typedef struct pts_work {
     pt_bins B;    /* cells of the heat grid's size */
     pt_bins near; /* cells of about 1.5 spacings, for the nearest neighbours */
     double *area, *nrm;
-    double *dir; /* the recovered normals (step 0), NULL with the given ones */
+    double *dir;         /* the recovered normals (step 0), NULL with the given ones */
+    unsigned char *held; /* their points on thin parts: the rays' signs, kept by the rounds */
     hv_grid *gh;
     hv_mesh *M;
 } pts_work;
@@ -550,6 +553,7 @@ static void pts_work_free(pts_work *w)
     free(w->area);
     free(w->nrm);
     free(w->dir);
+    free(w->held);
     hv_grid_destroy(&w->gh);
     hv_mesh_destroy(&w->M);
 }
@@ -682,10 +686,20 @@ static hv_status points_recover(const hv_points *P, const hv_sdf_opts *o, pts_wo
     hv__bins_free(&A);
     if (!st)
         st = median_spread(spread, P->count, &R->orient_spread);
-    free(spread);
     if (!st && R->orient_spread > PTS_LINES_SPREAD)
         st = lines_directions(P, o, w, R);
-    return st ? st : hv__points_propagate(&w->near, P, w->area, w->dir, R);
+    /* Thin parts: rays a little wider than the points' spacing, so that
+     * none passes between them, and sheets half a voxel thick; not on a
+     * cloud as noisy as the line field's, whose sheets are thicker than
+     * the thin parts (0.5 voxel of noise on the cow: 88% of the points on
+     * their true side with the rays, 96.6% without). */
+    const double hb = w->gh->h / R->coarsen;
+    const pt_thin T = {spread, fmax(PTS_THIN_RAY * hb, 1.5 * R->spacing_median),
+                       fmax(PTS_THIN_SHEET * hb, 2 * R->spacing_median), w->held};
+    if (!st)
+        st = hv__points_propagate(&w->near, P, w->area, R->orient_lines ? NULL : &T, w->dir, R);
+    free(spread);
+    return st;
 }
 
 /* 2. The heat method, and the normals turned to face out of phi's inside.
@@ -700,7 +714,7 @@ static hv_status points_heat_orient(hv_points *Q, const hv_sdf_opts *o, pts_work
         hv_status st = points_heat(Q, w->area, o, w->gh, R);
         if (st)
             return st;
-        points_orient(Q, w->area, w->gh, w->nrm, R);
+        points_orient(Q, w->area, w->gh, w->held, w->nrm, R);
         R->t_heat = hv_now() - tt;
         if (!w->dir || R->orient_rounds >= PTS_ROUNDS ||
             R->normals_against * PTS_ROUND_QUIET <= Q->count)
@@ -767,9 +781,11 @@ static hv_status points_run(const hv_points *P, const hv_sdf_opts *o, pts_work *
         return st;
     w->area = malloc(P->count * sizeof *w->area);
     w->nrm = malloc(3 * P->count * sizeof *w->nrm);
-    if (recover)
+    if (recover) {
         w->dir = malloc(3 * P->count * sizeof *w->dir);
-    if (!w->area || !w->nrm || (recover && !w->dir))
+        w->held = calloc(P->count, 1);
+    }
+    if (!w->area || !w->nrm || (recover && (!w->dir || !w->held)))
         return hv__error(HV_ERR_NOMEM, "points: out of memory for %zu points", P->count);
     if ((st = points_spacing(&w->near, P, w->area, R)))
         return st;
