@@ -22,7 +22,7 @@
 
 #define OR_CUT_SPREAD 0.3 /* a point's spread above which it votes */
 #define OR_CUT_HOPS 10    /* edges from a vote that the labelling reaches */
-#define OR_CUT_VOTE 1.0   /* a vote's weight against an edge's, at most 1 */
+#define OR_CUT_VOTE 1.0   /* a vote's weight (an edge weighs at most 1) */
 #define OR_CUT_EPS 1e-12  /* capacity left that counts as none */
 
 /* ---- votes ---- */
