@@ -89,7 +89,7 @@ hv_status hv__points_axes(const pt_bins *B, double rho, double *dir, float *spre
 typedef struct pt_thin {
     const float *spread;
     double rc, sheet;
-    unsigned char *held; /* by point: 1 where a vote gave the sign (NULL: not kept) */
+    unsigned char *held; /* by point: 1 on a thin part, its sign then kept (NULL: none) */
 } pt_thin;
 hv_status hv__points_propagate(const pt_bins *near, const hv_points *P, const double *area,
                                const pt_thin *T, double *dir, hv_points_report *R);

@@ -691,7 +691,7 @@ static hv_status points_recover(const hv_points *P, const hv_sdf_opts *o, pts_wo
     /* Thin parts: rays a little wider than the points' spacing, so that
      * none passes between them, and sheets half a voxel thick; not on a
      * cloud as noisy as the line field's, whose sheets are thicker than
-     * the thin parts (0.5 voxel of noise on the cow: 88% of the points on
+     * the thin parts (0.5 voxel of noise on the cow: 11.6% of the points on
      * their true side with the rays, 96.6% without). */
     const double hb = w->gh->h / R->coarsen;
     const pt_thin T = {spread, fmax(PTS_THIN_RAY * hb, 1.5 * R->spacing_median),
